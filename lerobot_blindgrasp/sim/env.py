@@ -1,0 +1,336 @@
+"""Batched blind-grasp environment: N grippers, each with one object, stepped together in C on all cores.
+
+Physics runs in `mujoco.batch.Batch` (MuJoCo >= 3.17): every env's state is a row, the batch loads rows into a
+thread-local MjData and steps them with the GIL released; results are bit-identical at any thread count. Each env
+runs on its own MjModel copy, which carries the env's object and its domain-randomization draw (friction, mass,
+servo gains). Everything around the physics is numpy over the env axis; there is no Python loop over envs.
+
+Step (paper Sec. III-B): a_t = delta-theta in R^9 is clipped to +-0.3 rad, the servo target is q_t + a_t (clipped to
+the joint limits, as the real robot does), and `substeps` physics steps cover one 50 ms control period.
+Episodes last 10 s; an episode terminates when the object leaves the 10 cm workspace. Envs auto-reset inside
+`step` (rsl-rl never calls reset); `info["final"]` describes the episodes that ended.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+from mujoco import batch as mjbatch
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim import gripper, objects, randomization, rewards, rng, sensors
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class GraspEnvConfig:
+    num_envs: int = 18
+    objects: tuple[str, ...] = objects.PAPER_OBJECTS  # assigned round-robin: env i gets objects[i % len]
+    seed: int = 0  # env i uses seed + i
+    episode_s: float = spec.EPISODE_S
+    dr: randomization.DomainRandomization = field(default_factory=lambda: randomization.PAPER_DR)
+    reward: rewards.RewardConfig = field(default_factory=lambda: rewards.PAPER_REWARD)
+    physics: gripper.PhysicsOptions = field(default_factory=gripper.PhysicsOptions)
+    nthread: int = 0  # 0: all CPUs
+    autoreset: bool = True
+
+    def __post_init__(self):
+        self.objects = objects.resolve_objects(self.objects)
+        if self.num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {self.num_envs}")
+
+
+class BatchedGraspEnv:
+    """N envs in one object; numpy in, numpy out.
+
+    reset() -> obs; step(action (N, 9)) -> (obs, reward (N,), terminated (N,), truncated (N,), info).
+    obs is a dict with "policy" (N, 12, the student's o_t) and "privileged" (N, 92, the teacher's).
+    """
+
+    def __init__(self, cfg: GraspEnvConfig):
+        self.cfg = cfg
+        n = self.num_envs = cfg.num_envs
+        self.max_episode_steps = int(round(cfg.episode_s * spec.CONTROL_HZ))
+        self.env_seeds = (np.uint64(cfg.seed) + np.arange(n, dtype=np.uint64)).astype(np.uint64)
+        self.object_index = np.arange(n) % len(cfg.objects)  # index into cfg.objects
+        self.object_names = [cfg.objects[k] for k in self.object_index]
+        obj_specs = [objects.get_object(name) for name in cfg.objects]
+        self.rest_height = np.array([obj_specs[k].rest_height for k in self.object_index])
+        self._rest_quat = np.array([self._body_quat(o) for o in obj_specs])[self.object_index]
+
+        templates = [
+            gripper.compile_model(
+                objects.object_mjcf(o, gripper.OBJECT_CONTYPE, gripper.OBJECT_CONAFFINITY), cfg.physics
+            )
+            for o in obj_specs
+        ]
+        self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)
+        self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
+        self.batch = mjbatch.Batch(templates[0], nsim=n, nthread=cfg.nthread)
+        self.batch.set_models(self.models)
+        self.sensor_index = sensors.SensorIndex.from_model(templates[0])
+        self._object_body = templates[0].body("object").id
+        self._qpos = self.batch.bind("qpos")
+        self._qvel = self.batch.bind("qvel")
+        self._ctrl = self.batch.bind("ctrl")
+        self._warm = self.batch.bind("qacc_warmstart")
+        self._xfrc = self.batch.bind("xfrc_applied")
+        self._sensordata = self.batch.bind("sensordata")
+        self._warnings_seen = np.zeros(n, dtype=np.int64)
+
+        self.episode = np.zeros(n, dtype=np.int64)  # per-env episode counter (drives the reset draws)
+        self.episode_length = np.zeros(n, dtype=np.int64)
+        self.lifted_steps = np.zeros(n, dtype=np.int64)  # consecutive steps lifted >= SUCCESS_LIFT_M
+        self.success = np.zeros(n, dtype=bool)  # latched once held for SUCCESS_HOLD_S
+        self.prev_action = np.zeros((n, spec.NUM_JOINTS))
+        self.push_counter = np.zeros(n, dtype=np.int64)
+        self.steps_to_push = np.zeros(n, dtype=np.int64)
+        self.episode_return = np.zeros(n)
+        self.episode_terms = {k: np.zeros(n) for k in rewards.TERM_NAMES}
+        self.physics_resets = 0  # envs reset because their physics went unstable
+        self._raw: dict[str, np.ndarray] = {}
+
+    # --- construction ----------------------------------------------------------------------------------------
+    @staticmethod
+    def _body_quat(o: objects.ObjectSpec) -> np.ndarray:
+        q = np.zeros(4)
+        mujoco.mju_euler2Quat(q, np.asarray(o.euler, dtype=np.float64), "xyz")
+        return q
+
+    def _randomized_model(self, template: mujoco.MjModel, i: int) -> mujoco.MjModel:
+        """A copy of the object's model with env i's Table II draw written into it."""
+        m = copy.copy(template)
+        d = self.physics_draw
+        obj_geom = m.geom("object_geom").id
+        m.geom_friction[obj_geom, 0] = d.object_friction[i]
+        for f in spec.FINGERS:
+            m.geom_friction[m.geom(f"{f}_tipgeom").id, 0] = d.robot_friction[i]
+        body = m.body("object").id
+        m.body_mass[body] *= d.object_mass_scale[i]
+        m.body_inertia[body] *= d.object_mass_scale[i]
+        kp = m.actuator_gainprm[:, 0] * d.kp_scale[i]
+        kv = -m.actuator_biasprm[:, 2] * d.kv_scale[i]
+        m.actuator_gainprm[:, 0] = kp
+        m.actuator_biasprm[:, 1] = -kp
+        m.actuator_biasprm[:, 2] = -kv
+        mujoco.mj_setConst(m, mujoco.MjData(m))  # mass-dependent constants (e.g. constraint scaling)
+        return m
+
+    # --- reset ------------------------------------------------------------------------------------------------
+    def reset(self) -> dict[str, np.ndarray]:
+        self.episode[:] = 0
+        self._reset_envs(np.arange(self.num_envs))
+        return self._observe()
+
+    def _reset_envs(self, ids: np.ndarray) -> None:
+        if ids.size == 0:
+            return
+        seeds = self.env_seeds[ids]
+        q0, xy = randomization.draw_reset(self.cfg.dr, seeds, self.episode[ids])
+        q0 = np.clip(q0, spec.JOINT_LOWER, spec.JOINT_UPPER)
+        self.batch.reset(ids, stage=mujoco.mjtStage.mjSTAGE_NONE)
+        qpos = self._qpos[ids]
+        qpos[:, : spec.NUM_JOINTS] = q0
+        qpos[:, 9:11] = xy
+        qpos[:, 11] = self.rest_height[ids]
+        qpos[:, 12:16] = self._rest_quat[ids]
+        self._qpos[ids] = qpos
+        self._qvel[ids] = 0.0
+        self._ctrl[ids] = q0
+        self._warm[ids] = 0.0
+        self._xfrc[ids] = 0.0
+        self.batch.forward(ids)
+        self.episode_length[ids] = 0
+        self.lifted_steps[ids] = 0
+        self.success[ids] = False
+        self.prev_action[ids] = 0.0
+        self.episode_return[ids] = 0.0
+        for v in self.episode_terms.values():
+            v[ids] = 0.0
+        if self.cfg.dr.external_force:
+            _, steps = randomization.draw_push(self.cfg.dr, seeds, self.push_counter[ids])
+            self.push_counter[ids] += 1
+            self.steps_to_push[ids] = steps
+        self._warnings_seen[ids] = self.batch.warning[ids, :, 1].sum(axis=1)
+
+    # --- step -------------------------------------------------------------------------------------------------
+    def validate_action(self, action) -> np.ndarray:
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (self.num_envs, spec.NUM_JOINTS):
+            raise ValueError(f"action must have shape ({self.num_envs}, {spec.NUM_JOINTS}), got {a.shape}")
+        if not np.isfinite(a).all():
+            bad = np.flatnonzero(~np.isfinite(a).all(axis=1))
+            raise ValueError(f"action has NaN/inf entries for envs {bad[:10].tolist()}")
+        return a
+
+    def step(self, action):
+        a = np.clip(self.validate_action(action), -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
+        q = self._qpos[:, : spec.NUM_JOINTS]
+        self._ctrl[:] = np.clip(q + a, spec.JOINT_LOWER, spec.JOINT_UPPER)
+        if self.cfg.dr.external_force:
+            self._update_pushes()
+
+        failed = np.zeros(self.num_envs, dtype=bool)
+        try:
+            self.batch.step(nstep=self.cfg.physics.substeps)
+        except mjbatch.SimulationError as e:  # those sims kept their old state; reset them below
+            failed[e.ids] = True
+        warn = self.batch.warning[:, :, 1].sum(axis=1)
+        failed |= warn > self._warnings_seen
+        failed |= ~np.isfinite(self._qpos).all(axis=1) | ~np.isfinite(self._qvel).all(axis=1)
+        self._warnings_seen = warn
+
+        obs = self._observe()
+        raw = self._raw
+        terms = rewards.compute_terms(
+            lift=raw["lift"],
+            d_xy=raw["d_xy"],
+            uniaxial_force=raw["uniaxial_clean"],
+            q=raw["q"],
+            action=a,
+            prev_action=self.prev_action,
+            tip_object_distance=raw["tip_object_distance"],
+            cfg=self.cfg.reward,
+        )
+        reward = rewards.total(terms, self.cfg.reward)
+        reward[failed] = 0.0
+
+        self.episode_length += 1
+        lifted = raw["lift"] >= spec.SUCCESS_LIFT_M
+        self.lifted_steps = np.where(lifted, self.lifted_steps + 1, 0)
+        self.success |= self.lifted_steps >= spec.SUCCESS_HOLD_STEPS
+        self.prev_action = a
+        self.episode_return += reward
+        for k, v in terms.items():
+            self.episode_terms[k] += v
+
+        terminated = (raw["d_xy"] > self.cfg.reward.workspace_radius_m) | failed
+        truncated = (self.episode_length >= self.max_episode_steps) & ~terminated
+        info = {
+            "success": self.success.copy(),
+            "lift": raw["lift"],
+            "n_contact": rewards.num_contacts(raw["uniaxial_clean"]),
+            "terms": terms,
+            "physics_failed": failed,
+        }
+        done = terminated | truncated
+        if failed.any():
+            self.physics_resets += int(failed.sum())
+            log.warning("physics unstable in envs %s; resetting them", np.flatnonzero(failed)[:10].tolist())
+        if done.any():
+            ids = np.flatnonzero(done)
+            info["final"] = {
+                "env_ids": ids,
+                "object_index": self.object_index[ids],
+                "success": self.success[ids].copy(),
+                "episode_return": self.episode_return[ids].copy(),
+                "episode_length": self.episode_length[ids].copy(),
+                "terminated": terminated[ids],
+                "truncated": truncated[ids],
+                "terms": {k: v[ids].copy() for k, v in self.episode_terms.items()},
+                "observation": {k: v[ids].copy() for k, v in obs.items()},
+            }
+            if self.cfg.autoreset:
+                self.episode[ids] += 1
+                self._reset_envs(ids)
+                fresh = self._observe(ids)
+                for k in obs:
+                    obs[k][ids] = fresh[k]
+        return obs, reward, terminated, truncated, info
+
+    def _update_pushes(self) -> None:
+        self.steps_to_push -= 1
+        due = np.flatnonzero(self.steps_to_push <= 0)
+        if due.size:
+            force, steps = randomization.draw_push(self.cfg.dr, self.env_seeds[due], self.push_counter[due])
+            self.push_counter[due] += 1
+            self.steps_to_push[due] = steps
+            xfrc = self._xfrc[due]
+            xfrc[:, self._object_body, :3] = force
+            self._xfrc[due] = xfrc
+
+    # --- observation --------------------------------------------------------------------------------------------
+    def _observe(self, ids: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Compute raw quantities (kept in self._raw for rewards) and both observations, for all envs or `ids`."""
+        sel = slice(None) if ids is None else ids
+        qpos, qvel, sd = self._qpos[sel], self._qvel[sel], self._sensordata[sel]
+        si = self.sensor_index
+        contact = si.read(sd, "contact")
+        tip_quat = si.read(sd, "quat")
+        uni = sensors.threshold(sensors.uniaxial_force(contact, si.read(sd, "zaxis")))
+        obj_pos = qpos[:, 9:12]
+        raw = {
+            "q": qpos[:, : spec.NUM_JOINTS],
+            "uniaxial_clean": uni,
+            "d_xy": rewards.planar_distance(obj_pos[:, :2]),
+            "lift": obj_pos[:, 2] - self.rest_height[sel],
+            "tip_object_distance": si.read(sd, "objdist")[:, :, 0],
+        }
+        seeds = self.env_seeds[sel]
+        counter = self.episode[sel] * 100_003 + self.episode_length[sel]
+        noise = rng.normal(seeds, rng.STREAM_OBS_NOISE, counter, spec.NUM_JOINTS + 3 * 10)
+        jn = noise[:, : spec.NUM_JOINTS] * self.cfg.dr.joint_noise_rad
+        fn = noise[:, spec.NUM_JOINTS :] * self.cfg.dr.force_noise_n
+        q_obs = raw["q"] + jn
+        uni_obs = uni + fn[:, :3]
+        contact_tip = sensors.contact_force_tip_frame(contact, tip_quat).reshape(-1, 9) + fn[:, 3:12]
+        wrench = np.concatenate([si.read(sd, "force"), si.read(sd, "torque")], axis=2).reshape(-1, 18)
+        wrench = wrench + fn[:, 12:30]
+        privileged = np.concatenate(
+            [
+                q_obs,
+                qvel[:, : spec.NUM_JOINTS],
+                si.read(sd, "pos").reshape(-1, 9),
+                tip_quat.reshape(-1, 12),
+                obj_pos,
+                qpos[:, 12:16],
+                qvel[:, 9:12],
+                qvel[:, 12:15],
+                contact_tip,
+                raw["d_xy"][:, None],
+                uni_obs,
+                wrench,
+                self.prev_action[sel],
+            ],
+            axis=1,
+        )
+        if ids is None:
+            self._raw = raw
+        return {
+            "policy": np.concatenate([q_obs, uni_obs], axis=1).astype(np.float32),
+            "privileged": privileged.astype(np.float32),
+        }
+
+    # --- helpers for tests, rendering and eval ---------------------------------------------------------------
+    def joint_positions(self) -> np.ndarray:
+        return self._qpos[:, : spec.NUM_JOINTS].copy()
+
+    def object_position(self) -> np.ndarray:
+        return self._qpos[:, 9:12].copy()
+
+    def mj_model_data(self, i: int) -> tuple[mujoco.MjModel, mujoco.MjData]:
+        """Env i's model and a forwarded MjData of its current state (for rendering)."""
+        m = self.models[i]
+        d = self.batch.get_data(i)
+        mujoco.mj_forward(m, d)
+        return m, d
+
+    def episode_info(self, i: int) -> dict:
+        """What a dataset user may filter by: object, size, randomization draw."""
+        o = objects.get_object(self.object_names[i])
+        return {
+            "object": o.name,
+            "geometry": o.geometry,
+            "size": o.size_label,
+            "env_seed": int(self.env_seeds[i]),
+            "episode": int(self.episode[i]),
+            **{f"dr_{k}": v for k, v in self.physics_draw.row(i).items()},
+        }
+
+    def close(self) -> None:
+        self.batch = None

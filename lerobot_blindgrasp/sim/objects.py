@@ -1,0 +1,133 @@
+"""The paper's 18 training objects (Table I), and the catalogue that later objects (OOD proxies) join.
+
+Dimensions are Table I's, in cm there and in metres here. Interpretation of the rows:
+- cuboids: X, Y, Z are full edge lengths, Z vertical;
+- capsule: "Height" is the length of the cylindrical part between the two hemispheres (so the large capsule is
+  3.33 + 2 x 3.33 = 10 cm long); it rests lying on its side, its only stable pose;
+- cylinders: radius and full height, standing upright;
+- sphere: radius.
+
+Mass: density 400 kg/m^3, i.e. PLA (1240 kg/m^3) printed with two walls and ~20 % infill, the usual setting for
+replicas like the paper's 3D-printed ID objects. The large cuboid A is then 300 g, the small capsule 23 g.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+OBJECT_DENSITY = 400.0  # kg/m^3
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    name: str  # e.g. "cylinder_a_medium"
+    geometry: str  # "cuboid_a", ...
+    size_label: str  # "large" | "medium" | "small"
+    mjcf_type: str  # box | capsule | cylinder | sphere
+    size: tuple[float, ...]  # MuJoCo geom size (half-extents / radius, half-length)
+    euler: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def rest_height(self) -> float:
+        """Height of the centre above the table when the object rests in its spawn pose."""
+        if self.mjcf_type == "box":
+            return self.size[2]
+        if self.mjcf_type == "cylinder":
+            return self.size[1]
+        return self.size[0]  # sphere; capsule lying on its side
+
+    @property
+    def volume(self) -> float:
+        s = self.size
+        if self.mjcf_type == "box":
+            return 8.0 * s[0] * s[1] * s[2]
+        if self.mjcf_type == "cylinder":
+            return math.pi * s[0] ** 2 * 2.0 * s[1]
+        if self.mjcf_type == "capsule":
+            return math.pi * s[0] ** 2 * 2.0 * s[1] + 4.0 / 3.0 * math.pi * s[0] ** 3
+        return 4.0 / 3.0 * math.pi * s[0] ** 3
+
+    @property
+    def mass(self) -> float:
+        return OBJECT_DENSITY * self.volume
+
+    @property
+    def task(self) -> str:
+        """Natural-language task string (LeRobot `task`) naming the object."""
+        return f"grasp and lift the {self.size_label} {self.geometry.replace('_', ' ')}"
+
+
+# Table I, cm. One row per geometry: parameters for (large, medium, small).
+TABLE_I_CM: dict[str, dict[str, tuple[float, float, float]]] = {
+    "cuboid_a": {"x": (10.0, 8.0, 6.0), "y": (10.0, 8.0, 6.0), "z": (7.5, 6.0, 4.5)},
+    "cuboid_b": {"x": (10.0, 8.0, 6.0), "y": (7.5, 6.0, 4.5), "z": (10.0, 8.0, 6.0)},
+    "capsule": {"radius": (3.33, 2.67, 2.00), "height": (3.33, 2.67, 2.00)},
+    "cylinder_a": {"radius": (3.75, 3.0, 2.25), "height": (10.0, 8.0, 6.0)},
+    "cylinder_b": {"radius": (5.0, 4.0, 3.0), "height": (7.5, 6.0, 4.5)},
+    "sphere": {"radius": (5.0, 4.0, 3.0)},
+}
+SIZES = ("large", "medium", "small")
+
+
+def _from_table(geometry: str, k: int) -> ObjectSpec:
+    p = {key: v[k] / 100.0 for key, v in TABLE_I_CM[geometry].items()}
+    name = f"{geometry}_{SIZES[k]}"
+    if geometry.startswith("cuboid"):
+        return ObjectSpec(name, geometry, SIZES[k], "box", (p["x"] / 2, p["y"] / 2, p["z"] / 2))
+    if geometry == "capsule":  # lying along x
+        return ObjectSpec(name, geometry, SIZES[k], "capsule", (p["radius"], p["height"] / 2), (0.0, math.pi / 2, 0.0))
+    if geometry.startswith("cylinder"):
+        return ObjectSpec(name, geometry, SIZES[k], "cylinder", (p["radius"], p["height"] / 2))
+    return ObjectSpec(name, geometry, SIZES[k], "sphere", (p["radius"],))
+
+
+CATALOGUE: dict[str, ObjectSpec] = {
+    o.name: o for o in (_from_table(g, k) for g in TABLE_I_CM for k in range(len(SIZES)))
+}
+PAPER_OBJECTS: tuple[str, ...] = tuple(CATALOGUE)  # the 18 training objects, Table I order
+MEDIUM_OBJECTS: tuple[str, ...] = tuple(n for n in PAPER_OBJECTS if n.endswith("_medium"))
+
+
+def register_object(obj: ObjectSpec) -> None:
+    """Add an object (e.g. an OOD proxy) to the catalogue. Its geom must be one primitive, like the others."""
+    if obj.name in CATALOGUE:
+        raise ValueError(f"object {obj.name!r} already in the catalogue")
+    CATALOGUE[obj.name] = obj
+
+
+def get_object(name: str) -> ObjectSpec:
+    try:
+        return CATALOGUE[name]
+    except KeyError:
+        raise ValueError(f"unknown object {name!r}; known objects: {', '.join(CATALOGUE)}") from None
+
+
+def resolve_objects(names: str | list[str] | tuple[str, ...] | None) -> tuple[str, ...]:
+    """Expand "all" / "medium" / a comma list into catalogue names, rejecting unknown ones."""
+    if names is None or names == "all":
+        return PAPER_OBJECTS
+    if names == "medium":
+        return MEDIUM_OBJECTS
+    if isinstance(names, str):
+        names = [n.strip() for n in names.split(",") if n.strip()]
+    out = tuple(names)
+    if not out:
+        raise ValueError("empty object list")
+    for n in out:
+        get_object(n)
+    return out
+
+
+def object_mjcf(obj: ObjectSpec, contype: int, conaffinity: int, friction: float = 1.0) -> str:
+    # The spawn rotation goes on the body, not the geom: every object then has the same sparsity layout, which
+    # `mujoco.batch` needs to step models of different objects together.
+    size = " ".join(f"{v:.6f}" for v in obj.size)
+    euler = " ".join(f"{v:.9f}" for v in obj.euler)
+    return f"""
+    <body name="object" pos="0 0 {obj.rest_height:.6f}" euler="{euler}">
+      <freejoint name="object_free"/>
+      <geom name="object_geom" type="{obj.mjcf_type}" size="{size}" mass="{obj.mass:.6f}"
+            condim="4" friction="{friction} 0.005 0.0001" contype="{contype}" conaffinity="{conaffinity}"
+            rgba="0.2 0.6 0.3 1"/>
+    </body>"""

@@ -1,0 +1,121 @@
+"""The paper's reward, eq. 3-8, one function per term, vectorized over envs.
+
+    r = w1 r_t + w2 r_i + w31 r_l + w32 r_a + w33 r_ar            (eq. 3)
+
+with w = (1.0, 0.2, -500, -0.04, -0.01). `RewardConfig` holds the weights; the `cpu` teacher preset may add the
+reaching term (not in the paper, see docs/results/teacher_cpu.md for why) and nothing else.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from lerobot_blindgrasp import spec
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    w_task: float = 1.0
+    w_incentive: float = 0.2  # 0 for the "Student w/o r_i" ablation teacher
+    w_joint_limit: float = -500.0
+    w_action: float = -0.04
+    w_action_rate: float = -0.01
+    w_reach: float = 0.0  # not in the paper; cpu preset only
+    reach_scale: float = 10.0  # r_reach = mean over tips of 1 - tanh(reach_scale * d_tip_object)
+    target_lift_m: float = spec.TARGET_LIFT_M  # h_t
+    contact_threshold_n: float = spec.FORCE_THRESHOLD_N
+    workspace_radius_m: float = spec.WORKSPACE_RADIUS_M
+
+    def weights(self) -> dict[str, float]:
+        return {k: v for k, v in asdict(self).items() if k.startswith("w_")}
+
+
+PAPER_REWARD = RewardConfig()
+TERM_NAMES = ("task", "incentive", "joint_limit", "action", "action_rate", "reach")
+
+
+def planar_distance(object_xy: np.ndarray, centre_xy: np.ndarray | None = None) -> np.ndarray:
+    """d_xy, eq. 4: distance in the table plane between the object and the gripper centre."""
+    rel = object_xy if centre_xy is None else object_xy - centre_xy
+    return np.linalg.norm(rel, axis=-1)
+
+
+def num_contacts(uniaxial_force: np.ndarray, threshold: float = spec.FORCE_THRESHOLD_N) -> np.ndarray:
+    """n_contact: fingertip sensors reading more than the contact threshold (0.1 N)."""
+    return (uniaxial_force > threshold).sum(axis=-1)
+
+
+def r_task(lift: np.ndarray, d_xy: np.ndarray, n_contact: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+    """Eq. 5. Active only with >= 1 fingertip contact and the object inside the workspace; else 0.
+
+    `lift` is h_o, the object's height above its resting height (clipped at 0, so that resting penetration does
+    not make the square root's argument exceed 1).
+    """
+    h_t = cfg.target_lift_m
+    h_o = np.clip(lift, 0.0, None)
+    centred = 1.0 - np.sqrt(np.clip(d_xy / cfg.workspace_radius_m, 0.0, 1.0))
+    height = np.where(h_o < h_t, 1.0 - np.sqrt(np.clip((h_t - h_o) / h_t, 0.0, 1.0)), 1.0)
+    active = (n_contact >= 1) & (d_xy < cfg.workspace_radius_m)
+    return np.where(active, height * centred, 0.0)
+
+
+def r_incentive(n_contact: np.ndarray) -> np.ndarray:
+    """Eq. 6: 1 when all three fingertips sense contact."""
+    return (n_contact == spec.NUM_FORCES).astype(np.float64)
+
+
+def r_joint_limit(q: np.ndarray, lower=spec.JOINT_LOWER, upper=spec.JOINT_UPPER) -> np.ndarray:
+    """Eq. 7: summed violation (rad) of the allowed joint range over the nine joints."""
+    return (np.clip(lower - q, 0.0, None) + np.clip(q - upper, 0.0, None)).sum(axis=-1)
+
+
+def r_action(action: np.ndarray) -> np.ndarray:
+    """Eq. 8: |a_t|^2, a_t = delta-theta in rad."""
+    return np.square(action).sum(axis=-1)
+
+
+def r_action_rate(action: np.ndarray, prev_action: np.ndarray) -> np.ndarray:
+    """Eq. 9: |a_t - a_{t-1}|^2."""
+    return np.square(action - prev_action).sum(axis=-1)
+
+
+def r_reach(tip_object_distance: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+    """Shaping (not in the paper): pulls fingertips toward the object surface before any contact exists."""
+    return (1.0 - np.tanh(cfg.reach_scale * np.clip(tip_object_distance, 0.0, None))).mean(axis=-1)
+
+
+def compute_terms(
+    *,
+    lift: np.ndarray,
+    d_xy: np.ndarray,
+    uniaxial_force: np.ndarray,
+    q: np.ndarray,
+    action: np.ndarray,
+    prev_action: np.ndarray,
+    tip_object_distance: np.ndarray,
+    cfg: RewardConfig,
+) -> dict[str, np.ndarray]:
+    """Unweighted terms, by name (for logging each one separately)."""
+    n = num_contacts(uniaxial_force, cfg.contact_threshold_n)
+    return {
+        "task": r_task(lift, d_xy, n, cfg),
+        "incentive": r_incentive(n),
+        "joint_limit": r_joint_limit(q),
+        "action": r_action(action),
+        "action_rate": r_action_rate(action, prev_action),
+        "reach": r_reach(tip_object_distance, cfg) if cfg.w_reach else np.zeros_like(d_xy),
+    }
+
+
+def total(terms: dict[str, np.ndarray], cfg: RewardConfig) -> np.ndarray:
+    """Eq. 3 (plus the optional reach term)."""
+    return (
+        cfg.w_task * terms["task"]
+        + cfg.w_incentive * terms["incentive"]
+        + cfg.w_joint_limit * terms["joint_limit"]
+        + cfg.w_action * terms["action"]
+        + cfg.w_action_rate * terms["action_rate"]
+        + cfg.w_reach * terms["reach"]
+    )

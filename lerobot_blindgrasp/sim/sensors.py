@@ -1,0 +1,72 @@
+"""Fingertip sensing from MuJoCo sensor data: uniaxial force, 3-axis contact force, 6-D wrench, tip poses.
+
+The `contact` sensor (reduce="netforce") reports, in the world frame, the net force the fingertip geom exerts on
+what it touches; the force *on* the tip is its negative. The load cell's z axis points from the distal joint to the
+tip, so a push on the tip end (compression, what a uniaxial cell under the tip measures) is
+
+    f_uni = -(F_on_tip . z) = F_reported . z        (positive in compression)
+
+and magnitudes under the 0.1 N deadband read 0 (paper Sec. III-B; same threshold as the contact test).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from lerobot_blindgrasp import spec
+
+PER_TIP = ("contact", "force", "torque", "pos", "quat", "zaxis", "objdist")
+
+
+@dataclass(frozen=True)
+class SensorIndex:
+    """Column indices into `sensordata` for each (finger, reading), as (n_fingers, dim) integer arrays."""
+
+    cols: dict[str, np.ndarray]
+
+    @classmethod
+    def from_model(cls, m: mujoco.MjModel) -> "SensorIndex":
+        cols = {}
+        for kind in PER_TIP:
+            rows = []
+            for f in spec.FINGERS:
+                s = m.sensor(f"{f}_{kind}")
+                rows.append(np.arange(s.adr[0], s.adr[0] + s.dim[0]))
+            cols[kind] = np.stack(rows)
+        return cls(cols)
+
+    def read(self, sensordata: np.ndarray, kind: str) -> np.ndarray:
+        """(n_envs, n_fingers, dim) view-copy of one reading for all envs."""
+        return sensordata[:, self.cols[kind]]
+
+
+def quat_to_mat(q: np.ndarray) -> np.ndarray:
+    """wxyz quaternions (..., 4) to rotation matrices (..., 3, 3)."""
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def threshold(force: np.ndarray, deadband: float = spec.FORCE_THRESHOLD_N) -> np.ndarray:
+    """Magnitudes under the deadband read 0 (sim and real use the same rule)."""
+    return np.where(np.abs(force) < deadband, 0.0, force)
+
+
+def uniaxial_force(contact_reported: np.ndarray, zaxis: np.ndarray) -> np.ndarray:
+    """(n, 3 tips) compressive force along each tip's z axis, before the deadband."""
+    return np.einsum("nfi,nfi->nf", contact_reported, zaxis)
+
+
+def contact_force_tip_frame(contact_reported: np.ndarray, tip_quat: np.ndarray) -> np.ndarray:
+    """(n, 3 tips, 3) force on each tip, in the tip (load-cell) frame."""
+    rot = quat_to_mat(tip_quat)  # columns = tip axes in world
+    return -np.einsum("nfji,nfj->nfi", rot, contact_reported)

@@ -1,0 +1,135 @@
+"""The shared contracts of lerobot_blindgrasp, defined once (see DESIGN.md, "Contracts every part shares").
+
+Sim, demos, policy, real robot and glove import these names; nothing else defines joint order, limits, servo IDs,
+control rate, action bound, observation layouts or the success rule.
+
+Joint conventions (the sim's zero is the hardware calibration target, see `robots/` for the reference pose):
+- Fingers FF, MF, TH (D'Claw naming) sit 120 deg apart on a 6 cm circle; each has J*0 (abduction), J*1 (proximal
+  flexion) and J*2 (distal flexion), servo IDs 10,11,12 / 20,21,22 / 30,31,32.
+- q = 0 everywhere: every finger hangs straight down from the plate.
+- J*1, J*2 > 0 swing the fingertip *away* from the claw axis (opening). With this sign the paper's start pose
+  (0, pi/3, 0) is an open claw: proximal link tilted 60 deg outward, distal link straight.
+- J*0 > 0 moves the fingertip counter-clockwise about the claw axis, seen from above.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+# --- Joints ------------------------------------------------------------------------------------------------------
+FINGERS: tuple[str, ...] = ("ff", "mf", "th")
+# Finger base angle about the claw axis (world z, seen from above), D'Claw layout.
+FINGER_BASE_ANGLES_RAD: tuple[float, ...] = (math.radians(60.0), math.radians(-60.0), math.radians(180.0))
+JOINT_NAMES: tuple[str, ...] = tuple(f"{f}_j{10 * (i + 1) + k}" for i, f in enumerate(FINGERS) for k in range(3))
+SERVO_IDS: tuple[int, ...] = tuple(10 * (i + 1) + k for i in range(len(FINGERS)) for k in range(3))
+NUM_JOINTS = len(JOINT_NAMES)  # 9
+
+# Allowed joint range (rad), per joint kind (abduction, proximal, distal). Targets are clipped to it (sim and real)
+# and r_l (eq. 6) penalizes measured positions outside it.
+_KIND_LIMITS = ((-0.48, 0.48), (-1.57, 1.57), (-1.8, 1.8))
+JOINT_LOWER = np.array([_KIND_LIMITS[k][0] for _ in FINGERS for k in range(3)], dtype=np.float64)
+JOINT_UPPER = np.array([_KIND_LIMITS[k][1] for _ in FINGERS for k in range(3)], dtype=np.float64)
+# The hard stops (MJCF joint range) sit a little outside the allowed range, so that r_l can be violated and seen.
+HARD_STOP_MARGIN_RAD = 0.2
+
+# Paper, Sec. III-B: start pose (0, pi/3, 0) per finger, plus U(-pi/9, pi/9) per joint at each reset.
+HOME_POSE = np.tile(np.array([0.0, math.pi / 3.0, 0.0]), len(FINGERS))
+RESET_JOINT_NOISE_RAD = math.pi / 9.0
+
+# --- Control -----------------------------------------------------------------------------------------------------
+CONTROL_HZ = 20
+CONTROL_DT = 1.0 / CONTROL_HZ
+# Paper: a_t = delta-theta in R^9, clipped to +-0.3 rad. LeRobot-native action = absolute target q_now + delta.
+ACTION_BOUND_RAD = 0.3
+EPISODE_S = 10.0
+EPISODE_STEPS = int(round(EPISODE_S * CONTROL_HZ))  # 200
+DEMO_EPISODE_S = 5.0
+
+# --- Fingertip force sensing -------------------------------------------------------------------------------------
+FORCE_SENSOR_NAMES: tuple[str, ...] = tuple(f"{f}_tip" for f in FINGERS)
+NUM_FORCES = len(FORCE_SENSOR_NAMES)
+# |f| below this is reported as 0 (sim and real), and f above it counts as a contact (paper: 0.1 N).
+FORCE_THRESHOLD_N = 0.1
+JOINT_NOISE_STD_RAD = 0.005
+FORCE_NOISE_STD_N = 0.5
+
+# --- Student observation o_t in R^12 and action, as LeRobot feature names ----------------------------------------
+STATE_KEY = "observation.state"
+ACTION_KEY = "action"
+JOINT_FEATURE_NAMES: tuple[str, ...] = tuple(f"{j}.pos" for j in JOINT_NAMES)
+FORCE_FEATURE_NAMES: tuple[str, ...] = tuple(f"{s}.force" for s in FORCE_SENSOR_NAMES)
+STATE_NAMES: tuple[str, ...] = JOINT_FEATURE_NAMES + FORCE_FEATURE_NAMES
+ACTION_NAMES: tuple[str, ...] = JOINT_FEATURE_NAMES  # absolute joint targets (rad)
+STATE_DIM = len(STATE_NAMES)  # 12
+ACTION_DIM = len(ACTION_NAMES)  # 9
+STATE_JOINT_SLICE = slice(0, NUM_JOINTS)
+STATE_FORCE_SLICE = slice(NUM_JOINTS, NUM_JOINTS + NUM_FORCES)
+
+
+def dataset_features() -> dict:
+    """LeRobotDataset features shared by sim demos and glove demos (state-only, no video)."""
+    return {
+        STATE_KEY: {"dtype": "float32", "shape": (STATE_DIM,), "names": list(STATE_NAMES)},
+        ACTION_KEY: {"dtype": "float32", "shape": (ACTION_DIM,), "names": list(ACTION_NAMES)},
+    }
+
+
+# --- Privileged observation (teacher only) -----------------------------------------------------------------------
+# (name, size) in order; the sim's `observations.privileged_obs` builds exactly this layout.
+PRIVILEGED_LAYOUT: tuple[tuple[str, int], ...] = (
+    ("joint_pos", NUM_JOINTS),
+    ("joint_vel", NUM_JOINTS),
+    ("fingertip_pos", 3 * NUM_FORCES),  # world frame, relative to the claw centre on the table
+    ("fingertip_quat", 4 * NUM_FORCES),  # wxyz
+    ("object_pos", 3),  # relative to the claw centre on the table
+    ("object_quat", 4),
+    ("object_linvel", 3),
+    ("object_angvel", 3),
+    ("fingertip_contact_force", 3 * NUM_FORCES),  # contact force on each tip, tip frame
+    ("object_planar_distance", 1),  # d_xy, eq. 4
+    ("uniaxial_force", NUM_FORCES),
+    ("fingertip_wrench", 6 * NUM_FORCES),  # force + torque at each tip's load cell, tip frame
+    ("previous_action", NUM_JOINTS),  # a_{t-1}, delta-theta (rad)
+)
+PRIVILEGED_DIM = sum(n for _, n in PRIVILEGED_LAYOUT)  # 92 (the paper reports 95 without a breakdown)
+
+
+def privileged_slices() -> dict[str, slice]:
+    out, i = {}, 0
+    for name, n in PRIVILEGED_LAYOUT:
+        out[name] = slice(i, i + n)
+        i += n
+    return out
+
+
+# --- Task and success --------------------------------------------------------------------------------------------
+# Object lift (m) above its resting height at which r_t (eq. 5) saturates. 3 cm is reachable for every object from
+# mid-height side contacts with the D'Claw finger lengths, and clears the table with margin.
+TARGET_LIFT_M = 0.03
+# Success (sim, teacher eval, real protocol): object lifted >= SUCCESS_LIFT_M and held for >= SUCCESS_HOLD_S
+# continuously within a 10 s trial. "Completely lifted" = clear of the table; 1.5 cm leaves margin for penetration.
+SUCCESS_LIFT_M = 0.015
+SUCCESS_HOLD_S = 1.0
+SUCCESS_HOLD_STEPS = int(round(SUCCESS_HOLD_S * CONTROL_HZ))
+# Paper: an episode terminates when the object leaves a 10 cm planar radius around the claw centre.
+WORKSPACE_RADIUS_M = 0.10
+OBJECT_XY_RANGE_M = 0.03
+
+
+@dataclass(frozen=True)
+class JointInfo:
+    name: str
+    servo_id: int
+    finger: str
+    kind: int  # 0 abduction, 1 proximal, 2 distal
+    lower: float
+    upper: float
+
+
+JOINTS: tuple[JointInfo, ...] = tuple(
+    JointInfo(JOINT_NAMES[i], SERVO_IDS[i], FINGERS[i // 3], i % 3, float(JOINT_LOWER[i]), float(JOINT_UPPER[i]))
+    for i in range(NUM_JOINTS)
+)
