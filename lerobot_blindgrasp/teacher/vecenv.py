@@ -1,0 +1,85 @@
+"""rsl-rl-lib 5.x `VecEnv` adapter over the batched blind-grasp env.
+
+Observation groups (TensorDict): "policy" = the student's 12-d o_t, "privileged" = the teacher's 92-d vector.
+Presets pick which group the actor and critic read (`obs_groups`). The env auto-resets inside `step`.
+extras["time_outs"] marks truncations (PPO bootstraps them); extras["log"] carries, for the episodes that ended
+this step, each reward term (weighted, per second of episode), success overall and per object, and termination
+reasons. rsl-rl averages these over an iteration and writes them to TensorBoard.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim import rewards
+from lerobot_blindgrasp.sim.env import BatchedGraspEnv
+
+
+class RslRlGraspEnv(VecEnv):
+    def __init__(self, env: BatchedGraspEnv, device: str = "cpu", on_step=None):
+        self.env = env
+        self.num_envs = env.num_envs
+        self.num_actions = spec.NUM_JOINTS
+        self.max_episode_length = env.max_episode_steps
+        self.device = device
+        self.cfg = {"env": repr(env.cfg)}
+        self._on_step = on_step  # e.g. a progress-bar tick
+        self._obs = self._to_td(env.reset())
+
+    @property
+    def episode_length_buf(self) -> torch.Tensor:
+        return torch.from_numpy(self.env.episode_length)
+
+    @episode_length_buf.setter
+    def episode_length_buf(self, value: torch.Tensor) -> None:
+        # rsl-rl's init_at_random_ep_len spreads time-outs over an iteration
+        self.env.episode_length[:] = value.cpu().numpy()
+
+    def _to_td(self, obs: dict[str, np.ndarray]) -> TensorDict:
+        return TensorDict(
+            {k: torch.from_numpy(v).to(self.device) for k, v in obs.items()},
+            batch_size=[self.num_envs],
+            device=self.device,
+        )
+
+    def get_observations(self) -> TensorDict:
+        return self._obs
+
+    def step(self, actions: torch.Tensor):
+        obs, reward, terminated, truncated, info = self.env.step(actions.detach().cpu().numpy())
+        self._obs = self._to_td(obs)
+        dones = terminated | truncated
+        extras = {"time_outs": torch.from_numpy(truncated).to(self.device), "log": self._episode_log(info)}
+        if self._on_step is not None:
+            self._on_step()
+        return (
+            self._obs,
+            torch.from_numpy(reward.astype(np.float32)).to(self.device),
+            torch.from_numpy(dones).to(self.device),
+            extras,
+        )
+
+    def _episode_log(self, info: dict) -> dict[str, float]:
+        log = {"Metrics/physics_resets_total": float(self.env.physics_resets)}
+        log["Metrics/mean_lift_cm"] = float(np.clip(info["lift"], 0, None).mean() * 100.0)
+        log["Metrics/mean_contacts"] = float(info["n_contact"].mean())
+        final = info.get("final")
+        if final is None:
+            return log
+        cfg = self.env.cfg.reward
+        weights = {t: getattr(cfg, f"w_{t}") for t in rewards.TERM_NAMES}
+        seconds = final["episode_length"] / spec.CONTROL_HZ
+        for term, sums in final["terms"].items():
+            log[f"Episode_Reward/{term}"] = float((weights[term] * sums / seconds).mean())
+        log["Episode_Termination/time_out"] = float(final["truncated"].mean())
+        log["Episode_Termination/object_out_of_reach"] = float(final["terminated"].mean())
+        log["Metrics/success"] = float(final["success"].mean())
+        names = self.env.cfg.objects
+        for k in np.unique(final["object_index"]):
+            mask = final["object_index"] == k
+            log[f"Success/{names[k]}"] = float(final["success"][mask].mean())
+        return log
