@@ -1,0 +1,1 @@
+"""Curated teacher demonstrations as LeRobotDataset episodes (paper Sec. III-C)."""
