@@ -215,6 +215,8 @@ class BatchedGraspEnv:
             "success": self.success.copy(),
             "lift": raw["lift"],
             "n_contact": rewards.num_contacts(raw["uniaxial_clean"]),
+            "uniaxial_force": raw["uniaxial_clean"],  # noise-free, after the deadband (N)
+            "joint_target": self._ctrl.copy(),  # the absolute targets commanded this step (rad)
             "terms": terms,
             "physics_failed": failed,
         }
