@@ -1,0 +1,189 @@
+"""The batched env's contract: rewards (paper eq. for r_t, r_i, r_l, r_a, r_ar), termination, time-out,
+randomization ranges, seeded determinism, bad input and physics failures."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim import objects, randomization, rewards
+from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+
+CFG = rewards.PAPER_REWARD
+
+
+# --- reward terms against hand-computed values --------------------------------------------------------------------
+def test_r_task_hand_computed():
+    lift = np.array([0.0, 0.0075, 0.03, 0.05, 0.0075, 0.0075])
+    d = np.array([0.0, 0.025, 0.025, 0.0, 0.12, 0.025])
+    n = np.array([1, 2, 3, 1, 3, 0])
+    got = rewards.r_task(lift, d, n, CFG)
+    # h_t = 0.03: (1 - sqrt((0.03 - 0.0075)/0.03)) (1 - sqrt(0.025/0.1)) = (1 - sqrt(0.75)) * 0.5
+    expected = [
+        0.0,  # resting object: height factor 0
+        (1 - math.sqrt(0.75)) * 0.5,
+        0.5,  # at h_t: only the centring factor
+        1.0,  # above h_t, centred
+        0.0,  # outside the 10 cm workspace
+        0.0,  # no fingertip contact
+    ]
+    np.testing.assert_allclose(got, expected, atol=1e-12)
+
+
+def test_r_incentive_needs_all_three_contacts_above_0_1_newton():
+    f = np.array([[0.2, 0.3, 5.0], [0.2, 0.3, 0.1], [0.0, 0.0, 0.0], [0.11, 0.11, 0.11]])
+    np.testing.assert_array_equal(rewards.num_contacts(f), [3, 2, 0, 3])
+    np.testing.assert_array_equal(rewards.r_incentive(rewards.num_contacts(f)), [1.0, 0.0, 0.0, 1.0])
+
+
+def test_r_joint_limit_sums_violations():
+    q = spec.HOME_POSE.copy()[None].repeat(2, 0)
+    q[1, 0] = spec.JOINT_UPPER[0] + 0.1
+    q[1, 4] = spec.JOINT_LOWER[4] - 0.05
+    np.testing.assert_allclose(rewards.r_joint_limit(q), [0.0, 0.15], atol=1e-12)
+
+
+def test_r_action_and_rate():
+    a = np.array([[0.1] * 9, [0.3, -0.3] + [0.0] * 7])
+    prev = np.array([[0.0] * 9, [0.3, 0.3] + [0.0] * 7])
+    np.testing.assert_allclose(rewards.r_action(a), [0.09, 0.18])
+    np.testing.assert_allclose(rewards.r_action_rate(a, prev), [0.09, 0.36])
+
+
+def test_total_uses_paper_weights_and_incentive_switch():
+    terms = {k: np.array([1.0]) for k in rewards.TERM_NAMES}
+    assert rewards.total(terms, CFG)[0] == pytest.approx(1.0 + 0.2 - 500 - 0.04 - 0.01)
+    ablated = replace(CFG, w_incentive=0.0)
+    assert rewards.total(terms, ablated)[0] == pytest.approx(1.0 - 500 - 0.04 - 0.01)
+
+
+def test_env_logs_each_term_and_reward_is_their_weighted_sum():
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=4, seed=0))
+    env.reset()
+    a = np.full((4, 9), 0.1)
+    _, r, _, _, info = env.step(a)
+    assert set(info["terms"]) == set(rewards.TERM_NAMES)
+    np.testing.assert_allclose(info["terms"]["action"], 0.09)
+    np.testing.assert_allclose(r, rewards.total(info["terms"], CFG))
+
+
+# --- episode ends ---------------------------------------------------------------------------------------------------
+def test_time_out_is_reported_separately_from_termination():
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=2, seed=0, episode_s=0.5, dr=randomization.NO_DR))
+    env.reset()
+    for t in range(10):
+        _, _, term, trunc, info = env.step(np.zeros((2, 9)))
+        if t < 9:
+            assert not trunc.any() and not term.any()
+    assert trunc.all() and not term.any()
+    assert info["final"]["truncated"].all()
+    assert (env.episode_length == 0).all()  # auto-reset
+    assert (env.episode == 1).all()
+
+
+def test_object_leaving_the_workspace_terminates():
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=2, seed=0, dr=randomization.NO_DR))
+    env.reset()
+    qpos = env._qpos.copy()
+    qpos[0, 9:11] = [0.08, 0.08]  # 11.3 cm from the centre
+    env._qpos[0] = qpos[0]
+    _, _, term, trunc, info = env.step(np.zeros((2, 9)))
+    np.testing.assert_array_equal(term, [True, False])
+    assert not trunc.any()
+    assert info["final"]["env_ids"].tolist() == [0]
+    assert np.linalg.norm(env.object_position()[0, :2]) < 0.01  # reset to the centre (no xy randomization)
+
+
+# --- randomization ------------------------------------------------------------------------------------------------
+def test_domain_randomization_stays_in_table_ii_ranges():
+    dr = randomization.PAPER_DR
+    n = 2000
+    seeds = np.arange(n, dtype=np.uint64)
+    p = randomization.draw_physics(dr, seeds)
+    for name, (lo, hi) in {
+        "object_friction": dr.object_friction,
+        "robot_friction": dr.robot_friction,
+        "object_mass_scale": dr.object_mass_scale,
+        "kp_scale": dr.kp_scale,
+        "kv_scale": dr.kv_scale,
+    }.items():
+        v = getattr(p, name)
+        assert v.min() >= lo and v.max() <= hi, name
+        assert v.max() - v.min() > 0.8 * (hi - lo), f"{name} does not cover its range"
+    # Gains are log-uniform: the median scale is the geometric mean.
+    assert np.median(p.kp_scale) == pytest.approx(math.sqrt(0.3 * 3.0), rel=0.1)
+    q0, xy = randomization.draw_reset(dr, seeds, np.zeros(n, dtype=np.int64))
+    off = q0 - spec.HOME_POSE
+    assert np.abs(off).max() <= math.pi / 9 and np.abs(off).max() > 0.9 * math.pi / 9
+    assert np.abs(xy).max() <= 0.03 and np.abs(xy).max() > 0.028
+    force, steps = randomization.draw_push(dr, seeds, np.zeros(n, dtype=np.int64))
+    assert np.abs(force).max() <= 0.3
+    assert steps.min() >= 1 and steps.max() <= 10 * spec.CONTROL_HZ
+
+
+def test_env_models_carry_their_own_randomization_draw():
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=3, seed=7))
+    kp = [m.actuator_gainprm[0, 0] for m in env.models]
+    assert len(set(kp)) == 3
+    np.testing.assert_allclose(kp, 15.0 * env.physics_draw.kp_scale)
+    mass0 = objects.get_object(env.object_names[0]).mass
+    np.testing.assert_allclose(env.models[0].body("object").mass[0], mass0 * env.physics_draw.object_mass_scale[0])
+
+
+def test_objects_are_assigned_evenly():
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=36, seed=0))
+    counts = np.bincount(env.object_index, minlength=18)
+    assert (counts == 2).all()
+
+
+# --- determinism --------------------------------------------------------------------------------------------------
+def test_env_i_of_a_batch_equals_a_single_env_with_its_seed():
+    names = ("sphere_small", "cuboid_b_large", "capsule_medium")
+    batch = BatchedGraspEnv(GraspEnvConfig(num_envs=3, objects=names, seed=40))
+    single = BatchedGraspEnv(GraspEnvConfig(num_envs=1, objects=(names[2],), seed=42))
+    ob, os_ = batch.reset(), single.reset()
+    np.testing.assert_array_equal(ob["privileged"][2], os_["privileged"][0])
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        a = rng.uniform(-0.3, 0.3, (3, 9))
+        ob, rb, *_ = batch.step(a)
+        os_, rs, *_ = single.step(a[2:3])
+        np.testing.assert_array_equal(ob["privileged"][2], os_["privileged"][0])
+        assert rb[2] == rs[0]
+
+
+# --- bad input and physics failures ---------------------------------------------------------------------------------
+def test_bad_inputs_are_rejected_clearly():
+    with pytest.raises(ValueError, match="unknown object 'banana'"):
+        GraspEnvConfig(objects=("banana",))
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=2))
+    env.reset()
+    with pytest.raises(ValueError, match=r"shape \(2, 9\)"):
+        env.step(np.zeros((2, 8)))
+    a = np.zeros((2, 9))
+    a[1, 3] = np.nan
+    with pytest.raises(ValueError, match=r"NaN/inf entries for envs \[1\]"):
+        env.step(a)
+
+
+def test_physics_blow_up_resets_only_that_env_and_is_counted():
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=3, seed=0))
+    env.reset()
+    for _ in range(3):
+        env.step(np.zeros((3, 9)))
+    qvel = env._qvel.copy()
+    qvel[1, 9:] = 1e12  # a wild object velocity: MuJoCo flags the sim as unstable
+    env._qvel[1] = qvel[1]
+    before = env.joint_positions()
+    _, r, term, _, info = env.step(np.zeros((3, 9)))
+    assert env.physics_resets == 1
+    np.testing.assert_array_equal(info["physics_failed"], [False, True, False])
+    assert term[1] and r[1] == 0.0
+    assert env.episode[1] == 1 and env.episode[0] == 0 and env.episode[2] == 0
+    assert np.isfinite(env._qpos).all()
+    # The healthy envs kept stepping from where they were.
+    assert np.abs(env.joint_positions()[[0, 2]] - before[[0, 2]]).max() < 0.1
