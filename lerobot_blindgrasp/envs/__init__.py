@@ -1,1 +1,3 @@
-"""Placeholder until this plugin type lands."""
+"""LeRobot env plugins for `lerobot-eval`. Importing a module here registers its `--env.type`."""
+
+from lerobot_blindgrasp.envs.sim_env import BlindGraspEnvConfig  # noqa: F401  (registers "blindgrasp")

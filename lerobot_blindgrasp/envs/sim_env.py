@@ -1,0 +1,108 @@
+"""`--env.type=blindgrasp`: the MuJoCo grasping sim as a lerobot-eval env, one task per object.
+
+    lerobot-eval --policy.path=<checkpoint> --env.type=blindgrasp --env.task=all --eval.n_episodes=10
+
+`create_envs` returns `{"blindgrasp": {task_id: VectorEnv}}` with one task per object, so `eval_info.json` has one
+`per_task` entry per object. A task_id is the object's index in the object catalogue (Table I order, see
+`TASK_IDS`), the same whether one object or all 18 are evaluated; `object_for_task_id` maps it back to the name.
+
+This module is imported when LeRobot discovers the plugin, so it must stay light: MuJoCo and the gym env are
+imported inside `create_envs`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import partial
+
+import gymnasium as gym
+from lerobot.configs import FeatureType, PolicyFeature
+from lerobot.envs.configs import EnvConfig
+from lerobot.utils.constants import ACTION, OBS_STATE
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim import objects
+
+TASK_GROUP = "blindgrasp"
+
+
+def task_id(object_name: str) -> int:
+    """The stable task_id of an object in lerobot-eval's `per_task` (its catalogue index)."""
+    return list(objects.CATALOGUE).index(objects.get_object(object_name).name)
+
+
+def object_for_task_id(tid: int) -> str:
+    names = list(objects.CATALOGUE)
+    if not 0 <= tid < len(names):
+        raise ValueError(f"task_id {tid} out of range: the catalogue has {len(names)} objects")
+    return names[tid]
+
+
+# The 18 paper objects; OOD objects registered later get the next ids (see `task_id`).
+TASK_IDS: dict[int, str] = {task_id(n): n for n in objects.PAPER_OBJECTS}
+
+
+@EnvConfig.register_subclass("blindgrasp")
+@dataclass
+class BlindGraspEnvConfig(EnvConfig):
+    # One object name (e.g. "cylinder_a_medium"), a comma list, "medium" (the 6 medium objects) or "all" (18).
+    task: str | None = "all"
+    fps: int = spec.CONTROL_HZ
+    # The paper's randomization and sensor noise (external pushes off); false gives the nominal, noise-free sim.
+    domain_randomization: bool = True
+    # lerobot-eval renders up to 10 episodes to mp4; small frames without shadows keep that cheap on a CPU.
+    render_width: int = 320
+    render_height: int = 240
+    render_shadows: bool = False
+    features: dict[str, PolicyFeature] = field(
+        default_factory=lambda: {
+            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(spec.ACTION_DIM,)),
+            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(spec.STATE_DIM,)),
+        }
+    )
+    features_map: dict[str, str] = field(
+        default_factory=lambda: {ACTION: ACTION, "agent_pos": OBS_STATE}
+    )
+
+    def __post_init__(self):
+        # Fail while parsing the CLI, not after the policy has loaded.
+        self.objects = objects.resolve_objects(self.task)
+
+    @property
+    def gym_kwargs(self) -> dict:
+        from lerobot_blindgrasp.sim import gym_env  # MuJoCo: only when envs are actually built
+
+        dr = gym_env.EVAL_DR if self.domain_randomization else gym_env.randomization.NO_DR
+        return {
+            "dr": dr,
+            "render_width": self.render_width,
+            "render_height": self.render_height,
+            "render_shadows": self.render_shadows,
+            "disable_env_checker": self.disable_env_checker,
+        }
+
+    def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
+        # The freeze wrapper and the lazy async vector env are what LeRobot's own multi-task benchmarks use: a
+        # finished sub-env stops simulating while the rest of the batch runs on, and only the task being evaluated
+        # has worker processes alive (18 tasks x n_envs processes otherwise).
+        from lerobot.envs.utils import _LazyAsyncVectorEnv, freeze_after_episode_end
+
+        from lerobot_blindgrasp.sim import gym_env
+
+        if n_envs < 1:
+            raise ValueError(f"n_envs must be >= 1, got {n_envs}")
+        kwargs = self.gym_kwargs
+        out: dict[int, gym.vector.VectorEnv] = {}
+        for name in self.objects:
+            # A module-level function plus plain kwargs: async workers unpickle it by reference.
+            fns = [partial(gym_env.make_env, name, **kwargs) for _ in range(n_envs)]
+            if use_async_envs and n_envs > 1:
+                vec = _LazyAsyncVectorEnv(
+                    fns, gym_env.observation_space(), gym_env.action_space(), dict(gym_env.BlindGraspGymEnv.metadata)
+                )
+            else:
+                vec = gym.vector.SyncVectorEnv(
+                    [freeze_after_episode_end(fn) for fn in fns], autoreset_mode=gym.vector.AutoresetMode.NEXT_STEP
+                )
+            out[task_id(name)] = vec
+        return {TASK_GROUP: out}

@@ -1,0 +1,211 @@
+"""One grasping trial as a gymnasium env, for `lerobot-eval` and anything else that speaks gymnasium.
+
+A thin shell over `BatchedGraspEnv` with one env, so that eval sees exactly the physics, randomization, noise and
+success rule that teacher training and demo collection use.
+
+LeRobot-facing contract (spec.py):
+- observation `{"agent_pos": o_t}` with o_t = 9 joint positions (rad) + 3 uniaxial forces (N), float32;
+  LeRobot's `preprocess_observation` turns `agent_pos` into `observation.state`.
+- action = absolute joint targets (rad), shape (9,), order `spec.ACTION_NAMES`. The env turns it into the paper's
+  delta = target - q_now, which `BatchedGraspEnv.step` clips to +-0.3 rad and to the joint limits, as the real
+  gripper does. So a policy cannot move a joint farther than 0.3 rad in one 50 ms step, whatever it asks for.
+- `info["is_success"]`: the shared success rule (lifted >= SUCCESS_LIFT_M for SUCCESS_HOLD_S), latched.
+
+Seeding: `reset(seed=s)` runs the trial that `BatchedGraspEnv(GraspEnvConfig(seed=s))` runs as its first episode
+(physics draw, start pose, object offset and sensor noise all derive from s). `reset()` without a seed draws the
+next env seed from gymnasium's `np_random`, so a seeded reset followed by unseeded ones is reproducible too. Every
+episode gets a fresh physics draw: a fresh `BatchedGraspEnv` costs a few milliseconds.
+"""
+
+from __future__ import annotations
+
+import os
+
+# MuJoCo picks its OpenGL backend when it is first imported, and its Linux default (GLFW) needs a display. Eval
+# runs headless (CI, servers, lerobot-eval's worker processes), so default to EGL there; an explicit MUJOCO_GL wins.
+if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
+    os.environ["MUJOCO_GL"] = "egl"
+
+from dataclasses import replace  # noqa: E402
+
+import gymnasium as gym  # noqa: E402
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from lerobot_blindgrasp import spec  # noqa: E402
+from lerobot_blindgrasp.sim import objects, randomization  # noqa: E402
+from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
+
+GYM_ID = "lerobot_blindgrasp/BlindGrasp-v0"
+# The paper's randomization and sensor noise, without the external pushes (those are a training-time robustness
+# aid; eval and demos run undisturbed trials).
+EVAL_DR = randomization.PAPER_DR.without_external_force()
+# The scene's offscreen framebuffer (sim/gripper.py, <visual><global offwidth offheight>) bounds render sizes.
+MAX_RENDER_WIDTH, MAX_RENDER_HEIGHT = 640, 480
+_MAX_SEED = 2**63  # GraspEnvConfig.seed becomes a uint64 base; leave headroom for the per-env offset
+
+
+def observation_space() -> gym.spaces.Dict:
+    return gym.spaces.Dict(
+        {"agent_pos": gym.spaces.Box(-np.inf, np.inf, shape=(spec.STATE_DIM,), dtype=np.float32)}
+    )
+
+
+def action_space() -> gym.spaces.Box:
+    return gym.spaces.Box(
+        spec.JOINT_LOWER.astype(np.float32), spec.JOINT_UPPER.astype(np.float32), dtype=np.float32
+    )
+
+
+class BlindGraspGymEnv(gym.Env):
+    """Grasp and lift one object, blind: o_t in R^12 in, absolute joint targets out, 10 s per episode."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": spec.CONTROL_HZ}
+
+    def __init__(
+        self,
+        object_name: str = "cylinder_a_medium",
+        *,
+        dr: randomization.DomainRandomization = EVAL_DR,
+        render_mode: str | None = "rgb_array",
+        render_width: int = 320,
+        render_height: int = 240,
+        render_shadows: bool = False,
+        camera: str = "side",
+    ):
+        self.object = objects.get_object(object_name)  # raises on unknown names, listing the known ones
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if not (0 < render_width <= MAX_RENDER_WIDTH and 0 < render_height <= MAX_RENDER_HEIGHT):
+            raise ValueError(
+                f"render size must be within {MAX_RENDER_WIDTH}x{MAX_RENDER_HEIGHT} (the scene's offscreen "
+                f"buffer), got {render_width}x{render_height}"
+            )
+        if not isinstance(dr, randomization.DomainRandomization):
+            raise TypeError(f"dr must be a DomainRandomization, got {type(dr).__name__}")
+        self.dr = dr
+        self.render_mode = render_mode
+        self.render_width, self.render_height = int(render_width), int(render_height)
+        # Shadows cost ~4x per frame on a CPU renderer; eval videos are for a glance, the demo turns them on.
+        self.render_shadows = bool(render_shadows)
+        self.camera = camera
+        self.observation_space = observation_space()
+        self.action_space = action_space()
+        # Read by lerobot-eval (`env.call("task_description")`); the dataset's task string for this object.
+        self.task = self.task_description = self.object.task
+        self._max_episode_steps = spec.EPISODE_STEPS  # gym.make's TimeLimit sets the same; kept for direct use
+        self.env_seed: int | None = None
+        self._sim: BatchedGraspEnv | None = None
+        self._done = False
+        self._renderer: mujoco.Renderer | None = None
+
+    # --- gymnasium API ---------------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)  # seeds self.np_random when a seed is given
+        if seed is not None and not 0 <= int(seed) < _MAX_SEED:
+            raise ValueError(f"seed must be in [0, 2**63), got {seed}")
+        # `options` is accepted and ignored: lerobot-eval passes its own marker there.
+        self.env_seed = int(seed) if seed is not None else int(self.np_random.integers(_MAX_SEED))
+        if self._sim is not None:
+            self._sim.close()
+        self._sim = BatchedGraspEnv(
+            GraspEnvConfig(
+                num_envs=1,
+                objects=(self.object.name,),
+                seed=self.env_seed,
+                dr=self.dr,
+                nthread=1,  # one env: a thread pool would only add overhead
+                autoreset=False,  # gymnasium's vector envs own resets
+            )
+        )
+        obs = self._sim.reset()
+        self._done = False
+        return self._obs(obs), {"is_success": False, "env_seed": self.env_seed}
+
+    def step(self, action):
+        if self._sim is None:
+            raise RuntimeError("call reset() before step()")
+        if self._done:
+            raise RuntimeError("the episode has ended (terminated or truncated); call reset() before step()")
+        target = np.asarray(action, dtype=np.float64)
+        if target.shape != (spec.NUM_JOINTS,):
+            raise ValueError(
+                f"action must be {spec.NUM_JOINTS} absolute joint targets in rad, order {spec.ACTION_NAMES}; "
+                f"got shape {target.shape}"
+            )
+        if not np.isfinite(target).all():
+            raise ValueError(f"action has NaN/inf entries: {target.tolist()}")
+        # Targets beyond the joint limits are clipped, as the real gripper does, rather than rejected: a
+        # policy's output may overshoot a limit slightly and that is a command, not a bug.
+        target = np.clip(target, spec.JOINT_LOWER, spec.JOINT_UPPER)
+        delta = target - self._sim.joint_positions()[0]
+        obs, reward, terminated, truncated, info = self._sim.step(delta[None, :])
+        self._done = bool(terminated[0] or truncated[0])
+        step_info = {
+            "is_success": bool(info["success"][0]),
+            "lift_m": float(info["lift"][0]),
+            "uniaxial_force_n": info["uniaxial_force"][0].astype(np.float32),  # noise-free, after the deadband
+            "joint_target": info["joint_target"][0].astype(np.float32),  # what the servos were sent
+        }
+        return self._obs(obs), float(reward[0]), bool(terminated[0]), bool(truncated[0]), step_info
+
+    def render(self):
+        if self.render_mode is None:
+            raise RuntimeError("this env was created with render_mode=None; pass render_mode='rgb_array'")
+        if self._sim is None:
+            raise RuntimeError("call reset() before render()")
+        model, data = self._sim.mj_model_data(0)
+        if self._renderer is None:
+            self._renderer = self._make_renderer(model)
+        # The renderer was built from an earlier episode's model. Every episode of this env has the same object
+        # and geometry (randomization changes only friction, mass and gains), so that model draws this data.
+        self._renderer.update_scene(data, camera=self.camera)
+        self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.render_shadows
+        return self._renderer.render().copy()
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        if self._sim is not None:
+            self._sim.close()
+            self._sim = None
+
+    # --- helpers ----------------------------------------------------------------------------------------------
+    @staticmethod
+    def _obs(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return {"agent_pos": obs["policy"][0].copy()}
+
+    def _make_renderer(self, model: mujoco.MjModel) -> mujoco.Renderer:
+        try:
+            return mujoco.Renderer(model, height=self.render_height, width=self.render_width)
+        except Exception as e:  # the GL backend is chosen at `import mujoco`; say how to fix it
+            raise RuntimeError(
+                f"MuJoCo offscreen rendering failed ({e}). On a headless machine set MUJOCO_GL=egl (or osmesa) "
+                f"before anything imports mujoco (MUJOCO_GL is {os.environ.get('MUJOCO_GL')!r} here)."
+            ) from e
+
+    def sim(self) -> BatchedGraspEnv:
+        """The underlying one-env batch (for tests and demos that want ground truth, e.g. the object height)."""
+        if self._sim is None:
+            raise RuntimeError("call reset() first")
+        return self._sim
+
+
+def make_env(object_name: str = "cylinder_a_medium", **kwargs) -> gym.Env:
+    """`gym.make` of the registered id; module-level, so that async vector env workers can unpickle it by name."""
+    return gym.make(GYM_ID, object_name=object_name, **kwargs)
+
+
+def eval_dr(object_xy: bool = True) -> randomization.DomainRandomization:
+    """The eval randomization; `object_xy=False` centres the object (for scripted, centre-assuming motions)."""
+    return EVAL_DR if object_xy else replace(EVAL_DR, object_xy_m=0.0)
+
+
+if GYM_ID not in gym.registry:
+    gym.register(
+        GYM_ID,
+        entry_point=BlindGraspGymEnv,
+        max_episode_steps=spec.EPISODE_STEPS,
+        disable_env_checker=True,
+    )
