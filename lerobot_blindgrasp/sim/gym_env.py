@@ -101,9 +101,9 @@ class BlindGraspGymEnv(gym.Env):
 
     # --- gymnasium API ---------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)  # seeds self.np_random when a seed is given
-        if seed is not None and not 0 <= int(seed) < _MAX_SEED:
-            raise ValueError(f"seed must be in [0, 2**63), got {seed}")
+        if seed is not None and not (isinstance(seed, int | np.integer) and 0 <= int(seed) < _MAX_SEED):
+            raise ValueError(f"seed must be an integer in [0, 2**63), got {seed!r}")
+        super().reset(seed=None if seed is None else int(seed))  # seeds self.np_random when a seed is given
         # `options` is accepted and ignored: lerobot-eval passes its own marker there.
         self.env_seed = int(seed) if seed is not None else int(self.np_random.integers(_MAX_SEED))
         if self._sim is not None:

@@ -1,0 +1,198 @@
+"""The sim env lerobot-eval sees: the gymnasium wrapper's contract and the `--env.type=blindgrasp` config."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from lerobot.envs.configs import EnvConfig
+from lerobot.envs.factory import make_env, make_env_config
+from lerobot.envs.utils import NEW_ROLLOUT_OPTION, env_to_policy_features, preprocess_observation
+from lerobot.utils.constants import ACTION, OBS_STATE
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.envs import BlindGraspEnvConfig
+from lerobot_blindgrasp.envs.sim_env import TASK_IDS, object_for_task_id, task_id
+from lerobot_blindgrasp.sim import gym_env, objects, randomization
+from lerobot_blindgrasp.sim.scripted import PinchLiftScript
+
+
+def _true_q(env: gym.Env) -> np.ndarray:
+    return env.unwrapped.sim().joint_positions()[0]
+
+
+def _rollout(env: gym.Env, seed: int | None, actions: np.ndarray) -> np.ndarray:
+    obs, _ = env.reset(seed=seed)
+    out = [obs["agent_pos"]]
+    for a in actions:
+        obs, *_ = env.step(a)
+        out.append(obs["agent_pos"])
+    return np.array(out)
+
+
+# --- the gymnasium wrapper ----------------------------------------------------------------------------------
+def test_spaces_task_and_episode_length():
+    env = gym_env.make_env("sphere_small")
+    assert env.observation_space == gym.spaces.Dict(
+        {"agent_pos": gym.spaces.Box(-np.inf, np.inf, (spec.STATE_DIM,), np.float32)}
+    )
+    assert env.action_space.shape == (spec.ACTION_DIM,) and env.action_space.dtype == np.float32
+    np.testing.assert_allclose(env.action_space.low, spec.JOINT_LOWER, rtol=1e-6)
+    np.testing.assert_allclose(env.action_space.high, spec.JOINT_UPPER, rtol=1e-6)
+    assert env.metadata["render_fps"] == spec.CONTROL_HZ == 20
+    assert env.get_wrapper_attr("_max_episode_steps") == spec.EPISODE_STEPS == 200
+    assert env.get_wrapper_attr("task") == env.get_wrapper_attr("task_description") == "grasp and lift the small sphere"
+
+    obs, info = env.reset(seed=0)
+    assert env.observation_space.contains(obs) and info["is_success"] is False
+    # o_t is the joint positions (the start pose, pi/9 of reset noise at most) followed by the three forces.
+    q = obs["agent_pos"][spec.STATE_JOINT_SLICE]
+    assert np.all(np.abs(q - spec.HOME_POSE) < spec.RESET_JOINT_NOISE_RAD + 0.03)
+    # Holding the pose never lifts anything; the episode is truncated after exactly 10 s, not terminated.
+    hold = _true_q(env).astype(np.float32)
+    for t in range(1, 1000):
+        obs, reward, terminated, truncated, info = env.step(hold)
+        if terminated or truncated:
+            break
+    assert (t, terminated, truncated, info["is_success"]) == (spec.EPISODE_STEPS, False, True, False)
+
+
+def test_action_is_an_absolute_target_clipped_to_0p3_rad_from_the_current_position():
+    env = gym_env.BlindGraspGymEnv("cylinder_a_medium", dr=randomization.NO_DR)
+    env.reset(seed=1)
+    q = _true_q(env)
+    target = q.copy()
+    target[1] += 0.1  # within the bound: commanded as is
+    target[4] += 1.0  # beyond: the servo gets q + 0.3
+    target[7] -= 1.0
+    *_, info = env.step(target.astype(np.float32))
+    expected = q.copy()
+    expected[1] += 0.1
+    expected[4] += spec.ACTION_BOUND_RAD
+    expected[7] -= spec.ACTION_BOUND_RAD
+    np.testing.assert_allclose(info["joint_target"], expected, atol=1e-5)
+    # And the joints follow: within one 50 ms step they move a good part of the way, in the right direction.
+    moved = _true_q(env) - q
+    assert moved[1] > 0.03 and moved[4] > 0.1 and moved[7] < -0.1
+    # Targets beyond the joint limits are clipped to them, like the real gripper.
+    for _ in range(10):
+        q = _true_q(env)
+        *_, info = env.step(np.full(spec.NUM_JOINTS, 5.0, dtype=np.float32))
+        np.testing.assert_allclose(
+            info["joint_target"], np.minimum(q + spec.ACTION_BOUND_RAD, spec.JOINT_UPPER), atol=1e-5
+        )
+    assert np.isclose(info["joint_target"], spec.JOINT_UPPER).sum() >= 6  # abduction and proximal got there
+
+
+def test_scripted_lift_of_the_medium_cylinder_is_a_success():
+    env = gym_env.make_env("cylinder_a_medium", dr=gym_env.eval_dr(object_xy=False))
+    env.reset(seed=0)
+    script = PinchLiftScript(object_radius=0.03, grasp_height=0.045, lift_m=0.03)
+    success = []
+    for t in range(spec.EPISODE_STEPS):
+        obs, _, terminated, truncated, info = env.step(script.target(t).astype(np.float32))
+        success.append(info["is_success"])
+        if terminated or truncated:
+            break
+    assert truncated and not terminated
+    # Success needs the lift held for 1 s: the pinch is done by step 35 and the lift by ~step 60, so success
+    # latches about 20 steps later, and stays.
+    first = success.index(True)
+    assert 60 <= first <= 100, first
+    assert all(success[first:])
+    assert info["lift_m"] > spec.SUCCESS_LIFT_M
+    # All three fingertips feel the object, in newtons, in what the policy sees (with noise) and in truth.
+    assert np.all(info["uniaxial_force_n"] > 1.0) and np.all(obs["agent_pos"][spec.STATE_FORCE_SLICE] > 0.0)
+
+
+def test_render_gives_rgb_frames_of_the_scene():
+    with pytest.raises(RuntimeError, match="reset"):
+        gym_env.BlindGraspGymEnv("cuboid_a_medium").render()
+    env = gym_env.make_env("cuboid_a_medium")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (240, 320, 3) and frame.dtype == np.uint8
+    assert frame.std() > 10  # a scene, not a blank buffer
+    env.step(np.full(spec.NUM_JOINTS, 0.5, dtype=np.float32))  # fingers move: the picture changes
+    assert np.abs(env.render().astype(int) - frame).mean() > 0.5
+    big = gym_env.make_env("cuboid_a_medium", render_width=640, render_height=480, render_shadows=True)
+    big.reset(seed=0)
+    assert big.render().shape == (480, 640, 3)
+
+
+def test_seed_makes_the_episode_reproducible():
+    env = gym_env.make_env("capsule_medium")
+    actions = np.random.default_rng(0).uniform(spec.JOINT_LOWER, spec.JOINT_UPPER, (15, 9)).astype(np.float32)
+    a = _rollout(env, 7, actions)
+    b = _rollout(env, 7, actions)
+    np.testing.assert_array_equal(a, b)
+    assert not np.allclose(a[0], _rollout(env, 8, actions)[0])  # another seed: another start pose and noise
+    # The seed flows into the sim: episode 0 of BatchedGraspEnv with that seed.
+    assert env.unwrapped.sim().cfg.seed == 8
+    # Unseeded resets continue a seeded sequence reproducibly, and give new episodes.
+    env.reset(seed=3)
+    first = _rollout(env, None, actions)
+    env2 = gym_env.make_env("capsule_medium")
+    env2.reset(seed=3)
+    np.testing.assert_array_equal(first, _rollout(env2, None, actions))
+    assert not np.allclose(first[0], _rollout(env2, 3, actions)[0])
+
+
+def test_bad_input_raises_clear_errors():
+    with pytest.raises(ValueError, match="unknown object"):
+        gym_env.BlindGraspGymEnv("teapot")
+    with pytest.raises(ValueError, match="render size"):
+        gym_env.BlindGraspGymEnv(render_width=1920, render_height=1080)
+    with pytest.raises(ValueError, match="render_mode"):
+        gym_env.BlindGraspGymEnv(render_mode="human")
+    env = gym_env.BlindGraspGymEnv()
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(np.zeros(9, dtype=np.float32))
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="9 absolute joint targets"):
+        env.step(np.zeros(12, dtype=np.float32))
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.full(9, np.nan, dtype=np.float32))
+    with pytest.raises(ValueError, match="seed"):
+        env.reset(seed=-1)
+
+
+# --- --env.type=blindgrasp ----------------------------------------------------------------------------------
+def test_env_config_is_registered_with_the_state_and_action_features():
+    assert EnvConfig.get_choice_class("blindgrasp") is BlindGraspEnvConfig
+    cfg = make_env_config("blindgrasp")
+    assert cfg.fps == spec.CONTROL_HZ and cfg.task == "all" and cfg.objects == objects.PAPER_OBJECTS
+    feats = env_to_policy_features(cfg)
+    assert set(feats) == {OBS_STATE, ACTION}
+    assert feats[OBS_STATE].shape == (spec.STATE_DIM,) and feats[ACTION].shape == (spec.ACTION_DIM,)
+    with pytest.raises(ValueError, match="unknown object"):
+        make_env_config("blindgrasp", task="teapot")
+
+
+def test_task_ids_are_stable_catalogue_indices():
+    assert list(TASK_IDS) == list(range(18)) and tuple(TASK_IDS.values()) == objects.PAPER_OBJECTS
+    for tid, name in TASK_IDS.items():
+        assert task_id(name) == tid and object_for_task_id(tid) == name
+    with pytest.raises(ValueError):
+        object_for_task_id(999)
+
+
+def test_create_envs_gives_one_vector_env_per_object():
+    envs = make_env(make_env_config("blindgrasp", task="all"), n_envs=1, use_async_envs=False)
+    assert list(envs) == ["blindgrasp"] and sorted(envs["blindgrasp"]) == list(range(18))
+    envs = make_env(make_env_config("blindgrasp", task="sphere_small,cylinder_a_medium"), n_envs=2)
+    vecs = envs["blindgrasp"]
+    assert sorted(vecs) == sorted([task_id("sphere_small"), task_id("cylinder_a_medium")])
+    vec = vecs[task_id("sphere_small")]
+    # What lerobot-eval's rollout does with it.
+    obs, _ = vec.reset(seed=[1000, 1001], options={NEW_ROLLOUT_OPTION: True})
+    batch = preprocess_observation(obs)
+    assert batch[OBS_STATE].shape == (2, spec.STATE_DIM)
+    assert not np.allclose(obs["agent_pos"][0], obs["agent_pos"][1])  # two seeds, two start poses
+    assert list(vec.call("task_description")) == ["grasp and lift the small sphere"] * 2
+    assert vec.call("_max_episode_steps")[0] == spec.EPISODE_STEPS
+    assert vec.unwrapped.metadata["render_fps"] == spec.CONTROL_HZ
+    assert vec.envs[0].render().shape == (240, 320, 3)
+    _, _, _, _, info = vec.step(obs["agent_pos"][:, : spec.NUM_JOINTS])
+    assert info["is_success"].shape == (2,) and not info["is_success"].any()
+    vec.close()
