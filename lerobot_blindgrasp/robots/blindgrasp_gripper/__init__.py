@@ -1,0 +1,6 @@
+"""The real three-finger gripper (`--robot.type=blindgrasp_gripper`): Dynamixel bus + fingertip force sensors."""
+
+from .blindgrasp_gripper import BlindgraspGripper
+from .config_blindgrasp_gripper import BlindgraspGripperConfig, ForceSensorConfig
+
+__all__ = ["BlindgraspGripper", "BlindgraspGripperConfig", "ForceSensorConfig"]

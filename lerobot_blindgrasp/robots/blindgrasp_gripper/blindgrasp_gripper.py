@@ -1,0 +1,335 @@
+"""The real gripper: nine XM430-W350 on one Dynamixel bus plus three fingertip load cells.
+
+Observation and action follow `spec` exactly (names, order, rad and N), so datasets recorded here have the sim
+demos' schema. Every bus transaction goes through LeRobot's `DynamixelMotorsBus` with raw register values
+(`normalize=False`): the calibration lives in the servos (Drive_Mode, Homing_Offset), so rad = (ticks - 2048) * 2pi/4096
+needs no LeRobot normalization mode.
+
+Safety is latched: any failure while connected (bus error after the retries, servo hardware error, force overload,
+stale force data, an exception or Ctrl-C inside a call) turns the torque off on every servo that answers, closes the
+ports and raises a `GripperSafetyStop` that says so. Reconnecting is an explicit decision of the operator.
+"""
+
+from __future__ import annotations
+
+import atexit
+import logging
+import weakref
+from contextlib import contextmanager
+from functools import cached_property
+
+import numpy as np
+from lerobot.motors import Motor, MotorNormMode
+from lerobot.motors.dynamixel import DynamixelMotorsBus, OperatingMode
+from lerobot.motors.motors_bus import get_address
+from lerobot.robots.robot import Robot
+from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
+
+from lerobot_blindgrasp import spec
+
+from . import calibration as calib
+from .config_blindgrasp_gripper import BlindgraspGripperConfig
+from .errors import ForceOverloadError, ForceSensorError, GripperBusError, GripperHardwareError, GripperSafetyStop
+from .force_sensor import ForceSensorReader, ForceStreamError
+from .units import amps_to_current_units, rad_to_ticks, ticks_to_rad
+
+logger = logging.getLogger(__name__)
+
+MODEL = "xm430-w350"
+HARDWARE_ERROR_BITS = {
+    0x01: "input voltage",
+    0x04: "overheating",
+    0x08: "motor encoder",
+    0x10: "electrical shock",
+    0x20: "overload",
+}
+REFERENCE_POSE_HELP = (
+    "REFERENCE pose (q = 0 on all 9 joints): every finger hangs straight down from the plate, proximal and distal "
+    "links in line, each finger in its own vertical plane through the claw axis (see robot_configs/README.md)."
+)
+POSITIVE_POSE_HELP = (
+    "POSITIVE pose: from the reference pose, move EVERY joint by hand by at least ~10-15 degrees in its positive "
+    "direction: J*0 turns the fingertip counter-clockwise seen from above; J*1 and J*2 swing the fingertip away "
+    "from the claw axis (opening the claw)."
+)
+
+
+def _decode_hw_error(bits: int) -> str:
+    names = [name for bit, name in HARDWARE_ERROR_BITS.items() if bits & bit]
+    return ", ".join(names) or f"bits {bits:#04x}"
+
+
+class BlindgraspGripper(Robot):
+    """D'Claw-derived three-finger gripper (`--robot.type=blindgrasp_gripper`)."""
+
+    config_class = BlindgraspGripperConfig
+    name = "blindgrasp_gripper"
+
+    def __init__(self, config: BlindgraspGripperConfig):
+        super().__init__(config)
+        self.config = config
+        self.joints = list(spec.JOINT_NAMES)
+        self.bus = DynamixelMotorsBus(
+            port=config.port,
+            motors={j: Motor(i, MODEL, MotorNormMode.DEGREES) for j, i in zip(self.joints, config.servo_ids)},
+            calibration=self.calibration,
+        )
+        # The SDK opens the port at PortHandler.baudrate; set it before connect so the handshake uses our rate.
+        self.bus.port_handler.baudrate = config.baudrate
+        fs = config.force_sensor
+        self.force = ForceSensorReader(
+            fs.port,
+            fs.baudrate,
+            fs.scale_n_per_count,
+            channel_map=fs.channel_map,
+            stale_timeout_s=fs.stale_timeout_s,
+            connect_timeout_s=fs.connect_timeout_s,
+        )
+        self.lower = np.asarray(config.joint_lower, dtype=np.float64)
+        self.upper = np.asarray(config.joint_upper, dtype=np.float64)
+        self._retry = config.bus_num_retry
+        self._torque_addr, _ = get_address(self.bus.model_ctrl_table, MODEL, "Torque_Enable")
+        self._atexit = None
+
+    # --- features (valid while disconnected) ---------------------------------------------------------------------
+    @cached_property
+    def observation_features(self) -> dict[str, type]:
+        return dict.fromkeys(spec.STATE_NAMES, float)
+
+    @cached_property
+    def action_features(self) -> dict[str, type]:
+        return dict.fromkeys(spec.ACTION_NAMES, float)
+
+    @property
+    def is_connected(self) -> bool:
+        return self.bus.is_connected
+
+    @property
+    def is_calibrated(self) -> bool:
+        return bool(self.calibration) and self.bus.is_connected and self.bus.is_calibrated
+
+    # --- connection -----------------------------------------------------------------------------------------------
+    @check_if_already_connected
+    def connect(self, calibrate: bool = True) -> None:
+        with self._safety("connecting"):
+            self.bus.connect()
+            self._register_atexit()
+            self._raise_on_hardware_errors()
+            if self.calibration and not self.bus.is_calibrated:
+                logger.info("Writing the calibration file %s to the servos.", self.calibration_fpath)
+                self._write_calibration()
+            if not self.bus.is_calibrated:
+                if not calibrate:
+                    logger.warning("%s is not calibrated: run lerobot-calibrate before using it.", self)
+                    self.force.connect()
+                    return
+                self.calibrate()
+            self.force.connect()
+            self.force.tare(self.config.force_sensor.tare_s)
+            self.configure()
+        logger.info("%s connected (force tare %s counts).", self, np.round(self.force.offset).tolist())
+
+    def configure(self) -> None:
+        mode = OperatingMode[self.config.operating_mode].value
+        current = amps_to_current_units(self.config.current_limit_a)
+        r = self._retry
+        with self._safety("configuring the servos"):
+            self.bus.disable_torque(num_retry=r)
+            self.bus.configure_motors()  # Return_Delay_Time 0: status packets come back without the 500 us delay
+            for j in self.joints:
+                self.bus.write("Operating_Mode", j, mode, num_retry=r)
+                self.bus.write("Current_Limit", j, current, num_retry=r)
+                self.bus.write("Goal_Current", j, current, num_retry=r)
+                self.bus.write("Position_P_Gain", j, self.config.position_p_gain, num_retry=r)
+                self.bus.write("Position_I_Gain", j, self.config.position_i_gain, num_retry=r)
+                self.bus.write("Position_D_Gain", j, self.config.position_d_gain, num_retry=r)
+                self.bus.write("Profile_Velocity", j, self.config.profile_velocity, num_retry=r)
+            # Hold the present pose when torque comes on, instead of jumping to whatever Goal_Position held.
+            present = self.bus.sync_read("Present_Position", normalize=False, num_retry=r)
+            for j in self.joints:
+                self.bus.write("Goal_Position", j, present[j], normalize=False, num_retry=r)
+            q = np.array([ticks_to_rad(present[j]) for j in self.joints])
+            outside = [j for j, v, lo, hi in zip(self.joints, q, self.lower, self.upper) if not lo <= v <= hi]
+            if outside:
+                logger.warning("Joints %s start outside their limits; the first actions bring them back.", outside)
+            self.bus.enable_torque(num_retry=r)
+
+    def calibrate(self) -> None:
+        with self._safety("calibrating"):
+            self.bus.disable_torque(num_retry=self._retry)
+            if self.calibration:
+                answer = input(
+                    f"Press ENTER to write the calibration file of '{self.id}' to the servos, "
+                    "or type 'c' and press ENTER to calibrate again: "
+                )
+                if answer.strip().lower() != "c":
+                    self._write_calibration()
+                    return
+            self._calibrate_interactively()
+
+    def _calibrate_interactively(self) -> None:
+        r = self._retry
+        for j in self.joints:
+            # Multi-turn mode so that readings never wrap at 0/4095 while the fingers are moved by hand.
+            self.bus.write("Operating_Mode", j, OperatingMode.EXTENDED_POSITION.value, num_retry=r)
+            self.bus.write("Drive_Mode", j, 0, num_retry=r)
+            self.bus.write("Homing_Offset", j, 0, normalize=False, num_retry=r)
+        input(f"\nTorque is off. Hold the gripper in the {REFERENCE_POSE_HELP}\nPress ENTER when it is there: ")
+        reference = self.bus.sync_read("Present_Position", normalize=False, num_retry=r)
+        input(f"\nNow the {POSITIVE_POSE_HELP}\nPress ENTER while holding it: ")
+        positive = self.bus.sync_read("Present_Position", normalize=False, num_retry=r)
+        modes = calib.directions(reference, positive, self.config.calibration_min_motion_rad)
+        for j in self.joints:
+            self.bus.write("Drive_Mode", j, modes[j], num_retry=r)
+        present = self.bus.sync_read("Present_Position", normalize=False, num_retry=r)
+        homings = calib.homing_offsets(reference, positive, present)
+        ids = {j: m.id for j, m in self.bus.motors.items()}
+        self.calibration = calib.build(ids, modes, homings, self.lower, self.upper)
+        self._write_calibration()
+        self._save_calibration()
+        check = self.bus.sync_read("Present_Position", normalize=False, num_retry=r)
+        print("\nCalibrated joint angles in the positive pose (all should be > 0):")
+        for j in self.joints:
+            print(f"  {j:7s} id {ids[j]:2d}  drive_mode {modes[j]}  q = {ticks_to_rad(check[j]):+.3f} rad")
+        logger.info("Calibration saved to %s", self.calibration_fpath)
+
+    def _write_calibration(self) -> None:
+        # LeRobot's write_calibration writes Homing_Offset and the position limits but not Drive_Mode, which
+        # `is_calibrated` compares too.
+        for j, c in self.calibration.items():
+            self.bus.write("Drive_Mode", j, c.drive_mode, num_retry=self._retry)
+        self.bus.write_calibration(self.calibration)
+
+    # --- control loop ---------------------------------------------------------------------------------------------
+    @check_if_not_connected
+    def get_observation(self) -> dict[str, float]:
+        with self._safety("reading the gripper state"):
+            q = self._read_q()
+            self._raise_on_hardware_errors()
+            forces = self.force.read()
+            over = np.abs(forces) > self.config.force_sensor.overload_n
+            if over.any():
+                tips = {spec.FORCE_SENSOR_NAMES[i]: round(float(forces[i]), 2) for i in np.flatnonzero(over)}
+                raise ForceOverloadError(f"Fingertip force overload {tips} N > {self.config.force_sensor.overload_n} N")
+        obs = {f"{j}.pos": float(v) for j, v in zip(self.joints, q)}
+        obs.update({f"{s}.force": float(f) for s, f in zip(spec.FORCE_SENSOR_NAMES, forces)})
+        return obs
+
+    @check_if_not_connected
+    def send_action(self, action: dict[str, float]) -> dict[str, float]:
+        """Absolute joint targets (rad), clipped to +-max_relative_target around the present position and then to
+        the joint limits, sent with one sync write. Returns the targets actually sent (after tick rounding)."""
+        missing = [k for k in spec.ACTION_NAMES if k not in action]
+        if missing:
+            raise KeyError(f"Action lacks {missing}; expected keys {list(spec.ACTION_NAMES)}")
+        target = np.array([float(action[k]) for k in spec.ACTION_NAMES])
+        if not np.all(np.isfinite(target)):
+            raise ValueError(f"Non-finite joint target {target.tolist()}; nothing was sent.")
+        with self._safety("sending joint targets"):
+            q = self._read_q()
+            bound = self.config.max_relative_target
+            target = np.clip(np.clip(target, q - bound, q + bound), self.lower, self.upper)
+            ticks = {j: rad_to_ticks(t) for j, t in zip(self.joints, target)}
+            self.bus.sync_write("Goal_Position", ticks, normalize=False, num_retry=self._retry)
+        return {f"{j}.pos": ticks_to_rad(ticks[j]) for j in self.joints}
+
+    def _read_q(self) -> np.ndarray:
+        raw = self.bus.sync_read("Present_Position", normalize=False, num_retry=self._retry)
+        return np.array([ticks_to_rad(raw[j]) for j in self.joints])
+
+    def _raise_on_hardware_errors(self) -> None:
+        status = self.bus.sync_read("Hardware_Error_Status", normalize=False, num_retry=self._retry)
+        bad = {j: v for j, v in status.items() if v}
+        if bad:
+            detail = "; ".join(f"{j} (ID {self.bus.motors[j].id}): {_decode_hw_error(v)}" for j, v in bad.items())
+            raise GripperHardwareError(
+                f"Servo hardware error: {detail}. The firmware keeps torque off until the servo is rebooted or "
+                "power-cycled; inspect the finger first."
+            )
+
+    # --- safety -----------------------------------------------------------------------------------------------------
+    @contextmanager
+    def _safety(self, what: str):
+        try:
+            yield
+        except BaseException as e:
+            if getattr(e, "torque_off_handled", False):
+                raise  # an inner _safety already stopped the gripper and wrote the message
+            unconfirmed = self._stop()
+            note = (
+                "Torque is off on all servos."
+                if not unconfirmed
+                else f"Torque-off NOT confirmed by servo IDs {unconfirmed}: cut the servo power."
+            )
+            if isinstance(e, GripperSafetyStop):
+                err = type(e)(f"{e} {note}")
+            elif isinstance(e, ForceStreamError):
+                err = ForceSensorError(f"Force sensor failure while {what}: {e} {note}")
+            elif isinstance(e, (ConnectionError, RuntimeError, OSError)):
+                err = GripperBusError(f"Dynamixel bus failure while {what} (after {1 + self._retry} tries): {e} {note}")
+            else:  # KeyboardInterrupt, programming errors: keep the original exception, the torque is off anyway
+                logger.error("%s while %s. %s", type(e).__name__, what, note)
+                e.torque_off_handled = True
+                raise
+            err.torque_off_handled = True
+            raise err from e
+
+    def _torque_off_all(self) -> list[int]:
+        """Torque off on every servo; returns the IDs that did not confirm it."""
+        ph, port = self.bus.packet_handler, self.bus.port_handler
+        port.is_using = False  # an interrupted transaction may have left the SDK's busy flag set
+        try:  # one broadcast packet reaches every live servo at once, even if one of them is dead
+            self.bus.sync_write("Torque_Enable", 0, normalize=False)
+        except Exception as e:
+            logger.error("Broadcast torque-off failed: %s", e)
+        unconfirmed = []
+        for m in self.bus.motors.values():
+            for _ in range(3):
+                comm, error = ph.write1ByteTxRx(port, m.id, self._torque_addr, 0)
+                # 0x80 is only the hardware-alert flag: the write itself succeeded.
+                if comm == 0 and not error & 0x7F:
+                    break
+            else:
+                unconfirmed.append(m.id)
+        return unconfirmed
+
+    def _stop(self) -> list[int]:
+        """Latched stop: torque off, then close both ports."""
+        unconfirmed = list(self.config.servo_ids)
+        if self.bus.is_connected:
+            try:
+                unconfirmed = self._torque_off_all()
+            finally:
+                self._close()
+        else:
+            self._close()
+        return unconfirmed
+
+    def _close(self) -> None:
+        if self.bus.is_connected:
+            self.bus.port_handler.closePort()
+        self.force.disconnect()
+        if self._atexit is not None:
+            atexit.unregister(self._atexit)
+            self._atexit = None
+
+    def _register_atexit(self) -> None:
+        ref = weakref.ref(self)
+
+        def _at_exit():
+            robot = ref()
+            if robot is not None and robot.is_connected:
+                robot._stop()
+
+        self._atexit = _at_exit
+        atexit.register(_at_exit)
+
+    @check_if_not_connected
+    def disconnect(self) -> None:
+        if not self.config.disable_torque_on_disconnect:
+            self._close()
+            return
+        unconfirmed = self._stop()
+        if unconfirmed:
+            raise GripperBusError(f"Disconnected, but servo IDs {unconfirmed} did not confirm torque off: cut the power.")
+        logger.info("%s disconnected, torque off.", self)

@@ -1,0 +1,96 @@
+"""Configuration of the real gripper (`--robot.type=blindgrasp_gripper`).
+
+Defaults are the D'Claw-derived build of the paper; a site-specific file lives in `robot_configs/` and is passed to
+any LeRobot CLI with `--robot="include robot_configs/blindgrasp_gripper.yaml"` (draccus' include syntax; later
+`--robot.<field>=...` flags still override it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from lerobot.robots.config import RobotConfig
+
+from lerobot_blindgrasp import spec
+
+from .units import CURRENT_LIMIT_MAX_UNITS, STALL_CURRENT_A, amps_to_current_units
+
+
+@dataclass
+class ForceSensorConfig:
+    """The fingertip load-cell microcontroller (wire protocol in `force_sensor.py` and `docs/hardware.md`)."""
+
+    port: str = "/dev/ttyACM0"
+    baudrate: int = 115_200
+    # N per raw count, one per channel in `spec.FORCE_SENSOR_NAMES` order; the sign makes a push on the pad
+    # positive. Placeholder for an HX711 (gain 128) on a 5 kg, 1 mV/V cell: measure yours with a known weight.
+    scale_n_per_count: list[float] = field(default_factory=lambda: [2.5e-5, 2.5e-5, 2.5e-5])
+    # Which stream channel feeds ff_tip, mf_tip, th_tip (wiring can differ from the firmware's order).
+    channel_map: list[int] = field(default_factory=lambda: [0, 1, 2])
+    # Tare window at connect (fingers must touch nothing). The firmware streams at ~100 Hz.
+    tare_s: float = 0.5
+    # A reading older than this is stale: the gripper stops (3 control periods at 20 Hz).
+    stale_timeout_s: float = 0.15
+    connect_timeout_s: float = 1.0
+    # A tip force above this stops the gripper (torque off): protects the load cells and the object.
+    overload_n: float = 40.0
+
+
+@RobotConfig.register_subclass("blindgrasp_gripper")
+@dataclass
+class BlindgraspGripperConfig(RobotConfig):
+    # U2D2 (or any USB-RS485/TTL adapter) serial port of the Dynamixel bus.
+    port: str = "/dev/ttyUSB0"
+    # Must equal the servos' Baud_Rate register; D'Claw/ROBEL use 1 Mbps (factory default is 57 600).
+    baudrate: int = 1_000_000
+    # Servo ID per joint, in `spec.JOINT_NAMES` order (D'Claw convention 10, 11, 12 / 20, 21, 22 / 30, 31, 32).
+    servo_ids: list[int] = field(default_factory=lambda: list(spec.SERVO_IDS))
+    # Allowed joint range (rad) in `spec.JOINT_NAMES` order. Defaults to the sim's; a narrower range is allowed,
+    # a wider one is refused (the policy never saw it).
+    joint_lower: list[float] = field(default_factory=lambda: spec.JOINT_LOWER.tolist())
+    joint_upper: list[float] = field(default_factory=lambda: spec.JOINT_UPPER.tolist())
+    # Per-step bound |target - q_now| (rad): the paper's action clip, applied again on the robot.
+    max_relative_target: float = spec.ACTION_BOUND_RAD
+    # CURRENT_POSITION (5) makes the current limit act as a torque limit, like the sim's actuator forcerange.
+    # POSITION (3) would enforce the position limits in firmware instead but ignore Goal_Current.
+    operating_mode: str = "CURRENT_POSITION"
+    # Current limit (A). 2.3 A is the XM430-W350 stall current at 12 V (4.1 N m), the sim's torque limit.
+    current_limit_a: float = STALL_CURRENT_A
+    # Position loop gains (register units). 800/0/0 is the XM430 default, the gain the sim's kp = 15 N m/rad models.
+    position_p_gain: int = 800
+    position_i_gain: int = 0
+    position_d_gain: int = 0
+    # Profile_Velocity (0.229 rpm units); 0 = no profile, as in the sim.
+    profile_velocity: int = 0
+    # Extra tries of a failed bus transaction before the gripper stops with a GripperBusError.
+    bus_num_retry: int = 2
+    # Calibration: a joint must move at least this far (rad) in the "positive" pose to read its direction.
+    calibration_min_motion_rad: float = 0.15
+    disable_torque_on_disconnect: bool = True
+    force_sensor: ForceSensorConfig = field(default_factory=ForceSensorConfig)
+
+    def __post_init__(self):
+        super().__post_init__()
+        n = spec.NUM_JOINTS
+        if len(self.servo_ids) != n or len(set(self.servo_ids)) != n:
+            raise ValueError(f"servo_ids must be {n} distinct IDs in spec.JOINT_NAMES order, got {self.servo_ids}")
+        for name, values in (("joint_lower", self.joint_lower), ("joint_upper", self.joint_upper)):
+            if len(values) != n:
+                raise ValueError(f"{name} needs {n} values, got {len(values)}")
+        for j, lo, hi in zip(spec.JOINT_NAMES, self.joint_lower, self.joint_upper, strict=True):
+            k = spec.JOINT_NAMES.index(j)
+            if not spec.JOINT_LOWER[k] <= lo < hi <= spec.JOINT_UPPER[k]:
+                raise ValueError(
+                    f"{j}: limits [{lo}, {hi}] must lie inside the sim's [{spec.JOINT_LOWER[k]}, {spec.JOINT_UPPER[k]}]"
+                )
+        if not 0 < self.max_relative_target <= spec.ACTION_BOUND_RAD:
+            raise ValueError(f"max_relative_target must be in (0, {spec.ACTION_BOUND_RAD}] rad")
+        if self.operating_mode not in ("CURRENT_POSITION", "POSITION"):
+            raise ValueError("operating_mode must be CURRENT_POSITION or POSITION")
+        if not 0 < amps_to_current_units(self.current_limit_a) <= CURRENT_LIMIT_MAX_UNITS:
+            raise ValueError(f"current_limit_a must be in (0, {CURRENT_LIMIT_MAX_UNITS * 0.00269:.2f}] A")
+        fs = self.force_sensor
+        if len(fs.scale_n_per_count) != spec.NUM_FORCES or len(fs.channel_map) != spec.NUM_FORCES:
+            raise ValueError(f"force_sensor needs {spec.NUM_FORCES} scales and {spec.NUM_FORCES} channel_map entries")
+        if len(set(fs.channel_map)) != spec.NUM_FORCES or not all(0 <= c < 8 for c in fs.channel_map):
+            raise ValueError(f"force_sensor.channel_map must name distinct stream channels 0..7, got {fs.channel_map}")

@@ -1,0 +1,5 @@
+"""Device emulators that speak the gripper's real wire protocols over pseudo-terminals and UDP.
+
+They stand in for hardware in `tests/test_hw_*.py`: the production code (dynamixel-sdk, LeRobot's
+`DynamixelMotorsBus`, our force-sensor reader and glove receiver) talks to them unchanged.
+"""

@@ -1,0 +1,71 @@
+"""The fingertip load-cell microcontroller, emulated on a pseudo-terminal.
+
+It streams the frame format of `lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor` at `rate_hz`, with raw
+counts = offset + force / scale (+ noise), and can misbehave the ways a USB serial sensor does: dropped frames,
+garbage bytes between frames, frames with a bad CRC, a stalled stream, and channel-fault status bits.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+
+import numpy as np
+
+from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import encode_frame
+
+from .pty_device import PtyDevice
+
+
+class ForceSensorEmulator(PtyDevice):
+    def __init__(
+        self,
+        *,
+        rate_hz: float = 100.0,
+        scale_n_per_count=(2.5e-5, 2.5e-5, 2.5e-5),
+        offset_counts=(81_000, -52_000, 12_000),
+        noise_counts: float = 300.0,
+        force_fn=None,
+        seed: int = 0,
+    ):
+        super().__init__()
+        self.period = 1.0 / rate_hz
+        self.scale = np.asarray(scale_n_per_count, dtype=np.float64)
+        self.offset = np.asarray(offset_counts, dtype=np.float64)
+        self.noise = noise_counts
+        self.forces_n = np.zeros(3)  # used when force_fn is None
+        self.force_fn = force_fn  # () -> forces (N) per channel, e.g. a contact model on the servo emulator
+        self.rng = random.Random(seed)
+        self.seq = 0
+        self._next = time.monotonic()
+        # Fault injection.
+        self.paused = False  # stream stalled (unplugged sensor, crashed firmware)
+        self.drop_prob = 0.0  # probability to skip a frame (its sequence number is still consumed)
+        self.garbage_prob = 0.0  # probability to emit 1-20 random bytes before a frame
+        self.corrupt_next = 0  # send the next n frames with a wrong CRC
+        self.status = 0  # channel fault bits
+        self.sent = 0
+
+    def counts_for(self, forces) -> np.ndarray:
+        return self.offset + np.asarray(forces, dtype=np.float64) / self.scale
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        if now < self._next:
+            return
+        self._next = max(self._next + self.period, now - self.period)
+        if self.paused:
+            return
+        seq, self.seq = self.seq, (self.seq + 1) % 65536
+        if self.drop_prob and self.rng.random() < self.drop_prob:
+            return
+        forces = self.force_fn() if self.force_fn is not None else self.forces_n
+        counts = self.counts_for(forces) + np.array([self.rng.gauss(0.0, self.noise) for _ in range(3)])
+        frame = encode_frame(seq, np.round(counts).astype(np.int64).tolist(), self.status)
+        if self.corrupt_next > 0:
+            self.corrupt_next -= 1
+            frame = frame[:-1] + bytes([frame[-1] ^ 0xFF])
+        if self.garbage_prob and self.rng.random() < self.garbage_prob:
+            self.write(bytes(self.rng.randrange(256) for _ in range(self.rng.randrange(1, 21))))
+        if self.write(frame):
+            self.sent += 1

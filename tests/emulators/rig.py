@@ -1,0 +1,79 @@
+"""A complete emulated gripper: the servo bus, the force sensor and how the servos are mounted on the fingers.
+
+The mounting (shaft ticks at the sim's q = 0 and the sign of each servo) is deliberately messy, as after assembly:
+calibration has to discover it. `hand_move` moves joints like an operator does with the torque off.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from lerobot_blindgrasp import spec
+
+from .dynamixel import DynamixelBusEmulator
+from .force_sensor import ForceSensorEmulator
+
+TICKS_PER_RAD = 4096 / (2 * math.pi)
+# Shaft ticks at q = 0 and mounting sign per joint (spec.JOINT_NAMES order).
+MOUNT_ZERO = tuple(1100.0 + 237.0 * k for k in range(spec.NUM_JOINTS))
+MOUNT_SIGN = (1, -1, 1, -1, 1, -1, 1, 1, -1)
+
+
+class GripperRig:
+    def __init__(self, force_fn=None, **force_kwargs):
+        self.ids = list(spec.SERVO_IDS)
+        self.dxl = DynamixelBusEmulator(self.ids, initial_shaft=dict(zip(self.ids, MOUNT_ZERO)))
+        self.force = ForceSensorEmulator(force_fn=force_fn, **force_kwargs)
+
+    def start(self) -> GripperRig:
+        self.dxl.start()
+        self.force.start()
+        return self
+
+    def stop(self) -> None:
+        self.dxl.stop()
+        self.force.stop()
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    def servo(self, joint: str):
+        return self.dxl.servos[self.ids[spec.JOINT_NAMES.index(joint)]]
+
+    def hand_move(self, q) -> None:
+        """Put the joints at q (rad, sim convention) by hand."""
+        for k, i in enumerate(self.ids):
+            self.dxl.servos[i].shaft = MOUNT_ZERO[k] + MOUNT_SIGN[k] * float(q[k]) * TICKS_PER_RAD
+
+    def true_q(self) -> np.ndarray:
+        """Joint angles from the physical shaft positions (ground truth for the tests)."""
+        return np.array(
+            [(self.dxl.servos[i].shaft - MOUNT_ZERO[k]) * MOUNT_SIGN[k] / TICKS_PER_RAD for k, i in enumerate(self.ids)]
+        )
+
+    def calibration_inputs(self, positive_q: float = 0.3):
+        """An `input` replacement that plays the operator of `BlindgraspGripper.calibrate`."""
+
+        def operator(prompt: str = "") -> str:
+            if "calibrate again" in prompt:
+                return "c"
+            if "REFERENCE" in prompt:
+                self.hand_move(np.zeros(spec.NUM_JOINTS))
+            elif "POSITIVE" in prompt:
+                self.hand_move(np.full(spec.NUM_JOINTS, positive_q))
+            return ""
+
+        return operator
+
+    def robot_config(self, calibration_dir, **overrides):
+        from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig, ForceSensorConfig
+
+        fs = ForceSensorConfig(port=self.force.port, scale_n_per_count=self.force.scale.tolist(), tare_s=0.2)
+        return BlindgraspGripperConfig(
+            id="rig", port=self.dxl.port, calibration_dir=calibration_dir, force_sensor=fs, **overrides
+        )
