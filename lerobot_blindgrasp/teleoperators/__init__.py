@@ -1,1 +1,3 @@
-"""Placeholder until this plugin type lands."""
+"""Teleoperators of this plugin; importing registers them with LeRobot (`--teleop.type=manus_glove`)."""
+
+from . import manus_glove  # noqa: F401  (registration)

@@ -1,0 +1,40 @@
+"""Configuration of the glove teleoperator (`--teleop.type=manus_glove`); see `stream.py` for the wire format."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from lerobot.teleoperators.config import TeleoperatorConfig
+
+from .retarget import DEFAULT_CLOSED_POSE, DEFAULT_OPEN_POSE
+
+
+@TeleoperatorConfig.register_subclass("manus_glove")
+@dataclass
+class ManusGloveConfig(TeleoperatorConfig):
+    # Where the SDK bridge sends its UDP datagrams.
+    host: str = "127.0.0.1"
+    port: int = 50120
+    side: str = "right"
+    # First datagram must arrive within this time at connect.
+    connect_timeout_s: float = 2.0
+    # Newest datagram older than this: the target freezes at its last value, so the gripper stops moving.
+    hold_timeout_s: float = 0.15
+    # Older than this: get_action raises, which ends lerobot-record, whose cleanup turns the gripper torque off.
+    disconnect_timeout_s: float = 1.0
+    # Calibration: averaging window per pose, and the least flexion change (deg) open -> fist per channel.
+    calibration_s: float = 1.0
+    min_flex_range_deg: float = 15.0
+    # Gripper targets (rad, spec.JOINT_NAMES order) for the operator's open hand and fist.
+    open_pose: list[float] = field(default_factory=lambda: list(DEFAULT_OPEN_POSE))
+    closed_pose: list[float] = field(default_factory=lambda: list(DEFAULT_CLOSED_POSE))
+    # Abduction gain (rad of J*0 per rad of finger spread), per finger (ff, mf, th); the sign picks the direction.
+    spread_gain: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0])
+
+    def __post_init__(self):
+        if self.side not in ("left", "right"):
+            raise ValueError("side must be 'left' or 'right'")
+        if len(self.open_pose) != 9 or len(self.closed_pose) != 9 or len(self.spread_gain) != 3:
+            raise ValueError("open_pose and closed_pose need 9 values, spread_gain 3")
+        if not 0 < self.hold_timeout_s < self.disconnect_timeout_s:
+            raise ValueError("need 0 < hold_timeout_s < disconnect_timeout_s")

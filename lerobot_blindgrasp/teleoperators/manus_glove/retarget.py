@@ -1,0 +1,54 @@
+"""Human hand -> gripper joints: index -> FF, middle -> MF, thumb -> TH; per finger, spread -> J*0 (abduction),
+MCP flexion -> J*1 (proximal), mean of PIP and DIP flexion -> J*2 (distal).
+
+Per-operator calibration records the glove in two poses, open hand and fist. Flexion channels map linearly from
+[open, fist] onto [open_pose, closed_pose] of the gripper (clipped to that segment: a hand cannot over-drive the
+claw). Spread channels map relative to the open-hand value with a gain in rad/rad, since neither pose pins spread.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lerobot_blindgrasp import spec
+
+# Gripper joint (spec.JOINT_NAMES order) -> (kind, glove ergonomics channels averaged).
+CHANNELS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("spread", ("IndexSpread",)),
+    ("flex", ("IndexMCPStretch",)),
+    ("flex", ("IndexPIPStretch", "IndexDIPStretch")),
+    ("spread", ("MiddleSpread",)),
+    ("flex", ("MiddleMCPStretch",)),
+    ("flex", ("MiddlePIPStretch", "MiddleDIPStretch")),
+    ("spread", ("ThumbMCPSpread",)),
+    ("flex", ("ThumbMCPStretch",)),
+    ("flex", ("ThumbPIPStretch", "ThumbDIPStretch")),
+)
+REQUIRED_KEYS: set[str] = {k for _, keys in CHANNELS for k in keys}
+IS_FLEX = np.array([kind == "flex" for kind, _ in CHANNELS])
+
+
+def glove_features(ergonomics: dict[str, float]) -> np.ndarray:
+    """One value (deg) per gripper joint."""
+    return np.array([np.mean([ergonomics[k] for k in keys]) for _, keys in CHANNELS])
+
+
+def retarget(
+    features_deg: np.ndarray,
+    open_deg: np.ndarray,
+    fist_deg: np.ndarray,
+    open_pose: np.ndarray,
+    closed_pose: np.ndarray,
+    spread_gain: np.ndarray,
+) -> np.ndarray:
+    """Joint targets (rad) for the gripper, inside spec's joint limits."""
+    span = np.where(IS_FLEX, fist_deg - open_deg, 1.0)
+    closure = np.clip((features_deg - open_deg) / span, 0.0, 1.0)
+    flex_q = open_pose + closure * (closed_pose - open_pose)
+    gain = np.repeat(np.asarray(spread_gain, dtype=np.float64), 3)
+    spread_q = open_pose + gain * np.radians(features_deg - open_deg)
+    return np.clip(np.where(IS_FLEX, flex_q, spread_q), spec.JOINT_LOWER, spec.JOINT_UPPER)
+
+
+DEFAULT_OPEN_POSE = spec.HOME_POSE.tolist()  # the paper's start pose (0, pi/3, 0): open claw
+DEFAULT_CLOSED_POSE = np.tile([0.0, -0.35, -0.6], spec.NUM_FORCES).tolist()  # tips meet low near the claw axis

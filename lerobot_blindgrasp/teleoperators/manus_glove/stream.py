@@ -1,0 +1,138 @@
+"""The glove's local network stream: one UDP datagram per glove frame, UTF-8 JSON.
+
+A small bridge next to the vendor's SDK (MANUS Core SDK, or its ROS 2 `manus_data_publisher`) sends, for one hand:
+
+    {"proto": "blindgrasp-glove/1", "seq": 1234, "t": 1732412345.123, "side": "right",
+     "ergonomics": {"ThumbMCPSpread": 12.1, "ThumbMCPStretch": 20.4, ..., "PinkyDIPStretch": 3.0}}
+
+- `ergonomics`: the SDK's ergonomics data, keyed by its type names (ThumbMCPSpread, ThumbMCPStretch,
+  ThumbPIPStretch, ThumbDIPStretch, then {Index,Middle,Ring,Pinky}{Spread,MCPStretch,PIPStretch,DIPStretch}),
+  in degrees as the SDK reports them. Only the keys the retargeting uses are required.
+- `seq`: uint32 counter of the bridge; datagrams older than the newest one (UDP reordering) are ignored.
+- `t`: sender wall time (s), informational; staleness is judged on the receiver's clock.
+- `side`: "left" | "right"; datagrams for the other hand are ignored (two gloves may share a port).
+
+UDP fits a 60-120 Hz pose stream: the newest datagram wins, a lost one is replaced 10 ms later, and the sender
+needs no connection state. The default destination is 127.0.0.1:50120 (same machine as the bridge).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import socket
+import threading
+import time
+from dataclasses import dataclass
+
+logger = logging.getLogger(__name__)
+
+PROTO = "blindgrasp-glove/1"
+
+
+@dataclass(frozen=True)
+class GloveFrame:
+    seq: int
+    side: str
+    ergonomics: dict[str, float]
+    received: float  # receiver monotonic time
+
+
+def encode(seq: int, ergonomics: dict[str, float], side: str = "right", t: float | None = None) -> bytes:
+    msg = {"proto": PROTO, "seq": seq, "t": time.time() if t is None else t, "side": side, "ergonomics": ergonomics}
+    return json.dumps(msg).encode()
+
+
+def decode(datagram: bytes, required: set[str]) -> tuple[int, str, dict[str, float]]:
+    """Raises ValueError on anything that is not a complete message of this protocol."""
+    try:
+        msg = json.loads(datagram.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"not JSON: {e}") from e
+    if not isinstance(msg, dict) or msg.get("proto") != PROTO:
+        raise ValueError("not a blindgrasp-glove/1 message")
+    ergo = msg.get("ergonomics")
+    if not isinstance(ergo, dict) or not required <= ergo.keys():
+        raise ValueError(f"ergonomics lacks {sorted(required - set(ergo or {}))}")
+    values = {k: float(ergo[k]) for k in required}
+    if any(v != v or abs(v) > 360 for v in values.values()):
+        raise ValueError("ergonomics value out of range")
+    return int(msg["seq"]), str(msg.get("side", "right")), values
+
+
+class GloveReceiver:
+    """Background UDP listener keeping the newest valid frame for one hand."""
+
+    def __init__(self, host: str, port: int, side: str, required: set[str]):
+        self.host, self.port, self.side, self.required = host, port, side, required
+        self.frames = 0
+        self.rejected = 0
+        self._latest: GloveFrame | None = None
+        self._lock = threading.Condition()
+        self._sock: socket.socket | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    @property
+    def is_open(self) -> bool:
+        return self._sock is not None
+
+    def open(self) -> None:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.bind((self.host, self.port))
+        except OSError as e:
+            sock.close()
+            raise ConnectionError(f"Cannot listen for the glove on udp://{self.host}:{self.port}: {e}") from e
+        sock.settimeout(0.05)
+        self._sock = sock
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="glove-udp", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
+            self._thread = None
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                datagram = self._sock.recv(65536)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            try:
+                seq, side, ergo = decode(datagram, self.required)
+            except (ValueError, KeyError, TypeError) as e:
+                self.rejected += 1
+                logger.debug("glove datagram rejected: %s", e)
+                continue
+            if side != self.side:
+                continue
+            with self._lock:
+                if self._latest is not None and 0 < (self._latest.seq - seq) % 2**32 < 2**31:
+                    continue  # older than what we have: reordered on the way
+                self._latest = GloveFrame(seq, side, ergo, time.monotonic())
+                self.frames += 1
+                self._lock.notify_all()
+
+    def latest(self) -> GloveFrame | None:
+        with self._lock:
+            return self._latest
+
+    def wait_frames(self, n: int, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            target = self.frames + n
+            while self.frames < target:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._lock.wait(left)
+        return True
