@@ -41,7 +41,8 @@ def test_spaces_task_and_episode_length():
     np.testing.assert_allclose(env.action_space.high, spec.JOINT_UPPER, rtol=1e-6)
     assert env.metadata["render_fps"] == spec.CONTROL_HZ == 20
     assert env.get_wrapper_attr("_max_episode_steps") == spec.EPISODE_STEPS == 200
-    assert env.get_wrapper_attr("task") == env.get_wrapper_attr("task_description") == "grasp and lift the small sphere"
+    assert env.get_wrapper_attr("task") == "grasp and lift the small sphere"
+    assert env.get_wrapper_attr("task_description") == env.get_wrapper_attr("task")
 
     obs, info = env.reset(seed=0)
     assert env.observation_space.contains(obs) and info["is_success"] is False
@@ -195,4 +196,33 @@ def test_create_envs_gives_one_vector_env_per_object():
     assert vec.envs[0].render().shape == (240, 320, 3)
     _, _, _, _, info = vec.step(obs["agent_pos"][:, : spec.NUM_JOINTS])
     assert info["is_success"].shape == (2,) and not info["is_success"].any()
+    vec.close()
+
+
+def test_a_knocked_away_object_ends_the_episode_early_and_the_batch_runs_on():
+    """What lerobot-eval does when one sub-env terminates: it keeps stepping the batch; the ended env holds."""
+    envs = make_env(make_env_config("blindgrasp", task="sphere_small"), n_envs=2)
+    vec = envs["blindgrasp"][task_id("sphere_small")]
+
+    def flail():
+        obs, _ = vec.reset(seed=[1000, 1001], options={NEW_ROLLOUT_OPTION: True})
+        rng = np.random.default_rng(0)
+        states, ended = [obs["agent_pos"]], np.full(2, -1)
+        for t in range(spec.EPISODE_STEPS):
+            obs, _, terminated, truncated, _ = vec.step(rng.uniform(spec.JOINT_LOWER, spec.JOINT_UPPER, (2, 9)))
+            states.append(obs["agent_pos"])
+            ended[(ended < 0) & terminated] = t + 1
+            if (ended > 0).all():
+                break
+        return np.array(states), ended
+
+    states, ended = flail()
+    assert (ended > 0).all() and ended[0] != ended[1], ended  # flailing knocks the sphere out of the workspace
+    first, last = np.argmin(ended), len(states) - 1
+    assert np.ptp(states[ended[first] :, first], axis=0).max() == 0.0  # the ended env is frozen
+    assert np.ptp(states[ended[first] :, 1 - first], axis=0).max() > 0.0  # the other one still moves
+    # The next rollout starts afresh and, with the same seeds, replays exactly.
+    states2, ended2 = flail()
+    np.testing.assert_array_equal(ended, ended2)
+    np.testing.assert_array_equal(states[:last], states2[:last])
     vec.close()

@@ -98,7 +98,10 @@ class BlindGraspEnvConfig(EnvConfig):
             fns = [partial(gym_env.make_env, name, **kwargs) for _ in range(n_envs)]
             if use_async_envs and n_envs > 1:
                 vec = _LazyAsyncVectorEnv(
-                    fns, gym_env.observation_space(), gym_env.action_space(), dict(gym_env.BlindGraspGymEnv.metadata)
+                    fns,
+                    gym_env.observation_space(),
+                    gym_env.action_space(),
+                    dict(gym_env.BlindGraspGymEnv.metadata),
                 )
             else:
                 vec = gym.vector.SyncVectorEnv(

@@ -22,7 +22,7 @@ from __future__ import annotations
 import os
 
 # MuJoCo picks its OpenGL backend when it is first imported, and its Linux default (GLFW) needs a display. Eval
-# runs headless (CI, servers, lerobot-eval's worker processes), so default to EGL there; an explicit MUJOCO_GL wins.
+# runs headless (CI, servers, lerobot-eval's workers), so default to EGL; an explicit MUJOCO_GL wins.
 if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
     os.environ["MUJOCO_GL"] = "egl"
 
