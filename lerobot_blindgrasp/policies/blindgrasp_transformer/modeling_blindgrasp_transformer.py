@@ -1,0 +1,265 @@
+"""The `blindgrasp_transformer` student: robomimic's BC-Transformer over o_t = (9 joint positions, 3 forces).
+
+Shapes: B batch, T context (n_obs_steps = 30), D embed_dim, A = 9 joints.
+
+Network (robomimic `TransformerActorNetwork` + `GPT_Backbone`, deterministic head):
+    token_t = Dropout(LayerNorm(Linear(12 -> D)(o_t) + pos[t]))      learned pos = nn.Parameter(1, T, D), zeros
+    n_layers x pre-LN block: x + Attn(LN(x)), x + MLP(LN(x))      fused qkv (no bias), GELU MLP 4x
+    final LayerNorm -> MLP head [1024, 1024] on the LAST token -> A -> tanh
+
+Inputs and outputs are normalized: `observation.state` is z-scored and the prediction is delta-theta / 0.3 in
+[-1, 1]; the processors turn the dataset's absolute targets into that and back (see the processor module).
+
+Padding. LeRobot pads a window that starts before the episode by repeating the episode's first frame and flags
+those steps in `observation.state_is_pad`. Padded keys are masked out of attention, so they cannot reach the real
+tokens (each padded query still sees itself, which keeps its softmax row finite). At inference the rolling context
+does the same: it starts as n_obs_steps copies of the first observation, all but the newest flagged as padding, so
+step t of an episode sees exactly what training saw for frame t.
+
+Two forward paths compute the same function:
+- `BlindgraspGPT.forward` (training and inference): fused attention (`F.scaled_dot_product_attention`), and in the
+  last layer only the keys/values of all tokens plus the query, output projection and MLP of the last token, the
+  only token the head reads. Exact, also with dropout, because the loss only uses the last token.
+- `BlindgraspGPT.forward_reference`: the plain path, every token through every layer with explicit softmax
+  attention. Kept to check the fast path (tests, `blindgrasp-bench policy`).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import torch
+import torch.nn.functional as F  # noqa: N812
+from lerobot.policies.pretrained import PreTrainedPolicy
+from lerobot.utils.constants import ACTION, OBS_STATE
+from torch import Tensor, nn
+
+from lerobot_blindgrasp import spec
+
+from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
+
+STATE_IS_PAD = f"{OBS_STATE}_is_pad"
+
+
+def padding_attention_mask(is_pad: Tensor) -> Tensor:
+    """(B, T) padding flags -> (B, 1, T, T) boolean mask, True where query i may attend to key j.
+
+    Causal, with padded keys removed; the diagonal stays open so a padded query (which only has padded keys
+    before it) keeps one finite score.
+    """
+    t = is_pad.shape[-1]
+    causal = torch.ones(t, t, dtype=torch.bool, device=is_pad.device).tril()
+    eye = torch.eye(t, dtype=torch.bool, device=is_pad.device)
+    return causal & ((~is_pad)[:, None, None, :] | eye)
+
+
+class CausalSelfAttention(nn.Module):
+    def __init__(self, embed_dim: int, n_heads: int, dropout: float):
+        super().__init__()
+        self.embed_dim, self.n_heads = embed_dim, n_heads
+        self.qkv = nn.Linear(embed_dim, 3 * embed_dim, bias=False)
+        self.proj = nn.Linear(embed_dim, embed_dim)
+        self.attn_dropout = dropout
+        self.resid_dropout = nn.Dropout(dropout)
+
+    def _heads(self, x: Tensor) -> Tensor:  # (B, T, D) -> (B, H, T, D/H)
+        b, t, _ = x.shape
+        return x.view(b, t, self.n_heads, -1).transpose(1, 2)
+
+    def _merge(self, y: Tensor) -> Tensor:  # (B, H, T, D/H) -> projected (B, T, D)
+        b, _, t, _ = y.shape
+        return self.resid_dropout(self.proj(y.transpose(1, 2).reshape(b, t, self.embed_dim)))
+
+    def forward(self, x: Tensor, mask: Tensor | None) -> Tensor:
+        q, k, v = (self._heads(p) for p in self.qkv(x).split(self.embed_dim, dim=-1))
+        p = self.attn_dropout if self.training else 0.0
+        if mask is None:
+            y = F.scaled_dot_product_attention(q, k, v, dropout_p=p, is_causal=True)
+        else:
+            y = F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=p)
+        return self._merge(y)
+
+    def forward_last_query(self, x: Tensor, key_mask: Tensor | None) -> Tensor:
+        """Attention output of the last token only: (B, T, D) -> (B, 1, D). key_mask: (B, 1, 1, T) or None."""
+        d = self.embed_dim
+        # Rows [0, D) of the fused weight project queries, rows [D, 3D) keys and values (contiguous views).
+        q = F.linear(x[:, -1:], self.qkv.weight[:d])
+        k, v = F.linear(x, self.qkv.weight[d:]).split(d, dim=-1)
+        p = self.attn_dropout if self.training else 0.0
+        # The last query sits after every key, so causality needs no mask here.
+        y = F.scaled_dot_product_attention(
+            self._heads(q), self._heads(k), self._heads(v), attn_mask=key_mask, dropout_p=p
+        )
+        return self._merge(y)
+
+    def forward_reference(self, x: Tensor, mask: Tensor) -> Tensor:
+        """Plain eager attention over all tokens (mask: (B or 1, 1, T, T) boolean)."""
+        q, k, v = (self._heads(p) for p in self.qkv(x).split(self.embed_dim, dim=-1))
+        att = (q @ k.transpose(-2, -1)) / (q.shape[-1] ** 0.5)
+        att = att.masked_fill(~mask, float("-inf")).softmax(dim=-1)
+        att = F.dropout(att, self.attn_dropout, self.training)
+        return self._merge(att @ v)
+
+
+class Block(nn.Module):
+    """Pre-LN transformer block (robomimic `SelfAttentionBlock` with GELU)."""
+
+    def __init__(self, embed_dim: int, n_heads: int, dropout: float):
+        super().__init__()
+        self.ln1 = nn.LayerNorm(embed_dim)
+        self.attn = CausalSelfAttention(embed_dim, n_heads, dropout)
+        self.ln2 = nn.LayerNorm(embed_dim)
+        self.mlp = nn.Sequential(
+            nn.Linear(embed_dim, 4 * embed_dim),
+            nn.GELU(),
+            nn.Linear(4 * embed_dim, embed_dim),
+            nn.Dropout(dropout),
+        )
+
+    def forward(self, x: Tensor, mask: Tensor | None) -> Tensor:
+        x = x + self.attn(self.ln1(x), mask)
+        return x + self.mlp(self.ln2(x))
+
+    def forward_last(self, x: Tensor, key_mask: Tensor | None) -> Tensor:
+        """This block's output for the last token only: (B, T, D) -> (B, 1, D)."""
+        x_last = x[:, -1:] + self.attn.forward_last_query(self.ln1(x), key_mask)
+        return x_last + self.mlp(self.ln2(x_last))
+
+    def forward_reference(self, x: Tensor, mask: Tensor) -> Tensor:
+        x = x + self.attn.forward_reference(self.ln1(x), mask)
+        return x + self.mlp(self.ln2(x))
+
+
+class BlindgraspGPT(nn.Module):
+    """(B, T, 12) normalized observations + optional (B, T) padding flags -> (B, 9) normalized delta."""
+
+    def __init__(self, config: BlindgraspTransformerConfig):
+        super().__init__()
+        d, t = config.embed_dim, config.n_obs_steps
+        self.context_length = t
+        self.embed = nn.Linear(spec.STATE_DIM, d)
+        self.pos_embed = nn.Parameter(torch.zeros(1, t, d))
+        self.embed_norm = nn.LayerNorm(d)
+        self.embed_dropout = nn.Dropout(config.dropout)
+        self.blocks = nn.ModuleList(Block(d, config.n_heads, config.dropout) for _ in range(config.n_layers))
+        self.final_norm = nn.LayerNorm(d)
+        layers, width = [], d
+        for hidden in config.head_hidden_dims:
+            # ReLU: robomimic's MLP default; Table IV's GELU is the transformer's activation.
+            layers += [nn.Linear(width, hidden), nn.ReLU()]
+            width = hidden
+        layers.append(nn.Linear(width, spec.ACTION_DIM))
+        self.head = nn.Sequential(*layers)
+        self.tanh_output = config.tanh_output
+        self.apply(self._init_weights)
+
+    @staticmethod
+    def _init_weights(module: nn.Module) -> None:
+        # robomimic GPT_Backbone init: N(0, 0.02) weights, zero biases (LayerNorm keeps its (1, 0) default).
+        if isinstance(module, nn.Linear):
+            nn.init.normal_(module.weight, mean=0.0, std=0.02)
+            if module.bias is not None:
+                nn.init.zeros_(module.bias)
+
+    def _tokens(self, states: Tensor) -> Tensor:
+        if states.shape[1] != self.context_length:
+            raise ValueError(f"expected a context of {self.context_length} steps, got {tuple(states.shape)}")
+        return self.embed_dropout(self.embed_norm(self.embed(states) + self.pos_embed))
+
+    def _decode(self, x_last: Tensor) -> Tensor:
+        out = self.head(self.final_norm(x_last))
+        return torch.tanh(out) if self.tanh_output else out
+
+    def forward(self, states: Tensor, is_pad: Tensor | None = None) -> Tensor:
+        x = self._tokens(states)
+        mask = key_mask = None
+        if is_pad is not None:
+            mask = padding_attention_mask(is_pad)
+            key_mask = mask[:, :, -1:, :]  # the last query's row: (B, 1, 1, T)
+        for block in self.blocks[:-1]:
+            x = block(x, mask)
+        x_last = self.blocks[-1].forward_last(x, key_mask)
+        return self._decode(x_last[:, 0])
+
+    def forward_reference(self, states: Tensor, is_pad: Tensor | None = None) -> Tensor:
+        """The plain path: every token through every layer, explicit softmax attention. Same result as forward."""
+        x = self._tokens(states)
+        t = x.shape[1]
+        if is_pad is None:
+            mask = torch.ones(t, t, dtype=torch.bool, device=x.device).tril()[None, None]
+        else:
+            mask = padding_attention_mask(is_pad)
+        for block in self.blocks:
+            x = block.forward_reference(x, mask)
+        return self._decode(x[:, -1])
+
+
+class BlindgraspTransformerPolicy(PreTrainedPolicy):
+    """LeRobot policy wrapper: training loss, rolling inference context, LeRobot's policy interface."""
+
+    config_class = BlindgraspTransformerConfig
+    name = "blindgrasp_transformer"
+
+    def __init__(self, config: BlindgraspTransformerConfig, **kwargs):
+        # kwargs: make_policy passes dataset_stats / dataset_meta; normalization lives in the processors instead.
+        super().__init__(config)
+        config.validate_features()
+        self.config = config
+        self.model = BlindgraspGPT(config)
+        self.reset()
+
+    def get_optim_params(self):
+        # robomimic applies AdamW's weight decay to every parameter (its "L2 regularization").
+        return self.parameters()
+
+    def reset(self) -> None:
+        """Start a new episode: the next observation refills the whole context."""
+        self._context: deque[Tensor] = deque(maxlen=self.config.n_obs_steps)
+        self._context_is_pad: deque[Tensor] = deque(maxlen=self.config.n_obs_steps)
+
+    def _push_observation(self, state: Tensor) -> tuple[Tensor, Tensor | None]:
+        """Append one (B, 12) observation to the rolling context; return (B, T, 12) states and padding flags.
+
+        Like robomimic's FrameStackWrapper and LeRobot diffusion's `populate_queues`, the first observation of an
+        episode fills the context with copies of itself; the copies are flagged as padding, as LeRobot flags the
+        repeated first frame in a training window.
+        """
+        real = torch.zeros(state.shape[0], dtype=torch.bool, device=state.device)
+        if not self._context:
+            for _ in range(self.config.n_obs_steps - 1):
+                self._context.append(state)
+                self._context_is_pad.append(~real)
+        self._context.append(state)
+        self._context_is_pad.append(real)
+        states = torch.stack(list(self._context), dim=1)
+        is_pad = torch.stack(list(self._context_is_pad), dim=1)
+        # Once the episode is 30 steps old nothing is padded: drop the mask for the faster causal kernel.
+        return states, (is_pad if bool(is_pad.any()) else None)
+
+    @torch.no_grad()
+    def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
+        """(B, 1, 9) normalized delta.
+
+        A (B, 12) `observation.state` is one new observation: it goes into the rolling context (like
+        `select_action`). A (B, T, 12) one is a full window (with optional `observation.state_is_pad`), used as is.
+        """
+        state = batch[OBS_STATE]
+        if state.ndim == 3:
+            return self.model(state, batch.get(STATE_IS_PAD))[:, None]
+        states, is_pad = self._push_observation(state)
+        return self.model(states, is_pad)[:, None]
+
+    @torch.no_grad()
+    def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
+        """One (B, 12) observation in, (B, 9) normalized delta out (the postprocessor makes it a joint target)."""
+        return self.predict_action_chunk(batch)[:, 0]
+
+    def forward(self, batch: dict[str, Tensor], reduction: str = "mean") -> tuple[Tensor, dict]:
+        """MSE between the last token's prediction and the normalized delta action (paper eq. 11)."""
+        pred = self.model(batch[OBS_STATE], batch.get(STATE_IS_PAD))
+        per_element = F.mse_loss(pred, batch[ACTION], reduction="none")
+        if reduction == "none":
+            per_sample = per_element.mean(dim=-1)
+            return per_sample, {"mse": per_sample.mean().item()}
+        loss = per_element.mean()
+        return loss, {"mse": loss.item()}
