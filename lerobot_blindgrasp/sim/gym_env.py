@@ -15,6 +15,9 @@ Seeding: `reset(seed=s)` runs the trial that `BatchedGraspEnv(GraspEnvConfig(see
 (physics draw, start pose, object offset and sensor noise all derive from s). `reset()` without a seed draws the
 next env seed from gymnasium's `np_random`, so a seeded reset followed by unseeded ones is reproducible too. Every
 episode gets a fresh physics draw: a fresh `BatchedGraspEnv` costs a few milliseconds.
+
+Outside LeRobot: `gym.make("lerobot_blindgrasp.sim.gym_env:lerobot_blindgrasp/BlindGrasp-v0", object_name=...)`
+(the module prefix imports this file, which registers the id with its 200-step limit), or `make_env(name)`.
 """
 
 from __future__ import annotations
