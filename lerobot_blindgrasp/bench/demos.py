@@ -1,0 +1,124 @@
+"""Demo collection speed: curated demos per CPU-minute and dataset frames written per second.
+
+Runs a real, small `blindgrasp-collect-demos` collection into a temporary folder (curated as in the paper unless
+--no-curation), then re-writes the rollouts it saw through both LeRobot write paths, to measure the writer alone:
+`save_episode(episode_data=...)` with whole arrays (what collection uses) and `add_frame` per frame. Without
+--teacher a throwaway `quick` teacher is trained for one iteration: the speeds are real, its yield is not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--teacher", type=Path, default=None, help="teacher checkpoint or run dir (default: throwaway)")
+    p.add_argument("--num-envs", type=int, default=72)
+    p.add_argument("--objects", default="all")
+    p.add_argument("--episodes-per-object", type=int, default=2, help="written-episode target per object")
+    p.add_argument("--max-rollouts-per-object", type=int, default=4, help="bounds the run for weak teachers")
+    p.add_argument("--no-curation", action="store_true")
+    p.add_argument("--write-episodes", type=int, default=40, help="episodes re-written per writer path")
+    p.add_argument("--threads", type=int, default=0)
+
+
+def _throwaway_teacher(tmp: Path) -> Path:
+    from lerobot_blindgrasp.teacher import train
+
+    out = tmp / "teacher"
+    with contextlib.redirect_stdout(io.StringIO()):  # keep --json output clean
+        train.train(train.parse_args(["--preset", "quick", "--output-dir", str(out), "--iterations", "1",
+                                      "--no-export"]))
+    return out
+
+
+def _writer_speed(episodes, root: Path, per_frame: bool) -> float:
+    """Frames per second through one LeRobot write path, on real rollouts (whole, untrimmed)."""
+    from lerobot_blindgrasp import spec
+    from lerobot_blindgrasp.demos import curation, dataset
+
+    ds = dataset.create(root, "bench/writer")
+    frames, t0 = 0, time.perf_counter()
+    try:
+        for ep in episodes:
+            cut = curation.evaluate(ep.task_reward, ep.uniaxial_force, curation.NO_CURATION)
+            if not per_frame:
+                frames += dataset.write_episode(ds, ep, cut)
+                continue
+            buf = dataset.episode_buffer(ep, cut, ds.meta.total_episodes)
+            for t in range(buf["size"]):
+                ds.add_frame(
+                    {
+                        spec.STATE_KEY: buf[spec.STATE_KEY][t],
+                        spec.ACTION_KEY: buf[spec.ACTION_KEY][t],
+                        **{k: buf[k][t].copy() for k in dataset.EPISODE_FEATURES},
+                        "task": buf["task"][t],
+                    }
+                )
+            ds.save_episode()
+            frames += buf["size"]
+    finally:
+        ds.finalize()
+    return frames / (time.perf_counter() - t0)
+
+
+def run(args: argparse.Namespace) -> dict:
+    from lerobot_blindgrasp.demos import collect, curation
+
+    tmp = Path(tempfile.mkdtemp(prefix="blindgrasp-bench-demos-"))
+    try:
+        teacher = args.teacher or _throwaway_teacher(tmp)
+        seen = []
+
+        def keep_some(ep, cut, written, stats):
+            if len(seen) < args.write_episodes and not ep.physics_failed:
+                seen.append(ep)
+
+        cfg = collect.CollectConfig(
+            teacher=teacher,
+            out=tmp / "demos",
+            repo_id="bench/demos",
+            episodes_per_object=args.episodes_per_object,
+            max_rollouts_per_object=args.max_rollouts_per_object,
+            objects=args.objects,
+            curation=curation.NO_CURATION if args.no_curation else curation.PAPER_CURATION,
+            num_envs=args.num_envs,
+            threads=args.threads,
+            progress=False,
+        )
+        with contextlib.redirect_stderr(io.StringIO()):
+            stats = collect.collect(cfg, on_episode=keep_some)
+        cpu_min = stats.cpu_s / 60.0
+        result = {
+            "teacher": str(args.teacher) if args.teacher else "throwaway quick teacher (1 iteration)",
+            "curation": not args.no_curation,
+            "num_envs": args.num_envs,
+            "rollouts": stats.rollouts,
+            "curated_demos": stats.kept,
+            "frames": stats.frames,
+            "wall_s": stats.wall_s,
+            "cpu_s": stats.cpu_s,
+            "env_steps_per_s": stats.env_steps / stats.wall_s if stats.wall_s else 0.0,
+            "rollouts_per_cpu_minute": stats.rollouts / cpu_min if cpu_min else 0.0,
+            "curated_demos_per_cpu_minute": stats.demos_per_cpu_minute,
+            "demos_per_minute": stats.demos_per_minute,
+            "write_share_of_wall": stats.write_s / stats.wall_s if stats.wall_s else 0.0,
+            "frames_written_per_s": _writer_speed(seen, tmp / "w_episode_data", per_frame=False) if seen else 0.0,
+            "frames_written_per_s_add_frame": _writer_speed(seen, tmp / "w_add_frame", per_frame=True)
+            if seen
+            else 0.0,
+            "writer_episodes": len(seen),
+        }
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    if not getattr(args, "json", False):
+        width = max(map(len, result))
+        for k, v in result.items():
+            print(f"{k:<{width}}  {v:.2f}" if isinstance(v, float) else f"{k:<{width}}  {v}")
+    return result

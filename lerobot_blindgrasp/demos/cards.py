@@ -1,0 +1,234 @@
+"""Dataset cards for blindgrasp datasets, from the templates in `datasets_cards/`.
+
+A card is LeRobot's own (`create_lerobot_dataset_card`: LeRobot template, `task_categories: robotics`, the
+`configs` entry the Hub viewer needs, info.json) with our body as its `dataset_description`, our tags, the license
+and the paper's citation. `push_to_hub` builds the card from the same arguments, so the README.md we write next to
+the data is exactly what lands on the Hub. Two bodies:
+- `sim_teacher_demos.md`: filled from `collection.json` and `yield_report.json` (object set, curation thresholds,
+  randomization, teacher checkpoint hash, yield);
+- `glove_teleop_demos.md`: for `lerobot-record` datasets of the real gripper, filled from the dataset's metadata.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import json
+from dataclasses import fields
+from pathlib import Path
+
+import jinja2
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.demos import dataset as demo_dataset
+from lerobot_blindgrasp.demos import provenance, report
+from lerobot_blindgrasp.sim import objects, randomization
+
+CARDS_DIR = Path(__file__).resolve().parents[2] / "datasets_cards"
+TEMPLATES = {"sim": "sim_teacher_demos.md", "glove": "glove_teleop_demos.md"}
+CARD_NAME = "README.md"
+DEFAULT_LICENSE = "apache-2.0"  # the project's license
+
+PAPER = (
+    "Lee, Choi, Kim, Nam, Jeong: Why Look at It at All?: Vision-Free Multifingered Blind Grasping Using Uniaxial "
+    "Fingertip Force Sensing (2025)"
+)
+CITATION_BIBTEX = """@article{lee2025blindgrasping,
+  title  = {Why Look at It at All?: Vision-Free Multifingered Blind Grasping Using Uniaxial Fingertip Force Sensing},
+  author = {Lee, Edgar and Choi, Junho and Kim, Taemin and Nam, Changjoo and Jeong, Seokhwan},
+  year   = {2025}
+}"""
+_COMMON_TAGS = ["blind-grasping", "force-sensing", "multifingered-gripper", "dclaw", "grasping", "blindgrasp"]
+TAGS = {
+    "sim": _COMMON_TAGS + ["simulation", "mujoco", "teacher-student", "behavior-cloning"],
+    "glove": _COMMON_TAGS + ["real-robot", "teleoperation", "data-glove"],
+}
+# Hub license identifiers we accept (https://huggingface.co/docs/hub/repositories-licenses); the full list is
+# longer, these are the ones that make sense for a robotics dataset.
+HUB_LICENSES = frozenset(
+    {
+        "apache-2.0", "mit", "bsd-3-clause", "cc0-1.0", "cc-by-4.0", "cc-by-sa-4.0", "cc-by-nc-4.0",
+        "cc-by-nc-sa-4.0", "odc-by", "odbl", "pddl", "openrail", "other", "unknown",
+    }
+)  # fmt: skip
+
+
+def detect_kind(root: Path) -> str:
+    """'sim' for folders written by blindgrasp-collect-demos, else 'glove' (a lerobot-record dataset)."""
+    return "sim" if provenance.path(root).is_file() else "glove"
+
+
+def render_body(kind: str, context: dict) -> str:
+    if kind not in TEMPLATES:
+        raise ValueError(f"unknown card kind {kind!r}; choose from {', '.join(TEMPLATES)}")
+    path = CARDS_DIR / TEMPLATES[kind]
+    if not path.is_file():
+        raise FileNotFoundError(f"card template {path} is missing (datasets_cards/ ships with the source tree)")
+    env = jinja2.Environment(undefined=jinja2.StrictUndefined, keep_trailing_newline=True)
+    return env.from_string(path.read_text()).render(**context).strip() + "\n"
+
+
+def _versions() -> dict:
+    from lerobot_blindgrasp import __version__
+
+    return {"plugin_version": __version__, "lerobot_version": importlib.metadata.version("lerobot")}
+
+
+def _randomization_rows(dr: dict) -> list[tuple[str, str]]:
+    labels = {
+        "joint_offset_rad": "joint offset at reset, per joint (rad), uniform ±",
+        "object_xy_m": "object position at reset, x and y (m), uniform ±",
+        "object_friction": "object friction coefficient, uniform",
+        "robot_friction": "fingertip friction coefficient, uniform",
+        "object_mass_scale": "object mass scale, uniform",
+        "kp_scale": "servo stiffness scale, log-uniform",
+        "kv_scale": "servo damping scale, log-uniform",
+        "external_force": "external pushes on the object",
+        "joint_noise_rad": "joint position noise std (rad)",
+        "force_noise_n": "fingertip force noise std (N)",
+    }
+    rows = []
+    for f in fields(randomization.DomainRandomization):
+        if f.name in ("push_force_n", "push_period_s") and not dr.get("external_force"):
+            continue  # irrelevant while pushes are off
+        value = dr.get(f.name)
+        if isinstance(value, (list, tuple)):
+            value = f"[{value[0]:g}, {value[1]:g}]"
+        elif isinstance(value, bool):
+            value = "on" if value else "off"
+        elif isinstance(value, float):
+            value = f"{value:.4g}"
+        rows.append((labels.get(f.name, f.name), str(value)))
+    return rows
+
+
+def _sim_context(root: Path, repo_id: str, meta) -> dict:
+    prov = provenance.load(root)
+    tally = report.load_tally(root)
+    rows = []
+    for name in prov["objects"]:
+        o = tally.of(name)
+        rows.append({"name": name, "task": objects.get_object(name).task, "yield": o.yield_rate, **vars(o)})
+    total = tally.total()
+    return {
+        "repo_id": repo_id,
+        "n_episodes": meta.total_episodes,
+        "n_frames": meta.total_frames,
+        "fps": meta.fps,
+        "robot_type": meta.robot_type,
+        "objects": rows,
+        "total": {"yield": total.yield_rate, **vars(total)},
+        "stochastic": prov["stochastic"],
+        "curation": prov["curation"],
+        "teacher": prov["teacher"],
+        "randomization": _randomization_rows(prov["randomization"]),
+        "runs": prov["runs"],
+        "state_names": list(spec.STATE_NAMES),
+        "action_names": list(spec.ACTION_NAMES),
+        "metadata_features": demo_dataset.EPISODE_FEATURES,
+        "merge_hint": demo_dataset.MERGE_HINT.format(
+            repo_id=repo_id, root="<root>", names=list(demo_dataset.METADATA_FEATURE_NAMES)
+        ),
+        **_versions(),
+    }
+
+
+def _glove_context(root: Path, repo_id: str, meta, operators: list[str], notes: str) -> dict:
+    import pandas as pd
+
+    files = sorted(Path(root, "meta", "episodes").glob("chunk-*/file-*.parquet"))
+    per_task: dict[str, dict] = {}
+    if files:
+        eps = pd.concat([pd.read_parquet(f, columns=["tasks", "length"]) for f in files], ignore_index=True)
+        for tasks, length in zip(eps["tasks"], eps["length"], strict=True):
+            for task in tasks:
+                row = per_task.setdefault(task, {"task": task, "episodes": 0, "frames": 0})
+                row["episodes"] += 1
+                row["frames"] += int(length)
+    return {
+        "repo_id": repo_id,
+        "n_episodes": meta.total_episodes,
+        "n_frames": meta.total_frames,
+        "fps": meta.fps,
+        "robot_type": meta.robot_type,
+        "tasks": list(per_task.values()),
+        "features": {k: v for k, v in meta.features.items() if k not in ("timestamp", "frame_index", "episode_index", "index", "task_index")},
+        "operators": operators,
+        "notes": notes,
+        **_versions(),
+    }
+
+
+def card_kwargs(
+    root: Path,
+    repo_id: str,
+    kind: str | None = None,
+    license: str = DEFAULT_LICENSE,
+    extra_tags: list[str] | None = None,
+    operators: list[str] | None = None,
+    notes: str = "",
+) -> dict:
+    """Keyword arguments for `create_lerobot_dataset_card` and `LeRobotDataset.push_to_hub` (same keys)."""
+    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+
+    if license not in HUB_LICENSES:
+        raise ValueError(f"license {license!r} is not one of {sorted(HUB_LICENSES)}")
+    root = Path(root)
+    kind = kind or detect_kind(root)
+    meta = LeRobotDatasetMetadata(repo_id, root=root)
+    if kind == "sim":
+        context = _sim_context(root, repo_id, meta)
+    else:
+        context = _glove_context(root, repo_id, meta, operators or [], notes)
+    return {
+        "tags": TAGS[kind] + list(extra_tags or []),
+        "license": license,
+        "dataset_description": render_body(kind, context),
+        "paper": PAPER,
+        "citation_bibtex": CITATION_BIBTEX,
+        "_dataset_info": meta.info,  # not a card kwarg: popped by build_card
+    }
+
+
+def build_card(kwargs: dict, repo_id: str):
+    """The huggingface_hub DatasetCard LeRobot will push for these kwargs."""
+    from lerobot.datasets.utils import create_lerobot_dataset_card
+
+    kw = dict(kwargs)
+    info = kw.pop("_dataset_info")
+    tags = kw.pop("tags")
+    return create_lerobot_dataset_card(tags=tags, dataset_info=info, repo_id=repo_id, **kw)
+
+
+def write_card(root: Path, repo_id: str, **kwargs) -> Path:
+    """Render the card for the dataset in `root` and save it as `root/README.md`."""
+    card = build_card(card_kwargs(root, repo_id, **kwargs), repo_id)
+    validate(str(card))
+    out = Path(root) / CARD_NAME
+    card.save(out)
+    return out
+
+
+def validate(text: str) -> dict:
+    """Parse a card with huggingface_hub and check the Hub metadata we rely on; returns the metadata dict.
+
+    The Hub's own validator (`DatasetCard.validate`) is an online call; this is the offline part of it.
+    """
+    from huggingface_hub import DatasetCard
+
+    card = DatasetCard(text)
+    data = card.data.to_dict()
+    problems = []
+    if "robotics" not in (data.get("task_categories") or []):
+        problems.append("task_categories must include 'robotics'")
+    tags = data.get("tags") or []
+    if not tags or not all(isinstance(t, str) and t and " " not in t for t in tags):
+        problems.append(f"tags must be non-empty strings without spaces, got {tags!r}")
+    if data.get("license") not in HUB_LICENSES:
+        problems.append(f"license {data.get('license')!r} is not a Hub license identifier")
+    configs = data.get("configs") or []
+    if not any(c.get("data_files") for c in configs):
+        problems.append("configs must point the Hub viewer at the parquet data files")
+    if problems:
+        raise ValueError("invalid dataset card metadata: " + "; ".join(problems))
+    json.dumps(data)  # the metadata must be plain data
+    return data

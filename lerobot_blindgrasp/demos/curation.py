@@ -1,0 +1,114 @@
+"""Demonstration curation (paper Sec. III-C): keep grasp-and-lift episodes with rich fingertip force interaction.
+
+An episode of T <= 100 steps (5 s at 20 Hz) passes when, within it,
+- the task reward r_t (eq. 5) stays > 0.5 for >= 0.5 s without a break (10 consecutive control steps), and
+- the cumulative sum of the uniaxial fingertip forces, over the 3 sensors and the steps, exceeds 200 N.
+
+Both comparisons are strict, as the paper words them ("> 0.5", "exceeds 200 N"); only the hold length is ">=".
+
+Which force signal is summed: the compressive part, max(f, 0), of the *noise-free* uniaxial force after the 0.1 N
+deadband (`info["uniaxial_force"]` from the env), sampled once per control step, summed over the 3 sensors and the
+steps. Why:
+- noise-free: the paper sums "uniaxial fingertip contact forces", the physical contact quantity. The student's o_t
+  carries the same force plus N(0, 0.5 N) noise per sensor and step; summed over up to 300 samples that noise alone
+  random-walks by about +-9 N, so curating on it would select partly on sensor noise.
+- compressive part: the sim's reading is the contact force projected on the load cell's axis and is negative when
+  a contact pulls the tip along that axis (e.g. a touch on the back of a curled tip). Such readings are not the
+  pressing the criterion rewards, and summed signed they cancel real pressing (untrained teachers reach negative
+  totals). The env counts a sensor as "in contact" only when f > 0.1 N (r_t, r_i); this uses the same sign.
+The unit is "N summed over 20 Hz samples" (200 N = 10 N*s of impulse), not an integral over time.
+
+The paper adds that the selection "emphasizes the grasp-and-lift phase rather than the prolonged holding". We read
+that as: a kept episode ends at the step where both criteria are first met (`trim_to_success`); what follows is
+holding. Acceptance does not depend on trimming. `--no-curation` (the "w/o curation" ablation) keeps every
+episode whole.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from lerobot_blindgrasp import spec
+
+
+@dataclass(frozen=True)
+class CurationConfig:
+    task_reward_threshold: float = 0.5  # r_t must be strictly above this ...
+    min_hold_s: float = 0.5  # ... for at least this long without a break
+    force_sum_threshold_n: float = 200.0  # sum of uniaxial forces over sensors and steps must exceed this
+    episode_s: float = spec.DEMO_EPISODE_S  # rollout length, 100 steps
+    trim_to_success: bool = True  # end kept episodes where both criteria are first met
+    enabled: bool = True  # False: the "w/o curation" ablation, every episode kept whole
+
+    @property
+    def min_hold_steps(self) -> int:
+        return int(round(self.min_hold_s * spec.CONTROL_HZ))
+
+    @property
+    def episode_steps(self) -> int:
+        return int(round(self.episode_s * spec.CONTROL_HZ))
+
+    def to_dict(self) -> dict:
+        return {**asdict(self), "min_hold_steps": self.min_hold_steps, "episode_steps": self.episode_steps}
+
+
+PAPER_CURATION = CurationConfig()
+NO_CURATION = CurationConfig(enabled=False, trim_to_success=False)
+
+
+@dataclass(frozen=True)
+class CurationResult:
+    passed: bool  # both criteria met (computed even when curation is disabled, for the metadata)
+    keep: bool  # written to the dataset
+    keep_steps: int  # frames written (trimmed or whole)
+    longest_hold_steps: int  # longest run of r_t > threshold
+    force_sum_n: float  # compressive force summed over sensors and the whole rollout (N)
+    criteria_step: int  # index of the step where both criteria were first met; -1 if never
+
+    @property
+    def longest_hold_s(self) -> float:
+        return self.longest_hold_steps / spec.CONTROL_HZ
+
+
+def _first_true(mask: np.ndarray) -> int:
+    idx = np.flatnonzero(mask)
+    return int(idx[0]) if idx.size else -1
+
+
+def hold_run_lengths(task_reward: np.ndarray, threshold: float) -> np.ndarray:
+    """run[t] = number of consecutive steps ending at t with r > threshold (0 where r <= threshold)."""
+    above = np.asarray(task_reward) > threshold
+    # Index of the last step at or before t that was not above the threshold (-1 if none yet).
+    last_break = np.maximum.accumulate(np.where(~above, np.arange(above.size), -1))
+    return np.where(above, np.arange(above.size) - last_break, 0)
+
+
+def evaluate(task_reward: np.ndarray, uniaxial_force: np.ndarray, cfg: CurationConfig = PAPER_CURATION) -> CurationResult:
+    """Judge one episode. task_reward: (T,) r_t per step; uniaxial_force: (T, 3) noise-free forces (N) per step."""
+    r = np.asarray(task_reward, dtype=np.float64).reshape(-1)
+    if r.size == 0:
+        raise ValueError("cannot curate an empty episode")
+    f = np.asarray(uniaxial_force, dtype=np.float64).reshape(r.size, -1)
+    if r.size > cfg.episode_steps:
+        raise ValueError(f"episode has {r.size} steps, more than the {cfg.episode_steps}-step curation window")
+    runs = hold_run_lengths(r, cfg.task_reward_threshold)
+    cum_force = np.cumsum(np.clip(f, 0.0, None).sum(axis=1))
+    t_hold = _first_true(runs >= cfg.min_hold_steps)
+    t_force = _first_true(cum_force > cfg.force_sum_threshold_n)
+    passed = t_hold >= 0 and t_force >= 0
+    criteria_step = max(t_hold, t_force) if passed else -1
+    if not cfg.enabled:
+        keep, keep_steps = True, r.size
+    else:
+        keep = passed
+        keep_steps = (criteria_step + 1 if cfg.trim_to_success else r.size) if passed else 0
+    return CurationResult(
+        passed=bool(passed),
+        keep=bool(keep),
+        keep_steps=int(keep_steps),
+        longest_hold_steps=int(runs.max()),
+        force_sum_n=float(cum_force[-1]),
+        criteria_step=int(criteria_step),
+    )

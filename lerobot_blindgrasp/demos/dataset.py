@@ -1,0 +1,182 @@
+"""The demo dataset: LeRobotDataset v3 at 20 fps, state-only, the shared schema plus per-episode metadata features.
+
+Schema: `spec.dataset_features()` (observation.state = 9 joint positions + 3 forces, action = 9 absolute joint
+targets) is what sim demos and glove demos share. On top of it, every frame carries its episode's metadata as three
+small extra features (constant within an episode):
+
+    episode.outcome        float32 (6,)  success, curation_passed, left_workspace, longest_hold_s, force_sum_n,
+                                          rollout_steps
+    episode.randomization  float32 (7,)  the Table II draw (frictions, mass and gain scales) and the object's start xy
+    episode.seed           int64   (2,)  env_seed, env_episode: with the collection's DR they reproduce the draw
+
+The object and its size are in the task string (one task per object), which LeRobot keeps per episode.
+
+Why features and not custom columns or info.json keys: LeRobot's tools rebuild metadata from what they know.
+`DatasetInfo.from_dict` drops unknown info.json keys, and `lerobot-edit-dataset` (delete_episodes, split, merge)
+rewrites meta/episodes from episode_index, tasks, length, file indices and the per-feature stats, so extra episode
+columns vanish. Features survive every operation, are returned by `LeRobotDataset.__getitem__`, and are ignored by
+policies (only `observation.*` and `action*` keys become policy features). Their per-episode stats (min = max =
+the value) are also kept in meta/episodes, so `episode_table()` reads every episode's metadata without touching
+the frames. The cost is a few bytes per frame.
+
+Merging with glove demos (`lerobot-edit-dataset --operation.type merge`) needs identical features and robot_type:
+remove the three metadata features first (`--operation.type remove_feature`, see `MERGE_HINT`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.demos.curation import CurationResult
+from lerobot_blindgrasp.demos.rollout import RANDOMIZATION_NAMES, Episode
+from lerobot_blindgrasp.sim import objects
+
+# robot_type of every blindgrasp dataset, sim or real: `merge` refuses datasets whose robot_type differs, so the
+# real gripper's LeRobot robot type must carry this name too.
+ROBOT_TYPE = "blindgrasp_gripper"
+FPS = spec.CONTROL_HZ
+
+OUTCOME_NAMES: tuple[str, ...] = (
+    "success",
+    "curation_passed",
+    "left_workspace",
+    "longest_hold_s",
+    "force_sum_n",
+    "rollout_steps",
+)
+SEED_NAMES: tuple[str, ...] = ("env_seed", "env_episode")
+EPISODE_FEATURES: dict[str, dict] = {
+    "episode.outcome": {"dtype": "float32", "shape": (len(OUTCOME_NAMES),), "names": list(OUTCOME_NAMES)},
+    "episode.randomization": {
+        "dtype": "float32",
+        "shape": (len(RANDOMIZATION_NAMES),),
+        "names": list(RANDOMIZATION_NAMES),
+    },
+    "episode.seed": {"dtype": "int64", "shape": (len(SEED_NAMES),), "names": list(SEED_NAMES)},
+}
+METADATA_FEATURE_NAMES: tuple[str, ...] = tuple(EPISODE_FEATURES)
+MERGE_HINT = (
+    "lerobot-edit-dataset --repo_id {repo_id} --root {root} --new_repo_id {repo_id}_schema --new_root {root}_schema "
+    "--operation.type remove_feature --operation.feature_names \"{names}\""
+)
+
+
+def demo_features() -> dict:
+    return {**spec.dataset_features(), **EPISODE_FEATURES}
+
+
+def create(root: Path, repo_id: str):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    # video_backend is irrelevant without cameras; naming it skips LeRobot's torchcodec probe and its warning.
+    return LeRobotDataset.create(
+        repo_id, fps=FPS, features=demo_features(), root=root, robot_type=ROBOT_TYPE, use_videos=False,
+        video_backend="pyav",
+    )
+
+
+def resume(root: Path, repo_id: str):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    ds = LeRobotDataset.resume(repo_id, root=root, video_backend="pyav")
+    problems = check_schema(ds.meta.features, ds.meta.fps, ds.meta.robot_type)
+    if problems:
+        ds.finalize()
+        raise ValueError(f"{root} is not a blindgrasp demo dataset: " + "; ".join(problems))
+    return ds
+
+
+def check_schema(features: dict, fps: int, robot_type: str | None) -> list[str]:
+    problems = []
+    want = demo_features()
+    for key, ft in want.items():
+        have = features.get(key)
+        if have is None:
+            problems.append(f"missing feature {key!r}")
+        elif have["dtype"] != ft["dtype"] or tuple(have["shape"]) != tuple(ft["shape"]) or list(
+            have["names"]
+        ) != list(ft["names"]):
+            problems.append(f"feature {key!r} differs from the spec")
+    if fps != FPS:
+        problems.append(f"fps {fps} != {FPS}")
+    if robot_type != ROBOT_TYPE:
+        problems.append(f"robot_type {robot_type!r} != {ROBOT_TYPE!r}")
+    return problems
+
+
+def episode_buffer(ep: Episode, cut: CurationResult, episode_index: int) -> dict:
+    """A ready episode for `LeRobotDataset.save_episode(episode_data=...)`: whole arrays, no per-frame add_frame."""
+    n = cut.keep_steps
+    task = objects.get_object(ep.object_name).task
+    outcome = np.array(
+        [ep.success, cut.passed, ep.left_workspace, cut.longest_hold_s, cut.force_sum_n, ep.length], dtype=np.float32
+    )
+    return {
+        "size": n,
+        "task": [task] * n,
+        spec.STATE_KEY: ep.state[:n].astype(np.float32, copy=False),
+        spec.ACTION_KEY: ep.action[:n].astype(np.float32, copy=False),
+        "episode.outcome": np.broadcast_to(outcome, (n, outcome.size)),
+        "episode.randomization": np.broadcast_to(ep.randomization.astype(np.float32), (n, len(RANDOMIZATION_NAMES))),
+        "episode.seed": np.broadcast_to(np.array([ep.env_seed, ep.env_episode], dtype=np.int64), (n, 2)),
+        # LeRobot's default columns: timestamp and frame_index as add_frame would compute them; index and
+        # task_index are overwritten by save_episode.
+        "timestamp": (np.arange(n) / FPS).astype(np.float32),
+        "frame_index": np.arange(n, dtype=np.int64),
+        "episode_index": episode_index,
+        "index": np.zeros(n, dtype=np.int64),
+        "task_index": np.zeros(n, dtype=np.int64),
+    }
+
+
+def write_episode(ds, ep: Episode, cut: CurationResult) -> int:
+    """Append one kept episode; returns the number of frames written."""
+    ds.save_episode(episode_data=episode_buffer(ep, cut, ds.meta.total_episodes))
+    return cut.keep_steps
+
+
+_TASK_TO_OBJECT: dict[str, str] = {}
+
+
+def object_from_task(task: str) -> str | None:
+    """The catalogue object a task string names (None for tasks that are not ours, e.g. edited ones)."""
+    if len(_TASK_TO_OBJECT) != len(objects.CATALOGUE):
+        _TASK_TO_OBJECT.clear()
+        _TASK_TO_OBJECT.update({o.task: name for name, o in objects.CATALOGUE.items()})
+    return _TASK_TO_OBJECT.get(task)
+
+
+def episode_table(root: str | Path):
+    """One row per episode (pandas): episode_index, task, object, length and every metadata value.
+
+    Read from meta/episodes only (the per-episode stats of the metadata features), so it is fast on large
+    datasets. Pick episodes with it and pass them to `LeRobotDataset(repo_id, root=..., episodes=[...])`.
+    """
+    import pandas as pd
+
+    files = sorted(Path(root, "meta", "episodes").glob("chunk-*/file-*.parquet"))
+    if not files:
+        raise FileNotFoundError(f"no episode metadata under {Path(root, 'meta', 'episodes')}")
+    raw = pd.concat([pd.read_parquet(f) for f in files], ignore_index=True).sort_values("episode_index")
+    out = pd.DataFrame(
+        {
+            "episode_index": raw["episode_index"].to_numpy(),
+            "task": [t[0] for t in raw["tasks"]],
+            "length": raw["length"].to_numpy(),
+        }
+    )
+    out["object"] = [object_from_task(t) for t in out["task"]]
+    for key, ft in EPISODE_FEATURES.items():
+        col = f"stats/{key}/min"
+        if col not in raw:
+            continue
+        values = np.stack(raw[col].to_numpy())
+        for j, name in enumerate(ft["names"]):
+            out[name] = values[:, j].astype(np.int64 if ft["dtype"] == "int64" else np.float64)
+    for flag in ("success", "curation_passed", "left_workspace"):
+        if flag in out:
+            out[flag] = out[flag] > 0.5
+    return out.reset_index(drop=True)

@@ -1,0 +1,43 @@
+"""`collection.json` in the dataset folder: how the demos were made, run by run (the card is filled from it).
+
+It lives beside `meta/` rather than inside LeRobot's metadata, which LeRobot's tools rewrite; it travels with the
+folder to the Hub. `--resume` reads it to refuse appending demos of another teacher or another curation rule,
+and to continue with env seeds no earlier run used.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+PROVENANCE_NAME = "collection.json"
+FORMAT = "blindgrasp-demos/1"
+
+# Settings that must be identical for demos to share one dataset.
+_MUST_MATCH = ("teacher_sha256", "stochastic", "curation", "randomization", "objects")
+
+
+def path(root: Path) -> Path:
+    return Path(root) / PROVENANCE_NAME
+
+
+def load(root: Path) -> dict:
+    p = path(root)
+    if not p.is_file():
+        raise FileNotFoundError(f"{root} has no {PROVENANCE_NAME}; it was not written by blindgrasp-collect-demos")
+    data = json.loads(p.read_text())
+    if data.get("format") != FORMAT:
+        raise ValueError(f"{p}: unknown format {data.get('format')!r}, expected {FORMAT!r}")
+    return data
+
+
+def save(root: Path, data: dict) -> None:
+    p = path(root)
+    tmp = p.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(data, indent=2))
+    tmp.replace(p)  # atomic: a crash never leaves half a file
+
+
+def mismatches(old: dict, new: dict) -> list[str]:
+    """Settings of `new` that differ from the dataset's `old` provenance."""
+    return [key for key in _MUST_MATCH if old.get(key) != new.get(key)]
