@@ -22,6 +22,8 @@ from lerobot_blindgrasp.sim import gym_env, objects
 from lerobot_blindgrasp.sim.demo import grasp_geometry
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
+pytestmark = pytest.mark.slow  # ~40 s: two CLI subprocesses and 4 rendered 10 s episodes
+
 BIN = Path(sys.executable).parent
 OBJECTS = ("cylinder_a_medium", "sphere_small")
 TRAIN_STEPS = 4
