@@ -56,6 +56,35 @@ class GripperRig:
             [(self.dxl.servos[i].shaft - MOUNT_ZERO[k]) * MOUNT_SIGN[k] / TICKS_PER_RAD for k, i in enumerate(self.ids)]
         )
 
+    def place_object(self, contact_q: float = 0.2, stiffness_n_per_rad: float = 100.0, max_n: float = 25.0) -> None:
+        """A rigid object at the claw centre: each proximal joint (J*1) stops at `contact_q` when closing, and its
+        fingertip load cell reads the squeeze, stiffness x (contact_q - commanded q), like a P-controlled servo
+        pressing on a rigid body (saturating at the servo's torque)."""
+        self.contact_q = contact_q
+        for f in range(spec.NUM_FORCES):
+            k = 3 * f + 1
+            servo = self.dxl.servos[self.ids[k]]
+            servo.obstacle = (MOUNT_ZERO[k] + MOUNT_SIGN[k] * contact_q * TICKS_PER_RAD, -MOUNT_SIGN[k])
+
+        def forces() -> np.ndarray:
+            out = np.zeros(spec.NUM_FORCES)
+            for f in range(spec.NUM_FORCES):
+                k = 3 * f + 1
+                servo = self.dxl.servos[self.ids[k]]
+                if not servo.get("Torque_Enable"):
+                    continue
+                shaft_goal = servo.position_for(servo.get("Goal_Position"))
+                q_goal = (shaft_goal - MOUNT_ZERO[k]) * MOUNT_SIGN[k] / TICKS_PER_RAD
+                out[f] = min(max_n, max(0.0, stiffness_n_per_rad * (contact_q - q_goal)))
+            return out
+
+        self.force.force_fn = forces
+
+    def remove_object(self) -> None:
+        for servo in self.dxl.servos.values():
+            servo.obstacle = None
+        self.force.force_fn = None
+
     def calibration_inputs(self, positive_q: float = 0.3):
         """An `input` replacement that plays the operator of `BlindgraspGripper.calibrate`."""
 

@@ -90,6 +90,8 @@ class BlindgraspGripper(Robot):
         self._retry = config.bus_num_retry
         self._torque_addr, _ = get_address(self.bus.model_ctrl_table, MODEL, "Torque_Enable")
         self._atexit = None
+        # Vision-free by design; lerobot-record and lerobot-rollout still read `robot.cameras`.
+        self.cameras: dict = {}
 
     # --- features (valid while disconnected) ---------------------------------------------------------------------
     @cached_property
@@ -200,6 +202,13 @@ class BlindgraspGripper(Robot):
             self.bus.write("Drive_Mode", j, c.drive_mode, num_retry=self._retry)
         self.bus.write_calibration(self.calibration)
 
+    @check_if_not_connected
+    def tare_forces(self) -> None:
+        """Re-zero the fingertip sensors (fingertips touching nothing), e.g. between evaluation trials: load cells
+        drift with temperature and use."""
+        with self._safety("taring the force sensors"):
+            self.force.tare(self.config.force_sensor.tare_s)
+
     # --- control loop ---------------------------------------------------------------------------------------------
     @check_if_not_connected
     def get_observation(self) -> dict[str, float]:
@@ -255,18 +264,22 @@ class BlindgraspGripper(Robot):
         except BaseException as e:
             if getattr(e, "torque_off_handled", False):
                 raise  # an inner _safety already stopped the gripper and wrote the message
+            was_open = self.bus.is_connected
             unconfirmed = self._stop()
-            note = (
-                "Torque is off on all servos."
-                if not unconfirmed
-                else f"Torque-off NOT confirmed by servo IDs {unconfirmed}: cut the servo power."
-            )
+            if not was_open:
+                note = "The bus port was not open, so no torque was enabled by this process."
+            elif unconfirmed:
+                note = f"Torque-off NOT confirmed by servo IDs {unconfirmed}: cut the servo power."
+            else:
+                note = "Torque is off on all servos."
             if isinstance(e, GripperSafetyStop):
                 err = type(e)(f"{e} {note}")
             elif isinstance(e, ForceStreamError):
                 err = ForceSensorError(f"Force sensor failure while {what}: {e} {note}")
             elif isinstance(e, (ConnectionError, RuntimeError, OSError)):
-                err = GripperBusError(f"Dynamixel bus failure while {what} (after {1 + self._retry} tries): {e} {note}")
+                err = GripperBusError(
+                    f"Dynamixel bus failure while {what} (each transaction tried {1 + self._retry} times): {e} {note}"
+                )
             else:  # KeyboardInterrupt, programming errors: keep the original exception, the torque is off anyway
                 logger.error("%s while %s. %s", type(e).__name__, what, note)
                 e.torque_off_handled = True
