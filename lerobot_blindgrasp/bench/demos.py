@@ -95,6 +95,11 @@ def run(args: argparse.Namespace) -> dict:
         with contextlib.redirect_stderr(io.StringIO()):
             stats = collect.collect(cfg, on_episode=keep_some)
         cpu_min = stats.cpu_s / 60.0
+        whole = per_frame = 0.0
+        if seen:
+            _writer_speed(seen[:3], tmp / "w_warmup", per_frame=False)  # pays the lazy imports of a first write
+            whole = _writer_speed(seen, tmp / "w_episode_data", per_frame=False)
+            per_frame = _writer_speed(seen, tmp / "w_add_frame", per_frame=True)
         result = {
             "teacher": str(args.teacher) if args.teacher else "throwaway quick teacher (1 iteration)",
             "curation": not args.no_curation,
@@ -109,10 +114,8 @@ def run(args: argparse.Namespace) -> dict:
             "curated_demos_per_cpu_minute": stats.demos_per_cpu_minute,
             "demos_per_minute": stats.demos_per_minute,
             "write_share_of_wall": stats.write_s / stats.wall_s if stats.wall_s else 0.0,
-            "frames_written_per_s": _writer_speed(seen, tmp / "w_episode_data", per_frame=False) if seen else 0.0,
-            "frames_written_per_s_add_frame": _writer_speed(seen, tmp / "w_add_frame", per_frame=True)
-            if seen
-            else 0.0,
+            "frames_written_per_s": whole,
+            "frames_written_per_s_add_frame": per_frame,
             "writer_episodes": len(seen),
         }
     finally:

@@ -453,6 +453,13 @@ def main(argv=None) -> None:
         f"{s['wall_s'] / 60:.1f} min: {s['demos_per_minute']:.1f} demos/min, "
         f"{s['demos_per_cpu_minute']:.1f} demos/CPU-min; dataset: {cfg.out}"
     )
+    if tally.total().kept == 0:
+        print(
+            "warning: no episode met the curation criteria, so the dataset has no data yet (LeRobot cannot load it "
+            "until one is written). A better-trained teacher, a larger --max-rollouts-per-object, or --no-curation "
+            "will fill it; add --resume to append to this folder.",
+            file=sys.stderr,
+        )
     if stats.stop_reason == "interrupted":
         again = command if cfg.resume else f"{command} --resume"
         print(f"interrupted; every written episode is readable. To continue: {again}", file=sys.stderr)

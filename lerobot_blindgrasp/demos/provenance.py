@@ -39,5 +39,6 @@ def save(root: Path, data: dict) -> None:
 
 
 def mismatches(old: dict, new: dict) -> list[str]:
-    """Settings of `new` that differ from the dataset's `old` provenance."""
-    return [key for key in _MUST_MATCH if old.get(key) != new.get(key)]
+    """Settings of `new` that differ from the dataset's `old` provenance (compared as JSON: tuples == lists)."""
+    as_json = lambda v: json.loads(json.dumps(v))  # noqa: E731
+    return [key for key in _MUST_MATCH if as_json(old.get(key)) != as_json(new.get(key))]

@@ -14,6 +14,7 @@ stops before the network.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -56,6 +57,8 @@ def prepare(
         raise PushError(f"--repo-id must look like USER/NAME, got {repo_id!r}")
     if not (root / "meta" / "info.json").is_file():
         raise PushError(f"{root} is not a LeRobot dataset folder (no meta/info.json)")
+    if json.loads((root / "meta" / "info.json").read_text()).get("total_episodes", 0) == 0:
+        raise PushError(f"{root} has no episodes yet; nothing to upload")
     try:
         kwargs = cards.card_kwargs(root, repo_id, kind=kind, license=license, extra_tags=tags,
                                    operators=operators, notes=notes)

@@ -1,0 +1,225 @@
+"""blindgrasp-collect-demos end to end with a real (barely trained) quick teacher, and the push up to the network."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.demos import cards, collect, curation, provenance, push, report
+from lerobot_blindgrasp.demos import dataset as demo_dataset
+from lerobot_blindgrasp.sim import objects
+
+N_ENVS = 18  # one env per object
+
+
+@pytest.fixture(scope="module")
+def teacher(tmp_path_factory) -> Path:
+    from lerobot_blindgrasp.teacher import train
+
+    out = tmp_path_factory.mktemp("teacher") / "quick"
+    previous = signal.getsignal(signal.SIGTERM)  # the trainer installs its own SIGTERM handler
+    try:
+        train.train(train.parse_args(["--preset", "quick", "--output-dir", str(out), "--iterations", "1",
+                                      "--num-envs", str(N_ENVS), "--no-export"]))
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    return out
+
+
+def config(teacher: Path, out: Path, **kw) -> collect.CollectConfig:
+    base = dict(teacher=teacher, out=out, repo_id="test/demos", episodes_per_object=1, num_envs=N_ENVS, seed=3,
+                curation=curation.NO_CURATION, progress=False)
+    return collect.CollectConfig(**{**base, **kw})
+
+
+@pytest.fixture(scope="module")
+def tiny(teacher, tmp_path_factory):
+    out = tmp_path_factory.mktemp("tiny") / "demos"
+    stats = collect.collect(config(teacher, out))
+    return out, stats
+
+
+def snapshot(root: Path) -> dict:
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*") if p.is_file()}
+
+
+def test_tiny_collection_loads_back(tiny):
+    out, stats = tiny
+    ds = LeRobotDataset("test/demos", root=out, video_backend="pyav")
+    n_obj = len(objects.PAPER_OBJECTS)
+    assert stats.stop_reason == "done" and stats.kept == n_obj
+    assert ds.num_episodes == n_obj and ds.fps == 20 and ds.meta.video_keys == []
+    for key, names, dim in ((spec.STATE_KEY, spec.STATE_NAMES, 12), (spec.ACTION_KEY, spec.ACTION_NAMES, 9)):
+        assert ds.meta.names[key] == list(names) and ds.meta.shapes[key] == (dim,)
+        assert ds[0][key].shape == (dim,)
+    tasks = sorted(ds.meta.tasks.index)
+    assert tasks == sorted(objects.get_object(n).task for n in objects.PAPER_OBJECTS)
+
+    table = demo_dataset.episode_table(out)
+    assert sorted(table["object"]) == sorted(objects.PAPER_OBJECTS)
+    # --no-curation: whole episodes (100 steps unless the object left the workspace).
+    assert (table["length"] == table["rollout_steps"]).all()
+    assert ((table["length"] == 100) | table["left_workspace"]).all()
+    assert ds.num_frames == table["length"].sum() == stats.frames
+    assert len(set(zip(table.env_seed, table.env_episode, strict=True))) == n_obj
+
+    # The action is the absolute target the env commanded: within 0.3 rad of the (noisy) joint reading o_t and
+    # inside the joint limits.
+    frames = ds.hf_dataset.with_format("numpy")
+    state, action = np.stack(frames[spec.STATE_KEY]), np.stack(frames[spec.ACTION_KEY])
+    q = state[:, spec.STATE_JOINT_SLICE]
+    assert np.abs(action - q).max() <= spec.ACTION_BOUND_RAD + 5 * spec.JOINT_NOISE_STD_RAD
+    assert (action >= spec.JOINT_LOWER - 1e-6).all() and (action <= spec.JOINT_UPPER + 1e-6).all()
+    assert np.abs(action - q).max() > 0.05  # the teacher moved the fingers
+
+    rep = json.loads((out / report.REPORT_NAME).read_text())
+    assert set(rep["objects"]) == set(objects.PAPER_OBJECTS)
+    assert all(row["kept"] == 1 for row in rep["objects"].values())
+    assert rep["total"]["kept"] == n_obj and rep["demos_per_minute"] > 0
+    prov = provenance.load(out)
+    assert prov["runs"][0]["stop_reason"] == "done" and prov["teacher_sha256"] == prov["teacher"]["sha256"]
+    card = (out / cards.CARD_NAME).read_text()
+    cards.validate(card)
+    assert prov["teacher_sha256"] in card and "without curation" in card
+
+
+def test_bad_inputs_are_refused_and_touch_nothing(teacher, tiny, tmp_path, capsys):
+    out, _ = tiny
+    before = snapshot(out)
+    fresh = tmp_path / "fresh"
+    cases = [
+        (["--teacher", str(tmp_path / "missing"), "--out", str(fresh)], "cannot load the teacher"),
+        (["--teacher", str(tmp_path), "--out", str(fresh)], "no model_<iteration>.pt"),
+        (["--teacher", str(teacher), "--out", str(out)], "already exists"),
+        (["--teacher", str(teacher), "--out", str(fresh), "--resume"], "does not exist"),
+        (["--teacher", str(teacher), "--out", str(out), "--resume"], "different curation"),
+        (["--teacher", str(teacher), "--out", str(out), "--resume", "--no-curation", "--deterministic"],
+         "different stochastic"),
+    ]
+    for argv, message in cases:
+        with pytest.raises(SystemExit) as exc:
+            collect.main([*argv, "--repo-id", "test/demos", "--no-progress"])
+        assert exc.value.code == 2
+        assert message in capsys.readouterr().err
+        assert not fresh.exists()
+    with pytest.raises(SystemExit):
+        collect.main(["--teacher", str(teacher), "--out", str(fresh), "--repo-id", "no-slash"])
+    assert "USER/NAME" in capsys.readouterr().err and not fresh.exists()
+    assert snapshot(out) == before
+
+
+def test_exception_mid_collection_leaves_finished_episodes_readable(teacher, tmp_path):
+    """An error raised from inside the collection loop (here the per-episode callback) still finalizes."""
+    out = tmp_path / "crash"
+
+    def explode(ep, cut, written, stats):
+        if stats.kept == 3:
+            raise RuntimeError("injected failure")
+
+    with pytest.raises(RuntimeError, match="injected failure"):
+        collect.collect(config(teacher, out, episodes_per_object=5), on_episode=explode)
+    ds = LeRobotDataset("test/demos", root=out, video_backend="pyav")
+    assert ds.num_episodes == 3 and len(ds) == ds.meta.total_frames
+    ds[len(ds) - 1]  # the last frame of the last episode reads back
+    run = provenance.load(out)["runs"][-1]
+    assert run["stop_reason"].startswith("error: RuntimeError") and run["kept"] == 3
+    assert json.loads((out / report.REPORT_NAME).read_text())["total"]["kept"] == 3
+
+
+def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
+    out = tmp_path / "sig"
+    cmd = [sys.executable, "-m", "lerobot_blindgrasp.demos.collect", "--teacher", str(teacher), "--out", str(out),
+           "--repo-id", "test/sig", "--episodes-per-object", "50", "--num-envs", str(N_ENVS), "--no-curation",
+           "--no-progress", "--seed", "11"]
+    env = {**os.environ, "HF_HUB_OFFLINE": "1"}
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    info = out / "meta" / "info.json"
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        if info.is_file() and json.loads(info.read_text() or "{}").get("total_episodes", 0) >= 1:
+            break
+        time.sleep(0.2)
+    assert proc.poll() is None, proc.communicate()[1][-3000:]
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-3000:]
+    assert "finalizing" in err and "--resume" in err
+
+    ds = LeRobotDataset("test/sig", root=out, video_backend="pyav")
+    prov = provenance.load(out)
+    assert prov["runs"][0]["interrupted"] and ds.num_episodes == prov["runs"][0]["kept"] >= 1
+    ds[len(ds) - 1]
+    first_episode = ds.hf_dataset.with_format("numpy")[: ds.meta.episodes[0]["length"]][spec.ACTION_KEY]
+    old_seeds = set(demo_dataset.episode_table(out).env_seed)
+
+    # --resume appends until every object has 2 episodes, with env seeds no earlier run used.
+    stats = collect.collect(config(teacher, out, repo_id="test/sig", episodes_per_object=2, seed=11, resume=True))
+    assert stats.stop_reason == "done" and stats.kept >= 1
+    ds2 = LeRobotDataset("test/sig", root=out, video_backend="pyav")
+    assert ds2.num_episodes == ds.num_episodes + stats.kept
+    table = demo_dataset.episode_table(out)
+    assert (table.groupby("object").size() >= 2).all() and len(table.groupby("object")) == 18
+    new_seeds = set(table.env_seed[table.episode_index >= ds.num_episodes])
+    assert new_seeds and not new_seeds & old_seeds
+    np.testing.assert_array_equal(
+        ds2.hf_dataset.with_format("numpy")[: len(first_episode)][spec.ACTION_KEY], first_episode
+    )
+    runs = provenance.load(out)["runs"]
+    assert len(runs) == 2 and runs[1]["seed_start"] > runs[0]["seed_start"]
+
+
+def test_push_prepares_everything_then_stops_at_the_network(tiny, monkeypatch, capsys):
+    import huggingface_hub.constants
+
+    out, _ = tiny
+    (out / cards.CARD_NAME).unlink()
+    push.main([str(out), "--repo-id", "test/demos", "--dry-run"])
+    assert "dry run" in capsys.readouterr().out and (out / cards.CARD_NAME).is_file()
+
+    (out / cards.CARD_NAME).unlink()
+    monkeypatch.setattr(huggingface_hub.constants, "HF_HUB_OFFLINE", True)  # what HF_HUB_OFFLINE=1 sets
+    with pytest.raises(SystemExit) as exc:
+        push.main([str(out), "--repo-id", "test/pushed", "--tag", "unit-test"])
+    captured = capsys.readouterr()
+    assert exc.value.code == 1
+    # It got as far as LeRobot's push_to_hub creating the repo, the first network call...
+    assert "OfflineModeIsEnabled" in captured.err and "repos/create" in captured.err
+    # ...with the card prepared: the one LeRobot pushes, naming the new repo, with our content and metadata.
+    text = (out / cards.CARD_NAME).read_text()
+    meta = cards.validate(text)
+    assert {"LeRobot", "unit-test", "simulation"} <= set(meta["tags"])
+    assert meta["task_categories"] == ["robotics"] and meta["license"] == "apache-2.0"
+    assert "test/pushed" in text and "Yield per object" in text and "@article{lee2025blindgrasping" in text
+    assert provenance.load(out)["teacher_sha256"] in text
+    assert "18 episodes" in captured.out and "files" in captured.out
+
+    with pytest.raises(SystemExit) as exc:
+        push.main([str(out / "meta"), "--repo-id", "test/pushed"])
+    assert exc.value.code == 2 and "not a LeRobot dataset" in capsys.readouterr().err
+
+
+def test_bench_demos_reports_speeds(teacher, capsys):
+    import argparse
+
+    from lerobot_blindgrasp.bench import demos as bench_demos
+
+    p = argparse.ArgumentParser()
+    p.add_argument("--json", action="store_true")
+    bench_demos.add_arguments(p)
+    args = p.parse_args(["--teacher", str(teacher), "--num-envs", "6", "--objects", "medium", "--no-curation",
+                         "--episodes-per-object", "1", "--write-episodes", "6", "--json"])
+    result = bench_demos.run(args)
+    assert result["curated_demos"] == 6 and result["rollouts"] >= 6
+    assert result["curated_demos_per_cpu_minute"] > 0 and result["frames_written_per_s"] > 0
+    assert result["frames_written_per_s_add_frame"] > 0 and result["writer_episodes"] == 6
+    assert capsys.readouterr().out == ""  # --json: the dispatcher prints, run() stays quiet

@@ -1,0 +1,158 @@
+"""The demo dataset writer, its per-episode metadata through LeRobot's edit tools, and the dataset cards.
+
+No teacher needed: episodes are synthetic but go through the real curation, writer and LeRobot code.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from huggingface_hub import DatasetCard
+from lerobot.datasets.dataset_tools import delete_episodes, merge_datasets, remove_feature
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.demos import cards, curation
+from lerobot_blindgrasp.demos import dataset as demo_dataset
+from lerobot_blindgrasp.demos.rollout import Episode
+from lerobot_blindgrasp.sim import objects
+
+OBJECTS = ("sphere_small", "capsule_large", "cuboid_a_medium", "cylinder_b_small")
+
+
+def synthetic_episode(i: int, hold_start: int) -> Episode:
+    rng = np.random.default_rng(i)
+    t = 100
+    r = np.zeros(t)
+    r[hold_start:] = 0.8
+    return Episode(
+        object_name=OBJECTS[i % len(OBJECTS)],
+        state=rng.normal(size=(t, spec.STATE_DIM)).astype(np.float32),
+        action=rng.normal(size=(t, spec.ACTION_DIM)).astype(np.float32),
+        task_reward=r,
+        uniaxial_force=np.full((t, 3), 3.0),  # 9 N per step: the sum passes 200 N at step 22
+        success=i % 2 == 0,
+        left_workspace=False,
+        physics_failed=False,
+        env_seed=100 + i,
+        env_episode=i,
+        randomization=np.array([0.8, 0.9, 1.1 + 0.1 * i, 2.0, 1.0, 0.01, -0.02]),
+    )
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    """Six curated (trimmed) episodes written through the real path."""
+    root = tmp_path_factory.mktemp("ds") / "sim"
+    ds = demo_dataset.create(root, "test/sim")
+    episodes, cuts = [], []
+    for i in range(6):
+        ep = synthetic_episode(i, hold_start=20 + 5 * i)
+        cut = curation.evaluate(ep.task_reward, ep.uniaxial_force)
+        assert cut.keep
+        demo_dataset.write_episode(ds, ep, cut)
+        episodes.append(ep)
+        cuts.append(cut)
+    ds.finalize()
+    return root, episodes, cuts
+
+
+def test_written_episodes_load_back_with_schema_and_metadata(written):
+    root, episodes, cuts = written
+    ds = LeRobotDataset("test/sim", root=root, video_backend="pyav")
+    assert ds.num_episodes == 6 and ds.fps == spec.CONTROL_HZ
+    assert ds.meta.robot_type == demo_dataset.ROBOT_TYPE and ds.meta.video_keys == []
+    assert ds.meta.names[spec.STATE_KEY] == list(spec.STATE_NAMES)
+    assert ds.meta.names[spec.ACTION_KEY] == list(spec.ACTION_NAMES)
+    # Trimmed at the later criterion: hold of 10 steps from 20 + 5i, force sum > 200 N at step 22.
+    lengths = [c.keep_steps for c in cuts]
+    assert lengths == [max(20 + 5 * i + 9, 22) + 1 for i in range(6)]
+    assert ds.num_frames == sum(lengths)
+    start = 0
+    for ep, n in zip(episodes, lengths, strict=True):
+        first, last = ds[start], ds[start + n - 1]
+        np.testing.assert_array_equal(first[spec.STATE_KEY].numpy(), ep.state[0])
+        np.testing.assert_array_equal(last[spec.ACTION_KEY].numpy(), ep.action[n - 1])
+        assert first["task"] == objects.get_object(ep.object_name).task
+        assert last["timestamp"].item() == pytest.approx((n - 1) / spec.CONTROL_HZ)
+        assert last["episode.seed"].tolist() == [ep.env_seed, ep.env_episode]
+        start += n
+
+
+def test_episode_table_reads_metadata_without_frames(written):
+    root, episodes, cuts = written
+    table = demo_dataset.episode_table(root)
+    assert table["object"].tolist() == [e.object_name for e in episodes]
+    assert table["success"].tolist() == [e.success for e in episodes]
+    assert table["curation_passed"].all() and not table["left_workspace"].any()
+    assert table["rollout_steps"].tolist() == [100] * 6
+    np.testing.assert_allclose(table["object_mass_scale"], [e.randomization[2] for e in episodes], rtol=1e-6)
+    np.testing.assert_allclose(table["force_sum_n"], [c.force_sum_n for c in cuts], rtol=1e-6)
+    assert table["env_seed"].tolist() == [e.env_seed for e in episodes]
+    heavy = table[table.object_mass_scale > 1.35].episode_index.tolist()
+    assert heavy == [3, 4, 5]
+    ds = LeRobotDataset("test/sim", root=root, episodes=heavy, video_backend="pyav")
+    assert ds.num_episodes == 3
+
+
+def test_metadata_survives_lerobot_edit_tools(written, tmp_path):
+    """What `lerobot-edit-dataset --operation.type delete_episodes` does: the metadata follows the episodes."""
+    root, episodes, _ = written
+    src = LeRobotDataset("test/sim", root=root, video_backend="pyav")
+    kept = delete_episodes(src, episode_indices=[0, 2], output_dir=tmp_path / "edited", repo_id="test/edited")
+    assert kept.num_episodes == 4
+    table = demo_dataset.episode_table(tmp_path / "edited")
+    survivors = [episodes[i] for i in (1, 3, 4, 5)]
+    assert table["episode_index"].tolist() == [0, 1, 2, 3]
+    assert table["object"].tolist() == [e.object_name for e in survivors]
+    assert table["env_seed"].tolist() == [e.env_seed for e in survivors]
+    assert kept[0]["episode.outcome"].shape == (len(demo_dataset.OUTCOME_NAMES),)
+
+
+def test_sim_demos_merge_with_glove_schema_after_dropping_metadata(written, tmp_path):
+    root, _, _ = written
+    glove = LeRobotDataset.create(
+        "test/glove", fps=spec.CONTROL_HZ, features=spec.dataset_features(), root=tmp_path / "glove",
+        robot_type=demo_dataset.ROBOT_TYPE, use_videos=False, video_backend="pyav",
+    )
+    for _ in range(2):
+        for _ in range(12):
+            glove.add_frame({spec.STATE_KEY: np.zeros(12, np.float32), spec.ACTION_KEY: np.zeros(9, np.float32),
+                             "task": objects.get_object("sphere_large").task})
+        glove.save_episode()
+    glove.finalize()
+    sim = LeRobotDataset("test/sim", root=root, video_backend="pyav")
+    with pytest.raises(ValueError, match="Same features"):
+        merge_datasets([sim, glove], output_repo_id="test/bad", output_dir=tmp_path / "bad")
+    core = remove_feature(sim, list(demo_dataset.METADATA_FEATURE_NAMES), tmp_path / "core", "test/core")
+    merged = merge_datasets([core, glove], output_repo_id="test/merged", output_dir=tmp_path / "merged")
+    assert merged.num_episodes == sim.num_episodes + 2
+    assert set(merged.meta.features) == set(glove.meta.features)
+    # ...and the glove card renders from a lerobot-record style dataset.
+    text = str(cards.build_card(cards.card_kwargs(tmp_path / "glove", "test/glove", operators=["alice"]), "test/glove"))
+    meta = cards.validate(text)
+    assert "teleoperation" in meta["tags"] and "LeRobot" in meta["tags"]
+    assert "grasp and lift the large sphere | 2 | 24" in text and "alice" in text
+    assert cards.detect_kind(tmp_path / "glove") == "glove"
+
+
+def test_resume_refuses_foreign_schema(tmp_path):
+    other = LeRobotDataset.create("test/other", fps=30, features=spec.dataset_features(), root=tmp_path / "o",
+                                  use_videos=False, video_backend="pyav")
+    other.add_frame({spec.STATE_KEY: np.zeros(12, np.float32), spec.ACTION_KEY: np.zeros(9, np.float32), "task": "x"})
+    other.save_episode()
+    other.finalize()
+    with pytest.raises(ValueError, match="missing feature 'episode.outcome'.*fps 30"):
+        demo_dataset.resume(tmp_path / "o", "test/other")
+
+
+def test_card_validation_catches_bad_metadata():
+    good = "---\nlicense: apache-2.0\ntask_categories: [robotics]\ntags: [LeRobot]\nconfigs:\n- config_name: default\n  data_files: data/*/*.parquet\n---\nbody\n"
+    assert cards.validate(good)["license"] == "apache-2.0"
+    with pytest.raises(ValueError, match="robotics"):
+        cards.validate(good.replace("[robotics]", "[text-generation]"))
+    with pytest.raises(ValueError, match="license"):
+        cards.validate(good.replace("apache-2.0", "apache 2"))
+    with pytest.raises(ValueError, match="tags"):
+        cards.validate(good.replace("[LeRobot]", "['two words']"))
+    assert isinstance(DatasetCard(good).data.to_dict(), dict)
