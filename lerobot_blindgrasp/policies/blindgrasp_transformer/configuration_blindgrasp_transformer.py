@@ -6,12 +6,13 @@ delta-theta / 0.3 in [-1, 1] from the last token. The delta <-> absolute-target 
 live in the processors (`processor_blindgrasp_transformer.py`), so the network only ever sees normalized deltas.
 
 Table IV -> field:
-    batch size 256                      -> lerobot-train `--batch_size=256` (a training-loop setting, not a policy one)
+    batch size 256                      -> lerobot-train `--batch_size=256` (a training-loop setting)
     number of epochs 2000               -> lerobot-train `--steps` = 2000 * ceil(num_frames / batch_size)
     optimizer AdamW, lr 1e-4            -> `optimizer_lr`
     L2 regularization 0.01              -> `optimizer_weight_decay`
     lr schedule: linear decay after
-      100 epochs                        -> `scheduler_constant_steps` (steps, = 100 epochs' worth), `scheduler_end_factor`
+      100 epochs                        -> `scheduler_constant_steps` (= 100 epochs' worth of steps),
+                                           `scheduler_end_factor`
     loss: MSE                           -> `BlindgraspTransformerPolicy.forward`
     Transformer layers 6                -> `n_layers`   (via `size="paper"`)
     embedding dimension 512             -> `embed_dim`  (via `size="paper"`)
@@ -116,9 +117,9 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     # Not in the paper; LeRobot's AdamW default. 0 disables clipping.
     optimizer_grad_clip_norm: float = 10.0
     # "Linear decay after 100 epochs": constant lr for this many optimizer steps, then linear decay to
-    # `scheduler_end_factor` x lr at the last step (`--steps`). Default = 100 epochs of the paper's data at batch 256
-    # (35,000 steps); set it to 100 * ceil(num_frames / batch_size) for your dataset. End factor 0.1 is robomimic's
-    # LinearLR end factor in its BC-Transformer template.
+    # `scheduler_end_factor` x lr at the last step (`--steps`). Default = 100 epochs of the paper's data at
+    # batch 256 (35,000 steps); set it to 100 * ceil(num_frames / batch_size) for your dataset. End factor 0.1 is
+    # robomimic's LinearLR end factor in its BC-Transformer template.
     scheduler_constant_steps: int = 100 * PAPER_STEPS_PER_EPOCH
     scheduler_end_factor: float = 0.1
 

@@ -231,10 +231,15 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
                 self._context_is_pad.append(~real)
         self._context.append(state)
         self._context_is_pad.append(real)
-        states = torch.stack(list(self._context), dim=1)
-        is_pad = torch.stack(list(self._context_is_pad), dim=1)
+        states, is_pad = self.current_context()
         # Once the episode is 30 steps old nothing is padded: drop the mask for the faster causal kernel.
         return states, (is_pad if bool(is_pad.any()) else None)
+
+    def current_context(self) -> tuple[Tensor, Tensor]:
+        """The window the latest observation was predicted from: (B, T, 12) states and (B, T) padding flags."""
+        if not self._context:
+            raise RuntimeError("no observation since reset()")
+        return torch.stack(list(self._context), dim=1), torch.stack(list(self._context_is_pad), dim=1)
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:

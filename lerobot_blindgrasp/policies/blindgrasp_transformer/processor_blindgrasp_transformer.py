@@ -1,8 +1,8 @@
 """Pre/post processors of `blindgrasp_transformer`: state z-scoring and the absolute-target <-> delta conversion.
 
-The action contract (DESIGN.md): a LeRobot `action` is the ABSOLUTE joint target in radians, target = q_now + delta,
-while the paper's network predicts delta / 0.3 in [-1, 1]. Both conversions live here, in the pipelines saved with
-the checkpoint, so a checkpoint is self-contained:
+The action contract (DESIGN.md): a LeRobot `action` is the ABSOLUTE joint target in radians, target = q_now +
+delta, while the paper's network predicts delta / 0.3 in [-1, 1]. Both conversions live here, in the pipelines
+saved with the checkpoint, so a checkpoint is self-contained:
 
     preprocessor  (training batch or one observation -> model input)
         rename -> add batch dim -> device
@@ -18,17 +18,17 @@ q_now is the current step's 9 joint positions, raw radians, from `observation.st
 window (B, T, 12), the observation itself at inference (B, 12). The target->delta step reads it before the
 normalizer, so it is never z-scored.
 
-How the postprocessor knows q_now. LeRobot calls `postprocessor(action_tensor)` with nothing but the policy's output
-tensor, so the observation cannot travel with it. Instead the two steps form a pair sharing one `CurrentJoints`
-holder: the preprocessor step writes q_now into it on every call, the postprocessor step reads it. Every caller of a
-LeRobot policy (lerobot-eval, lerobot-rollout's sync engine, the record/replay loops) runs pre -> policy -> post
-once per observation, which is exactly the protocol this needs. The pair is linked by a `link` id that both steps
-save in their JSON config; steps with the same id share one holder in this process (a registry of weak references),
-so the link survives any way of loading, `PolicyProcessorPipeline.from_pretrained` twice or LeRobot's
-`make_pre_post_processors(..., pretrained_path=...)`, with no reconnection code. Loading the same checkpoint twice
-in one process gives two pipeline pairs on one holder: fine as long as each observation's pre/post calls are not
-interleaved with the other pair's. The postprocessor raises if it runs before any observation was seen, and if the
-batch size of the action and of the remembered q_now differ.
+How the postprocessor knows q_now. LeRobot calls `postprocessor(action_tensor)` with nothing but the policy's
+output tensor, so the observation cannot travel with it. Instead the two steps form a pair sharing one
+`CurrentJoints` holder: the preprocessor step writes q_now into it on every call, the postprocessor step reads it.
+LeRobot's policy loops (lerobot-eval, lerobot-rollout's sync engine) run pre -> policy -> post once per
+observation, which is exactly the protocol this needs. The pair is linked by a `link` id
+that both steps save in their JSON config; steps with the same id share one holder in this process (a registry of
+weak references), so the link survives any way of loading, `PolicyProcessorPipeline.from_pretrained` twice or
+LeRobot's `make_pre_post_processors(..., pretrained_path=...)`, with no reconnection code. Loading the same
+checkpoint twice in one process gives two pipeline pairs on one holder: fine as long as each observation's pre/post
+calls are not interleaved with the other pair's. The postprocessor raises if it runs before any observation was
+seen, and if the batch size of the action and of the remembered q_now differ.
 
 Why not LeRobot's own `RelativeActionsProcessorStep` / `AbsoluteActionsProcessorStep`: they take the whole state
 (not the last frame of a window), do no bound scaling, and lerobot-rollout's sync engine refuses any pipeline that
@@ -169,8 +169,8 @@ class NormalizedDeltaToTargetStep(ProcessorStep):
             )
         if q_now.shape[0] != action.shape[0]:
             raise RuntimeError(
-                f"blindgrasp_delta_to_target: action batch {action.shape[0]} != batch {q_now.shape[0]} of the last "
-                "preprocessed observation; pre/post calls of two pipelines were interleaved."
+                f"blindgrasp_delta_to_target: action batch {action.shape[0]} != batch {q_now.shape[0]} of the "
+                "last preprocessed observation; pre/post calls of two pipelines were interleaved."
             )
         new_transition = transition.copy()
         new_transition[TransitionKey.ACTION] = normalized_delta_to_target(action, q_now, self.action_bound)

@@ -1,0 +1,174 @@
+"""blindgrasp_transformer processors: target <-> delta / 0.3, q_now sharing, state z-scoring, save/load."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from lerobot.configs import FeatureType, NormalizationMode, PolicyFeature
+from lerobot.policies.factory import make_pre_post_processors
+from lerobot.processor import PolicyProcessorPipeline
+from lerobot.processor.converters import (
+    batch_to_transition,
+    policy_action_to_transition,
+    transition_to_batch,
+    transition_to_policy_action,
+)
+from lerobot.utils.constants import ACTION, OBS_STATE
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.policies.blindgrasp_transformer import (
+    BlindgraspTransformerConfig,
+    make_blindgrasp_transformer_pre_post_processors,
+)
+
+BOUND = spec.ACTION_BOUND_RAD
+T = 30
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread():
+    # Small CPU ops on a shared 2-core machine run far faster on one thread than with two spinning OpenMP threads.
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)
+
+
+def make_config(**kw) -> BlindgraspTransformerConfig:
+    return BlindgraspTransformerConfig(
+        size="quick",
+        device="cpu",
+        input_features={OBS_STATE: PolicyFeature(FeatureType.STATE, (spec.STATE_DIM,))},
+        output_features={ACTION: PolicyFeature(FeatureType.ACTION, (spec.ACTION_DIM,))},
+        **kw,
+    )
+
+
+def make_stats() -> dict:
+    g = torch.Generator().manual_seed(0)
+    state_mean, state_std = torch.randn(spec.STATE_DIM, generator=g), torch.rand(spec.STATE_DIM, generator=g) + 0.5
+    # Action stats deliberately far from (0, 1): if they were applied to the delta the round trip would break.
+    action = {"mean": torch.full((spec.ACTION_DIM,), 5.0), "std": torch.full((spec.ACTION_DIM,), 3.0)}
+    action |= {"min": action["mean"] - 1, "max": action["mean"] + 1}
+    state = {"mean": state_mean, "std": state_std, "min": state_mean - 1, "max": state_mean + 1}
+    return {OBS_STATE: state, ACTION: action}
+
+
+def random_state(*shape: int, seed: int = 0) -> torch.Tensor:
+    g = torch.Generator().manual_seed(seed)
+    state = torch.randn(*shape, spec.STATE_DIM, generator=g)
+    state[..., spec.STATE_FORCE_SLICE] = state[..., spec.STATE_FORCE_SLICE].abs() * 3  # forces in N, >= 0
+    return state
+
+
+@pytest.fixture
+def pipelines():
+    return make_blindgrasp_transformer_pre_post_processors(make_config(), make_stats())
+
+
+def test_training_batch_action_becomes_delta_over_bound_from_last_frame(pipelines):
+    pre, _ = pipelines
+    window = random_state(4, T)
+    delta = torch.empty(4, spec.ACTION_DIM).uniform_(-BOUND, BOUND)
+    target = window[:, -1, spec.STATE_JOINT_SLICE] + delta  # q_now is the LAST frame of the window
+    out = pre({OBS_STATE: window, ACTION: target, f"{OBS_STATE}_is_pad": torch.zeros(4, T, dtype=torch.bool)})
+    torch.testing.assert_close(out[ACTION], delta / BOUND, atol=1e-5, rtol=0)
+    # A delta taken from the first frame instead would be wrong: make sure the frames differ enough to tell.
+    wrong = (target - window[:, 0, spec.STATE_JOINT_SLICE]) / BOUND
+    assert not torch.allclose(out[ACTION], wrong.clamp(-1, 1), atol=1e-3)
+
+
+def test_state_is_z_scored_with_dataset_stats(pipelines):
+    pre, _ = pipelines
+    stats = make_stats()[OBS_STATE]
+    window = random_state(2, T)
+    out = pre({OBS_STATE: window.clone(), ACTION: window[:, -1, :9]})
+    torch.testing.assert_close(out[OBS_STATE], (window - stats["mean"]) / stats["std"], atol=1e-5, rtol=1e-5)
+
+
+def test_round_trip_target_delta_target_at_inference(pipelines):
+    pre, post = pipelines
+    obs = random_state(3, seed=1)  # one observation per env, as lerobot-eval sends it
+    delta = torch.empty(3, spec.ACTION_DIM).uniform_(-BOUND, BOUND)
+    target = obs[:, spec.STATE_JOINT_SLICE] + delta
+    normalized = pre({OBS_STATE: obs, ACTION: target})[ACTION]
+    torch.testing.assert_close(normalized, delta / BOUND, atol=1e-5, rtol=0)
+    torch.testing.assert_close(post(normalized), target, atol=1e-5, rtol=0)
+
+
+def test_postprocessor_turns_prediction_into_absolute_target(pipelines):
+    pre, post = pipelines
+    obs = random_state(2, seed=2)
+    pre({OBS_STATE: obs})  # inference: no action, only q_now is remembered
+    pred = torch.tensor([[0.5] * 9, [-1.0] * 9])
+    expected = obs[:, spec.STATE_JOINT_SLICE] + BOUND * pred
+    torch.testing.assert_close(post(pred), expected, atol=1e-6, rtol=0)
+    # (B, 1, 9) chunks from predict_action_chunk broadcast over the chunk axis.
+    torch.testing.assert_close(post(pred[:, None]), expected[:, None], atol=1e-6, rtol=0)
+
+
+def test_deltas_beyond_the_bound_are_clipped_both_ways(pipelines):
+    pre, post = pipelines
+    obs = random_state(1, seed=3)
+    q = obs[:, spec.STATE_JOINT_SLICE]
+    normalized = pre({OBS_STATE: obs, ACTION: q + torch.linspace(-1.0, 1.0, 9)})[ACTION]
+    assert normalized.min() == -1.0 and normalized.max() == 1.0
+    target = post(torch.full((1, 9), 7.0))
+    torch.testing.assert_close(target, q + BOUND, atol=1e-6, rtol=0)
+
+
+def test_postprocessor_needs_an_observation_first():
+    _, post = make_blindgrasp_transformer_pre_post_processors(make_config(), make_stats())
+    with pytest.raises(RuntimeError, match="no observation seen yet"):
+        post(torch.zeros(1, spec.ACTION_DIM))
+
+
+def test_two_policies_do_not_share_q_now():
+    pre_a, post_a = make_blindgrasp_transformer_pre_post_processors(make_config(), make_stats())
+    pre_b, post_b = make_blindgrasp_transformer_pre_post_processors(make_config(), make_stats())
+    obs_a, obs_b = random_state(1, seed=4), random_state(1, seed=5)
+    pre_a({OBS_STATE: obs_a})
+    pre_b({OBS_STATE: obs_b})
+    zero = torch.zeros(1, spec.ACTION_DIM)
+    torch.testing.assert_close(post_a(zero), obs_a[:, spec.STATE_JOINT_SLICE])
+    torch.testing.assert_close(post_b(zero), obs_b[:, spec.STATE_JOINT_SLICE])
+
+
+def _check_linked(pre, post, seed: int) -> None:
+    obs = random_state(2, seed=seed)
+    delta = torch.empty(2, spec.ACTION_DIM).uniform_(-BOUND, BOUND)
+    normalized = pre({OBS_STATE: obs, ACTION: obs[:, spec.STATE_JOINT_SLICE] + delta})[ACTION]
+    torch.testing.assert_close(normalized, delta / BOUND, atol=1e-5, rtol=0)
+    torch.testing.assert_close(post(normalized), obs[:, spec.STATE_JOINT_SLICE] + delta, atol=1e-5, rtol=0)
+
+
+def test_saved_pipelines_reload_linked(tmp_path):
+    config = make_config()
+    pre, post = make_blindgrasp_transformer_pre_post_processors(config, make_stats())
+    pre.save_pretrained(tmp_path)
+    post.save_pretrained(tmp_path)
+    del pre, post  # the reloaded pair must find each other through the saved link id alone
+
+    pre2 = PolicyProcessorPipeline.from_pretrained(
+        tmp_path, "policy_preprocessor.json", to_transition=batch_to_transition, to_output=transition_to_batch
+    )
+    post2 = PolicyProcessorPipeline.from_pretrained(
+        tmp_path,
+        "policy_postprocessor.json",
+        to_transition=policy_action_to_transition,
+        to_output=transition_to_policy_action,
+    )
+    _check_linked(pre2, post2, seed=6)
+
+    pre3, post3 = make_pre_post_processors(config, pretrained_path=str(tmp_path))
+    _check_linked(pre3, post3, seed=7)
+    # The saved normalizer stats came back too.
+    stats = make_stats()[OBS_STATE]
+    obs = random_state(1, seed=8)
+    torch.testing.assert_close(pre3({OBS_STATE: obs})[OBS_STATE], (obs - stats["mean"]) / stats["std"])
+
+
+def test_action_normalization_must_stay_identity():
+    with pytest.raises(ValueError, match="IDENTITY"):
+        mapping = {"STATE": NormalizationMode.MEAN_STD, "ACTION": NormalizationMode.MIN_MAX}
+        make_config(normalization_mapping=mapping)
