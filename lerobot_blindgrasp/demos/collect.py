@@ -219,6 +219,10 @@ def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> Co
     from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 
     teacher = _check_inputs(cfg)
+    try:  # the teacher's own reward settings: r_t must be the task reward it was trained on
+        reward_cfg = rewards.RewardConfig(**teacher.config["reward"])
+    except (KeyError, TypeError) as e:
+        raise CollectError(f"teacher config has no usable reward settings: {e}") from None
     out = Path(cfg.out)
     dr = randomization.PAPER_DR.without_external_force()
     prov_new = _provenance(cfg, teacher, dr)
@@ -238,7 +242,6 @@ def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> Co
         prov, tally = prov_new, report.Tally()
         provenance.save(out, prov)
 
-    reward_cfg = rewards.RewardConfig(**teacher.config["reward"])
     target, budget = cfg.episodes_per_object, cfg.rollout_budget
     stats = CollectStats(tally=tally)
     run = {
