@@ -1,7 +1,7 @@
 """`blindgrasp-bench {sim,demos,policy}`: benchmarks that print one table per run (and JSON with --json).
 
 Each subcommand lives in its own module (`bench/sim.py`, `bench/demos.py`, `bench/policy.py`) exposing
-`add_arguments(parser)` and `run(args) -> dict`.
+`add_arguments(parser)` and `run(args) -> dict`; only the chosen one is imported.
 """
 
 from __future__ import annotations
@@ -9,21 +9,22 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import sys
 
 SUBCOMMANDS = ("sim", "demos", "policy")
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(prog="blindgrasp-bench", description=__doc__)
-    sub = parser.add_subparsers(dest="what", required=True)
-    modules = {}
-    for name in SUBCOMMANDS:
-        mod = importlib.import_module(f"lerobot_blindgrasp.bench.{name}")
-        modules[name] = mod
-        p = sub.add_parser(name, help=(mod.__doc__ or "").strip().splitlines()[0])
-        p.add_argument("--json", action="store_true", help="print machine-readable JSON instead of a table")
-        mod.add_arguments(p)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] not in SUBCOMMANDS:
+        print(f"usage: blindgrasp-bench {{{','.join(SUBCOMMANDS)}}} [--json] [options]", file=sys.stderr)
+        raise SystemExit(2)
+    what = argv.pop(0)
+    mod = importlib.import_module(f"lerobot_blindgrasp.bench.{what}")
+    parser = argparse.ArgumentParser(prog=f"blindgrasp-bench {what}", description=mod.__doc__)
+    parser.add_argument("--json", action="store_true", help="print machine-readable JSON instead of a table")
+    mod.add_arguments(parser)
     args = parser.parse_args(argv)
-    result = modules[args.what].run(args)
+    result = mod.run(args)
     if args.json:
         print(json.dumps(result, indent=2))

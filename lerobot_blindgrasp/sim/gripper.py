@@ -122,6 +122,8 @@ def _finger_xml(i: int, finger: str, servo: ServoParams) -> str:
               <site name="{finger}_loadcell" euler="3.14159265 0 0" size="0.004" rgba="1 0 0 1"/>
               <site name="{finger}_tipsite" pos="0 0 {-(LINK_J12_TIPSITE - TIP_CAPSULE_START):.6f}"
                     euler="3.14159265 0 0" size="0.003"/>
+              <geom name="{finger}_tipend" type="sphere" size="{TIP_CAPSULE_RADIUS}" contype="0" conaffinity="0"
+                    pos="0 0 {-(TIP_CAPSULE_END - TIP_CAPSULE_START):.6f}" mass="0" rgba="0 0 0 0" group="3"/>
               <geom name="{finger}_tipgeom" class="fingertip" type="capsule"
                     fromto="0 0 {-TIP_CAPSULE_RADIUS} 0 0 {-(TIP_CAPSULE_END - TIP_CAPSULE_START):.6f}"
                     size="{TIP_CAPSULE_RADIUS}" mass="{TIP_MASS}" {col}/>
@@ -151,7 +153,8 @@ def gripper_mjcf(object_xml: str, options: PhysicsOptions | None = None, servo: 
             f'<framepos name="{f}_pos" objtype="site" objname="{f}_tipsite"/>',
             f'<framequat name="{f}_quat" objtype="site" objname="{f}_tipsite"/>',
             f'<framezaxis name="{f}_zaxis" objtype="site" objname="{f}_loadcell"/>',
-            f'<distance name="{f}_objdist" geom1="{f}_tipgeom" geom2="object_geom" cutoff="0.3"/>',
+            # distance from the tip END (where the axial load cell reads pushes) to the object, for the reach term
+            f'<distance name="{f}_objdist" geom1="{f}_tipend" geom2="object_geom" cutoff="0.3"/>',
         ]
     table_aff = _OBJECT_BIT | sum(_FINGER_BITS)
     return f"""

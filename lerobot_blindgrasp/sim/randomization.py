@@ -6,13 +6,13 @@ construction (paper, Sec. III-B). Deviations and readings of the table:
   nominal 3D-printed mass, which spans the infill settings a replica might be printed with (10-40 %).
 - Static vs dynamic friction: MuJoCo has one Coulomb coefficient per geom (no static/dynamic split), so we draw one
   coefficient per object and one for the fingertips, each from [0.7, 1.3]. MuJoCo combines a pair with max().
-- Random force: each env pushes its object with a force whose components are U[-0.3, 0.3] N, held until the next
-  push; the time to the next push is U[0, 10] s. Off for demo collection and lerobot-eval.
+- Random force: each env pushes its object with a force whose components are U[-0.3, 0.3] N for one control step
+  (50 ms) "at randomly selected times", U[0, 10] s apart. A force held between pushes rolls spheres and capsules
+  off the table (see `BatchedGraspEnv._update_pushes`). Off for demo collection and lerobot-eval.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -96,7 +96,3 @@ def draw_push(dr: DomainRandomization, seeds: np.ndarray, counter: np.ndarray) -
     period_s = rng.between(u[:, 3], *dr.push_period_s)
     steps = np.maximum(1, np.ceil(period_s * spec.CONTROL_HZ)).astype(np.int64)
     return force, steps
-
-
-def log_uniform_bounds(low: float, high: float) -> tuple[float, float]:
-    return math.log(low), math.log(high)

@@ -24,6 +24,7 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from lerobot_blindgrasp.sim import randomization
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.teacher import presets
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME, latest_checkpoint
@@ -33,7 +34,8 @@ log = logging.getLogger("blindgrasp.teacher")
 
 
 def build_env_config(preset: presets.TeacherPreset, num_envs: int, seed: int, nthread: int = 0) -> GraspEnvConfig:
-    return GraspEnvConfig(num_envs=num_envs, seed=seed, reward=preset.reward, nthread=nthread)
+    dr = randomization.PAPER_DR if preset.external_force else randomization.PAPER_DR.without_external_force()
+    return GraspEnvConfig(num_envs=num_envs, seed=seed, reward=preset.reward, dr=dr, nthread=nthread)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -59,7 +61,7 @@ def train(args: argparse.Namespace) -> Path:
     out = args.output_dir
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(args.seed)
-    torch.set_num_threads(max(1, os.cpu_count() or 1))
+    torch.set_num_threads(args.threads or max(1, os.cpu_count() or 1))
 
     config = {
         "preset": preset.name,
@@ -69,6 +71,7 @@ def train(args: argparse.Namespace) -> Path:
         "iterations": iterations,
         "runner": preset.runner_cfg(),
         "reward": dataclasses.asdict(preset.reward),
+        "external_force": preset.external_force,
         "deviations": list(preset.deviations),
         "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
     }

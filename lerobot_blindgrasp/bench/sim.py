@@ -1,0 +1,83 @@
+"""Simulation throughput: raw physics vs the env's control step (obs, reward, resets), 1 thread and all cores.
+
+Raw physics = `mujoco.batch.Batch.step(nstep=substeps)` on the env's own per-env models (same objects, same
+randomization draw, same substeps and threads) with no observation or reward work. Env = `BatchedGraspEnv.step`.
+Each block first runs the env from a saved physics state with random delta-theta actions (fingers hit objects),
+recording the joint targets it commanded; then restores that state and replays the same targets through raw
+stepping, so both do identical physics. Blocks alternate so that a noisy shared machine affects both alike. The
+ratio env / raw is the overhead check (target >= 0.85).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--num-envs", type=int, default=1026)
+    p.add_argument("--steps", type=int, default=40, help="control steps per timed block")
+    p.add_argument("--blocks", type=int, default=3, help="alternating raw/env blocks per thread count")
+    p.add_argument("--threads", type=int, nargs="*", default=None, help="thread counts (default: 1 and all CPUs)")
+
+
+def _measure(num_envs: int, nthread: int, steps: int, blocks: int) -> dict:
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=num_envs, seed=0, nthread=nthread))
+    env.reset()
+    k = env.cfg.physics.substeps
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-0.15, 0.15, (steps, num_envs, spec.NUM_JOINTS))
+    for a in actions[:5]:  # warm-up, and get fingers moving
+        env.step(a)
+    raw_t = env_t = 0.0
+    ctrl = env.batch.bind("ctrl")
+    for _ in range(blocks):
+        saved = env.batch.state.copy()
+        targets = []
+        t = time.perf_counter()
+        for a in actions:
+            _, _, _, _, info = env.step(a)
+            targets.append(info["joint_target"])
+        env_t += time.perf_counter() - t
+        after_env = env.batch.state.copy()
+        env.batch.state[:] = saved
+        t = time.perf_counter()
+        for target in targets:
+            ctrl[:] = target
+            env.batch.step(nstep=k)
+        raw_t += time.perf_counter() - t
+        env.batch.state[:] = after_env
+    n_ctrl = blocks * steps * num_envs
+    raw_ctrl = n_ctrl / raw_t
+    env_ctrl = n_ctrl / env_t
+    return {
+        "threads": env.batch.nthread,
+        "raw_physics_steps_per_s": raw_ctrl * k,
+        "raw_control_steps_per_s": raw_ctrl,
+        "env_control_steps_per_s": env_ctrl,
+        "env_over_raw": env_ctrl / raw_ctrl,
+    }
+
+
+def run(args) -> dict:
+    threads = args.threads or sorted({1, os.cpu_count() or 1})
+    rows = [_measure(args.num_envs, n, args.steps, args.blocks) for n in threads]
+    base = rows[0]["env_control_steps_per_s"]
+    for r in rows:
+        r["env_speedup_vs_first"] = r["env_control_steps_per_s"] / base
+    result = {"num_envs": args.num_envs, "substeps": 10, "rows": rows}
+    if not args.json:
+        print(f"blindgrasp-bench sim: {args.num_envs} envs, 10 x 5 ms substeps per 20 Hz control step")
+        print("| threads | raw physics steps/s | raw ctrl steps/s | env ctrl steps/s | env / raw | env speed-up |")
+        print("|---:|---:|---:|---:|---:|---:|")
+        for r in rows:
+            print(
+                f"| {r['threads']} | {r['raw_physics_steps_per_s']:,.0f} | {r['raw_control_steps_per_s']:,.0f} | "
+                f"{r['env_control_steps_per_s']:,.0f} | {r['env_over_raw']:.2f} | {r['env_speedup_vs_first']:.2f}x |"
+            )
+    return result
