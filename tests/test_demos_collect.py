@@ -1,4 +1,4 @@
-"""blindgrasp-collect-demos end to end with a real (barely trained) quick teacher, and the push up to the network."""
+"""blindgrasp-collect-demos end to end with a real (barely trained) quick teacher; the push up to the network."""
 
 from __future__ import annotations
 
@@ -29,16 +29,37 @@ def teacher(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("teacher") / "quick"
     previous = signal.getsignal(signal.SIGTERM)  # the trainer installs its own SIGTERM handler
     try:
-        train.train(train.parse_args(["--preset", "quick", "--output-dir", str(out), "--iterations", "1",
-                                      "--num-envs", str(N_ENVS), "--no-export"]))
+        train.train(
+            train.parse_args(
+                [
+                    "--preset",
+                    "quick",
+                    "--output-dir",
+                    str(out),
+                    "--iterations",
+                    "1",
+                    "--num-envs",
+                    str(N_ENVS),
+                    "--no-export",
+                ]
+            )
+        )
     finally:
         signal.signal(signal.SIGTERM, previous)
     return out
 
 
 def config(teacher: Path, out: Path, **kw) -> collect.CollectConfig:
-    base = dict(teacher=teacher, out=out, repo_id="test/demos", episodes_per_object=1, num_envs=N_ENVS, seed=3,
-                curation=curation.NO_CURATION, progress=False)
+    base = {
+        "teacher": teacher,
+        "out": out,
+        "repo_id": "test/demos",
+        "episodes_per_object": 1,
+        "num_envs": N_ENVS,
+        "seed": 3,
+        "curation": curation.NO_CURATION,
+        "progress": False,
+    }
     return collect.CollectConfig(**{**base, **kw})
 
 
@@ -51,7 +72,9 @@ def tiny(teacher, tmp_path_factory):
 
 
 def snapshot(root: Path) -> dict:
-    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*") if p.is_file()}
+    return {
+        str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*") if p.is_file()
+    }
 
 
 def test_tiny_collection_loads_back(tiny):
@@ -103,10 +126,15 @@ def test_frames_are_the_observation_before_each_step_and_the_commanded_target(te
 
     out, _ = tiny
     policy = TeacherPolicy(teacher)
-    env = BatchedGraspEnv(GraspEnvConfig(
-        num_envs=N_ENVS, seed=3, episode_s=spec.DEMO_EPISODE_S, dr=randomization.PAPER_DR.without_external_force(),
-        reward=rewards.RewardConfig(**policy.config["reward"]),
-    ))
+    env = BatchedGraspEnv(
+        GraspEnvConfig(
+            num_envs=N_ENVS,
+            seed=3,
+            episode_s=spec.DEMO_EPISODE_S,
+            dr=randomization.PAPER_DR.without_external_force(),
+            reward=rewards.RewardConfig(**policy.config["reward"]),
+        )
+    )
     obs = env.reset()
     states, targets = [], []
     for _ in range(env.max_episode_steps):
@@ -171,9 +199,25 @@ def test_exception_mid_collection_leaves_finished_episodes_readable(teacher, tmp
 
 def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     out = tmp_path / "sig"
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.demos.collect", "--teacher", str(teacher), "--out", str(out),
-           "--repo-id", "test/sig", "--episodes-per-object", "50", "--num-envs", str(N_ENVS), "--no-curation",
-           "--no-progress", "--seed", "11"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "lerobot_blindgrasp.demos.collect",
+        "--teacher",
+        str(teacher),
+        "--out",
+        str(out),
+        "--repo-id",
+        "test/sig",
+        "--episodes-per-object",
+        "50",
+        "--num-envs",
+        str(N_ENVS),
+        "--no-curation",
+        "--no-progress",
+        "--seed",
+        "11",
+    ]
     env = {**os.environ, "HF_HUB_OFFLINE": "1"}
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     info = out / "meta" / "info.json"
@@ -249,8 +293,22 @@ def test_bench_demos_reports_speeds(teacher, capsys):
     p = argparse.ArgumentParser()
     p.add_argument("--json", action="store_true")
     bench_demos.add_arguments(p)
-    args = p.parse_args(["--teacher", str(teacher), "--num-envs", "6", "--objects", "medium", "--no-curation",
-                         "--episodes-per-object", "1", "--write-episodes", "6", "--json"])
+    args = p.parse_args(
+        [
+            "--teacher",
+            str(teacher),
+            "--num-envs",
+            "6",
+            "--objects",
+            "medium",
+            "--no-curation",
+            "--episodes-per-object",
+            "1",
+            "--write-episodes",
+            "6",
+            "--json",
+        ]
+    )
     result = bench_demos.run(args)
     assert result["curated_demos"] == 6 and result["rollouts"] >= 6
     assert result["curated_demos_per_cpu_minute"] > 0 and result["frames_written_per_s"] > 0

@@ -73,7 +73,7 @@ def test_negative_readings_do_not_cancel_pressing():
 
 
 def test_trim_ends_at_the_step_both_criteria_hold():
-    # Hold reaches 10 steps at step 39 (starts at 30); force sum passes 200 at step 40 (5 N per step: 41 * 5 = 205).
+    # Hold reaches 10 steps at step 39 (starts at 30); the force sum passes 200 N at step 40 (41 * 5 N = 205 N).
     r, f = trajectory(30, 60, force_per_step=(5.0, 0.0, 0.0))
     res = evaluate(r, f)
     assert res.criteria_step == 40 and res.keep_steps == 41

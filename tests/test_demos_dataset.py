@@ -112,13 +112,23 @@ def test_metadata_survives_lerobot_edit_tools(written, tmp_path):
 def test_sim_demos_merge_with_glove_schema_after_dropping_metadata(written, tmp_path):
     root, _, _ = written
     glove = LeRobotDataset.create(
-        "test/glove", fps=spec.CONTROL_HZ, features=spec.dataset_features(), root=tmp_path / "glove",
-        robot_type=demo_dataset.ROBOT_TYPE, use_videos=False, video_backend="pyav",
+        "test/glove",
+        fps=spec.CONTROL_HZ,
+        features=spec.dataset_features(),
+        root=tmp_path / "glove",
+        robot_type=demo_dataset.ROBOT_TYPE,
+        use_videos=False,
+        video_backend="pyav",
     )
     for _ in range(2):
         for _ in range(12):
-            glove.add_frame({spec.STATE_KEY: np.zeros(12, np.float32), spec.ACTION_KEY: np.zeros(9, np.float32),
-                             "task": objects.get_object("sphere_large").task})
+            glove.add_frame(
+                {
+                    spec.STATE_KEY: np.zeros(12, np.float32),
+                    spec.ACTION_KEY: np.zeros(9, np.float32),
+                    "task": objects.get_object("sphere_large").task,
+                }
+            )
         glove.save_episode()
     glove.finalize()
     sim = LeRobotDataset("test/sim", root=root, video_backend="pyav")
@@ -129,7 +139,9 @@ def test_sim_demos_merge_with_glove_schema_after_dropping_metadata(written, tmp_
     assert merged.num_episodes == sim.num_episodes + 2
     assert set(merged.meta.features) == set(glove.meta.features)
     # ...and the glove card renders from a lerobot-record style dataset.
-    text = str(cards.build_card(cards.card_kwargs(tmp_path / "glove", "test/glove", operators=["alice"]), "test/glove"))
+    text = str(
+        cards.build_card(cards.card_kwargs(tmp_path / "glove", "test/glove", operators=["alice"]), "test/glove")
+    )
     meta = cards.validate(text)
     assert "teleoperation" in meta["tags"] and "LeRobot" in meta["tags"]
     assert "grasp and lift the large sphere | 2 | 24" in text and "alice" in text
@@ -137,9 +149,17 @@ def test_sim_demos_merge_with_glove_schema_after_dropping_metadata(written, tmp_
 
 
 def test_resume_refuses_foreign_schema(tmp_path):
-    other = LeRobotDataset.create("test/other", fps=30, features=spec.dataset_features(), root=tmp_path / "o",
-                                  use_videos=False, video_backend="pyav")
-    other.add_frame({spec.STATE_KEY: np.zeros(12, np.float32), spec.ACTION_KEY: np.zeros(9, np.float32), "task": "x"})
+    other = LeRobotDataset.create(
+        "test/other",
+        fps=30,
+        features=spec.dataset_features(),
+        root=tmp_path / "o",
+        use_videos=False,
+        video_backend="pyav",
+    )
+    other.add_frame(
+        {spec.STATE_KEY: np.zeros(12, np.float32), spec.ACTION_KEY: np.zeros(9, np.float32), "task": "x"}
+    )
     other.save_episode()
     other.finalize()
     with pytest.raises(ValueError, match="missing feature 'episode.outcome'.*fps 30"):
@@ -147,7 +167,10 @@ def test_resume_refuses_foreign_schema(tmp_path):
 
 
 def test_card_validation_catches_bad_metadata():
-    good = "---\nlicense: apache-2.0\ntask_categories: [robotics]\ntags: [LeRobot]\nconfigs:\n- config_name: default\n  data_files: data/*/*.parquet\n---\nbody\n"
+    good = (
+        "---\nlicense: apache-2.0\ntask_categories: [robotics]\ntags: [LeRobot]\n"
+        "configs:\n- config_name: default\n  data_files: data/*/*.parquet\n---\nbody\n"
+    )
     assert cards.validate(good)["license"] == "apache-2.0"
     with pytest.raises(ValueError, match="robotics"):
         cards.validate(good.replace("[robotics]", "[text-generation]"))

@@ -33,8 +33,9 @@ def _throwaway_teacher(tmp: Path) -> Path:
 
     out = tmp / "teacher"
     with contextlib.redirect_stdout(io.StringIO()):  # keep --json output clean
-        train.train(train.parse_args(["--preset", "quick", "--output-dir", str(out), "--iterations", "1",
-                                      "--no-export"]))
+        train.train(
+            train.parse_args(["--preset", "quick", "--output-dir", str(out), "--iterations", "1", "--no-export"])
+        )
     return out
 
 

@@ -33,7 +33,8 @@ PAPER = (
     "Fingertip Force Sensing (2025)"
 )
 CITATION_BIBTEX = """@article{lee2025blindgrasping,
-  title  = {Why Look at It at All?: Vision-Free Multifingered Blind Grasping Using Uniaxial Fingertip Force Sensing},
+  title  = {Why Look at It at All?: Vision-Free Multifingered Blind Grasping Using Uniaxial Fingertip
+            Force Sensing},
   author = {Lee, Edgar and Choi, Junho and Kim, Taemin and Nam, Changjoo and Jeong, Seokhwan},
   year   = {2025}
 }"""
@@ -151,7 +152,11 @@ def _glove_context(root: Path, repo_id: str, meta, operators: list[str], notes: 
         "fps": meta.fps,
         "robot_type": meta.robot_type,
         "tasks": list(per_task.values()),
-        "features": {k: v for k, v in meta.features.items() if k not in ("timestamp", "frame_index", "episode_index", "index", "task_index")},
+        "features": {
+            k: v
+            for k, v in meta.features.items()
+            if k not in ("timestamp", "frame_index", "episode_index", "index", "task_index")
+        },
         "operators": operators,
         "notes": notes,
         **_versions(),

@@ -30,7 +30,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 from lerobot_blindgrasp.demos import curation as curation_mod
@@ -109,7 +109,8 @@ class CollectStats:
         return d
 
 
-# Called after every finished rollout: (episode, its curation result or None if the physics failed, written, stats).
+# Called after every finished rollout with (episode, its curation result, written?, stats); the curation result
+# is None when the physics failed.
 EpisodeCallback = Callable[[Episode, "curation_mod.CurationResult | None", bool, CollectStats], None]
 
 
@@ -246,7 +247,7 @@ def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> Co
     stats = CollectStats(tally=tally)
     run = {
         "command": cfg.command or f"collect(repo_id={cfg.repo_id!r})",
-        "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "started": datetime.now(UTC).isoformat(timespec="seconds"),
         "episodes_per_object": target,
         "max_rollouts_per_object": budget,
         "num_envs": cfg.num_envs,
@@ -296,7 +297,7 @@ def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> Co
                     stats.env_steps += _env.num_envs
                     return teacher(obs, stochastic=cfg.stochastic)
 
-                episodes = run_episodes(env, act, lambda: stop.requested is not None or stale["now"])
+                episodes = run_episodes(env, act, lambda s=stale: stop.requested is not None or s["now"])
                 for ep in episodes:
                     cut, written = _handle_episode(ds, ep, cfg.curation, tally, stats, target, bar)
                     if on_episode is not None:
@@ -309,7 +310,9 @@ def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> Co
             else:
                 stats.stop_reason = "interrupted"
     except BaseException as e:
-        stats.stop_reason = "interrupted" if isinstance(e, KeyboardInterrupt) else f"error: {type(e).__name__}: {e}"
+        stats.stop_reason = (
+            "interrupted" if isinstance(e, KeyboardInterrupt) else f"error: {type(e).__name__}: {e}"
+        )
         raise
     finally:
         bar.close()
@@ -317,7 +320,7 @@ def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> Co
         stats.wall_s = time.perf_counter() - t_wall
         stats.cpu_s = time.process_time() - t_cpu
         run.update(
-            ended=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            ended=datetime.now(UTC).isoformat(timespec="seconds"),
             stop_reason=stats.stop_reason,
             interrupted=stats.stop_reason != "done",
             wall_s=stats.wall_s,
@@ -334,7 +337,7 @@ def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> Co
             from lerobot_blindgrasp.demos import cards
 
             cards.write_card(out, cfg.repo_id)
-        except Exception as e:  # a card problem must not mask the collection's own outcome
+        except Exception as e:  # noqa: BLE001  (a card problem must not mask the collection's outcome)
             log.warning("could not write the dataset card: %s", e)
     return stats
 
@@ -401,9 +404,15 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--episodes-per-object", type=int, default=20, help="episodes to write per object")
     p.add_argument("--max-rollouts-per-object", type=int, default=None, help="rollout budget per object (20 N)")
     p.add_argument("--objects", default="all", help="'all', 'medium' or a comma list of catalogue names")
-    p.add_argument("--deterministic", action="store_true", help="teacher mean: the 'w/o stochastic teacher' ablation")
-    p.add_argument("--no-curation", action="store_true", help="keep every episode whole: the 'w/o curation' ablation")
-    p.add_argument("--keep-full-episodes", action="store_true", help="curate, but do not end kept episodes at lift")
+    p.add_argument(
+        "--deterministic", action="store_true", help="teacher mean: the 'w/o stochastic teacher' ablation"
+    )
+    p.add_argument(
+        "--no-curation", action="store_true", help="keep every episode whole: the 'w/o curation' ablation"
+    )
+    p.add_argument(
+        "--keep-full-episodes", action="store_true", help="curate, but do not end kept episodes at lift"
+    )
     p.add_argument("--resume", action="store_true", help="append to an existing --out until the targets are met")
     p.add_argument("--num-envs", type=int, default=180, help="parallel envs (default 180 = 18 objects x 10)")
     p.add_argument("--seed", type=int, default=0, help="first env seed (a resumed run continues after the last)")
@@ -458,9 +467,9 @@ def main(argv=None) -> None:
     )
     if tally.total().kept == 0:
         print(
-            "warning: no episode met the curation criteria, so the dataset has no data yet (LeRobot cannot load it "
-            "until one is written). A better-trained teacher, a larger --max-rollouts-per-object, or --no-curation "
-            "will fill it; add --resume to append to this folder.",
+            "warning: no episode met the curation criteria, so the dataset has no data yet (LeRobot cannot "
+            "load it until one is written). A better-trained teacher, a larger --max-rollouts-per-object or "
+            "--no-curation will fill it; add --resume to append to this folder.",
             file=sys.stderr,
         )
     if stats.stop_reason == "interrupted":

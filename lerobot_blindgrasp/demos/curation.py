@@ -44,11 +44,11 @@ class CurationConfig:
 
     @property
     def min_hold_steps(self) -> int:
-        return int(round(self.min_hold_s * spec.CONTROL_HZ))
+        return round(self.min_hold_s * spec.CONTROL_HZ)
 
     @property
     def episode_steps(self) -> int:
-        return int(round(self.episode_s * spec.CONTROL_HZ))
+        return round(self.episode_s * spec.CONTROL_HZ)
 
     def to_dict(self) -> dict:
         return {**asdict(self), "min_hold_steps": self.min_hold_steps, "episode_steps": self.episode_steps}
@@ -85,7 +85,9 @@ def hold_run_lengths(task_reward: np.ndarray, threshold: float) -> np.ndarray:
     return np.where(above, np.arange(above.size) - last_break, 0)
 
 
-def evaluate(task_reward: np.ndarray, uniaxial_force: np.ndarray, cfg: CurationConfig = PAPER_CURATION) -> CurationResult:
+def evaluate(
+    task_reward: np.ndarray, uniaxial_force: np.ndarray, cfg: CurationConfig = PAPER_CURATION
+) -> CurationResult:
     """Judge one episode. task_reward: (T,) r_t per step; uniaxial_force: (T, 3) noise-free forces (N) per step."""
     r = np.asarray(task_reward, dtype=np.float64).reshape(-1)
     if r.size == 0:

@@ -6,7 +6,7 @@ small extra features (constant within an episode):
 
     episode.outcome        float32 (6,)  success, curation_passed, left_workspace, longest_hold_s, force_sum_n,
                                           rollout_steps
-    episode.randomization  float32 (7,)  the Table II draw (frictions, mass and gain scales) and the object's start xy
+    episode.randomization  float32 (7,)  the Table II draw (frictions, mass and gain scales), the object's start xy
     episode.seed           int64   (2,)  env_seed, env_episode: with the collection's DR they reproduce the draw
 
 The object and its size are in the task string (one task per object), which LeRobot keeps per episode.
@@ -59,8 +59,9 @@ EPISODE_FEATURES: dict[str, dict] = {
 }
 METADATA_FEATURE_NAMES: tuple[str, ...] = tuple(EPISODE_FEATURES)
 MERGE_HINT = (
-    "lerobot-edit-dataset --repo_id {repo_id} --root {root} --new_repo_id {repo_id}_schema --new_root {root}_schema "
-    "--operation.type remove_feature --operation.feature_names \"{names}\""
+    "lerobot-edit-dataset --repo_id {repo_id} --root {root} --new_repo_id {repo_id}_schema "
+    "--new_root {root}_schema "
+    '--operation.type remove_feature --operation.feature_names "{names}"'
 )
 
 
@@ -73,7 +74,12 @@ def create(root: Path, repo_id: str):
 
     # video_backend is irrelevant without cameras; naming it skips LeRobot's torchcodec probe and its warning.
     return LeRobotDataset.create(
-        repo_id, fps=FPS, features=demo_features(), root=root, robot_type=ROBOT_TYPE, use_videos=False,
+        repo_id,
+        fps=FPS,
+        features=demo_features(),
+        root=root,
+        robot_type=ROBOT_TYPE,
+        use_videos=False,
         video_backend="pyav",
     )
 
@@ -96,9 +102,11 @@ def check_schema(features: dict, fps: int, robot_type: str | None) -> list[str]:
         have = features.get(key)
         if have is None:
             problems.append(f"missing feature {key!r}")
-        elif have["dtype"] != ft["dtype"] or tuple(have["shape"]) != tuple(ft["shape"]) or list(
-            have["names"]
-        ) != list(ft["names"]):
+        elif (
+            have["dtype"] != ft["dtype"]
+            or tuple(have["shape"]) != tuple(ft["shape"])
+            or list(have["names"]) != list(ft["names"])
+        ):
             problems.append(f"feature {key!r} differs from the spec")
     if fps != FPS:
         problems.append(f"fps {fps} != {FPS}")
@@ -108,11 +116,12 @@ def check_schema(features: dict, fps: int, robot_type: str | None) -> list[str]:
 
 
 def episode_buffer(ep: Episode, cut: CurationResult, episode_index: int) -> dict:
-    """A ready episode for `LeRobotDataset.save_episode(episode_data=...)`: whole arrays, no per-frame add_frame."""
+    """An episode for `LeRobotDataset.save_episode(episode_data=...)`: whole arrays, no add_frame per frame."""
     n = cut.keep_steps
     task = objects.get_object(ep.object_name).task
     outcome = np.array(
-        [ep.success, cut.passed, ep.left_workspace, cut.longest_hold_s, cut.force_sum_n, ep.length], dtype=np.float32
+        [ep.success, cut.passed, ep.left_workspace, cut.longest_hold_s, cut.force_sum_n, ep.length],
+        dtype=np.float32,
     )
     return {
         "size": n,
@@ -120,7 +129,9 @@ def episode_buffer(ep: Episode, cut: CurationResult, episode_index: int) -> dict
         spec.STATE_KEY: ep.state[:n].astype(np.float32, copy=False),
         spec.ACTION_KEY: ep.action[:n].astype(np.float32, copy=False),
         "episode.outcome": np.broadcast_to(outcome, (n, outcome.size)),
-        "episode.randomization": np.broadcast_to(ep.randomization.astype(np.float32), (n, len(RANDOMIZATION_NAMES))),
+        "episode.randomization": np.broadcast_to(
+            ep.randomization.astype(np.float32), (n, len(RANDOMIZATION_NAMES))
+        ),
         "episode.seed": np.broadcast_to(np.array([ep.env_seed, ep.env_episode], dtype=np.int64), (n, 2)),
         # LeRobot's default columns: timestamp and frame_index as add_frame would compute them; index and
         # task_index are overwritten by save_episode.

@@ -40,5 +40,8 @@ def save(root: Path, data: dict) -> None:
 
 def mismatches(old: dict, new: dict) -> list[str]:
     """Settings of `new` that differ from the dataset's `old` provenance (compared as JSON: tuples == lists)."""
-    as_json = lambda v: json.loads(json.dumps(v))  # noqa: E731
+
+    def as_json(v):
+        return json.loads(json.dumps(v))
+
     return [key for key in _MUST_MATCH if as_json(old.get(key)) != as_json(new.get(key))]

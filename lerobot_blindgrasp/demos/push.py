@@ -31,9 +31,7 @@ class PushError(Exception):
 
 def upload_plan(root: Path) -> dict:
     """What the upload will send: file count and size, for the user and for tests."""
-    files = [
-        p for p in root.rglob("*") if p.is_file() and p.relative_to(root).parts[0] not in _IGNORED_DIRS
-    ]
+    files = [p for p in root.rglob("*") if p.is_file() and p.relative_to(root).parts[0] not in _IGNORED_DIRS]
     return {
         "files": sorted(str(p.relative_to(root)) for p in files),
         "bytes": sum(p.stat().st_size for p in files),
@@ -60,8 +58,9 @@ def prepare(
     if json.loads((root / "meta" / "info.json").read_text()).get("total_episodes", 0) == 0:
         raise PushError(f"{root} has no episodes yet; nothing to upload")
     try:
-        kwargs = cards.card_kwargs(root, repo_id, kind=kind, license=license, extra_tags=tags,
-                                   operators=operators, notes=notes)
+        kwargs = cards.card_kwargs(
+            root, repo_id, kind=kind, license=license, extra_tags=tags, operators=operators, notes=notes
+        )
     except (FileNotFoundError, ValueError) as e:
         raise PushError(str(e)) from None
     card = cards.build_card(kwargs, repo_id)

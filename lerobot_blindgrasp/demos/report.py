@@ -46,7 +46,11 @@ class Tally:
     def to_json(self) -> dict:
         rows = {}
         for name, o in self.objects.items():
-            rows[name] = {**asdict(o), "yield": o.yield_rate, "force_sum_n_mean": _mean(o.force_sum_n_total, o.rollouts)}
+            rows[name] = {
+                **asdict(o),
+                "yield": o.yield_rate,
+                "force_sum_n_mean": _mean(o.force_sum_n_total, o.rollouts),
+            }
         t = self.total()
         return {"objects": rows, "total": {**asdict(t), "yield": t.yield_rate}}
 
@@ -63,7 +67,10 @@ def _mean(total: float, n: int) -> float:
 
 def format_table(tally: Tally, order: list[str] | None = None) -> str:
     names = order or list(tally.objects)
-    head = f"{'object':<20} {'rollouts':>8} {'passed':>7} {'yield':>7} {'kept':>6} {'frames':>8} {'success':>8} {'F sum':>8}"
+    head = (
+        f"{'object':<20} {'rollouts':>8} {'passed':>7} {'yield':>7} {'kept':>6} {'frames':>8} {'success':>8} "
+        f"{'F sum':>8}"
+    )
     lines = [head, "-" * len(head)]
 
     def row(name: str, o: ObjectTally) -> str:

@@ -18,7 +18,13 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv
 
 # Names of the per-episode randomization values we store (the Table II draw plus the reset's object offset).
-PHYSICS_DRAW_NAMES: tuple[str, ...] = ("object_friction", "robot_friction", "object_mass_scale", "kp_scale", "kv_scale")
+PHYSICS_DRAW_NAMES: tuple[str, ...] = (
+    "object_friction",
+    "robot_friction",
+    "object_mass_scale",
+    "kp_scale",
+    "kv_scale",
+)
 RANDOMIZATION_NAMES: tuple[str, ...] = PHYSICS_DRAW_NAMES + ("object_x", "object_y")
 
 
