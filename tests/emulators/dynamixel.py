@@ -23,6 +23,7 @@ import termios
 import time
 from dataclasses import dataclass, field
 
+from dynamixel_sdk import protocol2_packet_handler as p2
 from dynamixel_sdk import robotis_def as dx
 
 from .pty_device import PtyDevice
@@ -191,8 +192,9 @@ class EmulatedServo:
         profile = self.get("Profile_Velocity")
         if profile > 0:
             vmax = min(vmax, profile * VELOCITY_UNIT_RPM / 60.0 * 4096)
-        velocity = max(-vmax, min(vmax, error / SLEW_TAU_S)) if torque else 0.0
-        new = self.shaft + velocity * dt
+        # Exact first-order response over dt (stable for any dt), capped at the slew rate.
+        step = error * (1.0 - math.exp(-dt / SLEW_TAU_S)) if torque and dt > 0 else 0.0
+        new = self.shaft + max(-vmax * dt, min(vmax * dt, step))
         if self.obstacle is not None:
             stop, side = self.obstacle
             if side > 0 and new > stop:
@@ -227,6 +229,9 @@ class EmulatedServo:
 
 class DynamixelBusEmulator(PtyDevice):
     """Nine (by default) XM430-W350 servos on one emulated bus. `port` is the path a client opens."""
+
+    # Dynamics are also advanced on every packet, so the idle tick can be slow (keeps the GIL free for the client).
+    tick_s = 0.01
 
     def __init__(self, ids, *, baudrate: int = 1_000_000, initial_shaft: dict[int, float] | None = None):
         super().__init__()
@@ -304,7 +309,7 @@ class DynamixelBusEmulator(PtyDevice):
 
     def _status(self, servo: EmulatedServo, error: int = 0, params: bytes = b"", *, force: bool = False) -> None:
         if servo.get("Hardware_Error_Status"):
-            error |= dx.ERRBIT_ALERT
+            error |= p2.ERRBIT_ALERT
         if self.drop_responses.get(servo.id, 0) > 0:
             self.drop_responses[servo.id] -= 1
             return
@@ -320,7 +325,7 @@ class DynamixelBusEmulator(PtyDevice):
             self.rx_crc_errors += 1
             servo = self._alive(dxl_id)
             if servo is not None:
-                self._status(servo, dx.ERRNUM_CRC)
+                self._status(servo, p2.ERRNUM_CRC)
             return
         params = _unstuff(pkt[8:-2])
         self.instruction_counts[inst] = self.instruction_counts.get(inst, 0) + 1
@@ -367,11 +372,11 @@ class DynamixelBusEmulator(PtyDevice):
         elif not broadcast:
             servo = self._alive(dxl_id)
             if servo is not None:
-                self._status(servo, dx.ERRNUM_INSTRUCTION)
+                self._status(servo, p2.ERRNUM_INSTRUCTION)
 
     def _reply_read(self, servo: EmulatedServo, addr: int, size: int) -> None:
         if addr + size > TABLE_SIZE:
-            self._status(servo, dx.ERRNUM_ACCESS)
+            self._status(servo, p2.ERRNUM_ACCESS)
             return
         self._status(servo, 0, bytes(servo.regs[addr : addr + size]))
 
@@ -379,15 +384,15 @@ class DynamixelBusEmulator(PtyDevice):
         """Apply a write like the firmware does; returns the status error code (0 = ok, nothing written else)."""
         end = addr + len(data)
         if not data or end > TABLE_SIZE:
-            return dx.ERRNUM_ACCESS
+            return p2.ERRNUM_ACCESS
         touched = [(n, spec) for n, spec in CONTROL_TABLE.items() if spec[0] < end and addr < spec[0] + spec[1]]
         if not touched:
-            return dx.ERRNUM_ACCESS
+            return p2.ERRNUM_ACCESS
         for name, (a, size, _, access) in touched:
             if access == "ro" or a < addr or a + size > end:
-                return dx.ERRNUM_ACCESS  # read-only, or a partial register write
+                return p2.ERRNUM_ACCESS  # read-only, or a partial register write
             if access == "eeprom" and servo.get("Torque_Enable"):
-                return dx.ERRNUM_ACCESS  # EEPROM is locked while torque is on
+                return p2.ERRNUM_ACCESS  # EEPROM is locked while torque is on
         staged = EmulatedServo.__new__(EmulatedServo)
         staged.regs = bytearray(servo.regs)
         staged.regs[addr:end] = data
@@ -407,20 +412,20 @@ class DynamixelBusEmulator(PtyDevice):
         for name in names:
             value = staged.get(name)
             if name == "Operating_Mode" and value not in (0, 1, 3, 4, 5, 16):
-                return dx.ERRNUM_DATA_RANGE
+                return p2.ERRNUM_DATA_RANGE
             if name == "Torque_Enable" and value not in (0, 1):
-                return dx.ERRNUM_DATA_RANGE
+                return p2.ERRNUM_DATA_RANGE
             if name == "Current_Limit" and not 0 <= value <= 1193:
-                return dx.ERRNUM_DATA_RANGE
+                return p2.ERRNUM_DATA_RANGE
             if name == "Goal_Current" and abs(value) > servo.get("Current_Limit"):
-                return dx.ERRNUM_DATA_LIMIT
+                return p2.ERRNUM_DATA_LIMIT
             if name in ("Min_Position_Limit", "Max_Position_Limit") and not 0 <= value <= 4095:
-                return dx.ERRNUM_DATA_RANGE
+                return p2.ERRNUM_DATA_RANGE
             if name == "Homing_Offset" and abs(value) > 1_044_479:
-                return dx.ERRNUM_DATA_RANGE
+                return p2.ERRNUM_DATA_RANGE
             if name == "Goal_Position" and servo.get("Operating_Mode") == 3:
                 if not servo.get("Min_Position_Limit") <= value <= servo.get("Max_Position_Limit"):
-                    return dx.ERRNUM_DATA_LIMIT
+                    return p2.ERRNUM_DATA_LIMIT
         return 0
 
 

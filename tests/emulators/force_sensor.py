@@ -18,6 +18,7 @@ from .pty_device import PtyDevice
 
 
 class ForceSensorEmulator(PtyDevice):
+    tick_s = 0.005
     def __init__(
         self,
         *,

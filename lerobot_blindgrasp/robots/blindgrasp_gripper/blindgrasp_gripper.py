@@ -242,19 +242,40 @@ class BlindgraspGripper(Robot):
             self.bus.sync_write("Goal_Position", ticks, normalize=False, num_retry=self._retry)
         return {f"{j}.pos": ticks_to_rad(ticks[j]) for j in self.joints}
 
+    def _sync_read(self, register: str) -> dict[str, int]:
+        # The SDK matches status packets by ID only. A reply that arrived after an earlier transaction timed out
+        # would be taken for this register's data, so drop whatever is already waiting on the line.
+        self.bus.port_handler.ser.reset_input_buffer()
+        return self.bus.sync_read(register, normalize=False, num_retry=self._retry)
+
     def _read_q(self) -> np.ndarray:
-        raw = self.bus.sync_read("Present_Position", normalize=False, num_retry=self._retry)
+        raw = self._sync_read("Present_Position")
         return np.array([ticks_to_rad(raw[j]) for j in self.joints])
 
     def _raise_on_hardware_errors(self) -> None:
-        status = self.bus.sync_read("Hardware_Error_Status", normalize=False, num_retry=self._retry)
-        bad = {j: v for j, v in status.items() if v}
+        status = self._sync_read("Hardware_Error_Status")
+        bad = {j: v for j, v in status.items() if v and self._confirm_hardware_error(j)}
         if bad:
             detail = "; ".join(f"{j} (ID {self.bus.motors[j].id}): {_decode_hw_error(v)}" for j, v in bad.items())
             raise GripperHardwareError(
                 f"Servo hardware error: {detail}. The firmware keeps torque off until the servo is rebooted or "
                 "power-cycled; inspect the finger first."
             )
+
+    def _confirm_hardware_error(self, joint: str) -> bool:
+        """Re-read one servo's Hardware_Error_Status (unicast, alert bit allowed): a corrupted or stale sync-read
+        reply must not stop the gripper, a real error reads the same twice."""
+        addr, _ = get_address(self.bus.model_ctrl_table, MODEL, "Hardware_Error_Status")
+        for _ in range(1 + self._retry):
+            self.bus.port_handler.ser.reset_input_buffer()
+            value, comm, _ = self.bus.packet_handler.read1ByteTxRx(
+                self.bus.port_handler, self.bus.motors[joint].id, addr
+            )
+            if comm == 0:
+                if not value:
+                    logger.warning("Spurious Hardware_Error_Status on %s (not confirmed by a second read).", joint)
+                return bool(value)
+        return True  # cannot confirm either way: treat as an error
 
     # --- safety -----------------------------------------------------------------------------------------------------
     @contextmanager

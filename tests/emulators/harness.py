@@ -1,0 +1,67 @@
+"""Helpers for tests that drive the emulated hardware: calibrated robots, and CLI subprocesses with an operator."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+BIN = Path(sys.executable).parent
+
+
+def cli_env(home: Path) -> dict[str, str]:
+    """Offline, isolated environment for LeRobot CLI subprocesses."""
+    return {
+        **os.environ,
+        "HF_HUB_OFFLINE": "1",
+        "HF_DATASETS_OFFLINE": "1",
+        "HF_HOME": str(home / "hf"),
+        "HF_LEROBOT_HOME": str(home / "hf" / "lerobot"),
+        "HF_LEROBOT_CALIBRATION": str(home / "calibration"),
+        "WANDB_MODE": "disabled",
+        "OMP_NUM_THREADS": "1",
+        "PYTHONUNBUFFERED": "1",
+        "MUJOCO_GL": "egl",
+    }
+
+
+class Operator:
+    """Runs a CLI whose `input()` prompts an operator: waits for each prompt text, acts, then presses ENTER."""
+
+    def __init__(self, cmd: list[str], env: dict[str, str]):
+        self.proc = subprocess.Popen(
+            cmd, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+        )
+        self.output = bytearray()
+        self._pos = 0
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        while chunk := self.proc.stdout.read1(4096):
+            self.output += chunk
+
+    @property
+    def text(self) -> str:
+        return self.output.decode(errors="replace")
+
+    def expect(self, marker: str, timeout_s: float = 60.0) -> None:
+        deadline = time.monotonic() + timeout_s
+        needle = marker.encode()
+        while (i := self.output.find(needle, self._pos)) < 0:
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                raise AssertionError(f"never saw {marker!r}; output:\n{self.text[-4000:]}")
+            time.sleep(0.02)
+        self._pos = i + len(needle)
+
+    def answer(self, line: str = "") -> None:
+        self.proc.stdin.write(line.encode() + b"\n")
+        self.proc.stdin.flush()
+
+    def wait(self, timeout_s: float = 120.0) -> int:
+        rc = self.proc.wait(timeout=timeout_s)
+        self._reader.join(timeout=5)
+        return rc
