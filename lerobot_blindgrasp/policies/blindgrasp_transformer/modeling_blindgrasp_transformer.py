@@ -260,7 +260,7 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         return self.predict_action_chunk(batch)[:, 0]
 
     def forward(self, batch: dict[str, Tensor], reduction: str = "mean") -> tuple[Tensor, dict]:
-        """MSE between the last token's prediction and the normalized delta action (paper eq. 11)."""
+        """MSE between the last token's prediction and the normalized delta action (the paper's imitation loss)."""
         pred = self.model(batch[OBS_STATE], batch.get(STATE_IS_PAD))
         per_element = F.mse_loss(pred, batch[ACTION], reduction="none")
         if reduction == "none":
