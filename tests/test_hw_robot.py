@@ -244,7 +244,7 @@ def test_missing_servo_at_connect_is_named(rig, tmp_path, monkeypatch):
     r.disconnect()
     rig.dxl.missing_ids.add(22)
     r = BlindgraspGripper(rig.robot_config(tmp_path))
-    with pytest.raises(GripperBusError, match=r"(?s)Missing motor IDs.*22"):
+    with pytest.raises(GripperBusError, match=r"missing IDs \[22\]"):
         r.connect()
     _assert_stopped(rig, r)
 
@@ -293,5 +293,14 @@ def test_no_force_sensor_fails_connect_with_torque_off(rig, tmp_path, monkeypatc
     rig.force.paused = True
     r = BlindgraspGripper(rig.robot_config(tmp_path))
     with pytest.raises(ForceSensorError, match="No valid force-sensor frame"):
+        r.connect()
+    _assert_stopped(rig, r)
+
+
+def test_hardware_error_present_at_connect_is_reported(rig, tmp_path, monkeypatch):
+    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
+    rig.dxl.set_hardware_error(32, HW_OVERLOAD)
+    r = BlindgraspGripper(rig.robot_config(tmp_path))
+    with pytest.raises(GripperHardwareError, match=r"th_j32 \(ID 32\): overload"):
         r.connect()
     _assert_stopped(rig, r)

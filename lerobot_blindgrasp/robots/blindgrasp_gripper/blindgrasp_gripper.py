@@ -108,19 +108,20 @@ class BlindgraspGripper(Robot):
 
     @property
     def is_calibrated(self) -> bool:
-        return bool(self.calibration) and self.bus.is_connected and self.bus.is_calibrated
+        return bool(self.calibration) and self.bus.is_connected and self._servos_match_calibration()
 
     # --- connection -----------------------------------------------------------------------------------------------
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
         with self._safety("connecting"):
-            self.bus.connect()
+            self.bus.connect(handshake=False)
             self._register_atexit()
+            self._handshake()
             self._raise_on_hardware_errors()
-            if self.calibration and not self.bus.is_calibrated:
+            if self.calibration and not self._servos_match_calibration():
                 logger.info("Writing the calibration file %s to the servos.", self.calibration_fpath)
                 self._write_calibration()
-            if not self.bus.is_calibrated:
+            if not self._servos_match_calibration():
                 if not calibrate:
                     logger.warning("%s is not calibrated: run lerobot-calibrate before using it.", self)
                     self.force.connect()
@@ -137,8 +138,9 @@ class BlindgraspGripper(Robot):
         r = self._retry
         with self._safety("configuring the servos"):
             self.bus.disable_torque(num_retry=r)
-            self.bus.configure_motors()  # Return_Delay_Time 0: status packets come back without the 500 us delay
             for j in self.joints:
+                # Status packets come back without the default 500 us delay.
+                self.bus.write("Return_Delay_Time", j, 0, num_retry=r)
                 self.bus.write("Operating_Mode", j, mode, num_retry=r)
                 self.bus.write("Current_Limit", j, current, num_retry=r)
                 self.bus.write("Goal_Current", j, current, num_retry=r)
@@ -195,12 +197,49 @@ class BlindgraspGripper(Robot):
             print(f"  {j:7s} id {ids[j]:2d}  drive_mode {modes[j]}  q = {ticks_to_rad(check[j]):+.3f} rad")
         logger.info("Calibration saved to %s", self.calibration_fpath)
 
+    # LeRobot's bus has the same three operations (`_assert_motors_exist`, `write_calibration`, `read_calibration`)
+    # but tries each transaction once; ours retry like every other transaction, and also cover Drive_Mode.
+    def _handshake(self) -> None:
+        expected = self.bus.model_number_table[MODEL]
+        found = {j: self._ping(self.bus.motors[j].id) for j in self.joints}
+        missing = [self.bus.motors[j].id for j, model in found.items() if model is None]
+        wrong = {self.bus.motors[j].id: model for j, model in found.items() if model not in (None, expected)}
+        if missing or wrong:
+            raise ConnectionError(
+                f"Servo check failed on '{self.config.port}' at {self.config.baudrate} bps: "
+                f"missing IDs {missing}, wrong model numbers {wrong} (expected {expected}, XM430-W350). "
+                "Check power, cabling, IDs and the Baud_Rate register (lerobot-setup-motors)."
+            )
+
+    def _ping(self, dxl_id: int) -> int | None:
+        """Model number, or None if the servo never answers. Unlike `bus.ping`, a reply carrying the hardware-alert
+        bit counts as present: that servo is there, and `_raise_on_hardware_errors` says what is wrong with it."""
+        for _ in range(1 + self._retry):
+            model, comm, _ = self.bus.packet_handler.ping(self.bus.port_handler, dxl_id)
+            if comm == 0:
+                return model
+        return None
+
     def _write_calibration(self) -> None:
-        # LeRobot's write_calibration writes Homing_Offset and the position limits but not Drive_Mode, which
-        # `is_calibrated` compares too.
+        r = self._retry
         for j, c in self.calibration.items():
-            self.bus.write("Drive_Mode", j, c.drive_mode, num_retry=self._retry)
-        self.bus.write_calibration(self.calibration)
+            self.bus.write("Drive_Mode", j, c.drive_mode, num_retry=r)
+            self.bus.write("Homing_Offset", j, c.homing_offset, normalize=False, num_retry=r)
+            self.bus.write("Min_Position_Limit", j, c.range_min, normalize=False, num_retry=r)
+            self.bus.write("Max_Position_Limit", j, c.range_max, normalize=False, num_retry=r)
+        self.bus.calibration = self.calibration
+
+    def _servos_match_calibration(self) -> bool:
+        """The EEPROM calibration registers equal the file (what LeRobot's `bus.is_calibrated` compares)."""
+        if not self.calibration:
+            return False
+        regs = {n: self._sync_read(n) for n in ("Drive_Mode", "Homing_Offset", "Min_Position_Limit",
+                                               "Max_Position_Limit")}  # fmt: skip
+        return all(
+            (regs["Drive_Mode"][j], regs["Homing_Offset"][j], regs["Min_Position_Limit"][j],
+             regs["Max_Position_Limit"][j]) == (c.drive_mode, c.homing_offset, c.range_min, c.range_max)
+            for j, c in self.calibration.items()
+        )  # fmt: skip
 
     @check_if_not_connected
     def tare_forces(self) -> None:
