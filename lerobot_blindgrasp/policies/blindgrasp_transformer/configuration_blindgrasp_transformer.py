@@ -1,4 +1,4 @@
-"""Configuration of the `blindgrasp_transformer` student policy (paper Sec. IV-B, Table IV).
+"""Configuration of the `blindgrasp_transformer` student policy (paper Sec. III-B, Table IV).
 
 The student is robomimic's BC-Transformer as the paper uses it: one token per 20 Hz step built from
 o_t = 9 joint positions + 3 uniaxial forces, a causal GPT over the last 30 steps, and an MLP head that predicts
