@@ -5,6 +5,8 @@ No teacher needed: episodes are synthetic but go through the real curation, writ
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from huggingface_hub import DatasetCard
@@ -77,6 +79,33 @@ def test_written_episodes_load_back_with_schema_and_metadata(written):
         assert last["timestamp"].item() == pytest.approx((n - 1) / spec.CONTROL_HZ)
         assert last["episode.seed"].tolist() == [ep.env_seed, ep.env_episode]
         start += n
+
+
+def test_fast_writer_path_writes_the_same_files_as_lerobots_default(tmp_path):
+    import pyarrow.parquet as pq
+    from lerobot.datasets import dataset_writer
+
+    original = dataset_writer.embed_images
+    roots = {}
+    for fast in (True, False):
+        root = roots[fast] = tmp_path / f"fast_{fast}"
+        ds = demo_dataset.create(root, "test/fast")
+        for i in range(3):
+            ep = synthetic_episode(i, hold_start=20)
+            demo_dataset.write_episode(ds, ep, curation.evaluate(ep.task_reward, ep.uniaxial_force), fast=fast)
+        ds.finalize()
+    assert dataset_writer.embed_images is original  # the skip is scoped to the write
+    files = sorted(p.relative_to(roots[True]) for p in roots[True].rglob("*.parquet"))
+    assert files == sorted(p.relative_to(roots[False]) for p in roots[False].rglob("*.parquet")) and files
+    for f in files:
+        a, b = pq.read_table(roots[True] / f), pq.read_table(roots[False] / f)
+        assert a.equals(b) and a.schema.equals(b.schema), f
+        # Schema metadata too, but for the random cache fingerprint `datasets` stamps on a mapped table.
+        meta_a, meta_b = (json.loads((t.schema.metadata or {}).get(b"huggingface", b"{}")) for t in (a, b))
+        meta_b.pop("fingerprint", None)
+        assert meta_a == meta_b, f
+    for name in ("info.json", "stats.json"):
+        assert (roots[True] / "meta" / name).read_text() == (roots[False] / "meta" / name).read_text()
 
 
 def test_episode_table_reads_metadata_without_frames(written):

@@ -1,9 +1,11 @@
 """Demo collection speed: curated demos per CPU-minute and dataset frames written per second.
 
 Runs a real, small `blindgrasp-collect-demos` collection into a temporary folder (curated as in the paper unless
---no-curation), then re-writes the rollouts it saw through both LeRobot write paths, to measure the writer alone:
-`save_episode(episode_data=...)` with whole arrays (what collection uses) and `add_frame` per frame. Without
---teacher a throwaway `quick` teacher is trained for one iteration: the speeds are real, its yield is not.
+--no-curation), then re-writes the rollouts it saw through three write paths, to measure the writer alone: what
+collection uses (`save_episode(episode_data=...)` with whole arrays, LeRobot's empty image-embedding pass skipped,
+see `demos.dataset.skip_empty_image_embedding`), the same with LeRobot's default pass, and `add_frame` per frame
+(LeRobot's default, as lerobot-record writes). Without --teacher a throwaway `quick` teacher is trained for one
+iteration: the speeds are real, its yield is not.
 """
 
 from __future__ import annotations
@@ -39,8 +41,8 @@ def _throwaway_teacher(tmp: Path) -> Path:
     return out
 
 
-def _writer_speed(episodes, root: Path, per_frame: bool) -> float:
-    """Frames per second through one LeRobot write path, on real rollouts (whole, untrimmed)."""
+def _writer_speed(episodes, root: Path, per_frame: bool, fast: bool = True) -> float:
+    """Frames per second through one write path, on real rollouts (whole, untrimmed)."""
     from lerobot_blindgrasp import spec
     from lerobot_blindgrasp.demos import curation, dataset
 
@@ -50,7 +52,7 @@ def _writer_speed(episodes, root: Path, per_frame: bool) -> float:
         for ep in episodes:
             cut = curation.evaluate(ep.task_reward, ep.uniaxial_force, curation.NO_CURATION)
             if not per_frame:
-                frames += dataset.write_episode(ds, ep, cut)
+                frames += dataset.write_episode(ds, ep, cut, fast=fast)
                 continue
             buf = dataset.episode_buffer(ep, cut, ds.meta.total_episodes)
             for t in range(buf["size"]):
@@ -96,10 +98,11 @@ def run(args: argparse.Namespace) -> dict:
         with contextlib.redirect_stderr(io.StringIO()):
             stats = collect.collect(cfg, on_episode=keep_some)
         cpu_min = stats.cpu_s / 60.0
-        whole = per_frame = 0.0
+        whole = whole_default = per_frame = 0.0
         if seen:
             _writer_speed(seen[:3], tmp / "w_warmup", per_frame=False)  # pays the lazy imports of a first write
             whole = _writer_speed(seen, tmp / "w_episode_data", per_frame=False)
+            whole_default = _writer_speed(seen, tmp / "w_episode_data_default", per_frame=False, fast=False)
             per_frame = _writer_speed(seen, tmp / "w_add_frame", per_frame=True)
         result = {
             "teacher": str(args.teacher) if args.teacher else "throwaway quick teacher (1 iteration)",
@@ -116,6 +119,7 @@ def run(args: argparse.Namespace) -> dict:
             "demos_per_minute": stats.demos_per_minute,
             "write_share_of_wall": stats.write_s / stats.wall_s if stats.wall_s else 0.0,
             "frames_written_per_s": whole,
+            "frames_written_per_s_lerobot_default": whole_default,
             "frames_written_per_s_add_frame": per_frame,
             "writer_episodes": len(seen),
         }

@@ -213,6 +213,7 @@ def _existing_counts(root: Path, tally: report.Tally) -> None:
 def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> CollectStats:
     """Run a collection. Raises CollectError (nothing touched) for bad inputs; any later exception propagates
     after the dataset is finalized and the reports are written."""
+    import datasets
     import torch
     from tqdm import tqdm
 
@@ -259,6 +260,9 @@ def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> Co
         o = tally.of(name)
         return o.kept >= target or o.rollouts >= budget
 
+    # `datasets` draws a progress bar for every map LeRobot runs while saving; one per episode is noise here.
+    bars_were_off = datasets.are_progress_bars_disabled()
+    datasets.disable_progress_bars()
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     bar = tqdm(
         total=target * len(cfg.objects),
@@ -316,6 +320,8 @@ def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> Co
         raise
     finally:
         bar.close()
+        if not bars_were_off:
+            datasets.enable_progress_bars()
         ds.finalize()  # closes the parquet writers: every saved episode is readable from here on
         stats.wall_s = time.perf_counter() - t_wall
         stats.cpu_s = time.process_time() - t_cpu
