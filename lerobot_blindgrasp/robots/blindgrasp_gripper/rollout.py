@@ -1,0 +1,79 @@
+"""Policy deployment on the gripper: LeRobot's rollout engine, with the fingertip forces kept in the policy input.
+
+    python -m lerobot_blindgrasp.robots.blindgrasp_gripper.rollout --strategy.type=base \\
+        --policy.path=<checkpoint> --robot="include robot_configs/blindgrasp_gripper.yaml" --fps=20 --duration=10
+
+Same arguments and behaviour as `lerobot-rollout` (strategies, inference engines, datasets, Ctrl-C handling), because
+it is the same code: `RolloutConfig`, `build_rollout_context`, `create_strategy`. The one difference is the robot
+observation processor. In LeRobot 0.6.1 `build_rollout_context` keeps only scalar observation features named
+`*.pos` or `*.vel` (rollout/context.py, "features + action-key reconciliation"), so plain `lerobot-rollout` drops
+`ff_tip.force`, `mf_tip.force`, `th_tip.force` and feeds a 9-d state to a policy trained on 12 (it fails with "size
+of tensor a (9) must match ... (12)", after a safe teardown). The processor step below declares the force features
+again, so `observation.state` is built with exactly `spec.STATE_NAMES`, as in every dataset.
+"""
+
+# No `from __future__ import annotations`: LeRobot's parser.wrap reads the config class from the real annotation.
+import logging
+
+from lerobot.configs import parser
+from lerobot.configs.types import PipelineFeatureType
+from lerobot.processor import RobotProcessorPipeline
+from lerobot.processor.converters import observation_to_transition, transition_to_observation
+from lerobot.processor.pipeline import ObservationProcessorStep
+from lerobot.rollout import RolloutConfig, build_rollout_context, create_strategy
+from lerobot.utils.import_utils import register_third_party_plugins
+from lerobot.utils.process import ProcessSignalHandler
+from lerobot.utils.utils import init_logging
+
+from lerobot_blindgrasp import spec
+
+logger = logging.getLogger(__name__)
+
+
+class DeclareForceFeatures(ObservationProcessorStep):
+    """Identity on the data; adds the fingertip forces to the declared observation features."""
+
+    def observation(self, observation):
+        return observation
+
+    def transform_features(self, features):
+        obs = dict(features.get(PipelineFeatureType.OBSERVATION, {}))
+        for name in spec.FORCE_FEATURE_NAMES:
+            obs.setdefault(name, float)
+        return {**features, PipelineFeatureType.OBSERVATION: obs}
+
+
+def make_robot_observation_processor() -> RobotProcessorPipeline:
+    return RobotProcessorPipeline(
+        steps=[DeclareForceFeatures()],
+        to_transition=observation_to_transition,
+        to_output=transition_to_observation,
+    )
+
+
+@parser.wrap()
+def rollout(cfg: RolloutConfig) -> None:
+    init_logging()
+    if cfg.display_data:
+        logger.warning("--display_data is not supported here; run without it.")
+    signal_handler = ProcessSignalHandler(use_threads=True, display_pid=False)
+    ctx = build_rollout_context(
+        cfg, signal_handler.shutdown_event, robot_observation_processor=make_robot_observation_processor()
+    )
+    strategy = create_strategy(cfg.strategy)
+    try:
+        strategy.setup(ctx)
+        strategy.run(ctx)
+    except KeyboardInterrupt:
+        logger.info("Interrupted by user")
+    finally:
+        strategy.teardown(ctx)  # returns to the start pose (unless disabled) and disconnects: torque off
+
+
+def main() -> None:
+    register_third_party_plugins()
+    rollout()
+
+
+if __name__ == "__main__":
+    main()
