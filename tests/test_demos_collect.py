@@ -197,6 +197,30 @@ def test_exception_mid_collection_leaves_finished_episodes_readable(teacher, tmp
     assert json.loads((out / report.REPORT_NAME).read_text())["total"]["kept"] == 3
 
 
+def test_second_ctrl_c_aborts_at_once_but_never_inside_a_save(teacher, tmp_path):
+    out = tmp_path / "abort"
+
+    def double_ctrl_c(ep, cut, written, stats):
+        if written and stats.kept == 2:
+            signal.raise_signal(signal.SIGINT)  # first: stop after this step
+            signal.raise_signal(signal.SIGINT)  # second: abort now
+
+    with pytest.raises(KeyboardInterrupt):
+        collect.collect(config(teacher, out, episodes_per_object=5), on_episode=double_ctrl_c)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handlers restored
+    ds = LeRobotDataset("test/demos", root=out, video_backend="pyav")
+    assert ds.num_episodes == 2 and provenance.load(out)["runs"][-1]["stop_reason"] == "interrupted"
+
+    # A second Ctrl-C that lands while an episode is being saved waits for the save to complete.
+    with collect._StopSignal() as stop, pytest.raises(KeyboardInterrupt):
+        with stop.saving():
+            signal.raise_signal(signal.SIGINT)
+            signal.raise_signal(signal.SIGINT)
+            saved = True  # reached: no KeyboardInterrupt inside the save
+        pytest.fail("the deferred abort must be raised when the save completes")
+    assert saved and stop.requested == signal.SIGINT
+
+
 def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     out = tmp_path / "sig"
     cmd = [

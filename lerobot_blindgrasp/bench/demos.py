@@ -72,6 +72,8 @@ def _writer_speed(episodes, root: Path, per_frame: bool, fast: bool = True) -> f
 
 
 def run(args: argparse.Namespace) -> dict:
+    import datasets
+
     from lerobot_blindgrasp.demos import collect, curation
 
     tmp = Path(tempfile.mkdtemp(prefix="blindgrasp-bench-demos-"))
@@ -99,11 +101,15 @@ def run(args: argparse.Namespace) -> dict:
             stats = collect.collect(cfg, on_episode=keep_some)
         cpu_min = stats.cpu_s / 60.0
         whole = whole_default = per_frame = 0.0
+        bars_were_off = datasets.are_progress_bars_disabled()
+        datasets.disable_progress_bars()  # LeRobot's default path maps with a bar per episode
         if seen:
             _writer_speed(seen[:3], tmp / "w_warmup", per_frame=False)  # pays the lazy imports of a first write
             whole = _writer_speed(seen, tmp / "w_episode_data", per_frame=False)
             whole_default = _writer_speed(seen, tmp / "w_episode_data_default", per_frame=False, fast=False)
             per_frame = _writer_speed(seen, tmp / "w_add_frame", per_frame=True)
+        if not bars_were_off:
+            datasets.enable_progress_bars()
         result = {
             "teacher": str(args.teacher) if args.teacher else "throwaway quick teacher (1 iteration)",
             "curation": not args.no_curation,

@@ -21,6 +21,7 @@ episode stays readable either way. `--resume` appends to the folder until the ta
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import logging
 import re
@@ -115,11 +116,25 @@ EpisodeCallback = Callable[[Episode, "curation_mod.CurationResult | None", bool,
 
 
 class _StopSignal:
-    """First SIGINT/SIGTERM: stop after the current step. Second: KeyboardInterrupt right away."""
+    """First SIGINT/SIGTERM: stop after the current step. Second: KeyboardInterrupt right away, except inside
+    `saving()`: an episode interrupted half-way through `save_episode` would leave rows in the data file that the
+    metadata does not list, so the abort waits the few milliseconds until the episode is complete."""
 
     def __init__(self):
         self.requested: int | None = None
         self._previous: dict[int, object] = {}
+        self._saving = False
+        self._abort_pending = False
+
+    @contextlib.contextmanager
+    def saving(self):
+        self._saving = True
+        try:
+            yield
+        finally:
+            self._saving = False
+        if self._abort_pending:
+            raise KeyboardInterrupt
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
@@ -129,6 +144,9 @@ class _StopSignal:
 
     def _handle(self, signum, frame):
         if self.requested is not None:
+            if self._saving:
+                self._abort_pending = True
+                return
             raise KeyboardInterrupt
         self.requested = signum
         print(
@@ -303,7 +321,8 @@ def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> Co
 
                 episodes = run_episodes(env, act, lambda s=stale: stop.requested is not None or s["now"])
                 for ep in episodes:
-                    cut, written = _handle_episode(ds, ep, cfg.curation, tally, stats, target, bar)
+                    with stop.saving():
+                        cut, written = _handle_episode(ds, ep, cfg.curation, tally, stats, target, bar)
                     if on_episode is not None:
                         on_episode(ep, cut, written, stats)
                     if done(ep.object_name):
