@@ -47,6 +47,9 @@ from lerobot_blindgrasp.sim import objects
 
 logger = logging.getLogger(__name__)
 
+SUCCESS_KEYS = frozenset({"s", "y"})
+FAILURE_KEYS = frozenset({"f", "n"})
+
 
 def resolve_real_objects(task: str) -> tuple[str, ...]:
     """"medium" -> the six ID objects (3D-printed medium replicas); otherwise a comma list of any names, since real
@@ -122,15 +125,19 @@ class _EnvFactory:
 
 
 class OperatorKeys:
-    """Key presses from LeRobot's own listener (pynput, or the controlling terminal), as a queue."""
+    """Key presses from LeRobot's own listener (pynput, or the controlling terminal), as a queue.
 
-    HELP = "ENTER=start trial, s=success, f=failure, y/n=answer"
+    `listener_factory` has the signature of `lerobot.utils.keyboard_input.create_key_listener` (the default).
+    """
 
-    def __init__(self):
-        from lerobot.utils.keyboard_input import create_key_listener
+    HELP = "ENTER=start trial, s/y=success, f/n=failure"
+
+    def __init__(self, listener_factory=None):
+        if listener_factory is None:
+            from lerobot.utils.keyboard_input import create_key_listener as listener_factory
 
         self.queue: queue.Queue[str] = queue.Queue()
-        self.listener = create_key_listener(self.queue.put, controls_help=self.HELP)
+        self.listener = listener_factory(self.queue.put, controls_help=self.HELP)
 
     @property
     def available(self) -> bool:
@@ -181,8 +188,8 @@ class GripperSession:
     def ensure_connected(self) -> None:
         if self.keys is None:
             self.keys = OperatorKeys()
-            if self.cfg.success_mode == "operator" and not self.keys.available:
-                raise RuntimeError(
+        if self.cfg.success_mode == "operator" and not self.keys.available:
+            raise RuntimeError(
                     "success_mode=operator needs keyboard input (a display for pynput, or run lerobot-eval in a "
                     "terminal); use --env.success_mode=force for unattended runs."
                 )
@@ -252,8 +259,7 @@ class RealGraspEnv(gym.Env):
         keys = self.session.keys
         k = self.session.trials.get(self.object_name, 0) + 1
         self.session.trials[self.object_name] = k
-        keys.clear()
-        if keys.available:
+        if keys.available:  # an ENTER pressed while the gripper was homing counts: the operator is ready
             print(f"\n[{self.object_name}] trial {k}: place the object at the claw centre, hands clear, press ENTER.")
             keys.wait_for({"enter"})
         else:
@@ -287,13 +293,15 @@ class RealGraspEnv(gym.Env):
         success = bool(self._decided and self._decided[0])
         if terminated or truncated:
             self._log_trial(success)
+            self.session.keys.clear()  # keys pressed during this trial must not decide the next one
         return obs, float(success), terminated, truncated, {"is_success": success}
 
     def _judge(self, forces: np.ndarray) -> None:
         if self.cfg.success_mode == "operator":
-            key = self.session.keys.poll()
-            if key in ("s", "f"):
-                self._decided = (key == "s", "operator")
+            while (key := self.session.keys.poll()) is not None:
+                if key in SUCCESS_KEYS | FAILURE_KEYS:
+                    self._decided = (key in SUCCESS_KEYS, "operator")
+                    return
             return
         contacts = int((forces > self.cfg.hold_force_n).sum())
         self._held = self._held + 1 if contacts >= self.cfg.min_contacts else 0
@@ -303,7 +311,7 @@ class RealGraspEnv(gym.Env):
     def _ask_outcome(self) -> bool:
         # Hold the final pose while the operator answers: the last target stays on the servos.
         print("10 s elapsed. Was the object lifted and held for >= 1 s? press y or n.")
-        return self.session.keys.wait_for({"y", "n", "s", "f"}) in ("y", "s")
+        return self.session.keys.wait_for(SUCCESS_KEYS | FAILURE_KEYS) in SUCCESS_KEYS
 
     def _log_trial(self, success: bool) -> None:
         who = self._decided[1] if self._decided else "time limit"
