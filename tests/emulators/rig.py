@@ -19,6 +19,8 @@ TICKS_PER_RAD = 4096 / (2 * math.pi)
 # Shaft ticks at q = 0 and mounting sign per joint (spec.JOINT_NAMES order).
 MOUNT_ZERO = tuple(1100.0 + 237.0 * k for k in range(spec.NUM_JOINTS))
 MOUNT_SIGN = (1, -1, 1, -1, 1, -1, 1, 1, -1)
+# Reply timeout for clients of the emulators (see BlindgraspGripperConfig.latency_timer_ms): 2 x 60 + 2 = 122 ms.
+LATENCY_TIMER_MS = 60
 
 
 class GripperRig:
@@ -103,6 +105,8 @@ class GripperRig:
         from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig, ForceSensorConfig
 
         fs = ForceSensorConfig(port=self.force.port, scale_n_per_count=self.force.scale.tolist(), tare_s=0.2)
+        # A shared, loaded CI host can stall the emulator thread for longer than the real 34 ms reply window.
+        overrides.setdefault("latency_timer_ms", LATENCY_TIMER_MS)
         return BlindgraspGripperConfig(
             id="rig", port=self.dxl.port, calibration_dir=calibration_dir, force_sensor=fs, **overrides
         )

@@ -19,6 +19,7 @@ from contextlib import contextmanager
 from functools import cached_property
 
 import numpy as np
+from dynamixel_sdk import port_handler as dxl_port_handler
 from lerobot.motors import Motor, MotorNormMode
 from lerobot.motors.dynamixel import DynamixelMotorsBus, OperatingMode
 from lerobot.motors.motors_bus import get_address
@@ -114,6 +115,8 @@ class BlindgraspGripper(Robot):
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
         with self._safety("connecting"):
+            # The SDK sizes every reply timeout from this module constant (there is no per-port setting).
+            dxl_port_handler.LATENCY_TIMER = self.config.latency_timer_ms
             self.bus.connect(handshake=False)
             self._register_atexit()
             self._handshake()

@@ -64,6 +64,9 @@ class BlindgraspGripperConfig(RobotConfig):
     profile_velocity: int = 0
     # Extra tries of a failed bus transaction before the gripper stops with a GripperBusError.
     bus_num_retry: int = 2
+    # USB adapter latency timer (ms; FTDI/U2D2 default 16). dynamixel-sdk waits 2 x this + 2 ms for a reply, so
+    # raise it on a loaded host or a slow USB hub instead of seeing timeouts.
+    latency_timer_ms: int = 16
     # Calibration: a joint must move at least this far (rad) in the "positive" pose to read its direction.
     calibration_min_motion_rad: float = 0.15
     disable_torque_on_disconnect: bool = True
@@ -83,6 +86,8 @@ class BlindgraspGripperConfig(RobotConfig):
                 raise ValueError(
                     f"{j}: limits [{lo}, {hi}] must lie inside the sim's [{spec.JOINT_LOWER[k]}, {spec.JOINT_UPPER[k]}]"
                 )
+        if not 1 <= self.latency_timer_ms <= 500:
+            raise ValueError("latency_timer_ms must be in [1, 500]")
         if not 0 < self.max_relative_target <= spec.ACTION_BOUND_RAD:
             raise ValueError(f"max_relative_target must be in (0, {spec.ACTION_BOUND_RAD}] rad")
         if self.operating_mode not in ("CURRENT_POSITION", "POSITION"):

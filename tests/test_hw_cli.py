@@ -1,0 +1,291 @@
+"""The hardware workflows through LeRobot's own CLIs, as subprocesses, against the emulators.
+
+lerobot-calibrate (gripper and glove, with an operator answering the prompts) -> lerobot-record (2 glove episodes)
+-> lerobot-train (tiny) -> rollout and lerobot-eval on the gripper. No plugin flags (discovery through the
+`lerobot_policy_blindgrasp` distribution), the robot and glove settings come from `robot_configs/` through draccus'
+`include`, nothing touches the network (HF_HUB_OFFLINE=1, temporary HF_HOME and calibration directory).
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+from emulators.glove import GloveEmulator, free_udp_port
+from emulators.harness import BIN, Operator, cli_env
+from emulators.rig import LATENCY_TIMER_MS, MOUNT_SIGN, GripperRig
+
+from lerobot_blindgrasp import spec
+
+pytestmark = pytest.mark.slow
+
+ROOT = Path(__file__).resolve().parents[1]
+ROBOT_FILE = ROOT / "robot_configs" / "blindgrasp_gripper.yaml"
+GLOVE_FILE = ROOT / "robot_configs" / "manus_glove.yaml"
+REPO_ID = "local/blindgrasp_glove_demo"
+
+
+def _robot_args(rig: GripperRig, prefix: str = "--robot") -> list[str]:
+    return [
+        f'{prefix}=include {ROBOT_FILE}',
+        f"{prefix}.port={rig.dxl.port}",
+        f"{prefix}.id=rig",
+        f"{prefix}.force_sensor.port={rig.force.port}",
+        f"{prefix}.force_sensor.tare_s=0.2",
+        f"{prefix}.latency_timer_ms={LATENCY_TIMER_MS}",
+    ]
+
+
+def _teleop_args(glove: GloveEmulator) -> list[str]:
+    return [f"--teleop=include {GLOVE_FILE}", f"--teleop.port={glove.addr[1]}", "--teleop.id=op"]
+
+
+def _record_cmd(rig, glove, root: Path, *, episodes: int, episode_s: float) -> list[str]:
+    return [
+        str(BIN / "lerobot-record"),
+        *_robot_args(rig),
+        *_teleop_args(glove),
+        f"--dataset.repo_id={REPO_ID}",
+        f"--dataset.root={root}",
+        "--dataset.single_task=grasp and lift the medium cylinder a",
+        f"--dataset.fps={spec.CONTROL_HZ}",
+        f"--dataset.episode_time_s={episode_s}",
+        "--dataset.reset_time_s=0.5",
+        f"--dataset.num_episodes={episodes}",
+        "--dataset.video=false",
+        "--dataset.push_to_hub=false",
+        "--play_sounds=false",
+    ]
+
+
+def _run(cmd: list[str], env: dict, timeout: int = 240) -> subprocess.CompletedProcess:
+    res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
+    assert res.returncode == 0, f"{Path(cmd[0]).name} failed:\n{res.stdout[-3000:]}\n{res.stderr[-6000:]}"
+    return res
+
+
+@dataclass
+class Station:
+    home: Path
+    env: dict[str, str]
+    glove_port: int
+
+
+@pytest.fixture(scope="module")
+def station(tmp_path_factory) -> Station:
+    """Gripper and glove calibrated through lerobot-calibrate; the files stay for the later sessions."""
+    home = tmp_path_factory.mktemp("station")
+    env = cli_env(home)
+    port = free_udp_port()
+    with GripperRig() as rig:
+        rig.hand_move(spec.HOME_POSE)
+        op = Operator([str(BIN / "lerobot-calibrate"), *_robot_args(rig)], env)
+        op.expect("Press ENTER when it is there")
+        rig.hand_move(np.zeros(spec.NUM_JOINTS))  # the reference pose, by hand
+        op.answer()
+        op.expect("Press ENTER while holding it")
+        rig.hand_move(np.full(spec.NUM_JOINTS, 0.25))  # every joint a little positive
+        op.answer()
+        assert op.wait() == 0, op.text[-4000:]
+        assert not rig.dxl.any_torque()
+    cal = json.loads((home / "calibration" / "robots" / "blindgrasp_gripper" / "rig.json").read_text())
+    assert [cal[j]["drive_mode"] for j in spec.JOINT_NAMES] == [0 if s > 0 else 1 for s in MOUNT_SIGN]
+
+    with GloveEmulator(port) as glove:
+        op = Operator([str(BIN / "lerobot-calibrate"), *_teleop_args(glove), "--teleop.calibration_s=0.3"], env)
+        op.expect("OPEN HAND")
+        glove.closure = 0.0
+        time.sleep(0.1)
+        op.answer()
+        op.expect("FIST")
+        glove.closure = 1.0
+        time.sleep(0.1)
+        op.answer()
+        assert op.wait() == 0, op.text[-4000:]
+    glove_cal = json.loads((home / "calibration" / "teleoperators" / "manus_glove" / "op.json").read_text())
+    assert glove_cal["fist"]["IndexMCPStretch"] > glove_cal["open"]["IndexMCPStretch"] + 60
+    return Station(home, env, port)
+
+
+@pytest.fixture(scope="module")
+def recorded(station) -> Path:
+    """Two 2 s glove episodes recorded with lerobot-record (fresh servos: the calibration file is written back)."""
+    root = station.home / "dataset"
+    with GripperRig() as rig, GloveEmulator(station.glove_port) as glove:
+        rig.hand_move(spec.HOME_POSE)
+        rig.place_object()
+        glove.closure_fn = lambda t: 0.5 - 0.5 * np.cos(2.5 * t)  # open -> fist -> open, ~2.5 s period
+        _run(_record_cmd(rig, glove, root, episodes=2, episode_s=2), station.env)
+        assert not rig.dxl.any_torque()
+    return root
+
+
+def test_recorded_dataset_has_the_sim_schema(recorded):
+    from lerobot.datasets import LeRobotDataset
+
+    ds = LeRobotDataset(REPO_ID, root=recorded)
+    expected = spec.dataset_features()
+    for key, feature in expected.items():
+        assert ds.features[key]["names"] == feature["names"]
+        assert tuple(ds.features[key]["shape"]) == feature["shape"] and ds.features[key]["dtype"] == "float32"
+    assert ds.meta.robot_type == "blindgrasp_gripper" and ds.fps == spec.CONTROL_HZ
+    assert ds.num_episodes == 2
+    frames = [ds[i] for i in range(len(ds))]
+    lengths = np.bincount([int(f["episode_index"]) for f in frames])
+    assert all(30 <= n <= 41 for n in lengths), lengths  # 2 s at 20 Hz, minus frames lost to a loaded CPU
+    np.testing.assert_allclose([float(f["timestamp"]) for f in frames[: lengths[0]]],
+                               np.arange(lengths[0]) / spec.CONTROL_HZ, atol=1e-4)  # fmt: skip
+
+    state = np.stack([f[spec.STATE_KEY].numpy() for f in frames])
+    action = np.stack([f[spec.ACTION_KEY].numpy() for f in frames])
+    assert np.all(action >= spec.JOINT_LOWER - 1e-6) and np.all(action <= spec.JOINT_UPPER + 1e-6)
+    # The glove swept open -> fist: proximal targets span most of [closed, open] = [-0.35, pi/3].
+    assert action[:, 1].max() > 0.8 and action[:, 1].min() < 0.0
+    # The gripper followed (up to the emulated object at J*1 = 0.2 rad), and squeezing it loaded the tips.
+    assert state[:, 1].max() > 0.8 and state[:, 1].min() == pytest.approx(0.2, abs=0.01)
+    assert state[:, 9:].max() > 5.0 and state[:, 9:].min() >= 0.0
+
+
+def _wait_for_torque(rig: GripperRig, proc: subprocess.Popen, timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not rig.dxl.any_torque():
+        assert proc.poll() is None and time.monotonic() < deadline, "the robot never switched its torque on"
+        time.sleep(0.05)
+
+
+def test_ctrl_c_during_recording_turns_the_torque_off(station, tmp_path):
+    with GripperRig() as rig, GloveEmulator(station.glove_port) as glove:
+        rig.hand_move(spec.HOME_POSE)
+        glove.closure = 0.5
+        cmd = _record_cmd(rig, glove, tmp_path / "ds", episodes=1, episode_s=60)
+        proc = subprocess.Popen(cmd, env=station.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        _wait_for_torque(rig, proc)
+        time.sleep(1.0)  # recording
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+        assert not rig.dxl.any_torque(), out.decode()[-3000:]
+
+
+def test_glove_loss_during_recording_stops_with_torque_off(station, tmp_path):
+    with GripperRig() as rig, GloveEmulator(station.glove_port) as glove:
+        rig.hand_move(spec.HOME_POSE)
+        glove.closure = 0.3
+        cmd = _record_cmd(rig, glove, tmp_path / "ds", episodes=1, episode_s=60)
+        proc = subprocess.Popen(cmd, env=station.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        _wait_for_torque(rig, proc)
+        time.sleep(0.5)
+        glove.paused = True  # the SDK bridge dies
+        out, _ = proc.communicate(timeout=30)
+        text = out.decode()
+        assert proc.returncode != 0 and "Glove stream lost" in text, text[-3000:]
+        assert not rig.dxl.any_torque()
+
+
+@pytest.fixture(scope="module")
+def checkpoint(station, recorded) -> Path:
+    out = station.home / "train"
+    _run(
+        [
+            str(BIN / "lerobot-train"),
+            "--policy.type=blindgrasp_transformer",
+            "--policy.size=quick",
+            "--policy.n_layers=1",
+            "--policy.embed_dim=32",
+            "--policy.head_hidden_dims=[32]",
+            "--policy.n_obs_steps=8",
+            "--policy.device=cpu",
+            "--policy.push_to_hub=false",
+            f"--dataset.repo_id={REPO_ID}",
+            f"--dataset.root={recorded}",
+            f"--output_dir={out}",
+            "--steps=4",
+            "--save_freq=4",
+            "--batch_size=4",
+            "--num_workers=0",
+            "--wandb.enable=false",
+        ],
+        station.env,
+    )
+    return out / "checkpoints" / "000004" / "pretrained_model"
+
+
+def _rollout_args(rig, checkpoint) -> list[str]:
+    return [
+        "--strategy.type=base",
+        f"--policy.path={checkpoint}",
+        "--policy.device=cpu",
+        "--device=cpu",
+        *_robot_args(rig),
+        f"--fps={spec.CONTROL_HZ}",
+        "--duration=1.5",
+        "--task=grasp and lift the medium cylinder a",
+        "--play_sounds=false",
+    ]
+
+
+def test_rollout_of_a_trained_checkpoint_on_the_gripper(station, checkpoint):
+    with GripperRig() as rig:
+        rig.hand_move(spec.HOME_POSE)
+        before = rig.dxl.instruction_counts.get(0x83, 0)
+        cmd = [str(BIN / "python"), "-m", "lerobot_blindgrasp.robots.blindgrasp_gripper.rollout",
+               *_rollout_args(rig, checkpoint)]  # fmt: skip
+        res = _run(cmd, station.env)
+        assert "Duration limit reached" in res.stderr
+        # ~30 policy steps plus the return to the start pose, each one sync write of 9 goals.
+        assert rig.dxl.instruction_counts.get(0x83, 0) - before >= 20
+        assert not rig.dxl.any_torque()
+
+
+def test_stock_lerobot_rollout_drops_the_forces_but_stops_safely(station, checkpoint):
+    """LeRobot 0.6.1's lerobot-rollout keeps only *.pos/*.vel observations: the 12-d policy gets 9-d input. If this
+    starts passing upstream, switch the docs back to plain lerobot-rollout."""
+    with GripperRig() as rig:
+        rig.hand_move(spec.HOME_POSE)
+        res = subprocess.run([str(BIN / "lerobot-rollout"), *_rollout_args(rig, checkpoint)], env=station.env,
+                             capture_output=True, text=True, timeout=240)  # fmt: skip
+        assert res.returncode != 0 and "(9) must match the size of tensor b (12)" in res.stderr
+        assert not rig.dxl.any_torque()
+
+
+def test_lerobot_eval_on_the_real_env_reports_per_object_success(station, checkpoint, tmp_path):
+    out = tmp_path / "eval"
+    log = tmp_path / "trials.jsonl"
+    with GripperRig() as rig:
+        rig.hand_move(spec.HOME_POSE)
+        rig.place_object()
+        _run(
+            [
+                str(BIN / "lerobot-eval"),
+                f"--policy.path={checkpoint}",
+                "--policy.device=cpu",
+                "--env.type=blindgrasp_real",
+                *_robot_args(rig, prefix="--env.robot"),
+                "--env.task=cylinder_a_medium,wine_glass",
+                "--env.success_mode=force",
+                "--env.unattended_reset_s=0.1",
+                "--env.episode_s=1.0",
+                f"--env.trial_log={log}",
+                "--eval.n_episodes=2",
+                "--eval.batch_size=1",
+                "--eval.use_async_envs=false",
+                f"--output_dir={out}",
+            ],
+            station.env,
+        )
+        assert not rig.dxl.any_torque()
+    info = json.loads((out / "eval_info.json").read_text())
+    assert set(info["per_group"]) == {"cylinder_a_medium", "wine_glass"}
+    assert all(g["n_episodes"] == 2 for g in info["per_group"].values())
+    trials = [json.loads(line) for line in log.read_text().splitlines()]
+    assert [(t["object"], t["trial"]) for t in trials] == [
+        ("cylinder_a_medium", 1), ("cylinder_a_medium", 2), ("wine_glass", 1), ("wine_glass", 2)
+    ]  # fmt: skip
+    table = subprocess.run([str(BIN / "python"), "-m", "lerobot_blindgrasp.envs.real_report", str(out / "eval_info.json")],
+                           env=station.env, capture_output=True, text=True, check=True).stdout  # fmt: skip
+    assert "| cylinder_a_medium | 2 |" in table and "| **overall** | 4 |" in table
