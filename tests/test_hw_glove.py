@@ -87,7 +87,8 @@ def test_open_hand_and_fist_map_to_the_calibrated_gripper_poses(teleop, glove):
     flex = [1, 2, 4, 5, 7, 8]  # spread (J*0) follows the hand's spread, which a fist changes a little
     np.testing.assert_allclose(_action(teleop, glove, 1.0)[flex], np.array(cfg.closed_pose)[flex], atol=1e-9)
     half = _action(teleop, glove, 0.5)
-    np.testing.assert_allclose(half[flex], (np.array(cfg.open_pose) + np.array(cfg.closed_pose))[flex] / 2, atol=1e-9)
+    mid = (np.array(cfg.open_pose) + np.array(cfg.closed_pose)) / 2
+    np.testing.assert_allclose(half[flex], mid[flex], atol=1e-9)
     assert np.all(half >= spec.JOINT_LOWER) and np.all(half <= spec.JOINT_UPPER)
     # Spread: relative to the open hand, in rad per rad.
     glove.spread_offset_deg = 10.0

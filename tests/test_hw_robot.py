@@ -46,7 +46,7 @@ def _zero_action() -> dict[str, float]:
     return dict.fromkeys(spec.ACTION_NAMES, 0.0)
 
 
-# --- contracts that need no hardware ---------------------------------------------------------------------------------
+# --- contracts that need no hardware -----------------------------------------------------------------------------
 def test_features_give_the_sim_dataset_schema(tmp_path):
     robot = BlindgraspGripper(BlindgraspGripperConfig(id="x", calibration_dir=tmp_path))
     assert list(robot.observation_features) == list(spec.STATE_NAMES)
@@ -97,7 +97,7 @@ def test_config_refuses_limits_wider_than_the_sim():
         BlindgraspGripperConfig(joint_lower=lower)
 
 
-# --- calibration, observation, action ---------------------------------------------------------------------------------
+# --- calibration, observation, action ----------------------------------------------------------------------------
 def test_calibration_maps_ticks_to_the_sim_zero_and_direction(rig, robot):
     cal = robot.calibration
     assert [cal[j].drive_mode for j in spec.JOINT_NAMES] == [0 if s > 0 else 1 for s in MOUNT_SIGN]
@@ -135,7 +135,8 @@ def test_connect_configures_current_limit_gains_and_holds_pose(rig, robot):
         assert servo.get("Torque_Enable") == 1
         assert servo.get("Operating_Mode") == 5  # current-based position: the current limit is a torque limit
         assert servo.get("Current_Limit") == servo.get("Goal_Current") == 855
-        assert (servo.get("Position_P_Gain"), servo.get("Position_I_Gain"), servo.get("Position_D_Gain")) == (800, 0, 0)
+        gains = (servo.get("Position_P_Gain"), servo.get("Position_I_Gain"), servo.get("Position_D_Gain"))
+        assert gains == (800, 0, 0)
         assert servo.get("Return_Delay_Time") == 0
     # The operator left the fingers in the calibration's positive pose; torque-on did not move them.
     np.testing.assert_allclose(rig.true_q(), 0.3, atol=2 * TICK)
@@ -217,7 +218,7 @@ def test_disconnect_turns_the_torque_off(rig, robot):
     assert not rig.dxl.any_torque() and not robot.is_connected
 
 
-# --- faults: each ends with the torque off and a clear error -----------------------------------------------------------
+# --- faults: each ends with the torque off and a clear error -----------------------------------------------------
 def _assert_stopped(rig, robot, exclude=()):
     assert not robot.is_connected  # latched: the ports are closed
     assert not any(rig.dxl.torque_enabled(i) for i in spec.SERVO_IDS if i not in exclude)

@@ -63,7 +63,9 @@ def resolve_real_objects(task: str) -> tuple[str, ...]:
 
 
 def task_string(name: str) -> str:
-    return objects.CATALOGUE[name].task if name in objects.CATALOGUE else f"grasp and lift the {name.replace('_', ' ')}"
+    if name in objects.CATALOGUE:
+        return objects.CATALOGUE[name].task
+    return f"grasp and lift the {name.replace('_', ' ')}"
 
 
 @EnvConfig.register_subclass("blindgrasp_real")
@@ -181,7 +183,7 @@ class GripperSession:
         self.cfg = cfg
         self.robot = make_robot_from_config(cfg.robot)
         if set(self.robot.observation_features) != set(spec.STATE_NAMES):
-            raise ValueError(f"Robot type {cfg.robot.type} does not provide the spec observation {spec.STATE_NAMES}")
+            raise ValueError(f"Robot type {cfg.robot.type} lacks the spec observation {spec.STATE_NAMES}")
         self.keys = keys
         self.trials: dict[str, int] = {}
 
@@ -260,7 +262,7 @@ class RealGraspEnv(gym.Env):
         k = self.session.trials.get(self.object_name, 0) + 1
         self.session.trials[self.object_name] = k
         if keys.available:  # an ENTER pressed while the gripper was homing counts: the operator is ready
-            print(f"\n[{self.object_name}] trial {k}: place the object at the claw centre, hands clear, press ENTER.")
+            print(f"\n[{self.object_name}] trial {k}: place the object at the claw centre, hands clear, ENTER.")
             keys.wait_for({"enter"})
         else:
             logger.info("[%s] trial %d starts in %.1f s", self.object_name, k, self.cfg.unattended_reset_s)

@@ -5,8 +5,8 @@ What it implements (ROBOTIS e-Manual, "DYNAMIXEL Protocol 2.0" and the XM430-W35
 - PING (unicast and broadcast), READ, WRITE, SYNC READ, SYNC WRITE, REBOOT; status packets (INST 0x55) with the
   error byte (instruction error codes 1..7 and the 0x80 hardware-alert bit);
 - the control table with EEPROM write protection while torque is on, read-only registers, data range and limit
-  checks, Status Return Level, and the bus baud rate (a servo answers only when the port's termios speed matches its
-  Baud_Rate register, like a real bus at the wrong speed);
+  checks, Status Return Level, and the bus baud rate (a servo answers only when the port's termios speed matches
+  its Baud_Rate register, like a real bus at the wrong speed);
 - Homing_Offset and Drive_Mode (reverse) as the firmware applies them: Present = sign * shaft + Homing_Offset;
 - first-order servo dynamics: the shaft slews toward the goal at the no-load speed (46 rpm) or Profile_Velocity,
   Present_Current follows the position error times the P gain and saturates at Goal_Current/Current_Limit in

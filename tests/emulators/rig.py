@@ -54,11 +54,10 @@ class GripperRig:
 
     def true_q(self) -> np.ndarray:
         """Joint angles from the physical shaft positions (ground truth for the tests)."""
-        return np.array(
-            [(self.dxl.servos[i].shaft - MOUNT_ZERO[k]) * MOUNT_SIGN[k] / TICKS_PER_RAD for k, i in enumerate(self.ids)]
-        )
+        shafts = [self.dxl.servos[i].shaft for i in self.ids]
+        return (np.array(shafts) - MOUNT_ZERO) * np.array(MOUNT_SIGN) / TICKS_PER_RAD
 
-    def place_object(self, contact_q: float = 0.2, stiffness_n_per_rad: float = 100.0, max_n: float = 25.0) -> None:
+    def place_object(self, contact_q: float = 0.2, stiffness_n_per_rad: float = 100.0, max_n: float = 25.0):
         """A rigid object at the claw centre: each proximal joint (J*1) stops at `contact_q` when closing, and its
         fingertip load cell reads the squeeze, stiffness x (contact_q - commanded q), like a P-controlled servo
         pressing on a rigid body (saturating at the servo's torque)."""

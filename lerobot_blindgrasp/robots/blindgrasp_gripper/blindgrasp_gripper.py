@@ -2,12 +2,12 @@
 
 Observation and action follow `spec` exactly (names, order, rad and N), so datasets recorded here have the sim
 demos' schema. Every bus transaction goes through LeRobot's `DynamixelMotorsBus` with raw register values
-(`normalize=False`): the calibration lives in the servos (Drive_Mode, Homing_Offset), so rad = (ticks - 2048) * 2pi/4096
-needs no LeRobot normalization mode.
+(`normalize=False`): the calibration lives in the servos (Drive_Mode, Homing_Offset), so
+rad = (ticks - 2048) * 2pi/4096 needs no LeRobot normalization mode.
 
 Safety is latched: any failure while connected (bus error after the retries, servo hardware error, force overload,
-stale force data, an exception or Ctrl-C inside a call) turns the torque off on every servo that answers, closes the
-ports and raises a `GripperSafetyStop` that says so. Reconnecting is an explicit decision of the operator.
+stale force data, an exception or Ctrl-C inside a call) turns the torque off on every servo that answers, closes
+the ports and raises a `GripperSafetyStop` that says so. Reconnecting is an explicit decision of the operator.
 """
 
 from __future__ import annotations
@@ -111,7 +111,7 @@ class BlindgraspGripper(Robot):
     def is_calibrated(self) -> bool:
         return bool(self.calibration) and self.bus.is_connected and self._servos_match_calibration()
 
-    # --- connection -----------------------------------------------------------------------------------------------
+    # --- connection ----------------------------------------------------------------------------------------------
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
         with self._safety("connecting"):
@@ -251,7 +251,7 @@ class BlindgraspGripper(Robot):
         with self._safety("taring the force sensors"):
             self.force.tare(self.config.force_sensor.tare_s)
 
-    # --- control loop ---------------------------------------------------------------------------------------------
+    # --- control loop --------------------------------------------------------------------------------------------
     @check_if_not_connected
     def get_observation(self) -> dict[str, float]:
         with self._safety("reading the gripper state"):
@@ -261,7 +261,8 @@ class BlindgraspGripper(Robot):
             over = np.abs(forces) > self.config.force_sensor.overload_n
             if over.any():
                 tips = {spec.FORCE_SENSOR_NAMES[i]: round(float(forces[i]), 2) for i in np.flatnonzero(over)}
-                raise ForceOverloadError(f"Fingertip force overload {tips} N > {self.config.force_sensor.overload_n} N")
+                limit = self.config.force_sensor.overload_n
+                raise ForceOverloadError(f"Fingertip force overload {tips} N > {limit} N")
         obs = {f"{j}.pos": float(v) for j, v in zip(self.joints, q)}
         obs.update({f"{s}.force": float(f) for s, f in zip(spec.FORCE_SENSOR_NAMES, forces)})
         return obs
@@ -319,7 +320,7 @@ class BlindgraspGripper(Robot):
                 return bool(value)
         return True  # cannot confirm either way: treat as an error
 
-    # --- safety -----------------------------------------------------------------------------------------------------
+    # --- safety --------------------------------------------------------------------------------------------------
     @contextmanager
     def _safety(self, what: str):
         try:
@@ -340,8 +341,9 @@ class BlindgraspGripper(Robot):
             elif isinstance(e, ForceStreamError):
                 err = ForceSensorError(f"Force sensor failure while {what}: {e} {note}")
             elif isinstance(e, (ConnectionError, RuntimeError, OSError)):
+                tries = 1 + self._retry
                 err = GripperBusError(
-                    f"Dynamixel bus failure while {what} (each transaction tried {1 + self._retry} times): {e} {note}"
+                    f"Dynamixel bus failure while {what} (each transaction tried {tries} times): {e} {note}"
                 )
             else:  # KeyboardInterrupt, programming errors: keep the original exception, the torque is off anyway
                 logger.error("%s while %s. %s", type(e).__name__, what, note)
@@ -407,5 +409,6 @@ class BlindgraspGripper(Robot):
             return
         unconfirmed = self._stop()
         if unconfirmed:
-            raise GripperBusError(f"Disconnected, but servo IDs {unconfirmed} did not confirm torque off: cut the power.")
+            msg = f"Disconnected, but servo IDs {unconfirmed} did not confirm torque off: cut the power."
+            raise GripperBusError(msg)
         logger.info("%s disconnected, torque off.", self)

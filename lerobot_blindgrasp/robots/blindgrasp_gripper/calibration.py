@@ -33,7 +33,7 @@ def directions(reference: dict[str, int], positive: dict[str, int], min_motion_r
     still = [j for j in reference if abs(wrapped_delta(reference[j], positive[j])) < min_ticks]
     if still:
         raise ValueError(
-            f"Joints {still} moved less than {min_motion_rad:.2f} rad between the reference and the positive pose; "
+            f"Joints {still} moved less than {min_motion_rad:.2f} rad between the reference and positive poses; "
             "move each of them clearly in its positive direction and calibrate again."
         )
     return {j: (0 if wrapped_delta(reference[j], positive[j]) > 0 else REVERSE_BIT) for j in reference}

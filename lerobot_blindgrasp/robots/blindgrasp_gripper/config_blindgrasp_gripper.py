@@ -56,7 +56,7 @@ class BlindgraspGripperConfig(RobotConfig):
     operating_mode: str = "CURRENT_POSITION"
     # Current limit (A). 2.3 A is the XM430-W350 stall current at 12 V (4.1 N m), the sim's torque limit.
     current_limit_a: float = STALL_CURRENT_A
-    # Position loop gains (register units). 800/0/0 is the XM430 default, the gain the sim's kp = 15 N m/rad models.
+    # Position loop gains (register units). 800/0/0 is the XM430 default, modelled by the sim's kp = 15 N m/rad.
     position_p_gain: int = 800
     position_i_gain: int = 0
     position_d_gain: int = 0
@@ -84,7 +84,8 @@ class BlindgraspGripperConfig(RobotConfig):
             k = spec.JOINT_NAMES.index(j)
             if not spec.JOINT_LOWER[k] <= lo < hi <= spec.JOINT_UPPER[k]:
                 raise ValueError(
-                    f"{j}: limits [{lo}, {hi}] must lie inside the sim's [{spec.JOINT_LOWER[k]}, {spec.JOINT_UPPER[k]}]"
+                    f"{j}: limits [{lo}, {hi}] must lie inside the sim's "
+                    f"[{spec.JOINT_LOWER[k]}, {spec.JOINT_UPPER[k]}]"
                 )
         if not 1 <= self.latency_timer_ms <= 500:
             raise ValueError("latency_timer_ms must be in [1, 500]")
@@ -96,6 +97,6 @@ class BlindgraspGripperConfig(RobotConfig):
             raise ValueError(f"current_limit_a must be in (0, {CURRENT_LIMIT_MAX_UNITS * 0.00269:.2f}] A")
         fs = self.force_sensor
         if len(fs.scale_n_per_count) != spec.NUM_FORCES or len(fs.channel_map) != spec.NUM_FORCES:
-            raise ValueError(f"force_sensor needs {spec.NUM_FORCES} scales and {spec.NUM_FORCES} channel_map entries")
+            raise ValueError(f"force_sensor needs {spec.NUM_FORCES} scales and channel_map entries")
         if len(set(fs.channel_map)) != spec.NUM_FORCES or not all(0 <= c < 8 for c in fs.channel_map):
-            raise ValueError(f"force_sensor.channel_map must name distinct stream channels 0..7, got {fs.channel_map}")
+            raise ValueError(f"force_sensor.channel_map needs distinct channels 0..7, not {fs.channel_map}")

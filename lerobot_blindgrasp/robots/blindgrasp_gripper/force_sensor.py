@@ -14,8 +14,9 @@ CRC-16/CCITT-FALSE of b"123456789" is 0x29B1 (check value for firmware authors).
 next SYNC after any bad length or CRC, so garbage bytes on the line cost frames, never wrong values. SEQ gaps count
 dropped frames; the age of the newest good frame detects a stalled or unplugged stream.
 
-Host side: counts -> newtons with a tare (mean counts over `tare_s` at connect, fingers in free air) and a per-channel
-scale in N/count from the robot config; then the same deadband as the sim (|f| < spec.FORCE_THRESHOLD_N reads 0).
+Host side: counts -> newtons with a tare (mean counts over `tare_s` at connect, fingers in free air) and a
+per-channel scale in N/count from the robot config; then the same deadband as the sim
+(|f| < spec.FORCE_THRESHOLD_N reads 0).
 """
 
 from __future__ import annotations
@@ -213,7 +214,7 @@ class ForceSensorReader:
             with self._lock:
                 frame = self._latest
             if frame.status:
-                raise ForceStreamError(f"Force sensor reports a channel fault during tare (status {frame.status:#04x}).")
+                raise ForceStreamError(f"Force sensor channel fault during tare (status {frame.status}).")
             samples.append(self._channels(frame))
         self.offset = np.mean(samples, axis=0)
         return self.offset

@@ -3,13 +3,13 @@
     python -m lerobot_blindgrasp.robots.blindgrasp_gripper.rollout --strategy.type=base \\
         --policy.path=<checkpoint> --robot="include robot_configs/blindgrasp_gripper.yaml" --fps=20 --duration=10
 
-Same arguments and behaviour as `lerobot-rollout` (strategies, inference engines, datasets, Ctrl-C handling), because
-it is the same code: `RolloutConfig`, `build_rollout_context`, `create_strategy`. The one difference is the robot
-observation processor. In LeRobot 0.6.1 `build_rollout_context` keeps only scalar observation features named
-`*.pos` or `*.vel` (rollout/context.py, "features + action-key reconciliation"), so plain `lerobot-rollout` drops
-`ff_tip.force`, `mf_tip.force`, `th_tip.force` and feeds a 9-d state to a policy trained on 12 (it fails with "size
-of tensor a (9) must match ... (12)", after a safe teardown). The processor step below declares the force features
-again, so `observation.state` is built with exactly `spec.STATE_NAMES`, as in every dataset.
+Same arguments and behaviour as `lerobot-rollout` (strategies, inference engines, datasets, Ctrl-C handling),
+because it is the same code: `RolloutConfig`, `build_rollout_context`, `create_strategy`. The one difference is
+the robot observation processor. In LeRobot 0.6.1 `build_rollout_context` keeps only scalar observation features
+named `*.pos` or `*.vel` (rollout/context.py, "features + action-key reconciliation"), so plain `lerobot-rollout`
+drops `ff_tip.force`, `mf_tip.force`, `th_tip.force` and feeds a 9-d state to a policy trained on 12 (it fails with
+"size of tensor a (9) must match ... (12)", after a safe teardown). The processor step below declares the force
+features again, so `observation.state` is built with exactly `spec.STATE_NAMES`, as in every dataset.
 """
 
 # No `from __future__ import annotations`: LeRobot's parser.wrap reads the config class from the real annotation.

@@ -82,8 +82,8 @@ class ManusGlove(Teleoperator):
         if not self.receiver.wait_frames(1, self.config.connect_timeout_s):
             self.receiver.close()
             raise ConnectionError(
-                f"No glove data on udp://{self.config.host}:{self.config.port} for the {self.config.side} hand within "
-                f"{self.config.connect_timeout_s:.1f} s ({self.receiver.rejected} datagrams rejected): "
+                f"No glove data on udp://{self.config.host}:{self.config.port} for the {self.config.side} hand "
+                f"within {self.config.connect_timeout_s:.1f} s ({self.receiver.rejected} datagrams rejected): "
                 "is the SDK bridge running?"
             )
         if not self.is_calibrated and calibrate:
@@ -106,7 +106,7 @@ class ManusGlove(Teleoperator):
 
     @check_if_not_connected
     def calibrate(self) -> None:
-        input("Glove calibration. OPEN HAND: fingers straight and together, thumb alongside; hold it and press ENTER: ")
+        input("Glove calibration. OPEN HAND: fingers straight and together, thumb alongside; hold, press ENTER: ")
         open_pose = self._average(self.config.calibration_s)
         input("FIST: close the hand fully, thumb over the fingers; hold it and press ENTER: ")
         fist_pose = self._average(self.config.calibration_s)
@@ -116,8 +116,8 @@ class ManusGlove(Teleoperator):
                 if flex and abs(f - o) < self.config.min_flex_range_deg]
         if weak:
             raise ValueError(
-                f"Flexion for {weak} changed by less than {self.config.min_flex_range_deg} deg between open hand and "
-                "fist: check the glove fit and calibrate again."
+                f"Flexion for {weak} changed by less than {self.config.min_flex_range_deg} deg between open hand "
+                "and fist: check the glove fit and calibrate again."
             )
         self.calibration = GloveCalibration(open=open_pose, fist=fist_pose)
         self._save_calibration()

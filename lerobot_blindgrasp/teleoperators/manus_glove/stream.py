@@ -39,7 +39,8 @@ class GloveFrame:
 
 
 def encode(seq: int, ergonomics: dict[str, float], side: str = "right", t: float | None = None) -> bytes:
-    msg = {"proto": PROTO, "seq": seq, "t": time.time() if t is None else t, "side": side, "ergonomics": ergonomics}
+    stamp = time.time() if t is None else t
+    msg = {"proto": PROTO, "seq": seq, "t": stamp, "side": side, "ergonomics": ergonomics}
     return json.dumps(msg).encode()
 
 
