@@ -112,3 +112,28 @@ def test_hold_run_lengths():
     r = np.array([0.6, 0.7, 0.1, 0.9, 0.9, 0.9, 0.5, 0.51])
     assert hold_run_lengths(r, 0.5).tolist() == [1, 2, 0, 1, 2, 3, 0, 1]
     assert curation.CurationConfig(min_hold_s=0.25).min_hold_steps == 5
+
+
+def test_a_real_scripted_lift_passes_and_an_idle_hand_does_not():
+    """The thresholds are reachable in our physics: the scripted pinch-and-lift of the medium cylinder passes once
+    lifted (trimmed before the hold), a hand that never moves fails both criteria."""
+    from lerobot_blindgrasp.demos.rollout import run_episodes
+    from lerobot_blindgrasp.sim import randomization
+    from lerobot_blindgrasp.sim.demo import grasp_geometry
+    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+    from lerobot_blindgrasp.sim.scripted import PinchLiftScript
+
+    name = "cylinder_a_medium"
+    env = BatchedGraspEnv(
+        GraspEnvConfig(num_envs=1, objects=(name,), episode_s=5.0, dr=randomization.NO_DR, nthread=1)
+    )
+    script = PinchLiftScript(*grasp_geometry(name), lift_m=0.03)
+    lifted = next(run_episodes(env, lambda obs: script(env.joint_positions()), lambda: False))
+    res = evaluate(lifted.task_reward, lifted.uniaxial_force)
+    assert lifted.length == T and lifted.success
+    assert res.passed and 40 <= res.criteria_step < 90 and res.keep_steps == res.criteria_step + 1
+    assert res.force_sum_n > PAPER_CURATION.force_sum_threshold_n
+
+    idle = next(run_episodes(env, lambda obs: np.zeros((1, 9)), lambda: False))
+    res = evaluate(idle.task_reward, idle.uniaxial_force)
+    assert not res.passed and res.force_sum_n == 0.0 and res.longest_hold_steps == 0
