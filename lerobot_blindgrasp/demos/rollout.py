@@ -97,7 +97,7 @@ def run_episodes(env: BatchedGraspEnv, act: TeacherFn, should_stop: Callable[[],
                 physics_failed=bool(failed[i]),
                 env_seed=int(env.env_seeds[i]),
                 env_episode=int(start_episode[i]),
-                randomization=np.array([*(draw[k2] for k2 in PHYSICS_DRAW_NAMES), *start_xy[i]], dtype=np.float64),
+                randomization=np.array([*(draw[p] for p in PHYSICS_DRAW_NAMES), *start_xy[i]], dtype=np.float64),
             )
         failed[ids] = False
         start_xy[ids] = fresh_xy
