@@ -48,6 +48,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--no-incentive", action="store_true", help="w2 = 0: the teacher of the 'Student w/o r_i' ablation")
     p.add_argument("--student-obs", action="store_true", help="'RL w/ o_t' baseline: actor and critic see only o_t")
     p.add_argument("--threads", type=int, default=0, help="physics threads (0: all CPUs)")
+    p.add_argument("--torch-threads", type=int, default=1, help="torch intra-op threads for the PPO update")
     p.add_argument("--no-export", action="store_true")
     return p.parse_args(argv)
 
@@ -61,7 +62,9 @@ def train(args: argparse.Namespace) -> Path:
     out = args.output_dir
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(args.seed)
-    torch.set_num_threads(args.threads or max(1, os.cpu_count() or 1))
+    # PPO on these small MLPs gains little from intra-op threads, and OpenMP threads that spin while MuJoCo's
+    # threads (or any other process) hold the cores made the update 5-8x slower on a busy 2-core machine.
+    torch.set_num_threads(args.torch_threads)
 
     config = {
         "preset": preset.name,
