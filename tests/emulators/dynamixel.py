@@ -242,6 +242,7 @@ class DynamixelBusEmulator(PtyDevice):
             servo.reboot()
             self.servos[i] = servo
         self._buf = bytearray()
+        self._pending_ids: list[EmulatedServo] = []
         self._last = time.monotonic()
         # Fault injection.
         self.missing_ids: set[int] = set()
@@ -320,6 +321,13 @@ class DynamixelBusEmulator(PtyDevice):
 
     def _handle(self, pkt: bytes) -> None:
         self._tick()  # registers reflect the shaft at the moment the packet arrives (tests move shafts directly)
+        self._handle_packet(pkt)
+        for servo in self._pending_ids:
+            self.servos = {s.get("ID"): s for s in self.servos.values()}
+            servo.id = servo.get("ID")
+        self._pending_ids.clear()
+
+    def _handle_packet(self, pkt: bytes) -> None:
         dxl_id, inst = pkt[4], pkt[7]
         if crc16(pkt[:-2]) != (pkt[-2] | (pkt[-1] << 8)):
             self.rx_crc_errors += 1
@@ -405,6 +413,8 @@ class DynamixelBusEmulator(PtyDevice):
             servo.set(name, staged.get(name))
             if name == "Torque_Enable" and staged.get(name) == 1:
                 servo.velocity = 0.0
+        if any(name == "ID" for name, _ in touched):
+            self._pending_ids.append(servo)  # answers under the new ID from the next packet on
         return 0
 
     @staticmethod

@@ -223,6 +223,30 @@ class BlindgraspGripper(Robot):
                 return model
         return None
 
+    def setup_motors(self) -> None:
+        """`lerobot-setup-motors`: give factory-fresh servos (ID 1, 57 600 bps) their D'Claw ID and the bus baud rate,
+        one servo on the cable at a time, through LeRobot's `setup_motor`. Baud rates are tried factory rate first:
+        a broadcast ping waits its full window at each rate (4 s at 9600 bps, LeRobot's first guess)."""
+        dxl_port_handler.LATENCY_TIMER = self.config.latency_timer_ms
+        self.bus.default_baudrate = self.config.baudrate  # the rate setup_motor writes into each servo
+        rates = [57_600, self.config.baudrate, *self.bus.model_baudrate_table[MODEL]]
+        rates = list(dict.fromkeys(rates))
+        try:
+            for j in reversed(self.joints):
+                input(f"Connect the controller board to the '{j}' servo (ID {self.bus.motors[j].id}) only, "
+                      "then press ENTER: ")  # fmt: skip
+                for k, rate in enumerate(rates):
+                    try:
+                        self.bus.setup_motor(j, initial_baudrate=rate)
+                        break
+                    except RuntimeError:
+                        if k == len(rates) - 1:
+                            raise
+                print(f"'{j}' servo: ID {self.bus.motors[j].id} at {self.config.baudrate} bps")
+        finally:
+            if self.bus.is_connected:
+                self.bus.port_handler.closePort()
+
     def _write_calibration(self) -> None:
         r = self._retry
         for j, c in self.calibration.items():
