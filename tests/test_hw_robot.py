@@ -305,3 +305,16 @@ def test_hardware_error_present_at_connect_is_reported(rig, tmp_path, monkeypatc
     with pytest.raises(GripperHardwareError, match=r"th_j32 \(ID 32\): overload"):
         r.connect()
     _assert_stopped(rig, r)
+
+
+def test_position_mode_keeps_the_firmware_limits_happy(rig, tmp_path, monkeypatch):
+    """operating_mode=POSITION: the firmware enforces Min/Max_Position_Limit (the joint limits) itself."""
+    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
+    r = BlindgraspGripper(rig.robot_config(tmp_path, operating_mode="POSITION"))
+    r.connect()
+    try:
+        assert {s.get("Operating_Mode") for s in rig.dxl.servos.values()} == {3}
+        obs = settle(r, dict.fromkeys(spec.ACTION_NAMES, -10.0), steps=25)
+        np.testing.assert_allclose(as_q(obs), spec.JOINT_LOWER, atol=1.01 * TICK)
+    finally:
+        r.disconnect()

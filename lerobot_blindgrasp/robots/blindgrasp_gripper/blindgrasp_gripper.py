@@ -152,13 +152,16 @@ class BlindgraspGripper(Robot):
                 self.bus.write("Position_D_Gain", j, self.config.position_d_gain, num_retry=r)
                 self.bus.write("Profile_Velocity", j, self.config.profile_velocity, num_retry=r)
             # Hold the present pose when torque comes on, instead of jumping to whatever Goal_Position held.
-            present = self.bus.sync_read("Present_Position", normalize=False, num_retry=r)
-            for j in self.joints:
-                self.bus.write("Goal_Position", j, present[j], normalize=False, num_retry=r)
+            present = self._sync_read("Present_Position")
             q = np.array([ticks_to_rad(present[j]) for j in self.joints])
             outside = [j for j, v, lo, hi in zip(self.joints, q, self.lower, self.upper) if not lo <= v <= hi]
             if outside:
                 logger.warning("Joints %s start outside their limits; the first actions bring them back.", outside)
+            for j, lo, hi in zip(self.joints, self.lower, self.upper):
+                goal = present[j]
+                if mode == OperatingMode.POSITION.value:  # the firmware refuses goals outside its position limits
+                    goal = min(max(goal, rad_to_ticks(lo)), rad_to_ticks(hi))
+                self.bus.write("Goal_Position", j, goal, normalize=False, num_retry=r)
             self.bus.enable_torque(num_retry=r)
 
     def calibrate(self) -> None:
@@ -182,19 +185,19 @@ class BlindgraspGripper(Robot):
             self.bus.write("Drive_Mode", j, 0, num_retry=r)
             self.bus.write("Homing_Offset", j, 0, normalize=False, num_retry=r)
         input(f"\nTorque is off. Hold the gripper in the {REFERENCE_POSE_HELP}\nPress ENTER when it is there: ")
-        reference = self.bus.sync_read("Present_Position", normalize=False, num_retry=r)
+        reference = self._sync_read("Present_Position")
         input(f"\nNow the {POSITIVE_POSE_HELP}\nPress ENTER while holding it: ")
-        positive = self.bus.sync_read("Present_Position", normalize=False, num_retry=r)
+        positive = self._sync_read("Present_Position")
         modes = calib.directions(reference, positive, self.config.calibration_min_motion_rad)
         for j in self.joints:
             self.bus.write("Drive_Mode", j, modes[j], num_retry=r)
-        present = self.bus.sync_read("Present_Position", normalize=False, num_retry=r)
+        present = self._sync_read("Present_Position")
         homings = calib.homing_offsets(reference, positive, present)
         ids = {j: m.id for j, m in self.bus.motors.items()}
         self.calibration = calib.build(ids, modes, homings, self.lower, self.upper)
         self._write_calibration()
         self._save_calibration()
-        check = self.bus.sync_read("Present_Position", normalize=False, num_retry=r)
+        check = self._sync_read("Present_Position")
         print("\nCalibrated joint angles in the positive pose (all should be > 0):")
         for j in self.joints:
             print(f"  {j:7s} id {ids[j]:2d}  drive_mode {modes[j]}  q = {ticks_to_rad(check[j]):+.3f} rad")
