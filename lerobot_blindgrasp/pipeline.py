@@ -128,17 +128,16 @@ def run_pipeline(preset: PipelinePreset, out: Path, seed: int) -> Path:
              "--out", str(teacher_eval)],
         )
 
-    demos = _collect(stage, preset, teacher_dir, out / "demos", f"local/blindgrasp_{preset.name}", seed, curate=True)
+    repo = f"local/blindgrasp_{preset.name}"
+    demos = _collect(stage, preset, teacher_dir, out / "demos", repo, seed, curate=True)
     kept = _kept(demos)
     train_set = demos
     record["student_dataset"] = "curated"
     if kept < preset.min_curated_episodes:
         print(f"[pipeline] only {kept} curated episodes (< {preset.min_curated_episodes}); also collecting the "
               "uncurated set and training the student on it", flush=True)
-        train_set = _collect(
-            stage, preset, teacher_dir, out / "demos_uncurated", f"local/blindgrasp_{preset.name}_uncurated", seed,
-            curate=False,
-        )
+        repo = f"local/blindgrasp_{preset.name}_uncurated"
+        train_set = _collect(stage, preset, teacher_dir, out / "demos_uncurated", repo, seed, curate=False)
         record["student_dataset"] = "uncurated (too few curated episodes)"
 
     student = out / "student"
@@ -148,7 +147,6 @@ def run_pipeline(preset: PipelinePreset, out: Path, seed: int) -> Path:
     else:
         if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
             os.replace(student, out / f"student_interrupted_{int(time.time())}")
-        repo = json.loads((train_set / "meta" / "info.json").read_text()).get("repo_id") or train_set.name
         stage.run(
             "student",
             [_bin("lerobot-train"), "--policy.type=blindgrasp_transformer", f"--policy.size={preset.student_size}",
