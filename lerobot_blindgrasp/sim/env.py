@@ -197,6 +197,7 @@ class BatchedGraspEnv:
             action=a,
             prev_action=self.prev_action,
             tip_object_distance=raw["tip_object_distance"],
+            tip_object_force=raw["tip_object_force"],
             cfg=self.cfg.reward,
         )
         reward = rewards.total(terms, self.cfg.reward)
@@ -285,6 +286,7 @@ class BatchedGraspEnv:
             "d_xy": rewards.planar_distance(obj_pos[:, :2]),
             "lift": obj_pos[:, 2] - self.rest_height[sel],
             "tip_object_distance": si.read(sd, "objdist")[:, :, 0],
+            "tip_object_force": np.linalg.norm(si.read(sd, "objcontact"), axis=2),
         }
         seeds = self.env_seeds[sel]
         counter = self.episode[sel] * 100_003 + self.episode_length[sel]

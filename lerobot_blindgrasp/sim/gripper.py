@@ -148,6 +148,8 @@ def gripper_mjcf(object_xml: str, options: PhysicsOptions | None = None, servo: 
     for f in spec.FINGERS:
         sensors += [
             f'<contact name="{f}_contact" geom1="{f}_tipgeom" data="force" reduce="netforce"/>',
+            # the same, restricted to the object: lets shaping tell a touch on the object from a push on the table
+            f'<contact name="{f}_objcontact" geom1="{f}_tipgeom" geom2="object_geom" data="force" reduce="netforce"/>',
             f'<force name="{f}_force" site="{f}_loadcell"/>',
             f'<torque name="{f}_torque" site="{f}_loadcell"/>',
             f'<framepos name="{f}_pos" objtype="site" objname="{f}_tipsite"/>',

@@ -2,8 +2,8 @@
 
     r = w1 r_t + w2 r_i + w31 r_l + w32 r_a + w33 r_ar            (eq. 3)
 
-with w = (1.0, 0.2, -500, -0.04, -0.01). `RewardConfig` holds the weights; the `cpu` teacher preset may add the
-reaching term (not in the paper, see docs/results/teacher_cpu.md for why) and nothing else.
+with w = (1.0, 0.2, -500, -0.04, -0.01). `RewardConfig` holds the weights; the `cpu`/`quick` teacher presets add
+two shaping terms that are not in the paper, reach and touch (see docs/results/teacher_cpu.md for why).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ class RewardConfig:
     w_action_rate: float = -0.01
     w_reach: float = 0.0  # not in the paper; cpu preset only
     reach_scale: float = 10.0  # r_reach = mean over tips of 1 - tanh(reach_scale * d_tip_object)
+    w_touch: float = 0.0  # not in the paper; cpu preset only
     target_lift_m: float = spec.TARGET_LIFT_M  # h_t
     contact_threshold_n: float = spec.FORCE_THRESHOLD_N
     workspace_radius_m: float = spec.WORKSPACE_RADIUS_M
@@ -33,7 +34,7 @@ class RewardConfig:
 
 
 PAPER_REWARD = RewardConfig()
-TERM_NAMES = ("task", "incentive", "joint_limit", "action", "action_rate", "reach")
+TERM_NAMES = ("task", "incentive", "joint_limit", "action", "action_rate", "reach", "touch")
 
 
 def planar_distance(object_xy: np.ndarray, centre_xy: np.ndarray | None = None) -> np.ndarray:
@@ -86,6 +87,14 @@ def r_reach(tip_object_distance: np.ndarray, cfg: RewardConfig) -> np.ndarray:
     return (1.0 - np.tanh(cfg.reach_scale * np.clip(tip_object_distance, 0.0, None))).mean(axis=-1)
 
 
+def r_touch(tip_object_force: np.ndarray, threshold: float = spec.FORCE_THRESHOLD_N) -> np.ndarray:
+    """Shaping (not in the paper): fraction of fingertips pressing on the *object* (any direction, > 0.1 N).
+
+    Unlike n_contact it ignores pushes on the table, and unlike the uniaxial sensor it sees side contacts, so it
+    rewards every touch that could become a grasp."""
+    return (tip_object_force > threshold).mean(axis=-1)
+
+
 def compute_terms(
     *,
     lift: np.ndarray,
@@ -95,6 +104,7 @@ def compute_terms(
     action: np.ndarray,
     prev_action: np.ndarray,
     tip_object_distance: np.ndarray,
+    tip_object_force: np.ndarray,
     cfg: RewardConfig,
 ) -> dict[str, np.ndarray]:
     """Unweighted terms, by name (for logging each one separately)."""
@@ -106,11 +116,12 @@ def compute_terms(
         "action": r_action(action),
         "action_rate": r_action_rate(action, prev_action),
         "reach": r_reach(tip_object_distance, cfg) if cfg.w_reach else np.zeros_like(d_xy),
+        "touch": r_touch(tip_object_force, cfg.contact_threshold_n) if cfg.w_touch else np.zeros_like(d_xy),
     }
 
 
 def total(terms: dict[str, np.ndarray], cfg: RewardConfig) -> np.ndarray:
-    """Eq. 3 (plus the optional reach term)."""
+    """Eq. 3 (plus the optional shaping terms)."""
     return (
         cfg.w_task * terms["task"]
         + cfg.w_incentive * terms["incentive"]
@@ -118,4 +129,5 @@ def total(terms: dict[str, np.ndarray], cfg: RewardConfig) -> np.ndarray:
         + cfg.w_action * terms["action"]
         + cfg.w_action_rate * terms["action_rate"]
         + cfg.w_reach * terms["reach"]
+        + cfg.w_touch * terms["touch"]
     )

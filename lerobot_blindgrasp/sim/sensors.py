@@ -18,7 +18,7 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 
-PER_TIP = ("contact", "force", "torque", "pos", "quat", "zaxis", "objdist")
+PER_TIP = ("contact", "objcontact", "force", "torque", "pos", "quat", "zaxis", "objdist")
 
 
 @dataclass(frozen=True)

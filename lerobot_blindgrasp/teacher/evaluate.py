@@ -89,7 +89,8 @@ def markdown_table(results: dict) -> str:
         s = [f"{results['modes'][m]['per_object'][o]['success_rate'] * 100:.0f} %" for m in modes]
         lift = [f"{results['modes'][m]['per_object'][o]['mean_max_lift_cm']:.1f}" for m in modes]
         lines.append(f"| {o} | " + " | ".join(s + lift) + " |")
-    for key, label in (("medium_objects", "6 medium objects"), ("overall", f"all {len(results['objects'])}")):
+    n_medium = sum(o.endswith("_medium") for o in results["objects"])
+    for key, label in (("medium_objects", f"{n_medium} medium objects"), ("overall", f"all {len(results['objects'])}")):
         vals = [results["modes"][m][key] for m in modes]
         if all(v is not None for v in vals):
             lines.append(f"| **{label}** | " + " | ".join(f"**{v * 100:.1f} %**" for v in vals) + " |" + " |" * len(modes))
