@@ -17,6 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from lerobot_blindgrasp.envs.sim_env import object_for_task_id  # noqa: E402
+from lerobot_blindgrasp.plots import plot_curves, teacher_curves  # noqa: E402
 from lerobot_blindgrasp.sim import objects  # noqa: E402
 
 _LOSS_LINE = re.compile(r"step:\s*([\d.]+[KMB]?)\b.*?\bloss:\s*([\d.eE+-]+)")
@@ -41,15 +42,6 @@ def student_loss_curve(log_text: str) -> tuple[list[float], list[float]]:
     return steps, losses
 
 
-def teacher_curves(run_dir: Path, tags=("Train/mean_reward", "Metrics/success", "Metrics/mean_lift_cm")) -> dict:
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    ea = EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
-    ea.Reload()
-    have = set(ea.Tags().get("scalars", []))
-    return {t: ([e.step for e in ea.Scalars(t)], [e.value for e in ea.Scalars(t)]) for t in tags if t in have}
-
-
 def _bar_chart(path: Path, names: list[str], series: dict[str, list[float]], title: str, ylabel: str) -> None:
     x = np.arange(len(names))
     w = 0.8 / max(1, len(series))
@@ -60,19 +52,6 @@ def _bar_chart(path: Path, names: list[str], series: dict[str, list[float]], tit
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def _curves(path: Path, curves: dict, title: str) -> None:
-    fig, axes = plt.subplots(1, len(curves), figsize=(4.2 * len(curves), 3.2), squeeze=False)
-    for ax, (tag, (xs, ys)) in zip(axes[0], curves.items()):
-        ax.plot(xs, ys)
-        ax.set_title(tag, fontsize=9)
-        ax.set_xlabel("iteration" if "/" in tag else "step")
-        ax.grid(alpha=0.3)
-    fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -127,12 +106,12 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     lines += ["## Learning curves", ""]
     tc = teacher_curves(out / "teacher")
     if tc:
-        _curves(figs / "teacher_curves.png", tc, "Teacher (PPO)")
+        plot_curves(figs / "teacher_curves.png", tc, "Teacher (PPO)")
         lines += ["![teacher](figures/teacher_curves.png)", ""]
     log = out / "logs" / "student.log"
     steps, losses = student_loss_curve(log.read_text()) if log.exists() else ([], [])
     if steps:
-        _curves(figs / "student_loss.png", {"train loss (MSE, normalized delta)": (steps, losses)}, "Student (BC)")
+        plot_curves(figs / "student_loss.png", {"train loss (MSE, normalized delta)": (steps, losses)}, "Student (BC)")
         lines += ["![student](figures/student_loss.png)", ""]
 
     # --- demo yield

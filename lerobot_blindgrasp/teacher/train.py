@@ -122,6 +122,7 @@ def train(args: argparse.Namespace) -> Path:
         path = out / f"model_{runner.current_learning_iteration}.pt"
         runner.save(str(path))
         bar.close()
+        write_learning_curve(out)
         print(f"\ninterrupted: saved {path}; run the same command to resume", file=sys.stderr)
         raise SystemExit(130)
     finally:
@@ -131,6 +132,7 @@ def train(args: argparse.Namespace) -> Path:
     final = latest_checkpoint(out)
     if not args.no_export:
         export(runner, out / "exported")
+    write_learning_curve(out)
     summary = {
         "checkpoint": str(final),
         "wall_clock_s": wall,
@@ -141,6 +143,15 @@ def train(args: argparse.Namespace) -> Path:
     (out / "train_summary.json").write_text(json.dumps(summary, indent=2))
     print(json.dumps(summary, indent=2))
     return final
+
+
+def write_learning_curve(run_dir: Path) -> None:
+    """learning_curve.png in the run directory, from its TensorBoard scalars."""
+    from lerobot_blindgrasp.plots import plot_curves, teacher_curves
+
+    curves = teacher_curves(run_dir)
+    if curves:
+        plot_curves(run_dir / "learning_curve.png", curves, f"Teacher PPO ({run_dir.name})")
 
 
 def export(runner, path: Path) -> None:

@@ -1,0 +1,49 @@
+"""Learning-curve plots shared by the teacher training CLI and the pipeline report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+TEACHER_TAGS = (
+    "Train/mean_reward",
+    "Metrics/success",
+    "Metrics/mean_lift_cm",
+    "Metrics/mean_contacts",
+    "Episode_Reward/task",
+    "Episode_Reward/incentive",
+    "Episode_Reward/touch",
+    "Episode_Termination/object_out_of_reach",
+)
+
+
+def teacher_curves(run_dir: Path, tags=TEACHER_TAGS) -> dict:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    ea = EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
+    ea.Reload()
+    have = set(ea.Tags().get("scalars", []))
+    return {t: ([e.step for e in ea.Scalars(t)], [e.value for e in ea.Scalars(t)]) for t in tags if t in have}
+
+
+def plot_curves(path: Path, curves: dict, title: str) -> None:
+    cols = min(4, len(curves))
+    rows = -(-len(curves) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.0 * rows), squeeze=False)
+    for ax in axes.flat[len(curves):]:
+        ax.set_visible(False)
+    for ax, (tag, (xs, ys)) in zip(axes.flat, curves.items()):
+        ax.plot(xs, ys)
+        ax.set_title(tag, fontsize=9)
+        ax.set_xlabel("iteration" if "/" in tag else "step")
+        ax.grid(alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
