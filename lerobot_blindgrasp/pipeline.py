@@ -44,15 +44,22 @@ class PipelinePreset:
     student_steps: int
     student_batch: int
     eval_episodes_per_object: int
+    eval_task: str = "all"  # lerobot-eval --env.task
+    teacher_iterations: int | None = None  # None: the teacher preset's own
+    teacher_num_envs: int | None = None
 
 
 PRESETS = {
     p.name: p
     for p in (
         PipelinePreset("quick", "quick", 4, 4, 8, 144, 18, "quick", 300, 64, 2),
-        PipelinePreset("cpu", "cpu", 20, 40, 400, 360, 90, "cpu", 20_000, 256, 10),
+        # lerobot-train reads ~2 ms per 30-frame sample here: 5000 steps at batch 256 is about an hour.
+        PipelinePreset("cpu", "cpu", 20, 40, 400, 360, 90, "cpu", 5_000, 256, 10),
         # Paper: 89,500 curated samples, 2000 epochs at batch 256 (Table IV) = 700k steps; 500 envs per object.
         PipelinePreset("paper", "paper", 50, 5000, 20_000, 9000, 1000, "paper", 700_000, 256, 50),
+        # CI smoke test of the plumbing only: every stage runs for seconds.
+        PipelinePreset("smoke", "quick", 1, 1, 2, 36, 18, "quick", 4, 8, 1, eval_task="cylinder_a_medium",
+                       teacher_iterations=2, teacher_num_envs=36),
     )
 }
 
@@ -113,11 +120,13 @@ def run_pipeline(preset: PipelinePreset, out: Path, seed: int) -> Path:
     if (teacher_dir / "train_summary.json").exists():
         stage.skip("teacher", "trained")
     else:
-        stage.run(
-            "teacher",
-            [_bin("blindgrasp-train-teacher"), "--preset", preset.teacher_preset, "--output-dir", str(teacher_dir),
-             "--seed", str(seed)],
-        )
+        cmd = [_bin("blindgrasp-train-teacher"), "--preset", preset.teacher_preset, "--output-dir", str(teacher_dir),
+               "--seed", str(seed)]
+        if preset.teacher_iterations:
+            cmd += ["--iterations", str(preset.teacher_iterations)]
+        if preset.teacher_num_envs:
+            cmd += ["--num-envs", str(preset.teacher_num_envs)]
+        stage.run("teacher", cmd)
     teacher_eval = out / "teacher_eval"
     if (teacher_eval / "eval.json").exists():
         stage.skip("teacher_eval", "done")
@@ -163,7 +172,7 @@ def run_pipeline(preset: PipelinePreset, out: Path, seed: int) -> Path:
     else:
         stage.run(
             "student_eval",
-            [_bin("lerobot-eval"), f"--policy.path={ckpt}", "--env.type=blindgrasp", "--env.task=all",
+            [_bin("lerobot-eval"), f"--policy.path={ckpt}", "--env.type=blindgrasp", f"--env.task={preset.eval_task}",
              f"--eval.n_episodes={preset.eval_episodes_per_object}",
              f"--eval.batch_size={preset.eval_episodes_per_object}", "--policy.device=cpu",
              f"--output_dir={student_eval}", f"--seed={seed + 1000}"],

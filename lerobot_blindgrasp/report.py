@@ -87,7 +87,8 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
         "## Success per object (sim)",
         "",
         f"Teacher: `blindgrasp-eval-teacher`, {teacher['episodes_per_object']} episodes per object and mode. "
-        f"Student: `lerobot-eval --env.type=blindgrasp --env.task=all`, {n_stu} episodes in all. Success = lifted "
+        f"Student: `lerobot-eval --env.type=blindgrasp --env.task={record['preset'].get('eval_task', 'all')}`, "
+        f"{n_stu} episodes in all (objects not evaluated show 0). Success = lifted "
         "≥ 1.5 cm and held ≥ 1 s within 10 s; the paper's randomization and noise, no pushes.",
         "",
         "![success](figures/success_per_object.png)",

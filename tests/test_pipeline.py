@@ -1,0 +1,49 @@
+"""The one-command pipeline, end to end with the real CLIs, at the `smoke` size (seconds per stage)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from lerobot_blindgrasp import pipeline
+from lerobot_blindgrasp.sim import objects
+
+
+@pytest.mark.slow
+def test_smoke_pipeline_runs_every_stage_and_writes_the_report(tmp_path):
+    out = tmp_path / "p"
+    cmd = [sys.executable, "-m", "lerobot_blindgrasp.pipeline", "--preset", "smoke", "--output-dir", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    record = json.loads((out / "pipeline.json").read_text())
+    assert {"teacher", "teacher_eval", "demos", "student", "student_eval"} <= set(record["stages"])
+    assert "lerobot-train" in record["stages"]["student"]["command"]
+    assert "lerobot-eval" in record["stages"]["student_eval"]["command"]
+    report = (out / "report.md").read_text()
+    for name in objects.PAPER_OBJECTS:
+        assert f"| {name} |" in report
+    for fig in ("success_per_object.png", "teacher_curves.png", "student_loss.png"):
+        assert (out / "figures" / fig).stat().st_size > 1000
+    assert "--preset cpu" in report and "--preset paper" in report
+    # Re-running skips the finished stages instead of redoing them.
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0 and again.stdout.count("skipped") >= 5
+
+
+def test_step_counts_in_lerobot_logs_parse():
+    assert pipeline.parse_step("300") == 300
+    assert pipeline.parse_step("1K") == 1000
+    assert pipeline.parse_step("2.5M") == 2_500_000
+    with pytest.raises(ValueError):
+        pipeline.parse_step("abc")
+
+
+def test_presets_are_consistent():
+    from lerobot_blindgrasp.teacher import presets as teacher_presets
+
+    for p in pipeline.PRESETS.values():
+        assert p.teacher_preset in teacher_presets.PRESETS
+        assert p.student_size in ("quick", "cpu", "paper")
