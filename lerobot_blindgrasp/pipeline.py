@@ -117,7 +117,8 @@ def run_pipeline(preset: PipelinePreset, out: Path, seed: int) -> Path:
     env1 = {"OMP_NUM_THREADS": "1", "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
 
     teacher_dir = out / "teacher"
-    if (teacher_dir / "train_summary.json").exists():
+    summary = teacher_dir / "train_summary.json"
+    if summary.exists() and not json.loads(summary.read_text()).get("interrupted"):
         stage.skip("teacher", "trained")
     else:
         cmd = [_bin("blindgrasp-train-teacher"), "--preset", preset.teacher_preset, "--output-dir", str(teacher_dir),

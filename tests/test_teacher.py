@@ -81,7 +81,9 @@ def test_short_ppo_run_saves_exports_and_reloads_deterministically(quick_run):
     out, _ = quick_run
     assert (out / "model_2.pt").exists() and (out / "exported" / "teacher.pt").exists()
     summary = json.loads((out / "train_summary.json").read_text())
-    assert summary["env_steps"] == 3 * 24 * 36 and summary["physics_resets"] == 0
+    assert summary["env_steps_this_session"] == 3 * 24 * 36 and summary["physics_resets"] == 0
+    assert summary["iterations"] == 3 and not summary["interrupted"]
+    assert (out / "learning_curve.png").stat().st_size > 1000
     env = BatchedGraspEnv(GraspEnvConfig(num_envs=4, seed=5))
     obs = env.reset()
     a1 = TeacherPolicy(out)(obs)
@@ -105,6 +107,28 @@ def test_rerunning_the_command_resumes(quick_run):
     # A different preset in the same folder is refused instead of silently mixing runs.
     bad = subprocess.run([*cmd[:4], "cpu", *cmd[5:]], capture_output=True, text=True, timeout=300)
     assert bad.returncode != 0 and "different" in bad.stderr
+
+
+def test_sigterm_saves_a_checkpoint_and_a_summary(tmp_path):
+    import signal
+    import time
+
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "lerobot_blindgrasp.teacher.train", "--preset", "quick", "--output-dir", str(out),
+           "--iterations", "500", "--num-envs", "18", "--threads", "1", "--no-export"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 240
+    while not (out / "model_0.pt").exists() and time.time() < deadline:
+        time.sleep(0.5)
+    assert (out / "model_0.pt").exists()
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-2000:]
+    assert "interrupted: saved" in err
+    summary = json.loads((out / "train_summary.json").read_text())
+    assert summary["interrupted"] and summary["iterations"] >= 1
+    assert TeacherPolicy(out).iteration == summary["iterations"] - 1
 
 
 def test_bad_teacher_path_is_a_clear_error(tmp_path):

@@ -114,34 +114,37 @@ def train(args: argparse.Namespace) -> Path:
     # SIGTERM (e.g. a job scheduler) behaves like Ctrl-C: save and exit.
     signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
     t0 = time.time()
+    interrupted = False
     try:
         if remaining > 0:
             with contextlib.redirect_stdout(console):  # rsl-rl prints a table per iteration; keep it in a file
                 runner.learn(remaining, init_at_random_ep_len=done_its == 0)
     except KeyboardInterrupt:
-        path = out / f"model_{runner.current_learning_iteration}.pt"
-        runner.save(str(path))
-        bar.close()
-        write_learning_curve(out)
-        print(f"\ninterrupted: saved {path}; run the same command to resume", file=sys.stderr)
-        raise SystemExit(130)
+        interrupted = True
+        runner.save(str(out / f"model_{runner.current_learning_iteration}.pt"))
     finally:
         console.close()
-    bar.close()
+        bar.close()
     wall = time.time() - t0
+    its_run = runner.current_learning_iteration + 1 - done_its
     final = latest_checkpoint(out)
     if not args.no_export:
         export(runner, out / "exported")
     write_learning_curve(out)
     summary = {
         "checkpoint": str(final),
-        "wall_clock_s": wall,
-        "env_steps": remaining * steps_per_it * num_envs,
-        "env_steps_per_s": remaining * steps_per_it * num_envs / max(wall, 1e-9),
+        "iterations": runner.current_learning_iteration + 1,
+        "interrupted": interrupted,
+        "wall_clock_s_this_session": wall,
+        "env_steps_this_session": its_run * steps_per_it * num_envs,
+        "env_steps_per_s": its_run * steps_per_it * num_envs / max(wall, 1e-9),
         "physics_resets": env.physics_resets,
     }
     (out / "train_summary.json").write_text(json.dumps(summary, indent=2))
     print(json.dumps(summary, indent=2))
+    if interrupted:
+        print(f"interrupted: saved {final}; run the same command to resume", file=sys.stderr)
+        raise SystemExit(130)
     return final
 
 
