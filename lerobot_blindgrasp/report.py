@@ -50,6 +50,7 @@ def _bar_chart(path: Path, names: list[str], series: dict[str, list[float]], tit
         ax.bar(x + (i - (len(series) - 1) / 2) * w, vals, w, label=label)
     ax.set_xticks(x, [n.replace("_", " ") for n in names], rotation=60, ha="right", fontsize=8)
     ax.set_ylabel(ylabel)
+    ax.set_ylim(0, 100)  # every chart here is a percentage; a fixed axis keeps all-zero charts readable
     ax.set_title(title)
     ax.legend(fontsize=8)
     fig.tight_layout()
