@@ -107,12 +107,17 @@ def test_calibration_maps_ticks_to_the_sim_zero_and_direction(rig, robot):
         assert servo.get("Min_Position_Limit") == rad_to_ticks(spec.JOINT_LOWER[spec.JOINT_NAMES.index(j)])
     assert robot.calibration_fpath.is_file() and robot.is_calibrated
     # Torque off, move by hand to random poses: the observation is the true joint angle within a tick.
-    robot.bus.disable_torque()
     rng = np.random.default_rng(1)
-    for _ in range(3):
-        q = rng.uniform(spec.JOINT_LOWER, spec.JOINT_UPPER)
-        rig.hand_move(q)
-        np.testing.assert_allclose(as_q(robot.get_observation()), q, atol=1.01 * TICK)
+    with robot.torque_disabled():
+        assert not rig.dxl.any_torque()
+        for _ in range(3):
+            q = rng.uniform(spec.JOINT_LOWER, spec.JOINT_UPPER)
+            rig.hand_move(q)
+            np.testing.assert_allclose(as_q(robot.get_observation()), q, atol=1.01 * TICK)
+    # Torque back on, holding the pose the hand left: nothing moves.
+    time.sleep(0.05)
+    assert all(rig.dxl.torque_enabled(i) for i in spec.SERVO_IDS)
+    np.testing.assert_allclose(rig.true_q(), q, atol=1.01 * TICK)
 
 
 def test_stored_calibration_is_written_to_fresh_servos(rig, robot, tmp_path):

@@ -12,8 +12,14 @@ What it implements (ROBOTIS e-Manual, "DYNAMIXEL Protocol 2.0" and the XM430-W35
   Present_Current follows the position error times the P gain and saturates at Goal_Current/Current_Limit in
   current-based position mode; an optional rigid obstacle per servo (`obstacle`) stalls the shaft.
 
+- the Bus Watchdog (98): with the torque on and 1..127 (x 20 ms) set, a servo that receives no instruction packet for
+  that long stops where it is (torque stays on), reads -1 (255) there, and refuses goal writes with a data range
+  error until 0 is written (e-Manual, "Bus Watchdog").
+
 Fault injection (what the tests use): a missing ID, dropped status packets (timeouts), corrupted status CRCs,
-hardware-error status bits (the firmware then drops torque per the Shutdown register and raises the alert bit).
+hardware-error status bits (the firmware then drops torque per the Shutdown register and raises the alert bit),
+a servo reset (brown-out: RAM back to factory values, torque off, no error bit) and, from `PtyDevice`, an unplugged
+USB adapter.
 """
 
 from __future__ import annotations
@@ -154,6 +160,8 @@ class EmulatedServo:
     velocity: float = 0.0  # ticks/s
     # A rigid obstacle, in shaft ticks, and the side it blocks from (+1: blocks motion above it).
     obstacle: tuple[float, int] | None = None
+    last_instruction: float = 0.0  # monotonic time of the last instruction packet addressed to this servo
+    watchdog_tripped_at: float | None = None  # when its bus watchdog last stopped it
 
     def __post_init__(self) -> None:
         for name, value in _DEFAULTS.items():
@@ -183,6 +191,13 @@ class EmulatedServo:
         return self.direction * (present - self.get("Homing_Offset"))
 
     # -- dynamics --
+    def check_watchdog(self, now: float) -> None:
+        limit = self.get("Bus_Watchdog")
+        if self.get("Torque_Enable") and 1 <= limit <= 127 and now - self.last_instruction > limit * 0.020:
+            self.set("Bus_Watchdog", 255)
+            self.set("Goal_Position", self.present_position())  # stops where it is, torque on
+            self.watchdog_tripped_at = now
+
     def step(self, dt: float) -> None:
         mode = self.get("Operating_Mode")
         torque = self.get("Torque_Enable") == 1
@@ -223,6 +238,7 @@ class EmulatedServo:
             if CONTROL_TABLE[name][0] >= 64:
                 self.set(name, value)
         self.regs[:64] = eeprom
+        self.set("Goal_Current", min(self.get("Goal_Current"), self.get("Current_Limit")))  # initialised within it
         self.set("Goal_Position", self.present_position())
         self.set("Present_Position", self.present_position())
 
@@ -259,6 +275,11 @@ class DynamixelBusEmulator(PtyDevice):
         if bits & servo.get("Shutdown"):
             servo.set("Torque_Enable", 0)
 
+    def reset_servo(self, dxl_id: int) -> None:
+        """A brown-out or watchdog reset of one servo's MCU: what `reboot` does, with no status packet and no error
+        bit, so only the registers tell."""
+        self.servos[dxl_id].reboot()
+
     def torque_enabled(self, dxl_id: int) -> bool:
         return self.servos[dxl_id].get("Torque_Enable") == 1
 
@@ -273,6 +294,7 @@ class DynamixelBusEmulator(PtyDevice):
             dt = 0.0
         for servo in self.servos.values():
             servo.step(dt)
+            servo.check_watchdog(now)
 
     def _port_baudrate(self) -> int | None:
         try:
@@ -338,6 +360,10 @@ class DynamixelBusEmulator(PtyDevice):
         params = _unstuff(pkt[8:-2])
         self.instruction_counts[inst] = self.instruction_counts.get(inst, 0) + 1
         broadcast = dxl_id == dx.BROADCAST_ID
+        now = time.monotonic()
+        for servo in self.servos.values():  # what feeds the bus watchdog: any valid instruction packet for it
+            if broadcast or servo.id == dxl_id:
+                servo.last_instruction = now
         if inst == dx.INST_PING:
             targets = sorted(self.servos) if broadcast else [dxl_id]
             for i in targets:
@@ -425,6 +451,10 @@ class DynamixelBusEmulator(PtyDevice):
                 return p2.ERRNUM_DATA_RANGE
             if name == "Torque_Enable" and value not in (0, 1):
                 return p2.ERRNUM_DATA_RANGE
+            if name == "Bus_Watchdog" and not 0 <= value <= 127:
+                return p2.ERRNUM_DATA_RANGE
+            if name.startswith("Goal_") and servo.get("Bus_Watchdog") == 255:
+                return p2.ERRNUM_DATA_RANGE  # goal registers are read-only after a watchdog stop
             if name == "Current_Limit" and not 0 <= value <= 1193:
                 return p2.ERRNUM_DATA_RANGE
             if name == "Goal_Current" and abs(value) > servo.get("Current_Limit"):

@@ -5,15 +5,19 @@ demos' schema. Every bus transaction goes through LeRobot's `DynamixelMotorsBus`
 (`normalize=False`): the calibration lives in the servos (Drive_Mode, Homing_Offset), so
 rad = (ticks - 2048) * 2pi/4096 needs no LeRobot normalization mode.
 
-Safety is latched: any failure while connected (bus error after the retries, servo hardware error, force overload,
-stale force data, an exception or Ctrl-C inside a call) turns the torque off on every servo that answers, closes
-the ports and raises a `GripperSafetyStop` that says so. Reconnecting is an explicit decision of the operator.
+Safety is latched: any failure while connected (bus error after the retries, a lost port, servo hardware error, a
+servo that reset or lost its settings, force overload, stale force data, an exception, Ctrl-C or SIGTERM/SIGHUP
+inside a call) turns the torque off on every servo that answers, closes the ports and raises one error that says
+so. Reconnecting is an explicit decision of the operator. The servos' bus watchdog stops them on their own when the
+host goes quiet (`bus_watchdog_ms`), and SIGTERM/SIGHUP unwind the LeRobot scripts like Ctrl-C (`signals.py`).
 """
 
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import logging
+import time
 import weakref
 from contextlib import contextmanager
 from functools import cached_property
@@ -29,9 +33,19 @@ from lerobot.utils.decorators import check_if_already_connected, check_if_not_co
 from lerobot_blindgrasp import spec
 
 from . import calibration as calib
+from . import signals
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
-from .errors import ForceOverloadError, ForceSensorError, GripperBusError, GripperHardwareError, GripperSafetyStop
+from .errors import (
+    ForceOverloadError,
+    ForceSensorError,
+    GripperBusError,
+    GripperHardwareError,
+    GripperSafetyStop,
+    GripperStateError,
+)
 from .force_sensor import ForceSensorReader, ForceStreamError
+from .port import PortLostError, use_flushing_port
+from .servo_state import WATCHDOG_UNIT_MS, ServoStateReader
 from .units import amps_to_current_units, rad_to_ticks, ticks_to_rad
 
 logger = logging.getLogger(__name__)
@@ -67,9 +81,10 @@ class BlindgraspGripper(Robot):
     name = "blindgrasp_gripper"
 
     def __init__(self, config: BlindgraspGripperConfig):
-        super().__init__(config)
         self.config = config
         self.joints = list(spec.JOINT_NAMES)
+        self.calibration_error: calib.CalibrationFileError | None = None
+        super().__init__(config)  # loads and validates the calibration file through _load_calibration
         self.bus = DynamixelMotorsBus(
             port=config.port,
             motors={j: Motor(i, MODEL, MotorNormMode.DEGREES) for j, i in zip(self.joints, config.servo_ids)},
@@ -77,6 +92,9 @@ class BlindgraspGripper(Robot):
         )
         # The SDK opens the port at PortHandler.baudrate; set it before connect so the handshake uses our rate.
         self.bus.port_handler.baudrate = config.baudrate
+        use_flushing_port(self.bus)
+        self.state = ServoStateReader(self.bus, MODEL, self.joints)
+        self._last_state_check = 0.0
         fs = config.force_sensor
         self.force = ForceSensorReader(
             fs.port,
@@ -114,13 +132,17 @@ class BlindgraspGripper(Robot):
     # --- connection ----------------------------------------------------------------------------------------------
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
+        if self.calibration_error is not None and calibrate:
+            raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
         with self._safety("connecting"):
             # The SDK sizes every reply timeout from this module constant (there is no per-port setting).
             dxl_port_handler.LATENCY_TIMER = self.config.latency_timer_ms
+            self.state.expected = {}
             self.bus.connect(handshake=False)
             self._register_atexit()
+            signals.install(self)
             self._handshake()
-            self._raise_on_hardware_errors()
+            self._check_servo_state()
             if self.calibration and not self._servos_match_calibration():
                 logger.info("Writing the calibration file %s to the servos.", self.calibration_fpath)
                 self._write_calibration()
@@ -139,7 +161,9 @@ class BlindgraspGripper(Robot):
         mode = OperatingMode[self.config.operating_mode].value
         current = amps_to_current_units(self.config.current_limit_a)
         r = self._retry
+        watchdog = self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS
         with self._safety("configuring the servos"):
+            self.state.expected = {}
             self.bus.disable_torque(num_retry=r)
             for j in self.joints:
                 # Status packets come back without the default 500 us delay.
@@ -151,21 +175,55 @@ class BlindgraspGripper(Robot):
                 self.bus.write("Position_I_Gain", j, self.config.position_i_gain, num_retry=r)
                 self.bus.write("Position_D_Gain", j, self.config.position_d_gain, num_retry=r)
                 self.bus.write("Profile_Velocity", j, self.config.profile_velocity, num_retry=r)
-            # Hold the present pose when torque comes on, instead of jumping to whatever Goal_Position held.
-            present = self._sync_read("Present_Position")
-            q = np.array([ticks_to_rad(present[j]) for j in self.joints])
-            outside = [j for j, v, lo, hi in zip(self.joints, q, self.lower, self.upper) if not lo <= v <= hi]
-            if outside:
-                logger.warning("Joints %s start outside their limits; the first actions bring them back.", outside)
-            for j, lo, hi in zip(self.joints, self.lower, self.upper):
-                goal = present[j]
-                if mode == OperatingMode.POSITION.value:  # the firmware refuses goals outside its position limits
-                    goal = min(max(goal, rad_to_ticks(lo)), rad_to_ticks(hi))
-                self.bus.write("Goal_Position", j, goal, normalize=False, num_retry=r)
-            self.bus.enable_torque(num_retry=r)
+                # 0 first: it also clears a watchdog error left by an earlier session (the register reads -1).
+                self.bus.write("Bus_Watchdog", j, 0, num_retry=r)
+                self.bus.write("Bus_Watchdog", j, watchdog, num_retry=r)
+            self._enable_torque_holding_pose()
+            self.state.expected = {
+                "Torque_Enable": 1,
+                "Position_P_Gain": self.config.position_p_gain,
+                "Position_I_Gain": self.config.position_i_gain,
+                "Position_D_Gain": self.config.position_d_gain,
+                "Bus_Watchdog": watchdog,
+                "Goal_Current": current,
+            }
+
+    def _enable_torque_holding_pose(self) -> None:
+        """Torque on with Goal_Position = the present pose, so nothing moves when the torque comes on."""
+        present = self._sync_read("Present_Position")
+        q = np.array([ticks_to_rad(present[j]) for j in self.joints])
+        outside = [j for j, v, lo, hi in zip(self.joints, q, self.lower, self.upper) if not lo <= v <= hi]
+        if outside and self.config.operating_mode == "POSITION":
+            # The firmware refuses goals outside its position limits, so holding the pose is impossible and a goal
+            # at the limit would jump there at full speed: refuse instead.
+            raise GripperSafetyStop(
+                f"Joints {outside} start outside their limits; in POSITION mode the firmware would jump them to the "
+                "limit. Move them inside by hand (torque is off) and connect again."
+            )
+        if outside:
+            logger.warning("Joints %s start outside their limits; actions bring them back at <= %.2f rad per step.",
+                           outside, self.config.max_relative_target)  # fmt: skip
+        for j in self.joints:
+            self.bus.write("Goal_Position", j, present[j], normalize=False, num_retry=self._retry)
+        self.bus.enable_torque(num_retry=self._retry)
+
+    @contextmanager
+    def torque_disabled(self):
+        """Torque off for the block (e.g. to move the fingers by hand), then on again holding the new pose. The
+        per-period state check knows the torque is off on purpose."""
+        expected = self.state.expected
+        with self._safety("turning the torque off"):
+            self.state.expected = {}
+            self.bus.disable_torque(num_retry=self._retry)
+        yield
+        if self.is_connected:  # a fault inside the block already stopped the gripper
+            with self._safety("turning the torque back on"):
+                self._enable_torque_holding_pose()
+                self.state.expected = expected
 
     def calibrate(self) -> None:
         with self._safety("calibrating"):
+            self.state.expected = {}
             self.bus.disable_torque(num_retry=self._retry)
             if self.calibration:
                 answer = input(
@@ -283,7 +341,7 @@ class BlindgraspGripper(Robot):
     def get_observation(self) -> dict[str, float]:
         with self._safety("reading the gripper state"):
             q = self._read_q()
-            self._raise_on_hardware_errors()
+            self._check_servo_state()
             forces = self.force.read()
             over = np.abs(forces) > self.config.force_sensor.overload_n
             if over.any():
@@ -296,8 +354,11 @@ class BlindgraspGripper(Robot):
 
     @check_if_not_connected
     def send_action(self, action: dict[str, float]) -> dict[str, float]:
-        """Absolute joint targets (rad), clipped to +-max_relative_target around the present position and then to
-        the joint limits, sent with one sync write. Returns the targets actually sent (after tick rounding)."""
+        """Absolute joint targets (rad), clipped to the joint limits and then to +-max_relative_target around the
+        present position, sent with one sync write. Returns the targets actually sent (after tick rounding).
+
+        The step bound comes last so it holds from the first step whatever the start pose: a joint that starts
+        outside its limits is brought back at <= max_relative_target per call, never in one jump."""
         missing = [k for k in spec.ACTION_NAMES if k not in action]
         if missing:
             raise KeyError(f"Action lacks {missing}; expected keys {list(spec.ACTION_NAMES)}")
@@ -306,38 +367,61 @@ class BlindgraspGripper(Robot):
             raise ValueError(f"Non-finite joint target {target.tolist()}; nothing was sent.")
         with self._safety("sending joint targets"):
             q = self._read_q()
+            if time.monotonic() - self._last_state_check > spec.CONTROL_DT:  # no get_observation this period
+                self._check_servo_state()
             bound = self.config.max_relative_target
-            target = np.clip(np.clip(target, q - bound, q + bound), self.lower, self.upper)
+            target = np.clip(np.clip(target, self.lower, self.upper), q - bound, q + bound)
             ticks = {j: rad_to_ticks(t) for j, t in zip(self.joints, target)}
             self.bus.sync_write("Goal_Position", ticks, normalize=False, num_retry=self._retry)
         return {f"{j}.pos": ticks_to_rad(ticks[j]) for j in self.joints}
 
     def _sync_read(self, register: str) -> dict[str, int]:
-        # The SDK matches status packets by ID only. A reply that arrived after an earlier transaction timed out
-        # would be taken for this register's data, so drop whatever is already waiting on the line.
-        self.bus.port_handler.ser.reset_input_buffer()
+        # Stale replies are dropped before every try by the port itself (port.py).
         return self.bus.sync_read(register, normalize=False, num_retry=self._retry)
 
     def _read_q(self) -> np.ndarray:
         raw = self._sync_read("Present_Position")
         return np.array([ticks_to_rad(raw[j]) for j in self.joints])
 
-    def _raise_on_hardware_errors(self) -> None:
-        status = self._sync_read("Hardware_Error_Status")
-        bad = {j: v for j, v in status.items() if v and self._confirm_hardware_error(j)}
+    def _check_servo_state(self) -> None:
+        """One sync read per control period (`servo_state.py`): hardware errors, then anything `configure()` set
+        that changed (a reset), then a watchdog that stopped servos during a pause of this process."""
+        report = self.state.check(self._retry)
+        self._last_state_check = time.monotonic()
+        bad = {j: v for j, v in report.hardware_error.items() if self._confirm_hardware_error(j)}
         if bad:
             detail = "; ".join(f"{j} (ID {self.bus.motors[j].id}): {_decode_hw_error(v)}" for j, v in bad.items())
             raise GripperHardwareError(
                 f"Servo hardware error: {detail}. The firmware keeps torque off until the servo is rebooted or "
                 "power-cycled; inspect the finger first."
             )
+        if report.changed:
+            detail = "; ".join(f"{j} (ID {self.bus.motors[j].id}): {', '.join(c)}" for j, c in report.changed.items())
+            raise GripperStateError(
+                f"Servo state changed without a command: {detail}. A servo reset (brown-out, loose power cable) "
+                "drops its torque and restores factory RAM settings; check the supply and cabling, then reconnect."
+            )
+        if report.watchdog_tripped:
+            self._rearm_watchdog(report.watchdog_tripped)
+
+    def _rearm_watchdog(self, joints: list[str]) -> None:
+        """The servos' bus watchdog stopped them because this process sent nothing for `bus_watchdog_ms` (a slow
+        save between episodes, an operator prompt). The host is evidently alive again: clear the error (goal
+        registers are read-only until then), hold the pose the servos stopped in, and arm the watchdog again."""
+        logger.warning("Bus watchdog stopped %s after more than %d ms without bus traffic; re-arming it.",
+                       joints, self.config.bus_watchdog_ms)  # fmt: skip
+        present = self._sync_read("Present_Position")
+        r = self._retry
+        for j in joints:
+            self.bus.write("Bus_Watchdog", j, 0, num_retry=r)
+            self.bus.write("Goal_Position", j, present[j], normalize=False, num_retry=r)
+            self.bus.write("Bus_Watchdog", j, self.state.expected["Bus_Watchdog"], num_retry=r)
 
     def _confirm_hardware_error(self, joint: str) -> bool:
         """Re-read one servo's Hardware_Error_Status (unicast, alert bit allowed): a corrupted or stale sync-read
         reply must not stop the gripper, a real error reads the same twice."""
         addr, _ = get_address(self.bus.model_ctrl_table, MODEL, "Hardware_Error_Status")
         for _ in range(1 + self._retry):
-            self.bus.port_handler.ser.reset_input_buffer()
             value, comm, _ = self.bus.packet_handler.read1ByteTxRx(
                 self.bus.port_handler, self.bus.motors[joint].id, addr
             )
@@ -365,6 +449,8 @@ class BlindgraspGripper(Robot):
                 note = "Torque is off on all servos."
             if isinstance(e, GripperSafetyStop):
                 err = type(e)(f"{e} {note}")
+            elif isinstance(e, PortLostError):
+                err = GripperBusError(f"Dynamixel port lost while {what}: {e} {note}")
             elif isinstance(e, ForceStreamError):
                 err = ForceSensorError(f"Force sensor failure while {what}: {e} {note}")
             elif isinstance(e, (ConnectionError, RuntimeError, OSError)):
@@ -382,6 +468,7 @@ class BlindgraspGripper(Robot):
     def _torque_off_all(self) -> list[int]:
         """Torque off on every servo; returns the IDs that did not confirm it."""
         ph, port = self.bus.packet_handler, self.bus.port_handler
+        self.state.expected = {}
         port.is_using = False  # an interrupted transaction may have left the SDK's busy flag set
         try:  # one broadcast packet reaches every live servo at once, even if one of them is dead
             self.bus.sync_write("Torque_Enable", 0, normalize=False)
@@ -390,7 +477,11 @@ class BlindgraspGripper(Robot):
         unconfirmed = []
         for m in self.bus.motors.values():
             for _ in range(3):
-                comm, error = ph.write1ByteTxRx(port, m.id, self._torque_addr, 0)
+                try:
+                    comm, error = ph.write1ByteTxRx(port, m.id, self._torque_addr, 0)
+                except PortLostError:  # nothing reaches any servo any more
+                    comm, error = -1, 0
+                    port.is_using = False
                 # 0x80 is only the hardware-alert flag: the write itself succeeded.
                 if comm == 0 and not error & 0x7F:
                     break
@@ -401,19 +492,21 @@ class BlindgraspGripper(Robot):
     def _stop(self) -> list[int]:
         """Latched stop: torque off, then close both ports."""
         unconfirmed = list(self.config.servo_ids)
-        if self.bus.is_connected:
-            try:
-                unconfirmed = self._torque_off_all()
-            finally:
+        with signals.deferred():  # a second Ctrl-C or SIGTERM must not cut the torque-off short
+            if self.bus.is_connected:
+                try:
+                    unconfirmed = self._torque_off_all()
+                finally:
+                    self._close()
+            else:
                 self._close()
-        else:
-            self._close()
         return unconfirmed
 
     def _close(self) -> None:
         if self.bus.is_connected:
             self.bus.port_handler.closePort()
         self.force.disconnect()
+        signals.uninstall(self)
         if self._atexit is not None:
             atexit.unregister(self._atexit)
             self._atexit = None
@@ -428,6 +521,37 @@ class BlindgraspGripper(Robot):
 
         self._atexit = _at_exit
         atexit.register(_at_exit)
+
+    def __exit__(self, exc_type, exc_value, traceback) -> None:
+        # After a latched safety stop the robot is already disconnected: LeRobot's __exit__ would raise
+        # DeviceNotConnectedError and hide the fault that stopped it. Let that fault propagate instead.
+        if self.is_connected:
+            self.disconnect()
+
+    def _load_calibration(self, fpath=None) -> None:
+        """Load and check the file by the rules `calibrate()` follows. A bad file is kept out of `self.calibration`
+        and refused by `connect()` (lerobot-calibrate still works: it connects with calibrate=False)."""
+        fpath = fpath or self.calibration_fpath
+        try:
+            super()._load_calibration(fpath)
+            bad = calib.problems(self.calibration, dict(zip(self.joints, self.config.servo_ids, strict=True)))
+        except Exception as e:  # not JSON, missing fields, wrong types
+            bad = [f"unreadable ({type(e).__name__}: {e})"]
+        if bad:
+            self.calibration = {}
+            self.calibration_error = calib.CalibrationFileError(
+                f"Calibration file {fpath} is invalid: {'; '.join(bad)}. Nothing was moved. Run "
+                f"lerobot-calibrate --robot.type={self.name} --robot.id={self.id} to replace it."
+            )
+            logger.error("%s", self.calibration_error)
+            return
+        self.calibration_error = None
+        # The position range is derived data: the config's joint limits are its authority (calibrate() builds it so).
+        cfg = self.config
+        self.calibration = {
+            j: dataclasses.replace(self.calibration[j], range_min=rad_to_ticks(lo), range_max=rad_to_ticks(hi))
+            for j, lo, hi in zip(self.joints, cfg.joint_lower, cfg.joint_upper, strict=True)
+        }
 
     @check_if_not_connected
     def disconnect(self) -> None:

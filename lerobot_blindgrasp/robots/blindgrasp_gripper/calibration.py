@@ -67,3 +67,35 @@ def build(
         )
         for j, lo, hi in zip(ids, lower, upper, strict=True)
     }
+
+
+HOMING_OFFSET_MAX = 1_044_479  # XM430 Homing_Offset(20) range, +-
+
+
+class CalibrationFileError(ValueError):
+    """A calibration file that parses but cannot be right; the robot refuses it before any motion."""
+
+
+def problems(calibration: dict, ids: dict[str, int]) -> list[str]:
+    """What is wrong with a loaded calibration, by the rules `calibrate()` builds it with: one record per joint under
+    the configured servo ID, Drive_Mode 0 or 1 (reverse), a Homing_Offset the
+    firmware accepts, and a position range 0 <= min < max <= 4095."""
+    out = []
+    missing, extra = [j for j in ids if j not in calibration], [j for j in calibration if j not in ids]
+    if missing:
+        out.append(f"joints {missing} are missing")
+    if extra:
+        out.append(f"unknown joints {extra}")
+    for j in ids:
+        c = calibration.get(j)
+        if c is None:
+            continue
+        if c.id != ids[j]:
+            out.append(f"{j}: servo ID {c.id}, the config says {ids[j]}")
+        if c.drive_mode not in (0, REVERSE_BIT):
+            out.append(f"{j}: drive_mode {c.drive_mode} (must be 0 or {REVERSE_BIT})")
+        if abs(c.homing_offset) > HOMING_OFFSET_MAX:
+            out.append(f"{j}: homing_offset {c.homing_offset} outside +-{HOMING_OFFSET_MAX}")
+        if not 0 <= c.range_min < c.range_max <= TICKS_PER_REV - 1:
+            out.append(f"{j}: range [{c.range_min}, {c.range_max}] must satisfy 0 <= min < max <= 4095")
+    return out

@@ -64,6 +64,11 @@ class BlindgraspGripperConfig(RobotConfig):
     profile_velocity: int = 0
     # Extra tries of a failed bus transaction before the gripper stops with a GripperBusError.
     bus_num_retry: int = 2
+    # The servos' own Bus_Watchdog (register 98, 20 ms units): a servo that receives no instruction packet for this
+    # long stops where it is (torque stays on, goal registers refuse writes) until the robot re-arms it. It bounds
+    # how long the gripper keeps moving after the host dies (SIGKILL, crash, unplugged USB): 200 ms = 4 control
+    # periods, long enough for a busy host not to trip it every few seconds. 0 disables it.
+    bus_watchdog_ms: int = 200
     # USB adapter latency timer (ms; FTDI/U2D2 default 16). dynamixel-sdk waits 2 x this + 2 ms for a reply, so
     # raise it on a loaded host or a slow USB hub instead of seeing timeouts.
     latency_timer_ms: int = 16
@@ -87,6 +92,8 @@ class BlindgraspGripperConfig(RobotConfig):
                     f"{j}: limits [{lo}, {hi}] must lie inside the sim's "
                     f"[{spec.JOINT_LOWER[k]}, {spec.JOINT_UPPER[k]}]"
                 )
+        if self.bus_watchdog_ms % 20 or not 0 <= self.bus_watchdog_ms <= 127 * 20:
+            raise ValueError("bus_watchdog_ms must be a multiple of 20 in [0, 2540] (0 disables the watchdog)")
         if not 1 <= self.latency_timer_ms <= 500:
             raise ValueError("latency_timer_ms must be in [1, 500]")
         if not 0 < self.max_relative_target <= spec.ACTION_BOUND_RAD:

@@ -21,3 +21,7 @@ class ForceOverloadError(GripperSafetyStop):
 
 class ForceSensorError(GripperSafetyStop, ConnectionError):
     """The fingertip force stream is stale, missing or reports a sensor fault."""
+
+
+class GripperStateError(GripperSafetyStop):
+    """A servo no longer holds what `configure()` set (torque, gains, current limit, watchdog): it was reset."""

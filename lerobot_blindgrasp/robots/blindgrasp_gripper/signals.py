@@ -1,0 +1,79 @@
+"""Process signals while the gripper is connected.
+
+- SIGTERM and SIGHUP (a job scheduler, `docker stop`, a closed terminal) kill a Python process outright by default:
+  no `finally`, no `atexit`, so lerobot-record or lerobot-eval would leave nine servos torqued. While a gripper is
+  connected, a signal that still has its default action raises `SystemExit(128 + signum)` in the main thread
+  instead, which unwinds exactly like Ctrl-C: the script's cleanup finalizes the dataset (the episode in progress
+  is discarded, as on Ctrl-C) and disconnects the robot (torque off). A handler someone already installed (LeRobot's
+  `ProcessSignalHandler` in lerobot-rollout) is left alone: it already ends the run cleanly.
+- `deferred()` guards the torque-off itself: a second Ctrl-C or SIGTERM arriving in the middle of it waits until the
+  torque is off, then takes effect.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import threading
+from contextlib import contextmanager
+
+logger = logging.getLogger(__name__)
+
+TERMINATION_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n))
+_DEFERRED_SIGNALS = (signal.SIGINT, *TERMINATION_SIGNALS)
+_owners: set[int] = set()  # ids of the connected robots that asked for the handlers
+_exiting = False
+
+
+def _on_termination(signum, frame):
+    global _exiting
+    if _exiting:  # the cleanup of the first one is running: let it finish
+        logger.warning("%s received again; still stopping.", signal.Signals(signum).name)
+        return
+    _exiting = True
+    logger.warning("%s received: stopping; the cleanup turns the gripper torque off.", signal.Signals(signum).name)
+    raise SystemExit(128 + signum)
+
+
+def _in_main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+def install(owner: object) -> None:
+    global _exiting
+    if not _in_main_thread():
+        return
+    if not _owners:
+        _exiting = False
+    _owners.add(id(owner))
+    for sig in TERMINATION_SIGNALS:
+        if signal.getsignal(sig) is signal.SIG_DFL:
+            signal.signal(sig, _on_termination)
+
+
+def uninstall(owner: object) -> None:
+    _owners.discard(id(owner))
+    if _owners or not _in_main_thread():
+        return
+    for sig in TERMINATION_SIGNALS:
+        if signal.getsignal(sig) is _on_termination:
+            signal.signal(sig, signal.SIG_DFL)
+
+
+@contextmanager
+def deferred():
+    """Hold SIGINT/SIGTERM/SIGHUP until the block ends, then deliver the first one that came."""
+    if not _in_main_thread():
+        yield
+        return
+    pending: list[int] = []
+    previous = {}
+    for sig in _DEFERRED_SIGNALS:
+        previous[sig] = signal.signal(sig, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+        if pending:
+            signal.raise_signal(pending[0])
