@@ -2,7 +2,8 @@
 
 It streams the frame format of `lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor` at `rate_hz`, with raw
 counts = offset + force / scale (+ noise), and can misbehave the ways a USB serial sensor does: dropped frames,
-garbage bytes between frames, frames with a bad CRC, a stalled stream, and channel-fault status bits.
+garbage bytes between frames, frames with a bad CRC, a stalled stream, channel-fault status bits, a different
+channel count (firmware/config mismatch) and an unplugged cable (`unplug`).
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ class ForceSensorEmulator(PtyDevice):
         self.garbage_prob = 0.0  # probability to emit 1-20 random bytes before a frame
         self.corrupt_next = 0  # send the next n frames with a wrong CRC
         self.status = 0  # channel fault bits
+        self.channels = 3  # channels per frame: firmware built for another number of load cells sends more or fewer
         self.sent = 0
 
     def counts_for(self, forces) -> np.ndarray:
@@ -62,7 +64,8 @@ class ForceSensorEmulator(PtyDevice):
             return
         forces = self.force_fn() if self.force_fn is not None else self.forces_n
         counts = self.counts_for(forces) + np.array([self.rng.gauss(0.0, self.noise) for _ in range(3)])
-        frame = encode_frame(seq, np.round(counts).astype(np.int64).tolist(), self.status)
+        counts = (np.round(counts).astype(np.int64).tolist() + [0] * self.channels)[: self.channels]
+        frame = encode_frame(seq, counts, self.status)
         if self.corrupt_next > 0:
             self.corrupt_next -= 1
             frame = frame[:-1] + bytes([frame[-1] ^ 0xFF])

@@ -128,6 +128,7 @@ class ForceSensorReader:
         self.dropped_frames = 0
         self._latest: Frame | None = None
         self._latest_t = 0.0
+        self._port_error: BaseException | None = None
         self._lock = threading.Lock()
         self._new_frame = threading.Condition(self._lock)
         self._serial = None
@@ -146,6 +147,8 @@ class ForceSensorReader:
         except (OSError, serial.SerialException) as e:
             raise ForceStreamError(f"Could not open the force-sensor port '{self.port}': {e}") from e
         self._serial.reset_input_buffer()
+        self._port_error = None
+        self._latest = None
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="force-sensor", daemon=True)
         self._thread.start()
@@ -172,8 +175,9 @@ class ForceSensorReader:
         while not self._stop.is_set():
             try:
                 data = self._serial.read(256)
-            except Exception as e:  # unplugged: stop reading; read() then reports a stale stream
+            except Exception as e:  # unplugged: stop reading; read() reports it
                 logger.error("force sensor read failed: %s", e)
+                self._port_error = e
                 return
             if not data:
                 continue
@@ -202,6 +206,11 @@ class ForceSensorReader:
         return True
 
     def _channels(self, frame: Frame) -> np.ndarray:
+        if max(self.channel_map) >= len(frame.counts):
+            raise ForceStreamError(
+                f"Force-sensor frames carry {len(frame.counts)} channels, but force_sensor.channel_map "
+                f"{self.channel_map} needs channel {max(self.channel_map)}: the firmware and the config disagree."
+            )
         return np.array([frame.counts[c] for c in self.channel_map], dtype=np.float64)
 
     def tare(self, duration_s: float, min_frames: int = 5) -> np.ndarray:
@@ -223,6 +232,8 @@ class ForceSensorReader:
         """(counts per channel, age of the newest frame in s, status bits)."""
         with self._lock:
             frame, t = self._latest, self._latest_t
+        if self._port_error is not None:
+            raise ForceStreamError(f"Force-sensor port '{self.port}' failed (USB cable unplugged?): {self._port_error}")
         if frame is None:
             raise ForceStreamError(f"No force-sensor frame received on '{self.port}'.")
         return self._channels(frame), time.monotonic() - t, frame.status

@@ -7,6 +7,7 @@ The action is q_glove, the retargeted hand pose, under the robot's action keys. 
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass
 from functools import cached_property
@@ -39,15 +40,43 @@ class GloveStreamLost(DeviceNotConnectedError):
     """No glove datagram for longer than `disconnect_timeout_s`."""
 
 
+class GloveCalibrationError(ValueError):
+    """A glove calibration (recorded now or loaded from a file) that would map the hand wrongly or to NaN."""
+
+
+def calibration_problems(open_pose: dict, fist_pose: dict, min_flex_range_deg: float) -> list[str]:
+    """The rules of `ManusGlove.calibrate()`, also applied to a loaded file: every channel the retargeting uses,
+    finite values, and open hand and fist distinct by `min_flex_range_deg` on every flexion joint (equal poses would
+    divide by zero in the retargeting)."""
+    keys = sorted(rt.REQUIRED_KEYS)
+    out = []
+    for name, pose in (("open", open_pose), ("fist", fist_pose)):
+        missing = [k for k in keys if k not in pose]
+        bad = [k for k in keys if k in pose and not (isinstance(pose[k], (int, float)) and math.isfinite(pose[k]))]
+        if missing:
+            out.append(f"{name} pose lacks {missing}")
+        if bad:
+            out.append(f"{name} pose has non-finite {bad}")
+    if out:
+        return out
+    open_f, fist_f = rt.glove_features(open_pose), rt.glove_features(fist_pose)
+    weak = [j for j, flex, o, f in zip(spec.JOINT_NAMES, rt.IS_FLEX, open_f, fist_f, strict=True)
+            if flex and abs(f - o) < min_flex_range_deg]  # fmt: skip
+    if weak:
+        out.append(f"flexion for {weak} changed by less than {min_flex_range_deg} deg between open hand and fist")
+    return out
+
+
 class ManusGlove(Teleoperator):
     config_class = ManusGloveConfig
     name = "manus_glove"
 
     def __init__(self, config: ManusGloveConfig):
+        self.config = config
+        self.calibration_error: GloveCalibrationError | None = None
         super().__init__(config)  # loads the calibration file through our _load_calibration, if there is one
         if not isinstance(self.calibration, GloveCalibration):
             self.calibration: GloveCalibration | None = None
-        self.config = config
         self.receiver = GloveReceiver(config.host, config.port, config.side, rt.REQUIRED_KEYS)
         self._last_target: np.ndarray | None = None
         self._holding = False
@@ -69,8 +98,25 @@ class ManusGlove(Teleoperator):
         return self.calibration is not None
 
     def _load_calibration(self, fpath: Path | None = None) -> None:
-        with open(fpath or self.calibration_fpath) as f, draccus.config_type("json"):
-            self.calibration = draccus.load(GloveCalibration, f)
+        """Load and check the file by `calibrate()`'s rules; a bad one is refused by `connect()`, and
+        lerobot-calibrate (connect(calibrate=False), then calibrate()) replaces it."""
+        fpath = fpath or self.calibration_fpath
+        try:
+            with open(fpath) as f, draccus.config_type("json"):
+                cal = draccus.load(GloveCalibration, f)
+            bad = calibration_problems(cal.open, cal.fist, self.config.min_flex_range_deg)
+        except Exception as e:  # not JSON, missing fields, wrong types
+            bad = [f"unreadable ({type(e).__name__}: {e})"]
+        if bad:
+            self.calibration = None
+            self.calibration_error = GloveCalibrationError(
+                f"Glove calibration file {fpath} is invalid: {'; '.join(bad)}. Run lerobot-calibrate "
+                f"--teleop.type={self.name} --teleop.id={self.id} to replace it."
+            )
+            logger.error("%s", self.calibration_error)
+            return
+        self.calibration_error = None
+        self.calibration = cal
 
     def _save_calibration(self, fpath: Path | None = None) -> None:
         with open(fpath or self.calibration_fpath, "w") as f, draccus.config_type("json"):
@@ -78,6 +124,8 @@ class ManusGlove(Teleoperator):
 
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
+        if self.calibration_error is not None and calibrate:
+            raise self.calibration_error
         self.receiver.open()
         if not self.receiver.wait_frames(1, self.config.connect_timeout_s):
             self.receiver.close()
@@ -110,16 +158,12 @@ class ManusGlove(Teleoperator):
         open_pose = self._average(self.config.calibration_s)
         input("FIST: close the hand fully, thumb over the fingers; hold it and press ENTER: ")
         fist_pose = self._average(self.config.calibration_s)
-        open_f = rt.glove_features(open_pose)
-        fist_f = rt.glove_features(fist_pose)
-        weak = [j for j, flex, o, f in zip(spec.JOINT_NAMES, rt.IS_FLEX, open_f, fist_f, strict=True)
-                if flex and abs(f - o) < self.config.min_flex_range_deg]
-        if weak:
-            raise ValueError(
-                f"Flexion for {weak} changed by less than {self.config.min_flex_range_deg} deg between open hand "
-                "and fist: check the glove fit and calibrate again."
-            )
+        bad = calibration_problems(open_pose, fist_pose, self.config.min_flex_range_deg)
+        if bad:
+            raise GloveCalibrationError(f"Glove calibration refused: {'; '.join(bad)}. Check the glove fit and "
+                                        "calibrate again.")  # fmt: skip
         self.calibration = GloveCalibration(open=open_pose, fist=fist_pose)
+        self.calibration_error = None
         self._save_calibration()
         logger.info("Glove calibration saved to %s", self.calibration_fpath)
 

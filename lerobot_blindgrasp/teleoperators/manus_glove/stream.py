@@ -8,7 +8,9 @@ A small bridge next to the vendor's SDK (MANUS Core SDK, or its ROS 2 `manus_dat
 - `ergonomics`: the SDK's ergonomics data, keyed by its type names (ThumbMCPSpread, ThumbMCPStretch,
   ThumbPIPStretch, ThumbDIPStretch, then {Index,Middle,Ring,Pinky}{Spread,MCPStretch,PIPStretch,DIPStretch}),
   in degrees as the SDK reports them. Only the keys the retargeting uses are required.
-- `seq`: uint32 counter of the bridge; datagrams older than the newest one (UDP reordering) are ignored.
+- `seq`: uint32 counter of the bridge; a datagram a few counts older than the newest one, arriving right after it,
+  was reordered on the way and is ignored. A larger step back is a restarted bridge (its counter starts again at
+  0) and is accepted.
 - `t`: sender wall time (s), informational; staleness is judged on the receiver's clock.
 - `side`: "left" | "right"; datagrams for the other hand are ignored (two gloves may share a port).
 
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import socket
 import threading
 import time
@@ -28,6 +31,11 @@ from dataclasses import dataclass
 logger = logging.getLogger(__name__)
 
 PROTO = "blindgrasp-glove/1"
+MAX_ABS_DEG = 360.0
+# UDP on one host or a LAN reorders by a few datagrams within milliseconds; anything else going backwards is a
+# restarted bridge.
+REORDER_WINDOW = 16
+REORDER_MAX_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -44,21 +52,40 @@ def encode(seq: int, ergonomics: dict[str, float], side: str = "right", t: float
     return json.dumps(msg).encode()
 
 
+def _number(value) -> float:
+    # JSON also yields bools, strings, lists, NaN, Infinity and integers too large for a float.
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"not a number: {value!r:.40}")
+    try:
+        out = float(value)
+    except OverflowError as e:
+        raise ValueError("number too large") from e
+    if not math.isfinite(out):
+        raise ValueError(f"non-finite number {out}")
+    return out
+
+
 def decode(datagram: bytes, required: set[str]) -> tuple[int, str, dict[str, float]]:
-    """Raises ValueError on anything that is not a complete message of this protocol."""
+    """Raises ValueError on anything that is not a complete, sane message of this protocol."""
     try:
         msg = json.loads(datagram.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+    except (UnicodeDecodeError, ValueError, RecursionError) as e:
         raise ValueError(f"not JSON: {e}") from e
     if not isinstance(msg, dict) or msg.get("proto") != PROTO:
         raise ValueError("not a blindgrasp-glove/1 message")
     ergo = msg.get("ergonomics")
     if not isinstance(ergo, dict) or not required <= ergo.keys():
-        raise ValueError(f"ergonomics lacks {sorted(required - set(ergo or {}))}")
-    values = {k: float(ergo[k]) for k in required}
-    if any(v != v or abs(v) > 360 for v in values.values()):
+        raise ValueError(f"ergonomics lacks {sorted(required - set(ergo if isinstance(ergo, dict) else {}))}")
+    values = {k: _number(ergo[k]) for k in required}
+    if any(abs(v) > MAX_ABS_DEG for v in values.values()):
         raise ValueError("ergonomics value out of range")
-    return int(msg["seq"]), str(msg.get("side", "right")), values
+    seq = msg.get("seq")
+    if isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq < 2**32:
+        raise ValueError(f"seq {seq!r:.40} is not a uint32")
+    side = msg.get("side", "right")
+    if side not in ("left", "right"):
+        raise ValueError(f"side {side!r:.40}")
+    return seq, side, values
 
 
 class GloveReceiver:
@@ -79,6 +106,9 @@ class GloveReceiver:
         return self._sock is not None
 
     def open(self) -> None:
+        # A frame from an earlier session must neither count as fresh nor shadow a restarted bridge's counter.
+        with self._lock:
+            self._latest = None
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.bind((self.host, self.port))
@@ -110,16 +140,19 @@ class GloveReceiver:
                 return
             try:
                 seq, side, ergo = decode(datagram, self.required)
-            except (ValueError, KeyError, TypeError) as e:
+            except Exception as e:  # whatever arrives, the listener must keep listening
                 self.rejected += 1
                 logger.debug("glove datagram rejected: %s", e)
                 continue
             if side != self.side:
                 continue
+            now = time.monotonic()
             with self._lock:
-                if self._latest is not None and 0 < (self._latest.seq - seq) % 2**32 < 2**31:
-                    continue  # older than what we have: reordered on the way
-                self._latest = GloveFrame(seq, side, ergo, time.monotonic())
+                last = self._latest
+                if (last is not None and 0 < (last.seq - seq) % 2**32 <= REORDER_WINDOW
+                        and now - last.received < REORDER_MAX_S):  # fmt: skip
+                    continue  # a little older than what we have, just after it: reordered on the way
+                self._latest = GloveFrame(seq, side, ergo, now)
                 self.frames += 1
                 self._lock.notify_all()
 
