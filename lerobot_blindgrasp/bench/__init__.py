@@ -1,6 +1,6 @@
-"""`blindgrasp-bench {sim,demos,policy}`: benchmarks that print one table per run (and JSON with --json).
+"""`blindgrasp-bench {sim,teacher,demos,policy}`: benchmarks that print one table per run (and JSON with --json).
 
-Each subcommand lives in its own module (`bench/sim.py`, `bench/demos.py`, `bench/policy.py`) exposing
+Each subcommand lives in its own module (`bench/sim.py`, `bench/teacher.py`, `bench/demos.py`, `bench/policy.py`) exposing
 `add_arguments(parser)` and `run(args) -> dict`; only the chosen one is imported.
 """
 
@@ -11,7 +11,7 @@ import importlib
 import json
 import sys
 
-SUBCOMMANDS = ("sim", "demos", "policy")
+SUBCOMMANDS = ("sim", "teacher", "demos", "policy")
 
 
 def main(argv=None) -> None:

@@ -31,6 +31,8 @@ log = logging.getLogger(__name__)
 class GraspEnvConfig:
     num_envs: int = 18
     objects: tuple[str, ...] = objects.PAPER_OBJECTS  # assigned round-robin: env i gets objects[i % len]
+    # Relative share of envs per object (same order as `objects`); None: even, as the paper's 18 x 500.
+    object_weights: tuple[float, ...] | None = None
     seed: int = 0  # env i uses seed + i
     episode_s: float = spec.EPISODE_S
     dr: randomization.DomainRandomization = field(default_factory=lambda: randomization.PAPER_DR)
@@ -43,6 +45,30 @@ class GraspEnvConfig:
         self.objects = objects.resolve_objects(self.objects)
         if self.num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {self.num_envs}")
+        if self.object_weights is not None:
+            w = np.asarray(self.object_weights, dtype=float)
+            if w.shape != (len(self.objects),) or not np.isfinite(w).all() or (w <= 0).any():
+                raise ValueError(
+                    f"object_weights needs one positive weight per object ({len(self.objects)}), got {self.object_weights}"
+                )
+
+
+def allocate_objects(num_envs: int, num_objects: int, weights: tuple[float, ...] | None) -> np.ndarray:
+    """Object index of each env. Even weights give the round-robin i % num_objects. Otherwise each object gets
+    its weighted share of envs (largest remainders, at least one env each), interleaved so that any prefix of the
+    batch holds a mix of objects."""
+    if weights is None:
+        return np.arange(num_envs) % num_objects
+    w = np.asarray(weights, dtype=float) / np.sum(weights)
+    counts = np.minimum(1, num_envs // num_objects) + np.zeros(num_objects, dtype=np.int64)
+    share = w * (num_envs - counts.sum())
+    counts += np.floor(share).astype(np.int64)
+    rest = num_envs - counts.sum()
+    counts[np.argsort(-(share - np.floor(share)), kind="stable")[:rest]] += 1
+    # Interleave: sort envs by their fractional position within their object's run.
+    obj = np.repeat(np.arange(num_objects), counts)
+    pos = np.concatenate([(np.arange(c) + 0.5) / c for c in counts])
+    return obj[np.argsort(pos, kind="stable")]
 
 
 class BatchedGraspEnv:
@@ -57,7 +83,7 @@ class BatchedGraspEnv:
         n = self.num_envs = cfg.num_envs
         self.max_episode_steps = int(round(cfg.episode_s * spec.CONTROL_HZ))
         self.env_seeds = (np.uint64(cfg.seed) + np.arange(n, dtype=np.uint64)).astype(np.uint64)
-        self.object_index = np.arange(n) % len(cfg.objects)  # index into cfg.objects
+        self.object_index = allocate_objects(n, len(cfg.objects), cfg.object_weights)  # index into cfg.objects
         self.object_names = [cfg.objects[k] for k in self.object_index]
         obj_specs = [objects.get_object(name) for name in cfg.objects]
         self.rest_height = np.array([obj_specs[k].rest_height for k in self.object_index])

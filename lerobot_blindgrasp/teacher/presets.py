@@ -9,7 +9,7 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass, field, replace
 
-from lerobot_blindgrasp.sim import rewards
+from lerobot_blindgrasp.sim import objects, rewards
 
 
 def _ppo_cfg(
@@ -69,6 +69,8 @@ class TeacherPreset:
     deviations: tuple[str, ...] = ()
     eval_episodes_per_object: int = 20
     external_force: bool = True  # Table II random pushes during training
+    # Share of training envs per object (order of objects.PAPER_OBJECTS); None: even, as the paper.
+    object_weights: tuple[float, ...] | None = None
 
     def runner_cfg(self) -> dict:
         return copy.deepcopy(self.runner)
@@ -83,6 +85,11 @@ PAPER = TeacherPreset(
     ),
 )
 
+_NO_PUSHES = (
+    "no random pushes: 27 % of episodes in which the fingers never move end with a sphere or capsule rolled out of "
+    "the workspace, which only adds reward noise on 2 cores (demos and eval run without pushes anyway)"
+)
+
 _CPU_DEVIATIONS = (
     "reach term w=0.5, 1 - tanh(20 d) with d from each tip END to the object: r_t is 0 until the object lifts, so "
     "PPO without it learns to keep still (feasibility run in issue #3)",
@@ -93,19 +100,36 @@ _CPU_DEVIATIONS = (
     "side-by-side 150-iteration run (docs/results/teacher_cpu.md)",
     "empirical observation normalization: privileged forces span 0-100 N next to radians",
     "1026 envs x 24 steps, 4 minibatches: what 2 cores step in ~4 s per iteration",
-    "no random pushes: 27 % of episodes in which the fingers never move end with a sphere or capsule rolled out of "
-    "the workspace, which only adds reward noise on 2 cores (demos and eval run without pushes anyway)",
+    "actor and critic MLPs [256, 128, 64] instead of [512, 256, 128]: the PPO update on 1 CPU thread took longer "
+    "than collection (4.5 s vs 3.5 s per iteration); the smaller MLPs cut it to 1.9 s (blindgrasp-bench teacher, "
+    "docs/results/teacher_cpu_v2.md)",
+    "envs per object weighted by difficulty (large 0.5, medium 1, small 1.5, capsules x1.5) instead of even: "
+    "the first cpu teacher was at 90-100 % on large objects and 0-20 % on small ones and capsules",
+    _NO_PUSHES,
 )
+
+
+def difficulty_weights(size: dict[str, float], capsule: float) -> tuple[float, ...]:
+    """Env share per paper object: a factor per size label, times `capsule` for capsules (they roll)."""
+    return tuple(
+        size[objects.get_object(n).size_label] * (capsule if objects.get_object(n).mjcf_type == "capsule" else 1.0)
+        for n in objects.PAPER_OBJECTS
+    )
+
+
+# The 50 % cpu teacher (iteration 618) lifted large objects 90-100 %, medium 50 %, small 0-20 % and capsules
+# 0-40 % (docs/results/teacher_cpu.md): samples go where the policy still fails.
+_CPU_OBJECT_WEIGHTS = difficulty_weights({"large": 0.5, "medium": 1.0, "small": 1.5}, capsule=1.5)
 
 _CPU_REWARD = replace(rewards.PAPER_REWARD, w_reach=0.5, reach_scale=20.0, w_touch=0.5)
 
 CPU = TeacherPreset(
     name="cpu",
     num_envs=1026,  # 18 objects x 57
-    max_iterations=1200,
+    max_iterations=3000,
     runner=_ppo_cfg(
         num_steps_per_env=24,
-        hidden_dims=[512, 256, 128],
+        hidden_dims=[256, 128, 64],
         init_std=0.5,
         obs_normalization=True,
         save_interval=25,
@@ -114,6 +138,7 @@ CPU = TeacherPreset(
     reward=_CPU_REWARD,
     deviations=_CPU_DEVIATIONS,
     external_force=False,
+    object_weights=_CPU_OBJECT_WEIGHTS,
 )
 
 QUICK = TeacherPreset(
@@ -130,7 +155,7 @@ QUICK = TeacherPreset(
     ),
     reward=_CPU_REWARD,
     deviations=_CPU_DEVIATIONS[:4]
-    + _CPU_DEVIATIONS[5:]
+    + (_NO_PUSHES,)
     + ("144 envs, MLP [128, 64], 30 iterations: minutes, for the pipeline and CI",),
     eval_episodes_per_object=4,
     external_force=False,

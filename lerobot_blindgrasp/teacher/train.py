@@ -35,7 +35,14 @@ log = logging.getLogger("blindgrasp.teacher")
 
 def build_env_config(preset: presets.TeacherPreset, num_envs: int, seed: int, nthread: int = 0) -> GraspEnvConfig:
     dr = randomization.PAPER_DR if preset.external_force else randomization.PAPER_DR.without_external_force()
-    return GraspEnvConfig(num_envs=num_envs, seed=seed, reward=preset.reward, dr=dr, nthread=nthread)
+    return GraspEnvConfig(
+        num_envs=num_envs,
+        seed=seed,
+        reward=preset.reward,
+        dr=dr,
+        nthread=nthread,
+        object_weights=preset.object_weights,
+    )
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -75,13 +82,14 @@ def train(args: argparse.Namespace) -> Path:
         "runner": preset.runner_cfg(),
         "reward": dataclasses.asdict(preset.reward),
         "external_force": preset.external_force,
+        "object_weights": preset.object_weights and list(preset.object_weights),
         "deviations": list(preset.deviations),
         "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
     }
     cfg_path = out / CONFIG_NAME
     if cfg_path.exists():
         old = json.loads(cfg_path.read_text())
-        for key in ("preset", "variant", "num_envs", "runner", "reward"):
+        for key in ("preset", "variant", "num_envs", "runner", "reward", "object_weights"):
             if old.get(key) != config[key]:
                 raise SystemExit(f"{out} holds a run with a different {key!r}; use another --output-dir")
     else:

@@ -1,0 +1,130 @@
+"""Whole-loop PPO throughput: collection vs update time per iteration, against raw physics at the same env count.
+
+    blindgrasp-bench teacher --preset cpu --iterations 6 --json
+
+Builds the preset's env and rsl-rl `OnPolicyRunner` exactly as `blindgrasp-train-teacher` does (no logging to
+disk), runs a warm-up iteration and then `--iterations` timed ones. Per iteration it splits wall time into
+collection (env steps + the actor/critic forward passes rsl-rl does while acting) and update (`PPO.update`).
+In the same process it times raw physics (`Batch.step` with the same per-env models, substeps and threads, no
+observation, reward or policy work) for as many control steps, so the ratio whole-loop / raw says how much of the
+machine the learner leaves to physics. Measured in one run because the machine may be shared.
+
+Overrides (`--hidden-dims`, `--mini-batches`, `--epochs`, `--torch-threads`, `--num-envs`) let levers be compared
+side by side without editing a preset.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from lerobot_blindgrasp.teacher import presets
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--preset", default="cpu", choices=sorted(presets.PRESETS))
+    p.add_argument("--iterations", type=int, default=5, help="timed PPO iterations (after one warm-up)")
+    p.add_argument("--num-envs", type=int, default=None)
+    p.add_argument("--threads", type=int, default=0, help="physics threads (0: all CPUs)")
+    p.add_argument("--torch-threads", type=int, default=None, help="torch threads (default: the preset's)")
+    p.add_argument("--hidden-dims", type=int, nargs="+", default=None)
+    p.add_argument("--mini-batches", type=int, default=None)
+    p.add_argument("--epochs", type=int, default=None)
+
+
+def _preset(args) -> presets.TeacherPreset:
+    preset = presets.get_preset(args.preset)
+    runner = preset.runner_cfg()
+    if args.hidden_dims:
+        runner["actor"]["hidden_dims"] = list(args.hidden_dims)
+        runner["critic"]["hidden_dims"] = list(args.hidden_dims)
+    if args.mini_batches:
+        runner["algorithm"]["num_mini_batches"] = args.mini_batches
+    if args.epochs:
+        runner["algorithm"]["num_learning_epochs"] = args.epochs
+    from dataclasses import replace
+
+    return replace(preset, runner=runner)
+
+
+def _raw_control_steps_per_s(env, steps: int) -> float:
+    """Raw `Batch.step` on the env's models from its current state, replaying the env's own last targets."""
+    saved = env.batch.state.copy()
+    ctrl = env.batch.bind("ctrl")
+    target = ctrl.copy()
+    t = time.perf_counter()
+    for _ in range(steps):
+        ctrl[:] = target
+        env.batch.step(nstep=env.cfg.physics.substeps)
+    wall = time.perf_counter() - t
+    env.batch.state[:] = saved
+    return steps * env.num_envs / wall
+
+
+def run(args) -> dict:
+    from rsl_rl.runners import OnPolicyRunner
+
+    from lerobot_blindgrasp.sim.env import BatchedGraspEnv
+    from lerobot_blindgrasp.teacher.train import build_env_config
+    from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
+
+    preset = _preset(args)
+    num_envs = args.num_envs or preset.num_envs
+    torch_threads = args.torch_threads or 1  # blindgrasp-train-teacher's default
+    torch.set_num_threads(torch_threads)
+    env = BatchedGraspEnv(build_env_config(preset, num_envs, seed=1, nthread=args.threads))
+    vec = RslRlGraspEnv(env)
+    runner_cfg = preset.runner_cfg()
+    steps_per_it = runner_cfg["num_steps_per_env"]
+    runner = OnPolicyRunner(vec, runner_cfg, log_dir=None, device="cpu")  # no log dir: nothing written
+    update_times: list[float] = []
+    inner_update = runner.alg.update
+
+    def timed_update():
+        t = time.perf_counter()
+        out = inner_update()
+        update_times.append(time.perf_counter() - t)
+        return out
+
+    runner.alg.update = timed_update
+    runner.learn(1, init_at_random_ep_len=True)  # warm-up: allocations, first normalizer stats
+    update_times.clear()
+    t = time.perf_counter()
+    runner.learn(args.iterations)
+    wall = time.perf_counter() - t
+    update = float(np.sum(update_times))
+    collect = wall - update
+    raw = _raw_control_steps_per_s(env, steps_per_it * 2)
+    env_steps = args.iterations * steps_per_it * num_envs
+    loop = env_steps / wall
+    result = {
+        "preset": preset.name,
+        "num_envs": num_envs,
+        "physics_threads": env.batch.nthread,
+        "torch_threads": torch_threads,
+        "hidden_dims": runner_cfg["actor"]["hidden_dims"],
+        "mini_batches": runner_cfg["algorithm"]["num_mini_batches"],
+        "epochs": runner_cfg["algorithm"]["num_learning_epochs"],
+        "iterations": args.iterations,
+        "collect_s_per_it": collect / args.iterations,
+        "update_s_per_it": update / args.iterations,
+        "update_over_collect": update / collect,
+        "loop_env_steps_per_s": loop,
+        "raw_control_steps_per_s": raw,
+        "loop_over_raw": loop / raw,
+    }
+    if not args.json:
+        print(
+            f"blindgrasp-bench teacher: preset {preset.name}, {num_envs} envs, {env.batch.nthread} physics threads, "
+            f"{torch_threads} torch threads, MLP {result['hidden_dims']}, {result['epochs']} epochs x "
+            f"{result['mini_batches']} minibatches"
+        )
+        print("| collect s/it | update s/it | update / collect | loop steps/s | raw ctrl steps/s | loop / raw |")
+        print("|---:|---:|---:|---:|---:|---:|")
+        print(
+            f"| {result['collect_s_per_it']:.2f} | {result['update_s_per_it']:.2f} | "
+            f"{result['update_over_collect']:.2f} | {loop:,.0f} | {raw:,.0f} | {result['loop_over_raw']:.2f} |"
+        )
+    return result

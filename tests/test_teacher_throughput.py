@@ -1,0 +1,54 @@
+"""Teacher sample allocation (env share per object) and the whole-loop PPO benchmark."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig, allocate_objects
+from lerobot_blindgrasp.teacher import presets
+
+
+def test_weighted_allocation_follows_weights_and_interleaves():
+    w = presets.CPU.object_weights
+    idx = allocate_objects(1026, 18, w)
+    counts = np.bincount(idx, minlength=18)
+    assert counts.sum() == 1026 and counts.min() >= 1
+    expected = np.asarray(w) / np.sum(w) * 1026
+    assert np.abs(counts - expected).max() <= 2  # every object at least one env, then shares by weight
+    small_capsule = objects.PAPER_OBJECTS.index("capsule_small")
+    large_cuboid = objects.PAPER_OBJECTS.index("cuboid_a_large")
+    assert counts[small_capsule] > 4 * counts[large_cuboid]
+    # Any prefix of the batch already mixes every object (no long run of one object).
+    assert set(idx[:60]) == set(range(18))
+
+
+def test_even_weights_are_the_paper_round_robin():
+    assert (allocate_objects(100, 18, None) == np.arange(100) % 18).all()
+    assert (np.bincount(allocate_objects(36, 18, (1.0,) * 18)) == 2).all()
+
+
+def test_env_uses_the_weighted_allocation_and_rejects_bad_weights():
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=40, object_weights=presets.CPU.object_weights))
+    counts = {n: env.object_names.count(n) for n in objects.PAPER_OBJECTS}
+    assert counts["capsule_small"] > counts["cuboid_a_large"]
+    with pytest.raises(ValueError, match="one positive weight per object"):
+        GraspEnvConfig(num_envs=4, object_weights=(1.0, -1.0))
+
+
+def test_bench_teacher_reports_collection_update_and_raw_physics():
+    out = subprocess.run(
+        [sys.executable, "-c", "from lerobot_blindgrasp.bench import main; main()", "teacher", "--preset", "quick",
+         "--num-envs", "18", "--iterations", "1", "--json"],
+        capture_output=True, text=True, timeout=300, check=True,
+    ).stdout
+    r = json.loads(out[out.index("{"):])
+    assert r["num_envs"] == 18 and r["hidden_dims"] == [128, 64]
+    assert r["collect_s_per_it"] > 0 and r["update_s_per_it"] > 0 and r["raw_control_steps_per_s"] > 0
+    assert r["update_over_collect"] == pytest.approx(r["update_s_per_it"] / r["collect_s_per_it"])
+    assert r["loop_over_raw"] == pytest.approx(r["loop_env_steps_per_s"] / r["raw_control_steps_per_s"])
