@@ -61,7 +61,8 @@ def test_protocol_round_trip_and_rejections():
         (b"\xff\xfe garbage", "not JSON"),
         (b'{"proto": "other/1", "seq": 1}', "not a blindgrasp-glove/1"),
         (encode(1, {k: 0.0 for k in sorted(REQUIRED_KEYS)[1:]}), "lacks"),
-        (encode(1, {**ergo, "IndexSpread": float("nan")}), "out of range"),
+        (encode(1, {**ergo, "IndexSpread": float("nan")}), "non-finite"),
+        (encode(1, {**ergo, "IndexSpread": 400.0}), "out of range"),
     ]:
         with pytest.raises(ValueError, match=why):
             decode(bad, REQUIRED_KEYS)
