@@ -2,6 +2,9 @@
 
 Sources: teacher `eval.json` (blindgrasp-eval-teacher), its TensorBoard scalars, the demos' `yield_report.json`,
 the student's `lerobot-train` log (loss lines) and lerobot-eval's `eval_info.json` (per task = per object).
+
+Teacher and student are evaluated on the same start states (episode k of object o is evaluation index seed + k in
+both tools), so the report pairs them episode by episode. Every rate carries its 95 % Wilson interval.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from lerobot_blindgrasp import rates  # noqa: E402
 from lerobot_blindgrasp.envs.sim_env import object_for_task_id  # noqa: E402
 from lerobot_blindgrasp.plots import plot_curves, teacher_curves  # noqa: E402
 from lerobot_blindgrasp.sim import objects  # noqa: E402
@@ -23,13 +27,25 @@ from lerobot_blindgrasp.sim import objects  # noqa: E402
 _LOSS_LINE = re.compile(r"step:\s*([\d.]+[KMB]?)\b.*?\bloss:\s*([\d.eE+-]+)")
 
 
+def student_successes(eval_info: dict) -> dict[str, list[bool]]:
+    """Per-object episode successes, in episode (= evaluation index) order, from lerobot-eval's per_task."""
+    return {
+        object_for_task_id(int(e["task_id"])): [bool(x) for x in e["metrics"].get("successes", [])]
+        for e in eval_info.get("per_task", [])
+    }
+
+
 def student_success(eval_info: dict) -> dict[str, float]:
     """Per-object success rate from lerobot-eval's per_task entries."""
-    out = {}
-    for entry in eval_info.get("per_task", []):
-        succ = entry["metrics"].get("successes", [])
-        out[object_for_task_id(int(entry["task_id"]))] = float(np.mean(succ)) if succ else 0.0
-    return out
+    return {o: float(np.mean(f)) if f else 0.0 for o, f in student_successes(eval_info).items()}
+
+
+def paired_counts(teacher: list[bool], student: list[bool]) -> dict[str, int]:
+    """Episodes on the same start state: both succeed, only the teacher, only the student, neither."""
+    n = min(len(teacher), len(student))
+    t, s = np.asarray(teacher[:n], bool), np.asarray(student[:n], bool)
+    return {"both": int((t & s).sum()), "teacher_only": int((t & ~s).sum()),
+            "student_only": int((~t & s).sum()), "neither": int((~t & ~s).sum())}
 
 
 def student_loss_curve(log_text: str) -> tuple[list[float], list[float]]:
@@ -58,12 +74,24 @@ def _bar_chart(path: Path, names: list[str], series: dict[str, list[float]], tit
     plt.close(fig)
 
 
+def _teacher_lines(record: dict) -> list[str]:
+    t = record.get("teacher") or {}
+    if not t:
+        return []
+    lines = ["## Teacher", "",
+             f"**{t['source']}**: `{t['path']}` (`{t['file']}`, iteration {t['iteration']}, preset "
+             f"`{t.get('preset')}`, sha256 `{t['sha256'][:12]}…`)."]
+    if t.get("eval_reused_from"):
+        lines.append(f"Its success below is its recorded eval on the same start states (`{t['eval_reused_from']}`).")
+    return lines + [""]
+
+
 def write_report(out: Path, record: dict, bigger: str) -> Path:
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
     preset = record["preset"]["name"]
-    names = list(objects.PAPER_OBJECTS)
     lines = [f"# Blind-grasp pipeline report: preset `{preset}`", ""]
+    lines += _teacher_lines(record)
 
     # --- stages
     lines += ["## Stages", "", "| stage | wall time | command |", "|---|---:|---|"]
@@ -73,40 +101,53 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
 
     # --- success per object
     teacher = json.loads((out / "teacher_eval" / "eval.json").read_text())
-    t_det = teacher["modes"]["deterministic"]["per_object"]
-    t_sto = teacher["modes"].get("stochastic", {}).get("per_object", {})
+    t_det = {o: r["successes"] for o, r in teacher["modes"]["deterministic"]["per_object"].items()}
+    t_sto = {o: r["successes"] for o, r in teacher["modes"].get("stochastic", {}).get("per_object", {}).items()}
     eval_info = json.loads((out / "student_eval" / "eval_info.json").read_text())
-    stu = student_success(eval_info)
-    n_stu = eval_info.get("overall", {}).get("n_episodes")
+    stu = student_successes(eval_info)
+    names = [n for n in objects.PAPER_OBJECTS if n in stu] + [n for n in stu if n not in objects.PAPER_OBJECTS]
     series = {
-        "teacher (deterministic)": [t_det[n]["success_rate"] * 100 for n in names],
-        "teacher (stochastic)": [t_sto.get(n, {}).get("success_rate", 0) * 100 for n in names],
-        "student (lerobot-eval)": [stu.get(n, 0.0) * 100 for n in names],
+        "teacher (deterministic)": [100 * np.mean(t_det.get(n) or [0]) for n in names],
+        "teacher (stochastic)": [100 * np.mean(t_sto.get(n) or [0]) for n in names],
+        "student (lerobot-eval)": [100 * np.mean(stu[n] or [0]) for n in names],
     }
     _bar_chart(figs / "success_per_object.png", names, series, "Sim success per object", "success (%)")
+    seed = record.get("seeds", {}).get("eval_index", teacher.get("seed"))
+    n_ep = len(next(iter(stu.values()), []))
     lines += [
         "## Success per object (sim)",
         "",
-        f"Teacher: `blindgrasp-eval-teacher`, {teacher['episodes_per_object']} episodes per object and mode. "
-        f"Student: `lerobot-eval --env.type=blindgrasp --env.task={record['preset'].get('eval_task', 'all')}`, "
-        f"{n_stu} episodes in all (objects not evaluated show 0). Success = lifted "
-        "≥ 1.5 cm and held ≥ 1 s within 10 s; the paper's randomization and noise, no pushes.",
+        f"Student: `lerobot-eval --env.type=blindgrasp --env.task={record['preset'].get('eval_task', 'all')} "
+        f"--seed={seed}`; teacher: `blindgrasp-eval-teacher --seed {seed}`. Both ran the same {n_ep} start states "
+        "per object (evaluation indices from the seed, each object its own draws, none used in teacher training "
+        "or demo collection). Success = lifted ≥ 1.5 cm and held ≥ 1 s within 10 s; the paper's randomization and "
+        "noise, no pushes. Rates with their 95 % Wilson interval and counts. *paired* = start states on which "
+        "both / only the deterministic teacher / only the student succeeded.",
         "",
         "![success](figures/success_per_object.png)",
         "",
-        "| object | teacher det. | teacher stoch. | student |",
-        "|---|---:|---:|---:|",
+        "| object | teacher det. | teacher stoch. | student | paired both / teacher only / student only |",
+        "|---|---:|---:|---:|---:|",
     ]
-    for i, n in enumerate(names):
-        lines.append(f"| {n} | {series['teacher (deterministic)'][i]:.0f} % | "
-                     f"{series['teacher (stochastic)'][i]:.0f} % | {series['student (lerobot-eval)'][i]:.0f} % |")
-    means = {k: float(np.mean(v)) for k, v in series.items()}
-    lines.append("| **mean** | " + " | ".join(f"**{means[k]:.1f} %**" for k in series) + " |")
+    pooled = {"det": [], "sto": [], "stu": []}
+    for n in names:
+        det, sto, st = t_det.get(n, []), t_sto.get(n, []), stu[n]
+        pooled["det"] += det
+        pooled["sto"] += sto
+        pooled["stu"] += st
+        p = paired_counts(det, st)
+        lines.append(f"| {n} | {rates.format_rate(*rates.count(det))} | {rates.format_rate(*rates.count(sto))} | "
+                     f"{rates.format_rate(*rates.count(st))} | {p['both']} / {p['teacher_only']} / {p['student_only']} |")
+    p = paired_counts(pooled["det"], pooled["stu"])
+    lines.append(f"| **all {len(names)}** | **{rates.format_rate(*rates.count(pooled['det']), digits=1)}** | "
+                 f"**{rates.format_rate(*rates.count(pooled['sto']), digits=1)}** | "
+                 f"**{rates.format_rate(*rates.count(pooled['stu']), digits=1)}** | "
+                 f"**{p['both']} / {p['teacher_only']} / {p['student_only']}** |")
     lines.append("")
 
     # --- learning curves
     lines += ["## Learning curves", ""]
-    tc = teacher_curves(out / "teacher")
+    tc = teacher_curves(out / "teacher") if (out / "teacher").is_dir() else {}  # only when trained in this run
     if tc:
         plot_curves(figs / "teacher_curves.png", tc, "Teacher (PPO)")
         lines += ["![teacher](figures/teacher_curves.png)", ""]
@@ -124,12 +165,14 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
             continue
         y = json.loads(path.read_text())
         rows = y["objects"]
-        _bar_chart(figs / f"yield_{sub}.png", names, {"yield (%)": [rows.get(n, {}).get("yield", 0) * 100 for n in names]},
+        demo_names = [n for n in objects.PAPER_OBJECTS if n in rows] or list(rows)
+        _bar_chart(figs / f"yield_{sub}.png", demo_names,
+                   {"yield (%)": [rows.get(n, {}).get("yield", 0) * 100 for n in demo_names]},
                    f"Demo yield ({label})", "episodes passing curation (%)")
         tot = y["total"]
         lines += [
-            f"**{label}** (`{sub}/`): {tot['kept']} episodes written from {tot['rollouts']} rollouts, "
-            f"yield {tot['yield'] * 100:.1f} %.",
+            f"**{label}** (`{sub}/`): {tot['kept']} episodes written from {tot['rollouts']} rollouts; "
+            f"{rates.format_rate(tot['passed'], tot['rollouts'], digits=1)} of the rollouts passed curation.",
             "",
             f"![yield](figures/yield_{sub}.png)",
             "",

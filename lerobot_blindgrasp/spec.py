@@ -133,3 +133,44 @@ JOINTS: tuple[JointInfo, ...] = tuple(
     JointInfo(JOINT_NAMES[i], SERVO_IDS[i], FINGERS[i // 3], i % 3, float(JOINT_LOWER[i]), float(JOINT_UPPER[i]))
     for i in range(NUM_JOINTS)
 )
+
+
+# --- Seed ranges (evaluation protocol) ---------------------------------------------------------------------------
+# An env's start states (physics draw, start pose, object offset, sensor noise) are a function of (env seed, episode
+# counter), and env i of a batch uses seed base + i. Each stage takes its env seeds from its own range, so no start
+# state seen while training the teacher or making demos is ever used to measure a policy. The ranges are far wider
+# than any run needs (a demo collection advances its base by num_envs per env rebuild).
+SEED_RANGE_SIZE = 1 << 40
+SEED_RANGES: dict[str, range] = {
+    "teacher_train": range(0, SEED_RANGE_SIZE),
+    "demos": range(SEED_RANGE_SIZE, 2 * SEED_RANGE_SIZE),
+    "eval": range(2 * SEED_RANGE_SIZE, 3 * SEED_RANGE_SIZE),
+}
+TEACHER_TRAIN_SEED = 1  # blindgrasp-train-teacher's default --seed: env seeds 1..num_envs
+DEMO_SEED = SEED_RANGES["demos"].start  # blindgrasp-collect-demos' default --seed
+# Evaluation seeds are small per-episode indices, as lerobot-eval gives them (its --seed, +1 per episode). The env
+# maps (index, object) into the eval range, one block of EVAL_TASK_STRIDE per object (task id = catalogue index),
+# so no two objects share a draw and no index reaches the training or demo ranges. The teacher eval uses the same
+# map, so both tools evaluate on the same start states for the same --seed.
+EVAL_TASK_STRIDE = 1 << 32
+EVAL_SEED = 1000  # lerobot-eval's own default --seed
+
+
+def eval_env_seed(seed: int, task_id: int) -> int:
+    """The env seed of evaluation episode index `seed` on object `task_id` (its catalogue index)."""
+    seed, task_id = int(seed), int(task_id)
+    if not 0 <= seed < EVAL_TASK_STRIDE:
+        raise ValueError(f"an evaluation seed must be in [0, 2**32), got {seed}")
+    if not 0 <= task_id < len(SEED_RANGES["eval"]) // EVAL_TASK_STRIDE:
+        raise ValueError(f"task id {task_id} has no evaluation seed block")
+    return SEED_RANGES["eval"].start + task_id * EVAL_TASK_STRIDE + seed
+
+
+def check_seeds(stage: str, first: int, count: int) -> None:
+    """Refuse env seeds [first, first + count) unless they lie inside `stage`'s range (so no other stage's)."""
+    r = SEED_RANGES[stage]
+    if count < 0 or not (r.start <= first and first + count <= r.stop):
+        raise ValueError(
+            f"env seeds {first}..{first + count - 1} are outside the {stage} range [{r.start}, {r.stop}) "
+            f"(spec.SEED_RANGES keeps teacher training, demos and evaluation apart); use a seed in that range"
+        )

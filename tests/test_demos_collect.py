@@ -20,6 +20,7 @@ from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.sim import objects
 
 N_ENVS = 18  # one env per object
+SEED = spec.DEMO_SEED + 3  # demos draw env seeds from their own range only
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +57,7 @@ def config(teacher: Path, out: Path, **kw) -> collect.CollectConfig:
         "repo_id": "test/demos",
         "episodes_per_object": 1,
         "num_envs": N_ENVS,
-        "seed": 3,
+        "seed": SEED,
         "curation": curation.NO_CURATION,
         "progress": False,
     }
@@ -118,7 +119,7 @@ def test_tiny_collection_loads_back(tiny):
 
 
 def test_frames_are_the_observation_before_each_step_and_the_commanded_target(teacher, tiny):
-    """Replay: env i of the collection holds object i with env seed 3 + i; its first episode must match a rollout
+    """Replay: env i of the collection holds object i with env seed SEED + i; its first episode must match a rollout
     of a fresh env built from the same settings, frame by frame."""
     from lerobot_blindgrasp.sim import randomization, rewards
     from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
@@ -129,7 +130,7 @@ def test_frames_are_the_observation_before_each_step_and_the_commanded_target(te
     env = BatchedGraspEnv(
         GraspEnvConfig(
             num_envs=N_ENVS,
-            seed=3,
+            seed=SEED,
             episode_s=spec.DEMO_EPISODE_S,
             dr=randomization.PAPER_DR.without_external_force(),
             reward=rewards.RewardConfig(**policy.config["reward"]),
@@ -147,7 +148,7 @@ def test_frames_are_the_observation_before_each_step_and_the_commanded_target(te
     frames = ds.hf_dataset.with_format("numpy")
     table = demo_dataset.episode_table(out)
     for row in table.itertuples():
-        i = row.env_seed - 3
+        i = row.env_seed - SEED
         assert row.env_episode == 0 and row.object == objects.PAPER_OBJECTS[i]
         ep = ds.meta.episodes[row.episode_index]
         rows = frames[ep["dataset_from_index"] : ep["dataset_to_index"]]
@@ -159,6 +160,9 @@ def test_bad_inputs_are_refused_and_touch_nothing(teacher, tiny, tmp_path, capsy
     out, _ = tiny
     before = snapshot(out)
     fresh = tmp_path / "fresh"
+    student_like = tmp_path / "pretrained_model"  # what lerobot-train writes: a policy, not a teacher
+    student_like.mkdir()
+    (student_like / "config.json").write_text(json.dumps({"type": "blindgrasp_transformer"}))
     cases = [
         (["--teacher", str(tmp_path / "missing"), "--out", str(fresh)], "cannot load the teacher"),
         (["--teacher", str(tmp_path), "--out", str(fresh)], "no model_<iteration>.pt"),
@@ -166,6 +170,9 @@ def test_bad_inputs_are_refused_and_touch_nothing(teacher, tiny, tmp_path, capsy
         (["--teacher", str(teacher), "--out", str(fresh), "--resume"], "does not exist"),
         (["--teacher", str(teacher), "--out", str(out), "--resume", "--deterministic"], "different curation"),
         (["--teacher", str(teacher), "--out", str(out), "--resume", "--no-curation"], "different stochastic"),
+        # Seed 0 is a teacher-training env seed: demos from it would overlap training start states.
+        (["--teacher", str(teacher), "--out", str(fresh), "--seed", "0"], "outside the demos range"),
+        (["--teacher", str(student_like), "--out", str(fresh)], "not a blindgrasp teacher"),
     ]
     for argv, message in cases:
         with pytest.raises(SystemExit) as exc:
@@ -240,7 +247,7 @@ def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
         "--no-curation",
         "--no-progress",
         "--seed",
-        "11",
+        str(spec.DEMO_SEED + 11),
     ]
     env = {**os.environ, "HF_HUB_OFFLINE": "1"}
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -264,7 +271,8 @@ def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     old_seeds = set(demo_dataset.episode_table(out).env_seed)
 
     # --resume appends until every object has 2 episodes, with env seeds no earlier run used.
-    stats = collect.collect(config(teacher, out, repo_id="test/sig", episodes_per_object=2, seed=11, resume=True))
+    stats = collect.collect(config(teacher, out, repo_id="test/sig", episodes_per_object=2, seed=spec.DEMO_SEED + 11,
+                                         resume=True))
     assert stats.stop_reason == "done" and stats.kept >= 1
     ds2 = LeRobotDataset("test/sig", root=out, video_backend="pyav")
     assert ds2.num_episodes == ds.num_episodes + stats.kept

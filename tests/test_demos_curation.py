@@ -72,17 +72,27 @@ def test_negative_readings_do_not_cancel_pressing():
     assert res.force_sum_n == pytest.approx(205.0) and res.passed
 
 
+def test_kept_episodes_are_whole_by_default():
+    # The paper keeps selected episodes as they are: the hold after the criteria is what teaches holding.
+    assert not PAPER_CURATION.trim_to_success
+    r, f = trajectory(30, 60, force_per_step=(5.0, 0.0, 0.0))
+    res = evaluate(r, f)
+    assert res.passed and res.criteria_step == 40 and res.keep_steps == T
+
+
+TRIM = dataclasses.replace(PAPER_CURATION, trim_to_success=True)
+
+
 def test_trim_ends_at_the_step_both_criteria_hold():
     # Hold reaches 10 steps at step 39 (starts at 30); the force sum passes 200 N at step 40 (41 * 5 N = 205 N).
     r, f = trajectory(30, 60, force_per_step=(5.0, 0.0, 0.0))
-    res = evaluate(r, f)
+    res = evaluate(r, f, TRIM)
     assert res.criteria_step == 40 and res.keep_steps == 41
     # Force first, hold later: the cut is the later of the two.
     r, f = trajectory(60, 20, force_per_step=(10.0, 10.0, 10.0))
-    res = evaluate(r, f)
+    res = evaluate(r, f, TRIM)
     assert res.criteria_step == 69 and res.keep_steps == 70
-    whole = dataclasses.replace(PAPER_CURATION, trim_to_success=False)
-    assert evaluate(r, f, whole).keep_steps == T
+    assert evaluate(r, f).keep_steps == T
 
 
 def test_no_curation_keeps_everything_whole_but_still_reports():
@@ -95,9 +105,11 @@ def test_no_curation_keeps_everything_whole_but_still_reports():
 
 
 def test_short_episode_is_judged_on_what_it_has():
-    # An episode that ended early (object left the workspace) after meeting both criteria is kept, trimmed.
+    # An episode that ended early (object left the workspace) after meeting both criteria is kept: whole, or
+    # trimmed when asked.
     r, f = trajectory(5, 15, force_per_step=(10.0, 10.0, 10.0))
-    res = evaluate(r[:25], f[:25])
+    assert evaluate(r[:25], f[:25]).keep_steps == 25
+    res = evaluate(r[:25], f[:25], TRIM)
     assert res.passed and res.keep_steps == 15
 
 
@@ -116,7 +128,7 @@ def test_hold_run_lengths():
 
 def test_a_real_scripted_lift_passes_and_an_idle_hand_does_not():
     """The thresholds are reachable in our physics: the scripted pinch-and-lift of the medium cylinder passes once
-    lifted (trimmed before the hold), a hand that never moves fails both criteria."""
+    lifted (kept whole, hold included; trimmed before the hold when asked), a hand that never moves fails both criteria."""
     from lerobot_blindgrasp.demos.rollout import run_episodes
     from lerobot_blindgrasp.sim import randomization
     from lerobot_blindgrasp.sim.demo import grasp_geometry
@@ -131,7 +143,8 @@ def test_a_real_scripted_lift_passes_and_an_idle_hand_does_not():
     lifted = next(run_episodes(env, lambda obs: script(env.joint_positions()), lambda: False))
     res = evaluate(lifted.task_reward, lifted.uniaxial_force)
     assert lifted.length == T and lifted.success
-    assert res.passed and 40 <= res.criteria_step < 90 and res.keep_steps == res.criteria_step + 1
+    assert res.passed and 40 <= res.criteria_step < 90 and res.keep_steps == T
+    assert evaluate(lifted.task_reward, lifted.uniaxial_force, TRIM).keep_steps == res.criteria_step + 1
     assert res.force_sum_n > PAPER_CURATION.force_sum_threshold_n
 
     idle = next(run_episodes(env, lambda obs: np.zeros((1, 9)), lambda: False))

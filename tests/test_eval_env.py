@@ -128,8 +128,8 @@ def test_seed_makes_the_episode_reproducible():
     b = _rollout(env, 7, actions)
     np.testing.assert_array_equal(a, b)
     assert not np.allclose(a[0], _rollout(env, 8, actions)[0])  # another seed: another start pose and noise
-    # The seed flows into the sim: episode 0 of BatchedGraspEnv with that seed.
-    assert env.unwrapped.sim().cfg.seed == 8
+    # The seed flows into the sim: episode 0 of BatchedGraspEnv with this object's eval-range seed for it.
+    assert env.unwrapped.sim().cfg.seed == gym_env.start_seed(8, "capsule_medium")
     # Unseeded resets continue a seeded sequence reproducibly, and give new episodes.
     env.reset(seed=3)
     first = _rollout(env, None, actions)
@@ -137,6 +137,31 @@ def test_seed_makes_the_episode_reproducible():
     env2.reset(seed=3)
     np.testing.assert_array_equal(first, _rollout(env2, None, actions))
     assert not np.allclose(first[0], _rollout(env2, 3, actions)[0])
+
+
+def test_each_object_gets_its_own_start_states_from_the_same_seed():
+    """lerobot-eval passes the same seeds to every task; the env must not turn them into the same draws."""
+    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+
+    names = ("cuboid_a_medium", "cylinder_a_medium")
+    sims = {}
+    for name in names:
+        env = gym_env.BlindGraspGymEnv(name, render_mode=None)
+        _, info = env.reset(seed=1000)
+        assert spec.SEED_RANGES["eval"].start <= info["env_seed"] < spec.SEED_RANGES["eval"].stop
+        sims[name] = env.unwrapped.sim()
+    seeds = {n: int(s.env_seeds[0]) for n, s in sims.items()}
+    assert seeds[names[0]] != seeds[names[1]]
+    # Different physics draws (friction, gains, ...) and start poses, not just a different object.
+    a, b = (sims[n] for n in names)
+    assert not np.allclose(a.joint_positions(), b.joint_positions())
+    ra, rb = a.physics_draw.row(0), b.physics_draw.row(0)
+    assert any(not np.allclose(ra[k], rb[k]) for k in ra)
+    # The same trial as the batched env's first episode with that seed (what the teacher eval builds).
+    batched = BatchedGraspEnv(GraspEnvConfig(num_envs=2, objects=(names[0],), seed=seeds[names[0]] - 1,
+                                             dr=gym_env.EVAL_DR, autoreset=False))  # fmt: skip
+    batched.reset()
+    np.testing.assert_array_equal(batched.joint_positions()[1], a.joint_positions()[0])
 
 
 def test_bad_input_raises_clear_errors():
@@ -156,6 +181,8 @@ def test_bad_input_raises_clear_errors():
         env.step(np.full(9, np.nan, dtype=np.float32))
     with pytest.raises(ValueError, match="seed"):
         env.reset(seed=-1)
+    with pytest.raises(ValueError, match="seed"):  # an index past one object's block would reach the next's
+        env.reset(seed=spec.EVAL_TASK_STRIDE)
 
 
 # --- --env.type=blindgrasp ----------------------------------------------------------------------------------

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
 import pytest
 
-from lerobot_blindgrasp import pipeline
-from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp import pipeline, spec
 
 
 @pytest.mark.slow
@@ -22,10 +22,16 @@ def test_smoke_pipeline_runs_every_stage_and_writes_the_report(tmp_path):
     assert {"teacher", "teacher_eval", "demos", "student", "student_eval"} <= set(record["stages"])
     assert "lerobot-train" in record["stages"]["student"]["command"]
     assert "lerobot-eval" in record["stages"]["student_eval"]["command"]
+    # Teacher and student ran the same start states: the same evaluation seed in both commands.
+    assert f"--seed {spec.EVAL_SEED}" in record["stages"]["teacher_eval"]["command"]
+    assert f"--seed={spec.EVAL_SEED}" in record["stages"]["student_eval"]["command"]
+    assert "--policy.device=cpu" in record["stages"]["student"]["command"]
     report = (out / "report.md").read_text()
-    for name in objects.PAPER_OBJECTS:
-        assert f"| {name} |" in report
-    for fig in ("success_per_object.png", "teacher_curves.png", "student_loss.png"):
+    assert "trained from scratch in this run" in report  # the smoke preset says which teacher it used
+    # One row per evaluated object: rate, Wilson interval and counts for teacher and student, and the pairing.
+    row = re.search(r"^\| cylinder_a_medium \|(.*)$", report, re.M)
+    assert row and len(re.findall(r"\d+ % \[\d+-\d+\] \([01]/1\)", row.group(1))) == 3
+    for fig in ("success_per_object.png", "teacher_curves.png", "student_loss.png", "yield_demos.png"):
         assert (out / "figures" / fig).stat().st_size > 1000
     assert "--preset cpu" in report and "--preset paper" in report
     # Re-running skips the finished stages instead of redoing them.
@@ -45,5 +51,12 @@ def test_presets_are_consistent():
     from lerobot_blindgrasp.teacher import presets as teacher_presets
 
     for p in pipeline.PRESETS.values():
-        assert p.teacher_preset in teacher_presets.PRESETS
+        assert p.teacher_preset in teacher_presets.PRESETS or p.teacher_preset == pipeline.SHIPPED
         assert p.student_size in ("quick", "cpu", "paper")
+        # Paired evaluation: the teacher runs exactly the student's episodes per object.
+        assert p.teacher_eval_episodes == p.eval_episodes_per_object
+    # README command 1 starts from the shipped teacher and records results at >= 20 episodes per object.
+    assert pipeline.PRESETS["quick"].teacher_preset == pipeline.SHIPPED
+    assert pipeline.PRESETS["quick"].eval_episodes_per_object >= 20 and pipeline.PRESETS["quick"].eval_task == "all"
+    assert pipeline.PRESETS["smoke"].teacher_preset != pipeline.SHIPPED  # CI still trains a (tiny) teacher
+    assert pipeline.PRESETS["paper"].device == "cuda"

@@ -148,7 +148,7 @@ def test_eval_outputs_table_json_and_chart(quick_run, tmp_path):
         assert set(mode["per_object"]) == {"sphere_small", "cuboid_a_medium"}
         assert all(0.0 <= r["success_rate"] <= 1.0 for r in mode["per_object"].values())
     md = (tmp_path / "eval.md").read_text().splitlines()
-    assert md[0].startswith("| object | deterministic success | stochastic success")
+    assert md[0].startswith("| object | deterministic success [95 % CI] | stochastic success [95 % CI]")
     assert any(line.startswith("| sphere_small |") for line in md)
     assert any(line.startswith("| **1 medium objects**") for line in md)
     assert any(line.startswith("| **all 2**") for line in md)

@@ -1,11 +1,14 @@
 """`blindgrasp-collect-demos`: roll out a trained teacher, curate its episodes and write a LeRobotDataset.
 
+    blindgrasp-collect-demos --out runs/demos_cpu --repo-id me/blindgrasp_demos_cpu     # the shipped teacher
     blindgrasp-collect-demos --teacher runs/teacher_cpu --out runs/demos_cpu --repo-id me/blindgrasp_demos_cpu
 
 Paper Sec. III-C: the batched env with the paper's randomization and external pushes off, the teacher sampled from
 its Gaussian (`--deterministic`: its mean, the "w/o stochastic teacher" ablation), 5 s episodes, each step logging
 the student observation and the teacher's action, then curation (`demos/curation.py`; `--no-curation`: the
-"w/o curation" ablation).
+"w/o curation" ablation). Kept episodes are whole (the hold that success needs included); `--trim-at-criteria`
+ends them where the curation criteria are first met. Env seeds come from the demo range (`spec.SEED_RANGES`), never
+the teacher-training or evaluation ranges; `--seed` outside it is refused.
 
 `--episodes-per-object N` is the number of episodes *written* per object: collection runs until every object has
 N, or has used `--max-rollouts-per-object` rollouts (default 20 N), so an object the teacher cannot lift ends
@@ -34,6 +37,7 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
+from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.demos import curation as curation_mod
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, report
@@ -58,7 +62,7 @@ class CollectError(Exception):
 
 @dataclass
 class CollectConfig:
-    teacher: Path
+    teacher: Path | None  # None: the shipped default teacher
     out: Path
     repo_id: str
     episodes_per_object: int = 20
@@ -67,7 +71,7 @@ class CollectConfig:
     stochastic: bool = True
     curation: curation_mod.CurationConfig = curation_mod.PAPER_CURATION
     num_envs: int = 180  # 18 objects x 10
-    seed: int = 0
+    seed: int = spec.DEMO_SEED  # first env seed; must lie in spec.SEED_RANGES["demos"]
     threads: int = 0  # physics threads, 0: all CPUs
     resume: bool = False
     progress: bool = True
@@ -167,7 +171,7 @@ class _StopSignal:
 
 def _check_inputs(cfg: CollectConfig):
     """Everything that can be refused before touching the output folder. Returns the loaded teacher."""
-    from lerobot_blindgrasp.teacher.policy import TeacherPolicy
+    from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, default_teacher
 
     if not REPO_ID_PATTERN.match(cfg.repo_id):
         raise CollectError(f"--repo-id must look like USER/NAME, got {cfg.repo_id!r}")
@@ -175,6 +179,10 @@ def _check_inputs(cfg: CollectConfig):
         raise CollectError("--episodes-per-object must be >= 1")
     if cfg.num_envs < 1:
         raise CollectError("--num-envs must be >= 1")
+    try:
+        spec.check_seeds("demos", cfg.seed, cfg.num_envs)
+    except ValueError as e:
+        raise CollectError(f"--seed: {e}") from None
     try:
         cfg.objects = objects_mod.resolve_objects(cfg.objects)
     except ValueError as e:
@@ -188,8 +196,12 @@ def _check_inputs(cfg: CollectConfig):
     elif out.exists():
         raise CollectError(f"{out} already exists; pass --resume to append to it, or choose a new --out")
     try:
+        if cfg.teacher is None:
+            cfg.teacher = default_teacher()
         teacher = TeacherPolicy(cfg.teacher)
-    except (FileNotFoundError, KeyError, RuntimeError, ValueError) as e:
+    except TeacherError as e:
+        raise CollectError(f"cannot load the teacher: {e}") from None
+    except (KeyError, RuntimeError, ValueError) as e:
         raise CollectError(f"cannot load the teacher from {cfg.teacher}: {e}") from None
     return teacher
 
@@ -200,7 +212,7 @@ def _provenance(cfg: CollectConfig, teacher, dr: randomization.DomainRandomizati
         "teacher_sha256": teacher.sha256,
         "teacher": {
             "checkpoint": str(teacher.checkpoint),
-            "checkpoint_name": f"{teacher.checkpoint.parent.name}/{teacher.checkpoint.name}",
+            "checkpoint_name": teacher.name,
             "sha256": teacher.sha256,
             "iteration": teacher.iteration,
             "preset": teacher.config.get("preset"),
@@ -301,6 +313,7 @@ def collect(cfg: CollectConfig, on_episode: EpisodeCallback | None = None) -> Co
                 if not todo:
                     stats.stop_reason = "done"
                     break
+                spec.check_seeds("demos", prov["next_env_seed"], cfg.num_envs)  # a long --resume stays in range
                 env = BatchedGraspEnv(
                     GraspEnvConfig(
                         num_envs=cfg.num_envs,
@@ -426,7 +439,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(
         prog="blindgrasp-collect-demos", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    p.add_argument("--teacher", required=True, type=Path, help="teacher checkpoint (model_<it>.pt) or its run dir")
+    p.add_argument(
+        "--teacher", type=Path, default=None,
+        help="teacher folder (teacher.safetensors, or a training run dir: its latest model_<it>.pt) or checkpoint "
+        "file; default: the shipped teacher",
+    )
     p.add_argument("--out", required=True, type=Path, help="dataset folder to create (must not exist)")
     p.add_argument("--repo-id", required=True, help="USER/NAME, the dataset's Hub id")
     p.add_argument("--episodes-per-object", type=int, default=20, help="episodes to write per object")
@@ -439,11 +456,16 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--no-curation", action="store_true", help="keep every episode whole: the 'w/o curation' ablation"
     )
     p.add_argument(
-        "--keep-full-episodes", action="store_true", help="curate, but do not end kept episodes at lift"
+        "--trim-at-criteria", action="store_true",
+        help="end kept episodes at the step where the curation criteria are first met (default: keep them whole)",
     )
     p.add_argument("--resume", action="store_true", help="append to an existing --out until the targets are met")
     p.add_argument("--num-envs", type=int, default=180, help="parallel envs (default 180 = 18 objects x 10)")
-    p.add_argument("--seed", type=int, default=0, help="first env seed (a resumed run continues after the last)")
+    p.add_argument(
+        "--seed", type=int, default=spec.DEMO_SEED,
+        help=f"first env seed, in the demo range [{spec.SEED_RANGES['demos'].start}, "
+        f"{spec.SEED_RANGES['demos'].stop}) (a resumed run continues after the last)",
+    )
     p.add_argument("--threads", type=int, default=0, help="physics threads (0: all CPUs)")
     p.add_argument("--no-progress", action="store_true")
     return p.parse_args(argv)
@@ -453,7 +475,7 @@ def config_from_args(args: argparse.Namespace, command: str = "") -> CollectConf
     if args.no_curation:
         cur = curation_mod.NO_CURATION
     else:
-        cur = dataclasses.replace(curation_mod.PAPER_CURATION, trim_to_success=not args.keep_full_episodes)
+        cur = dataclasses.replace(curation_mod.PAPER_CURATION, trim_to_success=args.trim_at_criteria)
     return CollectConfig(
         teacher=args.teacher,
         out=args.out,

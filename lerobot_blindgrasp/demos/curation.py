@@ -18,10 +18,12 @@ steps. Why:
   totals). The env counts a sensor as "in contact" only when f > 0.1 N (r_t, r_i); this uses the same sign.
 The unit is "N summed over 20 Hz samples" (200 N = 10 N*s of impulse), not an integral over time.
 
-The paper adds that the selection "emphasizes the grasp-and-lift phase rather than the prolonged holding". We read
-that as: a kept episode ends at the step where both criteria are first met (`trim_to_success`); what follows is
-holding. Acceptance does not depend on trimming. `--no-curation` (the "w/o curation" ablation) keeps every
-episode whole.
+The paper adds that the selection "emphasizes the grasp-and-lift phase rather than the prolonged holding": that is
+what the criteria select *for*, and the paper keeps the selected episodes as they are. Kept episodes are therefore
+whole by default, holding included: success needs a 1 s hold, and a student that never sees one does not learn to
+hold. `trim_to_success` (CLI `--trim-at-criteria`, off by default) instead ends a kept episode at the step where
+both criteria are first met. Acceptance does not depend on trimming. `--no-curation` (the "w/o curation" ablation)
+keeps every episode whole.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ class CurationConfig:
     min_hold_s: float = 0.5  # ... for at least this long without a break
     force_sum_threshold_n: float = 200.0  # sum of uniaxial forces over sensors and steps must exceed this
     episode_s: float = spec.DEMO_EPISODE_S  # rollout length, 100 steps
-    trim_to_success: bool = True  # end kept episodes where both criteria are first met
+    trim_to_success: bool = False  # True: end kept episodes where both criteria are first met
     enabled: bool = True  # False: the "w/o curation" ablation, every episode kept whole
 
     @property

@@ -11,9 +11,12 @@ LeRobot-facing contract (spec.py):
   gripper does. So a policy cannot move a joint farther than 0.3 rad in one 50 ms step, whatever it asks for.
 - `info["is_success"]`: the shared success rule (lifted >= SUCCESS_LIFT_M for SUCCESS_HOLD_S), latched.
 
-Seeding: `reset(seed=s)` runs the trial that `BatchedGraspEnv(GraspEnvConfig(seed=s))` runs as its first episode
-(physics draw, start pose, object offset and sensor noise all derive from s). `reset()` without a seed draws the
-next env seed from gymnasium's `np_random`, so a seeded reset followed by unseeded ones is reproducible too. Every
+Seeding: `reset(seed=s)` takes s as an evaluation index (lerobot-eval passes its --seed plus the episode number)
+and runs the first episode of `BatchedGraspEnv(GraspEnvConfig(seed=start_seed(s, object)))`, where
+`start_seed` = `spec.eval_env_seed(s, catalogue index of the object)`. So every object gets its own start states
+(physics draw, start pose, object offset and sensor noise) from the same lerobot-eval seeds, and all of them lie in
+the evaluation seed range, apart from teacher training and demo collection. `reset()` without a seed draws the
+next index from gymnasium's `np_random`, so a seeded reset followed by unseeded ones is reproducible too. Every
 episode gets a fresh physics draw: a fresh `BatchedGraspEnv` costs a few milliseconds.
 
 Outside LeRobot: `gym.make("lerobot_blindgrasp.sim.gym_env:lerobot_blindgrasp/BlindGrasp-v0", object_name=...)`
@@ -45,7 +48,12 @@ GYM_ID = "lerobot_blindgrasp/BlindGrasp-v0"
 EVAL_DR = randomization.PAPER_DR.without_external_force()
 # The scene's offscreen framebuffer (sim/gripper.py, <visual><global offwidth offheight>) bounds render sizes.
 MAX_RENDER_WIDTH, MAX_RENDER_HEIGHT = 640, 480
-_MAX_SEED = 2**63  # GraspEnvConfig.seed becomes a uint64 base; leave headroom for the per-env offset
+_MAX_SEED = spec.EVAL_TASK_STRIDE  # reset seeds are per-object evaluation indices (spec.eval_env_seed)
+
+
+def start_seed(seed: int, object_name: str) -> int:
+    """The env seed of evaluation index `seed` on `object_name`: distinct per object, inside the eval range."""
+    return spec.eval_env_seed(seed, list(objects.CATALOGUE).index(objects.get_object(object_name).name))
 
 
 def observation_space() -> gym.spaces.Dict:
@@ -97,7 +105,8 @@ class BlindGraspGymEnv(gym.Env):
         # Read by lerobot-eval (`env.call("task_description")`); the dataset's task string for this object.
         self.task = self.task_description = self.object.task
         self._max_episode_steps = spec.EPISODE_STEPS  # gym.make's TimeLimit sets the same; kept for direct use
-        self.env_seed: int | None = None
+        self.eval_seed: int | None = None  # evaluation index of the current episode
+        self.env_seed: int | None = None  # the sim's seed for it, see start_seed
         self._sim: BatchedGraspEnv | None = None
         self._done = False
         self._renderer: mujoco.Renderer | None = None
@@ -105,10 +114,11 @@ class BlindGraspGymEnv(gym.Env):
     # --- gymnasium API ---------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         if seed is not None and not (isinstance(seed, int | np.integer) and 0 <= int(seed) < _MAX_SEED):
-            raise ValueError(f"seed must be an integer in [0, 2**63), got {seed!r}")
+            raise ValueError(f"seed must be an integer in [0, 2**32), got {seed!r}")
         super().reset(seed=None if seed is None else int(seed))  # seeds self.np_random when a seed is given
         # `options` is accepted and ignored: lerobot-eval passes its own marker there.
-        self.env_seed = int(seed) if seed is not None else int(self.np_random.integers(_MAX_SEED))
+        self.eval_seed = int(seed) if seed is not None else int(self.np_random.integers(_MAX_SEED))
+        self.env_seed = start_seed(self.eval_seed, self.object.name)
         if self._sim is not None:
             self._sim.close()
         self._sim = BatchedGraspEnv(
@@ -123,7 +133,7 @@ class BlindGraspGymEnv(gym.Env):
         )
         obs = self._sim.reset()
         self._done = False
-        return self._obs(obs), {"is_success": False, "env_seed": self.env_seed}
+        return self._obs(obs), {"is_success": False, "eval_seed": self.eval_seed, "env_seed": self.env_seed}
 
     def step(self, action):
         if self._sim is None:

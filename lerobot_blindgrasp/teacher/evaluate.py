@@ -1,10 +1,16 @@
-"""`blindgrasp-eval-teacher CKPT`: per-object success table of a trained teacher.
+"""`blindgrasp-eval-teacher [TEACHER]`: per-object success table of a trained teacher.
 
-    blindgrasp-eval-teacher runs/teacher_cpu --episodes 20 --out docs/results/teacher_cpu_eval
+    blindgrasp-eval-teacher --episodes 20 --out docs/results/teacher_eval     # the shipped default teacher
+    blindgrasp-eval-teacher runs/teacher_cpu --episodes 20
 
 Runs N episodes per object (10 s each, the paper's randomization and observation noise, external forces off as in
 evaluation and demo collection), deterministic (mean action) and stochastic (sampled), and writes
-`eval.json`, `eval.md` (markdown table) and `eval.png` (bar chart) to --out.
+`eval.json`, `eval.md` (markdown table, each rate with its 95 % Wilson interval) and `eval.png` (bar chart).
+
+Start states: episode k on object o is evaluation index `--seed` + k, mapped into the evaluation seed range by
+`spec.eval_env_seed(index, o)`, exactly as the `blindgrasp` lerobot-eval env maps lerobot-eval's seeds. So
+`blindgrasp-eval-teacher --seed S --episodes N` and `lerobot-eval --seed=S --eval.n_episodes=N` run the same start
+states (paired), and none of them was used in teacher training or demo collection (`spec.SEED_RANGES`).
 """
 
 from __future__ import annotations
@@ -17,61 +23,77 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.sim import objects, randomization, rewards
+from lerobot_blindgrasp import rates, spec
+from lerobot_blindgrasp.sim import objects, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.teacher.policy import TeacherPolicy
+from lerobot_blindgrasp.sim.gym_env import EVAL_DR, start_seed
+from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, default_teacher
 
 MODES = ("deterministic", "stochastic")
+
+
+def _run_object(teacher: TeacherPolicy, name: str, episodes: int, seed: int, mode: str, reward_cfg) -> tuple:
+    """One object's episodes in one batch: env k has seed start_seed(seed + k, name), episode 0, as the gym env."""
+    env = BatchedGraspEnv(
+        GraspEnvConfig(
+            num_envs=episodes,
+            objects=(name,),
+            seed=start_seed(seed, name),
+            dr=EVAL_DR,
+            reward=reward_cfg,
+            autoreset=False,
+        )
+    )
+    obs = env.reset()
+    alive = np.ones(episodes, dtype=bool)
+    success = np.zeros(episodes, dtype=bool)
+    max_lift = np.zeros(episodes)
+    for _ in range(env.max_episode_steps):
+        obs, _, term, trunc, info = env.step(teacher(obs, stochastic=mode == "stochastic"))
+        success |= info["success"] & alive
+        max_lift = np.where(alive, np.maximum(max_lift, info["lift"]), max_lift)
+        alive &= ~(term | trunc)
+        if not alive.any():
+            break
+    env.close()
+    return success, max_lift
 
 
 def evaluate(
     teacher: TeacherPolicy,
     object_names: tuple[str, ...] = objects.PAPER_OBJECTS,
-    episodes_per_object: int = 10,
-    seed: int = 10_000,
+    episodes_per_object: int = 20,
+    seed: int = spec.EVAL_SEED,
     modes: tuple[str, ...] = MODES,
     progress: bool = True,
 ) -> dict:
-    """Success rate and mean lift per object and mode. One batched env runs every episode of a mode at once."""
+    """Success (with per-episode flags) and mean lift per object and mode, on the paired start states."""
+    spec.eval_env_seed(seed + episodes_per_object - 1, 0)  # raises if the indices leave the eval block
     reward_cfg = rewards.RewardConfig(**teacher.config["reward"])
-    n = len(object_names) * episodes_per_object
-    results: dict = {"objects": list(object_names), "episodes_per_object": episodes_per_object, "modes": {}}
+    results: dict = {
+        "objects": list(object_names),
+        "episodes_per_object": episodes_per_object,
+        "seed": seed,
+        "seeds": f"evaluation indices {seed}..{seed + episodes_per_object - 1} per object (spec.eval_env_seed)",
+        "modes": {},
+    }
     for mode in modes:
         torch.manual_seed(seed)
-        env = BatchedGraspEnv(
-            GraspEnvConfig(
-                num_envs=n,
-                objects=object_names,
-                seed=seed,
-                dr=randomization.PAPER_DR.without_external_force(),
-                reward=reward_cfg,
-                autoreset=False,
-            )
-        )
-        obs = env.reset()
-        alive = np.ones(n, dtype=bool)
-        success = np.zeros(n, dtype=bool)
-        max_lift = np.zeros(n)
-        for _ in tqdm(range(env.max_episode_steps), desc=f"eval {mode}", disable=not progress, leave=False):
-            obs, _, term, trunc, info = env.step(teacher(obs, stochastic=mode == "stochastic"))
-            success |= info["success"] & alive
-            max_lift = np.where(alive, np.maximum(max_lift, info["lift"]), max_lift)
-            alive &= ~(term | trunc)
-            if not alive.any():
-                break
         per_object = {}
-        for k, name in enumerate(object_names):
-            mask = env.object_index == k
+        for name in tqdm(object_names, desc=f"eval {mode}", disable=not progress, leave=False):
+            success, max_lift = _run_object(teacher, name, episodes_per_object, seed, mode, reward_cfg)
             per_object[name] = {
-                "success_rate": float(success[mask].mean()),
-                "mean_max_lift_cm": float(max_lift[mask].mean() * 100),
+                "success_rate": float(success.mean()),
+                "successes": [bool(x) for x in success],
+                "mean_max_lift_cm": float(max_lift.mean() * 100),
+                "first_env_seed": start_seed(seed, name),
             }
-        medium = [per_object[o]["success_rate"] for o in object_names if o.endswith("_medium")]
+        medium = [o for o in object_names if o.endswith("_medium")]
         results["modes"][mode] = {
             "per_object": per_object,
-            "overall": float(success.mean()),
-            "medium_objects": float(np.mean(medium)) if medium else None,
+            "overall": _pooled(per_object, object_names),
+            "medium_objects": _pooled(per_object, medium) if medium else None,
+            "counts": {"overall": _counts(per_object, object_names), "medium_objects": _counts(per_object, medium)},
         }
     results["checkpoint"] = str(teacher.checkpoint)
     results["checkpoint_sha256"] = teacher.sha256
@@ -79,21 +101,34 @@ def evaluate(
     return results
 
 
+def _counts(per_object: dict, names) -> list[int]:
+    flags = [f for n in names for f in per_object[n]["successes"]]
+    return list(rates.count(flags))
+
+
+def _pooled(per_object: dict, names) -> float:
+    k, n = _counts(per_object, names)
+    return k / n if n else 0.0
+
+
 def markdown_table(results: dict) -> str:
     modes = list(results["modes"])
-    head = "| object | " + " | ".join(f"{m} success" for m in modes) + " | " + " | ".join(
+    head = "| object | " + " | ".join(f"{m} success [95 % CI]" for m in modes) + " | " + " | ".join(
         f"{m} max lift (cm)" for m in modes
     ) + " |"
     lines = [head, "|---|" + "---:|" * (2 * len(modes))]
     for o in results["objects"]:
-        s = [f"{results['modes'][m]['per_object'][o]['success_rate'] * 100:.0f} %" for m in modes]
+        s = [rates.format_rate(*rates.count(results["modes"][m]["per_object"][o]["successes"])) for m in modes]
         lift = [f"{results['modes'][m]['per_object'][o]['mean_max_lift_cm']:.1f}" for m in modes]
         lines.append(f"| {o} | " + " | ".join(s + lift) + " |")
     n_medium = sum(o.endswith("_medium") for o in results["objects"])
     for key, label in (("medium_objects", f"{n_medium} medium objects"), ("overall", f"all {len(results['objects'])}")):
-        vals = [results["modes"][m][key] for m in modes]
-        if all(v is not None for v in vals):
-            lines.append(f"| **{label}** | " + " | ".join(f"**{v * 100:.1f} %**" for v in vals) + " |" + " |" * len(modes))
+        counts = [results["modes"][m]["counts"][key] for m in modes]
+        if all(c[1] for c in counts):
+            cells = " | ".join(f"**{rates.format_rate(*c, digits=1)}**" for c in counts)
+            lines.append(f"| **{label}** | " + cells + " |" + " |" * len(modes))
+    lines += ["", f"Teacher `{results['checkpoint']}` (iteration {results['iteration']}); start states: "
+              f"{results['seeds']}; 95 % Wilson intervals."]
     return "\n".join(lines) + "\n"
 
 
@@ -130,20 +165,32 @@ def write_outputs(results: dict, out: Path) -> None:
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("checkpoint", help="model_<it>.pt, or a run directory (its latest checkpoint)")
-    p.add_argument("--episodes", type=int, default=10, help="episodes per object and mode")
+    p.add_argument(
+        "checkpoint", nargs="?", default=None,
+        help="teacher folder (teacher.safetensors, or a run directory: its latest model_<it>.pt) or a checkpoint "
+        "file; default: the shipped teacher",
+    )
+    p.add_argument("--episodes", type=int, default=20, help="episodes per object and mode")
     p.add_argument("--objects", default="all", help='"all", "medium", or a comma-separated list')
     p.add_argument("--modes", default="deterministic,stochastic")
-    p.add_argument("--seed", type=int, default=10_000)
-    p.add_argument("--out", type=Path, default=None, help="output folder (default: <run dir>/eval)")
+    p.add_argument("--seed", type=int, default=spec.EVAL_SEED, help="first evaluation index (lerobot-eval's --seed)")
+    p.add_argument(
+        "--out", type=Path, default=None,
+        help="output folder (default: <run dir>/eval, or outputs/teacher_eval for the shipped teacher)",
+    )
     args = p.parse_args(argv)
-    teacher = TeacherPolicy(args.checkpoint)
+    try:
+        teacher = TeacherPolicy(args.checkpoint or default_teacher())
+        spec.eval_env_seed(args.seed + args.episodes - 1, 0)
+    except (TeacherError, ValueError) as e:
+        raise SystemExit(f"error: {e}") from None
     modes = tuple(m.strip() for m in args.modes.split(","))
     bad = set(modes) - set(MODES)
     if bad:
         raise SystemExit(f"unknown mode(s) {sorted(bad)}; choose from {MODES}")
     results = evaluate(teacher, objects.resolve_objects(args.objects), args.episodes, args.seed, modes)
-    out = args.out or teacher.checkpoint.parent / "eval"
+    # The shipped teacher's folder is part of the repository: never write into it unasked.
+    out = args.out or (teacher.checkpoint.parent / "eval" if args.checkpoint else Path("outputs/teacher_eval"))
     write_outputs(results, out)
     print(markdown_table(results))
     print(f"wrote {out}/eval.json, eval.md, eval.png")

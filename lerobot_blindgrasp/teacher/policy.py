@@ -1,14 +1,23 @@
-"""Loading a trained teacher for inference (evaluation, demo collection), from a training checkpoint.
+"""Loading a trained teacher for inference (evaluation, demo collection), in either of its two forms.
 
-A checkpoint directory holds rsl-rl's `model_<it>.pt` files and our `teacher_config.json` (preset, variant, env
-settings). The actor is rebuilt with rsl-rl's own `MLPModel` and run deterministically (mean) or stochastically
-(sampled from its Gaussian), which demo collection needs; the JIT/ONNX exports only carry the mean.
+- A shipped teacher: a folder with `teacher.safetensors` (the actor's state dict: MLP, Gaussian std and the
+  observation normalizer) and `teacher_config.json` (what the trainer wrote, plus a `weights` block). Nothing is
+  unpickled. `export_teacher` (CLI `blindgrasp-export-teacher RUN_DIR OUT_DIR`) makes one from a training run.
+- A training run directory: rsl-rl's `model_<it>.pt` checkpoints next to `teacher_config.json`. The latest one is
+  used (or a given file); it is read with `torch.load(weights_only=True)`, so it too runs no pickled code.
+
+The actor is rebuilt with rsl-rl's own `MLPModel` from the config and run deterministically (mean) or
+stochastically (sampled from its Gaussian), which demo collection needs; the JIT/ONNX exports only carry the mean.
+
+`default_teacher()` is the teacher every command uses when none is given: `models/<SHIPPED_TEACHER>` at the
+repository root, or the folder in $BLINDGRASP_TEACHER.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
 import re
 from pathlib import Path
 
@@ -20,26 +29,82 @@ from tensordict import TensorDict
 from lerobot_blindgrasp import spec
 
 CONFIG_NAME = "teacher_config.json"
+WEIGHTS_NAME = "teacher.safetensors"
+FORMAT = "blindgrasp-teacher/1"
+# The shipped default teacher: a folder under the repository's models/. A better teacher dropped there in the same
+# format (teacher.safetensors + teacher_config.json) becomes the default by changing this one name.
+SHIPPED_TEACHER = "teacher_cpu"
+TEACHER_ENV_VAR = "BLINDGRASP_TEACHER"
+
+
+class TeacherError(FileNotFoundError):
+    """A teacher that cannot be found or loaded; the message is one line that says what to do."""
+
+
+def models_dir() -> Path:
+    """<repo root>/models. models/ sits beside the package in the repository: an editable install (the README's)
+    finds it; a wheel or sdist install does not ship it, so `default_teacher` then asks for a path."""
+    return Path(__file__).resolve().parents[2] / "models"
+
+
+def default_teacher() -> Path:
+    """The teacher a command uses when none is given: $BLINDGRASP_TEACHER, else the shipped one."""
+    if os.environ.get(TEACHER_ENV_VAR):
+        return Path(os.environ[TEACHER_ENV_VAR])
+    d = models_dir() / SHIPPED_TEACHER
+    if not (d / WEIGHTS_NAME).is_file():
+        raise TeacherError(
+            f"the shipped teacher is not at {d} (it lives in the repository's models/ folder, which only an "
+            f"editable install can see); pass a teacher folder explicitly or set {TEACHER_ENV_VAR}"
+        )
+    return d
 
 
 def latest_checkpoint(run_dir: Path) -> Path | None:
-    ckpts = sorted(run_dir.glob("model_*.pt"), key=lambda p: int(re.findall(r"\d+", p.stem)[-1]))
+    ckpts = sorted(Path(run_dir).glob("model_*.pt"), key=lambda p: int(re.findall(r"\d+", p.stem)[-1]))
     return ckpts[-1] if ckpts else None
 
 
 def resolve_checkpoint(path: str | Path) -> Path:
-    """A checkpoint file, or a run directory (its latest checkpoint). Clear errors for anything else."""
+    """The weights file of a teacher folder (teacher.safetensors first, else the latest model_<it>.pt), or the
+    given file. One-line errors for anything else."""
     p = Path(path)
+    _refuse_student(p)
     if p.is_dir():
-        ckpt = latest_checkpoint(p)
-        if ckpt is None:
-            raise FileNotFoundError(f"no model_<iteration>.pt checkpoint in {p}")
-        return ckpt
-    if not p.is_file():
-        raise FileNotFoundError(f"teacher checkpoint not found: {p}")
-    if not (p.parent / CONFIG_NAME).is_file():
-        raise FileNotFoundError(f"{p} has no {CONFIG_NAME} beside it; is it a blindgrasp teacher checkpoint?")
-    return p
+        if (p / WEIGHTS_NAME).is_file():
+            ckpt = p / WEIGHTS_NAME
+        else:
+            ckpt = latest_checkpoint(p)
+            if ckpt is None:
+                raise TeacherError(
+                    f"no teacher in {p}: no {WEIGHTS_NAME} (a shipped teacher) and no model_<iteration>.pt "
+                    "(a training run)"
+                )
+    elif p.is_file():
+        ckpt = p
+    else:
+        raise TeacherError(f"teacher not found: {p} does not exist")
+    if ckpt.suffix not in (".pt", ".safetensors"):
+        raise TeacherError(f"{ckpt} is not a teacher checkpoint (expected {WEIGHTS_NAME} or model_<it>.pt)")
+    if not (ckpt.parent / CONFIG_NAME).is_file():
+        raise TeacherError(f"{ckpt} has no {CONFIG_NAME} beside it; is it a blindgrasp teacher checkpoint?")
+    return ckpt
+
+
+def _refuse_student(p: Path) -> None:
+    """A LeRobot policy folder (config.json with a `type`) where a teacher belongs: name the mix-up."""
+    folder = p if p.is_dir() else p.parent
+    cfg = folder / "config.json"
+    if cfg.is_file() and not (folder / CONFIG_NAME).is_file():
+        try:
+            kind = json.loads(cfg.read_text()).get("type")
+        except (json.JSONDecodeError, AttributeError):
+            return
+        if kind:
+            raise TeacherError(
+                f"{folder} is a LeRobot `{kind}` policy, not a blindgrasp teacher (teacher.safetensors + "
+                f"{CONFIG_NAME}); evaluate it with lerobot-eval --policy.path={folder}"
+            )
 
 
 def file_sha256(path: Path) -> str:
@@ -50,24 +115,64 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+def _observation_layout() -> dict:
+    return {"policy": [[spec.STATE_KEY, spec.STATE_DIM]], "privileged": [list(x) for x in spec.PRIVILEGED_LAYOUT]}
+
+
+def load_actor_state(ckpt: Path) -> tuple[dict[str, torch.Tensor], int | None]:
+    """(actor state dict, iteration or None) from either file kind, without unpickling objects."""
+    if ckpt.suffix == ".safetensors":
+        from safetensors.torch import load_file
+
+        return load_file(str(ckpt)), None
+    try:
+        state = torch.load(ckpt, map_location="cpu", weights_only=True)
+    except Exception as e:  # noqa: BLE001  (a truncated or foreign file: say which file, in one line)
+        raise TeacherError(f"cannot read {ckpt} as an rsl-rl checkpoint ({type(e).__name__})") from None
+    if not isinstance(state, dict) or "actor_state_dict" not in state:
+        raise TeacherError(f"{ckpt} has no actor_state_dict; is it an rsl-rl checkpoint?")
+    return state["actor_state_dict"], int(state["iter"]) if "iter" in state else None
+
+
 class TeacherPolicy:
     """Numpy-in, numpy-out teacher: obs dict (N, ...) -> delta-theta actions (N, 9)."""
 
     def __init__(self, checkpoint: str | Path, device: str = "cpu"):
         self.checkpoint = resolve_checkpoint(checkpoint)
-        self.config = json.loads((self.checkpoint.parent / CONFIG_NAME).read_text())
-        runner = self.config["runner"]
-        actor_cfg = {k: v for k, v in runner["actor"].items() if k != "class_name"}
+        try:
+            self.config = json.loads((self.checkpoint.parent / CONFIG_NAME).read_text())
+            runner = self.config["runner"]
+            actor_cfg = {k: v for k, v in runner["actor"].items() if k != "class_name"}
+            self.obs_groups = runner["obs_groups"]
+        except (json.JSONDecodeError, KeyError, TypeError) as e:
+            raise TeacherError(f"{self.checkpoint.parent / CONFIG_NAME} is not a teacher config ({e!r})") from None
+        layout = self.config.get("observation_layout")
+        if layout is not None and layout != _observation_layout():
+            raise TeacherError(
+                f"{self.checkpoint} was trained on another observation layout than spec.PRIVILEGED_LAYOUT; "
+                "retrain or use a teacher from this version"
+            )
         dims = {"policy": spec.STATE_DIM, "privileged": spec.PRIVILEGED_DIM}
         dummy = TensorDict({k: torch.zeros(1, d) for k, d in dims.items()}, batch_size=[1])
-        self.obs_groups = runner["obs_groups"]
         self.actor = MLPModel(dummy, self.obs_groups, "actor", spec.NUM_JOINTS, **actor_cfg)
-        state = torch.load(self.checkpoint, map_location=device, weights_only=False)
-        self.actor.load_state_dict(state["actor_state_dict"])
+        state, iteration = load_actor_state(self.checkpoint)
+        try:
+            self.actor.load_state_dict(state)
+        except RuntimeError as e:
+            first = str(e).strip().splitlines()[-1].strip()
+            raise TeacherError(
+                f"{self.checkpoint} does not fit its config or this observation layout ({first})"
+            ) from None
         self.actor.to(device).eval()
         self.device = device
-        self.iteration = int(state.get("iter", -1))
+        weights = self.config.get("weights", {})
+        self.iteration = iteration if iteration is not None else int(weights.get("iteration", -1))
         self.sha256 = file_sha256(self.checkpoint)
+
+    @property
+    def name(self) -> str:
+        """Folder/file, e.g. `teacher_cpu/teacher.safetensors`, for reports and provenance."""
+        return f"{self.checkpoint.parent.name}/{self.checkpoint.name}"
 
     @torch.inference_mode()
     def __call__(self, obs: dict[str, np.ndarray], stochastic: bool = False) -> np.ndarray:

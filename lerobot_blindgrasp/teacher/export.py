@@ -1,0 +1,128 @@
+"""`blindgrasp-export-teacher RUN_DIR OUT_DIR`: a training checkpoint as a shippable teacher (no pickle).
+
+    blindgrasp-export-teacher runs/teacher_cpu models/teacher_cpu
+    blindgrasp-export-teacher runs/teacher_cpu/model_618.pt models/teacher_cpu --push-to-hub you/blindgrasp_teacher
+
+OUT_DIR gets `teacher.safetensors` (the actor's state dict: MLP weights, Gaussian std, observation normalizer;
+critic and optimizer are training state and stay behind), `teacher_config.json` (the run's config plus a
+`weights` block: source checkpoint, its sha256, iteration, and the observation layout it was trained on) and a
+`README.md` card. `TeacherPolicy(OUT_DIR)` loads it; a `README.md` already in OUT_DIR is kept (a hand-written card
+with results), pass --overwrite-card to replace it. `--push-to-hub` uploads the folder to a Hub model repo.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from lerobot_blindgrasp.teacher import policy
+
+CARD_NAME = "README.md"
+PACKAGE = "lerobot_policy_blindgrasp"
+
+
+def export_teacher(source: str | Path, out_dir: str | Path, overwrite_card: bool = False) -> Path:
+    """Write OUT_DIR from a run directory (its latest model_<it>.pt) or a checkpoint file. Returns OUT_DIR."""
+    from safetensors.torch import save_file
+
+    ckpt = policy.resolve_checkpoint(source)
+    if ckpt.suffix != ".pt":
+        raise policy.TeacherError(f"{ckpt} is already exported; copy its folder instead")
+    state, iteration = policy.load_actor_state(ckpt)
+    # Load it the way users will, before writing anything: a checkpoint that does not fit its config fails here.
+    policy.TeacherPolicy(ckpt)
+    config = json.loads((ckpt.parent / policy.CONFIG_NAME).read_text())
+    config["observation_layout"] = policy._observation_layout()
+    config["weights"] = {
+        "format": policy.FORMAT,
+        "file": policy.WEIGHTS_NAME,
+        "iteration": iteration,
+        "source_checkpoint": ckpt.name,
+        "source_sha256": policy.file_sha256(ckpt),
+    }
+    summary = ckpt.parent / "train_summary.json"
+    if summary.is_file():
+        config["train_summary"] = json.loads(summary.read_text())
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    # safetensors wants contiguous tensors that share no memory.
+    save_file({k: v.detach().contiguous().clone() for k, v in state.items()}, str(out / policy.WEIGHTS_NAME),
+              metadata={"format": policy.FORMAT})  # fmt: skip
+    (out / policy.CONFIG_NAME).write_text(json.dumps(config, indent=2) + "\n")
+    if overwrite_card or not (out / CARD_NAME).exists():
+        (out / CARD_NAME).write_text(card(config))
+    return out
+
+
+def card(config: dict) -> str:
+    """A short model card: what it is, how to load it, how it was made."""
+    w = config["weights"]
+    return f"""---
+library_name: {PACKAGE}
+tags: [lerobot, robotics, blindgrasp, reinforcement-learning, ppo]
+---
+# blindgrasp PPO teacher (`{config.get('preset')}` preset, iteration {w['iteration']})
+
+Privileged-observation PPO teacher for three-finger blind grasping (rsl-rl MLP actor, {config['runner']['actor']['hidden_dims']}),
+used to collect the curated demonstrations the `blindgrasp_transformer` student learns from.
+
+- `teacher.safetensors`: the actor's state dict (MLP, Gaussian std, observation normalizer); no pickle.
+- `teacher_config.json`: preset, reward, PPO settings, observation layout, source checkpoint `{w['source_checkpoint']}`
+  (sha256 `{w['source_sha256']}`).
+
+Use it (`pip install {PACKAGE}`):
+
+    blindgrasp-eval-teacher THIS_FOLDER --episodes 20
+    blindgrasp-collect-demos --teacher THIS_FOLDER --out runs/demos --repo-id you/blindgrasp_demos
+
+Made by: `{config.get('command', '?')}` (env seeds from {config.get('seed')}, {config.get('num_envs')} envs).
+"""
+
+
+def push_teacher(folder: str | Path, repo_id: str, private: bool | None = None) -> str:
+    """Upload a teacher folder to a Hub model repo (weights, config, card). Returns the repo URL."""
+    from huggingface_hub import HfApi
+
+    folder = Path(folder)
+    policy.TeacherPolicy(folder)  # refuse to upload something that does not load
+    if policy.resolve_checkpoint(folder).suffix != ".safetensors":
+        raise policy.TeacherError(f"{folder} holds a training checkpoint; export it first (blindgrasp-export-teacher)")
+    api = HfApi()
+    api.create_repo(repo_id, repo_type="model", private=private, exist_ok=True)
+    api.upload_folder(
+        repo_id=repo_id,
+        folder_path=str(folder),
+        repo_type="model",
+        allow_patterns=[policy.WEIGHTS_NAME, policy.CONFIG_NAME, CARD_NAME],
+        commit_message="Upload blindgrasp teacher",
+    )
+    return f"https://huggingface.co/{repo_id}"
+
+
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(
+        prog="blindgrasp-export-teacher", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument("source", type=Path, help="training run directory (latest model_<it>.pt) or a checkpoint file")
+    p.add_argument("out_dir", type=Path, help="folder to write teacher.safetensors, teacher_config.json, README.md")
+    p.add_argument("--overwrite-card", action="store_true", help="replace an existing README.md")
+    p.add_argument("--push-to-hub", metavar="REPO_ID", default=None, help="also upload the folder to this model repo")
+    p.add_argument("--private", action="store_true")
+    args = p.parse_args(argv)
+    try:
+        out = export_teacher(args.source, args.out_dir, args.overwrite_card)
+        print(f"wrote {out / policy.WEIGHTS_NAME}, {out / policy.CONFIG_NAME}, {out / CARD_NAME}")
+        if args.push_to_hub:
+            print(f"pushed: {push_teacher(out, args.push_to_hub, args.private or None)}")
+    except policy.TeacherError as e:
+        print(f"error: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
+    except OSError as e:  # network, auth, offline mode
+        print(f"error: upload to the Hub failed ({type(e).__name__}: {e})", file=sys.stderr)
+        raise SystemExit(1) from None
+
+
+if __name__ == "__main__":
+    main()
