@@ -289,3 +289,61 @@ def test_lerobot_eval_on_the_real_env_reports_per_object_success(station, checkp
     report = [str(BIN / "python"), "-m", "lerobot_blindgrasp.envs.real_report", str(out / "eval_info.json")]
     table = subprocess.run(report, env=station.env, capture_output=True, text=True, check=True).stdout
     assert "| cylinder_a_medium | 2 |" in table and "| **overall** | 4 |" in table
+
+
+# --- SIGTERM / SIGHUP (a job scheduler, docker stop, a closed terminal) ---------------------------------------------
+def _signal_when(op: Operator, marker: str | None, sig: int, rig: GripperRig, after_s: float) -> float:
+    """Send `sig` `after_s` after `marker` appears; returns the time from the signal until all torque is off."""
+    if marker is not None:
+        op.expect(marker, timeout_s=120)
+    _wait_for_torque(rig, op.proc, timeout_s=120)
+    time.sleep(after_s)
+    op.proc.send_signal(sig)
+    t0 = time.monotonic()
+    while rig.dxl.any_torque():
+        assert time.monotonic() - t0 < 30, op.text[-3000:]
+        time.sleep(0.005)
+    return time.monotonic() - t0
+
+
+def test_sigterm_during_recording_keeps_the_saved_episodes(station, tmp_path):
+    from lerobot.datasets import LeRobotDataset
+
+    root = tmp_path / "ds"
+    with GripperRig() as rig, GloveEmulator(station.glove_port) as glove:
+        rig.hand_move(spec.HOME_POSE)
+        glove.closure = 0.4
+        op = Operator(_record_cmd(rig, glove, root, episodes=2, episode_s=1.5), station.env)
+        dt = _signal_when(op, "Recording episode 1", signal.SIGTERM, rig, after_s=0.5)
+        assert op.wait(60) == 128 + signal.SIGTERM, op.text[-3000:]
+    print(f"lerobot-record, SIGTERM: torque off {dt * 1e3:.0f} ms after the signal")
+    ds = LeRobotDataset(REPO_ID, root=root)  # finalized: readable, the interrupted episode discarded
+    assert ds.num_episodes == 1 and 25 <= len(ds) <= 31
+
+
+def test_sighup_during_real_eval_turns_the_torque_off(station, checkpoint, tmp_path):
+    with GripperRig() as rig:
+        rig.hand_move(spec.HOME_POSE)
+        cmd = [str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", "--policy.device=cpu",
+               "--env.type=blindgrasp_real", *_robot_args(rig, prefix="--env.robot"), "--env.task=wine_glass",
+               "--env.success_mode=force", "--env.unattended_reset_s=0.1", "--env.episode_s=60",
+               "--eval.n_episodes=1", "--eval.batch_size=1", "--eval.use_async_envs=false",
+               f"--output_dir={tmp_path / 'eval'}"]  # fmt: skip
+        op = Operator(cmd, station.env)
+        dt = _signal_when(op, "trial 1 starts", signal.SIGHUP, rig, after_s=1.0)
+        assert op.wait(60) == 128 + signal.SIGHUP, op.text[-3000:]
+    print(f"lerobot-eval, SIGHUP: torque off {dt * 1e3:.0f} ms after the signal")
+
+
+def test_sigterm_during_rollout_turns_the_torque_off(station, checkpoint):
+    """lerobot-rollout has its own handler (LeRobot's ProcessSignalHandler): the robot leaves it in place, and the
+    strategy's teardown returns to the start pose and disconnects."""
+    with GripperRig() as rig:
+        rig.hand_move(spec.HOME_POSE)
+        args = [a if not a.startswith("--duration") else "--duration=60" for a in _rollout_args(rig, checkpoint)]
+        op = Operator([str(BIN / "python"), "-m", "lerobot_blindgrasp.robots.blindgrasp_gripper.rollout", *args],
+                      station.env)  # fmt: skip
+        dt = _signal_when(op, None, signal.SIGTERM, rig, after_s=1.5)
+        assert op.wait(60) == 0, op.text[-3000:]
+        assert "Shutdown signal 15 received" in op.text
+    print(f"rollout, SIGTERM: torque off {dt * 1e3:.0f} ms after the signal (after the return to the start pose)")
