@@ -52,3 +52,27 @@ def test_bench_teacher_reports_collection_update_and_raw_physics():
     assert r["collect_s_per_it"] > 0 and r["update_s_per_it"] > 0 and r["raw_control_steps_per_s"] > 0
     assert r["update_over_collect"] == pytest.approx(r["update_s_per_it"] / r["collect_s_per_it"])
     assert r["loop_over_raw"] == pytest.approx(r["loop_env_steps_per_s"] / r["raw_control_steps_per_s"])
+
+
+def test_progress_curves_sum_training_time_and_weigh_objects_equally(tmp_path):
+    from torch.utils.tensorboard import SummaryWriter
+
+    from lerobot_blindgrasp.teacher.progress import plot_progress, progress
+
+    (tmp_path / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))
+    # Two sessions (a resume): the second rewrites iteration 2, as rsl-rl does after loading model_2.pt.
+    for session, its in ((0, range(0, 3)), (1, range(2, 4))):
+        w = SummaryWriter(str(tmp_path), filename_suffix=f".s{session}")
+        for it in its:
+            w.add_scalar("Perf/collection_time", 3.0, it)
+            w.add_scalar("Perf/learning_time", 1.0 + session, it)
+            for k, name in enumerate(objects.PAPER_OBJECTS):
+                w.add_scalar(f"Success/{name}", 1.0 if k == 0 else 0.0, it)  # only cuboid_a_large succeeds
+        w.close()
+    p = progress(tmp_path, window=1)
+    assert p["iteration"] == [0, 1, 2, 3]
+    assert p["env_steps"] == [40, 80, 120, 160]
+    assert p["wall_h"][-1] * 3600 == pytest.approx(4 + 4 + 5 + 5)  # the later session's value for iteration 2
+    assert p["success_all18"][-1] == pytest.approx(1 / 18) and p["success_medium"][-1] == 0.0
+    plot_progress(tmp_path, tmp_path / "p.png")
+    assert (tmp_path / "p.png").stat().st_size > 1000

@@ -1,0 +1,111 @@
+"""Training success against env steps and against training wall clock, from a run's TensorBoard scalars.
+
+    python -m lerobot_blindgrasp.teacher.progress RUN_DIR [OUT.png]
+
+Success here is the training-time rate rsl-rl logs per object (`Success/<object>`: episodes that ended in an
+iteration, stochastic actions, training seeds), averaged with equal weight over the 18 objects and over the 6
+medium ones, so a run that gives hard objects more envs is not flattered by its own allocation. Held-out numbers
+come from `blindgrasp-eval-teacher`; these curves show the trend.
+
+Wall clock is the sum of rsl-rl's per-iteration collection and update times, so a run stopped and resumed across
+sessions reports its training time without the gaps (process start-up, about 10 s per resume, is not counted).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp.teacher.policy import CONFIG_NAME
+
+
+def _scalars(run_dir: Path) -> dict[str, dict[int, float]]:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    out: dict[str, dict[int, float]] = {}
+    # A resumed run writes a new events file per session; later files win for a repeated iteration.
+    for events in sorted(run_dir.glob("events.out.tfevents.*"), key=lambda p: (p.stat().st_mtime, p.name)):
+        ea = EventAccumulator(str(events), size_guidance={"scalars": 0})
+        ea.Reload()
+        for tag in ea.Tags().get("scalars", []):
+            out.setdefault(tag, {}).update({e.step: e.value for e in ea.Scalars(tag)})
+    return out
+
+
+def _smooth(y: np.ndarray, window: int) -> np.ndarray:
+    """Trailing mean over `window` iterations (NaN-aware: iterations where an object ended no episode)."""
+    out = np.full_like(y, np.nan)
+    for i in range(len(y)):
+        w = y[max(0, i - window + 1) : i + 1]
+        if np.isfinite(w).any():
+            out[i] = np.nanmean(w)
+    return out
+
+
+def progress(run_dir: Path, window: int = 25) -> dict[str, list[float]]:
+    """Per iteration: env steps, training hours, and smoothed success (all 18 objects, 6 medium)."""
+    cfg = json.loads((run_dir / CONFIG_NAME).read_text())
+    steps_per_it = cfg["runner"]["num_steps_per_env"] * cfg["num_envs"]
+    s = _scalars(run_dir)
+    its = sorted(s.get("Perf/collection_time", {}))
+    if not its:
+        return {}
+    secs = np.array([s["Perf/collection_time"][i] + s["Perf/learning_time"].get(i, 0.0) for i in its])
+    per_obj = np.array(
+        [[s.get(f"Success/{n}", {}).get(i, np.nan) for i in its] for n in objects.PAPER_OBJECTS], dtype=float
+    )
+    per_obj = np.array([_smooth(row, window) for row in per_obj])
+    medium = [objects.PAPER_OBJECTS.index(n) for n in objects.MEDIUM_OBJECTS]
+    with np.errstate(invalid="ignore"):
+        return {
+            "iteration": [float(i) for i in its],
+            "env_steps": [float((i + 1) * steps_per_it) for i in its],
+            "wall_h": list(np.cumsum(secs) / 3600.0),
+            "success_all18": list(np.nan_to_num(per_obj.mean(axis=0))),
+            "success_medium": list(np.nan_to_num(per_obj[medium].mean(axis=0))),
+        }
+
+
+def plot_progress(run_dir: Path, path: Path, title: str | None = None) -> dict:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    p = progress(run_dir)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=True)
+    for ax, x, label in ((axes[0], np.array(p["env_steps"]) / 1e6, "env steps (M)"),
+                         (axes[1], np.array(p["wall_h"]), "training wall clock (h)")):
+        ax.plot(x, 100 * np.array(p["success_all18"]), label="all 18 objects")
+        ax.plot(x, 100 * np.array(p["success_medium"]), label="6 medium objects")
+        ax.set_xlabel(label)
+        ax.set_ylim(0, 100)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("training success, stochastic (%)")
+    axes[0].legend(loc="upper left")
+    fig.suptitle(title or f"Teacher training progress ({run_dir.name})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return p
+
+
+def main(argv=None) -> None:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv:
+        raise SystemExit("usage: python -m lerobot_blindgrasp.teacher.progress RUN_DIR [OUT.png]")
+    run_dir = Path(argv[0])
+    if not (run_dir / CONFIG_NAME).is_file():
+        raise SystemExit(f"{run_dir} is not a teacher run directory (no {CONFIG_NAME})")
+    out = Path(argv[1]) if len(argv) > 1 else run_dir / "progress.png"
+    p = plot_progress(run_dir, out)
+    last = {k: v[-1] for k, v in p.items()}
+    print(json.dumps({"plot": str(out), "last": last}, indent=2))
+
+
+if __name__ == "__main__":
+    main()
