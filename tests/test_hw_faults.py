@@ -319,7 +319,7 @@ def glove_teleop(tmp_path, monkeypatch):
 
 def _proximal(teleop, glove, closure: float) -> float:
     glove.closure = closure
-    time.sleep(0.08)
+    assert teleop.receiver.wait_frames(3, 2.0)  # the first may have been built before the change
     return teleop.get_action()["ff_j11.pos"]
 
 

@@ -48,7 +48,7 @@ def teleop(glove, tmp_path, monkeypatch):
 
 def _action(teleop, glove, closure: float) -> np.ndarray:
     glove.closure = closure
-    time.sleep(0.06)
+    assert teleop.receiver.wait_frames(3, 2.0)  # the first may have been built before the change
     a = teleop.get_action()
     return np.array([a[k] for k in spec.ACTION_NAMES])
 

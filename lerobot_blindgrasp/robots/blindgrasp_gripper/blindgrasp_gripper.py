@@ -175,9 +175,6 @@ class BlindgraspGripper(Robot):
                 self.bus.write("Position_I_Gain", j, self.config.position_i_gain, num_retry=r)
                 self.bus.write("Position_D_Gain", j, self.config.position_d_gain, num_retry=r)
                 self.bus.write("Profile_Velocity", j, self.config.profile_velocity, num_retry=r)
-                # 0 first: it also clears a watchdog error left by an earlier session (the register reads -1).
-                self.bus.write("Bus_Watchdog", j, 0, num_retry=r)
-                self.bus.write("Bus_Watchdog", j, watchdog, num_retry=r)
             self._enable_torque_holding_pose()
             self.state.expected = {
                 "Torque_Enable": 1,
@@ -203,9 +200,15 @@ class BlindgraspGripper(Robot):
         if outside:
             logger.warning("Joints %s start outside their limits; actions bring them back at <= %.2f rad per step.",
                            outside, self.config.max_relative_target)  # fmt: skip
+        r = self._retry
         for j in self.joints:
-            self.bus.write("Goal_Position", j, present[j], normalize=False, num_retry=self._retry)
-        self.bus.enable_torque(num_retry=self._retry)
+            # A watchdog error outlives the torque-off (the register keeps reading -1) and makes the goal registers
+            # read-only: clear it first, arm it once the torque is on (it only watches while the torque is on).
+            self.bus.write("Bus_Watchdog", j, 0, num_retry=r)
+            self.bus.write("Goal_Position", j, present[j], normalize=False, num_retry=r)
+        self.bus.enable_torque(num_retry=r)
+        for j in self.joints:
+            self.bus.write("Bus_Watchdog", j, self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS, num_retry=r)
 
     @contextmanager
     def torque_disabled(self):
