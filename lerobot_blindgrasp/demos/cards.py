@@ -1,4 +1,5 @@
-"""Dataset cards for blindgrasp datasets, from the templates in `datasets_cards/`.
+"""Dataset cards for blindgrasp datasets, from the templates in `card_templates/` (package data, read through
+importlib.resources, so a non-editable install writes cards too; the top-level `datasets_cards/` points here).
 
 A card is LeRobot's own (`create_lerobot_dataset_card`: LeRobot template, `task_categories: robotics`, the
 `configs` entry the Hub viewer needs, info.json) with our body as its `dataset_description`, our tags, the license
@@ -12,6 +13,7 @@ the data is exactly what lands on the Hub. Two bodies:
 from __future__ import annotations
 
 import importlib.metadata
+import importlib.resources
 import json
 from dataclasses import fields
 from pathlib import Path
@@ -23,7 +25,7 @@ from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, report
 from lerobot_blindgrasp.sim import objects, randomization
 
-CARDS_DIR = Path(__file__).resolve().parents[2] / "datasets_cards"
+TEMPLATE_PACKAGE, TEMPLATE_DIR = "lerobot_blindgrasp.demos", "card_templates"
 TEMPLATES = {"sim": "sim_teacher_demos.md", "glove": "glove_teleop_demos.md"}
 CARD_NAME = "README.md"
 DEFAULT_LICENSE = "apache-2.0"  # the project's license
@@ -61,11 +63,11 @@ def detect_kind(root: Path) -> str:
 def render_body(kind: str, context: dict) -> str:
     if kind not in TEMPLATES:
         raise ValueError(f"unknown card kind {kind!r}; choose from {', '.join(TEMPLATES)}")
-    path = CARDS_DIR / TEMPLATES[kind]
-    if not path.is_file():
-        raise FileNotFoundError(f"card template {path} is missing (datasets_cards/ ships with the source tree)")
+    template = importlib.resources.files(TEMPLATE_PACKAGE) / TEMPLATE_DIR / TEMPLATES[kind]
+    if not template.is_file():
+        raise FileNotFoundError(f"card template {template} is missing; reinstall lerobot_policy_blindgrasp")
     env = jinja2.Environment(undefined=jinja2.StrictUndefined, keep_trailing_newline=True)
-    return env.from_string(path.read_text()).render(**context).strip() + "\n"
+    return env.from_string(template.read_text(encoding="utf-8")).render(**context).strip() + "\n"
 
 
 def _versions() -> dict:
