@@ -35,9 +35,7 @@ def _throwaway_teacher(tmp: Path) -> Path:
 
     out = tmp / "teacher"
     with contextlib.redirect_stdout(io.StringIO()):  # keep --json output clean
-        train.train(
-            train.parse_args(["--preset", "quick", "--output-dir", str(out), "--iterations", "1", "--no-export"])
-        )
+        train.train(train.TrainTeacherConfig(preset="quick", output_dir=out, iterations=1, export=False))
     return out
 
 

@@ -1,6 +1,6 @@
 """`blindgrasp-train-teacher`: PPO teacher training with rsl-rl's OnPolicyRunner.
 
-    blindgrasp-train-teacher --preset cpu --output-dir runs/teacher_cpu
+    blindgrasp-train-teacher --preset=cpu --output_dir=runs/teacher_cpu
 
 The run directory gets TensorBoard logs (reward terms, success per object, fps, collection/learning time),
 `model_<it>.pt` checkpoints every `save_interval` iterations, and `teacher_config.json`. Re-running the same
@@ -10,20 +10,21 @@ to TorchScript and ONNX (`exported/`).
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import dataclasses
 import json
 import logging
 import os
-import signal
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 from tqdm import tqdm
 
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_config
 from lerobot_blindgrasp.sim import randomization
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.teacher import presets
@@ -45,39 +46,47 @@ def build_env_config(preset: presets.TeacherPreset, num_envs: int, seed: int, nt
     )
 
 
-def parse_args(argv=None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--preset", choices=sorted(presets.PRESETS), default="cpu")
-    p.add_argument("--output-dir", required=True, type=Path)
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--iterations", type=int, default=None, help="override the preset's max iterations")
-    p.add_argument("--num-envs", type=int, default=None, help="override the preset's number of envs")
-    p.add_argument("--no-incentive", action="store_true", help="w2 = 0: the teacher of the 'Student w/o r_i' ablation")
-    p.add_argument("--student-obs", action="store_true", help="'RL w/ o_t' baseline: actor and critic see only o_t")
-    p.add_argument("--threads", type=int, default=0, help="physics threads (0: all CPUs)")
-    p.add_argument("--torch-threads", type=int, default=1, help="torch intra-op threads for the PPO update")
-    p.add_argument("--no-export", action="store_true")
-    return p.parse_args(argv)
+@dataclass
+class TrainTeacherConfig:
+    """PPO teacher training (paper Sec. III-B, Table III)."""
+
+    output_dir: Path | None = None  # run directory; re-running with the same one resumes
+    preset: str = "cpu"  # teacher preset: paper (Table III), cpu, quick
+    seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
+    iterations: int | None = None  # override the preset's max iterations
+    num_envs: int | None = None  # override the preset's number of envs
+    no_incentive: bool = False  # w2 = 0: the teacher of the 'Student w/o r_i' ablation
+    student_obs: bool = False  # 'RL w/ o_t' baseline: actor and critic see only o_t
+    threads: int = 0  # physics threads (0: all CPUs)
+    torch_threads: int = 1  # torch intra-op threads for the PPO update
+    export: bool = True  # TorchScript/ONNX export of the actor at the end
+
+    def __post_init__(self):
+        if self.output_dir is None:
+            raise ValueError("--output_dir is required (the run directory; re-running with it resumes)")
+        self.output_dir = Path(self.output_dir)
+        presets.get_preset(self.preset)  # unknown preset: a clear error before anything heavy
 
 
-def train(args: argparse.Namespace) -> Path:
-    preset = presets.Variant(no_incentive=args.no_incentive, student_obs=args.student_obs).apply(
-        presets.get_preset(args.preset)
+def train(cfg: TrainTeacherConfig) -> Path:
+    preset = presets.Variant(no_incentive=cfg.no_incentive, student_obs=cfg.student_obs).apply(
+        presets.get_preset(cfg.preset)
     )
-    num_envs = args.num_envs or preset.num_envs
-    iterations = args.iterations or preset.max_iterations
-    out = args.output_dir
+    num_envs = cfg.num_envs or preset.num_envs
+    iterations = cfg.iterations or preset.max_iterations
+    spec.check_seeds("teacher_train", cfg.seed, num_envs)
+    out = cfg.output_dir
     out.mkdir(parents=True, exist_ok=True)
-    torch.manual_seed(args.seed)
+    torch.manual_seed(cfg.seed)
     # PPO on these small MLPs gains little from intra-op threads, and OpenMP threads that spin while MuJoCo's
     # threads (or any other process) hold the cores made the update 5-8x slower on a busy 2-core machine.
-    torch.set_num_threads(args.torch_threads)
+    torch.set_num_threads(cfg.torch_threads)
 
     config = {
         "preset": preset.name,
-        "variant": {"no_incentive": args.no_incentive, "student_obs": args.student_obs},
+        "variant": {"no_incentive": cfg.no_incentive, "student_obs": cfg.student_obs},
         "num_envs": num_envs,
-        "seed": args.seed,
+        "seed": cfg.seed,
         "iterations": iterations,
         "runner": preset.runner_cfg(),
         "reward": dataclasses.asdict(preset.reward),
@@ -95,7 +104,7 @@ def train(args: argparse.Namespace) -> Path:
     else:
         cfg_path.write_text(json.dumps(config, indent=2))
 
-    env = BatchedGraspEnv(build_env_config(preset, num_envs, args.seed, args.threads))
+    env = BatchedGraspEnv(build_env_config(preset, num_envs, cfg.seed, cfg.threads))
     bar = tqdm(total=iterations, desc=f"teacher[{preset.name}]", unit="it", dynamic_ncols=True)
     steps_per_it = preset.runner["num_steps_per_env"]
     counter = {"steps": 0}
@@ -119,13 +128,12 @@ def train(args: argparse.Namespace) -> Path:
         log.info("resuming from %s (iteration %d)", ckpt, done_its)
     remaining = iterations - done_its
     console = open(out / "train_console.log", "a")
-    # SIGTERM (e.g. a job scheduler) behaves like Ctrl-C: save and exit.
-    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
     t0 = time.time()
     interrupted = False
     try:
-        if remaining > 0:
-            with contextlib.redirect_stdout(console):  # rsl-rl prints a table per iteration; keep it in a file
+        # SIGTERM/SIGHUP (a job scheduler, a closed terminal) behave like Ctrl-C: save and exit.
+        with interrupts_as_keyboard_interrupt(), contextlib.redirect_stdout(console):
+            if remaining > 0:  # rsl-rl prints a table per iteration; it goes to the console log
                 runner.learn(remaining, init_at_random_ep_len=done_its == 0)
     except KeyboardInterrupt:
         interrupted = True
@@ -136,7 +144,7 @@ def train(args: argparse.Namespace) -> Path:
     wall = time.time() - t0
     its_run = runner.current_learning_iteration + 1 - done_its
     final = latest_checkpoint(out)
-    if not args.no_export:
+    if cfg.export:
         export(runner, out / "exported")
     write_learning_curve(out)
     summary = {
@@ -176,7 +184,7 @@ def export(runner, path: Path) -> None:
 
 def main(argv=None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    train(parse_args(argv))
+    train(parse_config(TrainTeacherConfig, argv))
 
 
 if __name__ == "__main__":
