@@ -29,7 +29,6 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     GripperBusError,
     GripperHardwareError,
 )
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import deadband
 from lerobot_blindgrasp.robots.blindgrasp_gripper.units import (
     CURRENT_UNIT_A,
     RAD_PER_TICK,
@@ -70,13 +69,6 @@ def test_current_limit_is_the_sims_torque_limit():
     units = amps_to_current_units(cfg.current_limit_a)
     assert units == 855  # 2.3 A / 2.69 mA
     assert torque_at_current_nm(units * CURRENT_UNIT_A) == pytest.approx(PhysicsOptions().torque_limit, rel=0.01)
-
-
-def test_deadband_is_the_sims():
-    from lerobot_blindgrasp.sim.sensors import threshold
-
-    f = np.random.default_rng(0).normal(0.0, 0.3, size=1000)
-    np.testing.assert_array_equal(deadband(f), threshold(f))
 
 
 def test_robot_config_file_parses_to_the_defaults():

@@ -109,12 +109,12 @@ def test_uniaxial_sensor_reads_a_known_load_in_newtons():
     settled = np.array(readings[20:])
     np.testing.assert_allclose(settled, mass * 9.81, rtol=0.03)
     # The other two sensors see nothing, and the deadband maps small readings to exactly 0.
-    assert np.all(sensors.threshold(uni()[1:]) == 0.0)
+    assert np.all(sensors.reading(uni()[1:]) == 0.0)
 
 
 def test_deadband_threshold():
     f = np.array([0.0, 0.05, -0.099, 0.1, -0.5, 3.0])
-    np.testing.assert_array_equal(sensors.threshold(f), [0.0, 0.0, 0.0, 0.1, -0.5, 3.0])
+    np.testing.assert_array_equal(sensors.reading(f), [0.0, 0.0, 0.0, 0.1, -0.5, 3.0])
 
 
 def test_scripted_closing_motion_lifts_the_medium_cylinder():

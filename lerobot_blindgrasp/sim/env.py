@@ -304,7 +304,8 @@ class BatchedGraspEnv:
         si = self.sensor_index
         contact = si.read(sd, "contact")
         tip_quat = si.read(sd, "quat")
-        uni = sensors.threshold(sensors.uniaxial_force(contact, si.read(sd, "zaxis")))
+        uni_true = sensors.uniaxial_force(contact, si.read(sd, "zaxis"))
+        uni = sensors.reading(uni_true)  # noise-free reading (rewards, curation)
         obj_pos = qpos[:, 9:12]
         raw = {
             "q": qpos[:, : spec.NUM_JOINTS],
@@ -320,7 +321,7 @@ class BatchedGraspEnv:
         jn = noise[:, : spec.NUM_JOINTS] * self.cfg.dr.joint_noise_rad
         fn = noise[:, spec.NUM_JOINTS :] * self.cfg.dr.force_noise_n
         q_obs = raw["q"] + jn
-        uni_obs = uni + fn[:, :3]
+        uni_obs = sensors.reading(uni_true, fn[:, :3])  # noise, then the deadband, as on the real sensor
         contact_tip = sensors.contact_force_tip_frame(contact, tip_quat).reshape(-1, 9) + fn[:, 3:12]
         wrench = np.concatenate([si.read(sd, "force"), si.read(sd, "torque")], axis=2).reshape(-1, 18)
         wrench = wrench + fn[:, 12:30]

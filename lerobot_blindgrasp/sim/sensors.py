@@ -6,7 +6,8 @@ tip, so a push on the tip end (compression, what a uniaxial cell under the tip m
 
     f_uni = -(F_on_tip . z) = F_reported . z        (positive in compression)
 
-and magnitudes under the 0.1 N deadband read 0 (paper Sec. III-B; same threshold as the contact test).
+That is the true force. What the policy sees goes through the sensor pipeline shared with the real gripper,
+`lerobot_blindgrasp.force.reading` (re-exported here as `reading`): true force + noise, then the 0.1 N deadband.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import mujoco
 import numpy as np
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.force import reading  # noqa: F401  (the env reads its fingertip sensing from this module)
 
 PER_TIP = ("contact", "objcontact", "force", "torque", "pos", "quat", "zaxis", "objdist")
 
@@ -56,13 +58,8 @@ def quat_to_mat(q: np.ndarray) -> np.ndarray:
     )
 
 
-def threshold(force: np.ndarray, deadband: float = spec.FORCE_THRESHOLD_N) -> np.ndarray:
-    """Magnitudes under the deadband read 0 (sim and real use the same rule)."""
-    return np.where(np.abs(force) < deadband, 0.0, force)
-
-
 def uniaxial_force(contact_reported: np.ndarray, zaxis: np.ndarray) -> np.ndarray:
-    """(n, 3 tips) compressive force along each tip's z axis, before the deadband."""
+    """(n, 3 tips) true compressive force along each tip's z axis (before noise and deadband)."""
     return np.einsum("nfi,nfi->nf", contact_reported, zaxis)
 
 

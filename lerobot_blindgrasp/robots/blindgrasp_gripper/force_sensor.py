@@ -15,8 +15,8 @@ next SYNC after any bad length or CRC, so garbage bytes on the line cost frames,
 dropped frames; the age of the newest good frame detects a stalled or unplugged stream.
 
 Host side: counts -> newtons with a tare (mean counts over `tare_s` at connect, fingers in free air) and a
-per-channel scale in N/count from the robot config; then the same deadband as the sim
-(|f| < spec.FORCE_THRESHOLD_N reads 0).
+per-channel scale in N/count from the robot config, then the sensor pipeline the sim uses too
+(`lerobot_blindgrasp.force.reading`: the measured newtons already hold the sensor's noise; |f| < 0.1 N reads 0).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import force, spec
 
 logger = logging.getLogger(__name__)
 
@@ -248,9 +248,4 @@ class ForceSensorReader:
         if status:
             bad = [spec.FORCE_SENSOR_NAMES[i] for i, c in enumerate(self.channel_map) if status >> c & 1]
             raise ForceStreamError(f"Force sensor reports a fault on {bad} (status {status:#04x}).")
-        return deadband((counts - self.offset) * self.scale)
-
-
-def deadband(force: np.ndarray, threshold: float = spec.FORCE_THRESHOLD_N) -> np.ndarray:
-    """Same rule as the sim (`sim.sensors.threshold`): magnitudes under the threshold read 0."""
-    return np.where(np.abs(force) < threshold, 0.0, force)
+        return force.reading(force.counts_to_newtons(counts, self.offset, self.scale))

@@ -1,0 +1,45 @@
+"""The uniaxial fingertip force reading: one pipeline for the sim and the real load cells (no MuJoCo here).
+
+    reading = deadband(true force + sensor noise)          |reading| < 0.1 N reads exactly 0
+
+Order: noise first, then the deadband. This is what the real hardware implies, and the paper says the same:
+- On the gripper, the noise is part of the measurement. The load cell and its ADC deliver counts in which the true
+  force and the electrical noise (and drift) are already summed. The host can only tare, scale and threshold that
+  sum (`counts_to_newtons`, then `reading`). A noise term that comes after the host's deadband has no physical
+  counterpart.
+- The paper (Sec. III-B) computes each uniaxial force by "thresholding small magnitudes to suppress noise". A
+  threshold that suppresses noise must see the noise.
+The sim therefore draws its Gaussian noise (sigma = `spec.FORCE_NOISE_STD_N`, Table II) as the sensor's noise and
+passes true force + noise through the same `reading` as the real counts. A free fingertip then reads exactly 0
+whenever |noise| < 0.1 N, just as the real sensor's noise is cut to 0 in free air. Before this change the sim added
+the noise after the deadband, so a free fingertip read N(0, 0.5 N) and never 0.
+
+The noise-free reading (`reading(true_force)`, no noise argument) is what the rewards and demo curation see.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lerobot_blindgrasp import spec
+
+DEADBAND_N = spec.FORCE_THRESHOLD_N
+
+
+def deadband(force, threshold: float = DEADBAND_N) -> np.ndarray:
+    """Magnitudes under the threshold read 0; the rest pass unchanged (no offset step at the threshold)."""
+    force = np.asarray(force, dtype=np.float64)
+    return np.where(np.abs(force) < threshold, 0.0, force)
+
+
+def reading(true_force, noise=0.0, threshold: float = DEADBAND_N) -> np.ndarray:
+    """What a uniaxial fingertip sensor reports for `true_force` (N), given the sensor's noise sample (N).
+
+    Sim: `true_force` is the contact force projected on the tip's z axis, `noise` the drawn Gaussian sample.
+    Real: the noise is already inside the measured newtons (`counts_to_newtons`), so `noise` stays 0."""
+    return deadband(np.asarray(true_force, dtype=np.float64) + noise, threshold)
+
+
+def counts_to_newtons(counts, tare_counts, scale_n_per_count) -> np.ndarray:
+    """Raw load-cell ADC counts -> newtons: subtract the tare (free-air counts), times the per-channel scale."""
+    return (np.asarray(counts, dtype=np.float64) - tare_counts) * np.asarray(scale_n_per_count, dtype=np.float64)
