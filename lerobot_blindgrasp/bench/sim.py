@@ -17,6 +17,7 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+from lerobot_blindgrasp.sim.gripper import PhysicsOptions
 
 
 def add_arguments(p) -> None:
@@ -70,9 +71,13 @@ def run(args) -> dict:
     base = rows[0]["env_control_steps_per_s"]
     for r in rows:
         r["env_speedup_vs_first"] = r["env_control_steps_per_s"] / base
-    result = {"num_envs": args.num_envs, "substeps": 10, "rows": rows}
+    physics = PhysicsOptions()
+    result = {"num_envs": args.num_envs, "substeps": physics.substeps, "timestep_s": physics.timestep, "rows": rows}
     if not args.json:
-        print(f"blindgrasp-bench sim: {args.num_envs} envs, 10 x 5 ms substeps per 20 Hz control step")
+        print(
+            f"blindgrasp-bench sim: {args.num_envs} envs, {physics.substeps} x {physics.timestep * 1e3:g} ms "
+            f"substeps per {spec.CONTROL_HZ:g} Hz control step"
+        )
         print("| threads | raw physics steps/s | raw ctrl steps/s | env ctrl steps/s | env / raw | env speed-up |")
         print("|---:|---:|---:|---:|---:|---:|")
         for r in rows:

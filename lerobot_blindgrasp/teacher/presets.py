@@ -7,7 +7,7 @@ measured in docs/results/teacher_cpu.md.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 from lerobot_blindgrasp.sim import objects, rewards
 
@@ -67,7 +67,6 @@ class TeacherPreset:
     runner: dict
     reward: rewards.RewardConfig = rewards.PAPER_REWARD
     deviations: tuple[str, ...] = ()
-    eval_episodes_per_object: int = 20
     external_force: bool = True  # Table II random pushes during training
     # Share of training envs per object (order of objects.PAPER_OBJECTS); None: even, as the paper.
     object_weights: tuple[float, ...] | None = None
@@ -157,7 +156,6 @@ QUICK = TeacherPreset(
     deviations=_CPU_DEVIATIONS[:4]
     + (_NO_PUSHES,)
     + ("144 envs, MLP [128, 64], 30 iterations: minutes, for the pipeline and CI",),
-    eval_episodes_per_object=4,
     external_force=False,
 )
 
@@ -177,7 +175,6 @@ class Variant:
 
     no_incentive: bool = False  # teacher for "Student w/o r_i"
     student_obs: bool = False  # "RL w/ o_t": actor and critic see only the 12-d student observation
-    extra: dict = field(default_factory=dict)
 
     def apply(self, preset: TeacherPreset) -> TeacherPreset:
         runner = preset.runner_cfg()
