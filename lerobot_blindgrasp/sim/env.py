@@ -1,9 +1,11 @@
-"""Batched blind-grasp environment: N grippers, each with one object, stepped together in C on all cores.
+"""Batched blind-grasp environment: N grippers, each with one object, stepped together.
 
-Physics runs in `mujoco.batch.Batch` (MuJoCo >= 3.17): every env's state is a row, the batch loads rows into a
-thread-local MjData and steps them with the GIL released; results are bit-identical at any thread count. Each env
-runs on its own MjModel copy, which carries the env's object and its domain-randomization draw (friction, mass,
-servo gains). Everything around the physics is numpy over the env axis; there is no Python loop over envs.
+This module is the task definition, written once: resets and their randomization draws, actions, pushes,
+observations, rewards, success and termination, all numpy over the env axis (no Python loop over envs). Physics
+runs in a backend (`sim/backends/`) chosen by `GraspEnvConfig.backend`:
+- "batch" (default): `mujoco.batch.Batch` (MuJoCo >= 3.17) on CPU threads, each env on its own MjModel copy
+  carrying its object and its domain-randomization draw (friction, mass, servo gains);
+- "warp": MuJoCo Warp (GPU, or CPU for development) with the same per-env parameters as per-world model fields.
 
 Step (paper Sec. III-B): a_t = delta-theta in R^9 is clipped to +-0.3 rad, the servo target is q_t + a_t (clipped to
 the joint limits, as the real robot does), and `substeps` physics steps cover one 50 ms control period.
@@ -19,10 +21,10 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
-from mujoco import batch as mjbatch
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.sim import gripper, objects, randomization, rewards, rng, sensors
+from lerobot_blindgrasp.sim import backends, gripper, objects, randomization, rewards, rng, sensors
+from lerobot_blindgrasp.sim.backends.batch import BatchBackend
 
 log = logging.getLogger(__name__)
 
@@ -40,8 +42,11 @@ class GraspEnvConfig:
     physics: gripper.PhysicsOptions = field(default_factory=gripper.PhysicsOptions)
     nthread: int = 0  # 0: all CPUs
     autoreset: bool = True
+    backend: str = "batch"  # physics: "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp, GPU; needs the gpu extra)
+    device: str | None = None  # warp only: "cuda:0", "cpu"; None: this process's GPU (LOCAL_RANK) if any, else CPU
 
     def __post_init__(self):
+        backends.check_backend(self.backend)
         self.objects = objects.resolve_objects(self.objects)
         if self.num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {self.num_envs}")
@@ -95,19 +100,25 @@ class BatchedGraspEnv:
             )
             for o in obj_specs
         ]
+        self._templates = templates
         self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)
-        self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
-        self.batch = mjbatch.Batch(templates[0], nsim=n, nthread=cfg.nthread)
-        self.batch.set_models(self.models)
+        if cfg.backend == "batch":
+            self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
+            self.physics = BatchBackend(self.models, nthread=cfg.nthread)
+            self.batch = self.physics.batch
+        else:
+            from lerobot_blindgrasp.sim.backends.warp import WarpBackend  # optional dependency
+
+            self.models = None  # per-world fields on the device; env_model(i) rebuilds env i's MjModel on demand
+            self.physics = WarpBackend(templates, self.object_index, self.env_model, device=cfg.device)
+            self.batch = None
         self.sensor_index = sensors.SensorIndex.from_model(templates[0])
         self._object_body = templates[0].body("object").id
-        self._qpos = self.batch.bind("qpos")
-        self._qvel = self.batch.bind("qvel")
-        self._ctrl = self.batch.bind("ctrl")
-        self._warm = self.batch.bind("qacc_warmstart")
-        self._xfrc = self.batch.bind("xfrc_applied")
-        self._sensordata = self.batch.bind("sensordata")
-        self._warnings_seen = np.zeros(n, dtype=np.int64)
+        self._qpos = self.physics.qpos
+        self._qvel = self.physics.qvel
+        self._ctrl = self.physics.ctrl
+        self._xfrc = self.physics.xfrc_applied
+        self._sensordata = self.physics.sensordata
 
         self.episode = np.zeros(n, dtype=np.int64)  # per-env episode counter (drives the reset draws)
         self.episode_length = np.zeros(n, dtype=np.int64)
@@ -128,6 +139,12 @@ class BatchedGraspEnv:
         q = np.zeros(4)
         mujoco.mju_euler2Quat(q, np.asarray(o.euler, dtype=np.float64), "xyz")
         return q
+
+    def env_model(self, i: int) -> mujoco.MjModel:
+        """Env i's MjModel: its object with its Table II draw (what either backend simulates for env i)."""
+        if self.models is not None:
+            return self.models[i]
+        return self._randomized_model(self._templates[self.object_index[i]], i)
 
     def _randomized_model(self, template: mujoco.MjModel, i: int) -> mujoco.MjModel:
         """A copy of the object's model with env i's Table II draw written into it."""
@@ -160,19 +177,16 @@ class BatchedGraspEnv:
         seeds = self.env_seeds[ids]
         q0, xy = randomization.draw_reset(self.cfg.dr, seeds, self.episode[ids])
         q0 = np.clip(q0, spec.JOINT_LOWER, spec.JOINT_UPPER)
-        self.batch.reset(ids, stage=mujoco.mjtStage.mjSTAGE_NONE)
+        self.physics.reset(ids)  # defaults; zero velocity, warm-start and applied forces
         qpos = self._qpos[ids]
         qpos[:, : spec.NUM_JOINTS] = q0
         qpos[:, 9:11] = xy
         qpos[:, 11] = self.rest_height[ids]
         qpos[:, 12:16] = self._rest_quat[ids]
         self._qpos[ids] = qpos
-        self._qvel[ids] = 0.0
         self._ctrl[ids] = q0
-        self._warm[ids] = 0.0
-        self._xfrc[ids] = 0.0
         self._pushing[ids] = False
-        self.batch.forward(ids)
+        self.physics.forward(ids)
         self.episode_length[ids] = 0
         self.lifted_steps[ids] = 0
         self.success[ids] = False
@@ -184,7 +198,6 @@ class BatchedGraspEnv:
             _, steps = randomization.draw_push(self.cfg.dr, seeds, self.push_counter[ids])
             self.push_counter[ids] += 1
             self.steps_to_push[ids] = steps
-        self._warnings_seen[ids] = self.batch.warning[ids, :, 1].sum(axis=1)
 
     # --- step -------------------------------------------------------------------------------------------------
     def validate_action(self, action) -> np.ndarray:
@@ -203,15 +216,7 @@ class BatchedGraspEnv:
         if self.cfg.dr.external_force:
             self._update_pushes()
 
-        failed = np.zeros(self.num_envs, dtype=bool)
-        try:
-            self.batch.step(nstep=self.cfg.physics.substeps)
-        except mjbatch.SimulationError as e:  # those sims kept their old state; reset them below
-            failed[e.ids] = True
-        warn = self.batch.warning[:, :, 1].sum(axis=1)
-        failed |= warn > self._warnings_seen
-        failed |= ~np.isfinite(self._qpos).all(axis=1) | ~np.isfinite(self._qvel).all(axis=1)
-        self._warnings_seen = warn
+        failed = self.physics.step(self.cfg.physics.substeps)  # unstable envs: reset below
 
         obs = self._observe()
         raw = self._raw
@@ -359,8 +364,8 @@ class BatchedGraspEnv:
 
     def mj_model_data(self, i: int) -> tuple[mujoco.MjModel, mujoco.MjData]:
         """Env i's model and a forwarded MjData of its current state (for rendering)."""
-        m = self.models[i]
-        d = self.batch.get_data(i)
+        m = self.env_model(i)
+        d = self.batch.get_data(i) if self.batch is not None else self.physics.get_data(i, m)
         mujoco.mj_forward(m, d)
         return m, d
 
@@ -377,4 +382,5 @@ class BatchedGraspEnv:
         }
 
     def close(self) -> None:
+        self.physics.close()
         self.batch = None
