@@ -167,3 +167,65 @@ def test_rolling_context_equals_lerobot_training_windows(dataset_root):
     torch.testing.assert_close(
         train_batch[ACTION], ((batch[ACTION] - q_now) / spec.ACTION_BOUND_RAD).clamp(-1, 1), atol=1e-5, rtol=0
     )
+
+
+# Run the real lerobot-train entry point in a subprocess with only huggingface_hub's network entry points replaced:
+# create_repo answers with the repo URL, the card check parses the card's YAML locally instead of asking the Hub,
+# and upload_folder (the last call, which validates and commits on the Hub) copies the files it would send,
+# filtered by the same allow/ignore patterns, to a folder. HF_HUB_OFFLINE=1 stays set, so any other network call
+# fails the test.
+HUB_CAPTURE = r'''
+import os, shutil, sys
+from pathlib import Path
+import yaml
+from huggingface_hub import HfApi
+from huggingface_hub.hf_api import CommitInfo, RepoUrl
+from huggingface_hub.repocard import RepoCard
+from huggingface_hub.utils import filter_repo_objects
+
+OUT = Path(os.environ["HUB_CAPTURE"])
+
+def create_repo(self, repo_id, **kwargs):
+    return RepoUrl(f"https://huggingface.co/{repo_id}")
+
+def upload_folder(self, *, repo_id, folder_path, path_in_repo=None, commit_message="", allow_patterns=None,
+                  ignore_patterns=None, **kwargs):
+    folder = Path(folder_path)
+    files = [str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file()]
+    for rel in filter_repo_objects(files, allow_patterns=allow_patterns, ignore_patterns=ignore_patterns):
+        dest = OUT / repo_id / (path_in_repo or "") / rel
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(folder / rel, dest)
+    return CommitInfo(f"https://huggingface.co/{repo_id}/commit/{'0' * 40}", commit_message, "", "0" * 40)
+
+def validate(self, repo_type=None):
+    assert isinstance(yaml.safe_load(str(self).split("---")[1]), dict)
+
+HfApi.create_repo, HfApi.upload_folder, RepoCard.validate = create_repo, upload_folder, validate
+if __name__ == "__main__":
+    from lerobot.scripts.lerobot_train import main
+    sys.argv[0] = "lerobot-train"
+    main()
+'''
+
+
+def test_lerobot_train_pushes_the_policy_to_the_hub_with_an_install_card(dataset_root, tmp_path):
+    captured = tmp_path / "hub"
+    env = dict(os.environ, HF_HUB_OFFLINE="1", OMP_NUM_THREADS="1", HUB_CAPTURE=str(captured),
+               HF_LEROBOT_HOME=str(tmp_path / "hf_lerobot"))  # fmt: skip
+    cmd = [sys.executable, "-c", HUB_CAPTURE, "--policy.type=blindgrasp_transformer", f"--dataset.repo_id={REPO_ID}",
+           f"--dataset.root={dataset_root}", "--policy.push_to_hub=true", "--policy.repo_id=you/blindgrasp_student",
+           "--policy.device=cpu", *TINY, "--steps=1", "--batch_size=2", "--save_freq=1", "--num_workers=0",
+           f"--output_dir={tmp_path / 'train'}", "--wandb.enable=false"]  # fmt: skip
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    repo = captured / "you" / "blindgrasp_student"
+    for name in ("config.json", "model.safetensors", "train_config.json", "README.md",
+                 "policy_preprocessor.json", "policy_postprocessor.json"):  # fmt: skip
+        assert (repo / name).is_file(), name
+    card = (repo / "README.md").read_text()
+    assert "pip install lerobot_policy_blindgrasp" in card and "--policy.path=you/blindgrasp_student" in card
+    assert "lerobot_policy_blindgrasp" in card.split("---")[1]  # a tag in the card's metadata
+    # What was uploaded is a complete policy: it loads as LeRobot loads a --policy.path download.
+    policy = BlindgraspTransformerPolicy.from_pretrained(repo)
+    assert policy.config.repo_id == "you/blindgrasp_student" and policy.config.n_layers == 1

@@ -39,6 +39,26 @@ from lerobot_blindgrasp import spec
 from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
 
 STATE_IS_PAD = f"{OBS_STATE}_is_pad"
+# The distribution that registers this policy type with LeRobot; without it `--policy.path=<hub id>` cannot
+# resolve `type: blindgrasp_transformer`, so the model card says to install it.
+PACKAGE = "lerobot_policy_blindgrasp"
+CARD_INSTALL = f"""
+## Install first
+
+This policy type comes from a LeRobot plugin. Install it next to `lerobot` so that LeRobot finds the
+`blindgrasp_transformer` type (plugin discovery imports `{PACKAGE}`; no extra flag is needed):
+
+```bash
+pip install {PACKAGE}
+```
+
+Then, for example, evaluate it in the blindgrasp simulation:
+
+```bash
+lerobot-eval --policy.path={{repo_id}} --env.type=blindgrasp --env.task=all --eval.n_episodes=20
+```
+
+"""
 
 
 def padding_attention_mask(is_pad: Tensor) -> Tensor:
@@ -207,6 +227,20 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         self.config = config
         self.model = BlindgraspGPT(config)
         self.reset()
+
+    def generate_model_card(self, dataset_repo_id: str, model_type: str, license, tags, cfg=None,
+                            dataset_meta=None):
+        """LeRobot's card, plus the package to install and our tags (the Hub lists models by them)."""
+        tags = sorted(set(tags or []) | {PACKAGE, "blindgrasp"})
+        card = super().generate_model_card(dataset_repo_id, model_type, license, tags, cfg=cfg,
+                                           dataset_meta=dataset_meta)  # fmt: skip
+        repo_id = getattr(self.config, "repo_id", None) or "<repo_id>"
+        lines = card.text.split("\n")
+        # After the card's title line, so the install step is the first thing a reader sees.
+        at = next((i + 1 for i, line in enumerate(lines) if line.startswith("# ")), 0)
+        lines[at:at] = CARD_INSTALL.format(repo_id=repo_id).split("\n")
+        card.text = "\n".join(lines)
+        return card
 
     def get_optim_params(self):
         # robomimic applies AdamW's weight decay to every parameter (its "L2 regularization").
