@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# README command 1: the whole pipeline on the `quick` preset, ending in a report (creates .venv if missing).
+# README command 1: the method on the shipped teacher (`quick` preset): curated demos, lerobot-train of the student,
+# lerobot-eval on all 18 objects, the teacher on the same start states, and a report (creates .venv if missing).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$ROOT/scripts/bootstrap.sh"

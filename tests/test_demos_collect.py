@@ -346,3 +346,16 @@ def test_bench_demos_reports_speeds(teacher, capsys):
     assert result["curated_demos_per_cpu_minute"] > 0 and result["frames_written_per_s"] > 0
     assert result["frames_written_per_s_add_frame"] > 0 and result["writer_episodes"] == 6
     assert capsys.readouterr().out == ""  # --json: the dispatcher prints, run() stays quiet
+
+
+def test_an_empty_curated_collection_is_a_one_line_error(teacher, tmp_path, capsys):
+    """A barely trained teacher lifts nothing, so curation keeps nothing: say so, instead of leaving a folder
+    that LeRobot later fails to load with an unrelated Hub error."""
+    out = tmp_path / "empty"
+    with pytest.raises(SystemExit) as exc:
+        collect.main(["--teacher", str(teacher), "--out", str(out), "--repo-id", "test/empty", "--num-envs",
+                      str(N_ENVS), "--episodes-per-object", "1", "--max-rollouts-per-object", "1", "--no-progress"])
+    assert exc.value.code == collect.EXIT_EMPTY
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
+    assert len(err) == 1 and "is empty" in err[0] and "--no-curation" in err[0]
+    assert json.loads((out / report.REPORT_NAME).read_text())["total"]["kept"] == 0  # the rollouts were counted

@@ -56,6 +56,9 @@ DEFAULT_ROLLOUT_BUDGET_FACTOR = 20
 REPO_ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*/[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 
+EXIT_EMPTY = 3  # the collection ran but wrote no episode
+
+
 class CollectError(Exception):
     """A problem found before anything was written (bad teacher, existing output, incompatible resume)."""
 
@@ -515,13 +518,14 @@ def main(argv=None) -> None:
         f"{s['wall_s'] / 60:.1f} min: {s['demos_per_minute']:.1f} demos/min, "
         f"{s['demos_per_cpu_minute']:.1f} demos/CPU-min; dataset: {cfg.out}"
     )
-    if tally.total().kept == 0:
+    if tally.total().kept == 0 and stats.stop_reason != "interrupted":
+        # LeRobot cannot load a dataset without episodes (it then tries the Hub), so stop anything downstream here.
         print(
-            "warning: no episode met the curation criteria, so the dataset has no data yet (LeRobot cannot "
-            "load it until one is written). A better-trained teacher, a larger --max-rollouts-per-object or "
-            "--no-curation will fill it; add --resume to append to this folder.",
+            f"error: {cfg.out} is empty: no episode met the curation criteria, so LeRobot cannot load it; use a "
+            "better teacher, a larger --max-rollouts-per-object or --no-curation, with --resume to append",
             file=sys.stderr,
         )
+        raise SystemExit(EXIT_EMPTY)
     if stats.stop_reason == "interrupted":
         again = command if cfg.resume else f"{command} --resume"
         print(f"interrupted; every written episode is readable. To continue: {again}", file=sys.stderr)
