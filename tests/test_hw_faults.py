@@ -31,8 +31,7 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     GripperSafetyStop,
     GripperStateError,
 )
-from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_state import WATCHDOG_TRIPPED
-from lerobot_blindgrasp.robots.blindgrasp_gripper.units import RAD_PER_TICK
+from lerobot_blindgrasp.xm430 import RAD_PER_TICK, WATCHDOG_TRIPPED
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
 from lerobot_blindgrasp.teleoperators.manus_glove.stream import PROTO

@@ -29,13 +29,8 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     GripperBusError,
     GripperHardwareError,
 )
-from lerobot_blindgrasp.robots.blindgrasp_gripper.units import (
-    CURRENT_UNIT_A,
-    RAD_PER_TICK,
-    amps_to_current_units,
-    rad_to_ticks,
-    torque_at_current_nm,
-)
+from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import rad_to_ticks
+from lerobot_blindgrasp.xm430 import CURRENT_UNIT_A, RAD_PER_TICK, amps_to_current_units, torque_at_current_nm
 
 ROOT = Path(__file__).resolve().parents[1]
 TICK = RAD_PER_TICK

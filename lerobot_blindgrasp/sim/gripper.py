@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import mujoco
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import spec, xm430
 
 # --- Facts (metres, kilograms) -----------------------------------------------------------------------------------
 BASE_RADIUS = 0.060
@@ -42,9 +42,7 @@ TIP_MASS = 0.018
 PLATE_HEIGHT = 0.25  # plate underside above the table top; straight fingertip end at 1.3 cm
 PLATE_RADIUS = 0.075
 
-XM430_STALL_TORQUE = 4.1  # N m at 12 V
-XM430_NO_LOAD_SPEED = 46.0 * 2.0 * math.pi / 60.0  # rad/s
-BACK_EMF_DAMPING = XM430_STALL_TORQUE / XM430_NO_LOAD_SPEED
+BACK_EMF_DAMPING = xm430.STALL_TORQUE_NM / xm430.NO_LOAD_SPEED_RAD_S
 ARMATURE = 0.002
 
 # Collision groups (bitmasks): fingers collide with each other, the table and the object; the object with
@@ -76,7 +74,7 @@ class PhysicsOptions:
     noslip_iterations: int = 3
     iterations: int = 20
     ls_iterations: int = 10
-    torque_limit: float = XM430_STALL_TORQUE  # N m; the robot config's current limit should match
+    torque_limit: float = xm430.STALL_TORQUE_NM  # N m; the robot's default current limit is the same stall point
     tip_friction: float = 1.0
     # Contact time constants (s). MuJoCo clamps them to >= 2 x timestep. The fingertips are softer than the rest,
     # standing in for the elastic printed tips.

@@ -31,6 +31,7 @@ from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.xm430 import MODEL, WATCHDOG_UNIT_MS, amps_to_current_units, decode_hardware_error
 
 from . import calibration as calib
 from . import signals
@@ -45,19 +46,11 @@ from .errors import (
 )
 from .force_sensor import ForceSensorReader, ForceStreamError
 from .port import PortLostError, use_flushing_port
-from .servo_state import WATCHDOG_UNIT_MS, ServoStateReader
-from .units import amps_to_current_units, rad_to_ticks, ticks_to_rad
+from .calibration import rad_to_ticks, ticks_to_rad
+from .servo_state import ServoStateReader
 
 logger = logging.getLogger(__name__)
 
-MODEL = "xm430-w350"
-HARDWARE_ERROR_BITS = {
-    0x01: "input voltage",
-    0x04: "overheating",
-    0x08: "motor encoder",
-    0x10: "electrical shock",
-    0x20: "overload",
-}
 REFERENCE_POSE_HELP = (
     "REFERENCE pose (q = 0 on all 9 joints): every finger hangs straight down from the plate, proximal and distal "
     "links in line, each finger in its own vertical plane through the claw axis (see robot_configs/README.md)."
@@ -67,11 +60,6 @@ POSITIVE_POSE_HELP = (
     "direction: J*0 turns the fingertip counter-clockwise seen from above; J*1 and J*2 swing the fingertip away "
     "from the claw axis (opening the claw)."
 )
-
-
-def _decode_hw_error(bits: int) -> str:
-    names = [name for bit, name in HARDWARE_ERROR_BITS.items() if bits & bit]
-    return ", ".join(names) or f"bits {bits:#04x}"
 
 
 class BlindgraspGripper(Robot):
@@ -393,7 +381,7 @@ class BlindgraspGripper(Robot):
         self._last_state_check = time.monotonic()
         bad = {j: v for j, v in report.hardware_error.items() if self._confirm_hardware_error(j)}
         if bad:
-            detail = "; ".join(f"{j} (ID {self.bus.motors[j].id}): {_decode_hw_error(v)}" for j, v in bad.items())
+            detail = "; ".join(f"{j} (ID {self.bus.motors[j].id}): {decode_hardware_error(v)}" for j, v in bad.items())
             raise GripperHardwareError(
                 f"Servo hardware error: {detail}. The firmware keeps torque off until the servo is rebooted or "
                 "power-cycled; inspect the finger first."

@@ -6,19 +6,30 @@
    (J*0: fingertip counter-clockwise seen from above; J*1, J*2: fingertip swings away from the claw axis, opening).
 
 The sign of (positive - reference) gives Drive_Mode bit 0 (reverse) per servo, so every servo counts up in the
-sim's positive direction; Homing_Offset then puts the reference pose at `units.ZERO_TICK`. Both live in the servo's
+sim's positive direction; Homing_Offset then puts the reference pose at `ZERO_TICK`. Both live in the servo's
 EEPROM, so the firmware itself reports sim-convention positions and `DynamixelMotorsBus.is_calibrated` can check
 them against the file. Drive mode is written before the homing offset is computed from a fresh reading, so the
 result only relies on the firmware's documented rules (reverse negates the count, homing offset adds to it).
+Converting a calibrated reading is then one affine map, the same for every joint and independent of how a servo
+horn was mounted: q = (ticks - ZERO_TICK) * 2 pi / 4096.
 """
 
 from __future__ import annotations
 
 from lerobot.motors import MotorCalibration
 
-from .units import RAD_PER_TICK, TICKS_PER_REV, ZERO_TICK, rad_to_ticks
+from lerobot_blindgrasp.xm430 import HOMING_OFFSET_MAX, RAD_PER_TICK, TICKS_PER_REV
 
 REVERSE_BIT = 0x01
+ZERO_TICK = 2048  # Present_Position at q = 0 after calibration: mid-turn, far from 0/4095 on both sides
+
+
+def ticks_to_rad(ticks: float) -> float:
+    return (ticks - ZERO_TICK) * RAD_PER_TICK
+
+
+def rad_to_ticks(q: float) -> int:
+    return int(round(ZERO_TICK + q / RAD_PER_TICK))
 
 
 def wrapped_delta(a: int, b: int) -> int:
@@ -67,9 +78,6 @@ def build(
         )
         for j, lo, hi in zip(ids, lower, upper, strict=True)
     }
-
-
-HOMING_OFFSET_MAX = 1_044_479  # XM430 Homing_Offset(20) range, +-
 
 
 class CalibrationFileError(ValueError):

@@ -12,8 +12,7 @@ from dataclasses import dataclass, field
 from lerobot.robots.config import RobotConfig
 
 from lerobot_blindgrasp import spec
-
-from .units import CURRENT_LIMIT_MAX_UNITS, STALL_CURRENT_A, amps_to_current_units
+from lerobot_blindgrasp.xm430 import CURRENT_LIMIT_MAX_UNITS, CURRENT_UNIT_A, STALL_CURRENT_A, amps_to_current_units
 
 
 @dataclass
@@ -101,7 +100,7 @@ class BlindgraspGripperConfig(RobotConfig):
         if self.operating_mode not in ("CURRENT_POSITION", "POSITION"):
             raise ValueError("operating_mode must be CURRENT_POSITION or POSITION")
         if not 0 < amps_to_current_units(self.current_limit_a) <= CURRENT_LIMIT_MAX_UNITS:
-            raise ValueError(f"current_limit_a must be in (0, {CURRENT_LIMIT_MAX_UNITS * 0.00269:.2f}] A")
+            raise ValueError(f"current_limit_a must be in (0, {CURRENT_LIMIT_MAX_UNITS * CURRENT_UNIT_A:.2f}] A")
         fs = self.force_sensor
         if len(fs.scale_n_per_count) != spec.NUM_FORCES or len(fs.channel_map) != spec.NUM_FORCES:
             raise ValueError(f"force_sensor needs {spec.NUM_FORCES} scales and channel_map entries")

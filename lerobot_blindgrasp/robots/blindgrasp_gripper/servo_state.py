@@ -18,8 +18,7 @@ from dataclasses import dataclass
 
 from lerobot.motors.motors_bus import get_address
 
-WATCHDOG_TRIPPED = 255  # Bus_Watchdog reads -1 (one unsigned byte) after the watchdog stopped the servo
-WATCHDOG_UNIT_MS = 20
+from lerobot_blindgrasp.xm430 import WATCHDOG_TRIPPED
 CHECKED = ("Torque_Enable", "Position_P_Gain", "Position_I_Gain", "Position_D_Gain", "Bus_Watchdog", "Goal_Current")
 BLOCK = ("Torque_Enable", "Goal_Current")  # first and last register of the block read
 
