@@ -22,17 +22,14 @@ per-channel scale in N/count from the robot config, then the sensor pipeline the
 from __future__ import annotations
 
 import binascii
-import logging
 import struct
-import threading
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from lerobot_blindgrasp import force, spec
-
-logger = logging.getLogger(__name__)
+from lerobot_blindgrasp.streams import LatestFrameStream, StreamError
 
 SYNC = b"\xa5\x5a"
 MAX_CHANNELS = 8
@@ -99,12 +96,17 @@ class FrameParser:
             del self.buffer[:total]
 
 
-class ForceStreamError(ConnectionError):
+class ForceStreamError(StreamError):
     """No fresh valid frame, or the microcontroller flags a channel fault."""
 
 
-class ForceSensorReader:
-    """Reads the stream in a background thread; `read()` returns tared, scaled, deadbanded forces in N."""
+class ForceSensorReader(LatestFrameStream[Frame]):
+    """The serial stream (newest frame kept by `LatestFrameStream`'s thread); `read()` returns tared, scaled,
+    deadbanded forces in N."""
+
+    name = "Force-sensor"
+    error_type = ForceStreamError
+    lost_hint = "USB cable unplugged?"
 
     def __init__(
         self,
@@ -116,42 +118,23 @@ class ForceSensorReader:
         stale_timeout_s: float = 0.15,
         connect_timeout_s: float = 1.0,
     ):
+        super().__init__(port, stale_timeout_s)
         self.port = port
         self.baudrate = baudrate
         self.scale = np.asarray(scale_n_per_count, dtype=np.float64)
         self.channel_map = list(channel_map)
-        self.stale_timeout_s = stale_timeout_s
         self.connect_timeout_s = connect_timeout_s
         self.offset = np.zeros(len(self.channel_map))
         self.parser = FrameParser()
-        self.frames = 0
         self.dropped_frames = 0
-        self._latest: Frame | None = None
-        self._latest_t = 0.0
-        self._port_error: BaseException | None = None
-        self._lock = threading.Lock()
-        self._new_frame = threading.Condition(self._lock)
         self._serial = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
 
     @property
     def is_connected(self) -> bool:
         return self._serial is not None
 
     def connect(self) -> None:
-        import serial  # pyserial comes with lerobot[dynamixel]
-
-        try:
-            self._serial = serial.Serial(self.port, self.baudrate, timeout=0.02)
-        except (OSError, serial.SerialException) as e:
-            raise ForceStreamError(f"Could not open the force-sensor port '{self.port}': {e}") from e
-        self._serial.reset_input_buffer()
-        self._port_error = None
-        self._latest = None
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="force-sensor", daemon=True)
-        self._thread.start()
+        self.start()
         if not self.wait_frames(1, self.connect_timeout_s):
             self.disconnect()
             raise ForceStreamError(
@@ -161,49 +144,35 @@ class ForceSensorReader:
             )
 
     def disconnect(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=1.0)
-            self._thread = None
+        self.stop()
+
+    def _open(self) -> None:
+        import serial  # pyserial comes with lerobot[dynamixel]
+
+        try:
+            self._serial = serial.Serial(self.port, self.baudrate, timeout=0.02)
+        except (OSError, serial.SerialException) as e:
+            raise ForceStreamError(f"Could not open the force-sensor port '{self.port}': {e}") from e
+        self._serial.reset_input_buffer()
+
+    def _receive(self) -> list[Frame]:
+        data = self._serial.read(256)
+        return self.parser.feed(data) if data else []
+
+    def _close(self) -> None:
         if self._serial is not None:
             try:
                 self._serial.close()
             finally:
                 self._serial = None
 
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                data = self._serial.read(256)
-            except Exception as e:  # unplugged: stop reading; read() reports it
-                logger.error("force sensor read failed: %s", e)
-                self._port_error = e
-                return
-            if not data:
-                continue
-            frames = self.parser.feed(data)
-            if not frames:
-                continue
-            now = time.monotonic()
-            with self._lock:
-                for f in frames:
-                    if self._latest is not None:
-                        self.dropped_frames += (f.seq - self._latest.seq - 1) % 65536
-                    self._latest = f
-                    self.frames += 1
-                self._latest_t = now
-                self._new_frame.notify_all()
-
-    def wait_frames(self, n: int, timeout_s: float) -> bool:
-        deadline = time.monotonic() + timeout_s
-        with self._lock:
-            target = self.frames + n
-            while self.frames < target:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self._new_frame.wait(left)
+    def _keep(self, frame: Frame, now: float) -> bool:
+        if self._latest is not None:  # SEQ gaps are frames lost on the way (or dropped by the firmware)
+            self.dropped_frames += (frame.seq - self._latest.seq - 1) % 65536
         return True
+
+    def _stale_detail(self) -> str:
+        return f"; {self.dropped_frames} frames dropped so far"
 
     def _channels(self, frame: Frame) -> np.ndarray:
         if max(self.channel_map) >= len(frame.counts):
@@ -220,32 +189,17 @@ class ForceSensorReader:
         while time.monotonic() < deadline or len(samples) < min_frames:
             if not self.wait_frames(1, self.stale_timeout_s * 4):
                 raise ForceStreamError(f"Force-sensor stream stopped during tare ({len(samples)} frames).")
-            with self._lock:
-                frame = self._latest
+            frame, _ = self.latest()
             if frame.status:
                 raise ForceStreamError(f"Force sensor channel fault during tare (status {frame.status}).")
             samples.append(self._channels(frame))
         self.offset = np.mean(samples, axis=0)
         return self.offset
 
-    def read_raw(self) -> tuple[np.ndarray, float, int]:
-        """(counts per channel, age of the newest frame in s, status bits)."""
-        with self._lock:
-            frame, t = self._latest, self._latest_t
-        if self._port_error is not None:
-            raise ForceStreamError(f"Force-sensor port '{self.port}' failed (USB cable unplugged?): {self._port_error}")
-        if frame is None:
-            raise ForceStreamError(f"No force-sensor frame received on '{self.port}'.")
-        return self._channels(frame), time.monotonic() - t, frame.status
-
     def read(self) -> np.ndarray:
-        counts, age, status = self.read_raw()
-        if age > self.stale_timeout_s:
-            raise ForceStreamError(
-                f"Force-sensor data is stale: newest frame is {age * 1e3:.0f} ms old "
-                f"(limit {self.stale_timeout_s * 1e3:.0f} ms; {self.dropped_frames} frames dropped so far)."
-            )
-        if status:
-            bad = [spec.FORCE_SENSOR_NAMES[i] for i, c in enumerate(self.channel_map) if status >> c & 1]
-            raise ForceStreamError(f"Force sensor reports a fault on {bad} (status {status:#04x}).")
+        frame = self.fresh()
+        counts = self._channels(frame)
+        if frame.status:
+            bad = [spec.FORCE_SENSOR_NAMES[i] for i, c in enumerate(self.channel_map) if frame.status >> c & 1]
+            raise ForceStreamError(f"Force sensor reports a fault on {bad} (status {frame.status:#04x}).")
         return force.reading(force.counts_to_newtons(counts, self.offset, self.scale))

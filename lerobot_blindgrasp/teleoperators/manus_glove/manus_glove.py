@@ -77,7 +77,7 @@ class ManusGlove(Teleoperator):
         super().__init__(config)  # loads the calibration file through our _load_calibration, if there is one
         if not isinstance(self.calibration, GloveCalibration):
             self.calibration: GloveCalibration | None = None
-        self.receiver = GloveReceiver(config.host, config.port, config.side, rt.REQUIRED_KEYS)
+        self.receiver = GloveReceiver(config.host, config.port, config.side, rt.REQUIRED_KEYS, config.hold_timeout_s)
         self._last_target: np.ndarray | None = None
         self._holding = False
 
@@ -149,7 +149,7 @@ class ManusGlove(Teleoperator):
         while time.monotonic() < deadline or not samples:
             if not self.receiver.wait_frames(1, self.config.hold_timeout_s * 4):
                 raise ConnectionError("The glove stream stopped during calibration.")
-            samples.append(self.receiver.latest().ergonomics)
+            samples.append(self.receiver.latest()[0].ergonomics)
         return {k: float(np.mean([s[k] for s in samples])) for k in sorted(rt.REQUIRED_KEYS)}
 
     @check_if_not_connected
@@ -171,8 +171,7 @@ class ManusGlove(Teleoperator):
     def get_action(self) -> dict[str, float]:
         if self.calibration is None:
             raise RuntimeError(f"{self} is not calibrated: run lerobot-calibrate --teleop.type=manus_glove first.")
-        frame = self.receiver.latest()
-        age = time.monotonic() - frame.received
+        frame, age = self.receiver.latest()
         if age > self.config.disconnect_timeout_s:
             raise GloveStreamLost(
                 f"Glove stream lost: no datagram for {age:.2f} s (limit {self.config.disconnect_timeout_s} s). "

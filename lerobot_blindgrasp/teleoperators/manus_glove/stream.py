@@ -24,9 +24,10 @@ import json
 import logging
 import math
 import socket
-import threading
 import time
 from dataclasses import dataclass
+
+from lerobot_blindgrasp.streams import LatestFrameStream
 
 logger = logging.getLogger(__name__)
 
@@ -88,27 +89,30 @@ def decode(datagram: bytes, required: set[str]) -> tuple[int, str, dict[str, flo
     return seq, side, values
 
 
-class GloveReceiver:
-    """Background UDP listener keeping the newest valid frame for one hand."""
+class GloveReceiver(LatestFrameStream[GloveFrame]):
+    """Background UDP listener keeping the newest valid frame for one hand (`LatestFrameStream`). Staleness is the
+    teleoperator's call (hold the target, then stop), so `stale_timeout_s` is its hold timeout."""
 
-    def __init__(self, host: str, port: int, side: str, required: set[str]):
+    name = "Glove"
+    lost_hint = "socket closed"
+
+    def __init__(self, host: str, port: int, side: str, required: set[str], stale_timeout_s: float = 0.15):
+        super().__init__(f"udp://{host}:{port}", stale_timeout_s)
         self.host, self.port, self.side, self.required = host, port, side, required
-        self.frames = 0
         self.rejected = 0
-        self._latest: GloveFrame | None = None
-        self._lock = threading.Condition()
         self._sock: socket.socket | None = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
 
     @property
     def is_open(self) -> bool:
         return self._sock is not None
 
     def open(self) -> None:
-        # A frame from an earlier session must neither count as fresh nor shadow a restarted bridge's counter.
-        with self._lock:
-            self._latest = None
+        self.start()
+
+    def close(self) -> None:
+        self.stop()
+
+    def _open(self) -> None:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.bind((self.host, self.port))
@@ -117,56 +121,27 @@ class GloveReceiver:
             raise ConnectionError(f"Cannot listen for the glove on udp://{self.host}:{self.port}: {e}") from e
         sock.settimeout(0.05)
         self._sock = sock
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="glove-udp", daemon=True)
-        self._thread.start()
 
-    def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=1.0)
-            self._thread = None
+    def _receive(self) -> list[GloveFrame]:
+        try:
+            datagram = self._sock.recv(65536)
+        except TimeoutError:
+            return []
+        try:
+            seq, side, ergo = decode(datagram, self.required)
+        except Exception as e:  # whatever arrives, the listener must keep listening
+            self.rejected += 1
+            logger.debug("glove datagram rejected: %s", e)
+            return []
+        return [GloveFrame(seq, side, ergo, time.monotonic())] if side == self.side else []
+
+    def _close(self) -> None:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
 
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                datagram = self._sock.recv(65536)
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            try:
-                seq, side, ergo = decode(datagram, self.required)
-            except Exception as e:  # whatever arrives, the listener must keep listening
-                self.rejected += 1
-                logger.debug("glove datagram rejected: %s", e)
-                continue
-            if side != self.side:
-                continue
-            now = time.monotonic()
-            with self._lock:
-                last = self._latest
-                if (last is not None and 0 < (last.seq - seq) % 2**32 <= REORDER_WINDOW
-                        and now - last.received < REORDER_MAX_S):  # fmt: skip
-                    continue  # a little older than what we have, just after it: reordered on the way
-                self._latest = GloveFrame(seq, side, ergo, now)
-                self.frames += 1
-                self._lock.notify_all()
-
-    def latest(self) -> GloveFrame | None:
-        with self._lock:
-            return self._latest
-
-    def wait_frames(self, n: int, timeout_s: float) -> bool:
-        deadline = time.monotonic() + timeout_s
-        with self._lock:
-            target = self.frames + n
-            while self.frames < target:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self._lock.wait(left)
-        return True
+    def _keep(self, frame: GloveFrame, now: float) -> bool:
+        last = self._latest
+        # A little older than what we have, just after it: reordered on the way. Further back: a restarted bridge.
+        return not (last is not None and 0 < (last.seq - frame.seq) % 2**32 <= REORDER_WINDOW
+                    and now - last.received < REORDER_MAX_S)  # fmt: skip
