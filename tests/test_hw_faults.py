@@ -23,7 +23,7 @@ from emulators.harness import Operator, cli_env
 from emulators.rig import LATENCY_TIMER_MS
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
+from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, servo_state
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     ForceSensorError,
@@ -133,10 +133,10 @@ def test_state_check_cost(rig, robot):
     t = []
     for _ in range(n):
         t0 = time.perf_counter()
-        robot.state.check(robot.config.bus_num_retry)
+        robot.bus.read_block(*servo_state.BLOCK, servo_state.READ)
         t.append(time.perf_counter() - t0)
     print(f"servo state check: median {np.median(t) * 1e3:.2f} ms, p90 {np.percentile(t, 90) * 1e3:.2f} ms")
-    assert robot.state.length == 40  # one 40-byte block per servo, one transaction
+    assert robot.bus.sync_reader.data_length == 40  # one 40-byte block per servo, one transaction
 
 
 def test_watchdog_stop_after_a_host_pause_is_rearmed(rig, robot, caplog):

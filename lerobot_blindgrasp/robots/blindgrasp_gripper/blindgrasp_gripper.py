@@ -1,9 +1,10 @@
 """The real gripper: nine XM430-W350 on one Dynamixel bus plus three fingertip load cells.
 
 Observation and action follow `spec` exactly (names, order, rad and N), so datasets recorded here have the sim
-demos' schema. Every bus transaction goes through LeRobot's `DynamixelMotorsBus` with raw register values
-(`normalize=False`): the calibration lives in the servos (Drive_Mode, Homing_Offset), so
-rad = (ticks - 2048) * 2pi/4096 needs no LeRobot normalization mode.
+demos' schema. Every bus transaction goes through LeRobot's `DynamixelMotorsBus`, subclassed in `bus.py` for
+retries, clean retries and raw registers: the calibration lives in the servos (Drive_Mode, Homing_Offset), so
+rad = (ticks - 2048) * 2pi/4096 needs no LeRobot normalization mode. The rest reads like LeRobot's `koch_follower`
+plus the safety latch (`_safety`).
 
 Safety is latched: any failure while connected (bus error after the retries, a lost port, servo hardware error, a
 servo that reset or lost its settings, force overload, stale force data, an exception, Ctrl-C or SIGTERM/SIGHUP
@@ -23,10 +24,8 @@ from contextlib import contextmanager
 from functools import cached_property
 
 import numpy as np
-from dynamixel_sdk import port_handler as dxl_port_handler
 from lerobot.motors import Motor, MotorNormMode
-from lerobot.motors.dynamixel import DynamixelMotorsBus, OperatingMode
-from lerobot.motors.motors_bus import get_address
+from lerobot.motors.dynamixel import OperatingMode
 from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 
@@ -34,7 +33,9 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.xm430 import MODEL, WATCHDOG_UNIT_MS, amps_to_current_units, decode_hardware_error
 
 from . import calibration as calib
-from . import signals
+from . import servo_state, signals
+from .bus import PortLostError, RetryingDynamixelBus
+from .calibration import rad_to_ticks, ticks_to_rad
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
 from .errors import (
     ForceOverloadError,
@@ -45,9 +46,6 @@ from .errors import (
     GripperStateError,
 )
 from .force_sensor import ForceSensorReader, ForceStreamError
-from .port import PortLostError, use_flushing_port
-from .calibration import rad_to_ticks, ticks_to_rad
-from .servo_state import ServoStateReader
 
 logger = logging.getLogger(__name__)
 
@@ -73,15 +71,16 @@ class BlindgraspGripper(Robot):
         self.joints = list(spec.JOINT_NAMES)
         self.calibration_error: calib.CalibrationFileError | None = None
         super().__init__(config)  # loads and validates the calibration file through _load_calibration
-        self.bus = DynamixelMotorsBus(
+        self.bus = RetryingDynamixelBus(
             port=config.port,
             motors={j: Motor(i, MODEL, MotorNormMode.DEGREES) for j, i in zip(self.joints, config.servo_ids)},
             calibration=self.calibration,
+            baudrate=config.baudrate,
+            num_retry=config.bus_num_retry,
+            latency_timer_ms=config.latency_timer_ms,
         )
-        # The SDK opens the port at PortHandler.baudrate; set it before connect so the handshake uses our rate.
-        self.bus.port_handler.baudrate = config.baudrate
-        use_flushing_port(self.bus)
-        self.state = ServoStateReader(self.bus, MODEL, self.joints)
+        # What configure() set, checked every control period (`servo_state.py`); empty while the torque is off.
+        self.expected: dict[str, int] = {}
         self._last_state_check = 0.0
         fs = config.force_sensor
         self.force = ForceSensorReader(
@@ -94,8 +93,6 @@ class BlindgraspGripper(Robot):
         )
         self.lower = np.asarray(config.joint_lower, dtype=np.float64)
         self.upper = np.asarray(config.joint_upper, dtype=np.float64)
-        self._retry = config.bus_num_retry
-        self._torque_addr, _ = get_address(self.bus.model_ctrl_table, MODEL, "Torque_Enable")
         self._atexit = None
         # Vision-free by design; lerobot-record and lerobot-rollout still read `robot.cameras`.
         self.cameras: dict = {}
@@ -115,7 +112,7 @@ class BlindgraspGripper(Robot):
 
     @property
     def is_calibrated(self) -> bool:
-        return bool(self.calibration) and self.bus.is_connected and self._servos_match_calibration()
+        return self.bus.is_connected and self.bus.is_calibrated
 
     # --- connection ----------------------------------------------------------------------------------------------
     @check_if_already_connected
@@ -123,18 +120,15 @@ class BlindgraspGripper(Robot):
         if self.calibration_error is not None and calibrate:
             raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
         with self._safety("connecting"):
-            # The SDK sizes every reply timeout from this module constant (there is no per-port setting).
-            dxl_port_handler.LATENCY_TIMER = self.config.latency_timer_ms
-            self.state.expected = {}
-            self.bus.connect(handshake=False)
+            self.expected = {}
+            self.bus.connect()  # pings all nine, with retries
             self._register_atexit()
             signals.install(self)
-            self._handshake()
             self._check_servo_state()
-            if self.calibration and not self._servos_match_calibration():
+            if self.calibration and not self.bus.is_calibrated:
                 logger.info("Writing the calibration file %s to the servos.", self.calibration_fpath)
-                self._write_calibration()
-            if not self._servos_match_calibration():
+                self.bus.write_calibration(self.calibration)
+            if not self.bus.is_calibrated:
                 if not calibrate:
                     logger.warning("%s is not calibrated: run lerobot-calibrate before using it.", self)
                     self.force.connect()
@@ -148,23 +142,21 @@ class BlindgraspGripper(Robot):
     def configure(self) -> None:
         mode = OperatingMode[self.config.operating_mode].value
         current = amps_to_current_units(self.config.current_limit_a)
-        r = self._retry
         watchdog = self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS
         with self._safety("configuring the servos"):
-            self.state.expected = {}
-            self.bus.disable_torque(num_retry=r)
+            self.expected = {}
+            self.bus.disable_torque()
+            self.bus.configure_motors()  # Return_Delay_Time 0: status packets come back without the 500 us delay
             for j in self.joints:
-                # Status packets come back without the default 500 us delay.
-                self.bus.write("Return_Delay_Time", j, 0, num_retry=r)
-                self.bus.write("Operating_Mode", j, mode, num_retry=r)
-                self.bus.write("Current_Limit", j, current, num_retry=r)
-                self.bus.write("Goal_Current", j, current, num_retry=r)
-                self.bus.write("Position_P_Gain", j, self.config.position_p_gain, num_retry=r)
-                self.bus.write("Position_I_Gain", j, self.config.position_i_gain, num_retry=r)
-                self.bus.write("Position_D_Gain", j, self.config.position_d_gain, num_retry=r)
-                self.bus.write("Profile_Velocity", j, self.config.profile_velocity, num_retry=r)
+                self.bus.write("Operating_Mode", j, mode)
+                self.bus.write("Current_Limit", j, current)
+                self.bus.write("Goal_Current", j, current)
+                self.bus.write("Position_P_Gain", j, self.config.position_p_gain)
+                self.bus.write("Position_I_Gain", j, self.config.position_i_gain)
+                self.bus.write("Position_D_Gain", j, self.config.position_d_gain)
+                self.bus.write("Profile_Velocity", j, self.config.profile_velocity)
             self._enable_torque_holding_pose()
-            self.state.expected = {
+            self.expected = {
                 "Torque_Enable": 1,
                 "Position_P_Gain": self.config.position_p_gain,
                 "Position_I_Gain": self.config.position_i_gain,
@@ -175,7 +167,7 @@ class BlindgraspGripper(Robot):
 
     def _enable_torque_holding_pose(self) -> None:
         """Torque on with Goal_Position = the present pose, so nothing moves when the torque comes on."""
-        present = self._sync_read("Present_Position")
+        present = self.bus.sync_read("Present_Position")
         q = np.array([ticks_to_rad(present[j]) for j in self.joints])
         outside = [j for j, v, lo, hi in zip(self.joints, q, self.lower, self.upper) if not lo <= v <= hi]
         if outside and self.config.operating_mode == "POSITION":
@@ -188,98 +180,73 @@ class BlindgraspGripper(Robot):
         if outside:
             logger.warning("Joints %s start outside their limits; actions bring them back at <= %.2f rad per step.",
                            outside, self.config.max_relative_target)  # fmt: skip
-        r = self._retry
         for j in self.joints:
             # A watchdog error outlives the torque-off (the register keeps reading -1) and makes the goal registers
             # read-only: clear it first, arm it once the torque is on (it only watches while the torque is on).
-            self.bus.write("Bus_Watchdog", j, 0, num_retry=r)
-            self.bus.write("Goal_Position", j, present[j], normalize=False, num_retry=r)
-        self.bus.enable_torque(num_retry=r)
+            self.bus.write("Bus_Watchdog", j, 0)
+            self.bus.write("Goal_Position", j, present[j])
+        self.bus.enable_torque()
         for j in self.joints:
-            self.bus.write("Bus_Watchdog", j, self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS, num_retry=r)
+            self.bus.write("Bus_Watchdog", j, self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS)
 
     @contextmanager
     def torque_disabled(self):
         """Torque off for the block (e.g. to move the fingers by hand), then on again holding the new pose. The
         per-period state check knows the torque is off on purpose."""
-        expected = self.state.expected
+        expected = self.expected
         with self._safety("turning the torque off"):
-            self.state.expected = {}
-            self.bus.disable_torque(num_retry=self._retry)
+            self.expected = {}
+            self.bus.disable_torque()
         yield
         if self.is_connected:  # a fault inside the block already stopped the gripper
             with self._safety("turning the torque back on"):
                 self._enable_torque_holding_pose()
-                self.state.expected = expected
+                self.expected = expected
 
     def calibrate(self) -> None:
         with self._safety("calibrating"):
-            self.state.expected = {}
-            self.bus.disable_torque(num_retry=self._retry)
+            self.expected = {}
+            self.bus.disable_torque()
             if self.calibration:
                 answer = input(
                     f"Press ENTER to write the calibration file of '{self.id}' to the servos, "
                     "or type 'c' and press ENTER to calibrate again: "
                 )
                 if answer.strip().lower() != "c":
-                    self._write_calibration()
+                    self.bus.write_calibration(self.calibration)
                     return
             self._calibrate_interactively()
 
     def _calibrate_interactively(self) -> None:
-        r = self._retry
         for j in self.joints:
             # Multi-turn mode so that readings never wrap at 0/4095 while the fingers are moved by hand.
-            self.bus.write("Operating_Mode", j, OperatingMode.EXTENDED_POSITION.value, num_retry=r)
-            self.bus.write("Drive_Mode", j, 0, num_retry=r)
-            self.bus.write("Homing_Offset", j, 0, normalize=False, num_retry=r)
+            self.bus.write("Operating_Mode", j, OperatingMode.EXTENDED_POSITION.value)
+            self.bus.write("Drive_Mode", j, 0)
+            self.bus.write("Homing_Offset", j, 0)
         input(f"\nTorque is off. Hold the gripper in the {REFERENCE_POSE_HELP}\nPress ENTER when it is there: ")
-        reference = self._sync_read("Present_Position")
+        reference = self.bus.sync_read("Present_Position")
         input(f"\nNow the {POSITIVE_POSE_HELP}\nPress ENTER while holding it: ")
-        positive = self._sync_read("Present_Position")
+        positive = self.bus.sync_read("Present_Position")
         modes = calib.directions(reference, positive, self.config.calibration_min_motion_rad)
         for j in self.joints:
-            self.bus.write("Drive_Mode", j, modes[j], num_retry=r)
-        present = self._sync_read("Present_Position")
+            self.bus.write("Drive_Mode", j, modes[j])
+        present = self.bus.sync_read("Present_Position")
         homings = calib.homing_offsets(reference, positive, present)
         ids = {j: m.id for j, m in self.bus.motors.items()}
         self.calibration = calib.build(ids, modes, homings, self.lower, self.upper)
-        self._write_calibration()
+        self.bus.write_calibration(self.calibration)
         self._save_calibration()
-        check = self._sync_read("Present_Position")
+        check = self.bus.sync_read("Present_Position")
         print("\nCalibrated joint angles in the positive pose (all should be > 0):")
         for j in self.joints:
             print(f"  {j:7s} id {ids[j]:2d}  drive_mode {modes[j]}  q = {ticks_to_rad(check[j]):+.3f} rad")
         logger.info("Calibration saved to %s", self.calibration_fpath)
 
-    # LeRobot's bus has the same three operations (`_assert_motors_exist`, `write_calibration`, `read_calibration`)
-    # but tries each transaction once; ours retry like every other transaction, and also cover Drive_Mode.
-    def _handshake(self) -> None:
-        expected = self.bus.model_number_table[MODEL]
-        found = {j: self._ping(self.bus.motors[j].id) for j in self.joints}
-        missing = [self.bus.motors[j].id for j, model in found.items() if model is None]
-        wrong = {self.bus.motors[j].id: model for j, model in found.items() if model not in (None, expected)}
-        if missing or wrong:
-            raise ConnectionError(
-                f"Servo check failed on '{self.config.port}' at {self.config.baudrate} bps: "
-                f"missing IDs {missing}, wrong model numbers {wrong} (expected {expected}, XM430-W350). "
-                "Check power, cabling, IDs and the Baud_Rate register (lerobot-setup-motors)."
-            )
-
-    def _ping(self, dxl_id: int) -> int | None:
-        """Model number, or None if the servo never answers. Unlike `bus.ping`, a reply carrying the hardware-alert
-        bit counts as present: that servo is there, and `_raise_on_hardware_errors` says what is wrong with it."""
-        for _ in range(1 + self._retry):
-            model, comm, _ = self.bus.packet_handler.ping(self.bus.port_handler, dxl_id)
-            if comm == 0:
-                return model
-        return None
-
     def setup_motors(self) -> None:
         """`lerobot-setup-motors`: give factory-fresh servos (ID 1, 57 600 bps) their D'Claw ID and the bus baud rate,
         one servo on the cable at a time, through LeRobot's `setup_motor`. Baud rates are tried factory rate first:
         a broadcast ping waits its full window at each rate (4 s at 9600 bps, LeRobot's first guess)."""
-        dxl_port_handler.LATENCY_TIMER = self.config.latency_timer_ms
+        self.bus.use_latency_timer()
         self.bus.default_baudrate = self.config.baudrate  # the rate setup_motor writes into each servo
         rates = [57_600, self.config.baudrate, *self.bus.model_baudrate_table[MODEL]]
         rates = list(dict.fromkeys(rates))
@@ -297,28 +264,7 @@ class BlindgraspGripper(Robot):
                 print(f"'{j}' servo: ID {self.bus.motors[j].id} at {self.config.baudrate} bps")
         finally:
             if self.bus.is_connected:
-                self.bus.port_handler.closePort()
-
-    def _write_calibration(self) -> None:
-        r = self._retry
-        for j, c in self.calibration.items():
-            self.bus.write("Drive_Mode", j, c.drive_mode, num_retry=r)
-            self.bus.write("Homing_Offset", j, c.homing_offset, normalize=False, num_retry=r)
-            self.bus.write("Min_Position_Limit", j, c.range_min, normalize=False, num_retry=r)
-            self.bus.write("Max_Position_Limit", j, c.range_max, normalize=False, num_retry=r)
-        self.bus.calibration = self.calibration
-
-    def _servos_match_calibration(self) -> bool:
-        """The EEPROM calibration registers equal the file (what LeRobot's `bus.is_calibrated` compares)."""
-        if not self.calibration:
-            return False
-        regs = {n: self._sync_read(n) for n in ("Drive_Mode", "Homing_Offset", "Min_Position_Limit",
-                                               "Max_Position_Limit")}  # fmt: skip
-        return all(
-            (regs["Drive_Mode"][j], regs["Homing_Offset"][j], regs["Min_Position_Limit"][j],
-             regs["Max_Position_Limit"][j]) == (c.drive_mode, c.homing_offset, c.range_min, c.range_max)
-            for j, c in self.calibration.items()
-        )  # fmt: skip
+                self.bus.disconnect(disable_torque=False)
 
     @check_if_not_connected
     def tare_forces(self) -> None:
@@ -363,21 +309,17 @@ class BlindgraspGripper(Robot):
             bound = self.config.max_relative_target
             target = np.clip(np.clip(target, self.lower, self.upper), q - bound, q + bound)
             ticks = {j: rad_to_ticks(t) for j, t in zip(self.joints, target)}
-            self.bus.sync_write("Goal_Position", ticks, normalize=False, num_retry=self._retry)
+            self.bus.sync_write("Goal_Position", ticks)
         return {f"{j}.pos": ticks_to_rad(ticks[j]) for j in self.joints}
 
-    def _sync_read(self, register: str) -> dict[str, int]:
-        # Stale replies are dropped before every try by the port itself (port.py).
-        return self.bus.sync_read(register, normalize=False, num_retry=self._retry)
-
     def _read_q(self) -> np.ndarray:
-        raw = self._sync_read("Present_Position")
+        raw = self.bus.sync_read("Present_Position")
         return np.array([ticks_to_rad(raw[j]) for j in self.joints])
 
     def _check_servo_state(self) -> None:
         """One sync read per control period (`servo_state.py`): hardware errors, then anything `configure()` set
         that changed (a reset), then a watchdog that stopped servos during a pause of this process."""
-        report = self.state.check(self._retry)
+        report = servo_state.compare(self.bus.read_block(*servo_state.BLOCK, servo_state.READ), self.expected)
         self._last_state_check = time.monotonic()
         bad = {j: v for j, v in report.hardware_error.items() if self._confirm_hardware_error(j)}
         if bad:
@@ -401,26 +343,21 @@ class BlindgraspGripper(Robot):
         registers are read-only until then), hold the pose the servos stopped in, and arm the watchdog again."""
         logger.warning("Bus watchdog stopped %s after more than %d ms without bus traffic; re-arming it.",
                        joints, self.config.bus_watchdog_ms)  # fmt: skip
-        present = self._sync_read("Present_Position")
-        r = self._retry
+        present = self.bus.sync_read("Present_Position")
         for j in joints:
-            self.bus.write("Bus_Watchdog", j, 0, num_retry=r)
-            self.bus.write("Goal_Position", j, present[j], normalize=False, num_retry=r)
-            self.bus.write("Bus_Watchdog", j, self.state.expected["Bus_Watchdog"], num_retry=r)
+            self.bus.write("Bus_Watchdog", j, 0)
+            self.bus.write("Goal_Position", j, present[j])
+            self.bus.write("Bus_Watchdog", j, self.expected["Bus_Watchdog"])
 
     def _confirm_hardware_error(self, joint: str) -> bool:
         """Re-read one servo's Hardware_Error_Status (unicast, alert bit allowed): a corrupted or stale sync-read
         reply must not stop the gripper, a real error reads the same twice."""
-        addr, _ = get_address(self.bus.model_ctrl_table, MODEL, "Hardware_Error_Status")
-        for _ in range(1 + self._retry):
-            value, comm, _ = self.bus.packet_handler.read1ByteTxRx(
-                self.bus.port_handler, self.bus.motors[joint].id, addr
-            )
-            if comm == 0:
-                if not value:
-                    logger.warning("Spurious Hardware_Error_Status on %s (not confirmed by a second read).", joint)
-                return bool(value)
-        return True  # cannot confirm either way: treat as an error
+        value = self.bus.read_despite_alert(joint, "Hardware_Error_Status")
+        if value is None:
+            return True  # cannot confirm either way: treat as an error
+        if not value:
+            logger.warning("Spurious Hardware_Error_Status on %s (not confirmed by a second read).", joint)
+        return bool(value)
 
     # --- safety --------------------------------------------------------------------------------------------------
     @contextmanager
@@ -445,7 +382,7 @@ class BlindgraspGripper(Robot):
             elif isinstance(e, ForceStreamError):
                 err = ForceSensorError(f"Force sensor failure while {what}: {e} {note}")
             elif isinstance(e, (ConnectionError, RuntimeError, OSError)):
-                tries = 1 + self._retry
+                tries = self.bus.tries
                 err = GripperBusError(
                     f"Dynamixel bus failure while {what} (each transaction tried {tries} times): {e} {note}"
                 )
@@ -458,27 +395,8 @@ class BlindgraspGripper(Robot):
 
     def _torque_off_all(self) -> list[int]:
         """Torque off on every servo; returns the IDs that did not confirm it."""
-        ph, port = self.bus.packet_handler, self.bus.port_handler
-        self.state.expected = {}
-        port.is_using = False  # an interrupted transaction may have left the SDK's busy flag set
-        try:  # one broadcast packet reaches every live servo at once, even if one of them is dead
-            self.bus.sync_write("Torque_Enable", 0, normalize=False)
-        except Exception as e:
-            logger.error("Broadcast torque-off failed: %s", e)
-        unconfirmed = []
-        for m in self.bus.motors.values():
-            for _ in range(3):
-                try:
-                    comm, error = ph.write1ByteTxRx(port, m.id, self._torque_addr, 0)
-                except PortLostError:  # nothing reaches any servo any more
-                    comm, error = -1, 0
-                    port.is_using = False
-                # 0x80 is only the hardware-alert flag: the write itself succeeded.
-                if comm == 0 and not error & 0x7F:
-                    break
-            else:
-                unconfirmed.append(m.id)
-        return unconfirmed
+        self.expected = {}
+        return self.bus.torque_off_everywhere()
 
     def _stop(self) -> list[int]:
         """Latched stop: torque off, then close both ports."""
@@ -495,7 +413,7 @@ class BlindgraspGripper(Robot):
 
     def _close(self) -> None:
         if self.bus.is_connected:
-            self.bus.port_handler.closePort()
+            self.bus.disconnect(disable_torque=False)  # the torque-off, when wanted, was _stop's
         self.force.disconnect()
         signals.uninstall(self)
         if self._atexit is not None:

@@ -16,11 +16,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from lerobot.motors.motors_bus import get_address
-
 from lerobot_blindgrasp.xm430 import WATCHDOG_TRIPPED
+
 CHECKED = ("Torque_Enable", "Position_P_Gain", "Position_I_Gain", "Position_D_Gain", "Bus_Watchdog", "Goal_Current")
-BLOCK = ("Torque_Enable", "Goal_Current")  # first and last register of the block read
+BLOCK = ("Torque_Enable", "Goal_Current")  # first and last register of the block read (40 bytes per servo)
+READ = (*CHECKED, "Hardware_Error_Status")
 
 
 @dataclass(frozen=True)
@@ -30,38 +30,16 @@ class ServoReport:
     watchdog_tripped: list[str]  # joints whose bus watchdog stopped them (torque still on, goals refused)
 
 
-class ServoStateReader:
-    """Reads the block through LeRobot's retrying `_sync_read` (one transaction) and compares it."""
-
-    def __init__(self, bus, model: str, joints: list[str]):
-        self.bus, self.joints = bus, joints
-        table = bus.model_ctrl_table
-        self.addr = {n: get_address(table, model, n) for n in (*CHECKED, "Hardware_Error_Status")}
-        first, _ = self.addr[BLOCK[0]]
-        last, size = self.addr[BLOCK[1]]
-        self.start, self.length = first, last + size - first
-        self.expected: dict[str, int] = {}
-
-    def read(self, num_retry: int) -> dict[str, dict[str, int]]:
-        ids = [self.bus.motors[j].id for j in self.joints]
-        self.bus._sync_read(self.start, self.length, ids, num_retry=num_retry,
-                            err_msg=f"Failed to sync read the servo state block on {ids=} after {num_retry + 1} tries.")  # fmt: skip
-        reader = self.bus.sync_reader
-        return {
-            j: {name: reader.getData(self.bus.motors[j].id, addr, size) for name, (addr, size) in self.addr.items()}
-            for j in self.joints
-        }
-
-    def check(self, num_retry: int) -> ServoReport:
-        state = self.read(num_retry)
-        hw = {j: s["Hardware_Error_Status"] for j, s in state.items() if s["Hardware_Error_Status"]}
-        changed: dict[str, list[str]] = {}
-        tripped = []
-        for j, s in state.items():
-            for name, want in self.expected.items():
-                got = s[name]
-                if name == "Bus_Watchdog" and want and got == WATCHDOG_TRIPPED and s["Torque_Enable"] == 1:
-                    tripped.append(j)
-                elif got != want:
-                    changed.setdefault(j, []).append(f"{name} {got} (set {want})")
-        return ServoReport(hw, changed, tripped)
+def compare(state: dict[str, dict[str, int]], expected: dict[str, int]) -> ServoReport:
+    """What the block read (`RetryingDynamixelBus.read_block(*BLOCK, READ)`) says against what was set."""
+    hw = {j: s["Hardware_Error_Status"] for j, s in state.items() if s["Hardware_Error_Status"]}
+    changed: dict[str, list[str]] = {}
+    tripped = []
+    for j, s in state.items():
+        for name, want in expected.items():
+            got = s[name]
+            if name == "Bus_Watchdog" and want and got == WATCHDOG_TRIPPED and s["Torque_Enable"] == 1:
+                tripped.append(j)
+            elif got != want:
+                changed.setdefault(j, []).append(f"{name} {got} (set {want})")
+    return ServoReport(hw, changed, tripped)

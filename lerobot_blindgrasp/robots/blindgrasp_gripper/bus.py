@@ -1,0 +1,198 @@
+"""LeRobot's `DynamixelMotorsBus`, with the bus-level behaviour the gripper's safety depends on.
+
+- Every transaction is retried: `num_retry` is the floor for every read, write, sync read and sync write, including
+  those LeRobot's own methods make (`read_calibration`, `disable_torque`, ...). Registers are raw by default: the
+  calibration lives in the servos (Drive_Mode, Homing_Offset), so no LeRobot normalization applies.
+- Each try starts on an empty line (`FlushingPortHandler`). The port also reports an unplugged adapter as one
+  `PortLostError`.
+- The handshake retries, names missing IDs and wrong models, and counts a servo that replies with the
+  hardware-alert bit as present (`_raise_on_hardware_errors` of the robot then says what is wrong with it).
+- The calibration read and written includes Drive_Mode (LeRobot's `write_calibration` skips it).
+- `read_state` reads the per-period servo state block in one sync read, and `torque_off_everywhere` is the latched
+  stop's torque-off, confirmed servo by servo.
+
+The sub-classing points are LeRobot's own: `_read`/`_write`/`_sync_read`/`_sync_write` (their retry loops are
+reused, not rewritten), `_assert_motors_exist`, `read_calibration`/`write_calibration` and `connect`.
+"""
+
+from __future__ import annotations
+
+import logging
+import termios
+
+from dynamixel_sdk import PortHandler
+from dynamixel_sdk import port_handler as dxl_port_handler
+from lerobot.motors import Motor, MotorCalibration
+from lerobot.motors.dynamixel import DynamixelMotorsBus
+from lerobot.motors.motors_bus import get_address
+
+logger = logging.getLogger(__name__)
+
+_OS_ERRORS = (OSError, termios.error)  # serial.SerialException subclasses OSError; termios.error does not
+ALERT_BIT = 0x80  # status-packet error byte: "hardware error, see Hardware_Error_Status"; the instruction worked
+
+
+class PortLostError(ConnectionError):
+    """The serial adapter stopped working (unplugged, USB reset, driver gone)."""
+
+
+class FlushingPortHandler(PortHandler):
+    """dynamixel-sdk's port with two changes.
+
+    1. `clearPort()` also drops the input. The SDK calls it right before every instruction packet (so before every
+       retry of LeRobot's retry loops) but only drains the output. A reply that arrived late for a failed try, or
+       the rest of an abandoned sync-read burst, would otherwise be parsed as the next try's answer: the SDK
+       matches status packets by ID only.
+    2. OS errors of a vanished adapter (pyserial's `SerialException`, `OSError`, `termios.error`) become one
+       `PortLostError`, instead of a raw termios traceback."""
+
+    def _lost(self, what: str, e: BaseException) -> PortLostError:
+        return PortLostError(f"serial port '{self.port_name}' failed on {what} (USB adapter unplugged?): {e}")
+
+    def clearPort(self):
+        try:
+            self.ser.reset_input_buffer()
+            self.ser.flush()
+        except _OS_ERRORS as e:
+            raise self._lost("flush", e) from e
+
+    def readPort(self, length):
+        try:
+            return self.ser.read(length)
+        except _OS_ERRORS as e:
+            raise self._lost("read", e) from e
+
+    def writePort(self, packet):
+        try:
+            return self.ser.write(packet)
+        except _OS_ERRORS as e:
+            raise self._lost("write", e) from e
+
+    def getBytesAvailable(self):
+        try:
+            return self.ser.in_waiting
+        except _OS_ERRORS as e:
+            raise self._lost("poll", e) from e
+
+    def closePort(self):
+        # Closing a dead adapter must not raise: it runs in the cleanup of every fault.
+        try:
+            if self.ser is not None:
+                self.ser.close()
+        except _OS_ERRORS:
+            pass
+        self.is_open = False
+
+
+class RetryingDynamixelBus(DynamixelMotorsBus):
+    def __init__(
+        self,
+        port: str,
+        motors: dict[str, Motor],
+        calibration: dict[str, MotorCalibration] | None = None,
+        *,
+        baudrate: int,
+        num_retry: int,
+        latency_timer_ms: int,
+    ):
+        super().__init__(port, motors, calibration)
+        self.num_retry = num_retry
+        self.latency_timer_ms = latency_timer_ms
+        self.port_handler = FlushingPortHandler(port)
+        self.port_handler.baudrate = baudrate  # the SDK opens the port at this rate: the handshake uses ours
+        self.sync_reader.port = self.port_handler
+        self.sync_writer.port = self.port_handler
+
+    @property
+    def tries(self) -> int:
+        return 1 + self.num_retry
+
+    def use_latency_timer(self) -> None:
+        # The SDK sizes every reply timeout (2 x LATENCY_TIMER + 2 ms) from this module constant; there is no
+        # per-port setting.
+        dxl_port_handler.LATENCY_TIMER = self.latency_timer_ms
+
+    def connect(self, handshake: bool = True) -> None:
+        self.use_latency_timer()
+        # LeRobot's connect wraps any OSError of the handshake (ConnectionError is one) into "Could not connect ...
+        # lerobot-find-port"; the handshake runs after it so that its message names the missing servos.
+        super().connect(handshake=False)
+        if handshake:
+            self._handshake()
+
+    # --- retries and raw registers by default -------------------------------------------------------------------
+    def read(self, data_name, motor, *, normalize=False, num_retry=0):
+        return super().read(data_name, motor, normalize=normalize, num_retry=max(num_retry, self.num_retry))
+
+    def write(self, data_name, motor, value, *, normalize=False, num_retry=0):
+        super().write(data_name, motor, value, normalize=normalize, num_retry=max(num_retry, self.num_retry))
+
+    def sync_read(self, data_name, motors=None, *, normalize=False, num_retry=0):
+        return super().sync_read(data_name, motors, normalize=normalize, num_retry=max(num_retry, self.num_retry))
+
+    def sync_write(self, data_name, values, *, normalize=False, num_retry=0):
+        super().sync_write(data_name, values, normalize=normalize, num_retry=max(num_retry, self.num_retry))
+
+    # --- handshake and calibration ------------------------------------------------------------------------------
+    def _assert_motors_exist(self) -> None:
+        # Unlike LeRobot's (one `ping` per servo, no retry), a servo that answers with the alert bit is present.
+        found = {m: self.read_despite_alert(m, "Model_Number") for m in self.motors}
+        missing = [self.motors[m].id for m, model in found.items() if model is None]
+        wrong = {
+            self.motors[m].id: model
+            for m, model in found.items()
+            if model not in (None, self.model_number_table[self.motors[m].model])
+        }
+        if missing or wrong:
+            models = sorted({self.model_number_table[m.model] for m in self.motors.values()})
+            raise ConnectionError(
+                f"Servo check failed on '{self.port}' at {self.port_handler.baudrate} bps: missing IDs {missing}, "
+                f"wrong model numbers {wrong} (expected {models}, {sorted(set(self.models))}). "
+                "Check power, cabling, IDs and the Baud_Rate register (lerobot-setup-motors)."
+            )
+
+    def write_calibration(self, calibration_dict: dict[str, MotorCalibration], cache: bool = True) -> None:
+        # Drive_Mode (the reverse bit) is half of our calibration; LeRobot's Dynamixel bus leaves it out.
+        for motor, c in calibration_dict.items():
+            self.write("Drive_Mode", motor, c.drive_mode)
+        super().write_calibration(calibration_dict, cache)
+
+    # --- per-period state and the latched stop ------------------------------------------------------------------
+    def read_block(self, first: str, last: str, names: tuple[str, ...]) -> dict[str, dict[str, int]]:
+        """One sync read of the contiguous registers first..last on every servo; returns `names` per motor."""
+        model = next(iter(self.motors.values())).model
+        start, _ = get_address(self.model_ctrl_table, model, first)
+        end, size = get_address(self.model_ctrl_table, model, last)
+        ids = [m.id for m in self.motors.values()]
+        err = f"Failed to sync read the {first}..{last} block on {ids=} after {self.tries} tries."
+        self._sync_read(start, end + size - start, ids, num_retry=self.num_retry, err_msg=err)
+        addrs = {n: get_address(self.model_ctrl_table, model, n) for n in names}
+        get = self.sync_reader.getData
+        return {motor: {n: get(m.id, a, s) for n, (a, s) in addrs.items()} for motor, m in self.motors.items()}
+
+    def read_despite_alert(self, motor: str, data_name: str) -> int | None:
+        """A unicast, retried read that also succeeds on a reply with the alert bit (a servo in hardware error
+        still answers); None if the servo never answers."""
+        m = self.motors[motor]
+        addr, length = get_address(self.model_ctrl_table, m.model, data_name)
+        value, comm, _ = self._read(addr, length, m.id, num_retry=self.num_retry, raise_on_error=False)
+        return value if self._is_comm_success(comm) else None
+
+    def torque_off_everywhere(self) -> list[int]:
+        """Torque off on every servo that can hear it; returns the IDs that did not confirm it."""
+        self.port_handler.is_using = False  # an interrupted transaction may have left the SDK's busy flag set
+        try:  # one broadcast packet reaches every live servo at once, even if one of them is dead
+            self.sync_write("Torque_Enable", 0)
+        except Exception as e:
+            logger.error("Broadcast torque-off failed: %s", e)
+        unconfirmed = []
+        for m in self.motors.values():
+            addr, length = get_address(self.model_ctrl_table, m.model, "Torque_Enable")
+            try:
+                comm, error = self._write(addr, length, m.id, 0, num_retry=2, raise_on_error=False)
+            except PortLostError:  # nothing reaches any servo any more
+                comm, error = -1, 0
+                self.port_handler.is_using = False
+            if not (self._is_comm_success(comm) and not error & ~ALERT_BIT):
+                unconfirmed.append(m.id)
+        return unconfirmed
