@@ -11,6 +11,10 @@ servo that reset or lost its settings, force overload, stale force data, an exce
 inside a call) turns the torque off on every servo that answers, closes the ports and raises one error that says
 so. Reconnecting is an explicit decision of the operator. The servos' bus watchdog stops them on their own when the
 host goes quiet (`bus_watchdog_ms`), and SIGTERM/SIGHUP unwind the LeRobot scripts like Ctrl-C (`signals.py`).
+
+Why this module is over 300 lines: LeRobot's `Robot` interface puts connect, the interactive calibrate, configure,
+setup_motors, get_observation, send_action and disconnect on one class. The safety latch (about 100 lines) wraps
+all of them, so splitting it out would scatter the one place that decides when the torque goes off.
 """
 
 from __future__ import annotations
