@@ -27,14 +27,16 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_config
 from lerobot_blindgrasp.sim import randomization
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.teacher import presets
+from lerobot_blindgrasp.teacher import distributed, presets
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME, latest_checkpoint
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
 log = logging.getLogger("blindgrasp.teacher")
 
 
-def build_env_config(preset: presets.TeacherPreset, num_envs: int, seed: int, nthread: int = 0) -> GraspEnvConfig:
+def build_env_config(
+    preset: presets.TeacherPreset, num_envs: int, seed: int, nthread: int = 0, backend: str = "batch"
+) -> GraspEnvConfig:
     dr = randomization.PAPER_DR if preset.external_force else randomization.PAPER_DR.without_external_force()
     return GraspEnvConfig(
         num_envs=num_envs,
@@ -43,6 +45,7 @@ def build_env_config(preset: presets.TeacherPreset, num_envs: int, seed: int, nt
         dr=dr,
         nthread=nthread,
         object_weights=preset.object_weights,
+        backend=backend,
     )
 
 
@@ -60,6 +63,10 @@ class TrainTeacherConfig:
     threads: int = 0  # physics threads (0: all CPUs)
     torch_threads: int = 1  # torch intra-op threads for the PPO update
     export: bool = True  # TorchScript/ONNX export of the actor at the end
+    backend: str = "batch"  # physics: batch (mujoco.batch, CPU) or warp (MuJoCo Warp; pip install .[gpu])
+    # torch device for PPO; None: cuda:<LOCAL_RANK> if CUDA is there, else cpu. Under torchrun (WORLD_SIZE > 1)
+    # rsl-rl's multi-GPU mode runs one process per device and num_envs is split over the processes.
+    device: str | None = None
 
     def __post_init__(self):
         if self.output_dir is None:
@@ -77,7 +84,10 @@ def train(cfg: TrainTeacherConfig) -> Path:
     spec.check_seeds("teacher_train", cfg.seed, num_envs)
     out = cfg.output_dir
     out.mkdir(parents=True, exist_ok=True)
-    torch.manual_seed(cfg.seed)
+    device = cfg.device or distributed.default_device()
+    rank_envs, rank_seed = distributed.split_envs(num_envs, cfg.seed)  # (num_envs, seed) outside torchrun
+    lead = distributed.world()[1] == 0  # only rank 0 writes files (rsl-rl already logs and saves on rank 0 only)
+    torch.manual_seed(cfg.seed + distributed.world()[1])
     # PPO on these small MLPs gains little from intra-op threads, and OpenMP threads that spin while MuJoCo's
     # threads (or any other process) hold the cores made the update 5-8x slower on a busy 2-core machine.
     torch.set_num_threads(cfg.torch_threads)
@@ -86,6 +96,7 @@ def train(cfg: TrainTeacherConfig) -> Path:
         "preset": preset.name,
         "variant": {"no_incentive": cfg.no_incentive, "student_obs": cfg.student_obs},
         "num_envs": num_envs,
+        "backend": cfg.backend,
         "seed": cfg.seed,
         "iterations": iterations,
         "runner": preset.runner_cfg(),
@@ -101,10 +112,10 @@ def train(cfg: TrainTeacherConfig) -> Path:
         for key in ("preset", "variant", "num_envs", "runner", "reward", "object_weights"):
             if old.get(key) != config[key]:
                 raise SystemExit(f"{out} holds a run with a different {key!r}; use another --output-dir")
-    else:
+    elif lead:
         cfg_path.write_text(json.dumps(config, indent=2))
 
-    env = BatchedGraspEnv(build_env_config(preset, num_envs, cfg.seed, cfg.threads))
+    env = BatchedGraspEnv(build_env_config(preset, rank_envs, rank_seed, cfg.threads, cfg.backend))
     bar = tqdm(total=iterations, desc=f"teacher[{preset.name}]", unit="it", dynamic_ncols=True)
     steps_per_it = preset.runner["num_steps_per_env"]
     counter = {"steps": 0}
@@ -114,10 +125,8 @@ def train(cfg: TrainTeacherConfig) -> Path:
         if counter["steps"] % steps_per_it == 0:
             bar.update(1)
 
-    from rsl_rl.runners import OnPolicyRunner  # heavy import, after argument checks
-
-    vec = RslRlGraspEnv(env, on_step=tick)
-    runner = OnPolicyRunner(vec, preset.runner_cfg(), log_dir=str(out), device="cpu")
+    vec = RslRlGraspEnv(env, device=device, on_step=tick)
+    runner = distributed.runner_class(device)(vec, preset.runner_cfg(), log_dir=str(out), device=device)
     ckpt = latest_checkpoint(out)
     done_its = 0
     if ckpt is not None:
@@ -127,7 +136,7 @@ def train(cfg: TrainTeacherConfig) -> Path:
         bar.update(done_its)
         log.info("resuming from %s (iteration %d)", ckpt, done_its)
     remaining = iterations - done_its
-    console = open(out / "train_console.log", "a")
+    console = open(out / ("train_console.log" if lead else f"train_console_rank{distributed.world()[1]}.log"), "a")
     t0 = time.time()
     interrupted = False
     try:
@@ -137,13 +146,16 @@ def train(cfg: TrainTeacherConfig) -> Path:
                 runner.learn(remaining, init_at_random_ep_len=done_its == 0)
     except KeyboardInterrupt:
         interrupted = True
-        runner.save(str(out / f"model_{runner.current_learning_iteration}.pt"))
+        if lead:
+            runner.save(str(out / f"model_{runner.current_learning_iteration}.pt"))
     finally:
         console.close()
         bar.close()
     wall = time.time() - t0
     its_run = runner.current_learning_iteration + 1 - done_its
     final = latest_checkpoint(out)
+    if not lead:
+        return final
     if cfg.export:
         export(runner, out / "exported")
     write_learning_curve(out)
