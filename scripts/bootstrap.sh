@@ -22,10 +22,15 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$VENV/bin/pip" install --quiet --upgrade pip
 fi
 # Re-install only when pyproject.toml changed since the last install (first install: ~5 min, a 4 GB torch).
+# BLINDGRASP_EXTRAS=test,gpu adds MuJoCo Warp (a 150 MB wheel) so that tests/test_sim_warp.py runs instead of being
+# skipped; off by default because Warp compiles its CPU kernels on first use (~10 min on 2 cores; cached after in
+# ~/.cache/warp, so a CI that caches that folder pays it once).
+EXTRAS="${BLINDGRASP_EXTRAS:-test}"
 STAMP="$VENV/.blindgrasp-installed"
+[ "$EXTRAS" = test ] || STAMP="$STAMP-${EXTRAS//,/-}"
 if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ]; then
-  echo "installing lerobot_blindgrasp and its dependencies into $VENV" >&2
-  "$VENV/bin/pip" install --quiet -e "$ROOT[test]"
+  echo "installing lerobot_blindgrasp[$EXTRAS] and its dependencies into $VENV" >&2
+  "$VENV/bin/pip" install --quiet -e "$ROOT[$EXTRAS]"
   touch "$STAMP"
 fi
 export PATH="$VENV/bin:$PATH"

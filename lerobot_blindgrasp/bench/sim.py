@@ -6,6 +6,9 @@ Each block first runs the env from a saved physics state with random delta-theta
 recording the joint targets it commanded; then restores that state and replays the same targets through raw
 stepping, so both do identical physics. Blocks alternate so that a noisy shared machine affects both alike. The
 ratio env / raw is the overhead check (target >= 0.85).
+
+`--backend warp`: the same on MuJoCo Warp; raw = Warp's `step` x substeps per object-type model, with the targets
+uploaded, without downloading state (one row: Warp parallelizes over worlds on its device).
 """
 
 from __future__ import annotations
@@ -25,10 +28,11 @@ def add_arguments(p) -> None:
     p.add_argument("--steps", type=int, default=40, help="control steps per timed block")
     p.add_argument("--blocks", type=int, default=3, help="alternating raw/env blocks per thread count")
     p.add_argument("--threads", type=int, nargs="*", default=None, help="thread counts (default: 1 and all CPUs)")
+    p.add_argument("--backend", default="batch", choices=("batch", "warp"), help="physics backend (warp: one run)")
 
 
-def _measure(num_envs: int, nthread: int, steps: int, blocks: int) -> dict:
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=num_envs, seed=0, nthread=nthread))
+def _measure(num_envs: int, nthread: int, steps: int, blocks: int, backend: str = "batch") -> dict:
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=num_envs, seed=0, nthread=nthread, backend=backend))
     env.reset()
     k = env.cfg.physics.substeps
     rng = np.random.default_rng(0)
@@ -36,28 +40,29 @@ def _measure(num_envs: int, nthread: int, steps: int, blocks: int) -> dict:
     for a in actions[:5]:  # warm-up, and get fingers moving
         env.step(a)
     raw_t = env_t = 0.0
-    ctrl = env.batch.bind("ctrl")
+    ctrl = env.physics.ctrl
     for _ in range(blocks):
-        saved = env.batch.state.copy()
+        saved = env.physics.snapshot()
         targets = []
         t = time.perf_counter()
         for a in actions:
             _, _, _, _, info = env.step(a)
             targets.append(info["joint_target"])
         env_t += time.perf_counter() - t
-        after_env = env.batch.state.copy()
-        env.batch.state[:] = saved
+        after_env = env.physics.snapshot()
+        env.physics.restore(saved)
         t = time.perf_counter()
         for target in targets:
             ctrl[:] = target
-            env.batch.step(nstep=k)
+            env.physics.raw_step(k)  # physics only: no observation, reward or state download
         raw_t += time.perf_counter() - t
-        env.batch.state[:] = after_env
+        env.physics.restore(after_env)
     n_ctrl = blocks * steps * num_envs
     raw_ctrl = n_ctrl / raw_t
     env_ctrl = n_ctrl / env_t
     return {
-        "threads": env.batch.nthread,
+        "backend": backend,
+        "threads": env.physics.nthread,
         "raw_physics_steps_per_s": raw_ctrl * k,
         "raw_control_steps_per_s": raw_ctrl,
         "env_control_steps_per_s": env_ctrl,
@@ -67,7 +72,9 @@ def _measure(num_envs: int, nthread: int, steps: int, blocks: int) -> dict:
 
 def run(args) -> dict:
     threads = args.threads or sorted({1, os.cpu_count() or 1})
-    rows = [_measure(args.num_envs, n, args.steps, args.blocks) for n in threads]
+    if args.backend == "warp":
+        threads = [0]  # Warp parallelizes over worlds on its device; MuJoCo threads do not apply
+    rows = [_measure(args.num_envs, n, args.steps, args.blocks, args.backend) for n in threads]
     base = rows[0]["env_control_steps_per_s"]
     for r in rows:
         r["env_speedup_vs_first"] = r["env_control_steps_per_s"] / base
@@ -75,7 +82,7 @@ def run(args) -> dict:
     result = {"num_envs": args.num_envs, "substeps": physics.substeps, "timestep_s": physics.timestep, "rows": rows}
     if not args.json:
         print(
-            f"blindgrasp-bench sim: {args.num_envs} envs, {physics.substeps} x {physics.timestep * 1e3:g} ms "
+            f"blindgrasp-bench sim ({args.backend}): {args.num_envs} envs, {physics.substeps} x {physics.timestep * 1e3:g} ms "
             f"substeps per {spec.CONTROL_HZ:g} Hz control step"
         )
         print("| threads | raw physics steps/s | raw ctrl steps/s | env ctrl steps/s | env / raw | env speed-up |")
