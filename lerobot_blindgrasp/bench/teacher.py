@@ -32,6 +32,7 @@ def add_arguments(p) -> None:
     p.add_argument("--hidden-dims", type=int, nargs="+", default=None)
     p.add_argument("--mini-batches", type=int, default=None)
     p.add_argument("--epochs", type=int, default=None)
+    p.add_argument("--backend", default="batch", choices=("batch", "warp"), help="physics backend")
 
 
 def _preset(args) -> presets.TeacherPreset:
@@ -50,16 +51,17 @@ def _preset(args) -> presets.TeacherPreset:
 
 
 def _raw_control_steps_per_s(env, steps: int) -> float:
-    """Raw `Batch.step` on the env's models from its current state, replaying the env's own last targets."""
-    saved = env.batch.state.copy()
-    ctrl = env.batch.bind("ctrl")
+    """Raw stepping of the env's backend (`Batch.step`, or Warp's `step` per model) from its current state,
+    replaying the env's own last targets."""
+    saved = env.physics.snapshot()
+    ctrl = env.physics.ctrl
     target = ctrl.copy()
     t = time.perf_counter()
     for _ in range(steps):
         ctrl[:] = target
-        env.batch.step(nstep=env.cfg.physics.substeps)
+        env.physics.raw_step(env.cfg.physics.substeps)
     wall = time.perf_counter() - t
-    env.batch.state[:] = saved
+    env.physics.restore(saved)
     return steps * env.num_envs / wall
 
 
@@ -74,11 +76,16 @@ def run(args) -> dict:
     num_envs = args.num_envs or preset.num_envs
     torch_threads = args.torch_threads or 1  # blindgrasp-train-teacher's default
     torch.set_num_threads(torch_threads)
-    env = BatchedGraspEnv(build_env_config(preset, num_envs, seed=1, nthread=args.threads))
-    vec = RslRlGraspEnv(env)
+    env = BatchedGraspEnv(build_env_config(preset, num_envs, seed=1, nthread=args.threads, backend=args.backend))
+    device = "cpu"
+    if args.backend == "warp":
+        from lerobot_blindgrasp.teacher.distributed import default_device
+
+        device = default_device()  # the GPU if there is one: sim and learner on the same device
+    vec = RslRlGraspEnv(env, device=device)
     runner_cfg = preset.runner_cfg()
     steps_per_it = runner_cfg["num_steps_per_env"]
-    runner = OnPolicyRunner(vec, runner_cfg, log_dir=None, device="cpu")  # no log dir: nothing written
+    runner = OnPolicyRunner(vec, runner_cfg, log_dir=None, device=device)  # no log dir: nothing written
     update_times: list[float] = []
     inner_update = runner.alg.update
 
@@ -102,7 +109,9 @@ def run(args) -> dict:
     result = {
         "preset": preset.name,
         "num_envs": num_envs,
-        "physics_threads": env.batch.nthread,
+        "backend": args.backend,
+        "device": device,
+        "physics_threads": env.physics.nthread,
         "torch_threads": torch_threads,
         "hidden_dims": runner_cfg["actor"]["hidden_dims"],
         "mini_batches": runner_cfg["algorithm"]["num_mini_batches"],
@@ -117,7 +126,8 @@ def run(args) -> dict:
     }
     if not args.json:
         print(
-            f"blindgrasp-bench teacher: preset {preset.name}, {num_envs} envs, {env.batch.nthread} physics threads, "
+            f"blindgrasp-bench teacher: preset {preset.name}, {num_envs} envs, {args.backend} backend on {device}, "
+            f"{env.physics.nthread} physics threads, "
             f"{torch_threads} torch threads, MLP {result['hidden_dims']}, {result['epochs']} epochs x "
             f"{result['mini_batches']} minibatches"
         )
