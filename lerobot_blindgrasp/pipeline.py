@@ -61,6 +61,9 @@ class PipelinePreset:
     device: str = "cpu"  # student training and eval; --device overrides
     student_threads: int = 1  # OMP threads of lerobot-train (nothing else runs during that stage)
     eval_async_envs: bool = False  # lerobot-eval worker processes: worth it only with many cores (paper)
+    # The paired comparison is the deterministic teacher's; the stochastic one (what demos come from) costs as
+    # much again and is in the teacher's own card.
+    teacher_eval_modes: tuple[str, ...] = ("deterministic", "stochastic")
 
 
 PRESETS = {
@@ -68,7 +71,8 @@ PRESETS = {
     for p in (
         # The method on the shipped teacher. 1200 steps at batch 128 is the recipe of docs/results/student_cpu.md
         # (~8 min on 2 idle cores); 20 episodes per object is the evaluation protocol's minimum.
-        PipelinePreset("quick", SHIPPED, 20, 40, 400, 720, 18, "cpu", 1200, 128, 20, student_threads=2),
+        PipelinePreset("quick", SHIPPED, 20, 40, 400, 720, 18, "cpu", 1200, 128, 20, student_threads=2,
+                       teacher_eval_modes=("deterministic",)),
         # lerobot-train reads ~2 ms per 30-frame sample here: 5000 steps at batch 256 is about an hour.
         PipelinePreset("cpu", "cpu", 20, 40, 400, 360, 90, "cpu", 5_000, 256, 20, student_threads=2),
         # Paper: 89,500 curated samples, 2000 epochs at batch 256 (Table IV) = 700k steps; 500 envs per object.
@@ -153,7 +157,8 @@ def run_pipeline(preset: PipelinePreset, out: Path, seed: int, teacher: Path | N
         stage.run(
             "teacher_eval",
             [_bin("blindgrasp-eval-teacher"), str(teacher_dir), "--episodes", str(preset.teacher_eval_episodes),
-             "--objects", ",".join(eval_objects), "--seed", str(eval_seed), "--out", str(teacher_eval)],
+             "--objects", ",".join(eval_objects), "--seed", str(eval_seed), "--modes",
+             ",".join(preset.teacher_eval_modes), "--out", str(teacher_eval)],
         )
 
     repo = f"local/blindgrasp_{preset.name}"
@@ -265,6 +270,7 @@ def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: PipelinePreset, e
         and prev.get("seed") == eval_seed
         and prev.get("episodes_per_object") == preset.teacher_eval_episodes
         and prev.get("objects") == list(eval_objects)
+        and set(preset.teacher_eval_modes) <= set(prev.get("modes", {}))
     )
     if same:
         shutil.copytree(src.parent, dest)

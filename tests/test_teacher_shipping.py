@@ -65,7 +65,7 @@ def test_the_shipped_teacher_is_safetensors_and_json_only(shipped):
 
 def test_export_of_a_run_dir_acts_exactly_like_its_checkpoint(run_dir, tmp_path, shipped):
     out = export.export_teacher(run_dir, tmp_path / "shipped")
-    assert sorted(p.name for p in out.iterdir()) == ["README.md", policy.CONFIG_NAME, policy.WEIGHTS_NAME]
+    assert sorted(p.name for p in out.iterdir()) == sorted(["README.md", policy.CONFIG_NAME, policy.WEIGHTS_NAME])
     from_pt, from_st = TeacherPolicy(run_dir), TeacherPolicy(out)
     assert from_pt.checkpoint.name == "model_7.pt" and from_st.checkpoint.name == policy.WEIGHTS_NAME
     assert from_pt.iteration == from_st.iteration == 7
@@ -85,10 +85,11 @@ def test_export_of_a_run_dir_acts_exactly_like_its_checkpoint(run_dir, tmp_path,
     assert (out / "README.md").read_text() == "my card"
 
 
-def test_a_checkpoint_with_pickled_objects_is_refused_not_executed(run_dir):
-    class Payload:  # anything that is not plain tensors and containers would need unpickling code
-        pass
+class Payload:
+    """Anything that is not plain tensors and containers would need unpickling code to load."""
 
+
+def test_a_checkpoint_with_pickled_objects_is_refused_not_executed(run_dir):
     state = torch.load(run_dir / "model_7.pt", weights_only=True)
     state["infos"] = Payload()
     torch.save(state, run_dir / "model_8.pt", pickle_protocol=pickle.HIGHEST_PROTOCOL)
@@ -174,4 +175,4 @@ def test_teacher_push_sends_weights_config_and_card(monkeypatch, tmp_path):
     shutil.copytree(policy.default_teacher(), folder)
     (folder / "scratch.log").write_text("not for the Hub")
     assert export.push_teacher(folder, "you/blindgrasp_teacher") == "https://huggingface.co/you/blindgrasp_teacher"
-    assert sent["you/blindgrasp_teacher"] == ["README.md", policy.CONFIG_NAME, policy.WEIGHTS_NAME]
+    assert sent["you/blindgrasp_teacher"] == sorted(["README.md", policy.CONFIG_NAME, policy.WEIGHTS_NAME])
