@@ -9,7 +9,7 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass, replace
 
-from lerobot_blindgrasp.sim import objects, rewards
+from lerobot_blindgrasp.sim import rewards
 
 
 def _ppo_cfg(
@@ -102,23 +102,9 @@ _CPU_DEVIATIONS = (
     "actor and critic MLPs [256, 128, 64] instead of [512, 256, 128]: the PPO update on 1 CPU thread took longer "
     "than collection (4.5 s vs 3.5 s per iteration); the smaller MLPs cut it to 1.9 s (blindgrasp-bench teacher, "
     "docs/results/teacher_cpu_v2.md)",
-    "envs per object weighted by difficulty (large 0.5, medium 1, small 1.5, capsules x1.5) instead of even: "
-    "the first cpu teacher was at 90-100 % on large objects and 0-20 % on small ones and capsules",
     _NO_PUSHES,
 )
 
-
-def difficulty_weights(size: dict[str, float], capsule: float) -> tuple[float, ...]:
-    """Env share per paper object: a factor per size label, times `capsule` for capsules (they roll)."""
-    return tuple(
-        size[objects.get_object(n).size_label] * (capsule if objects.get_object(n).mjcf_type == "capsule" else 1.0)
-        for n in objects.PAPER_OBJECTS
-    )
-
-
-# The 50 % cpu teacher (iteration 618) lifted large objects 90-100 %, medium 50 %, small 0-20 % and capsules
-# 0-40 % (docs/results/teacher_cpu.md): samples go where the policy still fails.
-_CPU_OBJECT_WEIGHTS = difficulty_weights({"large": 0.5, "medium": 1.0, "small": 1.5}, capsule=1.5)
 
 _CPU_REWARD = replace(rewards.PAPER_REWARD, w_reach=0.5, reach_scale=20.0, w_touch=0.5)
 
@@ -137,7 +123,6 @@ CPU = TeacherPreset(
     reward=_CPU_REWARD,
     deviations=_CPU_DEVIATIONS,
     external_force=False,
-    object_weights=_CPU_OBJECT_WEIGHTS,
 )
 
 QUICK = TeacherPreset(
