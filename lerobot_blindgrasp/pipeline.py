@@ -241,12 +241,12 @@ def _teacher(stage: Stage, preset: PipelinePreset, out: Path, seed: int, given: 
         stage.skip("teacher", "trained")
     else:
         spec.check_seeds("teacher_train", seed, preset.teacher_num_envs or 1)
-        cmd = [_bin("blindgrasp-train-teacher"), "--preset", preset.teacher_preset, "--output-dir", str(teacher_dir),
-               "--seed", str(seed)]
+        cmd = [_bin("blindgrasp-train-teacher"), f"--preset={preset.teacher_preset}", f"--output_dir={teacher_dir}",
+               f"--seed={seed}"]
         if preset.teacher_iterations:
-            cmd += ["--iterations", str(preset.teacher_iterations)]
+            cmd.append(f"--iterations={preset.teacher_iterations}")
         if preset.teacher_num_envs:
-            cmd += ["--num-envs", str(preset.teacher_num_envs)]
+            cmd.append(f"--num_envs={preset.teacher_num_envs}")
         stage.run("teacher", cmd)
     t = TeacherPolicy(teacher_dir)
     return teacher_dir, {"source": f"trained from scratch in this run (teacher preset `{preset.teacher_preset}`)",

@@ -31,19 +31,7 @@ def teacher(tmp_path_factory) -> Path:
     previous = signal.getsignal(signal.SIGTERM)  # the trainer installs its own SIGTERM handler
     try:
         train.train(
-            train.parse_args(
-                [
-                    "--preset",
-                    "quick",
-                    "--output-dir",
-                    str(out),
-                    "--iterations",
-                    "1",
-                    "--num-envs",
-                    str(N_ENVS),
-                    "--no-export",
-                ]
-            )
+            train.TrainTeacherConfig(output_dir=out, preset="quick", iterations=1, num_envs=N_ENVS, export=False)
         )
     finally:
         signal.signal(signal.SIGTERM, previous)
