@@ -15,6 +15,7 @@ side by side without editing a preset.
 
 from __future__ import annotations
 
+import resource
 import time
 
 import numpy as np
@@ -123,6 +124,8 @@ def run(args) -> dict:
         "loop_env_steps_per_s": loop,
         "raw_control_steps_per_s": raw,
         "loop_over_raw": loop / raw,
+        # Peak resident memory of this process (env models + rollout storage + nets), for sizing bigger runs.
+        "max_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
     }
     if not args.json:
         print(
@@ -131,10 +134,14 @@ def run(args) -> dict:
             f"{torch_threads} torch threads, MLP {result['hidden_dims']}, {result['epochs']} epochs x "
             f"{result['mini_batches']} minibatches"
         )
-        print("| collect s/it | update s/it | update / collect | loop steps/s | raw ctrl steps/s | loop / raw |")
-        print("|---:|---:|---:|---:|---:|---:|")
+        print(
+            "| collect s/it | update s/it | update / collect | loop steps/s | raw ctrl steps/s | loop / raw "
+            "| peak RSS GB |"
+        )
+        print("|---:|---:|---:|---:|---:|---:|---:|")
         print(
             f"| {result['collect_s_per_it']:.2f} | {result['update_s_per_it']:.2f} | "
-            f"{result['update_over_collect']:.2f} | {loop:,.0f} | {raw:,.0f} | {result['loop_over_raw']:.2f} |"
+            f"{result['update_over_collect']:.2f} | {loop:,.0f} | {raw:,.0f} | {result['loop_over_raw']:.2f} "
+            f"| {result['max_rss_gb']:.2f} |"
         )
     return result
