@@ -256,9 +256,10 @@ def _teacher(stage: Stage, preset: PipelinePreset, out: Path, seed: int, given: 
 
 def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: PipelinePreset, eval_seed: int,
                         eval_objects: tuple[str, ...]) -> bool:
-    """A shipped teacher carries its eval (`<folder>/eval/eval.json`). Deterministic and stochastic rollouts are
-    functions of (teacher, start states, torch seed), so an eval of the same weights on the same start states
-    is the paired eval; reuse it rather than spend minutes recomputing it."""
+    """A shipped teacher may carry its eval (`<folder>/eval/eval.json`). Rollouts are functions of (teacher, start
+    states, torch seed, sim code), so an eval of the same weights on the same start states under the same sim
+    sources is the paired eval; reuse it rather than spend minutes recomputing it."""
+    from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 
     src = teacher_dir / "eval" / "eval.json"
@@ -267,6 +268,7 @@ def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: PipelinePreset, e
     prev = json.loads(src.read_text())
     same = (
         prev.get("checkpoint_sha256") == TeacherPolicy(teacher_dir).sha256
+        and prev.get("sim_fingerprint") == sim_fingerprint()
         and prev.get("seed") == eval_seed
         and prev.get("episodes_per_object") == preset.teacher_eval_episodes
         and prev.get("objects") == list(eval_objects)

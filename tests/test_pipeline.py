@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 import subprocess
 import sys
 
@@ -60,3 +61,23 @@ def test_presets_are_consistent():
     assert pipeline.PRESETS["quick"].eval_episodes_per_object >= 20 and pipeline.PRESETS["quick"].eval_task == "all"
     assert pipeline.PRESETS["smoke"].teacher_preset != pipeline.SHIPPED  # CI still trains a (tiny) teacher
     assert pipeline.PRESETS["paper"].device == "cuda"
+
+
+def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_states_and_sim(tmp_path):
+    from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
+    from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
+
+    teacher = tmp_path / "teacher"
+    shutil.copytree(default_teacher(), teacher)
+    preset = pipeline.PRESETS["quick"]
+    objs = pipeline._objects(preset.eval_task)
+    rec = {"checkpoint_sha256": TeacherPolicy(teacher).sha256, "sim_fingerprint": sim_fingerprint(),
+           "seed": spec.EVAL_SEED, "episodes_per_object": preset.teacher_eval_episodes, "objects": list(objs),
+           "modes": {"deterministic": {}}}  # fmt: skip
+    (teacher / "eval").mkdir()
+    for change, reused in (({}, True), ({"seed": spec.EVAL_SEED + 1}, False), ({"sim_fingerprint": "other"}, False),
+                           ({"episodes_per_object": 5}, False), ({"checkpoint_sha256": "x"}, False)):  # fmt: skip
+        (teacher / "eval" / "eval.json").write_text(json.dumps({**rec, **change}))
+        dest = tmp_path / f"dest{len(list(tmp_path.iterdir()))}"
+        assert pipeline._reuse_teacher_eval(teacher, dest, preset, spec.EVAL_SEED, objs) is reused, change
+        assert (dest / "eval.json").is_file() is reused

@@ -32,6 +32,19 @@ from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, defau
 MODES = ("deterministic", "stochastic")
 
 
+def sim_fingerprint() -> str:
+    """sha256 of the sources that decide an episode's outcome (sim/ and spec.py): an eval recorded under another
+    fingerprint ran other physics, so it is not reused as the paired eval of a new run."""
+    import hashlib
+
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for path in sorted([*(root / "sim").rglob("*.py"), root / "spec.py"]):
+        h.update(path.relative_to(root).as_posix().encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
 def _run_object(teacher: TeacherPolicy, name: str, episodes: int, seed: int, mode: str, reward_cfg) -> tuple:
     """One object's episodes in one batch: env k has seed start_seed(seed + k, name), episode 0, as the gym env."""
     env = BatchedGraspEnv(
@@ -97,6 +110,7 @@ def evaluate(
         }
     results["checkpoint"] = str(teacher.checkpoint)
     results["checkpoint_sha256"] = teacher.sha256
+    results["sim_fingerprint"] = sim_fingerprint()
     results["iteration"] = teacher.iteration
     return results
 
