@@ -6,6 +6,11 @@
 `per_task` entry per object. A task_id is the object's index in the object catalogue (Table I order, see
 `TASK_IDS`), the same whether one object or all 18 are evaluated; `object_for_task_id` maps it back to the name.
 
+Start states: lerobot-eval seeds every task's envs with the same `--seed` + episode numbers; the gym env maps
+(seed, object) into the evaluation seed range (`sim/gym_env.start_seed`, `spec.eval_env_seed`), so each object gets
+its own draws, none of them used in teacher training or demo collection, and `blindgrasp-eval-teacher --seed S`
+runs the same start states as `lerobot-eval --seed=S`.
+
 This module is imported when LeRobot discovers the plugin, so it must stay light: MuJoCo and the gym env are
 imported inside `create_envs`.
 """
