@@ -86,3 +86,16 @@ def test_report_pairs_episodes_on_the_same_start_states():
     t = [True, True, False, False, True]
     s = [True, False, True, False, True]
     assert paired_counts(t, s) == {"both": 2, "teacher_only": 1, "student_only": 1, "neither": 1}
+
+
+def test_lerobot_eval_of_a_teacher_folder_is_a_one_line_error(monkeypatch):
+    """The env config is parsed before LeRobot loads the policy: a teacher folder as --policy.path is caught there."""
+    from lerobot_blindgrasp.envs.sim_env import BlindGraspEnvConfig
+    from lerobot_blindgrasp.teacher.policy import default_teacher
+
+    monkeypatch.setattr("sys.argv", ["lerobot-eval", f"--policy.path={default_teacher()}", "--env.type=blindgrasp"])
+    with pytest.raises(ValueError, match="is a blindgrasp PPO teacher, not a LeRobot policy") as e:
+        BlindGraspEnvConfig()
+    assert "\n" not in str(e.value) and "blindgrasp-eval-teacher" in str(e.value)
+    monkeypatch.setattr("sys.argv", ["lerobot-eval", "--env.type=blindgrasp"])
+    BlindGraspEnvConfig()  # no policy path: nothing to refuse
