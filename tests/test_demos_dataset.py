@@ -5,6 +5,8 @@ No teacher needed: episodes are synthetic but go through the real curation, writ
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 
 import numpy as np
@@ -20,6 +22,7 @@ from lerobot_blindgrasp.demos.rollout import Episode
 from lerobot_blindgrasp.sim import objects
 
 OBJECTS = ("sphere_small", "capsule_large", "cuboid_a_medium", "cylinder_b_small")
+TRIMMED = dataclasses.replace(curation.PAPER_CURATION, trim_to_success=True)
 
 
 def synthetic_episode(i: int, hold_start: int) -> Episode:
@@ -44,13 +47,13 @@ def synthetic_episode(i: int, hold_start: int) -> Episode:
 
 @pytest.fixture(scope="module")
 def written(tmp_path_factory):
-    """Six curated (trimmed) episodes written through the real path."""
+    """Six curated episodes written through the real path, trimmed (the opt-in) so that their lengths differ."""
     root = tmp_path_factory.mktemp("ds") / "sim"
     ds = demo_dataset.create(root, "test/sim")
     episodes, cuts = [], []
     for i in range(6):
         ep = synthetic_episode(i, hold_start=20 + 5 * i)
-        cut = curation.evaluate(ep.task_reward, ep.uniaxial_force)
+        cut = curation.evaluate(ep.task_reward, ep.uniaxial_force, TRIMMED)
         assert cut.keep
         demo_dataset.write_episode(ds, ep, cut)
         episodes.append(ep)
