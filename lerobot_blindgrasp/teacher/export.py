@@ -34,7 +34,7 @@ def export_teacher(source: str | Path, out_dir: str | Path, overwrite_card: bool
     # Load it the way users will, before writing anything: a checkpoint that does not fit its config fails here.
     policy.TeacherPolicy(ckpt)
     config = json.loads((ckpt.parent / policy.CONFIG_NAME).read_text())
-    config["observation_layout"] = policy._observation_layout()
+    config["observation_layout"] = policy.observation_layout()
     config["weights"] = {
         "format": policy.FORMAT,
         "file": policy.WEIGHTS_NAME,

@@ -115,7 +115,7 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _observation_layout() -> dict:
+def observation_layout() -> dict:
     return {"policy": [[spec.STATE_KEY, spec.STATE_DIM]], "privileged": [list(x) for x in spec.PRIVILEGED_LAYOUT]}
 
 
@@ -147,7 +147,7 @@ class TeacherPolicy:
         except (json.JSONDecodeError, KeyError, TypeError) as e:
             raise TeacherError(f"{self.checkpoint.parent / CONFIG_NAME} is not a teacher config ({e!r})") from None
         layout = self.config.get("observation_layout")
-        if layout is not None and layout != _observation_layout():
+        if layout is not None and layout != observation_layout():
             raise TeacherError(
                 f"{self.checkpoint} was trained on another observation layout than spec.PRIVILEGED_LAYOUT; "
                 "retrain or use a teacher from this version"

@@ -1,6 +1,6 @@
 """Training success against env steps and against training wall clock, from a run's TensorBoard scalars.
 
-    python -m lerobot_blindgrasp.teacher.progress RUN_DIR [OUT.png]
+    python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...]
 
 Success here is the training-time rate rsl-rl logs per object (`Success/<object>`: episodes that ended in an
 iteration, stochastic actions, training seeds), averaged with equal weight over the 18 objects and over the 6
@@ -70,41 +70,51 @@ def progress(run_dir: Path, window: int = 25) -> dict[str, list[float]]:
         }
 
 
-def plot_progress(run_dir: Path, path: Path, title: str | None = None) -> dict:
+def plot_progress(runs: dict[str, Path], path: Path, title: str = "Teacher training progress") -> dict:
+    """One figure, success against env steps (left) and training wall clock (right), one colour per run;
+    solid: all 18 objects, dashed: the 6 medium ones."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    p = progress(run_dir)
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=True)
-    for ax, x, label in ((axes[0], np.array(p["env_steps"]) / 1e6, "env steps (M)"),
-                         (axes[1], np.array(p["wall_h"]), "training wall clock (h)")):
-        ax.plot(x, 100 * np.array(p["success_all18"]), label="all 18 objects")
-        ax.plot(x, 100 * np.array(p["success_medium"]), label="6 medium objects")
-        ax.set_xlabel(label)
+    curves = {label: progress(run_dir) for label, run_dir in runs.items()}
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
+    for k, (label, p) in enumerate(curves.items()):
+        if not p:
+            continue
+        colour = f"C{k}"
+        for ax, x in ((axes[0], np.array(p["env_steps"]) / 1e6), (axes[1], np.array(p["wall_h"]))):
+            ax.plot(x, 100 * np.array(p["success_all18"]), colour, label=f"{label}: all 18")
+            ax.plot(x, 100 * np.array(p["success_medium"]), colour, ls="--", label=f"{label}: 6 medium")
+    for ax, xlabel in zip(axes, ("env steps (M)", "training wall clock (h)")):
+        ax.set_xlabel(xlabel)
         ax.set_ylim(0, 100)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("training success, stochastic (%)")
-    axes[0].legend(loc="upper left")
-    fig.suptitle(title or f"Teacher training progress ({run_dir.name})")
+    axes[0].legend(loc="upper left", fontsize=8)
+    fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return p
+    return curves
 
 
 def main(argv=None) -> None:
+    """python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...]"""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv:
-        raise SystemExit("usage: python -m lerobot_blindgrasp.teacher.progress RUN_DIR [OUT.png]")
-    run_dir = Path(argv[0])
-    if not (run_dir / CONFIG_NAME).is_file():
-        raise SystemExit(f"{run_dir} is not a teacher run directory (no {CONFIG_NAME})")
-    out = Path(argv[1]) if len(argv) > 1 else run_dir / "progress.png"
-    p = plot_progress(run_dir, out)
-    last = {k: v[-1] for k, v in p.items()}
-    print(json.dumps({"plot": str(out), "last": last}, indent=2))
+    if len(argv) < 2:
+        raise SystemExit("usage: python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR ...")
+    runs = {}
+    for arg in argv[1:]:
+        label, _, path = arg.rpartition("=")
+        run_dir = Path(path)
+        if not (run_dir / CONFIG_NAME).is_file():
+            raise SystemExit(f"{run_dir} is not a teacher run directory (no {CONFIG_NAME})")
+        runs[label or run_dir.name] = run_dir
+    curves = plot_progress(runs, Path(argv[0]))
+    last = {label: {k: v[-1] for k, v in p.items()} for label, p in curves.items() if p}
+    print(json.dumps({"plot": argv[0], "last": last}, indent=2))
 
 
 if __name__ == "__main__":

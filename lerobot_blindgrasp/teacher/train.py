@@ -28,7 +28,7 @@ from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_confi
 from lerobot_blindgrasp.sim import randomization
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.teacher import distributed, presets
-from lerobot_blindgrasp.teacher.policy import CONFIG_NAME, latest_checkpoint
+from lerobot_blindgrasp.teacher.policy import CONFIG_NAME, latest_checkpoint, observation_layout
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
 log = logging.getLogger("blindgrasp.teacher")
@@ -104,6 +104,8 @@ def train(cfg: TrainTeacherConfig) -> Path:
         "external_force": preset.external_force,
         "object_weights": preset.object_weights and list(preset.object_weights),
         "deviations": list(preset.deviations),
+        # Lets a loader refuse this checkpoint once spec.PRIVILEGED_LAYOUT changes.
+        "observation_layout": observation_layout(),
         "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
     }
     cfg_path = out / CONFIG_NAME
