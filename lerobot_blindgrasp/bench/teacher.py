@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import resource
 import time
+from dataclasses import replace
 
 import numpy as np
 import torch
@@ -46,8 +47,6 @@ def _preset(args) -> presets.TeacherPreset:
         runner["algorithm"]["num_mini_batches"] = args.mini_batches
     if args.epochs:
         runner["algorithm"]["num_learning_epochs"] = args.epochs
-    from dataclasses import replace
-
     return replace(preset, runner=runner)
 
 
