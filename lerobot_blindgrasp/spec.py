@@ -1,4 +1,4 @@
-"""The shared contracts of lerobot_blindgrasp, defined once (see DESIGN.md, "Contracts every part shares").
+"""The shared contracts of lerobot_blindgrasp, defined once.
 
 Sim, demos, policy, real robot and glove import these names; nothing else defines joint order, limits, servo IDs,
 control rate, action bound, observation layouts or the success rule.
@@ -15,7 +15,6 @@ Joint conventions (the sim's zero is the hardware calibration target, see `robot
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -78,31 +77,48 @@ def dataset_features() -> dict:
 
 
 # --- Privileged observation (teacher only) -----------------------------------------------------------------------
-# (name, size) in order; the sim's `observations.privileged_obs` builds exactly this layout.
+# (name, size) in order. `assemble_privileged` is the only way the sim builds the vector (`sim/observations.py`),
+# and a shipped teacher's checkpoint records this layout, so a change here is refused at load time.
 PRIVILEGED_LAYOUT: tuple[tuple[str, int], ...] = (
-    ("joint_pos", NUM_JOINTS),
+    ("joint_pos", NUM_JOINTS),  # measured: with joint noise
     ("joint_vel", NUM_JOINTS),
     ("fingertip_pos", 3 * NUM_FORCES),  # world frame, relative to the claw centre on the table
     ("fingertip_quat", 4 * NUM_FORCES),  # wxyz
     ("object_pos", 3),  # relative to the claw centre on the table
-    ("object_quat", 4),
-    ("object_linvel", 3),
-    ("object_angvel", 3),
-    ("fingertip_contact_force", 3 * NUM_FORCES),  # contact force on each tip, tip frame
+    ("object_quat", 4),  # wxyz
+    ("object_linvel", 3),  # world frame
+    ("object_angvel", 3),  # object frame (MuJoCo's free-joint convention)
+    ("fingertip_contact_force", 3 * NUM_FORCES),  # contact force on each tip, tip frame, with noise
     ("object_planar_distance", 1),  # d_xy, eq. 4
-    ("uniaxial_force", NUM_FORCES),
-    ("fingertip_wrench", 6 * NUM_FORCES),  # force + torque at each tip's load cell, tip frame
-    ("previous_action", NUM_JOINTS),  # a_{t-1}, delta-theta (rad)
+    ("uniaxial_force", NUM_FORCES),  # the student's force reading: noise, then the deadband
+    ("fingertip_wrench", 6 * NUM_FORCES),  # force + torque at each tip's load cell, tip frame, with noise
+    ("previous_action", NUM_JOINTS),  # a_{t-1}, delta-theta (rad), after the +-0.3 rad clip
 )
 PRIVILEGED_DIM = sum(n for _, n in PRIVILEGED_LAYOUT)  # 92 (the paper reports 95 without a breakdown)
 
 
-def privileged_slices() -> dict[str, slice]:
+def _slices(layout: tuple[tuple[str, int], ...]) -> dict[str, slice]:
     out, i = {}, 0
-    for name, n in PRIVILEGED_LAYOUT:
+    for name, n in layout:
         out[name] = slice(i, i + n)
         i += n
     return out
+
+
+PRIVILEGED_SLICES: dict[str, slice] = _slices(PRIVILEGED_LAYOUT)
+
+
+def assemble_privileged(parts: dict[str, np.ndarray]) -> np.ndarray:
+    """The (n, PRIVILEGED_DIM) vector from one (n, size) array per `PRIVILEGED_LAYOUT` name, in layout order.
+
+    Refuses a missing, extra or mis-sized part, so the layout cannot drift from what the sim computes."""
+    if set(parts) != set(PRIVILEGED_SLICES):
+        missing, extra = set(PRIVILEGED_SLICES) - set(parts), set(parts) - set(PRIVILEGED_SLICES)
+        raise ValueError(f"privileged parts differ from spec.PRIVILEGED_LAYOUT: missing {missing}, extra {extra}")
+    for name, n in PRIVILEGED_LAYOUT:
+        if parts[name].ndim != 2 or parts[name].shape[1] != n:
+            raise ValueError(f"privileged part {name!r} must be (n_envs, {n}), got {parts[name].shape}")
+    return np.concatenate([parts[name] for name, _ in PRIVILEGED_LAYOUT], axis=1)
 
 
 # --- Task and success --------------------------------------------------------------------------------------------
@@ -117,22 +133,6 @@ SUCCESS_HOLD_STEPS = int(round(SUCCESS_HOLD_S * CONTROL_HZ))
 # Paper: an episode terminates when the object leaves a 10 cm planar radius around the claw centre.
 WORKSPACE_RADIUS_M = 0.10
 OBJECT_XY_RANGE_M = 0.03
-
-
-@dataclass(frozen=True)
-class JointInfo:
-    name: str
-    servo_id: int
-    finger: str
-    kind: int  # 0 abduction, 1 proximal, 2 distal
-    lower: float
-    upper: float
-
-
-JOINTS: tuple[JointInfo, ...] = tuple(
-    JointInfo(JOINT_NAMES[i], SERVO_IDS[i], FINGERS[i // 3], i % 3, float(JOINT_LOWER[i]), float(JOINT_UPPER[i]))
-    for i in range(NUM_JOINTS)
-)
 
 
 # --- Seed ranges (evaluation protocol) ---------------------------------------------------------------------------

@@ -12,7 +12,7 @@ import pytest
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import gripper, objects, randomization, sensors
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.sim.scripted import PinchLiftScript
+from lerobot_blindgrasp.sim.scripted import run_pinch_lift
 
 
 def _model(obj="cylinder_a_medium"):
@@ -122,19 +122,13 @@ def test_scripted_closing_motion_lifts_the_medium_cylinder():
     dr = replace(randomization.PAPER_DR, joint_offset_rad=0.0, object_xy_m=0.0, external_force=False)
     env = BatchedGraspEnv(GraspEnvConfig(num_envs=8, objects=("cylinder_a_medium",), dr=dr, autoreset=False))
     env.reset()
-    script = PinchLiftScript(object_radius=0.03, grasp_height=0.045, lift_m=0.03)
-    lifts, forces = [], []
-    for _ in range(100):
-        _, _, _, _, info = env.step(script(env.joint_positions()))
-        lifts.append(info["lift"].copy())
-        forces.append(info["uniaxial_force"].copy())
-    lifts = np.array(lifts)
+    lifts, forces, info = run_pinch_lift(env, 100)
     assert info["success"].all()
     # Held for the last second without creep: within 3 mm of the 3 cm lift, and never launched.
     assert np.all(np.abs(lifts[-20:] - 0.03) < 0.003)
     assert lifts.max() < 0.045
     # All three tips press on the object while it is held (tens of newtons at most, not physics blow-ups).
-    held = np.array(forces)[-20:]
+    held = forces[-20:]
     assert (held > spec.FORCE_THRESHOLD_N).all() and held.max() < 100.0
 
 

@@ -23,7 +23,7 @@ import mujoco
 import numpy as np
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.sim import backends, gripper, objects, randomization, rewards, rng, sensors
+from lerobot_blindgrasp.sim import backends, gripper, objects, observations, randomization, rewards, rng, sensors
 from lerobot_blindgrasp.sim.backends.batch import BatchBackend
 
 log = logging.getLogger(__name__)
@@ -112,6 +112,7 @@ class BatchedGraspEnv:
             self.models = None  # per-world fields on the device; env_model(i) rebuilds env i's MjModel on demand
             self.physics = WarpBackend(templates, self.object_index, self.env_model, device=cfg.device)
             self.batch = None
+        observations.check_state_layout(templates[0])
         self.sensor_index = sensors.SensorIndex.from_model(templates[0])
         self._object_body = templates[0].body("object").id
         self._qpos = self.physics.qpos
@@ -179,10 +180,9 @@ class BatchedGraspEnv:
         q0 = np.clip(q0, spec.JOINT_LOWER, spec.JOINT_UPPER)
         self.physics.reset(ids)  # defaults; zero velocity, warm-start and applied forces
         qpos = self._qpos[ids]
-        qpos[:, : spec.NUM_JOINTS] = q0
-        qpos[:, 9:11] = xy
-        qpos[:, 11] = self.rest_height[ids]
-        qpos[:, 12:16] = self._rest_quat[ids]
+        qpos[:, observations.JOINTS] = q0
+        qpos[:, observations.OBJECT_POS] = np.column_stack([xy, self.rest_height[ids]])
+        qpos[:, observations.OBJECT_QUAT] = self._rest_quat[ids]
         self._qpos[ids] = qpos
         self._ctrl[ids] = q0
         self._pushing[ids] = False
@@ -211,7 +211,7 @@ class BatchedGraspEnv:
 
     def step(self, action):
         a = np.clip(self.validate_action(action), -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
-        q = self._qpos[:, : spec.NUM_JOINTS]
+        q = self._qpos[:, observations.JOINTS]
         self._ctrl[:] = np.clip(q + a, spec.JOINT_LOWER, spec.JOINT_UPPER)
         if self.cfg.dr.external_force:
             self._update_pushes()
@@ -303,64 +303,31 @@ class BatchedGraspEnv:
 
     # --- observation --------------------------------------------------------------------------------------------
     def _observe(self, ids: np.ndarray | None = None) -> dict[str, np.ndarray]:
-        """Compute raw quantities (kept in self._raw for rewards) and both observations, for all envs or `ids`."""
+        """Both observations for all envs or `ids`; for all envs, also the raw quantities the rewards read."""
         sel = slice(None) if ids is None else ids
-        qpos, qvel, sd = self._qpos[sel], self._qvel[sel], self._sensordata[sel]
-        si = self.sensor_index
-        contact = si.read(sd, "contact")
-        tip_quat = si.read(sd, "quat")
-        uni_true = sensors.uniaxial_force(contact, si.read(sd, "zaxis"))
-        uni = sensors.reading(uni_true)  # noise-free reading (rewards, curation)
-        obj_pos = qpos[:, 9:12]
-        raw = {
-            "q": qpos[:, : spec.NUM_JOINTS],
-            "uniaxial_clean": uni,
-            "d_xy": rewards.planar_distance(obj_pos[:, :2]),
-            "lift": obj_pos[:, 2] - self.rest_height[sel],
-            "tip_object_distance": si.read(sd, "objdist")[:, :, 0],
-            "tip_object_force": np.linalg.norm(si.read(sd, "objcontact"), axis=2),
-        }
         seeds = self.env_seeds[sel]
         counter = self.episode[sel] * 100_003 + self.episode_length[sel]
-        noise = rng.normal(seeds, rng.STREAM_OBS_NOISE, counter, spec.NUM_JOINTS + 3 * 10)
-        jn = noise[:, : spec.NUM_JOINTS] * self.cfg.dr.joint_noise_rad
-        fn = noise[:, spec.NUM_JOINTS :] * self.cfg.dr.force_noise_n
-        q_obs = raw["q"] + jn
-        uni_obs = sensors.reading(uni_true, fn[:, :3])  # noise, then the deadband, as on the real sensor
-        contact_tip = sensors.contact_force_tip_frame(contact, tip_quat).reshape(-1, 9) + fn[:, 3:12]
-        wrench = np.concatenate([si.read(sd, "force"), si.read(sd, "torque")], axis=2).reshape(-1, 18)
-        wrench = wrench + fn[:, 12:30]
-        privileged = np.concatenate(
-            [
-                q_obs,
-                qvel[:, : spec.NUM_JOINTS],
-                si.read(sd, "pos").reshape(-1, 9),
-                tip_quat.reshape(-1, 12),
-                obj_pos,
-                qpos[:, 12:16],
-                qvel[:, 9:12],
-                qvel[:, 12:15],
-                contact_tip,
-                raw["d_xy"][:, None],
-                uni_obs,
-                wrench,
-                self.prev_action[sel],
-            ],
-            axis=1,
+        noise = rng.normal(seeds, rng.STREAM_OBS_NOISE, counter, observations.NOISE_DIM)
+        raw, obs = observations.observe(
+            self._qpos[sel],
+            self._qvel[sel],
+            self._sensordata[sel],
+            self.sensor_index,
+            self.rest_height[sel],
+            self.prev_action[sel],
+            noise,
+            self.cfg.dr,
         )
         if ids is None:
             self._raw = raw
-        return {
-            "policy": np.concatenate([q_obs, uni_obs], axis=1).astype(np.float32),
-            "privileged": privileged.astype(np.float32),
-        }
+        return obs
 
     # --- helpers for tests, rendering and eval ---------------------------------------------------------------
     def joint_positions(self) -> np.ndarray:
-        return self._qpos[:, : spec.NUM_JOINTS].copy()
+        return self._qpos[:, observations.JOINTS].copy()
 
     def object_position(self) -> np.ndarray:
-        return self._qpos[:, 9:12].copy()
+        return self._qpos[:, observations.OBJECT_POS].copy()
 
     def mj_model_data(self, i: int) -> tuple[mujoco.MjModel, mujoco.MjData]:
         """Env i's model and a forwarded MjData of its current state (for rendering)."""
@@ -368,18 +335,6 @@ class BatchedGraspEnv:
         d = self.batch.get_data(i) if self.batch is not None else self.physics.get_data(i, m)
         mujoco.mj_forward(m, d)
         return m, d
-
-    def episode_info(self, i: int) -> dict:
-        """What a dataset user may filter by: object, size, randomization draw."""
-        o = objects.get_object(self.object_names[i])
-        return {
-            "object": o.name,
-            "geometry": o.geometry,
-            "size": o.size_label,
-            "env_seed": int(self.env_seeds[i]),
-            "episode": int(self.episode[i]),
-            **{f"dr_{k}": v for k, v in self.physics_draw.row(i).items()},
-        }
 
     def close(self) -> None:
         self.physics.close()

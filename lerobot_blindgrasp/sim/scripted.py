@@ -62,3 +62,15 @@ class PinchLiftScript:
         a = np.clip(self.target(self.t)[None, :] - q, -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
         self.t += 1
         return a
+
+
+def run_pinch_lift(env, steps: int, object_radius: float = 0.03, grasp_height: float = 0.045, lift_m: float = 0.03):
+    """Drive a reset `BatchedGraspEnv` with the pinch for `steps` control steps. Returns the per-step object lift
+    (steps, N), the noise-free uniaxial forces (steps, N, 3) and the last step's info."""
+    script = PinchLiftScript(object_radius, grasp_height, lift_m)
+    lifts, forces = [], []
+    for _ in range(steps):
+        _, _, _, _, info = env.step(script(env.joint_positions()))
+        lifts.append(info["lift"].copy())
+        forces.append(info["uniaxial_force"].copy())
+    return np.array(lifts), np.array(forces), info

@@ -1,0 +1,104 @@
+"""What the sim observes each control step, for all envs at once (numpy over the env axis).
+
+- `raw`: noise-free quantities that rewards, success and demo curation read;
+- "policy": the student's o_t in R^12, measured joint positions and uniaxial force readings (`spec.STATE_NAMES`);
+- "privileged": the teacher's 92-d vector, assembled by name through `spec.assemble_privileged`, so each part is
+  computed under the name `spec.PRIVILEGED_LAYOUT` gives it, never placed by position.
+
+Measurement noise comes in as one N(0, 1) draw per env and step, split by `NOISE_LAYOUT`. That order decides which
+random number each reading gets: changing it changes every observation the shipped teacher was evaluated on.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim import randomization, rewards, sensors
+
+# Where the state lives in qpos/qvel: the nine gripper hinges first (spec.JOINT_NAMES order), then the object's
+# free joint (position, wxyz quaternion; linear velocity in the world frame, angular velocity in the object frame).
+JOINTS = slice(0, spec.NUM_JOINTS)
+OBJECT_POS = slice(spec.NUM_JOINTS, spec.NUM_JOINTS + 3)  # qpos
+OBJECT_QUAT = slice(spec.NUM_JOINTS + 3, spec.NUM_JOINTS + 7)  # qpos
+OBJECT_LINVEL = slice(spec.NUM_JOINTS, spec.NUM_JOINTS + 3)  # qvel
+OBJECT_ANGVEL = slice(spec.NUM_JOINTS + 3, spec.NUM_JOINTS + 6)  # qvel
+
+# (reading, size) of the per-step noise draw, in draw order; joints get joint_noise_rad, the rest force_noise_n.
+NOISE_LAYOUT: tuple[tuple[str, int], ...] = (
+    ("joint_pos", spec.NUM_JOINTS),
+    ("uniaxial_force", spec.NUM_FORCES),
+    ("fingertip_contact_force", 3 * spec.NUM_FORCES),
+    ("fingertip_wrench", 6 * spec.NUM_FORCES),
+)
+NOISE_DIM = sum(n for _, n in NOISE_LAYOUT)
+
+
+def check_state_layout(m: mujoco.MjModel) -> None:
+    """Refuse a scene whose qpos/qvel order differs from the slices above."""
+    hinges = [m.joint(j) for j in spec.JOINT_NAMES]
+    free = m.joint("object_free")
+    ok = [int(j.qposadr[0]) for j in hinges] == list(range(spec.NUM_JOINTS))
+    ok &= [int(j.dofadr[0]) for j in hinges] == list(range(spec.NUM_JOINTS))
+    ok &= int(free.qposadr[0]) == OBJECT_POS.start and int(free.dofadr[0]) == OBJECT_LINVEL.start
+    if not ok or m.nq != OBJECT_QUAT.stop or m.nv != OBJECT_ANGVEL.stop:
+        raise ValueError("the scene's qpos/qvel order is not the nine spec joints followed by the object's free joint")
+
+
+def _scaled_noise(noise: np.ndarray, dr: randomization.DomainRandomization) -> dict[str, np.ndarray]:
+    out, i = {}, 0
+    for name, n in NOISE_LAYOUT:
+        std = dr.joint_noise_rad if name == "joint_pos" else dr.force_noise_n
+        out[name] = noise[:, i : i + n] * std
+        i += n
+    return out
+
+
+def observe(
+    qpos: np.ndarray,
+    qvel: np.ndarray,
+    sensordata: np.ndarray,
+    si: sensors.SensorIndex,
+    rest_height: np.ndarray,
+    prev_action: np.ndarray,
+    noise: np.ndarray,
+    dr: randomization.DomainRandomization,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """(raw, obs) for the envs whose state is given (rows of qpos, qvel, sensordata, ...)."""
+    contact = si.read(sensordata, "contact")
+    tip_quat = si.read(sensordata, "quat")
+    uni_true = sensors.uniaxial_force(contact, si.read(sensordata, "zaxis"))
+    obj_pos = qpos[:, OBJECT_POS]
+    raw = {
+        "q": qpos[:, JOINTS],
+        "uniaxial_clean": sensors.reading(uni_true),  # noise-free reading (rewards, curation)
+        "d_xy": rewards.planar_distance(obj_pos[:, :2]),
+        "lift": obj_pos[:, 2] - rest_height,
+        "tip_object_distance": si.read(sensordata, "objdist")[:, :, 0],
+        "tip_object_force": np.linalg.norm(si.read(sensordata, "objcontact"), axis=2),
+    }
+    nz = _scaled_noise(noise, dr)
+    n = qpos.shape[0]
+    wrench = np.concatenate([si.read(sensordata, "force"), si.read(sensordata, "torque")], axis=2)
+    parts = {
+        "joint_pos": raw["q"] + nz["joint_pos"],
+        "joint_vel": qvel[:, JOINTS],
+        "fingertip_pos": si.read(sensordata, "pos").reshape(n, -1),
+        "fingertip_quat": tip_quat.reshape(n, -1),
+        "object_pos": obj_pos,
+        "object_quat": qpos[:, OBJECT_QUAT],
+        "object_linvel": qvel[:, OBJECT_LINVEL],
+        "object_angvel": qvel[:, OBJECT_ANGVEL],
+        "fingertip_contact_force": sensors.contact_force_tip_frame(contact, tip_quat).reshape(n, -1)
+        + nz["fingertip_contact_force"],
+        "object_planar_distance": raw["d_xy"][:, None],
+        "uniaxial_force": sensors.reading(uni_true, nz["uniaxial_force"]),  # noise, then the deadband
+        "fingertip_wrench": wrench.reshape(n, -1) + nz["fingertip_wrench"],
+        "previous_action": prev_action,
+    }
+    obs = {
+        "policy": np.concatenate([parts["joint_pos"], parts["uniaxial_force"]], axis=1).astype(np.float32),
+        "privileged": spec.assemble_privileged(parts).astype(np.float32),
+    }
+    return raw, obs
