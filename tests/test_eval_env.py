@@ -159,7 +159,7 @@ def test_each_object_gets_its_own_start_states_from_the_same_seed():
     assert any(not np.allclose(ra[k], rb[k]) for k in ra)
     # The same trial as the batched env's first episode with that seed (what the teacher eval builds).
     batched = BatchedGraspEnv(GraspEnvConfig(num_envs=2, objects=(names[0],), seed=seeds[names[0]] - 1,
-                                             dr=gym_env.EVAL_DR, autoreset=False))  # fmt: skip
+                                             dr=randomization.EVAL_DR, autoreset=False))  # fmt: skip
     batched.reset()
     np.testing.assert_array_equal(batched.joint_positions()[1], a.joint_positions()[0])
 

@@ -25,9 +25,9 @@ pytest.importorskip("mujoco_warp")
 from lerobot_blindgrasp import spec  # noqa: E402
 from lerobot_blindgrasp.sim import objects, randomization  # noqa: E402
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
-from lerobot_blindgrasp.sim.scripted import PinchLiftScript  # noqa: E402
+from lerobot_blindgrasp.sim.scripted import run_pinch_lift  # noqa: E402
 
-NO_PUSH = randomization.PAPER_DR.without_external_force()
+NO_PUSH = randomization.EVAL_DR
 
 
 def _pair(**kw):
@@ -88,13 +88,8 @@ def test_scripted_grasp_holds_the_same_on_both_backends():
     runs = {}
     for name, env in zip(("batch", "warp"), _pair(**kw)):
         env.reset()
-        script = PinchLiftScript(object_radius=0.03, grasp_height=0.045, lift_m=0.03)
-        lifts, forces = [], []
-        for _ in range(85):
-            _, _, _, _, info = env.step(script(env.joint_positions()))
-            lifts.append(info["lift"].copy())
-            forces.append(info["uniaxial_force"].copy())
-        runs[name] = (np.array(lifts), np.array(forces), info["success"])
+        lifts, forces, info = run_pinch_lift(env, 85)
+        runs[name] = (lifts, forces, info["success"])
     (lb, fb, sb), (lw, fw, sw) = runs["batch"], runs["warp"]
     assert sb.all() and sw.all()
     np.testing.assert_allclose(lw[-20:], lb[-20:], atol=0.002)

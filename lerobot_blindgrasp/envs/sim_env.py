@@ -93,7 +93,7 @@ class BlindGraspEnvConfig(EnvConfig):
     def gym_kwargs(self) -> dict:
         from lerobot_blindgrasp.sim import gym_env  # MuJoCo: only when envs are actually built
 
-        dr = gym_env.EVAL_DR if self.domain_randomization else gym_env.randomization.NO_DR
+        dr = gym_env.randomization.EVAL_DR if self.domain_randomization else gym_env.randomization.NO_DR
         return {
             "dr": dr,
             "render_width": self.render_width,

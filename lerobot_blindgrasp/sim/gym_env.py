@@ -43,9 +43,6 @@ from lerobot_blindgrasp.sim import objects, randomization  # noqa: E402
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
 
 GYM_ID = "lerobot_blindgrasp/BlindGrasp-v0"
-# The paper's randomization and sensor noise, without the external pushes (those are a training-time robustness
-# aid; eval and demos run undisturbed trials).
-EVAL_DR = randomization.PAPER_DR.without_external_force()
 # The scene's offscreen framebuffer (sim/gripper.py, <visual><global offwidth offheight>) bounds render sizes.
 MAX_RENDER_WIDTH, MAX_RENDER_HEIGHT = 640, 480
 _MAX_SEED = spec.EVAL_TASK_STRIDE  # reset seeds are per-object evaluation indices (spec.eval_env_seed)
@@ -77,7 +74,7 @@ class BlindGraspGymEnv(gym.Env):
         self,
         object_name: str = "cylinder_a_medium",
         *,
-        dr: randomization.DomainRandomization = EVAL_DR,
+        dr: randomization.DomainRandomization = randomization.EVAL_DR,
         render_mode: str | None = "rgb_array",
         render_width: int = 320,
         render_height: int = 240,
@@ -212,7 +209,7 @@ def make_env(object_name: str = "cylinder_a_medium", **kwargs) -> gym.Env:
 
 def eval_dr(object_xy: bool = True) -> randomization.DomainRandomization:
     """The eval randomization; `object_xy=False` centres the object (for scripted, centre-assuming motions)."""
-    return EVAL_DR if object_xy else replace(EVAL_DR, object_xy_m=0.0)
+    return randomization.EVAL_DR if object_xy else replace(randomization.EVAL_DR, object_xy_m=0.0)
 
 
 if GYM_ID not in gym.registry:

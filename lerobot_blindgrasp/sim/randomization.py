@@ -37,10 +37,14 @@ class DomainRandomization:
     force_noise_n: float = spec.FORCE_NOISE_STD_N
 
     def without_external_force(self) -> "DomainRandomization":
+        """Deprecated spelling of `EVAL_DR` (for PAPER_DR); kept until the demo loop and its test use EVAL_DR."""
         return replace(self, external_force=False)
 
 
 PAPER_DR = DomainRandomization()
+# The paper's randomization and sensor noise without the pushes: the pushes are a training-time robustness aid, and
+# evaluation (lerobot-eval, the teacher eval) and demo collection run undisturbed trials.
+EVAL_DR = replace(PAPER_DR, external_force=False)
 # No randomization at all: for physics tests and scripted checks.
 NO_DR = DomainRandomization(
     joint_offset_rad=0.0,

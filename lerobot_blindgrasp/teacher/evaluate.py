@@ -26,7 +26,8 @@ from tqdm import tqdm
 from lerobot_blindgrasp import rates, spec
 from lerobot_blindgrasp.sim import objects, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.sim.gym_env import EVAL_DR, start_seed
+from lerobot_blindgrasp.sim.gym_env import start_seed
+from lerobot_blindgrasp.sim.randomization import EVAL_DR
 from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, default_teacher
 
 MODES = ("deterministic", "stochastic")

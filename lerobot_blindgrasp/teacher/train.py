@@ -37,7 +37,7 @@ log = logging.getLogger("blindgrasp.teacher")
 def build_env_config(
     preset: presets.TeacherPreset, num_envs: int, seed: int, nthread: int = 0, backend: str = "batch"
 ) -> GraspEnvConfig:
-    dr = randomization.PAPER_DR if preset.external_force else randomization.PAPER_DR.without_external_force()
+    dr = randomization.PAPER_DR if preset.external_force else randomization.EVAL_DR
     return GraspEnvConfig(
         num_envs=num_envs,
         seed=seed,
