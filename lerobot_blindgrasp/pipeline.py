@@ -1,15 +1,20 @@
-"""`blindgrasp-pipeline --preset {quick,cpu,paper}`: the whole method, end to end, ending in a report.
+"""`blindgrasp-pipeline --preset={quick,cpu,paper,smoke}`: the whole method, end to end, ending in a report.
 
-    blindgrasp-pipeline --preset quick     # README command 1: the shipped teacher -> demos -> student -> eval, ~15 min
-    blindgrasp-pipeline --preset cpu      # trains its own teacher from scratch: hours on 2 cores
-    blindgrasp-pipeline --preset paper --device cuda    # the paper's tables: a GPU machine
-    blindgrasp-pipeline --preset quick --teacher runs/teacher_cpu     # any teacher folder instead
+    blindgrasp-pipeline --preset=quick     # README command 1: the shipped teacher -> demos -> student -> eval, ~15 min
+    blindgrasp-pipeline --preset=cpu       # trains its own teacher from scratch: hours on 2 cores
+    blindgrasp-pipeline --preset=paper --device=cuda    # the paper's Tables III-IV: a GPU machine
+    blindgrasp-pipeline --preset=quick --teacher=runs/teacher_cpu     # any teacher folder instead
+
+Every size comes from the preset registry (`lerobot_blindgrasp/presets/`); the command lines from
+`lerobot_blindgrasp/recipe.py`, which `scripts/paper_recipe.sh` uses too (`--print_commands=STAGE`). A draccus
+config like LeRobot's scripts (`--help`, `--config_path`); the 0.1 spellings (`--output-dir`) still work.
 
 Stages, each a real CLI run as a subprocess (its command and log are kept in <out>/logs/):
 1. the teacher: the shipped default teacher (`quick`), a given `--teacher`, or trained from scratch
    (`blindgrasp-train-teacher`, presets `cpu`, `paper`, `smoke`);
 2. curated demos (`blindgrasp-collect-demos`) as a LeRobotDataset;
-3. the student (`lerobot-train --policy.type=blindgrasp_transformer`);
+3. the student (`lerobot-train --policy.type=blindgrasp_transformer`; an epoch-sized preset such as `paper` gets
+   its step count and LR schedule from the collected dataset's frames, `presets.student`);
 4. the student in sim (`lerobot-eval --env.type=blindgrasp`) and the teacher on the *same* start states
    (`blindgrasp-eval-teacher --seed` = lerobot-eval's `--seed`; see spec.eval_env_seed);
 5. `report.md` with PNG plots: which teacher, teacher vs student success per object with 95 % Wilson intervals
@@ -21,10 +26,8 @@ Env seeds: teacher training from `--seed`, demos from the demo range, evaluation
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
-import re
 import shlex
 import shutil
 import subprocess
@@ -33,63 +36,41 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import presets, recipe, spec
+from lerobot_blindgrasp.cli import parse_config
 
-SHIPPED = "shipped"  # PipelinePreset.teacher_preset: use the shipped default teacher, train nothing
-# Each pipeline --seed gets its own block of demo env seeds, so reruns with another seed are new draws.
-DEMO_SEED_BLOCK = 1 << 24
-
-
-@dataclass(frozen=True)
-class PipelinePreset:
-    name: str
-    teacher_preset: str  # a teacher preset to train from scratch, or SHIPPED
-    teacher_eval_episodes: int  # per object and mode; = eval_episodes_per_object keeps teacher and student paired
-    demo_episodes_per_object: int
-    demo_max_rollouts_per_object: int
-    demo_num_envs: int
-    # Below this many curated episodes the student cannot learn anything; the pipeline then also collects the
-    # uncurated ("w/o curation") set and trains on it, and says so in the report.
-    min_curated_episodes: int
-    student_size: str
-    student_steps: int
-    student_batch: int
-    eval_episodes_per_object: int
-    eval_task: str = "all"  # lerobot-eval --env.task
-    teacher_iterations: int | None = None  # None: the teacher preset's own
-    teacher_num_envs: int | None = None
-    device: str = "cpu"  # student training and eval; --device overrides
-    student_threads: int = 1  # OMP threads of lerobot-train (nothing else runs during that stage)
-    eval_async_envs: bool = False  # lerobot-eval worker processes: worth it only with many cores (paper)
-    # The paired comparison is the deterministic teacher's; the stochastic one (what demos come from) costs as
-    # much again and is in the teacher's own card.
-    teacher_eval_modes: tuple[str, ...] = ("deterministic", "stochastic")
-
-
-PRESETS = {
-    p.name: p
-    for p in (
-        # The method on the shipped teacher. 1200 steps at batch 128 is the recipe of docs/results/student_cpu.md
-        # (~8 min on 2 idle cores); 20 episodes per object is the evaluation protocol's minimum.
-        PipelinePreset("quick", SHIPPED, 20, 40, 400, 720, 18, "cpu", 1200, 128, 20, student_threads=2,
-                       teacher_eval_modes=("deterministic",)),
-        # lerobot-train reads ~2 ms per 30-frame sample here: 5000 steps at batch 256 is about an hour.
-        PipelinePreset("cpu", "cpu", 20, 40, 400, 360, 90, "cpu", 5_000, 256, 20, student_threads=2),
-        # Paper: 89,500 curated samples, 2000 epochs at batch 256 (Table IV) = 700k steps; 500 envs per object.
-        PipelinePreset("paper", "paper", 50, 5000, 20_000, 9000, 1000, "paper", 700_000, 256, 50, device="cuda",
-                       eval_async_envs=True),
-        # CI smoke test of the plumbing only: every stage runs for seconds, a tiny teacher trained from scratch.
-        PipelinePreset("smoke", "quick", 1, 1, 2, 36, 18, "quick", 4, 8, 1, eval_task="cylinder_a_medium",
-                       teacher_iterations=2, teacher_num_envs=36),
-    )
-}
+PRESETS = presets.PRESETS  # the registry itself, not a copy
+DEMO_SEED_BLOCK = recipe.DEMO_SEED_BLOCK
 
 BIGGER = """\
 Go bigger (same command, another preset):
 
-    blindgrasp-pipeline --preset cpu     # trains a teacher from scratch on 2 cores: ~1.5-2 h teacher, then demos, student
-    blindgrasp-pipeline --preset paper --device cuda   # GPU machine, the paper's Tables III-IV; see scripts/paper_recipe.sh
+    blindgrasp-pipeline --preset=cpu     # trains a teacher from scratch on 2 cores: ~1.5-2 h teacher, then demos, student
+    blindgrasp-pipeline --preset=paper --device=cuda   # GPU machine, the paper's Tables III-IV
+    bash scripts/paper_recipe.sh         # Table V: every ablation row at the paper preset's sizes
 """
+
+
+@dataclass
+class PipelineConfig:
+    """The method end to end (teacher -> curated demos -> student -> paired sim eval -> report)."""
+
+    preset: str = "quick"  # registry preset (lerobot_blindgrasp/presets): smoke, quick, cpu, paper
+    output_dir: Path | None = None  # default outputs/pipeline_<preset>; re-running continues where it stopped
+    seed: int = spec.TEACHER_TRAIN_SEED  # teacher-training env seed and torch seed; also picks the demo seed block
+    teacher: Path | None = None  # use this teacher folder instead of the preset's (shipped or trained from scratch)
+    eval_seed: int = spec.EVAL_SEED  # lerobot-eval --seed, and the teacher eval's: both run the same start states
+    device: str | None = None  # torch device for the student (default: the preset's)
+    # A Table V stage (teachers, teacher_evals, demos, students, evals): print its commands that are not done yet
+    # under output_dir, one shell line each, and exit. scripts/paper_recipe.sh runs them.
+    print_commands: str | None = None
+
+    def __post_init__(self):
+        presets.get(self.preset)  # an unknown preset: one line before anything runs
+        self.output_dir = Path(self.output_dir or Path("outputs") / f"pipeline_{self.preset}")
+        self.teacher = None if self.teacher is None else Path(self.teacher)
+        if self.print_commands is not None and self.print_commands not in recipe.STAGES:
+            raise ValueError(f"--print_commands takes one of {', '.join(recipe.STAGES)}")
 
 
 class Stage:
@@ -101,6 +82,7 @@ class Stage:
         (out / "logs").mkdir(parents=True, exist_ok=True)
 
     def run(self, name: str, cmd: list[str], env: dict | None = None, ok: tuple[int, ...] = (0,)) -> int:
+        cmd = [_bin(cmd[0]), *cmd[1:]]
         log_path = self.out / "logs" / f"{name}.log"
         print(f"[pipeline] {name}: {shlex.join(cmd)}", flush=True)
         t = time.time()
@@ -128,16 +110,18 @@ def _bin(name: str) -> str:
     return str(cand) if cand.exists() else name
 
 
-def run_pipeline(preset: PipelinePreset, out: Path, seed: int, teacher: Path | None = None,
-                 eval_seed: int = spec.EVAL_SEED, device: str | None = None) -> Path:
-    device = device or preset.device
-    demo_seed = spec.DEMO_SEED + seed * DEMO_SEED_BLOCK
+def run_pipeline(cfg: PipelineConfig) -> Path:
+    preset = presets.get(cfg.preset)
+    out, seed, eval_seed = cfg.output_dir, cfg.seed, cfg.eval_seed
+    device = cfg.device or preset.student.device
+    demo_seed = recipe.demo_seed(seed)
     spec.check_seeds("demos", demo_seed, DEMO_SEED_BLOCK)  # one-line errors before any stage runs
-    spec.eval_env_seed(eval_seed + max(preset.eval_episodes_per_object, preset.teacher_eval_episodes) - 1, 0)
+    spec.eval_env_seed(eval_seed + preset.evaluation.episodes_per_object - 1, 0)
     out.mkdir(parents=True, exist_ok=True)
     record_path = out / "pipeline.json"
     record = json.loads(record_path.read_text()) if record_path.exists() else {"stages": {}}
     record["preset"] = asdict(preset)
+    record["deviations"] = list(preset.all_deviations)
     record["seeds"] = {"pipeline": seed, "demos_first_env_seed": demo_seed, "eval_index": eval_seed}
     record["device"] = device
     stage = Stage(out, record)
@@ -145,8 +129,8 @@ def run_pipeline(preset: PipelinePreset, out: Path, seed: int, teacher: Path | N
     # lerobot-train steps at the quick size); MuJoCo's own threads are unaffected.
     env1 = {"OMP_NUM_THREADS": "1", "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
 
-    teacher_dir, record["teacher"] = _teacher(stage, preset, out, seed, teacher)
-    eval_objects = _objects(preset.eval_task)
+    teacher_dir, record["teacher"] = _teacher(stage, preset, out, seed, cfg.teacher)
+    eval_objects = recipe.objects_of(preset.evaluation.task)
     teacher_eval = out / "teacher_eval"
     if (teacher_eval / "eval.json").exists():
         stage.skip("teacher_eval", "done")
@@ -154,20 +138,15 @@ def run_pipeline(preset: PipelinePreset, out: Path, seed: int, teacher: Path | N
         stage.skip("teacher_eval", f"the same start states were evaluated for this teacher in {teacher_dir / 'eval'}")
         record["teacher"]["eval_reused_from"] = str(teacher_dir / "eval")
     else:
-        stage.run(
-            "teacher_eval",
-            [_bin("blindgrasp-eval-teacher"), str(teacher_dir), "--episodes", str(preset.teacher_eval_episodes),
-             "--objects", ",".join(eval_objects), "--seed", str(eval_seed), "--modes",
-             ",".join(preset.teacher_eval_modes), "--out", str(teacher_eval)],
-        )
+        stage.run("teacher_eval", recipe.teacher_eval(preset, teacher_dir, teacher_eval, eval_seed))
 
     repo = f"local/blindgrasp_{preset.name}"
     demos = _collect(stage, preset, teacher_dir, out / "demos", repo, demo_seed, curate=True)
     kept = _kept(demos)
     train_set = demos
     record["student_dataset"] = "curated"
-    if kept < preset.min_curated_episodes:
-        print(f"[pipeline] only {kept} curated episodes (< {preset.min_curated_episodes}); also collecting the "
+    if kept < preset.demos.min_curated_episodes:
+        print(f"[pipeline] only {kept} curated episodes (< {preset.demos.min_curated_episodes}); also collecting the "
               "uncurated set and training the student on it", flush=True)
         repo = f"local/blindgrasp_{preset.name}_uncurated"
         train_set = _collect(stage, preset, teacher_dir, out / "demos_uncurated", repo, demo_seed + DEMO_SEED_BLOCK // 2,
@@ -178,36 +157,20 @@ def run_pipeline(preset: PipelinePreset, out: Path, seed: int, teacher: Path | N
                          "train the student on; use a better teacher (--teacher) or more rollouts")
 
     student = out / "student"
-    ckpt = student / "checkpoints" / "last" / "pretrained_model"
+    ckpt = recipe.checkpoint(student)
+    cmd, sched = recipe.student_train(preset, train_set, repo, student, seed, device)
+    record["student_schedule"] = asdict(sched)
     if ckpt.exists():
         stage.skip("student", "trained")
     else:
         if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
             os.replace(student, out / f"student_interrupted_{int(time.time())}")
-        stage.run(
-            "student",
-            [_bin("lerobot-train"), "--policy.type=blindgrasp_transformer", f"--policy.size={preset.student_size}",
-             f"--dataset.repo_id={repo}", f"--dataset.root={train_set}", f"--output_dir={student}",
-             f"--steps={preset.student_steps}", f"--batch_size={preset.student_batch}",
-             f"--save_freq={preset.student_steps}", f"--log_freq={max(1, preset.student_steps // 50)}",
-             "--policy.push_to_hub=false", f"--policy.device={device}", "--num_workers=0", "--wandb.enable=false",
-             f"--seed={seed}"],
-            env={**env1, "OMP_NUM_THREADS": str(preset.student_threads)},
-        )
+        stage.run("student", cmd, env={**env1, "OMP_NUM_THREADS": str(preset.student.threads)})
     student_eval = out / "student_eval"
     if (student_eval / "eval_info.json").exists():
         stage.skip("student_eval", "done")
     else:
-        stage.run(
-            "student_eval",
-            [_bin("lerobot-eval"), f"--policy.path={ckpt}", "--env.type=blindgrasp", f"--env.task={preset.eval_task}",
-             f"--eval.n_episodes={preset.eval_episodes_per_object}",
-             f"--eval.batch_size={preset.eval_episodes_per_object}", f"--policy.device={device}",
-             # In-process envs: on a few cores, one worker process per env only adds start-up and contention.
-             f"--eval.use_async_envs={'true' if preset.eval_async_envs else 'false'}",
-             f"--output_dir={student_eval}", f"--seed={eval_seed}"],
-            env=env1,
-        )
+        stage.run("student_eval", recipe.student_eval(preset, ckpt, student_eval, eval_seed, device), env=env1)
     from lerobot_blindgrasp.report import write_report  # matplotlib, only now
 
     report = write_report(out, record, BIGGER)
@@ -215,17 +178,11 @@ def run_pipeline(preset: PipelinePreset, out: Path, seed: int, teacher: Path | N
     return report
 
 
-def _objects(task: str) -> tuple[str, ...]:
-    from lerobot_blindgrasp.sim import objects
-
-    return objects.resolve_objects(task)
-
-
-def _teacher(stage: Stage, preset: PipelinePreset, out: Path, seed: int, given: Path | None) -> tuple[Path, dict]:
+def _teacher(stage: Stage, preset: presets.Preset, out: Path, seed: int, given: Path | None) -> tuple[Path, dict]:
     """The teacher folder for this run and what the report says about it."""
     from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, default_teacher
 
-    if given is not None or preset.teacher_preset == SHIPPED:
+    if given is not None or preset.teacher.shipped:
         try:
             path = Path(given) if given is not None else default_teacher()
             t = TeacherPolicy(path)
@@ -236,25 +193,19 @@ def _teacher(stage: Stage, preset: PipelinePreset, out: Path, seed: int, given: 
         return path, {"source": source, "path": str(path), "file": t.name, "sha256": t.sha256,
                       "iteration": t.iteration, "preset": t.config.get("preset")}
     teacher_dir = out / "teacher"
-    summary = teacher_dir / "train_summary.json"
-    if summary.exists() and not json.loads(summary.read_text()).get("interrupted"):
+    if recipe.teacher_trained(teacher_dir):
         stage.skip("teacher", "trained")
     else:
-        spec.check_seeds("teacher_train", seed, preset.teacher_num_envs or 1)
-        cmd = [_bin("blindgrasp-train-teacher"), f"--preset={preset.teacher_preset}", f"--output_dir={teacher_dir}",
-               f"--seed={seed}"]
-        if preset.teacher_iterations:
-            cmd.append(f"--iterations={preset.teacher_iterations}")
-        if preset.teacher_num_envs:
-            cmd.append(f"--num_envs={preset.teacher_num_envs}")
-        stage.run("teacher", cmd)
+        spec.check_seeds("teacher_train", seed, preset.teacher.num_envs or preset.teacher.settings.num_envs)
+        stage.run("teacher", recipe.teacher_train(preset, teacher_dir, seed))
     t = TeacherPolicy(teacher_dir)
-    return teacher_dir, {"source": f"trained from scratch in this run (teacher preset `{preset.teacher_preset}`)",
+    name = preset.teacher.settings.name
+    return teacher_dir, {"source": f"trained from scratch in this run (teacher preset `{name}`)",
                          "path": str(teacher_dir), "file": t.name, "sha256": t.sha256, "iteration": t.iteration,
-                         "preset": preset.teacher_preset}
+                         "preset": name}
 
 
-def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: PipelinePreset, eval_seed: int,
+def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: presets.Preset, eval_seed: int,
                         eval_objects: tuple[str, ...]) -> bool:
     """A shipped teacher may carry its eval (`<folder>/eval/eval.json`). Rollouts are functions of (teacher, start
     states, torch seed, sim code), so an eval of the same weights on the same start states under the same sim
@@ -270,32 +221,25 @@ def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: PipelinePreset, e
         prev.get("checkpoint_sha256") == TeacherPolicy(teacher_dir).sha256
         and prev.get("sim_fingerprint") == sim_fingerprint()
         and prev.get("seed") == eval_seed
-        and prev.get("episodes_per_object") == preset.teacher_eval_episodes
+        and prev.get("episodes_per_object") == preset.evaluation.episodes_per_object
         and prev.get("objects") == list(eval_objects)
-        and set(preset.teacher_eval_modes) <= set(prev.get("modes", {}))
+        and set(preset.evaluation.teacher_modes) <= set(prev.get("modes", {}))
     )
     if same:
         shutil.copytree(src.parent, dest)
     return same
 
 
-def _collect(stage: Stage, preset: PipelinePreset, teacher: Path, root: Path, repo_id: str, first_seed: int,
+def _collect(stage: Stage, preset: presets.Preset, teacher: Path, root: Path, repo_id: str, first_seed: int,
              curate: bool) -> Path:
     name = "demos" if curate else "demos_uncurated"
-    if (root / "yield_report.json").exists() and (root / "meta" / "info.json").exists():
+    if recipe.demos_collected(root):
         stage.skip(name, "collected")
         return root
-    cmd = [_bin("blindgrasp-collect-demos"), "--teacher", str(teacher), "--out", str(root), "--repo-id", repo_id,
-           "--episodes-per-object", str(preset.demo_episodes_per_object),
-           "--max-rollouts-per-object", str(preset.demo_max_rollouts_per_object),
-           "--num-envs", str(preset.demo_num_envs), "--seed", str(first_seed), "--no-progress"]
-    if not curate:
-        cmd.append("--no-curation")
-    if root.exists():
-        cmd.append("--resume")
     from lerobot_blindgrasp.demos.collect import EXIT_EMPTY
 
-    stage.run(name, cmd, ok=(0, EXIT_EMPTY))  # an empty curated set is handled by the caller (uncurated fallback)
+    # An empty curated set is handled by the caller (uncurated fallback).
+    stage.run(name, recipe.collect(preset, teacher, root, repo_id, first_seed, curate=curate), ok=(0, EXIT_EMPTY))
     return root
 
 
@@ -304,29 +248,15 @@ def _kept(root: Path) -> int:
     return int(report["total"]["kept"])
 
 
-def parse_step(s: str) -> float:
-    m = re.fullmatch(r"([\d.]+)([KMB]?)", s)
-    if not m:
-        raise ValueError(s)
-    return float(m.group(1)) * {"": 1, "K": 1e3, "M": 1e6, "B": 1e9}[m.group(2)]
-
-
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--preset", choices=sorted(PRESETS), default="quick")
-    p.add_argument("--output-dir", type=Path, default=None, help="default: outputs/pipeline_<preset>")
-    p.add_argument("--seed", type=int, default=spec.TEACHER_TRAIN_SEED,
-                   help="teacher-training env seed and torch seed; also picks the block of demo env seeds")
-    p.add_argument("--teacher", type=Path, default=None,
-                   help="use this teacher folder instead of the preset's (shipped or trained from scratch)")
-    p.add_argument("--eval-seed", type=int, default=spec.EVAL_SEED,
-                   help="lerobot-eval --seed, and the teacher eval's: both run the same start states")
-    p.add_argument("--device", default=None, help="torch device for the student (default: the preset's)")
-    args = p.parse_args(argv)
-    out = args.output_dir or Path("outputs") / f"pipeline_{args.preset}"
+    cfg = parse_config(PipelineConfig, argv)
     try:
-        run_pipeline(PRESETS[args.preset], out, args.seed, args.teacher, args.eval_seed, args.device)
-    except ValueError as e:  # seeds outside their ranges
+        if cfg.print_commands:
+            print(recipe.shell_lines(recipe.table_v(presets.get(cfg.preset), cfg.output_dir, cfg.print_commands,
+                                                    cfg.seed, cfg.eval_seed, cfg.device)))
+            return
+        run_pipeline(cfg)
+    except ValueError as e:  # seeds outside their ranges, a stage printed before its inputs exist
         raise SystemExit(f"[pipeline] error: {e}") from None
 
 

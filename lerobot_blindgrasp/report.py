@@ -48,9 +48,15 @@ def paired_counts(teacher: list[bool], student: list[bool]) -> dict[str, int]:
             "student_only": int((~t & s).sum()), "neither": int((~t & ~s).sum())}
 
 
-def student_loss_curve(log_text: str) -> tuple[list[float], list[float]]:
-    from lerobot_blindgrasp.pipeline import parse_step
+def parse_step(s: str) -> float:
+    """A step count as lerobot-train logs it: 300, 1K, 2.5M."""
+    m = re.fullmatch(r"([\d.]+)([KMB]?)", s)
+    if not m:
+        raise ValueError(s)
+    return float(m.group(1)) * {"": 1, "K": 1e3, "M": 1e6, "B": 1e9}[m.group(2)]
 
+
+def student_loss_curve(log_text: str) -> tuple[list[float], list[float]]:
     steps, losses = [], []
     for m in _LOSS_LINE.finditer(log_text):
         steps.append(parse_step(m.group(1)))
@@ -117,7 +123,7 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     lines += [
         "## Success per object (sim)",
         "",
-        f"Student: `lerobot-eval --env.type=blindgrasp --env.task={record['preset'].get('eval_task', 'all')} "
+        f"Student: `lerobot-eval --env.type=blindgrasp --env.task={record['preset']['evaluation']['task']} "
         f"--seed={seed}`; teacher: `blindgrasp-eval-teacher --seed {seed}`. Both ran the same {n_ep} start states "
         "per object (evaluation indices from the seed, each object its own draws, none used in teacher training "
         "or demo collection). Success = lifted ≥ 1.5 cm and held ≥ 1 s within 10 s; the paper's randomization and "
@@ -178,6 +184,14 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
             "",
         ]
     lines += [f"The student was trained on the **{record.get('student_dataset', 'curated')}** set.", ""]
+    sched = record.get("student_schedule") or {}
+    if sched.get("steps_per_epoch"):
+        lines += [f"Student length from its dataset: {sched['total_frames']} frames = {sched['steps_per_epoch']} "
+                  f"steps per epoch, {sched['steps']} steps, LR constant for the first {sched['constant_lr_steps']}.",
+                  ""]
+    if record.get("deviations"):
+        lines += ["## Deviations from the paper (preset `" + preset + "`)", ""]
+        lines += [f"- {d}" for d in record["deviations"]] + [""]
     lines += ["## Next", "", bigger]
     path = out / "report.md"
     path.write_text("\n".join(lines) + "\n")

@@ -10,13 +10,13 @@ import sys
 
 import pytest
 
-from lerobot_blindgrasp import pipeline, spec
+from lerobot_blindgrasp import pipeline, recipe, spec
 
 
 @pytest.mark.slow
 def test_smoke_pipeline_runs_every_stage_and_writes_the_report(tmp_path):
     out = tmp_path / "p"
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.pipeline", "--preset", "smoke", "--output-dir", str(out)]
+    cmd = [sys.executable, "-m", "lerobot_blindgrasp.pipeline", "--preset=smoke", f"--output_dir={out}"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     record = json.loads((out / "pipeline.json").read_text())
@@ -34,33 +34,31 @@ def test_smoke_pipeline_runs_every_stage_and_writes_the_report(tmp_path):
     assert row and len(re.findall(r"\d+ % \[\d+-\d+\] \([01]/1\)", row.group(1))) == 3
     for fig in ("success_per_object.png", "teacher_curves.png", "student_loss.png", "yield_demos.png"):
         assert (out / "figures" / fig).stat().st_size > 1000
-    assert "--preset cpu" in report and "--preset paper" in report
+    assert "--preset=cpu" in report and "--preset=paper" in report
+    assert "## Deviations from the paper" in report  # the preset's own list, from the registry
     # Re-running skips the finished stages instead of redoing them.
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert again.returncode == 0 and again.stdout.count("skipped") >= 5
 
 
 def test_step_counts_in_lerobot_logs_parse():
-    assert pipeline.parse_step("300") == 300
-    assert pipeline.parse_step("1K") == 1000
-    assert pipeline.parse_step("2.5M") == 2_500_000
+    from lerobot_blindgrasp.report import parse_step
+
+    assert parse_step("300") == 300
+    assert parse_step("1K") == 1000
+    assert parse_step("2.5M") == 2_500_000
     with pytest.raises(ValueError):
-        pipeline.parse_step("abc")
+        parse_step("abc")
 
 
 def test_presets_are_consistent():
-    from lerobot_blindgrasp.teacher import presets as teacher_presets
-
     for p in pipeline.PRESETS.values():
-        assert p.teacher_preset in teacher_presets.PRESETS or p.teacher_preset == pipeline.SHIPPED
-        assert p.student_size in ("quick", "cpu", "paper")
-        # Paired evaluation: the teacher runs exactly the student's episodes per object.
-        assert p.teacher_eval_episodes == p.eval_episodes_per_object
+        assert p.student.size in ("quick", "cpu", "paper")
     # README command 1 starts from the shipped teacher and records results at >= 20 episodes per object.
-    assert pipeline.PRESETS["quick"].teacher_preset == pipeline.SHIPPED
-    assert pipeline.PRESETS["quick"].eval_episodes_per_object >= 20 and pipeline.PRESETS["quick"].eval_task == "all"
-    assert pipeline.PRESETS["smoke"].teacher_preset != pipeline.SHIPPED  # CI still trains a (tiny) teacher
-    assert pipeline.PRESETS["paper"].device == "cuda"
+    quick = pipeline.PRESETS["quick"]
+    assert quick.teacher.shipped and quick.evaluation.episodes_per_object >= 20 and quick.evaluation.task == "all"
+    assert not pipeline.PRESETS["smoke"].teacher.shipped  # CI still trains a (tiny) teacher
+    assert pipeline.PRESETS["paper"].student.device == "cuda"
 
 
 def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_states_and_sim(tmp_path):
@@ -70,9 +68,9 @@ def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_state
     teacher = tmp_path / "teacher"
     shutil.copytree(default_teacher(), teacher)
     preset = pipeline.PRESETS["quick"]
-    objs = pipeline._objects(preset.eval_task)
+    objs = recipe.objects_of(preset.evaluation.task)
     rec = {"checkpoint_sha256": TeacherPolicy(teacher).sha256, "sim_fingerprint": sim_fingerprint(),
-           "seed": spec.EVAL_SEED, "episodes_per_object": preset.teacher_eval_episodes, "objects": list(objs),
+           "seed": spec.EVAL_SEED, "episodes_per_object": preset.evaluation.episodes_per_object, "objects": list(objs),
            "modes": {"deterministic": {}}}  # fmt: skip
     (teacher / "eval").mkdir()
     for change, reused in (({}, True), ({"seed": spec.EVAL_SEED + 1}, False), ({"sim_fingerprint": "other"}, False),

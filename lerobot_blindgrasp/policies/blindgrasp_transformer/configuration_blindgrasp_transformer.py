@@ -7,7 +7,8 @@ live in the processors (`processor_blindgrasp_transformer.py`), so the network o
 
 Table IV -> field:
     batch size 256                      -> lerobot-train `--batch_size=256` (a training-loop setting)
-    number of epochs 2000               -> lerobot-train `--steps` = 2000 * ceil(num_frames / batch_size)
+    number of epochs 2000               -> lerobot-train `--steps` = 2000 * ceil(num_frames / batch_size), computed
+                                           from the collected dataset (`lerobot_blindgrasp.presets.student`)
     optimizer AdamW, lr 1e-4            -> `optimizer_lr`
     L2 regularization 0.01              -> `optimizer_weight_decay`
     lr schedule: linear decay after
@@ -22,18 +23,16 @@ Table IV -> field:
     activation GELU                     -> the transformer MLP (fixed)
     MLP head [1024, 1024]               -> `head_hidden_dims` (via `size="paper"`)
 
-Sizes. `size` picks the architecture from `SIZES` (one table, below); any of `n_layers`, `embed_dim`, `n_heads`,
-`head_hidden_dims` given explicitly wins over the preset. The resolved numbers are what `config.json` stores, so a
+Sizes. `size` picks the architecture from `SIZES` (the preset registry's student table,
+`lerobot_blindgrasp/presets/student.py`); any of `n_layers`, `embed_dim`, `n_heads`, `head_hidden_dims` given
+explicitly wins over the preset. The resolved numbers are what `config.json` stores, so a
 checkpoint reloads with the exact architecture it was trained with.
-    --policy.size=paper   (default) 6 x 512, 8 heads, head [1024, 1024]; ~1.1 GFLOP per control step
-    --policy.size=cpu     3 x 128, 4 heads, head [256, 256]; for a 2-core machine, an hour or two of training
-    --policy.size=quick   2 x 64, 4 heads, head [128, 128]; minutes, for the quick pipeline and CI
+    --policy.size=paper   (default) Table IV, ~1.1 GFLOP per control step; `cpu` and `quick` are smaller
     e.g. `--policy.size=cpu --policy.n_layers=2` for a cpu-size model with 2 layers.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 from lerobot.configs import FeatureType, NormalizationMode, PreTrainedConfig
@@ -44,17 +43,7 @@ from torch.optim import Optimizer
 from torch.optim.lr_scheduler import LambdaLR
 
 from lerobot_blindgrasp import spec
-
-# The architecture presets: data, in one place (DESIGN.md, "Presets").
-SIZES: dict[str, dict] = {
-    "paper": {"n_layers": 6, "embed_dim": 512, "n_heads": 8, "head_hidden_dims": [1024, 1024]},
-    "cpu": {"n_layers": 3, "embed_dim": 128, "n_heads": 4, "head_hidden_dims": [256, 256]},
-    "quick": {"n_layers": 2, "embed_dim": 64, "n_heads": 4, "head_hidden_dims": [128, 128]},
-}
-
-# Paper scale of "100 epochs' worth of steps": the curated set has 89,500 samples, so one epoch at batch 256 is
-# ceil(89500 / 256) = 350 optimizer steps. With another dataset use 100 * ceil(num_frames / batch_size).
-PAPER_STEPS_PER_EPOCH = math.ceil(89_500 / 256)
+from lerobot_blindgrasp.presets.student import SIZES  # noqa: F401  (the registry's table; --policy.size picks)
 
 
 @LRSchedulerConfig.register_subclass("blindgrasp_constant_then_linear")
@@ -66,11 +55,13 @@ class ConstantThenLinearDecaySchedulerConfig(LRSchedulerConfig):
     """
 
     num_warmup_steps: int | None = None  # base-class field; the paper uses no warmup
-    num_constant_steps: int = 100 * PAPER_STEPS_PER_EPOCH
+    num_constant_steps: int | None = None  # None: constant for the whole run
     end_factor: float = 0.1
 
     def build(self, optimizer: Optimizer, num_training_steps: int) -> LambdaLR:
         constant, end = self.num_constant_steps, self.end_factor
+        if constant is None:
+            constant = num_training_steps
 
         def lr_lambda(step: int) -> float:
             if step < constant:
@@ -117,10 +108,11 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     # Not in the paper; LeRobot's AdamW default. 0 disables clipping.
     optimizer_grad_clip_norm: float = 10.0
     # "Linear decay after 100 epochs": constant lr for this many optimizer steps, then linear decay to
-    # `scheduler_end_factor` x lr at the last step (`--steps`). Default = 100 epochs of the paper's data at
-    # batch 256 (35,000 steps); set it to 100 * ceil(num_frames / batch_size) for your dataset. End factor 0.1 is
-    # robomimic's LinearLR end factor in its BC-Transformer template.
-    scheduler_constant_steps: int = 100 * PAPER_STEPS_PER_EPOCH
+    # `scheduler_end_factor` x lr at the last step (`--steps`). An epoch's steps depend on the dataset, so there is
+    # no fixed default: None keeps the lr constant for the whole run, and `blindgrasp-pipeline --preset=paper`
+    # passes 100 * ceil(num_frames / batch_size) of the dataset it collected (`lerobot_blindgrasp.presets.student`).
+    # End factor 0.1 is robomimic's LinearLR end factor in its BC-Transformer template.
+    scheduler_constant_steps: int | None = None
     scheduler_end_factor: float = 0.1
 
     def __post_init__(self):

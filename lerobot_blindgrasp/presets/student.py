@@ -1,0 +1,78 @@
+"""The student part of the preset registry: architecture sizes and the training length of each preset.
+
+`SIZES` is what `--policy.size` of the `blindgrasp_transformer` policy picks from; `paper` is Table IV.
+
+Training length. Table IV gives 2000 epochs at batch 256 with the LR constant for 100 epochs, then decaying. An
+epoch here is one pass over the frames of the dataset actually collected (lerobot-train draws one sample per
+frame, with its 30-step context), so the step counts exist only after the demo stage:
+
+    steps_per_epoch = ceil(total_frames / batch_size)          total_frames: <dataset>/meta/info.json
+    --steps                         = epochs * steps_per_epoch
+    --policy.scheduler_constant_steps = constant_lr_epochs * steps_per_epoch
+
+The paper's "89,500" curated demonstrations are episodes by its own wording ("demonstrations", 18 objects x ~5000
+rollouts of 5 s); nothing here assumes either reading, the collected dataset decides. robomimic, which the paper
+trained with, can also define an epoch as a fixed 100 steps (`epoch_every_n_steps` in its BC-Transformer
+template); the paper does not say which it used, and a pass over the data is what "epoch" means in LeRobot.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+SIZES: dict[str, dict] = {
+    "paper": {"n_layers": 6, "embed_dim": 512, "n_heads": 8, "head_hidden_dims": [1024, 1024]},  # Table IV
+    "cpu": {"n_layers": 3, "embed_dim": 128, "n_heads": 4, "head_hidden_dims": [256, 256]},
+    "quick": {"n_layers": 2, "embed_dim": 64, "n_heads": 4, "head_hidden_dims": [128, 128]},
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudentStage:
+    """lerobot-train of the student: its size and either a fixed step count or epochs of the collected data."""
+
+    size: str  # a key of SIZES
+    batch_size: int
+    steps: int | None = None  # fixed optimizer steps (small presets: a measured wall-clock budget)
+    epochs: int | None = None  # passes over the collected dataset (paper); steps then follow from its frames
+    constant_lr_epochs: int | None = None  # LR constant this many epochs, then linear decay (Table IV)
+    threads: int = 1  # OMP threads of lerobot-train (nothing else runs during that stage)
+    device: str = "cpu"  # student training and eval; the pipeline's --device overrides
+
+    def __post_init__(self):
+        if self.size not in SIZES:
+            raise ValueError(f"student size {self.size!r} is not one of {sorted(SIZES)}")
+        if (self.steps is None) == (self.epochs is None):
+            raise ValueError("a student stage gives exactly one of steps and epochs")
+        if self.constant_lr_epochs is not None and self.epochs is None:
+            raise ValueError("constant_lr_epochs needs epochs: it is counted in passes over the data")
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """What lerobot-train is given for one dataset."""
+
+    steps: int
+    constant_lr_steps: int | None  # None: the policy's default (LR constant over the whole run)
+    total_frames: int | None = None
+    steps_per_epoch: int | None = None
+
+
+def schedule(stage: StudentStage, total_frames: int | None) -> Schedule:
+    """Steps (and the LR schedule) for `stage` on a dataset of `total_frames` frames."""
+    if stage.steps is not None:
+        return Schedule(steps=stage.steps, constant_lr_steps=None, total_frames=total_frames)
+    if not total_frames or total_frames < 1:
+        raise ValueError("an epoch-sized student stage needs the dataset's total_frames (collect the demos first)")
+    per_epoch = math.ceil(total_frames / stage.batch_size)
+    constant = None if stage.constant_lr_epochs is None else stage.constant_lr_epochs * per_epoch
+    return Schedule(steps=stage.epochs * per_epoch, constant_lr_steps=constant, total_frames=total_frames,
+                    steps_per_epoch=per_epoch)
+
+
+def dataset_frames(root: Path) -> int:
+    """total_frames of a LeRobotDataset folder, from its meta/info.json."""
+    return int(json.loads((Path(root) / "meta" / "info.json").read_text())["total_frames"])

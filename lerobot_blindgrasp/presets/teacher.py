@@ -1,0 +1,171 @@
+"""The teacher (PPO) part of the preset registry: `paper` is exactly Table III; `cpu` and `quick` are sized for a
+2-core machine. `blindgrasp-train-teacher --preset=NAME` takes these names.
+
+Every deviation from the paper lives in the `cpu`/`quick` presets only, by name (see `deviations`), and is
+measured in docs/results/teacher_cpu.md. A training run records the preset it used in `teacher_config.json`, and
+resuming refuses a run whose preset values differ, so a preset's numbers change only under a new name.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, replace
+
+from lerobot_blindgrasp.sim import rewards
+
+
+def _ppo_cfg(
+    *,
+    num_steps_per_env: int,
+    hidden_dims: list[int],
+    init_std: float,
+    obs_normalization: bool,
+    save_interval: int,
+    learning_rate: float = 1e-3,
+    entropy_coef: float = 0.003,
+    num_mini_batches: int = 6,
+) -> dict:
+    """rsl-rl 5.x OnPolicyRunner config with Table III's PPO values unless overridden."""
+    return {
+        "num_steps_per_env": num_steps_per_env,
+        "save_interval": save_interval,
+        "obs_groups": {"actor": ["privileged"], "critic": ["privileged"]},
+        "algorithm": {
+            "class_name": "PPO",
+            "learning_rate": learning_rate,
+            "schedule": "adaptive",
+            "desired_kl": 0.01,
+            "num_learning_epochs": 5,
+            "num_mini_batches": num_mini_batches,
+            "entropy_coef": entropy_coef,
+            "value_loss_coef": 1.0,
+            "clip_param": 0.2,
+            "gamma": 0.99,
+            "lam": 0.95,
+            "max_grad_norm": 1.0,
+            "use_clipped_value_loss": True,
+        },
+        "actor": {
+            "class_name": "MLPModel",
+            "hidden_dims": list(hidden_dims),
+            "activation": "elu",
+            "obs_normalization": obs_normalization,
+            "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": init_std},
+        },
+        "critic": {
+            "class_name": "MLPModel",
+            "hidden_dims": list(hidden_dims),
+            "activation": "elu",
+            "obs_normalization": obs_normalization,
+        },
+    }
+
+
+@dataclass(frozen=True)
+class TeacherPreset:
+    name: str
+    num_envs: int
+    max_iterations: int
+    runner: dict
+    reward: rewards.RewardConfig = rewards.PAPER_REWARD
+    deviations: tuple[str, ...] = ()
+    external_force: bool = True  # Table II random pushes during training
+    # Share of training envs per object (order of objects.PAPER_OBJECTS); None: even, as the paper.
+    object_weights: tuple[float, ...] | None = None
+
+    def runner_cfg(self) -> dict:
+        return copy.deepcopy(self.runner)
+
+
+PAPER = TeacherPreset(
+    name="paper",
+    num_envs=9000,  # 18 objects x 500
+    max_iterations=4500,
+    runner=_ppo_cfg(
+        num_steps_per_env=24, hidden_dims=[512, 256, 128], init_std=1.0, obs_normalization=False, save_interval=100
+    ),
+)
+
+_NO_PUSHES = (
+    "no random pushes: 27 % of episodes in which the fingers never move end with a sphere or capsule rolled out of "
+    "the workspace, which only adds reward noise on 2 cores (demos and eval run without pushes anyway)"
+)
+
+_CPU_DEVIATIONS = (
+    "reach term w=0.5, 1 - tanh(20 d) with d from each tip END to the object: r_t is 0 until the object lifts, so "
+    "PPO without it learns to keep still (feasibility run in issue #3)",
+    "touch term w=0.5 x fraction of tips pressing on the object (> 0.1 N, any direction): with reach alone (scale "
+    "10) the policy parked its tips 3 cm from the object for 4 M steps (docs/results/teacher_cpu.md)",
+    "initial action std 0.5 rad instead of 1.0: with a 0.3 rad clip, std 1.0 makes most actions clipped +-0.3 "
+    "bang-bang commands; 0.5 still explores widely (issue #3 evidence) and beat 0.3 on reach and contact rate in a "
+    "side-by-side 150-iteration run (docs/results/teacher_cpu.md)",
+    "empirical observation normalization: privileged forces span 0-100 N next to radians",
+    "1026 envs x 24 steps, 4 minibatches: what 2 cores step in ~4 s per iteration",
+    "actor and critic MLPs [256, 128, 64] instead of [512, 256, 128]: the PPO update on 1 CPU thread took longer "
+    "than collection (4.5 s vs 3.5 s per iteration); the smaller MLPs cut it to 1.9 s (blindgrasp-bench teacher, "
+    "docs/results/teacher_cpu_v2.md)",
+    _NO_PUSHES,
+)
+
+
+_CPU_REWARD = replace(rewards.PAPER_REWARD, w_reach=0.5, reach_scale=20.0, w_touch=0.5)
+
+# PPO settings the cpu and quick presets share (their deviations list says why each differs from Table III).
+_SMALL_PPO = {"num_steps_per_env": 24, "init_std": 0.5, "obs_normalization": True, "num_mini_batches": 4}
+
+CPU = TeacherPreset(
+    name="cpu",
+    num_envs=1026,  # 18 objects x 57
+    max_iterations=3000,
+    runner=_ppo_cfg(hidden_dims=[256, 128, 64], save_interval=25, **_SMALL_PPO),
+    reward=_CPU_REWARD,
+    deviations=_CPU_DEVIATIONS,
+    external_force=False,
+)
+
+QUICK = TeacherPreset(
+    name="quick",
+    num_envs=144,  # 18 objects x 8
+    max_iterations=30,
+    runner=_ppo_cfg(hidden_dims=[128, 64], save_interval=10, **_SMALL_PPO),
+    reward=_CPU_REWARD,
+    deviations=_CPU_DEVIATIONS[:4]
+    + (_NO_PUSHES,)
+    + ("144 envs, MLP [128, 64], 30 iterations: minutes, for the pipeline and CI",),
+    external_force=False,
+)
+
+PRESETS: dict[str, TeacherPreset] = {p.name: p for p in (PAPER, CPU, QUICK)}
+
+
+def get_preset(name: str) -> TeacherPreset:
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise ValueError(f"unknown teacher preset {name!r}; choose from {', '.join(PRESETS)}") from None
+
+
+# The reward terms a "w/o r_i" teacher loses. The paper's reward has one term that pays for fingertip contact, the
+# incentive r_i; the cpu/quick presets add touch, which pays for tips pressing on the object just as r_i pays for
+# tips reading force, so keeping it would leave r_i's signal in. Reach stays: it pays for closing the tip-object
+# distance and is blind to force, and without it PPO at 2-core scale learns to keep still (issue #3), which would
+# ablate exploration rather than the force incentive. r_t also needs a contact to be non-zero, but it pays for the
+# lift, the task itself, so every row keeps it.
+CONTACT_REWARD_TERMS = ("w_incentive", "w_touch")
+
+
+@dataclass(frozen=True)
+class Variant:
+    """Teacher switches of the Table V rows (`lerobot_blindgrasp.presets.ablations` names the rows)."""
+
+    no_incentive: bool = False  # teacher for "Student w/o r_i": every contact-rewarding term (CONTACT_REWARD_TERMS) 0
+    student_obs: bool = False  # "RL w/ o_t": actor and critic see only the 12-d student observation
+
+    def apply(self, preset: TeacherPreset) -> TeacherPreset:
+        runner = preset.runner_cfg()
+        reward = preset.reward
+        if self.no_incentive:
+            reward = replace(reward, **dict.fromkeys(CONTACT_REWARD_TERMS, 0.0))
+        if self.student_obs:
+            runner["obs_groups"] = {"actor": ["policy"], "critic": ["policy"]}
+        return replace(preset, runner=runner, reward=reward)

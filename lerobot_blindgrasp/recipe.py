@@ -1,0 +1,150 @@
+"""The command line of every stage, built from a registry preset: one definition for `blindgrasp-pipeline` and for
+`scripts/paper_recipe.sh` (Table V at the preset's sizes).
+
+    blindgrasp-pipeline --preset=paper --output_dir=outputs/paper --print_commands=demos
+
+prints, one shell line each, the commands of that Table V stage that are not done yet (the stages run in the
+order of STAGES; a re-run continues). Student steps come from the collected dataset (`presets.student`), so the
+`students` stage can only be printed once the demos exist.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import time
+from pathlib import Path
+
+from lerobot_blindgrasp import presets, spec
+
+STAGES = ("teachers", "teacher_evals", "demos", "students", "evals")
+# Each pipeline --seed gets its own block of demo env seeds, so reruns with another seed are new draws.
+DEMO_SEED_BLOCK = 1 << 24
+
+
+def demo_seed(seed: int) -> int:
+    return spec.DEMO_SEED + seed * DEMO_SEED_BLOCK
+
+
+def objects_of(task: str) -> tuple[str, ...]:
+    from lerobot_blindgrasp.sim import objects
+
+    return objects.resolve_objects(task)
+
+
+def teacher_train(p: presets.Preset, out: Path, seed: int, variant: presets.Variant = presets.Variant()) -> list[str]:
+    t = p.teacher
+    cmd = ["blindgrasp-train-teacher", f"--preset={t.settings.name}", f"--output_dir={out}", f"--seed={seed}"]
+    if t.iterations:
+        cmd.append(f"--iterations={t.iterations}")
+    if t.num_envs:
+        cmd.append(f"--num_envs={t.num_envs}")
+    if variant.no_incentive:
+        cmd.append("--no_incentive=true")
+    if variant.student_obs:
+        cmd.append("--student_obs=true")
+    return cmd
+
+
+def teacher_eval(p: presets.Preset, teacher_dir: Path, dest: Path, eval_seed: int) -> list[str]:
+    e = p.evaluation
+    return ["blindgrasp-eval-teacher", str(teacher_dir), "--episodes", str(e.episodes_per_object), "--objects",
+            ",".join(objects_of(e.task)), "--seed", str(eval_seed), "--modes", ",".join(e.teacher_modes),
+            "--out", str(dest)]
+
+
+def collect(p: presets.Preset, teacher: Path, root: Path, repo_id: str, first_seed: int, *, curate: bool = True,
+            stochastic: bool = True) -> list[str]:
+    d = p.demos
+    cmd = ["blindgrasp-collect-demos", "--teacher", str(teacher), "--out", str(root), "--repo-id", repo_id,
+           "--episodes-per-object", str(d.episodes_per_object),
+           "--max-rollouts-per-object", str(d.max_rollouts_per_object),
+           "--num-envs", str(d.num_envs), "--seed", str(first_seed), "--no-progress"]
+    if not stochastic:
+        cmd.append("--deterministic")
+    if not curate:
+        cmd.append("--no-curation")
+    if root.exists():
+        cmd.append("--resume")
+    return cmd
+
+
+def student_train(p: presets.Preset, dataset: Path, repo_id: str, out: Path, seed: int,
+                  device: str | None = None) -> tuple[list[str], presets.Schedule]:
+    """lerobot-train of the student; the step count (and LR schedule) follows from the dataset's frames."""
+    s = p.student
+    sched = presets.schedule(s, presets.dataset_frames(dataset) if s.epochs is not None else None)
+    cmd = ["lerobot-train", "--policy.type=blindgrasp_transformer", f"--policy.size={s.size}",
+           f"--dataset.repo_id={repo_id}", f"--dataset.root={dataset}", f"--output_dir={out}",
+           f"--steps={sched.steps}", f"--batch_size={s.batch_size}"]
+    if sched.constant_lr_steps is not None:
+        cmd.append(f"--policy.scheduler_constant_steps={sched.constant_lr_steps}")
+    cmd += [f"--save_freq={sched.steps}", f"--log_freq={max(1, sched.steps // 50)}", "--policy.push_to_hub=false",
+            f"--policy.device={device or s.device}", "--num_workers=0", "--wandb.enable=false", f"--seed={seed}"]
+    return cmd, sched
+
+
+def student_eval(p: presets.Preset, ckpt: Path, dest: Path, eval_seed: int, device: str | None = None) -> list[str]:
+    e = p.evaluation
+    return ["lerobot-eval", f"--policy.path={ckpt}", "--env.type=blindgrasp", f"--env.task={e.task}",
+            f"--eval.n_episodes={e.episodes_per_object}", f"--eval.batch_size={e.episodes_per_object}",
+            f"--policy.device={device or p.student.device}",
+            # In-process envs: on a few cores, one worker process per env only adds start-up and contention.
+            f"--eval.use_async_envs={'true' if e.async_envs else 'false'}",
+            f"--output_dir={dest}", f"--seed={eval_seed}"]
+
+
+def teacher_trained(run: Path) -> bool:
+    summary = run / "train_summary.json"
+    return summary.exists() and not json.loads(summary.read_text()).get("interrupted")
+
+
+def demos_collected(root: Path) -> bool:
+    return (root / "yield_report.json").exists() and (root / "meta" / "info.json").exists()
+
+
+def checkpoint(student: Path) -> Path:
+    return student / "checkpoints" / "last" / "pretrained_model"
+
+
+def table_v(p: presets.Preset, out: Path, stage: str, seed: int = spec.TEACHER_TRAIN_SEED,
+            eval_seed: int = spec.EVAL_SEED, device: str | None = None) -> list[list[str]]:
+    """The commands of one Table V stage not done yet under `out`. Every student row uses the same demo start
+    states (one demo seed), so rows differ only in what the paper varies."""
+    if stage not in STAGES:
+        raise ValueError(f"unknown stage {stage!r}; choose from {', '.join(STAGES)}")
+    rows = presets.TABLE_V.values()
+    cmds: list[list[str]] = []
+
+    def teacher_dir(name: str) -> Path:
+        if name == "teacher" and p.teacher.shipped:
+            from lerobot_blindgrasp.teacher.policy import default_teacher
+
+            return default_teacher()
+        return out / name
+
+    for name, variant in presets.TEACHERS.items():
+        shipped = name == "teacher" and p.teacher.shipped
+        if stage == "teachers" and not shipped and not teacher_trained(out / name):
+            cmds.append(teacher_train(p, out / name, seed, variant))
+        if stage == "teacher_evals" and not (out / f"{name}_eval" / "eval.json").exists():
+            cmds.append(teacher_eval(p, teacher_dir(name), out / f"{name}_eval", eval_seed))
+    for row in (r for r in rows if r.student):
+        root, student = out / f"demos_{row.name}", out / f"student_{row.name}"
+        repo = f"local/blindgrasp_{p.name}_{row.name}"
+        if stage == "demos" and not demos_collected(root):
+            cmds.append(collect(p, teacher_dir(row.teacher), root, repo, demo_seed(seed),
+                                curate=row.curated_demos, stochastic=row.stochastic_demos))
+        if stage == "students" and not checkpoint(student).exists():
+            if not demos_collected(root):
+                raise ValueError(f"{root} is not collected yet: run the demos stage first")
+            if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
+                cmds.append(["mv", str(student), str(out / f"student_{row.name}_interrupted_{int(time.time())}")])
+            cmds.append(student_train(p, root, repo, student, seed, device)[0])
+        if stage == "evals" and not (out / f"eval_{row.name}" / "eval_info.json").exists():
+            cmds.append(student_eval(p, checkpoint(student), out / f"eval_{row.name}", eval_seed, device))
+    return cmds
+
+
+def shell_lines(cmds: list[list[str]]) -> str:
+    return "\n".join(shlex.join(c) for c in cmds)
