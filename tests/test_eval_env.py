@@ -14,6 +14,7 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.envs import BlindGraspEnvConfig
 from lerobot_blindgrasp.envs.sim_env import TASK_IDS, object_for_task_id, task_id
 from lerobot_blindgrasp.sim import gym_env, objects, randomization
+from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
 
@@ -141,8 +142,6 @@ def test_seed_makes_the_episode_reproducible():
 
 def test_each_object_gets_its_own_start_states_from_the_same_seed():
     """lerobot-eval passes the same seeds to every task; the env must not turn them into the same draws."""
-    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-
     names = ("cuboid_a_medium", "cylinder_a_medium")
     sims = {}
     for name in names:
@@ -253,3 +252,40 @@ def test_a_knocked_away_object_ends_the_episode_early_and_the_batch_runs_on():
     np.testing.assert_array_equal(ended, ended2)
     np.testing.assert_array_equal(states[:last], states2[:last])
     vec.close()
+
+
+def test_the_sim_alone_bounds_the_target_as_the_old_pre_clip_did():
+    """The action is bounded once in the env: the gym env hands target - q to the sim, which clips the step to
+    +-0.3 rad and the servo target to the joint limits. The gym env used to clip the target to the limits first;
+    against a sim stepped that old way, on targets far beyond the limits, every commanded target, observation, lift
+    and success is the same to the bit (only the reward's action penalty, which charges the commanded step,
+    differs: it was the step to the limit)."""
+    name = "sphere_small"
+    env = gym_env.BlindGraspGymEnv(name, render_mode=None)
+    obs, _ = env.reset(seed=3)
+    old = BatchedGraspEnv(
+        GraspEnvConfig(num_envs=1, objects=(name,), seed=env.env_seed, dr=randomization.EVAL_DR, nthread=1,
+                       autoreset=False)
+    )  # fmt: skip
+    np.testing.assert_array_equal(obs["agent_pos"], old.reset()["policy"][0])
+    rng = np.random.default_rng(0)
+    beyond = 0
+    for t in range(80):
+        q = old.joint_positions()[0]
+        target = q + rng.uniform(-1.0, 1.0, spec.NUM_JOINTS)
+        if t % 3 == 0:
+            target = rng.choice([-3.0, 3.0], spec.NUM_JOINTS)
+        target = target.astype(np.float32)
+        beyond += int(((target < spec.JOINT_LOWER) | (target > spec.JOINT_UPPER)).sum())
+        obs, _, terminated, truncated, info = env.step(target)
+        pre_clipped = np.clip(target.astype(np.float64), spec.JOINT_LOWER, spec.JOINT_UPPER)
+        old_obs, _, old_term, old_trunc, old_info = old.step((pre_clipped - q)[None])
+        np.testing.assert_array_equal(info["joint_target"], old_info["joint_target"][0].astype(np.float32))
+        np.testing.assert_array_equal(obs["agent_pos"], old_obs["policy"][0])
+        assert (info["lift_m"], info["is_success"]) == (old_info["lift"][0], old_info["success"][0])
+        assert (terminated, truncated) == (old_term[0], old_trunc[0])
+        if terminated or truncated:
+            break
+    assert beyond > 100  # the limits were exercised
+    env.close()
+    old.close()

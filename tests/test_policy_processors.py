@@ -107,14 +107,27 @@ def test_postprocessor_turns_prediction_into_absolute_target(pipelines):
     torch.testing.assert_close(post(pred[:, None]), expected[:, None], atol=1e-6, rtol=0)
 
 
-def test_deltas_beyond_the_bound_are_clipped_both_ways(pipelines):
+def test_training_deltas_beyond_the_bound_are_clipped_and_actions_are_bounded_once(pipelines):
     pre, post = pipelines
     obs = random_state(1, seed=3)
     q = obs[:, spec.STATE_JOINT_SLICE]
     normalized = pre({OBS_STATE: obs, ACTION: q + torch.linspace(-1.0, 1.0, 9)})[ACTION]
-    assert normalized.min() == -1.0 and normalized.max() == 1.0
-    target = post(torch.full((1, 9), 7.0))
-    torch.testing.assert_close(target, q + BOUND, atol=1e-6, rtol=0)
+    assert normalized.min() == -1.0 and normalized.max() == 1.0  # training targets fit the model's tanh
+    # The postprocessor adds no bound of its own: the model's output mapping is the policy's one bound, the env's
+    # or the robot's +-0.3 rad step clip the next one.
+    torch.testing.assert_close(post(torch.full((1, 9), 7.0)), q + 7.0 * BOUND, atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("tanh_output", [True, False])
+def test_the_model_bounds_its_action_to_the_unit_box(tanh_output):
+    from lerobot_blindgrasp.policies.blindgrasp_transformer import BlindgraspTransformerPolicy
+
+    policy = BlindgraspTransformerPolicy(make_config(tanh_output=tanh_output)).eval()
+    with torch.no_grad():  # a last layer scaled up so that the raw output leaves [-1, 1] by far
+        policy.model.head[-1].weight.mul_(1e4)
+        policy.model.head[-1].bias.fill_(3.0)
+    pred = policy.select_action({OBS_STATE: random_state(4, seed=5)})
+    assert pred.abs().max() <= 1.0 and pred.abs().max() > 0.99
 
 
 def test_postprocessor_needs_an_observation_first():

@@ -145,9 +145,8 @@ class BlindGraspGymEnv(gym.Env):
             )
         if not np.isfinite(target).all():
             raise ValueError(f"action has NaN/inf entries: {target.tolist()}")
-        # Targets beyond the joint limits are clipped, as the real gripper does, rather than rejected: a
-        # policy's output may overshoot a limit slightly and that is a command, not a bug.
-        target = np.clip(target, spec.JOINT_LOWER, spec.JOINT_UPPER)
+        # Targets beyond the joint limits are not rejected (a policy may overshoot a limit slightly: a command, not
+        # a bug): the sim clips the step to +-0.3 rad and the servo target to the limits, as the real gripper does.
         delta = target - self._sim.joint_positions()[0]
         obs, reward, terminated, truncated, info = self._sim.step(delta[None, :])
         self._done = bool(terminated[0] or truncated[0])

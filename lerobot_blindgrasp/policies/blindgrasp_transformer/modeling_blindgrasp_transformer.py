@@ -284,9 +284,14 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         """
         state = batch[OBS_STATE]
         if state.ndim == 3:
-            return self.model(state, batch.get(STATE_IS_PAD))[:, None]
+            return self._bounded(self.model(state, batch.get(STATE_IS_PAD)))[:, None]
         states, is_pad = self._push_observation(state)
-        return self.model(states, is_pad)[:, None]
+        return self._bounded(self.model(states, is_pad))[:, None]
+
+    def _bounded(self, pred: Tensor) -> Tensor:
+        """The action's one bound in the policy: tanh, or without it a clamp at inference (training regresses the
+        raw output). The postprocessor adds none."""
+        return pred if self.config.tanh_output else pred.clamp(-1.0, 1.0)
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:

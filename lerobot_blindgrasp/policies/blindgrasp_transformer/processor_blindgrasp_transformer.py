@@ -11,12 +11,16 @@ saved with the checkpoint, so a checkpoint is self-contained:
     postprocessor (model output -> action for the robot / sim env)
         -> unnormalizer                 identity for the action (kept so lerobot-train's fine-tuning overrides,
                                         which address `unnormalizer_processor`, find their step)
-        -> blindgrasp_delta_to_target   action := q_now + 0.3 * clip(pred, -1, 1)
+        -> blindgrasp_delta_to_target   action := q_now + 0.3 * pred
         -> device(cpu)
 
 q_now is the current step's 9 joint positions, raw radians, from `observation.state`: its last frame for a training
 window (B, T, 12), the observation itself at inference (B, 12). The target->delta step reads it before the
 normalizer, so it is never z-scored.
+
+The action is bounded once per layer: the model's output mapping keeps pred in [-1, 1] (tanh), and the env or the
+robot clips the step to +-0.3 rad around the joints it measures and the target to the joint limits. This module adds
+no third bound; the clip in the target -> delta step is of training targets, not of actions.
 
 How the postprocessor knows q_now. LeRobot calls `postprocessor(action_tensor)` with nothing but the policy's
 output tensor, so the observation cannot travel with it. Instead the two steps form a pair sharing one
@@ -95,11 +99,11 @@ def target_to_normalized_delta(target: Tensor, q_now: Tensor, bound: float = spe
 
 
 def normalized_delta_to_target(pred: Tensor, q_now: Tensor, bound: float = spec.ACTION_BOUND_RAD) -> Tensor:
-    """Network output delta / bound -> absolute joint target q_now + bound * clip(pred, -1, 1) (rad)."""
+    """Network output delta / bound (in [-1, 1], the model bounds it) -> absolute joint target q_now + bound * pred."""
     q_now = q_now.to(pred)
     if pred.ndim == q_now.ndim + 1:  # (B, 1, 9) from predict_action_chunk
         q_now = q_now.unsqueeze(-2)
-    return q_now + bound * pred.clamp(-1.0, 1.0)
+    return q_now + bound * pred
 
 
 @ProcessorStepRegistry.register("blindgrasp_target_to_delta")
