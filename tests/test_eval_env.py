@@ -289,3 +289,14 @@ def test_the_sim_alone_bounds_the_target_as_the_old_pre_clip_did():
     assert beyond > 100  # the limits were exercised
     env.close()
     old.close()
+
+
+def test_sim_and_real_env_configs_share_one_definition_of_features_and_spaces():
+    from lerobot_blindgrasp import spaces
+    from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
+
+    sim, real = BlindGraspEnvConfig(task="medium"), BlindGraspRealEnvConfig(task="medium", success_mode="force")
+    assert sim.features == real.features == spaces.env_features()
+    assert sim.features_map == real.features_map == spaces.env_features_map()
+    env = gym_env.BlindGraspGymEnv("cylinder_a_medium", render_mode=None)
+    assert env.observation_space == spaces.observation_space() and env.action_space == spaces.action_space()

@@ -11,7 +11,9 @@ import pytest
 from emulators.fixtures import rig  # noqa: F401  (fixture)
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig, GripperSession, OperatorKeys, RealGraspEnv
+from lerobot_blindgrasp.envs.operator import OperatorKeys
+from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
+from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 from lerobot_blindgrasp.envs.real_report import success_table
 
 CLOSE = np.tile([0.0, -0.2, -0.3], 3)[None]  # squeezes past the emulated object's contact at J*1 = 0.2 rad

@@ -10,45 +10,25 @@ policy's own pre/post-processors and no extra code path. lerobot-rollout runs a 
 of trials, resets or success. So the gripper is wrapped as a gymnasium env, one task group per object:
 `eval_info.json` -> `per_group[<object>].pc_success` is the per-object success table
 (`python -m lerobot_blindgrasp.envs.real_report <eval_info.json>` prints it as markdown).
-
-One trial (= one lerobot-eval episode):
-1. reset: the gripper drives to the paper's start pose (0, pi/3, 0) at <= 0.3 rad per 20 Hz step; the operator
-   places the object at the claw centre and presses ENTER (unattended force mode: waits `unattended_reset_s`);
-   the fingertip sensors are tared (fingers in free air).
-2. 200 steps at 20 Hz (10 s): action = absolute joint targets, through `robot.send_action` (clipped on the robot).
-3. success, "lifted and held >= 1 s within 10 s", decided by
-   - `success_mode=operator` (the paper's protocol): the operator presses `s` as soon as the object has been held
-     off the table for 1 s (ends the trial, success) or `f` (ends it, failure); at 10 s without a key the env asks
-     `y`/`n`. Keys come from LeRobot's keyboard listener (pynput, or the terminal when headless).
-   - `success_mode=force` (unattended proxy): at least `min_contacts` fingertips read more than `hold_force_n`
-     continuously for `spec.SUCCESS_HOLD_S`. It sees a sustained grasp, not the lift itself: use it for smoke tests
-     and dry runs, and report operator-mode numbers.
+The trial itself (reset to the start pose, 200 steps at 20 Hz, who decides success) is `real_trial.py`.
 """
 
 from __future__ import annotations
 
-import json
 import logging
-import queue
-import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import gymnasium as gym
-import numpy as np
-from lerobot.configs import FeatureType, PolicyFeature
+from lerobot.configs import PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.robots.config import RobotConfig
-from lerobot.utils.constants import ACTION, OBS_STATE
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import spaces, spec
+from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig
 from lerobot_blindgrasp.sim import objects
 
 logger = logging.getLogger(__name__)
-
-SUCCESS_KEYS = frozenset({"s", "y"})
-FAILURE_KEYS = frozenset({"f", "n"})
 
 
 def resolve_real_objects(task: str) -> tuple[str, ...]:
@@ -60,12 +40,6 @@ def resolve_real_objects(task: str) -> tuple[str, ...]:
     if not names:
         raise ValueError("--env.task needs at least one object name")
     return names
-
-
-def task_string(name: str) -> str:
-    if name in objects.CATALOGUE:
-        return objects.CATALOGUE[name].task
-    return f"grasp and lift the {name.replace('_', ' ')}"
 
 
 @EnvConfig.register_subclass("blindgrasp_real")
@@ -87,13 +61,8 @@ class BlindGraspRealEnvConfig(EnvConfig):
     tare_each_trial: bool = True
     # Optional JSON-lines log of every trial (object, index, success, who decided, peak forces).
     trial_log: str | None = None
-    features: dict[str, PolicyFeature] = field(
-        default_factory=lambda: {
-            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(spec.ACTION_DIM,)),
-            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(spec.STATE_DIM,)),
-        }
-    )
-    features_map: dict[str, str] = field(default_factory=lambda: {ACTION: ACTION, "agent_pos": OBS_STATE})
+    features: dict[str, PolicyFeature] = field(default_factory=spaces.env_features)
+    features_map: dict[str, str] = field(default_factory=spaces.env_features_map)
 
     def __post_init__(self):
         self.objects = resolve_real_objects(self.task or "medium")
@@ -124,223 +93,3 @@ class _EnvFactory:
 
     def __call__(self) -> RealGraspEnv:
         return RealGraspEnv(self.session, self.object_name)
-
-
-class OperatorKeys:
-    """Key presses from LeRobot's own listener (pynput, or the controlling terminal), as a queue.
-
-    `listener_factory` has the signature of `lerobot.utils.keyboard_input.create_key_listener` (the default).
-    """
-
-    HELP = "ENTER=start trial, s/y=success, f/n=failure"
-
-    def __init__(self, listener_factory=None):
-        if listener_factory is None:
-            from lerobot.utils.keyboard_input import create_key_listener as listener_factory
-
-        self.queue: queue.Queue[str] = queue.Queue()
-        self.listener = listener_factory(self.queue.put, controls_help=self.HELP)
-
-    @property
-    def available(self) -> bool:
-        return self.listener is not None
-
-    def clear(self) -> None:
-        while not self.queue.empty():
-            self.queue.get_nowait()
-
-    def poll(self) -> str | None:
-        try:
-            return self.queue.get_nowait()
-        except queue.Empty:
-            return None
-
-    def wait_for(self, keys: set[str], timeout_s: float | None = None) -> str | None:
-        deadline = None if timeout_s is None else time.monotonic() + timeout_s
-        while True:
-            left = None if deadline is None else deadline - time.monotonic()
-            if left is not None and left <= 0:
-                return None
-            try:
-                key = self.queue.get(timeout=left)
-            except queue.Empty:
-                return None
-            if key in keys:
-                return key
-
-    def stop(self) -> None:
-        if self.listener is not None:
-            self.listener.stop()
-
-
-class GripperSession:
-    """The one robot (one serial bus) shared by the per-object envs: connected at the first reset, disconnected
-    once at the end (or on any error, by the robot's own latched stop)."""
-
-    def __init__(self, cfg: BlindGraspRealEnvConfig, keys: OperatorKeys | None = None):
-        from lerobot.robots.utils import make_robot_from_config
-
-        self.cfg = cfg
-        self.robot = make_robot_from_config(cfg.robot)
-        if set(self.robot.observation_features) != set(spec.STATE_NAMES):
-            raise ValueError(f"Robot type {cfg.robot.type} lacks the spec observation {spec.STATE_NAMES}")
-        self.keys = keys
-        self.trials: dict[str, int] = {}
-
-    def ensure_connected(self) -> None:
-        if self.keys is None:
-            self.keys = OperatorKeys()
-        if self.cfg.success_mode == "operator" and not self.keys.available:
-            raise RuntimeError(
-                    "success_mode=operator needs keyboard input (a display for pynput, or run lerobot-eval in a "
-                    "terminal); use --env.success_mode=force for unattended runs."
-                )
-        if not self.robot.is_connected:
-            self.robot.connect()
-
-    def close(self) -> None:
-        if self.robot.is_connected:
-            self.robot.disconnect()
-        if self.keys is not None:
-            self.keys.stop()
-
-
-class RealGraspEnv(gym.Env):
-    metadata = {"render_modes": ["rgb_array"], "render_fps": spec.CONTROL_HZ}
-
-    def __init__(self, session: GripperSession, object_name: str):
-        self.session = session
-        self.cfg = session.cfg
-        self.object_name = object_name
-        self.task = self.task_description = task_string(object_name)
-        self.render_mode = "rgb_array"
-        self.observation_space = gym.spaces.Dict(
-            {"agent_pos": gym.spaces.Box(-np.inf, np.inf, shape=(spec.STATE_DIM,), dtype=np.float32)}
-        )
-        self.action_space = gym.spaces.Box(
-            spec.JOINT_LOWER.astype(np.float32), spec.JOINT_UPPER.astype(np.float32), dtype=np.float32
-        )
-        self._max_episode_steps = int(round(self.cfg.episode_s * spec.CONTROL_HZ))
-        self._obs = np.zeros(spec.STATE_DIM, dtype=np.float32)
-        self._reset_trial_state()
-
-    def _reset_trial_state(self) -> None:
-        self._t = 0
-        self._held = 0
-        self._decided: tuple[bool, str] | None = None
-        self._peak = np.zeros(spec.NUM_FORCES)
-
-    @property
-    def robot(self):
-        return self.session.robot
-
-    def _observe(self) -> dict[str, np.ndarray]:
-        obs = self.robot.get_observation()
-        self._obs = np.array([obs[k] for k in spec.STATE_NAMES], dtype=np.float32)
-        return {"agent_pos": self._obs.copy()}
-
-    def _go_home(self) -> None:
-        home = dict(zip(spec.ACTION_NAMES, spec.HOME_POSE.tolist(), strict=True))
-        deadline = time.monotonic() + self.cfg.home_timeout_s
-        while True:
-            self._observe()
-            err = np.abs(self._obs[spec.STATE_JOINT_SLICE] - spec.HOME_POSE).max()
-            if err <= self.cfg.home_tolerance_rad:
-                return
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"The gripper did not reach the start pose within {self.cfg.home_timeout_s} s "
-                                   f"(worst joint error {err:.3f} rad): check for an obstruction.")
-            self.robot.send_action(home)
-            time.sleep(spec.CONTROL_DT)
-
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        self.session.ensure_connected()
-        self._reset_trial_state()
-        self._go_home()
-        keys = self.session.keys
-        k = self.session.trials.get(self.object_name, 0) + 1
-        self.session.trials[self.object_name] = k
-        if keys.available:  # an ENTER pressed while the gripper was homing counts: the operator is ready
-            print(f"\n[{self.object_name}] trial {k}: place the object at the claw centre, hands clear, ENTER.")
-            keys.wait_for({"enter"})
-        else:
-            logger.info("[%s] trial %d starts in %.1f s", self.object_name, k, self.cfg.unattended_reset_s)
-            time.sleep(self.cfg.unattended_reset_s)
-        if self.cfg.tare_each_trial and hasattr(self.robot, "tare_forces"):
-            self.robot.tare_forces()
-        if self.cfg.success_mode == "operator":
-            print("Running (10 s): press 's' once the object is held off the table for 1 s, 'f' to abort.")
-        self._next_tick = time.monotonic()
-        return self._observe(), {"is_success": False}
-
-    def step(self, action):
-        action = np.asarray(action, dtype=np.float64).reshape(spec.ACTION_DIM)
-        self.robot.send_action(dict(zip(spec.ACTION_NAMES, action.tolist(), strict=True)))
-        self._next_tick += spec.CONTROL_DT
-        time.sleep(max(0.0, self._next_tick - time.monotonic()))
-        obs = self._observe()
-        self._t += 1
-        forces = self._obs[spec.STATE_FORCE_SLICE]
-        self._peak = np.maximum(self._peak, forces)
-        if self._decided is None:
-            self._judge(forces)
-        truncated = self._t >= self._max_episode_steps and self._decided is None
-        if truncated and self.cfg.success_mode == "operator":
-            self._decided = (self._ask_outcome(), "operator")
-            truncated = False
-        elif truncated:
-            self._decided = (False, "force criterion")
-        terminated = self._decided is not None and not truncated
-        success = bool(self._decided and self._decided[0])
-        if terminated or truncated:
-            self._log_trial(success)
-            self.session.keys.clear()  # keys pressed during this trial must not decide the next one
-        return obs, float(success), terminated, truncated, {"is_success": success}
-
-    def _judge(self, forces: np.ndarray) -> None:
-        if self.cfg.success_mode == "operator":
-            while (key := self.session.keys.poll()) is not None:
-                if key in SUCCESS_KEYS | FAILURE_KEYS:
-                    self._decided = (key in SUCCESS_KEYS, "operator")
-                    return
-            return
-        contacts = int((forces > self.cfg.hold_force_n).sum())
-        self._held = self._held + 1 if contacts >= self.cfg.min_contacts else 0
-        if self._held >= spec.SUCCESS_HOLD_STEPS:
-            self._decided = (True, "force criterion")
-
-    def _ask_outcome(self) -> bool:
-        # Hold the final pose while the operator answers: the last target stays on the servos.
-        print("10 s elapsed. Was the object lifted and held for >= 1 s? press y or n.")
-        return self.session.keys.wait_for(SUCCESS_KEYS | FAILURE_KEYS) in SUCCESS_KEYS
-
-    def _log_trial(self, success: bool) -> None:
-        who = self._decided[1] if self._decided else "time limit"
-        logger.info("[%s] trial %d: %s (%s, %d steps)", self.object_name, self.session.trials[self.object_name],
-                    "SUCCESS" if success else "failure", who, self._t)
-        if self.cfg.trial_log:
-            record = {
-                "object": self.object_name,
-                "trial": self.session.trials[self.object_name],
-                "success": success,
-                "decided_by": who,
-                "steps": self._t,
-                "peak_force_n": [round(float(f), 3) for f in self._peak],
-            }
-            with Path(self.cfg.trial_log).open("a") as f:
-                f.write(json.dumps(record) + "\n")
-
-    def render(self) -> np.ndarray:
-        """A 64 x 96 strip chart of the state (no camera on a blind gripper): 9 joint bars, 3 force bars."""
-        img = np.full((64, 96, 3), 255, dtype=np.uint8)
-        q = (self._obs[spec.STATE_JOINT_SLICE] - spec.JOINT_LOWER) / (spec.JOINT_UPPER - spec.JOINT_LOWER)
-        f = np.clip(self._obs[spec.STATE_FORCE_SLICE] / 10.0, 0.0, 1.0)
-        for i, v in enumerate(np.concatenate([q, f])):
-            h = int(np.clip(v, 0.0, 1.0) * 60)
-            color = (40, 90, 200) if i < spec.NUM_JOINTS else (220, 60, 40)
-            img[62 - h : 62, 2 + 8 * i : 8 + 8 * i] = color
-        return img
-
-    def close(self) -> None:
-        self.session.close()

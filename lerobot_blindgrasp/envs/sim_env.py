@@ -21,11 +21,10 @@ from dataclasses import dataclass, field
 from functools import partial
 
 import gymnasium as gym
-from lerobot.configs import FeatureType, PolicyFeature
+from lerobot.configs import PolicyFeature
 from lerobot.envs.configs import EnvConfig
-from lerobot.utils.constants import ACTION, OBS_STATE
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import spaces, spec
 from lerobot_blindgrasp.sim import objects
 
 TASK_GROUP = "blindgrasp"
@@ -74,15 +73,8 @@ class BlindGraspEnvConfig(EnvConfig):
     render_width: int = 320
     render_height: int = 240
     render_shadows: bool = False
-    features: dict[str, PolicyFeature] = field(
-        default_factory=lambda: {
-            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(spec.ACTION_DIM,)),
-            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(spec.STATE_DIM,)),
-        }
-    )
-    features_map: dict[str, str] = field(
-        default_factory=lambda: {ACTION: ACTION, "agent_pos": OBS_STATE}
-    )
+    features: dict[str, PolicyFeature] = field(default_factory=spaces.env_features)
+    features_map: dict[str, str] = field(default_factory=spaces.env_features_map)
 
     def __post_init__(self):
         # Fail while parsing the CLI, not after the policy has loaded.
@@ -120,8 +112,8 @@ class BlindGraspEnvConfig(EnvConfig):
             if use_async_envs and n_envs > 1:
                 vec = _LazyAsyncVectorEnv(
                     fns,
-                    gym_env.observation_space(),
-                    gym_env.action_space(),
+                    spaces.observation_space(),
+                    spaces.action_space(),
                     dict(gym_env.BlindGraspGymEnv.metadata),
                 )
             else:

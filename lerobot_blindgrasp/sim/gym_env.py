@@ -38,7 +38,7 @@ import gymnasium as gym  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from lerobot_blindgrasp import spec  # noqa: E402
+from lerobot_blindgrasp import spaces, spec  # noqa: E402
 from lerobot_blindgrasp.sim import objects, randomization  # noqa: E402
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
 
@@ -51,18 +51,6 @@ _MAX_SEED = spec.EVAL_TASK_STRIDE  # reset seeds are per-object evaluation indic
 def start_seed(seed: int, object_name: str) -> int:
     """The env seed of evaluation index `seed` on `object_name`: distinct per object, inside the eval range."""
     return spec.eval_env_seed(seed, list(objects.CATALOGUE).index(objects.get_object(object_name).name))
-
-
-def observation_space() -> gym.spaces.Dict:
-    return gym.spaces.Dict(
-        {"agent_pos": gym.spaces.Box(-np.inf, np.inf, shape=(spec.STATE_DIM,), dtype=np.float32)}
-    )
-
-
-def action_space() -> gym.spaces.Box:
-    return gym.spaces.Box(
-        spec.JOINT_LOWER.astype(np.float32), spec.JOINT_UPPER.astype(np.float32), dtype=np.float32
-    )
 
 
 class BlindGraspGymEnv(gym.Env):
@@ -97,8 +85,8 @@ class BlindGraspGymEnv(gym.Env):
         # Shadows cost ~4x per frame on a CPU renderer; eval videos are for a glance, the demo turns them on.
         self.render_shadows = bool(render_shadows)
         self.camera = camera
-        self.observation_space = observation_space()
-        self.action_space = action_space()
+        self.observation_space = spaces.observation_space()
+        self.action_space = spaces.action_space()
         # Read by lerobot-eval (`env.call("task_description")`); the dataset's task string for this object.
         self.task = self.task_description = self.object.task
         self._max_episode_steps = spec.EPISODE_STEPS  # gym.make's TimeLimit sets the same; kept for direct use
@@ -183,7 +171,7 @@ class BlindGraspGymEnv(gym.Env):
     # --- helpers ----------------------------------------------------------------------------------------------
     @staticmethod
     def _obs(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        return {"agent_pos": obs["policy"][0].copy()}
+        return spaces.observation(obs["policy"][0])
 
     def _make_renderer(self, model: mujoco.MjModel) -> mujoco.Renderer:
         try:
