@@ -27,7 +27,7 @@ SERVO_IDS: tuple[int, ...] = tuple(10 * (i + 1) + k for i in range(len(FINGERS))
 NUM_JOINTS = len(JOINT_NAMES)  # 9
 
 # Allowed joint range (rad), per joint kind (abduction, proximal, distal). Targets are clipped to it (sim and real)
-# and r_l (eq. 6) penalizes measured positions outside it.
+# and r_l (eq. 5) penalizes measured positions outside it.
 _KIND_LIMITS = ((-0.48, 0.48), (-1.57, 1.57), (-1.8, 1.8))
 JOINT_LOWER = np.array([_KIND_LIMITS[k][0] for _ in FINGERS for k in range(3)], dtype=np.float64)
 JOINT_UPPER = np.array([_KIND_LIMITS[k][1] for _ in FINGERS for k in range(3)], dtype=np.float64)
@@ -89,7 +89,7 @@ PRIVILEGED_LAYOUT: tuple[tuple[str, int], ...] = (
     ("object_linvel", 3),  # world frame
     ("object_angvel", 3),  # object frame (MuJoCo's free-joint convention)
     ("fingertip_contact_force", 3 * NUM_FORCES),  # contact force on each tip, tip frame, with noise
-    ("object_planar_distance", 1),  # d_xy, eq. 4
+    ("object_planar_distance", 1),  # d_xy, eq. 2
     ("uniaxial_force", NUM_FORCES),  # the student's force reading: noise, then the deadband
     ("fingertip_wrench", 6 * NUM_FORCES),  # force + torque at each tip's load cell, tip frame, with noise
     ("previous_action", NUM_JOINTS),  # a_{t-1}, delta-theta (rad), after the +-0.3 rad clip
@@ -122,7 +122,7 @@ def assemble_privileged(parts: dict[str, np.ndarray]) -> np.ndarray:
 
 
 # --- Task and success --------------------------------------------------------------------------------------------
-# Object lift (m) above its resting height at which r_t (eq. 5) saturates. 3 cm is reachable for every object from
+# Object lift (m) above its resting height at which r_t (eq. 3) saturates. 3 cm is reachable for every object from
 # mid-height side contacts with the D'Claw finger lengths, and clears the table with margin.
 TARGET_LIFT_M = 0.03
 # Success (sim, teacher eval, real protocol): object lifted >= SUCCESS_LIFT_M and held for >= SUCCESS_HOLD_S

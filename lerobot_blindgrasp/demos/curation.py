@@ -1,7 +1,7 @@
 """Demonstration curation (paper Sec. III-C): keep grasp-and-lift episodes with rich fingertip force interaction.
 
 An episode of T <= 100 steps (5 s at 20 Hz) passes when, within it,
-- the task reward r_t (eq. 5) stays > 0.5 for >= 0.5 s without a break (10 consecutive control steps), and
+- the task reward r_t (eq. 3) stays > 0.5 for >= 0.5 s without a break (10 consecutive control steps), and
 - the cumulative sum of the uniaxial fingertip forces, over the 3 sensors and the steps, exceeds 200 N.
 
 Both comparisons are strict, as the paper words them ("> 0.5", "exceeds 200 N"); only the hold length is ">=".

@@ -1,6 +1,6 @@
-"""The paper's reward, eq. 3-8, one function per term, vectorized over envs.
+"""The paper's reward, eq. 1-7, one function per term, vectorized over envs.
 
-    r = w1 r_t + w2 r_i + w31 r_l + w32 r_a + w33 r_ar            (eq. 3)
+    r = w1 r_t + w2 r_i + w31 r_l + w32 r_a + w33 r_ar            (eq. 1)
 
 with w = (1.0, 0.2, -500, -0.04, -0.01). `RewardConfig` holds the weights; the `cpu`/`quick` teacher presets add
 two shaping terms that are not in the paper, reach and touch (see docs/results/teacher_cpu.md for why).
@@ -8,7 +8,7 @@ two shaping terms that are not in the paper, reach and touch (see docs/results/t
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -29,18 +29,14 @@ class RewardConfig:
     contact_threshold_n: float = spec.FORCE_THRESHOLD_N
     workspace_radius_m: float = spec.WORKSPACE_RADIUS_M
 
-    def weights(self) -> dict[str, float]:
-        return {k: v for k, v in asdict(self).items() if k.startswith("w_")}
-
 
 PAPER_REWARD = RewardConfig()
 TERM_NAMES = ("task", "incentive", "joint_limit", "action", "action_rate", "reach", "touch")
 
 
-def planar_distance(object_xy: np.ndarray, centre_xy: np.ndarray | None = None) -> np.ndarray:
-    """d_xy, eq. 4: distance in the table plane between the object and the gripper centre."""
-    rel = object_xy if centre_xy is None else object_xy - centre_xy
-    return np.linalg.norm(rel, axis=-1)
+def planar_distance(object_xy: np.ndarray) -> np.ndarray:
+    """d_xy, eq. 2: distance in the table plane between the object and the gripper centre (the world origin)."""
+    return np.linalg.norm(object_xy, axis=-1)
 
 
 def num_contacts(uniaxial_force: np.ndarray, threshold: float = spec.FORCE_THRESHOLD_N) -> np.ndarray:
@@ -49,7 +45,7 @@ def num_contacts(uniaxial_force: np.ndarray, threshold: float = spec.FORCE_THRES
 
 
 def r_task(lift: np.ndarray, d_xy: np.ndarray, n_contact: np.ndarray, cfg: RewardConfig) -> np.ndarray:
-    """Eq. 5. Active only with >= 1 fingertip contact and the object inside the workspace; else 0.
+    """Eq. 3. Active only with >= 1 fingertip contact and the object inside the workspace; else 0.
 
     `lift` is h_o, the object's height above its resting height (clipped at 0, so that resting penetration does
     not make the square root's argument exceed 1).
@@ -63,22 +59,22 @@ def r_task(lift: np.ndarray, d_xy: np.ndarray, n_contact: np.ndarray, cfg: Rewar
 
 
 def r_incentive(n_contact: np.ndarray) -> np.ndarray:
-    """Eq. 6: 1 when all three fingertips sense contact."""
+    """Eq. 4: 1 when all three fingertips sense contact."""
     return (n_contact == spec.NUM_FORCES).astype(np.float64)
 
 
 def r_joint_limit(q: np.ndarray, lower=spec.JOINT_LOWER, upper=spec.JOINT_UPPER) -> np.ndarray:
-    """Eq. 7: summed violation (rad) of the allowed joint range over the nine joints."""
+    """Eq. 5: summed violation (rad) of the allowed joint range over the nine joints."""
     return (np.clip(lower - q, 0.0, None) + np.clip(q - upper, 0.0, None)).sum(axis=-1)
 
 
 def r_action(action: np.ndarray) -> np.ndarray:
-    """Eq. 8: |a_t|^2, a_t = delta-theta in rad."""
+    """Eq. 6: |a_t|^2, a_t = delta-theta in rad."""
     return np.square(action).sum(axis=-1)
 
 
 def r_action_rate(action: np.ndarray, prev_action: np.ndarray) -> np.ndarray:
-    """Eq. 9: |a_t - a_{t-1}|^2."""
+    """Eq. 7: |a_t - a_{t-1}|^2."""
     return np.square(action - prev_action).sum(axis=-1)
 
 
@@ -121,7 +117,7 @@ def compute_terms(
 
 
 def total(terms: dict[str, np.ndarray], cfg: RewardConfig) -> np.ndarray:
-    """Eq. 3 (plus the optional shaping terms)."""
+    """Eq. 1 (plus the optional shaping terms)."""
     return (
         cfg.w_task * terms["task"]
         + cfg.w_incentive * terms["incentive"]

@@ -1,6 +1,6 @@
 """Pre/post processors of `blindgrasp_transformer`: state z-scoring and the absolute-target <-> delta conversion.
 
-The action contract (DESIGN.md): a LeRobot `action` is the ABSOLUTE joint target in radians, target = q_now +
+The action contract (`spec.ACTION_NAMES`): a LeRobot `action` is the ABSOLUTE joint target in radians, target = q_now +
 delta, while the paper's network predicts delta / 0.3 in [-1, 1]. Both conversions live here, in the pipelines
 saved with the checkpoint, so a checkpoint is self-contained:
 
