@@ -45,7 +45,7 @@ DEMO_SEED_BLOCK = recipe.DEMO_SEED_BLOCK
 BIGGER = """\
 Go bigger (same command, another preset):
 
-    blindgrasp-pipeline --preset=cpu     # trains a teacher from scratch on 2 cores: ~1.5-2 h teacher, then demos, student
+    blindgrasp-pipeline --preset=cpu     # a teacher from scratch on 2 cores (~1.5-2 h), then demos, student
     blindgrasp-pipeline --preset=paper --device=cuda   # GPU machine, the paper's Tables III-IV
     bash scripts/paper_recipe.sh         # Table V: every ablation row at the paper preset's sizes
 """
@@ -58,7 +58,7 @@ class PipelineConfig:
     preset: str = "quick"  # registry preset (lerobot_blindgrasp/presets): smoke, quick, cpu, paper
     output_dir: Path | None = None  # default outputs/pipeline_<preset>; re-running continues where it stopped
     seed: int = spec.TEACHER_TRAIN_SEED  # teacher-training env seed and torch seed; also picks the demo seed block
-    teacher: Path | None = None  # use this teacher folder instead of the preset's (shipped or trained from scratch)
+    teacher: Path | None = None  # this teacher folder instead of the preset's (shipped or trained from scratch)
     eval_seed: int = spec.EVAL_SEED  # lerobot-eval --seed, and the teacher eval's: both run the same start states
     device: str | None = None  # torch device for the student (default: the preset's)
     # A Table V stage (teachers, teacher_evals, demos, students, evals): print its commands that are not done yet
@@ -149,8 +149,8 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
         print(f"[pipeline] only {kept} curated episodes (< {preset.demos.min_curated_episodes}); also collecting the "
               "uncurated set and training the student on it", flush=True)
         repo = f"local/blindgrasp_{preset.name}_uncurated"
-        train_set = _collect(stage, preset, teacher_dir, out / "demos_uncurated", repo, demo_seed + DEMO_SEED_BLOCK // 2,
-                             curate=False)
+        train_set = _collect(stage, preset, teacher_dir, out / "demos_uncurated", repo,
+                             demo_seed + DEMO_SEED_BLOCK // 2, curate=False)
         record["student_dataset"] = "uncurated (too few curated episodes)"
     if _kept(train_set) == 0:
         raise SystemExit(f"[pipeline] error: the demo dataset {train_set} has no episodes, so there is nothing to "

@@ -32,7 +32,8 @@ def objects_of(task: str) -> tuple[str, ...]:
     return objects.resolve_objects(task)
 
 
-def teacher_train(p: presets.Preset, out: Path, seed: int, variant: presets.Variant = presets.Variant()) -> list[str]:
+def teacher_train(p: presets.Preset, out: Path, seed: int,
+                  variant: presets.Variant = presets.Variant()) -> list[str]:
     t = p.teacher
     cmd = ["blindgrasp-train-teacher", f"--preset={t.settings.name}", f"--output_dir={out}", f"--seed={seed}"]
     if t.iterations:
@@ -73,7 +74,8 @@ def student_train(p: presets.Preset, dataset: Path, repo_id: str, out: Path, see
                   device: str | None = None) -> tuple[list[str], presets.Schedule]:
     """lerobot-train of the student; the step count (and LR schedule) follows from the dataset's frames."""
     s = p.student
-    sched = presets.schedule(s, presets.dataset_frames(dataset) if s.epochs is not None else None)
+    frames = presets.dataset_frames(dataset) if (dataset / "meta" / "info.json").exists() else None
+    sched = presets.schedule(s, frames)
     cmd = ["lerobot-train", "--policy.type=blindgrasp_transformer", f"--policy.size={s.size}",
            f"--dataset.repo_id={repo_id}", f"--dataset.root={dataset}", f"--output_dir={out}",
            f"--steps={sched.steps}", f"--batch_size={s.batch_size}"]
@@ -84,7 +86,8 @@ def student_train(p: presets.Preset, dataset: Path, repo_id: str, out: Path, see
     return cmd, sched
 
 
-def student_eval(p: presets.Preset, ckpt: Path, dest: Path, eval_seed: int, device: str | None = None) -> list[str]:
+def student_eval(p: presets.Preset, ckpt: Path, dest: Path, eval_seed: int,
+                 device: str | None = None) -> list[str]:
     e = p.evaluation
     return ["lerobot-eval", f"--policy.path={ckpt}", "--env.type=blindgrasp", f"--env.task={e.task}",
             f"--eval.n_episodes={e.episodes_per_object}", f"--eval.batch_size={e.episodes_per_object}",

@@ -44,7 +44,8 @@ def test_pipeline_teacher_and_student_read_the_same_objects():
         assert teacher_presets.get_preset(name) is presets.teacher.PRESETS[name]
     assert student_cfg.SIZES is presets.SIZES
     c = student_cfg.BlindgraspTransformerConfig(size="cpu", device="cpu")
-    assert c.n_layers == presets.SIZES["cpu"]["n_layers"] and c.head_hidden_dims == presets.SIZES["cpu"]["head_hidden_dims"]
+    cpu = presets.SIZES["cpu"]
+    assert c.n_layers == cpu["n_layers"] and c.head_hidden_dims == cpu["head_hidden_dims"]
     cfg = parse_config(TrainTeacherConfig, ["--preset=cpu", "--output_dir=x"])
     assert teacher_presets.get_preset(cfg.preset) is presets.PRESETS["cpu"].teacher.settings
 
@@ -53,7 +54,8 @@ def test_paper_is_tables_iii_and_iv():
     p = presets.PRESETS["paper"]
     assert p.teacher.settings is teacher_presets.PAPER and p.teacher.settings.deviations == ()
     assert not p.teacher.shipped and p.teacher.iterations is None and p.teacher.num_envs is None
-    assert presets.SIZES["paper"] == {"n_layers": 6, "embed_dim": 512, "n_heads": 8, "head_hidden_dims": [1024, 1024]}
+    assert presets.SIZES["paper"] == {"n_layers": 6, "embed_dim": 512, "n_heads": 8,
+                                      "head_hidden_dims": [1024, 1024]}
     s = p.student
     assert (s.size, s.batch_size, s.epochs, s.constant_lr_epochs, s.steps) == ("paper", 256, 2000, 100, None)
     # Table V is on the six medium (in-distribution) shapes.
@@ -66,7 +68,8 @@ def test_quick_and_cpu_pipeline_numbers_are_unchanged():
             q.demos.min_curated_episodes) == (40, 400, 720, 18)
     assert (q.student.size, q.student.steps, q.student.batch_size, q.student.threads) == ("cpu", 1200, 128, 2)
     assert (q.evaluation.episodes_per_object, q.evaluation.teacher_modes) == (20, ("deterministic",))
-    assert (c.demos.num_envs, c.demos.min_curated_episodes, c.student.steps, c.student.batch_size) == (360, 90, 5000, 256)
+    assert (c.demos.num_envs, c.demos.min_curated_episodes) == (360, 90)
+    assert (c.student.steps, c.student.batch_size) == (5000, 256)
 
 
 def test_existing_cpu_run_config_still_matches_the_cpu_preset():
@@ -84,7 +87,8 @@ def test_existing_cpu_run_config_still_matches_the_cpu_preset():
 
 def test_table_v_rows_and_the_no_r_i_teacher():
     assert [a.label for a in presets.TABLE_V.values()] == [
-        "Student (Proposed)", "Student w/o Stochastic Teacher", "Student w/o Curation", "Student w/o r_i", "RL w/ o_t"]
+        "Student (Proposed)", "Student w/o Stochastic Teacher", "Student w/o Curation", "Student w/o r_i",
+        "RL w/ o_t"]
     rows = presets.TABLE_V
     assert not rows["wo_stochastic_teacher"].stochastic_demos and rows["wo_stochastic_teacher"].curated_demos
     assert not rows["wo_curation"].curated_demos and not rows["wo_r_i"].curated_demos  # paper: no selection
@@ -142,3 +146,13 @@ def test_table_v_commands_for_the_recipe(tmp_path):
 def test_report_does_not_import_the_pipeline():
     code = "import sys, lerobot_blindgrasp.report; sys.exit('lerobot_blindgrasp.pipeline' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+def test_paper_recipe_script_takes_its_commands_from_the_pipeline(tmp_path, capsys):
+    script = (ROOT / "scripts" / "paper_recipe.sh").read_text()
+    assert "--print_commands" in script
+    for restated in ("--episodes", "--steps", "--num-envs", "--batch_size", "9000", "5000", "700000"):
+        assert restated not in script, restated
+    pipeline.main(["--preset=paper", f"--output_dir={tmp_path}", "--print_commands=teachers"])
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 3 and all(line.startswith("blindgrasp-train-teacher --preset=paper") for line in lines)

@@ -78,9 +78,9 @@ PRESETS: dict[str, Preset] = {
         Preset(
             name="paper",
             teacher=TeacherStage(settings=teacher.PAPER),
-            # 5000 per object for the paper's 89,500 curated demonstrations (18 x ~4972). The paper gives no rollout
-            # cap, only that start states the teacher does not solve are dropped; 20 x the target (the collector's
-            # default) lets a 5 %-yield object still reach it.
+            # 5000 per object for the paper's 89,500 curated demonstrations (18 x ~4972). The paper gives no
+            # rollout cap, only that start states the teacher does not solve are dropped; 20 x the target (the
+            # collector's default) lets a 5 %-yield object still reach it.
             demos=DemoStage(episodes_per_object=5000, max_rollouts_per_object=100_000, num_envs=9000,
                             min_curated_episodes=1000),
             student=StudentStage(size="paper", batch_size=256, epochs=2000, constant_lr_epochs=100, device="cuda"),
@@ -89,13 +89,15 @@ PRESETS: dict[str, Preset] = {
             deviations=(
                 f"{_SIM_EVAL}: the six medium training shapes stand in for Table V's 3D-printed replicas, with 50 "
                 "episodes each instead of 10 trials, so that each rate has a usable 95 % interval",
-                "5000 curated episodes per object (90,000) for the paper's 89,500: the collector fills each object",
+                "5000 curated episodes per object (90,000) for the paper's 89,500: the collector fills each "
+                "object to a count",
             ),
         ),
         Preset(
             name="cpu",
             teacher=TeacherStage(settings=teacher.CPU),
-            demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=360, min_curated_episodes=90),
+            demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=360,
+                            min_curated_episodes=90),
             # lerobot-train reads ~2 ms per 30-frame sample here: 5000 steps at batch 256 is about an hour.
             student=StudentStage(size="cpu", batch_size=256, steps=5_000, threads=2),
             evaluation=EvalStage(episodes_per_object=20),
@@ -109,12 +111,14 @@ PRESETS: dict[str, Preset] = {
         Preset(
             name="quick",
             teacher=TeacherStage(settings=teacher.CPU, shipped=True),
-            demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720, min_curated_episodes=18),
+            demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720,
+                            min_curated_episodes=18),
             # 1200 steps at batch 128 is the recipe of docs/results/student_cpu.md (~8 min on 2 idle cores).
             student=StudentStage(size="cpu", batch_size=128, steps=1200, threads=2),
             evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",)),
             deviations=(
-                "the shipped teacher (models/teacher_cpu, trained with the cpu teacher settings), no teacher training",
+                "the shipped teacher (models/teacher_cpu, trained with the cpu teacher settings), no teacher "
+                "training",
                 "40 curated episodes per object (at most 400 rollouts) instead of ~5000",
                 "student size cpu (3 layers x 128, 4 heads, head [256, 256]) instead of 6 x 512",
                 "1200 steps at batch 128 with a constant LR instead of 2000 epochs at batch 256: minutes",
@@ -125,7 +129,8 @@ PRESETS: dict[str, Preset] = {
             name="smoke",
             # A tiny teacher trained from scratch, so CI exercises the teacher stage too.
             teacher=TeacherStage(settings=teacher.QUICK, iterations=2, num_envs=36),
-            demos=DemoStage(episodes_per_object=1, max_rollouts_per_object=2, num_envs=36, min_curated_episodes=18),
+            demos=DemoStage(episodes_per_object=1, max_rollouts_per_object=2, num_envs=36,
+                            min_curated_episodes=18),
             student=StudentStage(size="quick", batch_size=8, steps=4),
             evaluation=EvalStage(episodes_per_object=1, task="cylinder_a_medium"),
             deviations=("plumbing only: every stage runs for seconds; no number from it means anything",),

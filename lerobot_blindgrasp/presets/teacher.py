@@ -158,7 +158,7 @@ CONTACT_REWARD_TERMS = ("w_incentive", "w_touch")
 class Variant:
     """Teacher switches of the Table V rows (`lerobot_blindgrasp.presets.ablations` names the rows)."""
 
-    no_incentive: bool = False  # teacher for "Student w/o r_i": every contact-rewarding term (CONTACT_REWARD_TERMS) 0
+    no_incentive: bool = False  # teacher for "Student w/o r_i": every CONTACT_REWARD_TERMS weight set to 0
     student_obs: bool = False  # "RL w/ o_t": actor and critic see only the 12-d student observation
 
     def apply(self, preset: TeacherPreset) -> TeacherPreset:
