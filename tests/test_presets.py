@@ -93,6 +93,7 @@ def test_table_v_rows_and_the_no_r_i_teacher():
     assert not rows["wo_stochastic_teacher"].stochastic_demos and rows["wo_stochastic_teacher"].curated_demos
     assert not rows["wo_curation"].curated_demos and not rows["wo_r_i"].curated_demos  # paper: no selection
     assert not rows["rl_w_o_t"].student
+    assert all(a.doc for a in rows.values()) and "reach" in rows["wo_r_i"].doc.lower()
     no_ri = presets.TEACHERS[rows["wo_r_i"].teacher].apply(teacher_presets.CPU)
     for term in teacher_presets.CONTACT_REWARD_TERMS:
         assert getattr(no_ri.reward, term) == 0.0

@@ -1,13 +1,8 @@
-"""The Table V rows as named entries: which teacher, which demos, and whether a student is distilled.
+"""The Table V rows as named entries: which teacher, which demos, whether a student is distilled, and why.
 
 Every preset runs the same rows at its own sizes: the student rows share the preset's demo budget (episodes per
 object and rollout cap), student size and steps or epochs, and seed, and every row is evaluated on the preset's
-eval start states. What differs between rows is only what the paper varies (Sec. IV-A):
-- w/o stochastic teacher: demos from the teacher's mean action, still curated;
-- w/o curation: the stochastic teacher's 100-step episodes kept without any selection;
-- w/o r_i: a teacher trained without the contact-rewarding terms (`teacher.CONTACT_REWARD_TERMS`; why reach
-  stays is written there), its demos kept without selection as the paper's are;
-- RL w/ o_t: PPO whose actor and critic see only the 12-d student observation, evaluated as it is.
+eval start states. What differs between rows is only what the paper varies (Sec. IV-A); each row's `doc` says what.
 """
 
 from __future__ import annotations
@@ -25,6 +20,7 @@ class Ablation:
     stochastic_demos: bool = True
     curated_demos: bool = True
     student: bool = True  # False: the teacher itself is the row's policy (RL w/ o_t)
+    doc: str = ""
 
 
 # The teachers the rows need, by folder name, and the training switches that make each.
@@ -37,11 +33,23 @@ TEACHERS: dict[str, Variant] = {
 TABLE_V: dict[str, Ablation] = {
     a.name: a
     for a in (
-        Ablation(name="proposed", label="Student (Proposed)", teacher="teacher"),
+        Ablation(name="proposed", label="Student (Proposed)", teacher="teacher",
+                 doc="curated demos of the stochastic teacher, distilled into the student"),
         Ablation(name="wo_stochastic_teacher", label="Student w/o Stochastic Teacher", teacher="teacher",
-                 stochastic_demos=False),
-        Ablation(name="wo_curation", label="Student w/o Curation", teacher="teacher", curated_demos=False),
-        Ablation(name="wo_r_i", label="Student w/o r_i", teacher="teacher_no_ri", curated_demos=False),
-        Ablation(name="rl_w_o_t", label="RL w/ o_t", teacher="rl_with_ot", student=False),
+                 stochastic_demos=False, doc="demos from the teacher's mean action, still curated"),
+        Ablation(name="wo_curation", label="Student w/o Curation", teacher="teacher", curated_demos=False,
+                 doc="the stochastic teacher's 100-step episodes kept whole, without any selection"),
+        Ablation(
+            name="wo_r_i", label="Student w/o r_i", teacher="teacher_no_ri", curated_demos=False,
+            doc="a teacher trained without any term that pays for fingertip contact: the incentive r_i and, in "
+            "the cpu/quick presets, touch (it pays for tips pressing on the object just as r_i pays for tips "
+            "reading force, so keeping it would leave r_i's signal in). Reach stays: it pays for closing the "
+            "tip-object distance and is blind to force, and without it PPO at 2-core scale learns to keep still "
+            "(issue #3), which would ablate exploration rather than the force incentive the paper removes "
+            "(the paper preset has neither shaping term). Its demos are kept without selection, as the paper's "
+            "are (teacher.CONTACT_REWARD_TERMS)",
+        ),
+        Ablation(name="rl_w_o_t", label="RL w/ o_t", teacher="rl_with_ot", student=False,
+                 doc="PPO whose actor and critic see only the 12-d student observation, evaluated as it is"),
     )
 }

@@ -145,12 +145,8 @@ def get_preset(name: str) -> TeacherPreset:
         raise ValueError(f"unknown teacher preset {name!r}; choose from {', '.join(PRESETS)}") from None
 
 
-# The reward terms a "w/o r_i" teacher loses. The paper's reward has one term that pays for fingertip contact, the
-# incentive r_i; the cpu/quick presets add touch, which pays for tips pressing on the object just as r_i pays for
-# tips reading force, so keeping it would leave r_i's signal in. Reach stays: it pays for closing the tip-object
-# distance and is blind to force, and without it PPO at 2-core scale learns to keep still (issue #3), which would
-# ablate exploration rather than the force incentive. r_t also needs a contact to be non-zero, but it pays for the
-# lift, the task itself, so every row keeps it.
+# The reward terms a "w/o r_i" teacher loses: every term that pays for fingertip contact. Why these, and why reach
+# and r_t stay: the row's doc, ablations.TABLE_V["wo_r_i"].
 CONTACT_REWARD_TERMS = ("w_incentive", "w_touch")
 
 
