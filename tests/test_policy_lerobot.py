@@ -66,6 +66,7 @@ def dataset_root(tmp_path_factory) -> Path:
     return root
 
 
+@pytest.mark.slow
 def test_lerobot_train_cli_writes_a_self_contained_checkpoint(dataset_root, tmp_path):
     out = tmp_path / "train"
     env = dict(os.environ, HF_HUB_OFFLINE="1", OMP_NUM_THREADS="1", HF_LEROBOT_HOME=str(tmp_path / "hf_lerobot"))
@@ -209,6 +210,7 @@ if __name__ == "__main__":
 '''
 
 
+@pytest.mark.slow
 def test_lerobot_train_pushes_the_policy_to_the_hub_with_an_install_card(dataset_root, tmp_path):
     captured = tmp_path / "hub"
     env = dict(os.environ, HF_HUB_OFFLINE="1", OMP_NUM_THREADS="1", HUB_CAPTURE=str(captured),

@@ -16,6 +16,7 @@ from lerobot_blindgrasp.sim.demo import run_demo
 DEMO = Path(sys.executable).with_name("blindgrasp-sim-demo")
 
 
+@pytest.mark.slow
 def test_demo_cli_writes_a_video_and_prints_the_summary(tmp_path):
     out = tmp_path / "demo.mp4"
     env = {**os.environ, "MUJOCO_GL": "egl", "HF_HUB_OFFLINE": "1"}
