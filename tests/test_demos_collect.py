@@ -216,6 +216,7 @@ def test_second_ctrl_c_aborts_at_once_but_never_inside_a_save(teacher, tmp_path)
     assert saved and stop.requested == signal.SIGINT
 
 
+@pytest.mark.slow
 def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     out = tmp_path / "sig"
     cmd = [

@@ -77,6 +77,7 @@ def quick_run(tmp_path_factory):
     return out, cmd
 
 
+@pytest.mark.slow
 def test_short_ppo_run_saves_exports_and_reloads_deterministically(quick_run):
     out, _ = quick_run
     assert (out / "model_2.pt").exists() and (out / "exported" / "teacher.pt").exists()
@@ -98,6 +99,7 @@ def test_short_ppo_run_saves_exports_and_reloads_deterministically(quick_run):
     assert not np.allclose(TeacherPolicy(out)(obs, stochastic=True), a1)
 
 
+@pytest.mark.slow
 def test_rerunning_the_command_resumes(quick_run):
     out, cmd = quick_run
     more = [*cmd[:-4], "--iterations", "4", "--num-envs", "36", "--threads", "1"]
@@ -109,6 +111,7 @@ def test_rerunning_the_command_resumes(quick_run):
     assert bad.returncode != 0 and "different" in bad.stderr
 
 
+@pytest.mark.slow
 def test_sigterm_saves_a_checkpoint_and_a_summary(tmp_path):
     import signal
     import time
@@ -138,6 +141,7 @@ def test_bad_teacher_path_is_a_clear_error(tmp_path):
         TeacherPolicy(tmp_path)
 
 
+@pytest.mark.slow
 def test_eval_outputs_table_json_and_chart(quick_run, tmp_path):
     out, _ = quick_run
     res = evaluate.evaluate(TeacherPolicy(out), ("sphere_small", "cuboid_a_medium"), 2, progress=False)

@@ -48,6 +48,7 @@ def test_env_uses_the_weighted_allocation_and_rejects_bad_weights():
         GraspEnvConfig(num_envs=4, object_weights=(1.0, -1.0))
 
 
+@pytest.mark.slow
 def test_bench_teacher_reports_collection_update_and_raw_physics():
     out = subprocess.run(
         [sys.executable, "-c", "from lerobot_blindgrasp.bench import main; main()", "teacher", "--preset", "quick",
