@@ -51,9 +51,9 @@ class BlindGraspRealEnvConfig(EnvConfig):
     robot: RobotConfig = field(default_factory=BlindgraspGripperConfig)
     episode_s: float = spec.EPISODE_S
     success_mode: str = "operator"  # "operator" | "force"
-    # Force criterion (success_mode=force).
+    # Force criterion (success_mode=force): min_contacts tips (default: all) above hold_force_n.
     hold_force_n: float = 0.5
-    min_contacts: int = 3
+    min_contacts: int = spec.NUM_FORCES
     # Reset: start-pose tolerance (rad), time limit to reach it, and the wait without a keyboard (force mode).
     home_tolerance_rad: float = 0.05
     home_timeout_s: float = 5.0

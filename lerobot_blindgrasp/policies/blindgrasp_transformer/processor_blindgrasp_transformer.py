@@ -106,17 +106,30 @@ def normalized_delta_to_target(pred: Tensor, q_now: Tensor, bound: float = spec.
     return q_now + bound * pred
 
 
-@ProcessorStepRegistry.register("blindgrasp_target_to_delta")
 @dataclass
-class TargetToNormalizedDeltaStep(ProcessorStep):
-    """Preprocessor half of the pair: remembers q_now and turns an absolute-target action into delta / bound.
-
-    Runs on raw (not yet normalized) state. Observations without an action (inference) only update q_now.
-    """
+class _LinkedStep(ProcessorStep):
+    """What both halves share: the `link` naming their `CurrentJoints` holder, the bound, and their saved config."""
 
     link: str = ""
     action_bound: float = spec.ACTION_BOUND_RAD
     _joints: CurrentJoints = field(init=False, repr=False)
+
+    def get_config(self) -> dict[str, Any]:
+        return {"link": self.link, "action_bound": self.action_bound}
+
+    def transform_features(
+        self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
+    ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
+        return features  # same keys and shapes; only the meaning of `action` changes
+
+
+@ProcessorStepRegistry.register("blindgrasp_target_to_delta")
+@dataclass
+class TargetToNormalizedDeltaStep(_LinkedStep):
+    """Preprocessor half of the pair: remembers q_now and turns an absolute-target action into delta / bound.
+
+    Runs on raw (not yet normalized) state. Observations without an action (inference) only update q_now.
+    """
 
     def __post_init__(self):
         if not self.link:
@@ -137,24 +150,12 @@ class TargetToNormalizedDeltaStep(ProcessorStep):
         new_transition[TransitionKey.ACTION] = target_to_normalized_delta(action, q_now, self.action_bound)
         return new_transition
 
-    def get_config(self) -> dict[str, Any]:
-        return {"link": self.link, "action_bound": self.action_bound}
-
-    def transform_features(
-        self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
-    ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
-        return features  # same keys and shapes; only the meaning of `action` changes
-
 
 @ProcessorStepRegistry.register("blindgrasp_delta_to_target")
 @dataclass
-class NormalizedDeltaToTargetStep(ProcessorStep):
+class NormalizedDeltaToTargetStep(_LinkedStep):
     """Postprocessor half of the pair: delta / bound from the network -> absolute target, with q_now shared by the
     preprocessor step of the same `link`."""
-
-    link: str = ""
-    action_bound: float = spec.ACTION_BOUND_RAD
-    _joints: CurrentJoints = field(init=False, repr=False)
 
     def __post_init__(self):
         if not self.link:
@@ -179,14 +180,6 @@ class NormalizedDeltaToTargetStep(ProcessorStep):
         new_transition = transition.copy()
         new_transition[TransitionKey.ACTION] = normalized_delta_to_target(action, q_now, self.action_bound)
         return new_transition
-
-    def get_config(self) -> dict[str, Any]:
-        return {"link": self.link, "action_bound": self.action_bound}
-
-    def transform_features(
-        self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
-    ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
-        return features
 
 
 def make_blindgrasp_transformer_pre_post_processors(
