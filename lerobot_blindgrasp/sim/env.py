@@ -1,7 +1,9 @@
 """Batched blind-grasp environment: N grippers, each with one object, stepped together.
 
-This module is the task definition, written once: resets and their randomization draws, actions, pushes,
-observations, rewards, success and termination, all numpy over the env axis (no Python loop over envs). Physics
+This module is the task definition, written once: resets and their randomization draws, actions, pushes, rewards,
+success and termination, all numpy over the env axis (no Python loop over envs); what the envs observe is
+`sim/observations.py`. It runs a little over 300 lines because these share one set of per-env counters (episode,
+step, push schedule) that every draw is keyed on; split apart, each part would reach into the others' state. Physics
 runs in a backend (`sim/backends/`) chosen by `GraspEnvConfig.backend`:
 - "batch" (default): `mujoco.batch.Batch` (MuJoCo >= 3.17) on CPU threads, each env on its own MjModel copy
   carrying its object and its domain-randomization draw (friction, mass, servo gains);
