@@ -120,7 +120,7 @@ def test_frames_are_the_observation_before_each_step_and_the_commanded_target(te
             num_envs=N_ENVS,
             seed=SEED,
             episode_s=spec.DEMO_EPISODE_S,
-            dr=randomization.PAPER_DR.without_external_force(),
+            dr=randomization.EVAL_DR,
             reward=rewards.RewardConfig(**policy.config["reward"]),
         )
     )
