@@ -15,8 +15,11 @@ import pytest
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.demos import cards, collect, curation, provenance, push, report
+from lerobot_blindgrasp.cli import GracefulStop, parse_config
+from lerobot_blindgrasp.demos import collect, curation, loop, provenance, report
 from lerobot_blindgrasp.demos import dataset as demo_dataset
+from lerobot_blindgrasp.demos.config import CollectConfig
+from lerobot_blindgrasp.hub import cards, push
 from lerobot_blindgrasp.sim import objects
 
 N_ENVS = 18  # one env per object
@@ -38,10 +41,10 @@ def teacher(tmp_path_factory) -> Path:
     return out
 
 
-def config(teacher: Path, out: Path, **kw) -> collect.CollectConfig:
+def config(teacher: Path, out: Path, **kw) -> CollectConfig:
     base = {
         "teacher": teacher,
-        "out": out,
+        "output_dir": out,
         "repo_id": "test/demos",
         "episodes_per_object": 1,
         "num_envs": N_ENVS,
@@ -49,14 +52,14 @@ def config(teacher: Path, out: Path, **kw) -> collect.CollectConfig:
         "curation": curation.NO_CURATION,
         "progress": False,
     }
-    return collect.CollectConfig(**{**base, **kw})
+    return CollectConfig(**{**base, **kw})
 
 
 @pytest.fixture(scope="module")
 def tiny(teacher, tmp_path_factory):
     """One whole episode per object from the deterministic teacher (so a reference rollout can replay it)."""
     out = tmp_path_factory.mktemp("tiny") / "demos"
-    stats = collect.collect(config(teacher, out, stochastic=False))
+    stats = loop.collect(config(teacher, out, stochastic=False))
     return out, stats
 
 
@@ -152,24 +155,26 @@ def test_bad_inputs_are_refused_and_touch_nothing(teacher, tiny, tmp_path, capsy
     student_like.mkdir()
     (student_like / "config.json").write_text(json.dumps({"type": "blindgrasp_transformer"}))
     cases = [
-        (["--teacher", str(tmp_path / "missing"), "--out", str(fresh)], "cannot load the teacher"),
-        (["--teacher", str(tmp_path), "--out", str(fresh)], "no model_<iteration>.pt"),
-        (["--teacher", str(teacher), "--out", str(out)], "already exists"),
-        (["--teacher", str(teacher), "--out", str(fresh), "--resume"], "does not exist"),
-        (["--teacher", str(teacher), "--out", str(out), "--resume", "--deterministic"], "different curation"),
-        (["--teacher", str(teacher), "--out", str(out), "--resume", "--no-curation"], "different stochastic"),
+        ([f"--teacher={tmp_path / 'missing'}", f"--output_dir={fresh}"], "cannot load the teacher"),
+        ([f"--teacher={tmp_path}", f"--output_dir={fresh}"], "no model_<iteration>.pt"),
+        ([f"--teacher={teacher}", f"--output_dir={out}"], "already exists"),
+        ([f"--teacher={teacher}", f"--output_dir={fresh}", "--resume=true"], "does not exist"),
+        ([f"--teacher={teacher}", f"--output_dir={out}", "--resume=true", "--stochastic=false"],
+         "different curation"),
+        ([f"--teacher={teacher}", f"--output_dir={out}", "--resume=true", "--curation.enabled=false"],
+         "different stochastic"),
         # Seed 0 is a teacher-training env seed: demos from it would overlap training start states.
-        (["--teacher", str(teacher), "--out", str(fresh), "--seed", "0"], "outside the demos range"),
-        (["--teacher", str(student_like), "--out", str(fresh)], "not a blindgrasp teacher"),
+        ([f"--teacher={teacher}", f"--output_dir={fresh}", "--seed=0"], "outside the demos range"),
+        ([f"--teacher={student_like}", f"--output_dir={fresh}"], "not a blindgrasp teacher"),
     ]
     for argv, message in cases:
         with pytest.raises(SystemExit) as exc:
-            collect.main([*argv, "--repo-id", "test/demos", "--no-progress"])
+            collect.main([*argv, "--repo_id=test/demos", "--progress=false"])
         assert exc.value.code == 2
         assert message in capsys.readouterr().err
         assert not fresh.exists()
     with pytest.raises(SystemExit):
-        collect.main(["--teacher", str(teacher), "--out", str(fresh), "--repo-id", "no-slash"])
+        collect.main([f"--teacher={teacher}", f"--output_dir={fresh}", "--repo_id=no-slash"])
     assert "USER/NAME" in capsys.readouterr().err and not fresh.exists()
     assert snapshot(out) == before
 
@@ -183,7 +188,7 @@ def test_exception_mid_collection_leaves_finished_episodes_readable(teacher, tmp
             raise RuntimeError("injected failure")
 
     with pytest.raises(RuntimeError, match="injected failure"):
-        collect.collect(config(teacher, out, episodes_per_object=5), on_episode=explode)
+        loop.collect(config(teacher, out, episodes_per_object=5), on_episode=explode)
     ds = LeRobotDataset("test/demos", root=out, video_backend="pyav")
     assert ds.num_episodes == 3 and len(ds) == ds.meta.total_frames
     ds[len(ds) - 1]  # the last frame of the last episode reads back
@@ -201,13 +206,13 @@ def test_second_ctrl_c_aborts_at_once_but_never_inside_a_save(teacher, tmp_path)
             signal.raise_signal(signal.SIGINT)  # second: abort now
 
     with pytest.raises(KeyboardInterrupt):
-        collect.collect(config(teacher, out, episodes_per_object=5), on_episode=double_ctrl_c)
+        loop.collect(config(teacher, out, episodes_per_object=5), on_episode=double_ctrl_c)
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handlers restored
     ds = LeRobotDataset("test/demos", root=out, video_backend="pyav")
     assert ds.num_episodes == 2 and provenance.load(out)["runs"][-1]["stop_reason"] == "interrupted"
 
     # A second Ctrl-C that lands while an episode is being saved waits for the save to complete.
-    with collect._StopSignal() as stop, pytest.raises(KeyboardInterrupt):
+    with GracefulStop() as stop, pytest.raises(KeyboardInterrupt):
         with stop.saving():
             signal.raise_signal(signal.SIGINT)
             signal.raise_signal(signal.SIGINT)
@@ -219,6 +224,7 @@ def test_second_ctrl_c_aborts_at_once_but_never_inside_a_save(teacher, tmp_path)
 @pytest.mark.slow
 def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     out = tmp_path / "sig"
+    # The release-0.1 argparse spellings, as pipeline.py still passes them: translated, with a deprecation note.
     cmd = [
         sys.executable,
         "-m",
@@ -260,7 +266,7 @@ def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     old_seeds = set(demo_dataset.episode_table(out).env_seed)
 
     # --resume appends until every object has 2 episodes, with env seeds no earlier run used.
-    stats = collect.collect(config(teacher, out, repo_id="test/sig", episodes_per_object=2, seed=spec.DEMO_SEED + 11,
+    stats = loop.collect(config(teacher, out, repo_id="test/sig", episodes_per_object=2, seed=spec.DEMO_SEED + 11,
                                          resume=True))
     assert stats.stop_reason == "done" and stats.kept >= 1
     ds2 = LeRobotDataset("test/sig", root=out, video_backend="pyav")
@@ -281,13 +287,13 @@ def test_push_prepares_everything_then_stops_at_the_network(tiny, monkeypatch, c
 
     out, _ = tiny
     (out / cards.CARD_NAME).unlink()
-    push.main([str(out), "--repo-id", "test/demos", "--dry-run"])
+    push.main([f"--root={out}", "--repo_id=test/demos", "--dry_run=true"])
     assert "dry run" in capsys.readouterr().out and (out / cards.CARD_NAME).is_file()
 
     (out / cards.CARD_NAME).unlink()
     monkeypatch.setattr(huggingface_hub.constants, "HF_HUB_OFFLINE", True)  # what HF_HUB_OFFLINE=1 sets
     with pytest.raises(SystemExit) as exc:
-        push.main([str(out), "--repo-id", "test/pushed", "--tag", "unit-test"])
+        push.main([f"--root={out}", "--repo_id=test/pushed", "--tags=[unit-test]"])
     captured = capsys.readouterr()
     assert exc.value.code == 1
     # It got as far as LeRobot's push_to_hub creating the repo, the first network call...
@@ -302,35 +308,19 @@ def test_push_prepares_everything_then_stops_at_the_network(tiny, monkeypatch, c
     assert "18 episodes" in captured.out and "files" in captured.out
 
     with pytest.raises(SystemExit) as exc:
-        push.main([str(out / "meta"), "--repo-id", "test/pushed"])
+        push.main([str(out / "meta"), "--repo-id", "test/pushed"])  # the release-0.1 spelling still works
     assert exc.value.code == 2 and "not a LeRobot dataset" in capsys.readouterr().err
 
 
 def test_bench_demos_reports_speeds(teacher, capsys):
-    import argparse
-
     from lerobot_blindgrasp.bench import demos as bench_demos
 
-    p = argparse.ArgumentParser()
-    p.add_argument("--json", action="store_true")
-    bench_demos.add_arguments(p)
-    args = p.parse_args(
-        [
-            "--teacher",
-            str(teacher),
-            "--num-envs",
-            "6",
-            "--objects",
-            "medium",
-            "--no-curation",
-            "--episodes-per-object",
-            "1",
-            "--write-episodes",
-            "6",
-            "--json",
-        ]
-    )
-    result = bench_demos.run(args)
+    cfg = parse_config(
+        bench_demos.BenchDemosConfig,
+        [f"--teacher={teacher}", "--num_envs=6", "--objects=medium", "--curation=false", "--episodes_per_object=1",
+         "--write_episodes=6", "--json=true"],
+    )  # fmt: skip
+    result = bench_demos.run(cfg)
     assert result["curated_demos"] == 6 and result["rollouts"] >= 6
     assert result["curated_demos_per_cpu_minute"] > 0 and result["frames_written_per_s"] > 0
     assert result["frames_written_per_s_add_frame"] > 0 and result["writer_episodes"] == 6
@@ -342,9 +332,10 @@ def test_an_empty_curated_collection_is_a_one_line_error(teacher, tmp_path, caps
     that LeRobot later fails to load with an unrelated Hub error."""
     out = tmp_path / "empty"
     with pytest.raises(SystemExit) as exc:
-        collect.main(["--teacher", str(teacher), "--out", str(out), "--repo-id", "test/empty", "--num-envs",
-                      str(N_ENVS), "--episodes-per-object", "1", "--max-rollouts-per-object", "1", "--no-progress"])
+        collect.main([f"--teacher={teacher}", f"--output_dir={out}", "--repo_id=test/empty",
+                      f"--num_envs={N_ENVS}", "--episodes_per_object=1", "--max_rollouts_per_object=1",
+                      "--progress=false"])
     assert exc.value.code == collect.EXIT_EMPTY
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
-    assert len(err) == 1 and "is empty" in err[0] and "--no-curation" in err[0]
+    assert len(err) == 1 and "is empty" in err[0] and "--curation.enabled=false" in err[0]
     assert json.loads((out / report.REPORT_NAME).read_text())["total"]["kept"] == 0  # the rollouts were counted

@@ -16,9 +16,10 @@ from lerobot.datasets.dataset_tools import delete_episodes, merge_datasets, remo
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.demos import cards, curation
+from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos.rollout import Episode
+from lerobot_blindgrasp.hub import cards
 from lerobot_blindgrasp.sim import objects
 
 OBJECTS = ("sphere_small", "capsule_large", "cuboid_a_medium", "cylinder_b_small")

@@ -144,7 +144,7 @@ def test_bad_teacher_path_is_a_clear_error(tmp_path):
 @pytest.mark.slow
 def test_eval_outputs_table_json_and_chart(quick_run, tmp_path):
     out, _ = quick_run
-    res = evaluate.evaluate(TeacherPolicy(out), ("sphere_small", "cuboid_a_medium"), 2, progress=False)
+    res = evaluate.evaluate_teacher(TeacherPolicy(out), ("sphere_small", "cuboid_a_medium"), 2, progress=False)
     evaluate.write_outputs(res, tmp_path)
     data = json.loads((tmp_path / "eval.json").read_text())
     assert set(data["modes"]) == {"deterministic", "stochastic"}

@@ -81,7 +81,7 @@ def test_export_of_a_run_dir_acts_exactly_like_its_checkpoint(run_dir, tmp_path,
     assert cfg["weights"]["source_sha256"] == policy.file_sha256(run_dir / "model_7.pt")
     # The CLI does the same and keeps a hand-written card.
     (out / "README.md").write_text("my card")
-    export.main([str(run_dir), str(out)])
+    export.main([f"--source={run_dir}", f"--output_dir={out}"])
     assert (out / "README.md").read_text() == "my card"
 
 
@@ -130,8 +130,7 @@ def test_clear_one_line_errors(run_dir, tmp_path, monkeypatch):
 
 
 def test_eval_teacher_defaults_to_the_shipped_teacher_and_its_seeds(tmp_path, capsys):
-    evaluate.main(["--episodes", "2", "--objects", "cuboid_b_large", "--modes", "deterministic",
-                   "--out", str(tmp_path)])  # fmt: skip
+    evaluate.main(["--episodes=2", "--objects=cuboid_b_large", "--modes=deterministic", f"--output_dir={tmp_path}"])
     res = json.loads((tmp_path / "eval.json").read_text())
     assert res["checkpoint"] == str(policy.default_teacher() / policy.WEIGHTS_NAME)
     assert res["seed"] == spec.EVAL_SEED

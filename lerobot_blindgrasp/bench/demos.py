@@ -1,7 +1,7 @@
 """Demo collection speed: curated demos per CPU-minute and dataset frames written per second.
 
 Runs a real, small `blindgrasp-collect-demos` collection into a temporary folder (curated as in the paper unless
---no-curation), then re-writes the rollouts it saw through three write paths, to measure the writer alone: what
+--curation=false), then re-writes the rollouts it saw through three write paths, to measure the writer alone: what
 collection uses (`save_episode(episode_data=...)` with whole arrays, LeRobot's empty image-embedding pass skipped,
 see `demos.dataset.skip_empty_image_embedding`), the same with LeRobot's default pass, and `add_frame` per frame
 (LeRobot's default, as lerobot-record writes). Without --teacher a throwaway `quick` teacher is trained for one
@@ -10,24 +10,32 @@ iteration: the speeds are real, its yield is not.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import io
 import shutil
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
+from lerobot_blindgrasp.bench import BenchConfig
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--teacher", type=Path, default=None, help="teacher checkpoint or run dir (default: throwaway)")
-    p.add_argument("--num-envs", type=int, default=72)
-    p.add_argument("--objects", default="all")
-    p.add_argument("--episodes-per-object", type=int, default=2, help="written-episode target per object")
-    p.add_argument("--max-rollouts-per-object", type=int, default=4, help="bounds the run for weak teachers")
-    p.add_argument("--no-curation", action="store_true")
-    p.add_argument("--write-episodes", type=int, default=40, help="episodes re-written per writer path")
-    p.add_argument("--threads", type=int, default=0)
+
+@dataclass
+class BenchDemosConfig(BenchConfig):
+    """Demo collection speed: curated demos per CPU-minute and dataset frames written per second."""
+
+    teacher: Path | None = None  # teacher folder, checkpoint or run dir (default: a throwaway quick teacher)
+    num_envs: int = 72  # parallel envs
+    objects: str = "all"  # 'all', 'medium' or a comma list of catalogue names
+    episodes_per_object: int = 2  # written-episode target per object
+    max_rollouts_per_object: int = 4  # bounds the run for weak teachers
+    curation: bool = True  # false: keep every episode (the 'w/o curation' ablation)
+    write_episodes: int = 40  # episodes re-written per writer path
+    threads: int = 0  # physics threads (0: all CPUs)
+
+
+CONFIG = BenchDemosConfig
 
 
 def _throwaway_teacher(tmp: Path) -> Path:
@@ -69,34 +77,36 @@ def _writer_speed(episodes, root: Path, per_frame: bool, fast: bool = True) -> f
     return frames / (time.perf_counter() - t0)
 
 
-def run(args: argparse.Namespace) -> dict:
+def run(cfg: BenchDemosConfig) -> dict:
     import datasets
 
-    from lerobot_blindgrasp.demos import collect, curation
+    from lerobot_blindgrasp.demos import curation
+    from lerobot_blindgrasp.demos.config import CollectConfig
+    from lerobot_blindgrasp.demos.loop import collect
 
     tmp = Path(tempfile.mkdtemp(prefix="blindgrasp-bench-demos-"))
     try:
-        teacher = args.teacher or _throwaway_teacher(tmp)
+        teacher = cfg.teacher or _throwaway_teacher(tmp)
         seen = []
 
         def keep_some(ep, cut, written, stats):
-            if len(seen) < args.write_episodes and not ep.physics_failed:
+            if len(seen) < cfg.write_episodes and not ep.physics_failed:
                 seen.append(ep)
 
-        cfg = collect.CollectConfig(
+        collect_cfg = CollectConfig(
             teacher=teacher,
-            out=tmp / "demos",
+            output_dir=tmp / "demos",
             repo_id="bench/demos",
-            episodes_per_object=args.episodes_per_object,
-            max_rollouts_per_object=args.max_rollouts_per_object,
-            objects=args.objects,
-            curation=curation.NO_CURATION if args.no_curation else curation.PAPER_CURATION,
-            num_envs=args.num_envs,
-            threads=args.threads,
+            episodes_per_object=cfg.episodes_per_object,
+            max_rollouts_per_object=cfg.max_rollouts_per_object,
+            objects=cfg.objects,
+            curation=curation.PAPER_CURATION if cfg.curation else curation.NO_CURATION,
+            num_envs=cfg.num_envs,
+            threads=cfg.threads,
             progress=False,
         )
         with contextlib.redirect_stderr(io.StringIO()):
-            stats = collect.collect(cfg, on_episode=keep_some)
+            stats = collect(collect_cfg, on_episode=keep_some)
         cpu_min = stats.cpu_s / 60.0
         whole = whole_default = per_frame = 0.0
         bars_were_off = datasets.are_progress_bars_disabled()
@@ -109,9 +119,9 @@ def run(args: argparse.Namespace) -> dict:
         if not bars_were_off:
             datasets.enable_progress_bars()
         result = {
-            "teacher": str(args.teacher) if args.teacher else "throwaway quick teacher (1 iteration)",
-            "curation": not args.no_curation,
-            "num_envs": args.num_envs,
+            "teacher": str(cfg.teacher) if cfg.teacher else "throwaway quick teacher (1 iteration)",
+            "curation": cfg.curation,
+            "num_envs": cfg.num_envs,
             "rollouts": stats.rollouts,
             "curated_demos": stats.kept,
             "frames": stats.frames,
@@ -129,7 +139,7 @@ def run(args: argparse.Namespace) -> dict:
         }
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    if not getattr(args, "json", False):
+    if not cfg.json:
         width = max(map(len, result))
         for k, v in result.items():
             print(f"{k:<{width}}  {v:.2f}" if isinstance(v, float) else f"{k:<{width}}  {v}")

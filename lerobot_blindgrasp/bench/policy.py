@@ -17,9 +17,9 @@ is less disturbed by other processes on a shared machine.
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -28,6 +28,7 @@ from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.utils.constants import ACTION, OBS_STATE
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.bench import BenchConfig
 from lerobot_blindgrasp.policies.blindgrasp_transformer import (
     BlindgraspTransformerConfig,
     BlindgraspTransformerPolicy,
@@ -38,12 +39,22 @@ TARGET_RATIO = 1.3
 PEAK_GEMM_N = 1024
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--size", choices=sorted(SIZES), default="paper", help="policy size (default paper)")
-    parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads (default 1)")
-    parser.add_argument("--steps", type=int, default=spec.EPISODE_STEPS, help="control steps per round")
-    parser.add_argument("--rounds", type=int, default=3, help="interleaved measurement rounds")
-    parser.add_argument("--seed", type=int, default=0)
+@dataclass
+class BenchPolicyConfig(BenchConfig):
+    """select_action latency of blindgrasp_transformer on one CPU thread, against the model's compute floor."""
+
+    size: str = "paper"  # policy size (the student sizes of the preset registry)
+    threads: int = 1  # torch intra-op threads
+    steps: int = spec.EPISODE_STEPS  # control steps per round
+    rounds: int = 3  # interleaved measurement rounds
+    seed: int = 0  # random observations and weights
+
+    def __post_init__(self):
+        if self.size not in SIZES:
+            raise ValueError(f"--size must be one of {sorted(SIZES)}, got {self.size!r}")
+
+
+CONFIG = BenchPolicyConfig
 
 
 def flops_per_step(config: BlindgraspTransformerConfig, last_token_only: bool = False) -> int:
@@ -111,12 +122,12 @@ def _pct(samples: list[float], q: float) -> float:
     return float(np.percentile(np.asarray(samples) * 1e3, q))
 
 
-def run(args: argparse.Namespace) -> dict:
-    torch.set_num_threads(args.threads)
-    torch.manual_seed(args.seed)
-    policy = make_policy(args.size)
+def run(cfg: BenchPolicyConfig) -> dict:
+    torch.set_num_threads(cfg.threads)
+    torch.manual_seed(cfg.seed)
+    policy = make_policy(cfg.size)
     config = policy.config
-    rng = np.random.default_rng(args.seed)
+    rng = np.random.default_rng(cfg.seed)
     gemms, gemm_flops = _model_gemms(policy)
     a = torch.randn(PEAK_GEMM_N, PEAK_GEMM_N)
     peak_flops = 2 * PEAK_GEMM_N**3
@@ -130,8 +141,8 @@ def run(args: argparse.Namespace) -> dict:
             policy.select_action({OBS_STATE: torch.randn(1, spec.STATE_DIM)})
         gemms()
         a @ a
-        for _ in range(args.rounds):
-            episode = torch.from_numpy(rng.standard_normal((args.steps, 1, spec.STATE_DIM)).astype(np.float32))
+        for _ in range(cfg.rounds):
+            episode = torch.from_numpy(rng.standard_normal((cfg.steps, 1, spec.STATE_DIM)).astype(np.float32))
             # fast: the deployed path, step by step from reset; keep each step's window for the plain path.
             policy.reset()
             windows, fast_out = [], []
@@ -157,10 +168,10 @@ def run(args: argparse.Namespace) -> dict:
 
     flops_plain = flops_per_step(config)
     result = {
-        "size": args.size,
-        "threads": args.threads,
-        "steps_per_round": args.steps,
-        "rounds": args.rounds,
+        "size": cfg.size,
+        "threads": cfg.threads,
+        "steps_per_round": cfg.steps,
+        "rounds": cfg.rounds,
         "context_length": config.n_obs_steps,
         "flops_per_step": flops_plain,
         "flops_per_step_fast": flops_per_step(config, last_token_only=True),
@@ -184,7 +195,7 @@ def run(args: argparse.Namespace) -> dict:
         result[clock] = entry
     result["target"] = f"fast p50 <= {TARGET_RATIO} x floor (model-GEMM throughput), wall clock"
     result["target_met"] = result["wall"]["fast_p50_over_floor"] <= TARGET_RATIO
-    if not getattr(args, "json", False):
+    if not cfg.json:
         print(format_table(result))
     return result
 

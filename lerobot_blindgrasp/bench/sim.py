@@ -15,20 +15,32 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.bench import BenchConfig
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.gripper import PhysicsOptions
 
 
-def add_arguments(p) -> None:
-    p.add_argument("--num-envs", type=int, default=1026)
-    p.add_argument("--steps", type=int, default=40, help="control steps per timed block")
-    p.add_argument("--blocks", type=int, default=3, help="alternating raw/env blocks per thread count")
-    p.add_argument("--threads", type=int, nargs="*", default=None, help="thread counts (default: 1 and all CPUs)")
-    p.add_argument("--backend", default="batch", choices=("batch", "warp"), help="physics backend (warp: one run)")
+@dataclass
+class BenchSimConfig(BenchConfig):
+    """Simulation throughput: raw physics vs the env's control step, per physics thread count."""
+
+    num_envs: int = 1026  # parallel envs
+    steps: int = 40  # control steps per timed block
+    blocks: int = 3  # alternating raw/env blocks per thread count
+    threads: list[int] | None = None  # thread counts, e.g. [1,2] (default: 1 and all CPUs)
+    backend: str = "batch"  # physics backend: batch or warp (warp: one run)
+
+    def __post_init__(self):
+        if self.backend not in ("batch", "warp"):
+            raise ValueError(f"--backend must be batch or warp, got {self.backend!r}")
+
+
+CONFIG = BenchSimConfig
 
 
 def _measure(num_envs: int, nthread: int, steps: int, blocks: int, backend: str = "batch") -> dict:
@@ -70,19 +82,19 @@ def _measure(num_envs: int, nthread: int, steps: int, blocks: int, backend: str 
     }
 
 
-def run(args) -> dict:
-    threads = args.threads or sorted({1, os.cpu_count() or 1})
-    if args.backend == "warp":
+def run(cfg: BenchSimConfig) -> dict:
+    threads = cfg.threads or sorted({1, os.cpu_count() or 1})
+    if cfg.backend == "warp":
         threads = [0]  # Warp parallelizes over worlds on its device; MuJoCo threads do not apply
-    rows = [_measure(args.num_envs, n, args.steps, args.blocks, args.backend) for n in threads]
+    rows = [_measure(cfg.num_envs, n, cfg.steps, cfg.blocks, cfg.backend) for n in threads]
     base = rows[0]["env_control_steps_per_s"]
     for r in rows:
         r["env_speedup_vs_first"] = r["env_control_steps_per_s"] / base
     physics = PhysicsOptions()
-    result = {"num_envs": args.num_envs, "substeps": physics.substeps, "timestep_s": physics.timestep, "rows": rows}
-    if not args.json:
+    result = {"num_envs": cfg.num_envs, "substeps": physics.substeps, "timestep_s": physics.timestep, "rows": rows}
+    if not cfg.json:
         print(
-            f"blindgrasp-bench sim ({args.backend}): {args.num_envs} envs, {physics.substeps} x {physics.timestep * 1e3:g} ms "
+            f"blindgrasp-bench sim ({cfg.backend}): {cfg.num_envs} envs, {physics.substeps} x {physics.timestep * 1e3:g} ms "
             f"substeps per {spec.CONTROL_HZ:g} Hz control step"
         )
         print("| threads | raw physics steps/s | raw ctrl steps/s | env ctrl steps/s | env / raw | env speed-up |")

@@ -1,6 +1,6 @@
 """Whole-loop PPO throughput: collection vs update time per iteration, against raw physics at the same env count.
 
-    blindgrasp-bench teacher --preset cpu --iterations 6 --json
+    blindgrasp-bench teacher --preset=cpu --iterations=6 --json=true
 
 Builds the preset's env and rsl-rl `OnPolicyRunner` exactly as `blindgrasp-train-teacher` does (no logging to
 disk), runs a warm-up iteration and then `--iterations` timed ones. Per iteration it splits wall time into
@@ -9,7 +9,7 @@ In the same process it times raw physics (`Batch.step` with the same per-env mod
 observation, reward or policy work) for as many control steps, so the ratio whole-loop / raw says how much of the
 machine the learner leaves to physics. Measured in one run because the machine may be shared.
 
-Overrides (`--hidden-dims`, `--mini-batches`, `--epochs`, `--torch-threads`, `--num-envs`) let levers be compared
+Overrides (`--hidden_dims`, `--mini_batches`, `--epochs`, `--torch_threads`, `--num_envs`) let levers be compared
 side by side without editing a preset.
 """
 
@@ -17,36 +17,48 @@ from __future__ import annotations
 
 import resource
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
 
+from lerobot_blindgrasp.bench import BenchConfig
 from lerobot_blindgrasp.teacher import presets
 
 
-def add_arguments(p) -> None:
-    p.add_argument("--preset", default="cpu", choices=sorted(presets.PRESETS))
-    p.add_argument("--iterations", type=int, default=5, help="timed PPO iterations (after one warm-up)")
-    p.add_argument("--num-envs", type=int, default=None)
-    p.add_argument("--threads", type=int, default=0, help="physics threads (0: all CPUs)")
-    p.add_argument("--torch-threads", type=int, default=None, help="torch threads (default: the preset's)")
-    p.add_argument("--hidden-dims", type=int, nargs="+", default=None)
-    p.add_argument("--mini-batches", type=int, default=None)
-    p.add_argument("--epochs", type=int, default=None)
-    p.add_argument("--backend", default="batch", choices=("batch", "warp"), help="physics backend")
+@dataclass
+class BenchTeacherConfig(BenchConfig):
+    """Whole-loop PPO throughput: collection vs update time per iteration, against raw physics."""
+
+    preset: str = "cpu"  # teacher preset
+    iterations: int = 5  # timed PPO iterations (after one warm-up)
+    num_envs: int | None = None  # default: the preset's
+    threads: int = 0  # physics threads (0: all CPUs)
+    torch_threads: int | None = None  # torch threads (default: 1, as blindgrasp-train-teacher)
+    hidden_dims: list[int] | None = None  # actor and critic MLP widths, e.g. [256,128] (default: the preset's)
+    mini_batches: int | None = None  # PPO minibatches (default: the preset's)
+    epochs: int | None = None  # PPO epochs (default: the preset's)
+    backend: str = "batch"  # physics backend: batch or warp
+
+    def __post_init__(self):
+        presets.get_preset(self.preset)  # unknown preset: a clear error before anything heavy
+        if self.backend not in ("batch", "warp"):
+            raise ValueError(f"--backend must be batch or warp, got {self.backend!r}")
 
 
-def _preset(args) -> presets.TeacherPreset:
-    preset = presets.get_preset(args.preset)
+CONFIG = BenchTeacherConfig
+
+
+def _preset(cfg: BenchTeacherConfig) -> presets.TeacherPreset:
+    preset = presets.get_preset(cfg.preset)
     runner = preset.runner_cfg()
-    if args.hidden_dims:
-        runner["actor"]["hidden_dims"] = list(args.hidden_dims)
-        runner["critic"]["hidden_dims"] = list(args.hidden_dims)
-    if args.mini_batches:
-        runner["algorithm"]["num_mini_batches"] = args.mini_batches
-    if args.epochs:
-        runner["algorithm"]["num_learning_epochs"] = args.epochs
+    if cfg.hidden_dims:
+        runner["actor"]["hidden_dims"] = list(cfg.hidden_dims)
+        runner["critic"]["hidden_dims"] = list(cfg.hidden_dims)
+    if cfg.mini_batches:
+        runner["algorithm"]["num_mini_batches"] = cfg.mini_batches
+    if cfg.epochs:
+        runner["algorithm"]["num_learning_epochs"] = cfg.epochs
     return replace(preset, runner=runner)
 
 
@@ -65,20 +77,20 @@ def _raw_control_steps_per_s(env, steps: int) -> float:
     return steps * env.num_envs / wall
 
 
-def run(args) -> dict:
+def run(cfg: BenchTeacherConfig) -> dict:
     from rsl_rl.runners import OnPolicyRunner
 
     from lerobot_blindgrasp.sim.env import BatchedGraspEnv
     from lerobot_blindgrasp.teacher.train import build_env_config
     from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
-    preset = _preset(args)
-    num_envs = args.num_envs or preset.num_envs
-    torch_threads = args.torch_threads or 1  # blindgrasp-train-teacher's default
+    preset = _preset(cfg)
+    num_envs = cfg.num_envs or preset.num_envs
+    torch_threads = cfg.torch_threads or 1  # blindgrasp-train-teacher's default
     torch.set_num_threads(torch_threads)
-    env = BatchedGraspEnv(build_env_config(preset, num_envs, seed=1, nthread=args.threads, backend=args.backend))
+    env = BatchedGraspEnv(build_env_config(preset, num_envs, seed=1, nthread=cfg.threads, backend=cfg.backend))
     device = "cpu"
-    if args.backend == "warp":
+    if cfg.backend == "warp":
         from lerobot_blindgrasp.teacher.distributed import default_device
 
         device = default_device()  # the GPU if there is one: sim and learner on the same device
@@ -99,26 +111,26 @@ def run(args) -> dict:
     runner.learn(1, init_at_random_ep_len=True)  # warm-up: allocations, first normalizer stats
     update_times.clear()
     t = time.perf_counter()
-    runner.learn(args.iterations)
+    runner.learn(cfg.iterations)
     wall = time.perf_counter() - t
     update = float(np.sum(update_times))
     collect = wall - update
     raw = _raw_control_steps_per_s(env, steps_per_it * 2)
-    env_steps = args.iterations * steps_per_it * num_envs
+    env_steps = cfg.iterations * steps_per_it * num_envs
     loop = env_steps / wall
     result = {
         "preset": preset.name,
         "num_envs": num_envs,
-        "backend": args.backend,
+        "backend": cfg.backend,
         "device": device,
         "physics_threads": env.physics.nthread,
         "torch_threads": torch_threads,
         "hidden_dims": runner_cfg["actor"]["hidden_dims"],
         "mini_batches": runner_cfg["algorithm"]["num_mini_batches"],
         "epochs": runner_cfg["algorithm"]["num_learning_epochs"],
-        "iterations": args.iterations,
-        "collect_s_per_it": collect / args.iterations,
-        "update_s_per_it": update / args.iterations,
+        "iterations": cfg.iterations,
+        "collect_s_per_it": collect / cfg.iterations,
+        "update_s_per_it": update / cfg.iterations,
         "update_over_collect": update / collect,
         "loop_env_steps_per_s": loop,
         "raw_control_steps_per_s": raw,
@@ -126,9 +138,9 @@ def run(args) -> dict:
         # Peak resident memory of this process (env models + rollout storage + nets), for sizing bigger runs.
         "max_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
     }
-    if not args.json:
+    if not cfg.json:
         print(
-            f"blindgrasp-bench teacher: preset {preset.name}, {num_envs} envs, {args.backend} backend on {device}, "
+            f"blindgrasp-bench teacher: preset {preset.name}, {num_envs} envs, {cfg.backend} backend on {device}, "
             f"{env.physics.nthread} physics threads, "
             f"{torch_threads} torch threads, MLP {result['hidden_dims']}, {result['epochs']} epochs x "
             f"{result['mini_batches']} minibatches"

@@ -4,7 +4,7 @@ A scripted pinch-and-lift runs through the same gymnasium env lerobot-eval uses 
 out, the paper's randomization and sensor noise), rendered to an mp4, with a printed summary: lift, fingertip
 forces in newtons, success by the shared rule.
 
-    blindgrasp-sim-demo --object sphere_small --output outputs/sim_demo/sphere_small.mp4
+    blindgrasp-sim-demo --object=sphere_small --output=outputs/sim_demo/sphere_small.mp4
 
 The script is not a policy: it knows the object's shape and assumes it is centred, so the object's xy offset is
 off here. It lifts every Table I object.
@@ -12,18 +12,45 @@ off here. It lifts every Table I object.
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import gym_env, objects, randomization
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
 LIFT_M = 0.03
+
+
+@dataclass
+class SimDemoConfig:
+    """Watch the sim work: a scripted pinch-and-lift through the lerobot-eval gym env, rendered to an mp4."""
+
+    object: str = "cylinder_a_medium"  # object to lift: a name from sim/objects.py's CATALOGUE (Table I)
+    output: Path | None = None  # mp4 path (default: outputs/sim_demo/<object>.mp4)
+    video: bool = True  # false: skip rendering, print the summary only
+    seed: int = 0  # episode seed (randomization draw and noise)
+    steps: int = spec.EPISODE_STEPS  # control steps at 20 Hz (default: one 10 s trial)
+    width: int = 640  # video width (px)
+    height: int = 480  # video height (px)
+    shadows: bool = True  # false renders faster on a CPU
+    # false: nominal physics, no sensor noise (default: the paper's randomization, pushes off)
+    randomization: bool = True
+
+    def __post_init__(self):
+        if self.object not in objects.CATALOGUE:
+            raise ValueError(f"unknown object {self.object!r}; one of: {', '.join(objects.CATALOGUE)}")
+
+    @property
+    def video_path(self) -> Path | None:
+        if not self.video:
+            return None
+        return self.output or Path("outputs/sim_demo") / f"{self.object}.mp4"
 
 
 def _boundary_distance(o: objects.ObjectSpec, phi: float) -> float:
@@ -134,25 +161,10 @@ def format_summary(s: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="blindgrasp-sim-demo", description=__doc__.split("\n\n")[0])
-    p.add_argument("--object", default="cylinder_a_medium", choices=list(objects.CATALOGUE), metavar="NAME",
-                   help="object to lift (default: %(default)s); one of: " + ", ".join(objects.CATALOGUE))
-    p.add_argument("--output", type=Path, default=None,
-                   help="mp4 path (default: outputs/sim_demo/<object>.mp4)")
-    p.add_argument("--no-video", action="store_true", help="skip rendering; print the summary only")
-    p.add_argument("--seed", type=int, default=0, help="episode seed (randomization draw and noise)")
-    p.add_argument("--steps", type=int, default=spec.EPISODE_STEPS,
-                   help=f"control steps at {spec.CONTROL_HZ} Hz (default: one 10 s trial)")
-    p.add_argument("--width", type=int, default=640)
-    p.add_argument("--height", type=int, default=480)
-    p.add_argument("--no-shadows", action="store_true", help="faster rendering on a CPU")
-    p.add_argument("--no-randomization", action="store_true",
-                   help="nominal physics, no sensor noise (default: the paper's randomization, pushes off)")
-    args = p.parse_args(argv)
-    output = None if args.no_video else (args.output or Path("outputs/sim_demo") / f"{args.object}.mp4")
+    cfg = parse_config(SimDemoConfig, argv)
     summary = run_demo(
-        args.object, seed=args.seed, steps=args.steps, output=output, width=args.width, height=args.height,
-        shadows=not args.no_shadows, randomize=not args.no_randomization,
+        cfg.object, seed=cfg.seed, steps=cfg.steps, output=cfg.video_path, width=cfg.width, height=cfg.height,
+        shadows=cfg.shadows, randomize=cfg.randomization,
     )  # fmt: skip
     print(format_summary(summary))
     return 0

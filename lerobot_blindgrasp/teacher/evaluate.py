@@ -1,7 +1,7 @@
-"""`blindgrasp-eval-teacher [TEACHER]`: per-object success table of a trained teacher.
+"""`blindgrasp-eval-teacher`: per-object success table of a trained teacher.
 
-    blindgrasp-eval-teacher --episodes 20 --out docs/results/teacher_eval     # the shipped default teacher
-    blindgrasp-eval-teacher runs/teacher_cpu --episodes 20
+    blindgrasp-eval-teacher --episodes=20 --output_dir=docs/results/teacher_eval     # the shipped default teacher
+    blindgrasp-eval-teacher --teacher=runs/teacher_cpu --episodes=20
 
 Runs N episodes per object (10 s each, the paper's randomization and observation noise, external forces off as in
 evaluation and demo collection), deterministic (mean action) and stochastic (sampled), and writes
@@ -9,14 +9,14 @@ evaluation and demo collection), deterministic (mean action) and stochastic (sam
 
 Start states: episode k on object o is evaluation index `--seed` + k, mapped into the evaluation seed range by
 `spec.eval_env_seed(index, o)`, exactly as the `blindgrasp` lerobot-eval env maps lerobot-eval's seeds. So
-`blindgrasp-eval-teacher --seed S --episodes N` and `lerobot-eval --seed=S --eval.n_episodes=N` run the same start
+`blindgrasp-eval-teacher --seed=S --episodes=N` and `lerobot-eval --seed=S --eval.n_episodes=N` run the same start
 states (paired), and none of them was used in teacher training or demo collection (`spec.SEED_RANGES`).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +24,7 @@ import torch
 from tqdm import tqdm
 
 from lerobot_blindgrasp import rates, spec
+from lerobot_blindgrasp.cli import Legacy, parse_config
 from lerobot_blindgrasp.sim import objects, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.gym_env import start_seed
@@ -31,6 +32,36 @@ from lerobot_blindgrasp.sim.randomization import EVAL_DR
 from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, default_teacher
 
 MODES = ("deterministic", "stochastic")
+
+
+@dataclass
+class EvalTeacherConfig:
+    """Per-object success of a PPO teacher on the evaluation start states, deterministic and stochastic."""
+
+    # teacher folder (teacher.safetensors, or a run directory: its latest model_<it>.pt) or a checkpoint file;
+    # default: the shipped teacher
+    teacher: Path | None = None
+    episodes: int = 20  # episodes per object and mode
+    objects: str = "all"  # "all", "medium", or a comma-separated list of catalogue names
+    modes: str = ",".join(MODES)  # comma-separated: deterministic (mean action), stochastic (sampled)
+    seed: int = spec.EVAL_SEED  # first evaluation index (lerobot-eval's --seed)
+    # output folder (default: <run dir>/eval, or outputs/teacher_eval for the shipped teacher)
+    output_dir: Path | None = None
+    progress: bool = True  # progress bar
+
+    def __post_init__(self):
+        bad = set(self.mode_names) - set(MODES)
+        if bad:
+            raise ValueError(f"unknown mode(s) {sorted(bad)}; choose from {MODES}")
+        spec.eval_env_seed(self.seed + self.episodes - 1, 0)  # raises if the indices leave the eval block
+
+    @property
+    def mode_names(self) -> tuple[str, ...]:
+        return tuple(m.strip() for m in self.modes.split(",") if m.strip())
+
+
+# Release-0.1 spellings: `blindgrasp-eval-teacher RUN_DIR --out DIR`.
+LEGACY = Legacy(positionals=("teacher",), flags={"out": "output_dir", "checkpoint": "teacher"})
 
 
 def sim_fingerprint() -> str:
@@ -73,7 +104,20 @@ def _run_object(teacher: TeacherPolicy, name: str, episodes: int, seed: int, mod
     return success, max_lift
 
 
-def evaluate(
+def evaluate(cfg: EvalTeacherConfig) -> tuple[dict, Path]:
+    """Load the teacher, evaluate it, write eval.json/md/png. Returns (results, output folder).
+    Raises TeacherError for a teacher that does not load."""
+    teacher = TeacherPolicy(cfg.teacher or default_teacher())
+    results = evaluate_teacher(
+        teacher, objects.resolve_objects(cfg.objects), cfg.episodes, cfg.seed, cfg.mode_names, cfg.progress
+    )
+    # The shipped teacher's folder is part of the repository: never write into it unasked.
+    out = cfg.output_dir or (teacher.checkpoint.parent / "eval" if cfg.teacher else Path("outputs/teacher_eval"))
+    write_outputs(results, out)
+    return results, out
+
+
+def evaluate_teacher(
     teacher: TeacherPolicy,
     object_names: tuple[str, ...] = objects.PAPER_OBJECTS,
     episodes_per_object: int = 20,
@@ -179,34 +223,11 @@ def write_outputs(results: dict, out: Path) -> None:
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument(
-        "checkpoint", nargs="?", default=None,
-        help="teacher folder (teacher.safetensors, or a run directory: its latest model_<it>.pt) or a checkpoint "
-        "file; default: the shipped teacher",
-    )
-    p.add_argument("--episodes", type=int, default=20, help="episodes per object and mode")
-    p.add_argument("--objects", default="all", help='"all", "medium", or a comma-separated list')
-    p.add_argument("--modes", default="deterministic,stochastic")
-    p.add_argument("--seed", type=int, default=spec.EVAL_SEED, help="first evaluation index (lerobot-eval's --seed)")
-    p.add_argument(
-        "--out", type=Path, default=None,
-        help="output folder (default: <run dir>/eval, or outputs/teacher_eval for the shipped teacher)",
-    )
-    args = p.parse_args(argv)
+    cfg = parse_config(EvalTeacherConfig, argv, LEGACY)
     try:
-        teacher = TeacherPolicy(args.checkpoint or default_teacher())
-        spec.eval_env_seed(args.seed + args.episodes - 1, 0)
+        results, out = evaluate(cfg)
     except (TeacherError, ValueError) as e:
         raise SystemExit(f"error: {e}") from None
-    modes = tuple(m.strip() for m in args.modes.split(","))
-    bad = set(modes) - set(MODES)
-    if bad:
-        raise SystemExit(f"unknown mode(s) {sorted(bad)}; choose from {MODES}")
-    results = evaluate(teacher, objects.resolve_objects(args.objects), args.episodes, args.seed, modes)
-    # The shipped teacher's folder is part of the repository: never write into it unasked.
-    out = args.out or (teacher.checkpoint.parent / "eval" if args.checkpoint else Path("outputs/teacher_eval"))
-    write_outputs(results, out)
     print(markdown_table(results))
     print(f"wrote {out}/eval.json, eval.md, eval.png")
 

@@ -1,26 +1,58 @@
-"""`blindgrasp-export-teacher RUN_DIR OUT_DIR`: a training checkpoint as a shippable teacher (no pickle).
+"""`blindgrasp-export-teacher`: a training checkpoint as a shippable teacher (no pickle).
 
-    blindgrasp-export-teacher runs/teacher_cpu models/teacher_cpu
-    blindgrasp-export-teacher runs/teacher_cpu/model_618.pt models/teacher_cpu --push-to-hub you/blindgrasp_teacher
+    blindgrasp-export-teacher --source=runs/teacher_cpu --output_dir=models/teacher_cpu
+    blindgrasp-export-teacher --source=runs/teacher_cpu/model_618.pt --output_dir=models/teacher_cpu \
+        --push_to_hub=you/blindgrasp_teacher
 
-OUT_DIR gets `teacher.safetensors` (the actor's state dict: MLP weights, Gaussian std, observation normalizer;
-critic and optimizer are training state and stay behind), `teacher_config.json` (the run's config plus a
-`weights` block: source checkpoint, its sha256, iteration, and the observation layout it was trained on) and a
-`README.md` card. `TeacherPolicy(OUT_DIR)` loads it; a `README.md` already in OUT_DIR is kept (a hand-written card
-with results), pass --overwrite-card to replace it. `--push-to-hub` uploads the folder to a Hub model repo.
+The output folder gets `teacher.safetensors` (the actor's state dict: MLP weights, Gaussian std, observation
+normalizer; critic and optimizer are training state and stay behind), `teacher_config.json` (the run's config plus
+a `weights` block: source checkpoint, its sha256, iteration, and the observation layout it was trained on) and a
+`README.md` card. `TeacherPolicy(output_dir)` loads it; a `README.md` already there is kept (a hand-written card
+with results), pass --overwrite_card=true to replace it. `--push_to_hub` uploads the folder to a Hub model repo.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
+from lerobot_blindgrasp.cli import Legacy, parse_config
 from lerobot_blindgrasp.teacher import policy
 
 CARD_NAME = "README.md"
 PACKAGE = "lerobot_policy_blindgrasp"
+
+
+@dataclass
+class ExportTeacherConfig:
+    """A training checkpoint as a shippable teacher folder: safetensors weights, config, card."""
+
+    source: Path | None = None  # training run directory (its latest model_<it>.pt) or a checkpoint file
+    output_dir: Path | None = None  # folder to write teacher.safetensors, teacher_config.json, README.md
+    overwrite_card: bool = False  # replace a README.md already in output_dir
+    push_to_hub: str | None = None  # also upload the folder to this Hub model repo (USER/NAME)
+    private: bool = False  # create the Hub repo as private
+
+    def __post_init__(self):
+        if self.source is None:
+            raise ValueError("--source is required (a training run directory or checkpoint file)")
+        if self.output_dir is None:
+            raise ValueError("--output_dir is required (the teacher folder to write)")
+
+
+# Release-0.1 spellings: `blindgrasp-export-teacher RUN_DIR OUT_DIR`.
+LEGACY = Legacy(positionals=("source", "output_dir"), flags={"out_dir": "output_dir"})
+
+
+def export(cfg: ExportTeacherConfig) -> Path:
+    """Export, then push if asked (printing what it wrote). Returns the teacher folder."""
+    out = export_teacher(cfg.source, cfg.output_dir, cfg.overwrite_card)
+    print(f"wrote {out / policy.WEIGHTS_NAME}, {out / policy.CONFIG_NAME}, {out / CARD_NAME}")
+    if cfg.push_to_hub:
+        print(f"pushed: {push_teacher(out, cfg.push_to_hub, cfg.private or None)}")
+    return out
 
 
 def export_teacher(source: str | Path, out_dir: str | Path, overwrite_card: bool = False) -> Path:
@@ -74,8 +106,8 @@ used to collect the curated demonstrations the `blindgrasp_transformer` student 
 
 Use it (`pip install {PACKAGE}`):
 
-    blindgrasp-eval-teacher THIS_FOLDER --episodes 20
-    blindgrasp-collect-demos --teacher THIS_FOLDER --out runs/demos --repo-id you/blindgrasp_demos
+    blindgrasp-eval-teacher --teacher=THIS_FOLDER --episodes=20
+    blindgrasp-collect-demos --teacher=THIS_FOLDER --output_dir=runs/demos --repo_id=you/blindgrasp_demos
 
 Made by: `{config.get('command', '?')}` (env seeds from {config.get('seed')}, {config.get('num_envs')} envs).
 """
@@ -102,20 +134,9 @@ def push_teacher(folder: str | Path, repo_id: str, private: bool | None = None) 
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(
-        prog="blindgrasp-export-teacher", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    p.add_argument("source", type=Path, help="training run directory (latest model_<it>.pt) or a checkpoint file")
-    p.add_argument("out_dir", type=Path, help="folder to write teacher.safetensors, teacher_config.json, README.md")
-    p.add_argument("--overwrite-card", action="store_true", help="replace an existing README.md")
-    p.add_argument("--push-to-hub", metavar="REPO_ID", default=None, help="also upload the folder to this model repo")
-    p.add_argument("--private", action="store_true")
-    args = p.parse_args(argv)
+    cfg = parse_config(ExportTeacherConfig, argv, LEGACY)
     try:
-        out = export_teacher(args.source, args.out_dir, args.overwrite_card)
-        print(f"wrote {out / policy.WEIGHTS_NAME}, {out / policy.CONFIG_NAME}, {out / CARD_NAME}")
-        if args.push_to_hub:
-            print(f"pushed: {push_teacher(out, args.push_to_hub, args.private or None)}")
+        export(cfg)
     except policy.TeacherError as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None

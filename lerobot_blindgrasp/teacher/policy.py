@@ -2,7 +2,8 @@
 
 - A shipped teacher: a folder with `teacher.safetensors` (the actor's state dict: MLP, Gaussian std and the
   observation normalizer) and `teacher_config.json` (what the trainer wrote, plus a `weights` block). Nothing is
-  unpickled. `export_teacher` (CLI `blindgrasp-export-teacher RUN_DIR OUT_DIR`) makes one from a training run.
+  unpickled. `export_teacher` (CLI `blindgrasp-export-teacher --source=RUN_DIR --output_dir=OUT_DIR`) makes one
+  from a training run.
 - A training run directory: rsl-rl's `model_<it>.pt` checkpoints next to `teacher_config.json`. The latest one is
   used (or a given file); it is read with `torch.load(weights_only=True)`, so it too runs no pickled code.
 

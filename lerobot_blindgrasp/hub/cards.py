@@ -25,7 +25,7 @@ from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, report
 from lerobot_blindgrasp.sim import objects, randomization
 
-TEMPLATE_PACKAGE, TEMPLATE_DIR = "lerobot_blindgrasp.demos", "card_templates"
+TEMPLATE_PACKAGE, TEMPLATE_DIR = "lerobot_blindgrasp.hub", "card_templates"
 TEMPLATES = {"sim": "sim_teacher_demos.md", "glove": "glove_teleop_demos.md"}
 CARD_NAME = "README.md"
 DEFAULT_LICENSE = "apache-2.0"  # the project's license
@@ -104,6 +104,17 @@ def _randomization_rows(dr: dict) -> list[tuple[str, str]]:
     return rows
 
 
+def _dataset_fields(repo_id: str, meta) -> dict:
+    """What both card kinds say about the dataset itself, from LeRobot's metadata."""
+    return {
+        "repo_id": repo_id,
+        "n_episodes": meta.total_episodes,
+        "n_frames": meta.total_frames,
+        "fps": meta.fps,
+        "robot_type": meta.robot_type,
+    }
+
+
 def _sim_context(root: Path, repo_id: str, meta) -> dict:
     prov = provenance.load(root)
     tally = report.load_tally(root)
@@ -113,11 +124,7 @@ def _sim_context(root: Path, repo_id: str, meta) -> dict:
         rows.append({"name": name, "task": objects.get_object(name).task, "yield": o.yield_rate, **vars(o)})
     total = tally.total()
     return {
-        "repo_id": repo_id,
-        "n_episodes": meta.total_episodes,
-        "n_frames": meta.total_frames,
-        "fps": meta.fps,
-        "robot_type": meta.robot_type,
+        **_dataset_fields(repo_id, meta),
         "objects": rows,
         "total": {"yield": total.yield_rate, **vars(total)},
         "stochastic": prov["stochastic"],
@@ -148,11 +155,7 @@ def _glove_context(root: Path, repo_id: str, meta, operators: list[str], notes: 
                 row["episodes"] += 1
                 row["frames"] += int(length)
     return {
-        "repo_id": repo_id,
-        "n_episodes": meta.total_episodes,
-        "n_frames": meta.total_frames,
-        "fps": meta.fps,
-        "robot_type": meta.robot_type,
+        **_dataset_fields(repo_id, meta),
         "tasks": list(per_task.values()),
         "features": {
             k: v

@@ -1,25 +1,25 @@
 """`blindgrasp-push-dataset`: upload a blindgrasp dataset folder to the Hugging Face Hub with its card.
 
-    blindgrasp-push-dataset runs/demos_cpu --repo-id me/blindgrasp_demos_cpu
-    blindgrasp-push-dataset ~/glove_demos --repo-id me/blindgrasp_glove --kind glove --operator alice
+    blindgrasp-push-dataset --root=runs/demos_cpu --repo_id=me/blindgrasp_demos_cpu
+    blindgrasp-push-dataset --root=~/glove_demos --repo_id=me/blindgrasp_glove --kind=glove --operators=[alice]
 
 Works for sim teacher demos (`blindgrasp-collect-demos` output, detected by its collection.json) and for glove
 teleoperation datasets recorded with `lerobot-record` (record them with `--dataset.push_to_hub=false`, then push
 them with this command to get the glove card). Everything is prepared locally first: the dataset is loaded (so a
 broken folder fails here, not half-way through an upload) and its card is written to README.md. Then LeRobot's own
-`LeRobotDataset.push_to_hub` uploads the folder, pushes the same card and tags the `v3.0` revision. `--dry-run`
-stops before the network.
+`LeRobotDataset.push_to_hub` uploads the folder, pushes the same card and tags the `v3.0` revision.
+`--dry_run=true` stops before the network.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from lerobot_blindgrasp.demos import cards
-from lerobot_blindgrasp.demos.collect import REPO_ID_PATTERN
+from lerobot_blindgrasp.cli import Legacy, parse_config
+from lerobot_blindgrasp.hub import REPO_ID_PATTERN, cards
 
 # Not uploaded by LeRobot's push_to_hub (it ignores images/; state-only datasets have none anyway).
 _IGNORED_DIRS = ("images",)
@@ -52,7 +52,7 @@ def prepare(
 
     root = Path(root)
     if not REPO_ID_PATTERN.match(repo_id):
-        raise PushError(f"--repo-id must look like USER/NAME, got {repo_id!r}")
+        raise PushError(f"--repo_id must look like USER/NAME, got {repo_id!r}")
     if not (root / "meta" / "info.json").is_file():
         raise PushError(f"{root} is not a LeRobot dataset folder (no meta/info.json)")
     if json.loads((root / "meta" / "info.json").read_text()).get("total_episodes", 0) == 0:
@@ -84,51 +84,72 @@ def _network_errors() -> tuple[type[BaseException], ...]:
     return (OSError, httpx.TransportError)
 
 
-def parse_args(argv=None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
-        prog="blindgrasp-push-dataset", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+@dataclass
+class PushDatasetConfig:
+    """Upload a blindgrasp dataset folder (sim teacher demos or glove teleoperation) to the Hub with its card.
+
+        blindgrasp-push-dataset --root=runs/demos_cpu --repo_id=me/blindgrasp_demos_cpu
+        blindgrasp-push-dataset --root=~/glove_demos --repo_id=me/blindgrasp_glove --kind=glove --operators=[alice]
+    """
+
+    root: Path | None = None  # dataset folder (LeRobotDataset root)
+    repo_id: str | None = None  # USER/NAME on the Hub
+    kind: str | None = None  # card kind: sim or glove (default: detect; sim when collection.json is there)
+    license: str = cards.DEFAULT_LICENSE  # Hub license identifier
+    tags: list[str] = field(default_factory=list)  # extra card tags
+    operators: list[str] = field(default_factory=list)  # glove operators, for the glove card
+    notes: str = ""  # free text for the glove card's protocol section
+    private: bool = False  # create the Hub repo as private
+    branch: str | None = None  # Hub branch to push to (default: main)
+    dry_run: bool = False  # prepare the card and stop before the network
+
+    def __post_init__(self):
+        if self.root is None:
+            raise ValueError("--root is required (the dataset folder)")
+        if self.repo_id is None:
+            raise ValueError("--repo_id is required (USER/NAME on the Hub)")
+        if self.kind is not None and self.kind not in cards.TEMPLATES:
+            raise ValueError(f"--kind must be one of {sorted(cards.TEMPLATES)}, got {self.kind!r}")
+        self.root = Path(self.root).expanduser()
+
+
+# Release-0.1 spellings: `blindgrasp-push-dataset ROOT --repo-id ID --tag T --operator NAME`.
+LEGACY = Legacy(positionals=("root",), flags={"tag": "tags", "operator": "operators"})
+
+
+def push_dataset(cfg: PushDatasetConfig) -> str | None:
+    """Prepare (card, checks) and upload. Returns the dataset URL, or None for a dry run. Raises PushError for a
+    folder that cannot be pushed, and the network errors of `_network_errors()` for a failed upload."""
+    ds, kwargs, plan = prepare(cfg.root, cfg.repo_id, cfg.kind, cfg.license, cfg.tags, cfg.operators, cfg.notes)
+    print(
+        f"{cfg.root}: {ds.meta.total_episodes} episodes, {ds.meta.total_frames} frames; card written to "
+        f"{cfg.root / cards.CARD_NAME}; {len(plan['files'])} files ({plan['bytes'] / 1e6:.1f} MB) to upload "
+        f"to https://huggingface.co/datasets/{cfg.repo_id}"
     )
-    p.add_argument("root", type=Path, help="dataset folder (LeRobotDataset root)")
-    p.add_argument("--repo-id", required=True, help="USER/NAME on the Hub")
-    p.add_argument("--kind", choices=sorted(cards.TEMPLATES), default=None, help="card kind (default: detect)")
-    p.add_argument("--license", default=cards.DEFAULT_LICENSE)
-    p.add_argument("--tag", action="append", default=[], dest="tags", help="extra card tag (repeatable)")
-    p.add_argument("--operator", action="append", default=[], dest="operators", help="glove operator (repeatable)")
-    p.add_argument("--notes", default="", help="free text for the glove card's protocol section")
-    p.add_argument("--private", action="store_true")
-    p.add_argument("--branch", default=None)
-    p.add_argument("--dry-run", action="store_true", help="prepare the card and stop before the network")
-    return p.parse_args(argv)
+    if cfg.dry_run:
+        print("dry run: nothing uploaded")
+        return None
+    push(ds, kwargs, private=cfg.private or None, branch=cfg.branch)
+    return f"https://huggingface.co/datasets/{cfg.repo_id}"
 
 
 def main(argv=None) -> None:
-    args = parse_args(argv)
+    cfg = parse_config(PushDatasetConfig, argv, LEGACY)
     try:
-        ds, kwargs, plan = prepare(
-            args.root, args.repo_id, args.kind, args.license, args.tags, args.operators, args.notes
-        )
+        url = push_dataset(cfg)
     except PushError as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
-    print(
-        f"{args.root}: {ds.meta.total_episodes} episodes, {ds.meta.total_frames} frames; card written to "
-        f"{args.root / cards.CARD_NAME}; {len(plan['files'])} files ({plan['bytes'] / 1e6:.1f} MB) to upload "
-        f"to https://huggingface.co/datasets/{args.repo_id}"
-    )
-    if args.dry_run:
-        print("dry run: nothing uploaded")
-        return
-    try:
-        push(ds, kwargs, private=args.private or None, branch=args.branch)
     except _network_errors() as e:
         print(
             f"error: upload to the Hub failed ({type(e).__name__}: {e}).\n"
-            f"Nothing in {args.root} was changed except README.md; check the network and `hf auth login`, then "
+            f"Nothing in {cfg.root} was changed except README.md; check the network and `hf auth login`, then "
             "run the same command again.",
             file=sys.stderr,
         )
         raise SystemExit(1) from None
-    print(f"pushed: https://huggingface.co/datasets/{args.repo_id}")
+    if url:
+        print(f"pushed: {url}")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,65 @@
+"""What a demo collection is asked to do: `CollectConfig`, the draccus config of `blindgrasp-collect-demos`."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.demos import curation as curation_mod
+from lerobot_blindgrasp.sim import objects as objects_mod
+
+DEFAULT_ROLLOUT_BUDGET_FACTOR = 20
+
+
+class CollectError(Exception):
+    """A problem found before anything was written (bad teacher, existing output, incompatible resume)."""
+
+
+@dataclass
+class CollectConfig:
+    """Roll out a trained teacher, curate its episodes and write a LeRobotDataset (paper Sec. III-C).
+
+        blindgrasp-collect-demos --output_dir=runs/demos_cpu --repo_id=me/blindgrasp_demos_cpu   # shipped teacher
+        blindgrasp-collect-demos --teacher=runs/teacher_cpu --output_dir=runs/demos_cpu --repo_id=me/demos_cpu
+
+    Ablations: --stochastic=false (teacher mean: "w/o stochastic teacher"), --curation.enabled=false ("w/o
+    curation"). --curation.trim_to_success=true ends kept episodes where the curation criteria are first met.
+    """
+
+    # teacher folder (teacher.safetensors, or a training run dir: its latest model_<it>.pt) or checkpoint file;
+    # default: the shipped teacher
+    teacher: Path | None = None
+    output_dir: Path | None = None  # dataset folder to create (must not exist unless --resume=true)
+    repo_id: str | None = None  # USER/NAME, the dataset's Hub id
+    episodes_per_object: int = 20  # episodes to write per object
+    max_rollouts_per_object: int | None = None  # rollout budget per object (default 20 x episodes_per_object)
+    objects: str = "all"  # 'all', 'medium' or a comma list of catalogue names
+    stochastic: bool = True  # sample the teacher's Gaussian; false: its mean ('w/o stochastic teacher' ablation)
+    curation: curation_mod.CurationConfig = field(default_factory=curation_mod.CurationConfig)
+    num_envs: int = 180  # parallel envs (18 objects x 10)
+    # first env seed, in spec.SEED_RANGES["demos"] (a resumed run continues after the last)
+    seed: int = spec.DEMO_SEED
+    threads: int = 0  # physics threads (0: all CPUs)
+    resume: bool = False  # append to an existing output_dir until the targets are met
+    progress: bool = True  # progress bar
+
+    def __post_init__(self):
+        if self.output_dir is None:
+            raise ValueError("--output_dir is required (the dataset folder to create)")
+        if self.repo_id is None:
+            raise ValueError("--repo_id is required (USER/NAME, the dataset's Hub id)")
+        self.output_dir = Path(self.output_dir)
+        if not self.curation.enabled and self.curation.trim_to_success:
+            # Nothing is trimmed without curation; one spelling in the provenance, so --resume compares alike.
+            self.curation = dataclasses.replace(self.curation, trim_to_success=False)
+
+    @property
+    def rollout_budget(self) -> int:
+        return self.max_rollouts_per_object or DEFAULT_ROLLOUT_BUDGET_FACTOR * self.episodes_per_object
+
+    @property
+    def object_names(self) -> tuple[str, ...]:
+        """The catalogue names `objects` stands for (ValueError for unknown ones)."""
+        return objects_mod.resolve_objects(self.objects)

@@ -1,0 +1,212 @@
+"""The collection loop: teacher rollouts -> curation -> dataset episodes, until every object has its quota.
+
+Paper Sec. III-C: the batched env with the paper's randomization and external pushes off, the teacher sampled from
+its Gaussian (or its mean, the "w/o stochastic teacher" ablation), 5 s episodes, each step logging the student
+observation and the teacher's action, then curation (`demos/curation.py`). Env seeds come from the demo range
+(`spec.SEED_RANGES`), never the teacher-training or evaluation ranges.
+
+`episodes_per_object` N is the number of episodes *written* per object: collection runs until every object has N,
+or has used `max_rollouts_per_object` rollouts (default 20 N), so an object the teacher cannot lift ends the run
+instead of stalling it. When a quarter of the envs hold finished objects, the env is rebuilt with the remaining
+objects (new env seeds), so physics time goes to objects that still need demos.
+
+A first SIGINT/SIGTERM stops after the current control step; a second aborts at once, still finalizing
+(`cli.GracefulStop`). The dataset is finalized and the run recorded (`demos/records.py`) however the loop ends.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.cli import GracefulStop
+from lerobot_blindgrasp.demos import curation as curation_mod
+from lerobot_blindgrasp.demos import dataset as demo_dataset
+from lerobot_blindgrasp.demos import provenance, records
+from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
+from lerobot_blindgrasp.demos.records import CollectStats
+from lerobot_blindgrasp.demos.rollout import Episode, run_episodes
+from lerobot_blindgrasp.hub import REPO_ID_PATTERN
+from lerobot_blindgrasp.sim import randomization
+
+# Rebuild the env for the remaining objects once this fraction of envs holds finished objects. A rebuild drops the
+# running episodes of the other envs (half an episode each on average) and costs ~1 s; waiting wastes this fraction
+# of every step until the next object finishes, usually hundreds of steps later. At 0.5, a 30-minute cpu run spent
+# ~19 % of its rollouts on objects that were already done.
+REBUILD_WASTE_FRACTION = 0.25
+
+STOP_NOTE = "finishing this step and finalizing the dataset (again to abort now; written episodes stay readable)"
+
+# Called after every finished rollout with (episode, its curation result, written?, stats); the curation result
+# is None when the physics failed.
+EpisodeCallback = Callable[[Episode, "curation_mod.CurationResult | None", bool, CollectStats], None]
+
+
+def _check_inputs(cfg: CollectConfig):
+    """Everything that can be refused before touching the output folder. Returns (teacher, object names)."""
+    from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, default_teacher
+
+    if not REPO_ID_PATTERN.match(cfg.repo_id):
+        raise CollectError(f"--repo_id must look like USER/NAME, got {cfg.repo_id!r}")
+    if cfg.episodes_per_object < 1:
+        raise CollectError("--episodes_per_object must be >= 1")
+    if cfg.num_envs < 1:
+        raise CollectError("--num_envs must be >= 1")
+    try:
+        spec.check_seeds("demos", cfg.seed, cfg.num_envs)
+    except ValueError as e:
+        raise CollectError(f"--seed: {e}") from None
+    try:
+        object_names = cfg.object_names
+    except ValueError as e:
+        raise CollectError(str(e)) from None
+    out = cfg.output_dir
+    if cfg.resume:
+        if not out.is_dir():
+            raise CollectError(f"--resume: {out} does not exist; drop --resume to start a new dataset")
+        if not provenance.path(out).is_file():
+            raise CollectError(f"--resume: {out} was not written by blindgrasp-collect-demos (no collection.json)")
+    elif out.exists():
+        raise CollectError(f"{out} already exists; pass --resume=true to append to it, or a new --output_dir")
+    source = cfg.teacher
+    try:
+        if source is None:
+            source = default_teacher()
+        teacher = TeacherPolicy(source)
+    except TeacherError as e:
+        raise CollectError(f"cannot load the teacher: {e}") from None
+    except (KeyError, RuntimeError, ValueError) as e:
+        raise CollectError(f"cannot load the teacher from {source}: {e}") from None
+    return teacher, object_names
+
+
+def collect(
+    cfg: CollectConfig, on_episode: EpisodeCallback | None = None, *, command: str | None = None
+) -> CollectStats:
+    """Run a collection. Raises CollectError (nothing touched) for bad inputs; any later exception propagates
+    after the dataset is finalized and the run is recorded. `command` is recorded as the run's command line."""
+    import datasets
+    import torch
+    from tqdm import tqdm
+
+    from lerobot_blindgrasp.sim import rewards
+
+    teacher, object_names = _check_inputs(cfg)
+    try:  # the teacher's own reward settings: r_t must be the task reward it was trained on
+        reward_cfg = rewards.RewardConfig(**teacher.config["reward"])
+    except (KeyError, TypeError) as e:
+        raise CollectError(f"teacher config has no usable reward settings: {e}") from None
+    dr = randomization.EVAL_DR
+    ds, prov, tally = records.open_dataset(cfg, records.new_provenance(cfg, teacher, object_names, dr))
+
+    target, budget = cfg.episodes_per_object, cfg.rollout_budget
+    stats = CollectStats(tally=tally)
+    run = records.start_run(cfg, prov, command)
+    torch.manual_seed(prov["next_env_seed"])  # the stochastic teacher's samples
+
+    def done(name: str) -> bool:
+        o = tally.of(name)
+        return o.kept >= target or o.rollouts >= budget
+
+    # `datasets` draws a progress bar for every map LeRobot runs while saving; one per episode is noise here.
+    bars_were_off = datasets.are_progress_bars_disabled()
+    datasets.disable_progress_bars()
+    t_wall, t_cpu = time.perf_counter(), time.process_time()
+    bar = tqdm(
+        total=target * len(object_names),
+        initial=sum(min(tally.of(n).kept, target) for n in object_names),
+        desc="demos",
+        unit="ep",
+        dynamic_ncols=True,
+        disable=not cfg.progress,
+    )
+    try:
+        with GracefulStop(STOP_NOTE) as stop:
+            while stop.requested is None:
+                todo = [n for n in object_names if not done(n)]
+                if not todo:
+                    stats.stop_reason = "done"
+                    break
+                spec.check_seeds("demos", prov["next_env_seed"], cfg.num_envs)  # a long --resume stays in range
+                env = _build_env(cfg, todo, prov["next_env_seed"], dr, reward_cfg)
+                prov["next_env_seed"] += cfg.num_envs  # later envs (and --resume) never repeat a draw
+                stats.env_builds += 1
+                env_objects = env.object_names
+                stale = {"now": False}
+
+                def act(obs, _env=env):
+                    stats.env_steps += _env.num_envs
+                    return teacher(obs, stochastic=cfg.stochastic)
+
+                episodes = run_episodes(env, act, lambda s=stale: stop.requested is not None or s["now"])
+                for ep in episodes:
+                    with stop.saving():
+                        cut, written = _handle_episode(ds, ep, cfg.curation, tally, stats, target, bar)
+                    if on_episode is not None:
+                        on_episode(ep, cut, written, stats)
+                    if done(ep.object_name):
+                        finished = sum(done(n) for n in env_objects)
+                        stale["now"] = finished >= REBUILD_WASTE_FRACTION * len(env_objects)
+                env.close()
+            else:
+                stats.stop_reason = "interrupted"
+    except BaseException as e:
+        stats.stop_reason = (
+            "interrupted" if isinstance(e, KeyboardInterrupt) else f"error: {type(e).__name__}: {e}"
+        )
+        raise
+    finally:
+        bar.close()
+        if not bars_were_off:
+            datasets.enable_progress_bars()
+        ds.finalize()  # closes the parquet writers: every saved episode is readable from here on
+        stats.wall_s = time.perf_counter() - t_wall
+        stats.cpu_s = time.process_time() - t_cpu
+        records.finish_run(cfg, prov, run, tally, stats)
+    return stats
+
+
+def _build_env(cfg: CollectConfig, object_names: list[str], seed: int, dr, reward_cfg):
+    """Envs with autoreset for the objects that still need demos, env i seeded seed + i."""
+    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+
+    return BatchedGraspEnv(
+        GraspEnvConfig(
+            num_envs=cfg.num_envs,
+            objects=tuple(object_names),
+            seed=seed,
+            episode_s=cfg.curation.episode_s,
+            dr=dr,
+            reward=reward_cfg,
+            nthread=cfg.threads,
+            autoreset=True,
+        )
+    )
+
+
+def _handle_episode(ds, ep: Episode, cur: curation_mod.CurationConfig, tally, stats, target: int, bar):
+    """Curate, count and maybe write one episode. Returns (curation result or None, written)."""
+    o = tally.of(ep.object_name)
+    if ep.physics_failed:
+        o.physics_failed += 1
+        return None, False
+    cut = curation_mod.evaluate(ep.task_reward, ep.uniaxial_force, cur)
+    stats.rollouts += 1
+    o.rollouts += 1
+    o.passed += cut.passed
+    o.success += ep.success
+    o.left_workspace += ep.left_workspace
+    o.force_sum_n_total += cut.force_sum_n
+    if not cut.keep or o.kept >= target:
+        return cut, False
+    t0 = time.perf_counter()
+    frames = demo_dataset.write_episode(ds, ep, cut)
+    stats.write_s += time.perf_counter() - t0
+    o.kept += 1
+    o.frames += frames
+    stats.kept += 1
+    stats.frames += frames
+    bar.update(1)
+    bar.set_postfix(rollouts=stats.rollouts, refresh=False)
+    return cut, True

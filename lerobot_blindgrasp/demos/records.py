@@ -1,0 +1,176 @@
+"""The run records of a demo collection: provenance (`collection.json`), statistics, the yield report and card.
+
+A collection is one or more runs (`--resume=true` adds one) into one dataset folder. `open_dataset` starts or
+reopens the folder and its provenance; `start_run` and `finish_run` bracket each run, so `collection.json` lists
+every run with its outcome, however it ended, and `yield_report.json` and the card always describe the whole
+dataset.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+from lerobot_blindgrasp.demos import dataset as demo_dataset
+from lerobot_blindgrasp.demos import provenance, report
+from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
+from lerobot_blindgrasp.sim import randomization
+
+log = logging.getLogger("blindgrasp.demos")
+
+
+@dataclass
+class CollectStats:
+    wall_s: float = 0.0
+    cpu_s: float = 0.0  # process CPU time, all threads (physics, torch, writer)
+    write_s: float = 0.0  # inside LeRobotDataset.save_episode
+    env_steps: int = 0
+    rollouts: int = 0
+    kept: int = 0
+    frames: int = 0
+    env_builds: int = 0
+    stop_reason: str = ""  # "done" | "interrupted" | "error: ..."
+    tally: report.Tally = field(default_factory=report.Tally)
+
+    @property
+    def demos_per_minute(self) -> float:
+        return 60.0 * self.kept / self.wall_s if self.wall_s else 0.0
+
+    @property
+    def demos_per_cpu_minute(self) -> float:
+        return 60.0 * self.kept / self.cpu_s if self.cpu_s else 0.0
+
+    @property
+    def frames_written_per_s(self) -> float:
+        return self.frames / self.write_s if self.write_s else 0.0
+
+    def summary(self) -> dict:
+        d = {k: v for k, v in dataclasses.asdict(self).items() if k != "tally"}
+        d.update(
+            demos_per_minute=self.demos_per_minute,
+            demos_per_cpu_minute=self.demos_per_cpu_minute,
+            frames_written_per_s=self.frames_written_per_s,
+        )
+        return d
+
+
+def new_provenance(cfg: CollectConfig, teacher, object_names, dr: randomization.DomainRandomization) -> dict:
+    return {
+        "format": provenance.FORMAT,
+        "teacher_sha256": teacher.sha256,
+        "teacher": {
+            "checkpoint": str(teacher.checkpoint),
+            "checkpoint_name": teacher.name,
+            "sha256": teacher.sha256,
+            "iteration": teacher.iteration,
+            "preset": teacher.config.get("preset"),
+            "variant": teacher.config.get("variant"),
+            "reward": teacher.config.get("reward"),
+            "deviations": teacher.config.get("deviations", []),
+        },
+        "stochastic": cfg.stochastic,
+        "curation": cfg.curation.to_dict(),
+        "randomization": dataclasses.asdict(dr),
+        "objects": list(object_names),
+        "robot_type": demo_dataset.ROBOT_TYPE,
+        "next_env_seed": cfg.seed,
+        "runs": [],
+    }
+
+
+def open_dataset(cfg: CollectConfig, prov_new: dict):
+    """Create the dataset folder, or reopen it for --resume after checking it was collected alike.
+    Returns (dataset, provenance, tally)."""
+    out = cfg.output_dir
+    if not cfg.resume:
+        ds = demo_dataset.create(out, cfg.repo_id)
+        provenance.save(out, prov_new)
+        return ds, prov_new, report.Tally()
+    prov = provenance.load(out)
+    bad = provenance.mismatches(prov, prov_new)
+    if bad:
+        raise CollectError(f"--resume: {out} was collected with different {', '.join(bad)}; use a new output_dir")
+    try:
+        ds = demo_dataset.resume(out, cfg.repo_id)
+    except (ValueError, FileNotFoundError) as e:
+        raise CollectError(f"--resume: {e}") from None
+    tally = report.load_tally(out)
+    _existing_counts(out, tally)
+    return ds, prov, tally
+
+
+def _existing_counts(root: Path, tally: report.Tally) -> None:
+    """Kept episodes and frames per object, from the dataset itself (authoritative after a crash)."""
+    try:
+        table = demo_dataset.episode_table(root)
+    except FileNotFoundError:  # no episode written yet
+        return
+    for o in tally.objects.values():
+        o.kept, o.frames = 0, 0
+    for name, group in table.groupby("object"):
+        t = tally.of(name)
+        t.kept, t.frames = len(group), int(group["length"].sum())
+
+
+def start_run(cfg: CollectConfig, prov: dict, command: str | None) -> dict:
+    return {
+        "command": command or f"collect(repo_id={cfg.repo_id!r})",
+        "started": datetime.now(UTC).isoformat(timespec="seconds"),
+        "episodes_per_object": cfg.episodes_per_object,
+        "max_rollouts_per_object": cfg.rollout_budget,
+        "num_envs": cfg.num_envs,
+        "seed_start": prov["next_env_seed"],
+    }
+
+
+def finish_run(cfg: CollectConfig, prov: dict, run: dict, tally: report.Tally, stats: CollectStats) -> None:
+    """Record the run (however it ended) in collection.json, then rewrite the yield report and the card."""
+    out = cfg.output_dir
+    run.update(
+        ended=datetime.now(UTC).isoformat(timespec="seconds"),
+        stop_reason=stats.stop_reason,
+        interrupted=stats.stop_reason != "done",
+        wall_s=stats.wall_s,
+        cpu_s=stats.cpu_s,
+        rollouts=stats.rollouts,
+        kept=stats.kept,
+        frames=stats.frames,
+        env_steps=stats.env_steps,
+    )
+    prov["runs"].append(run)
+    provenance.save(out, prov)
+    _write_report(out, cfg, prov, tally)
+    try:
+        from lerobot_blindgrasp.hub import cards
+
+        cards.write_card(out, cfg.repo_id)
+    except Exception as e:  # noqa: BLE001  (a card problem must not mask the collection's outcome)
+        log.warning("could not write the dataset card: %s", e)
+
+
+def _write_report(out: Path, cfg: CollectConfig, prov: dict, tally: report.Tally) -> Path:
+    runs = prov["runs"]
+    wall = sum(r["wall_s"] for r in runs)
+    cpu = sum(r["cpu_s"] for r in runs)
+    kept_now = sum(r["kept"] for r in runs)
+    return report.write_report(
+        out,
+        tally,
+        {
+            "repo_id": cfg.repo_id,
+            "teacher_sha256": prov["teacher_sha256"],
+            "stochastic": prov["stochastic"],
+            "curation": prov["curation"],
+            "episodes_per_object": cfg.episodes_per_object,
+            "max_rollouts_per_object": cfg.rollout_budget,
+            "runs": len(runs),
+            "wall_s": wall,
+            "cpu_s": cpu,
+            "demos_per_minute": 60.0 * kept_now / wall if wall else 0.0,
+            "demos_per_cpu_minute": 60.0 * kept_now / cpu if cpu else 0.0,
+            "object_order": list(prov["objects"]),
+        },
+    )
