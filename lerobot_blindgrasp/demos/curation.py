@@ -21,9 +21,9 @@ The unit is "N summed over 20 Hz samples" (200 N = 10 N*s of impulse), not an in
 The paper adds that the selection "emphasizes the grasp-and-lift phase rather than the prolonged holding": that is
 what the criteria select *for*, and the paper keeps the selected episodes as they are. Kept episodes are therefore
 whole by default, holding included: success needs a 1 s hold, and a student that never sees one does not learn to
-hold. `trim_to_success` (CLI `--trim-at-criteria`, off by default) instead ends a kept episode at the step where
-both criteria are first met. Acceptance does not depend on trimming. `--no-curation` (the "w/o curation" ablation)
-keeps every episode whole.
+hold. `trim_to_success` (CLI `--curation.trim_to_success=true`, off by default) instead ends a kept episode at the
+step where both criteria are first met. Acceptance does not depend on trimming. `enabled=False` (CLI
+`--curation.enabled=false`, the "w/o curation" ablation) keeps every episode whole.
 """
 
 from __future__ import annotations

@@ -1,7 +1,11 @@
 """Policy deployment on the gripper: LeRobot's rollout engine, with the fingertip forces kept in the policy input.
 
-    python -m lerobot_blindgrasp.robots.blindgrasp_gripper.rollout --strategy.type=base \\
+    blindgrasp-rollout --strategy.type=base \\
         --policy.path=<checkpoint> --robot="include robot_configs/blindgrasp_gripper.yaml" --fps=20 --duration=10
+
+(`python -m lerobot_blindgrasp.robots.blindgrasp_gripper.rollout` is the same.) It is a draccus CLI already:
+LeRobot's own `parser.wrap` over `RolloutConfig`, so `--help`, `--config_path` and dotted flags work as in
+`lerobot-rollout`.
 
 Same arguments and behaviour as `lerobot-rollout` (strategies, inference engines, datasets, Ctrl-C handling),
 because it is the same code: `RolloutConfig`, `build_rollout_context`, `create_strategy`. The one difference is
