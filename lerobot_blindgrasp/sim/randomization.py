@@ -36,10 +36,6 @@ class DomainRandomization:
     joint_noise_rad: float = spec.JOINT_NOISE_STD_RAD
     force_noise_n: float = spec.FORCE_NOISE_STD_N
 
-    def without_external_force(self) -> "DomainRandomization":
-        """Deprecated spelling of `EVAL_DR` (for PAPER_DR); kept until the demo loop and its test use EVAL_DR."""
-        return replace(self, external_force=False)
-
 
 PAPER_DR = DomainRandomization()
 # The paper's randomization and sensor noise without the pushes: the pushes are a training-time robustness aid, and
