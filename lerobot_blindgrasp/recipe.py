@@ -106,6 +106,11 @@ def demos_collected(root: Path) -> bool:
     return (root / "yield_report.json").exists() and (root / "meta" / "info.json").exists()
 
 
+def demos_empty(root: Path) -> bool:
+    """A finished collection that kept no episode (the collector exits with EXIT_EMPTY): nothing to train on."""
+    return demos_collected(root) and presets.dataset_frames(root) == 0
+
+
 def checkpoint(student: Path) -> Path:
     return student / "checkpoints" / "last" / "pretrained_model"
 
@@ -138,6 +143,10 @@ def table_v(p: presets.Preset, out: Path, stage: str, seed: int = spec.TEACHER_T
         if stage == "demos" and not demos_collected(root):
             cmds.append(collect(p, teacher_dir(row.teacher), root, repo, demo_seed(seed),
                                 curate=row.curated_demos, stochastic=row.stochastic_demos))
+        if stage in ("students", "evals") and demos_empty(root):
+            # A row without demos has no student; the script goes on with the other rows and says so.
+            cmds.append(["#", f"{row.name}: skipped, {root} kept no episode"])
+            continue
         if stage == "students" and not checkpoint(student).exists():
             if not demos_collected(root):
                 raise ValueError(f"{root} is not collected yet: run the demos stage first")
@@ -150,4 +159,5 @@ def table_v(p: presets.Preset, out: Path, stage: str, seed: int = spec.TEACHER_T
 
 
 def shell_lines(cmds: list[list[str]]) -> str:
-    return "\n".join(shlex.join(c) for c in cmds)
+    """One shell line per command; a ["#", text] entry is a comment line."""
+    return "\n".join(f"# {c[1]}" if c[0] == "#" else shlex.join(c) for c in cmds)

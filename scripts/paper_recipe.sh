@@ -20,6 +20,8 @@ OUT="${1:-$ROOT/outputs/table_v_$PRESET}"
 mkdir -p "$OUT"
 device_flag=()
 [ -n "${DEVICE:-}" ] && device_flag=(--device="$DEVICE")
+# The collector's exit status for "ran, but kept no episode": that row then has no student (said in the log).
+EMPTY="$(python -c 'from lerobot_blindgrasp.demos.collect import EXIT_EMPTY; print(EXIT_EMPTY)')"
 
 for stage in teachers teacher_evals demos students evals; do
   cmds="$(blindgrasp-pipeline --preset="$PRESET" --output_dir="$OUT" "${device_flag[@]}" --print_commands="$stage")"
@@ -27,7 +29,11 @@ for stage in teachers teacher_evals demos students evals; do
   for cmd in "${lines[@]}"; do
     [ -z "$cmd" ] && continue
     echo "+ $cmd"
-    eval "$cmd"
+    rc=0
+    eval "$cmd" || rc=$?
+    if [ "$rc" -ne 0 ] && ! { [ "$stage" = demos ] && [ "$rc" -eq "$EMPTY" ]; }; then
+      exit "$rc"
+    fi
   done
 done
 echo "Table V runs done under $OUT: teacher evals in *_eval/eval.json, student evals in eval_*/eval_info.json"

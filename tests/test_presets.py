@@ -142,6 +142,15 @@ def test_table_v_commands_for_the_recipe(tmp_path):
     assert "--deterministic" in demos[1] and "--no-curation" in demos[2] and "--no-curation" in demos[3]
     with pytest.raises(ValueError, match="demos stage first"):
         recipe.table_v(p, tmp_path, "students")
+    # A row whose collection kept nothing has no student: a comment line, and the other rows go on.
+    for row in presets.TABLE_V.values():
+        root = tmp_path / f"demos_{row.name}"
+        (root / "meta").mkdir(parents=True)
+        (root / "yield_report.json").write_text("{}")
+        (root / "meta" / "info.json").write_text(json.dumps({"total_frames": 0 if row.name == "proposed" else 50}))
+    lines = recipe.shell_lines(recipe.table_v(p, tmp_path, "students")).splitlines()
+    assert lines[0].startswith("# proposed: skipped") and len(lines) == 4
+    assert all(line.startswith("lerobot-train ") for line in lines[1:])
 
 
 def test_report_does_not_import_the_pipeline():
