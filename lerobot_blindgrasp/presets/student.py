@@ -11,9 +11,11 @@ frame, with its 30-step context), so the step counts exist only after the demo s
     --policy.scheduler_constant_steps = constant_lr_epochs * steps_per_epoch
 
 The paper's "89,500" curated demonstrations are episodes by its own wording ("demonstrations", 18 objects x ~5000
-rollouts of 5 s); nothing here assumes either reading, the collected dataset decides. robomimic, which the paper
-trained with, can also define an epoch as a fixed 100 steps (`epoch_every_n_steps` in its BC-Transformer
-template); the paper does not say which it used, and a pass over the data is what "epoch" means in LeRobot.
+rollouts of 5 s); nothing here assumes either reading, the collected dataset decides. What that costs: 5000 whole
+100-step episodes per object are ~9 M frames, 35,157 steps per epoch and ~70 M steps for 2000 epochs, far beyond
+the paper's "about 3 hours" on one RTX 5080. robomimic, which the paper trained with, defines an epoch as a fixed
+100 steps in its BC-Transformer template (`epoch_every_n_steps`; 2000 epochs = 200 k steps, which would fit 3 h);
+the paper does not say which it used. We follow the pass-over-the-data reading, LeRobot's, and say so here.
 """
 
 from __future__ import annotations
