@@ -18,7 +18,8 @@ Stages, each a real CLI run as a subprocess (its command and log are kept in <ou
 4. the student in sim (`lerobot-eval --env.type=blindgrasp`) and the teacher on the *same* start states
    (`blindgrasp-eval-teacher --seed` = lerobot-eval's `--seed`; see spec.eval_env_seed);
 5. `report.md` with PNG plots: which teacher, teacher vs student success per object with 95 % Wilson intervals
-   and paired counts, learning curves, demo yield, and the commands to go bigger.
+   and paired counts, learning curves, demo yield, the preset's deviations from the paper, and the commands to
+   go bigger.
 A stage whose output is complete is skipped, so re-running after an interruption continues where it stopped.
 Env seeds: teacher training from `--seed`, demos from the demo range, evaluation from the eval range
 (`spec.SEED_RANGES`), so no start state is used twice.
