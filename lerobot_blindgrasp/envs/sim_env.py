@@ -53,7 +53,7 @@ def _refuse_teacher_as_policy() -> None:
     if path and (Path(path) / "teacher_config.json").is_file() and not (Path(path) / "config.json").is_file():
         raise ValueError(
             f"--policy.path={path} is a blindgrasp PPO teacher, not a LeRobot policy; evaluate it with "
-            f"`blindgrasp-eval-teacher {path}` (the same start states as lerobot-eval --seed)"
+            f"`blindgrasp-eval-teacher --teacher={path}` (the same start states as lerobot-eval --seed)"
         )
 
 

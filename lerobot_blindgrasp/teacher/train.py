@@ -113,7 +113,7 @@ def train(cfg: TrainTeacherConfig) -> Path:
         old = json.loads(cfg_path.read_text())
         for key in ("preset", "variant", "num_envs", "runner", "reward", "object_weights"):
             if old.get(key) != config[key]:
-                raise SystemExit(f"{out} holds a run with a different {key!r}; use another --output-dir")
+                raise SystemExit(f"{out} holds a run with a different {key!r}; use another --output_dir")
     elif lead:
         cfg_path.write_text(json.dumps(config, indent=2))
 
