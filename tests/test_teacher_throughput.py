@@ -55,7 +55,7 @@ def test_bench_teacher_reports_collection_update_and_raw_physics():
          "--num-envs", "18", "--iterations", "1", "--json"],
         capture_output=True, text=True, timeout=300, check=True,
     ).stdout
-    r = json.loads(out[out.index("{"):])
+    r = json.loads(out)  # stdout holds only the JSON (rsl-rl's model printout goes to stderr)
     assert r["num_envs"] == 18 and r["hidden_dims"] == [128, 64]
     assert r["collect_s_per_it"] > 0 and r["update_s_per_it"] > 0 and r["raw_control_steps_per_s"] > 0
     assert r["update_over_collect"] == pytest.approx(r["update_s_per_it"] / r["collect_s_per_it"])

@@ -15,7 +15,9 @@ side by side without editing a preset.
 
 from __future__ import annotations
 
+import contextlib
 import resource
+import sys
 import time
 from dataclasses import dataclass, replace
 
@@ -97,7 +99,9 @@ def run(cfg: BenchTeacherConfig) -> dict:
     vec = RslRlGraspEnv(env, device=device)
     runner_cfg = preset.runner_cfg()
     steps_per_it = runner_cfg["num_steps_per_env"]
-    runner = OnPolicyRunner(vec, runner_cfg, log_dir=None, device=device)  # no log dir: nothing written
+    # rsl-rl prints the models on construction; with --json=true stdout must hold only the JSON.
+    with contextlib.redirect_stdout(sys.stderr):
+        runner = OnPolicyRunner(vec, runner_cfg, log_dir=None, device=device)  # no log dir: nothing written
     update_times: list[float] = []
     inner_update = runner.alg.update
 
