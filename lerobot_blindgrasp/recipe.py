@@ -49,24 +49,24 @@ def teacher_train(p: presets.Preset, out: Path, seed: int,
 
 def teacher_eval(p: presets.Preset, teacher_dir: Path, dest: Path, eval_seed: int) -> list[str]:
     e = p.evaluation
-    return ["blindgrasp-eval-teacher", str(teacher_dir), "--episodes", str(e.episodes_per_object), "--objects",
-            ",".join(objects_of(e.task)), "--seed", str(eval_seed), "--modes", ",".join(e.teacher_modes),
-            "--out", str(dest)]
+    return ["blindgrasp-eval-teacher", f"--teacher={teacher_dir}", f"--episodes={e.episodes_per_object}",
+            f"--objects={','.join(objects_of(e.task))}", f"--seed={eval_seed}",
+            f"--modes={','.join(e.teacher_modes)}", f"--output_dir={dest}"]
 
 
 def collect(p: presets.Preset, teacher: Path, root: Path, repo_id: str, first_seed: int, *, curate: bool = True,
             stochastic: bool = True) -> list[str]:
     d = p.demos
-    cmd = ["blindgrasp-collect-demos", "--teacher", str(teacher), "--out", str(root), "--repo-id", repo_id,
-           "--episodes-per-object", str(d.episodes_per_object),
-           "--max-rollouts-per-object", str(d.max_rollouts_per_object),
-           "--num-envs", str(d.num_envs), "--seed", str(first_seed), "--no-progress"]
+    cmd = ["blindgrasp-collect-demos", f"--teacher={teacher}", f"--output_dir={root}", f"--repo_id={repo_id}",
+           f"--episodes_per_object={d.episodes_per_object}",
+           f"--max_rollouts_per_object={d.max_rollouts_per_object}",
+           f"--num_envs={d.num_envs}", f"--seed={first_seed}", "--progress=false"]
     if not stochastic:
-        cmd.append("--deterministic")
+        cmd.append("--stochastic=false")
     if not curate:
-        cmd.append("--no-curation")
+        cmd.append("--curation.enabled=false")
     if root.exists():
-        cmd.append("--resume")
+        cmd.append("--resume=true")
     return cmd
 
 

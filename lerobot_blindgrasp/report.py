@@ -124,7 +124,7 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
         "## Success per object (sim)",
         "",
         f"Student: `lerobot-eval --env.type=blindgrasp --env.task={record['preset']['evaluation']['task']} "
-        f"--seed={seed}`; teacher: `blindgrasp-eval-teacher --seed {seed}`. Both ran the same {n_ep} start states "
+        f"--seed={seed}`; teacher: `blindgrasp-eval-teacher --seed={seed}`. Both ran the same {n_ep} start states "
         "per object (evaluation indices from the seed, each object its own draws, none used in teacher training "
         "or demo collection). Success = lifted ≥ 1.5 cm and held ≥ 1 s within 10 s; the paper's randomization and "
         "noise, no pushes. Rates with their 95 % Wilson interval and counts. *paired* = start states on which "

@@ -5,4 +5,4 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$ROOT/scripts/bootstrap.sh"
 cd "$ROOT"
-exec blindgrasp-pipeline --preset quick "$@"
+exec blindgrasp-pipeline --preset=quick "$@"

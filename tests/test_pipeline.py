@@ -24,7 +24,7 @@ def test_smoke_pipeline_runs_every_stage_and_writes_the_report(tmp_path):
     assert "lerobot-train" in record["stages"]["student"]["command"]
     assert "lerobot-eval" in record["stages"]["student_eval"]["command"]
     # Teacher and student ran the same start states: the same evaluation seed in both commands.
-    assert f"--seed {spec.EVAL_SEED}" in record["stages"]["teacher_eval"]["command"]
+    assert f"--seed={spec.EVAL_SEED}" in record["stages"]["teacher_eval"]["command"]
     assert f"--seed={spec.EVAL_SEED}" in record["stages"]["student_eval"]["command"]
     assert "--policy.device=cpu" in record["stages"]["student"]["command"]
     report = (out / "report.md").read_text()

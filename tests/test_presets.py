@@ -138,8 +138,10 @@ def test_table_v_commands_for_the_recipe(tmp_path):
     teachers = recipe.table_v(p, tmp_path, "teachers")
     assert [c[-1] for c in teachers[1:]] == ["--no_incentive=true", "--student_obs=true"]
     demos = recipe.table_v(p, tmp_path, "demos")
-    assert len(demos) == 4 and len({c[c.index("--seed") + 1] for c in demos}) == 1  # the same start states
-    assert "--deterministic" in demos[1] and "--no-curation" in demos[2] and "--no-curation" in demos[3]
+    seeds = {a for c in demos for a in c if a.startswith("--seed=")}
+    assert len(demos) == 4 and len(seeds) == 1  # the same start states for every row
+    assert "--stochastic=false" in demos[1]
+    assert "--curation.enabled=false" in demos[2] and "--curation.enabled=false" in demos[3]
     with pytest.raises(ValueError, match="demos stage first"):
         recipe.table_v(p, tmp_path, "students")
     # A row whose collection kept nothing has no student: a comment line, and the other rows go on.
