@@ -21,6 +21,7 @@ import numpy as np  # noqa: E402
 
 from lerobot_blindgrasp import rates  # noqa: E402
 from lerobot_blindgrasp.envs.sim_env import object_for_task_id  # noqa: E402
+from lerobot_blindgrasp.grasp_strips import write_grasp_strips  # noqa: E402
 from lerobot_blindgrasp.plots import plot_curves, teacher_curves  # noqa: E402
 from lerobot_blindgrasp.sim import objects  # noqa: E402
 
@@ -150,6 +151,10 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
                  f"**{rates.format_rate(*rates.count(pooled['stu']), digits=1)}** | "
                  f"**{p['both']} / {p['teacher_only']} / {p['student_only']}** |")
     lines.append("")
+    strip = write_grasp_strips(eval_info, figs / "grasp_strips.png")
+    if strip is not None:
+        lines += ["Successful student grasps, one rendered lerobot-eval episode per shape (frames across the 10 s "
+                  "episode; the videos are in `student_eval/videos/`):", "", "![grasps](figures/grasp_strips.png)", ""]
 
     # --- learning curves
     lines += ["## Learning curves", ""]
