@@ -117,7 +117,7 @@ PRESETS: dict[str, Preset] = {
             student=StudentStage(size="cpu", batch_size=128, steps=1200, threads=2),
             evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",)),
             deviations=(
-                "the shipped teacher (models/teacher_cpu, trained with the cpu teacher settings), no teacher "
+                "the shipped teacher (models/teacher_cpu_v3, trained with the cpu teacher settings), no teacher "
                 "training",
                 "40 curated episodes per object (at most 400 rollouts) instead of ~5000",
                 "student size cpu (3 layers x 128, 4 heads, head [256, 256]) instead of 6 x 512",
