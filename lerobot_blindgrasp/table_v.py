@@ -1,0 +1,89 @@
+"""Table V (the paper's ablations) from a recipe output folder: per-object success of every row, with intervals.
+
+    python -m lerobot_blindgrasp.table_v OUT_DIR      # after `bash scripts/paper_recipe.sh OUT_DIR`
+
+Reads what `scripts/paper_recipe.sh` (`blindgrasp-pipeline --print_commands=STAGE`) leaves in OUT_DIR: each student
+row's lerobot-eval (`eval_<row>/eval_info.json`), the RL w/ o_t teacher's own eval (`<teacher>_eval/eval.json`,
+deterministic) and each row's demo yield (`demos_<row>/yield_report.json`). Rows not run yet are listed as missing.
+All rows are evaluated on the same start states (the preset's eval seed), so the per-object columns are paired.
+Writes `OUT_DIR/table_v.md` and `OUT_DIR/table_v.png` (bar chart per object).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from lerobot_blindgrasp import rates
+from lerobot_blindgrasp.presets import TABLE_V
+from lerobot_blindgrasp.sim import objects
+
+
+def row_successes(out: Path, name: str) -> dict[str, list[bool]] | None:
+    """Object -> episode successes of one Table V row, or None if that row has not been evaluated."""
+    from lerobot_blindgrasp.report import student_successes
+
+    row = TABLE_V[name]
+    if row.student:
+        path = out / f"eval_{name}" / "eval_info.json"
+        return student_successes(json.loads(path.read_text())) if path.exists() else None
+    path = out / f"{row.teacher}_eval" / "eval.json"
+    if not path.exists():
+        return None
+    per_object = json.loads(path.read_text())["modes"]["deterministic"]["per_object"]
+    return {o: r["successes"] for o, r in per_object.items()}
+
+
+def demo_budget(out: Path, name: str) -> str:
+    path = out / f"demos_{name}" / "yield_report.json"
+    if not TABLE_V[name].student:
+        return "no demos (PPO on o_t)"
+    if not path.exists():
+        return "not collected"
+    t = json.loads(path.read_text())["total"]
+    return f"{t['kept']} episodes, {t['frames']} frames (from {t['rollouts']} rollouts)"
+
+
+def write_table_v(out: Path) -> Path:
+    from lerobot_blindgrasp.report import _bar_chart
+
+    results = {name: row_successes(out, name) for name in TABLE_V}
+    done = {n: r for n, r in results.items() if r}
+    names = [o for o in objects.PAPER_OBJECTS if any(o in r for r in done.values())]
+    lines = ["# Table V in simulation", "",
+             f"Rows from `{out}`; every row on the same start states, 95 % Wilson intervals and counts.", "",
+             "| row | demos |", "|---|---|"]
+    lines += [f"| {TABLE_V[n].label} | {demo_budget(out, n)} |" for n in TABLE_V]
+    lines += ["", "| object | " + " | ".join(TABLE_V[n].label for n in done) + " |",
+              "|---|" + "---:|" * len(done)]
+    for o in names:
+        lines.append(f"| {o} | " + " | ".join(rates.format_rate(*rates.count(done[n].get(o, []))) for n in done)
+                     + " |")
+    medium = [o for o in names if o.endswith("_medium")]
+    for label, subset in ((f"{len(medium)} medium", medium), (f"all {len(names)}", names)):
+        cells = [rates.format_rate(*rates.count([x for o in subset for x in done[n].get(o, [])]), digits=1)
+                 for n in done]
+        lines.append(f"| **{label}** | " + " | ".join(f"**{c}**" for c in cells) + " |")
+    missing = [TABLE_V[n].label for n in TABLE_V if n not in done]
+    if missing:
+        lines += ["", "Not run yet: " + ", ".join(missing) + "."]
+    lines += ["", "![Table V](table_v.png)", ""]
+    if done:
+        series = {TABLE_V[n].label: [100 * sum(r.get(o, [])) / max(1, len(r.get(o, []))) for o in names]
+                  for n, r in done.items()}
+        _bar_chart(out / "table_v.png", names, series, "Table V in simulation: success per object", "success (%)")
+    path = out / "table_v.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = sys.argv[1:] if argv is None else argv
+    if len(args) != 1:
+        raise SystemExit("usage: python -m lerobot_blindgrasp.table_v OUT_DIR")
+    print(write_table_v(Path(args[0])))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,37 @@
+"""Table V from a recipe output folder: rows paired per object, intervals, missing rows named."""
+
+import json
+
+from lerobot_blindgrasp import table_v
+from lerobot_blindgrasp.presets import TABLE_V
+from lerobot_blindgrasp.sim import objects
+
+
+def _student_eval(path, per_object):
+    names = list(objects.CATALOGUE)
+    tasks = [{"task_group": "blindgrasp", "task_id": names.index(o), "metrics": {"successes": s, "video_paths": []}}
+             for o, s in per_object.items()]
+    path.mkdir(parents=True)
+    (path / "eval_info.json").write_text(json.dumps({"per_task": tasks}))
+
+
+def test_table_v_reads_student_and_rl_rows_and_names_the_missing(tmp_path):
+    _student_eval(tmp_path / "eval_proposed", {"sphere_medium": [True, True, False, True],
+                                               "capsule_small": [False, False, False, False]})
+    _student_eval(tmp_path / "eval_wo_curation", {"sphere_medium": [True, False, False, False],
+                                                  "capsule_small": [False, False, False, False]})
+    (tmp_path / "demos_proposed").mkdir()
+    (tmp_path / "demos_proposed" / "yield_report.json").write_text(
+        json.dumps({"total": {"kept": 80, "frames": 7000, "rollouts": 160}}))
+    rl = TABLE_V["rl_w_o_t"].teacher
+    (tmp_path / f"{rl}_eval").mkdir()
+    (tmp_path / f"{rl}_eval" / "eval.json").write_text(json.dumps({"modes": {"deterministic": {"per_object": {
+        "sphere_medium": {"successes": [False] * 4}, "capsule_small": {"successes": [False] * 4}}}}}))
+
+    md = table_v.write_table_v(tmp_path).read_text()
+    assert (tmp_path / "table_v.png").stat().st_size > 1000
+    assert "| sphere_medium | 75 % [30-95] (3/4) | 25 % [5-70] (1/4) | 0 % [0-49] (0/4) |" in md
+    assert "| **all 2** | **37.5 % [13.7-69.4] (3/8)** |" in md  # proposed, pooled over both objects
+    assert "| **1 medium** | **75.0 % [30.1-95.4] (3/4)** |" in md
+    assert "80 episodes, 7000 frames (from 160 rollouts)" in md and "no demos (PPO on o_t)" in md
+    assert "Not run yet: Student w/o Stochastic Teacher, Student w/o r_i." in md
