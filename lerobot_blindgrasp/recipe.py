@@ -94,7 +94,7 @@ def student_eval(p: presets.Preset, ckpt: Path, dest: Path, eval_seed: int,
             f"--policy.device={device or p.student.device}",
             # In-process envs: on a few cores, one worker process per env only adds start-up and contention.
             f"--eval.use_async_envs={'true' if e.async_envs else 'false'}",
-            f"--output_dir={dest}", f"--seed={eval_seed}"]
+            f"--env.render_stride={e.render_stride}", f"--output_dir={dest}", f"--seed={eval_seed}"]
 
 
 def teacher_trained(run: Path) -> bool:

@@ -122,6 +122,25 @@ def test_render_gives_rgb_frames_of_the_scene():
     assert big.render().shape == (480, 640, 3)
 
 
+def test_render_stride_repeats_frames_between_renders_and_starts_fresh_each_episode():
+    with pytest.raises(ValueError, match="render_stride"):
+        gym_env.make_env("cuboid_a_medium", render_stride=0)
+    env = gym_env.make_env("cuboid_a_medium", render_stride=3)
+    closing = np.full(spec.NUM_JOINTS, 0.5, dtype=np.float32)
+    env.reset(seed=0)
+    frames = [env.render()]
+    for _ in range(4):
+        env.step(closing)
+        frames.append(env.render())
+    # steps 0-2 show the step-0 frame, step 3 a new one (the fingers have moved), step 4 repeats it
+    assert frames[1] is frames[0] and frames[2] is frames[0]
+    assert np.abs(frames[3].astype(int) - frames[0]).mean() > 0.5 and frames[4] is frames[3]
+    env.reset(seed=0)  # a new episode renders at once, not the last frame of the previous one
+    assert np.array_equal(env.render(), frames[0]) and env.render() is not frames[0]
+    # the lerobot-eval config passes it through
+    assert BlindGraspEnvConfig(task="cuboid_a_medium", render_stride=4).gym_kwargs["render_stride"] == 4
+
+
 def test_seed_makes_the_episode_reproducible():
     env = gym_env.make_env("capsule_medium")
     actions = np.random.default_rng(0).uniform(spec.JOINT_LOWER, spec.JOINT_UPPER, (15, 9)).astype(np.float32)

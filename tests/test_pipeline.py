@@ -66,7 +66,7 @@ def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_state
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
     teacher = tmp_path / "teacher"
-    shutil.copytree(default_teacher(), teacher)
+    shutil.copytree(default_teacher(), teacher, ignore=shutil.ignore_patterns("eval", "run"))  # weights and config
     preset = pipeline.PRESETS["quick"]
     objs = recipe.objects_of(preset.evaluation.task)
     rec = {"checkpoint_sha256": TeacherPolicy(teacher).sha256, "sim_fingerprint": sim_fingerprint(),

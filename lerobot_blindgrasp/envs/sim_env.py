@@ -73,6 +73,8 @@ class BlindGraspEnvConfig(EnvConfig):
     render_width: int = 320
     render_height: int = 240
     render_shadows: bool = False
+    # A new video frame every N control steps (repeated in between): N x cheaper videos, motion at 20/N Hz.
+    render_stride: int = 1
     features: dict[str, PolicyFeature] = field(default_factory=spaces.env_features)
     features_map: dict[str, str] = field(default_factory=spaces.env_features_map)
 
@@ -91,6 +93,7 @@ class BlindGraspEnvConfig(EnvConfig):
             "render_width": self.render_width,
             "render_height": self.render_height,
             "render_shadows": self.render_shadows,
+            "render_stride": self.render_stride,
             "disable_env_checker": self.disable_env_checker,
         }
 

@@ -54,6 +54,9 @@ class EvalStage:
     # again and is also in the teacher's own card.
     teacher_modes: tuple[str, ...] = ("deterministic", "stochastic")
     async_envs: bool = False  # lerobot-eval worker processes: worth it only with many cores
+    # lerobot-eval renders 10 episodes per task at every step; a new frame every N steps makes that N x cheaper
+    # (~12 ms a frame with a software renderer was ~80 % of the quick preset's eval, docs/results/quick_pipeline.md)
+    render_stride: int = 1
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -100,7 +103,7 @@ PRESETS: dict[str, Preset] = {
                             min_curated_episodes=90),
             # lerobot-train reads ~2 ms per 30-frame sample here: 5000 steps at batch 256 is about an hour.
             student=StudentStage(size="cpu", batch_size=256, steps=5_000, threads=2),
-            evaluation=EvalStage(episodes_per_object=20),
+            evaluation=EvalStage(episodes_per_object=20, render_stride=4),
             deviations=(
                 "40 curated episodes per object (at most 400 rollouts) instead of ~5000",
                 "student size cpu (3 layers x 128, 4 heads, head [256, 256]) instead of 6 x 512",
@@ -115,7 +118,7 @@ PRESETS: dict[str, Preset] = {
                             min_curated_episodes=18),
             # 1200 steps at batch 128 is the recipe of docs/results/student_cpu.md (~8 min on 2 idle cores).
             student=StudentStage(size="cpu", batch_size=128, steps=1200, threads=2),
-            evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",)),
+            evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",), render_stride=4),
             deviations=(
                 "the shipped teacher (models/teacher_cpu_v3, trained with the cpu teacher settings), no teacher "
                 "training",

@@ -68,6 +68,7 @@ class BlindGraspGymEnv(gym.Env):
         render_height: int = 240,
         render_shadows: bool = False,
         camera: str = "side",
+        render_stride: int = 1,
     ):
         self.object = objects.get_object(object_name)  # raises on unknown names, listing the known ones
         if render_mode not in (None, *self.metadata["render_modes"]):
@@ -85,6 +86,14 @@ class BlindGraspGymEnv(gym.Env):
         # Shadows cost ~4x per frame on a CPU renderer; eval videos are for a glance, the demo turns them on.
         self.render_shadows = bool(render_shadows)
         self.camera = camera
+        # A new frame every `render_stride` control steps, the last one repeated in between. lerobot-eval renders
+        # the first 10 episodes of every task at every step (hard-coded); with a software GL renderer a frame costs
+        # ~12 ms, most of a CPU eval's time. Videos keep their length and 20 fps; motion updates at 20/stride Hz.
+        if int(render_stride) < 1:
+            raise ValueError(f"render_stride must be >= 1, got {render_stride}")
+        self.render_stride = int(render_stride)
+        self._frame: np.ndarray | None = None
+        self._frame_step = 0
         self.observation_space = spaces.observation_space()
         self.action_space = spaces.action_space()
         # Read by lerobot-eval (`env.call("task_description")`); the dataset's task string for this object.
@@ -118,6 +127,7 @@ class BlindGraspGymEnv(gym.Env):
         )
         obs = self._sim.reset()
         self._done = False
+        self._frame = None
         return self._obs(obs), {"is_success": False, "eval_seed": self.eval_seed, "env_seed": self.env_seed}
 
     def step(self, action):
@@ -151,6 +161,9 @@ class BlindGraspGymEnv(gym.Env):
             raise RuntimeError("this env was created with render_mode=None; pass render_mode='rgb_array'")
         if self._sim is None:
             raise RuntimeError("call reset() before render()")
+        step = int(self._sim.episode_length[0])
+        if self._frame is not None and step - self._frame_step < self.render_stride:
+            return self._frame
         model, data = self._sim.mj_model_data(0)
         if self._renderer is None:
             self._renderer = self._make_renderer(model)
@@ -158,7 +171,8 @@ class BlindGraspGymEnv(gym.Env):
         # and geometry (randomization changes only friction, mass and gains), so that model draws this data.
         self._renderer.update_scene(data, camera=self.camera)
         self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.render_shadows
-        return self._renderer.render().copy()
+        self._frame, self._frame_step = self._renderer.render().copy(), step
+        return self._frame
 
     def close(self):
         if self._renderer is not None:
