@@ -86,7 +86,8 @@ PRESETS: dict[str, Preset] = {
             # collector's default) lets a 5 %-yield object still reach it.
             demos=DemoStage(episodes_per_object=5000, max_rollouts_per_object=100_000, num_envs=9000,
                             min_curated_episodes=1000),
-            student=StudentStage(size="paper", batch_size=256, epochs=2000, constant_lr_epochs=100, device="cuda"),
+            student=StudentStage(size="paper", batch_size=256, epochs=2000, constant_lr_epochs=100, device="cuda",
+                                 num_workers=4),
             # Table V is on the six in-distribution objects, the medium training shapes.
             evaluation=EvalStage(episodes_per_object=50, task="medium", async_envs=True),
             deviations=(
@@ -102,7 +103,7 @@ PRESETS: dict[str, Preset] = {
             demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=360,
                             min_curated_episodes=90),
             # lerobot-train reads ~2 ms per 30-frame sample here: 5000 steps at batch 256 is about an hour.
-            student=StudentStage(size="cpu", batch_size=256, steps=5_000, threads=2),
+            student=StudentStage(size="cpu", batch_size=256, steps=5_000, threads=1, num_workers=1),
             evaluation=EvalStage(episodes_per_object=20, render_stride=4),
             deviations=(
                 "40 curated episodes per object (at most 400 rollouts) instead of ~5000",
@@ -117,7 +118,7 @@ PRESETS: dict[str, Preset] = {
             demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720,
                             min_curated_episodes=18),
             # 1200 steps at batch 128 is the recipe of docs/results/student_cpu.md (~8 min on 2 idle cores).
-            student=StudentStage(size="cpu", batch_size=128, steps=1200, threads=2),
+            student=StudentStage(size="cpu", batch_size=128, steps=1200, threads=1, num_workers=1),
             evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",), render_stride=4),
             deviations=(
                 "the shipped teacher (models/teacher_cpu_v3, trained with the cpu teacher settings), no teacher "

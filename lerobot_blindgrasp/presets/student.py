@@ -42,6 +42,10 @@ class StudentStage:
     epochs: int | None = None  # passes over the collected dataset (paper); steps then follow from its frames
     constant_lr_epochs: int | None = None  # LR constant this many epochs, then linear decay (Table IV)
     threads: int = 1  # OMP threads of lerobot-train (nothing else runs during that stage)
+    # lerobot-train's data-loader processes. Reading a 30-frame window costs ~2.8 ms a sample here, longer than the
+    # cpu-size update: one loader process next to one torch thread overlaps the two, 1.5x faster than loading
+    # in the training process with 2 torch threads on 2 cores (same loss curve; docs/results/quick_pipeline.md).
+    num_workers: int = 0
     device: str = "cpu"  # student training and eval; the pipeline's --device overrides
 
     def __post_init__(self):
