@@ -113,9 +113,11 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     eval_info = json.loads((out / "student_eval" / "eval_info.json").read_text())
     stu = student_successes(eval_info)
     names = [n for n in objects.PAPER_OBJECTS if n in stu] + [n for n in stu if n not in objects.PAPER_OBJECTS]
+    # The quick preset evaluates the teacher deterministically only: no empty stochastic column then.
+    teacher_cols = {"teacher det.": t_det, **({"teacher stoch.": t_sto} if t_sto else {})}
     series = {
-        "teacher (deterministic)": [100 * np.mean(t_det.get(n) or [0]) for n in names],
-        "teacher (stochastic)": [100 * np.mean(t_sto.get(n) or [0]) for n in names],
+        **{label.replace("det.", "(deterministic)").replace("stoch.", "(stochastic)"):
+           [100 * np.mean(col.get(n) or [0]) for n in names] for label, col in teacher_cols.items()},
         "student (lerobot-eval)": [100 * np.mean(stu[n] or [0]) for n in names],
     }
     _bar_chart(figs / "success_per_object.png", names, series, "Sim success per object", "success (%)")
@@ -133,22 +135,24 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
         "",
         "![success](figures/success_per_object.png)",
         "",
-        "| object | teacher det. | teacher stoch. | student | paired both / teacher only / student only |",
-        "|---|---:|---:|---:|---:|",
+        "| object | " + " | ".join(teacher_cols) + " | student | paired both / teacher only / student only |",
+        "|---|" + "---:|" * (len(teacher_cols) + 2),
     ]
-    pooled = {"det": [], "sto": [], "stu": []}
+    pooled = {label: [] for label in teacher_cols}
+    pooled_student: list[bool] = []
     for n in names:
-        det, sto, st = t_det.get(n, []), t_sto.get(n, []), stu[n]
-        pooled["det"] += det
-        pooled["sto"] += sto
-        pooled["stu"] += st
-        p = paired_counts(det, st)
-        lines.append(f"| {n} | {rates.format_rate(*rates.count(det))} | {rates.format_rate(*rates.count(sto))} | "
-                     f"{rates.format_rate(*rates.count(st))} | {p['both']} / {p['teacher_only']} / {p['student_only']} |")
-    p = paired_counts(pooled["det"], pooled["stu"])
-    lines.append(f"| **all {len(names)}** | **{rates.format_rate(*rates.count(pooled['det']), digits=1)}** | "
-                 f"**{rates.format_rate(*rates.count(pooled['sto']), digits=1)}** | "
-                 f"**{rates.format_rate(*rates.count(pooled['stu']), digits=1)}** | "
+        cells = []
+        for label, col in teacher_cols.items():
+            pooled[label] += col.get(n, [])
+            cells.append(rates.format_rate(*rates.count(col.get(n, []))))
+        pooled_student += stu[n]
+        p = paired_counts(t_det.get(n, []), stu[n])
+        lines.append(f"| {n} | " + " | ".join(cells) + f" | {rates.format_rate(*rates.count(stu[n]))} | "
+                     f"{p['both']} / {p['teacher_only']} / {p['student_only']} |")
+    p = paired_counts([x for n in names for x in t_det.get(n, [])], pooled_student)
+    cells = [f"**{rates.format_rate(*rates.count(v), digits=1)}**" for v in pooled.values()]
+    lines.append(f"| **all {len(names)}** | " + " | ".join(cells) + " | "
+                 f"**{rates.format_rate(*rates.count(pooled_student), digits=1)}** | "
                  f"**{p['both']} / {p['teacher_only']} / {p['student_only']}** |")
     lines.append("")
     strip = write_grasp_strips(eval_info, figs / "grasp_strips.png")
