@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 import matplotlib
 
 matplotlib.use("Agg")
@@ -47,3 +49,17 @@ def plot_curves(path: Path, curves: dict, title: str) -> None:
     plt.close(fig)
 
 
+def bar_chart(path: Path, names: list[str], series: dict[str, list[float]], title: str, ylabel: str) -> None:
+    x = np.arange(len(names))
+    w = 0.8 / max(1, len(series))
+    fig, ax = plt.subplots(figsize=(max(7, 0.55 * len(names) + 2), 4))
+    for i, (label, vals) in enumerate(series.items()):
+        ax.bar(x + (i - (len(series) - 1) / 2) * w, vals, w, label=label)
+    ax.set_xticks(x, [n.replace("_", " ") for n in names], rotation=60, ha="right", fontsize=8)
+    ax.set_ylabel(ylabel)
+    ax.set_ylim(0, 100)  # every chart here is a percentage; a fixed axis keeps all-zero charts readable
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -13,17 +13,13 @@ import json
 import re
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from lerobot_blindgrasp import rates  # noqa: E402
-from lerobot_blindgrasp.envs.sim_env import object_for_task_id  # noqa: E402
-from lerobot_blindgrasp.grasp_strips import write_grasp_strips  # noqa: E402
-from lerobot_blindgrasp.plots import plot_curves, teacher_curves  # noqa: E402
-from lerobot_blindgrasp.sim import objects  # noqa: E402
+from lerobot_blindgrasp import rates
+from lerobot_blindgrasp.envs.sim_env import object_for_task_id
+from lerobot_blindgrasp.grasp_strips import write_grasp_strips
+from lerobot_blindgrasp.plots import bar_chart, plot_curves, teacher_curves
+from lerobot_blindgrasp.sim import objects
 
 _LOSS_LINE = re.compile(r"step:\s*([\d.]+[KMB]?)\b.*?\bloss:\s*([\d.eE+-]+)")
 
@@ -65,22 +61,6 @@ def student_loss_curve(log_text: str) -> tuple[list[float], list[float]]:
     return steps, losses
 
 
-def _bar_chart(path: Path, names: list[str], series: dict[str, list[float]], title: str, ylabel: str) -> None:
-    x = np.arange(len(names))
-    w = 0.8 / max(1, len(series))
-    fig, ax = plt.subplots(figsize=(max(7, 0.55 * len(names) + 2), 4))
-    for i, (label, vals) in enumerate(series.items()):
-        ax.bar(x + (i - (len(series) - 1) / 2) * w, vals, w, label=label)
-    ax.set_xticks(x, [n.replace("_", " ") for n in names], rotation=60, ha="right", fontsize=8)
-    ax.set_ylabel(ylabel)
-    ax.set_ylim(0, 100)  # every chart here is a percentage; a fixed axis keeps all-zero charts readable
-    ax.set_title(title)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
 def _teacher_lines(record: dict) -> list[str]:
     t = record.get("teacher") or {}
     if not t:
@@ -120,7 +100,7 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
            [100 * np.mean(col.get(n) or [0]) for n in names] for label, col in teacher_cols.items()},
         "student (lerobot-eval)": [100 * np.mean(stu[n] or [0]) for n in names],
     }
-    _bar_chart(figs / "success_per_object.png", names, series, "Sim success per object", "success (%)")
+    bar_chart(figs / "success_per_object.png", names, series, "Sim success per object", "success (%)")
     seed = record.get("seeds", {}).get("eval_index", teacher.get("seed"))
     n_ep = len(next(iter(stu.values()), []))
     lines += [
@@ -181,7 +161,7 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
         y = json.loads(path.read_text())
         rows = y["objects"]
         demo_names = [n for n in objects.PAPER_OBJECTS if n in rows] or list(rows)
-        _bar_chart(figs / f"yield_{sub}.png", demo_names,
+        bar_chart(figs / f"yield_{sub}.png", demo_names,
                    {"yield (%)": [rows.get(n, {}).get("yield", 0) * 100 for n in demo_names]},
                    f"Demo yield ({label})", "episodes passing curation (%)")
         tot = y["total"]

@@ -46,7 +46,7 @@ def demo_budget(out: Path, name: str) -> str:
 
 
 def write_table_v(out: Path) -> Path:
-    from lerobot_blindgrasp.report import _bar_chart
+    from lerobot_blindgrasp.plots import bar_chart
 
     results = {name: row_successes(out, name) for name in TABLE_V}
     done = {n: r for n, r in results.items() if r}
@@ -72,7 +72,7 @@ def write_table_v(out: Path) -> Path:
     if done:
         series = {TABLE_V[n].label: [100 * sum(r.get(o, [])) / max(1, len(r.get(o, []))) for o in names]
                   for n, r in done.items()}
-        _bar_chart(out / "table_v.png", names, series, "Table V in simulation: success per object", "success (%)")
+        bar_chart(out / "table_v.png", names, series, "Table V in simulation: success per object", "success (%)")
     path = out / "table_v.md"
     path.write_text("\n".join(lines) + "\n")
     return path
