@@ -392,6 +392,19 @@ def test_a_burst_of_corrupt_replies_on_several_servos_is_absorbed(rig, robot):
     assert robot.is_connected and all(rig.dxl.torque_enabled(i) for i in spec.SERVO_IDS)
 
 
+def test_a_retry_waits_out_the_rest_of_an_abandoned_burst_with_gaps(rig, robot):
+    """The first, fourth and seventh replies of a sync read are corrupt, and the replies follow 2 ms apart, so the line
+    is empty for a while right after the first failure. The retry must wait until the abandoned burst has ended, not
+    only drop what has arrived so far: otherwise the second try meets the old burst's corrupt reply of servo 20 and
+    the third that of servo 30, and the gripper stops although only one try was spoiled."""
+    rig.dxl.reply_gap_s = 0.002
+    for _ in range(3):
+        for i in (10, 20, 30):
+            rig.dxl.corrupt_responses[i] = 1
+        robot.get_observation()
+    assert robot.is_connected and all(rig.dxl.torque_enabled(i) for i in spec.SERVO_IDS)
+
+
 def test_a_burst_beyond_the_retry_budget_still_stops(rig, robot):
     for i in (10, 21, 32):
         rig.dxl.corrupt_responses[i] = 3

@@ -264,6 +264,9 @@ class DynamixelBusEmulator(PtyDevice):
         self.missing_ids: set[int] = set()
         self.drop_responses: dict[int, int] = {}  # id -> number of status packets to swallow (timeouts)
         self.corrupt_responses: dict[int, int] = {}  # id -> number of status packets sent with a bad CRC
+        # Seconds between the replies of a sync-read burst (real servos answer in turn, each after its
+        # Return_Delay_Time): long gaps leave the line empty for a while in the middle of a burst.
+        self.reply_gap_s = 0.0
         # Observability for tests.
         self.instruction_counts: dict[int, int] = {}
         self.rx_crc_errors = 0
@@ -387,9 +390,11 @@ class DynamixelBusEmulator(PtyDevice):
                     self._status(servo, error)
         elif inst == dx.INST_SYNC_READ and broadcast:
             addr, size = params[0] | params[1] << 8, params[2] | params[3] << 8
-            for i in params[4:]:
+            for k, i in enumerate(params[4:]):
                 servo = self._alive(i)
                 if servo is not None:
+                    if k and self.reply_gap_s:
+                        time.sleep(self.reply_gap_s)
                     self._reply_read(servo, addr, size)
         elif inst == dx.INST_SYNC_WRITE and broadcast:
             addr, size = params[0] | params[1] << 8, params[2] | params[3] << 8

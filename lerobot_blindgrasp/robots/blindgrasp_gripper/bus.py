@@ -3,7 +3,8 @@
 - Every transaction is retried: `num_retry` is the floor for every read, write, sync read and sync write, including
   those LeRobot's own methods make (`read_calibration`, `disable_torque`, ...). Registers are raw by default: the
   calibration lives in the servos (Drive_Mode, Homing_Offset), so no LeRobot normalization applies.
-- Each try starts on an empty line (`FlushingPortHandler`). The port also reports an unplugged adapter as one
+- Each try starts on an empty line (`FlushingPortHandler`, told by `LineWatchingPacketHandler` when a receive
+  failed, so that it waits out the rest of an abandoned reply burst). The port also reports an unplugged adapter as one
   `PortLostError`.
 - The handshake retries, names missing IDs and wrong models, and counts a servo that replies with the
   hardware-alert bit as present (`_raise_on_hardware_errors` of the robot then says what is wrong with it).
@@ -21,8 +22,9 @@ import logging
 import termios
 import time
 
-from dynamixel_sdk import PortHandler
+from dynamixel_sdk import COMM_SUCCESS, PortHandler
 from dynamixel_sdk import port_handler as dxl_port_handler
+from dynamixel_sdk.protocol2_packet_handler import Protocol2PacketHandler
 from lerobot.motors import Motor, MotorCalibration
 from lerobot.motors.dynamixel import DynamixelMotorsBus
 from lerobot.motors.motors_bus import get_address
@@ -50,19 +52,26 @@ class FlushingPortHandler(PortHandler):
     def _lost(self, what: str, e: BaseException) -> PortLostError:
         return PortLostError(f"serial port '{self.port_name}' failed on {what} (USB adapter unplugged?): {e}")
 
-    # Input still arriving at clear time means a burst was abandoned mid-way (a failed sync read): its remaining
-    # replies can trail by more than the bytes already buffered, so drop input until the line has been quiet this
-    # long (a whole 9-reply burst takes under 1 ms at 1 Mbps). Costs nothing when the line is already quiet.
-    QUIET_S = 0.003
-    MAX_DRAIN_S = 0.05
+    # After a failed receive (bad CRC, timeout, garbage) the rest of the transaction may still be on its way: the
+    # other servos of a sync-read burst keep answering, each after its Return_Delay_Time (up to 0.5 ms by default),
+    # so "no byte waiting right now" does not mean "quiet". The next clear therefore drops input until the line has
+    # been silent for QUIET_S, several reply gaps long. Successful transactions never pay this wait.
+    QUIET_S = 0.01
+    MAX_DRAIN_S = 0.1
+    line_dirty = False  # set by LineWatchingPacketHandler when a receive failed
 
     def clearPort(self):
         try:
             self.ser.flush()
-            deadline = time.monotonic() + self.MAX_DRAIN_S
-            while self.ser.in_waiting and time.monotonic() < deadline:
-                self.ser.reset_input_buffer()
-                time.sleep(self.QUIET_S)
+            if self.line_dirty:
+                self.line_dirty = False
+                deadline = time.monotonic() + self.MAX_DRAIN_S
+                quiet_since = time.monotonic()
+                while time.monotonic() - quiet_since < self.QUIET_S and time.monotonic() < deadline:
+                    if self.ser.in_waiting:
+                        self.ser.reset_input_buffer()
+                        quiet_since = time.monotonic()
+                    time.sleep(self.QUIET_S / 10)
             self.ser.reset_input_buffer()
         except _OS_ERRORS as e:
             raise self._lost("flush", e) from e
@@ -95,6 +104,18 @@ class FlushingPortHandler(PortHandler):
         self.is_open = False
 
 
+
+class LineWatchingPacketHandler(Protocol2PacketHandler):
+    """The SDK's protocol-2 packet handler, telling the port when a receive failed so that the next try first waits
+    for the abandoned replies to end (see `FlushingPortHandler.clearPort`). Every read path ends here: unicast
+    reads, pings and each reply of a sync read."""
+
+    def rxPacket(self, port, fast_option):
+        rxpacket, result = super().rxPacket(port, fast_option)
+        if result != COMM_SUCCESS:
+            port.line_dirty = True
+        return rxpacket, result
+
 class RetryingDynamixelBus(DynamixelMotorsBus):
     def __init__(
         self,
@@ -111,8 +132,9 @@ class RetryingDynamixelBus(DynamixelMotorsBus):
         self.latency_timer_ms = latency_timer_ms
         self.port_handler = FlushingPortHandler(port)
         self.port_handler.baudrate = baudrate  # the SDK opens the port at this rate: the handshake uses ours
-        self.sync_reader.port = self.port_handler
-        self.sync_writer.port = self.port_handler
+        self.packet_handler = LineWatchingPacketHandler()
+        for group in (self.sync_reader, self.sync_writer):
+            group.port, group.ph = self.port_handler, self.packet_handler
 
     @property
     def tries(self) -> int:
