@@ -169,3 +169,12 @@ def test_paper_recipe_script_takes_its_commands_from_the_pipeline(tmp_path, caps
     pipeline.main(["--preset=paper", f"--output_dir={tmp_path}", "--print_commands=teachers"])
     lines = capsys.readouterr().out.splitlines()
     assert len(lines) == 3 and all(line.startswith("blindgrasp-train-teacher --preset=paper") for line in lines)
+
+
+def test_quick_table_v_teachers_get_the_shipped_teachers_budget(tmp_path):
+    """The w/o r_i and RL w/ o_t teachers are trained for as many iterations as the shipped teacher was."""
+    summary = json.loads((Path(__file__).parents[1] / "models/teacher_cpu_v3/run/train_summary.json").read_text())
+    assert presets.SHIPPED_TEACHER_ITERATIONS == summary["iterations"]
+    teachers = recipe.table_v(presets.PRESETS["quick"], tmp_path, "teachers")
+    assert len(teachers) == 2  # the proposed rows use the shipped teacher itself
+    assert all(f"--iterations={summary['iterations']}" in c and "--preset=cpu" in c for c in teachers)

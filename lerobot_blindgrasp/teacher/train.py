@@ -58,7 +58,7 @@ class TrainTeacherConfig:
     seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations
     num_envs: int | None = None  # override the preset's number of envs
-    no_incentive: bool = False  # w2 = 0: the teacher of the 'Student w/o r_i' ablation
+    no_incentive: bool = False  # 'Student w/o r_i' teacher: every contact-paying reward term at 0
     student_obs: bool = False  # 'RL w/ o_t' baseline: actor and critic see only o_t
     threads: int = 0  # physics threads (0: all CPUs)
     torch_threads: int = 1  # torch intra-op threads for the PPO update
@@ -145,7 +145,9 @@ def train(cfg: TrainTeacherConfig) -> Path:
         # SIGTERM/SIGHUP (a job scheduler, a closed terminal) behave like Ctrl-C: save and exit.
         with interrupts_as_keyboard_interrupt(), contextlib.redirect_stdout(console):
             if remaining > 0:  # rsl-rl prints a table per iteration; it goes to the console log
-                runner.learn(remaining, init_at_random_ep_len=done_its == 0)
+                # Random episode lengths on resume too: otherwise every env restarts at step 0 and, for a few
+                # iterations, all of them are in the same phase of the episode (dips in the training curve).
+                runner.learn(remaining, init_at_random_ep_len=True)
     except KeyboardInterrupt:
         interrupted = True
         if lead:
