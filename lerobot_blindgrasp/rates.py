@@ -37,3 +37,29 @@ def count(flags: Iterable) -> tuple[int, int]:
     """(successes, trials) of a sequence of booleans."""
     flags = [bool(f) for f in flags]
     return sum(flags), len(flags)
+
+
+def mcnemar_exact_p(only_a: int, only_b: int) -> float:
+    """Two-sided exact McNemar p-value for two policies run on the same start states.
+
+    Only the discordant episodes carry information: `only_a` start states that policy A solved and B did not, and
+    `only_b` the reverse. Under "no difference" each discordant episode is a fair coin, so the p-value is the
+    two-sided binomial tail of min(only_a, only_b) out of only_a + only_b at p = 1/2 (written out here with
+    math.comb: scipy is not a dependency)."""
+    if only_a < 0 or only_b < 0:
+        raise ValueError(f"need non-negative counts, got {only_a} and {only_b}")
+    n = only_a + only_b
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, k) for k in range(min(only_a, only_b) + 1)) / 2**n
+    return min(1.0, 2 * tail)
+
+
+def paired_counts(a: Iterable, b: Iterable) -> dict[str, int]:
+    """Episodes on the same start states, in order: both succeed, only A, only B, neither."""
+    a, b = [bool(x) for x in a], [bool(x) for x in b]
+    if len(a) != len(b):
+        raise ValueError(f"paired episodes need equal counts, got {len(a)} and {len(b)}")
+    pairs = list(zip(a, b, strict=True))
+    return {"both": sum(x and y for x, y in pairs), "a_only": sum(x and not y for x, y in pairs),
+            "b_only": sum(y and not x for x, y in pairs), "neither": sum(not x and not y for x, y in pairs)}

@@ -37,14 +37,6 @@ def student_success(eval_info: dict) -> dict[str, float]:
     return {o: float(np.mean(f)) if f else 0.0 for o, f in student_successes(eval_info).items()}
 
 
-def paired_counts(teacher: list[bool], student: list[bool]) -> dict[str, int]:
-    """Episodes on the same start state: both succeed, only the teacher, only the student, neither."""
-    n = min(len(teacher), len(student))
-    t, s = np.asarray(teacher[:n], bool), np.asarray(student[:n], bool)
-    return {"both": int((t & s).sum()), "teacher_only": int((t & ~s).sum()),
-            "student_only": int((~t & s).sum()), "neither": int((~t & ~s).sum())}
-
-
 def parse_step(s: str) -> float:
     """A step count as lerobot-train logs it: 300, 1K, 2.5M."""
     m = re.fullmatch(r"([\d.]+)([KMB]?)", s)
@@ -94,10 +86,11 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     stu = student_successes(eval_info)
     names = [n for n in objects.PAPER_OBJECTS if n in stu] + [n for n in stu if n not in objects.PAPER_OBJECTS]
     # The quick preset evaluates the teacher deterministically only: no empty stochastic column then.
-    teacher_cols = {"teacher det.": t_det, **({"teacher stoch.": t_sto} if t_sto else {})}
+    # column title -> (chart legend, successes per object)
+    teacher_cols = {"teacher det.": ("teacher (deterministic)", t_det),
+                    **({"teacher stoch.": ("teacher (stochastic)", t_sto)} if t_sto else {})}
     series = {
-        **{label.replace("det.", "(deterministic)").replace("stoch.", "(stochastic)"):
-           [100 * np.mean(col.get(n) or [0]) for n in names] for label, col in teacher_cols.items()},
+        **{legend: [100 * np.mean(col.get(n) or [0]) for n in names] for legend, col in teacher_cols.values()},
         "student (lerobot-eval)": [100 * np.mean(stu[n] or [0]) for n in names],
     }
     bar_chart(figs / "success_per_object.png", names, series, "Sim success per object", "success (%)")
@@ -120,20 +113,32 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     ]
     pooled = {label: [] for label in teacher_cols}
     pooled_student: list[bool] = []
+    paired_all = {"both": 0, "a_only": 0, "b_only": 0}
+
+    def paired_cell(t: list[bool], s: list[bool]) -> str:
+        if len(t) != len(s):  # no teacher episodes for this object: nothing to pair
+            return "n/a"
+        p = rates.paired_counts(t, s)
+        for k in paired_all:
+            paired_all[k] += p[k]
+        return f"{p['both']} / {p['a_only']} / {p['b_only']}"
+
     for n in names:
         cells = []
-        for label, col in teacher_cols.items():
+        for label, (_, col) in teacher_cols.items():
             pooled[label] += col.get(n, [])
             cells.append(rates.format_rate(*rates.count(col.get(n, []))))
         pooled_student += stu[n]
-        p = paired_counts(t_det.get(n, []), stu[n])
         lines.append(f"| {n} | " + " | ".join(cells) + f" | {rates.format_rate(*rates.count(stu[n]))} | "
-                     f"{p['both']} / {p['teacher_only']} / {p['student_only']} |")
-    p = paired_counts([x for n in names for x in t_det.get(n, [])], pooled_student)
+                     f"{paired_cell(t_det.get(n, []), stu[n])} |")
     cells = [f"**{rates.format_rate(*rates.count(v), digits=1)}**" for v in pooled.values()]
+    t_only, s_only = paired_all["a_only"], paired_all["b_only"]
     lines.append(f"| **all {len(names)}** | " + " | ".join(cells) + " | "
                  f"**{rates.format_rate(*rates.count(pooled_student), digits=1)}** | "
-                 f"**{p['both']} / {p['teacher_only']} / {p['student_only']}** |")
+                 f"**{paired_all['both']} / {t_only} / {s_only}** |")
+    lines += ["", f"Paired over all objects: the teacher alone solved {t_only} start states, the student alone "
+              f"{s_only}; exact McNemar p = {rates.mcnemar_exact_p(t_only, s_only):.3g} (below 0.05: the two "
+              "differ beyond the luck of these start states)."]
     lines.append("")
     strip = write_grasp_strips(eval_info, figs / "grasp_strips.png")
     if strip is not None:

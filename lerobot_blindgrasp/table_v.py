@@ -45,6 +45,29 @@ def demo_budget(out: Path, name: str) -> str:
     return f"{t['kept']} episodes, {t['frames']} frames (from {t['rollouts']} rollouts)"
 
 
+def paired_with_proposed(done: dict[str, dict[str, list[bool]]], names: list[str]) -> list[str]:
+    """Each row against the proposed student on the same start states (all objects pooled): the start states only
+    one of the two solved, the difference in success, and the exact McNemar p-value of that difference."""
+    if "proposed" not in done:
+        return []
+    base = [x for o in names for x in done["proposed"].get(o, [])]
+    lines = ["", "Paired with the proposed student, all objects pooled, episode by episode on the same start states:",
+             "", "| row | success difference | only proposed solved | only this row solved | exact McNemar p |",
+             "|---|---:|---:|---:|---:|"]
+    for n, r in done.items():
+        if n == "proposed":
+            continue
+        row = [x for o in names for x in r.get(o, [])]
+        if len(row) != len(base):
+            lines.append(f"| {TABLE_V[n].label} | not paired: {len(row)} episodes vs {len(base)} | | | |")
+            continue
+        p = rates.paired_counts(base, row)
+        diff = 100 * (sum(row) - sum(base)) / max(1, len(base))
+        lines.append(f"| {TABLE_V[n].label} | {diff:+.1f} pp | {p['a_only']} | {p['b_only']} | "
+                     f"{rates.mcnemar_exact_p(p['a_only'], p['b_only']):.2g} |")
+    return lines
+
+
 def write_table_v(out: Path) -> Path:
     from lerobot_blindgrasp.plots import bar_chart
 
@@ -65,6 +88,7 @@ def write_table_v(out: Path) -> Path:
         cells = [rates.format_rate(*rates.count([x for o in subset for x in done[n].get(o, [])]), digits=1)
                  for n in done]
         lines.append(f"| **{label}** | " + " | ".join(f"**{c}**" for c in cells) + " |")
+    lines += paired_with_proposed(done, names)
     missing = [TABLE_V[n].label for n in TABLE_V if n not in done]
     if missing:
         lines += ["", "Not run yet: " + ", ".join(missing) + "."]

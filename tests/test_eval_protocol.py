@@ -80,12 +80,16 @@ def test_rate_formatting_and_bad_counts():
         rates.wilson_interval(3, 2)
 
 
-def test_report_pairs_episodes_on_the_same_start_states():
-    from lerobot_blindgrasp.report import paired_counts
-
+def test_paired_counts_and_the_exact_mcnemar_test():
     t = [True, True, False, False, True]
     s = [True, False, True, False, True]
-    assert paired_counts(t, s) == {"both": 2, "teacher_only": 1, "student_only": 1, "neither": 1}
+    assert rates.paired_counts(t, s) == {"both": 2, "a_only": 1, "b_only": 1, "neither": 1}
+    with pytest.raises(ValueError, match="equal counts"):
+        rates.paired_counts(t, s[:4])
+    # Hand values: 0 vs 6 discordant pairs is 2 x 0.5**6; 1 vs 9 is 2 x 11 / 1024; a tie is 1.
+    assert rates.mcnemar_exact_p(0, 6) == pytest.approx(2 / 64)
+    assert rates.mcnemar_exact_p(9, 1) == pytest.approx(22 / 1024)
+    assert rates.mcnemar_exact_p(4, 4) == 1.0 and rates.mcnemar_exact_p(0, 0) == 1.0
 
 
 def test_lerobot_eval_of_a_teacher_folder_is_a_one_line_error(monkeypatch):

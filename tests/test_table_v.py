@@ -35,3 +35,7 @@ def test_table_v_reads_student_and_rl_rows_and_names_the_missing(tmp_path):
     assert "| **1 medium** | **75.0 % [30.1-95.4] (3/4)** |" in md
     assert "80 episodes, 7000 frames (from 160 rollouts)" in md and "no demos (PPO on o_t)" in md
     assert "Not run yet: Student w/o Stochastic Teacher, Student w/o r_i." in md
+    # Paired with the proposed row: w/o curation loses sphere episodes 2 and 4 and wins none (p = 2 x 1/4); RL w/
+    # o_t loses all three the proposed student solved (p = 2 x 1/8).
+    assert "| Student w/o Curation | -25.0 pp | 2 | 0 | 0.5 |" in md
+    assert "| RL w/ o_t | -37.5 pp | 3 | 0 | 0.25 |" in md
