@@ -10,11 +10,11 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from emulators.harness import BIN, tiny_student_train
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.envs.sim_env import task_id
@@ -24,7 +24,6 @@ from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
 pytestmark = pytest.mark.slow  # ~40 s: two CLI subprocesses and 4 rendered 10 s episodes
 
-BIN = Path(sys.executable).parent
 OBJECTS = ("cylinder_a_medium", "sphere_small")
 TRAIN_STEPS = 4
 
@@ -73,26 +72,7 @@ def checkpoint(tmp_path_factory) -> Path:
     _make_dataset(tmp / "dataset", repo_id)
     out = tmp / "train"
     _run(
-        [
-            str(BIN / "lerobot-train"),
-            "--policy.type=blindgrasp_transformer",
-            "--policy.size=quick",
-            "--policy.n_layers=1",
-            "--policy.embed_dim=32",
-            "--policy.head_hidden_dims=[32]",
-            "--policy.n_obs_steps=8",
-            "--policy.device=cpu",
-            "--policy.push_to_hub=false",
-            f"--dataset.repo_id={repo_id}",
-            f"--dataset.root={tmp / 'dataset'}",
-            f"--output_dir={out}",
-            f"--steps={TRAIN_STEPS}",
-            f"--save_freq={TRAIN_STEPS}",
-            "--batch_size=4",
-            "--num_workers=0",
-            "--log_freq=1",
-            "--wandb.enable=false",
-        ],
+        tiny_student_train(repo_id, tmp / "dataset", out, TRAIN_STEPS, "--log_freq=1"),
         timeout=300,
     )
     ckpt = out / "checkpoints" / f"{TRAIN_STEPS:06d}" / "pretrained_model"

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from emulators.glove import GloveEmulator, free_udp_port
-from emulators.harness import BIN, Operator, cli_env
+from emulators.harness import BIN, Operator, cli_env, tiny_student_train
 from emulators.rig import LATENCY_TIMER_MS, MOUNT_SIGN, GripperRig
 
 from lerobot_blindgrasp import spec
@@ -191,25 +191,7 @@ def test_glove_loss_during_recording_stops_with_torque_off(station, tmp_path):
 def checkpoint(station, recorded) -> Path:
     out = station.home / "train"
     _run(
-        [
-            str(BIN / "lerobot-train"),
-            "--policy.type=blindgrasp_transformer",
-            "--policy.size=quick",
-            "--policy.n_layers=1",
-            "--policy.embed_dim=32",
-            "--policy.head_hidden_dims=[32]",
-            "--policy.n_obs_steps=8",
-            "--policy.device=cpu",
-            "--policy.push_to_hub=false",
-            f"--dataset.repo_id={REPO_ID}",
-            f"--dataset.root={recorded}",
-            f"--output_dir={out}",
-            "--steps=4",
-            "--save_freq=4",
-            "--batch_size=4",
-            "--num_workers=0",
-            "--wandb.enable=false",
-        ],
+        tiny_student_train(REPO_ID, recorded, out, 4),
         station.env,
     )
     return out / "checkpoints" / "000004" / "pretrained_model"

@@ -31,13 +31,7 @@ EPISODE_LENGTHS = (36, 40)  # longer than the 30-step context, so windows go fro
 TINY = ["--policy.size=quick", "--policy.n_layers=1", "--policy.embed_dim=32", "--policy.head_hidden_dims=[64]"]
 
 
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    # Small CPU ops on a shared 2-core machine run far faster on one thread than with two spinning OpenMP threads.
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

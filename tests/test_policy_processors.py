@@ -25,13 +25,7 @@ BOUND = spec.ACTION_BOUND_RAD
 T = 30
 
 
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    # Small CPU ops on a shared 2-core machine run far faster on one thread than with two spinning OpenMP threads.
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def make_config(**kw) -> BlindgraspTransformerConfig:

@@ -12,6 +12,30 @@ from pathlib import Path
 BIN = Path(sys.executable).parent
 
 
+def tiny_student_train(repo_id: str, root: Path, out: Path, steps: int, *extra: str) -> list[str]:
+    """`lerobot-train` of a one-layer blindgrasp student for `steps` steps: end-to-end CLI tests train in seconds."""
+    return [
+        str(BIN / "lerobot-train"),
+        "--policy.type=blindgrasp_transformer",
+        "--policy.size=quick",
+        "--policy.n_layers=1",
+        "--policy.embed_dim=32",
+        "--policy.head_hidden_dims=[32]",
+        "--policy.n_obs_steps=8",
+        "--policy.device=cpu",
+        "--policy.push_to_hub=false",
+        f"--dataset.repo_id={repo_id}",
+        f"--dataset.root={root}",
+        f"--output_dir={out}",
+        f"--steps={steps}",
+        f"--save_freq={steps}",
+        "--batch_size=4",
+        "--num_workers=0",
+        "--wandb.enable=false",
+        *extra,
+    ]
+
+
 def cli_env(home: Path) -> dict[str, str]:
     """Offline, isolated environment for LeRobot CLI subprocesses."""
     return {
