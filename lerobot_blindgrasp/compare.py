@@ -1,0 +1,74 @@
+"""Two evaluations side by side, paired start state by start state: per-object rates and an exact McNemar test.
+
+    python -m lerobot_blindgrasp.compare A_LABEL=PATH B_LABEL=PATH
+
+PATH is a lerobot-eval output (`eval_info.json`, or its folder) or a `blindgrasp-eval-teacher` output (`eval.json`,
+or its folder; deterministic mode unless written `PATH:stochastic`). Both must have been run with the same seed
+and episode count: episode k of object o is then the same start state in both (`spec.eval_seed`), so a difference
+shows up as discordant pairs, which the McNemar test weighs, rather than as two independent rates.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from lerobot_blindgrasp import rates
+from lerobot_blindgrasp.sim import objects
+
+
+def load_successes(path: str | Path) -> dict[str, list[bool]]:
+    """Object -> episode successes in evaluation-index order, from either evaluation tool's output."""
+    from lerobot_blindgrasp.report import student_successes
+
+    text, _, mode = str(path).partition(":")
+    p = Path(text)
+    if p.is_dir():
+        p = p / "eval_info.json" if (p / "eval_info.json").exists() else p / "eval.json"
+    if not p.is_file():
+        raise FileNotFoundError(f"no eval_info.json (lerobot-eval) or eval.json (blindgrasp-eval-teacher) at {text}")
+    data = json.loads(p.read_text())
+    if "per_task" in data:
+        return student_successes(data)
+    modes = data["modes"]
+    mode = mode or "deterministic"
+    if mode not in modes:
+        raise ValueError(f"{p} has modes {sorted(modes)}, not {mode!r}")
+    return {o: [bool(x) for x in r["successes"]] for o, r in modes[mode]["per_object"].items()}
+
+
+def compare(a: dict[str, list[bool]], b: dict[str, list[bool]], label_a: str = "A", label_b: str = "B") -> str:
+    """Markdown: per object, both rates and the discordant pairs; then all objects pooled, with the McNemar p."""
+    names = [o for o in objects.PAPER_OBJECTS if o in a and o in b]
+    if not names:
+        raise ValueError("the two evaluations share no object")
+    for o in names:
+        if len(a[o]) != len(b[o]):
+            raise ValueError(f"{o}: {len(a[o])} vs {len(b[o])} episodes; pair only runs with the same episodes")
+    lines = [f"| object | {label_a} | {label_b} | only {label_a} | only {label_b} |", "|---|---:|---:|---:|---:|"]
+    for o in names:
+        p = rates.paired_counts(a[o], b[o])
+        lines.append(f"| {o} | {rates.format_rate(*rates.count(a[o]))} | {rates.format_rate(*rates.count(b[o]))} "
+                     f"| {p['a_only']} | {p['b_only']} |")
+    pa = [x for o in names for x in a[o]]
+    pb = [x for o in names for x in b[o]]
+    p = rates.paired_counts(pa, pb)
+    lines.append(f"| **all {len(names)}** | **{rates.format_rate(*rates.count(pa), digits=1)}** | "
+                 f"**{rates.format_rate(*rates.count(pb), digits=1)}** | **{p['a_only']}** | **{p['b_only']}** |")
+    diff = 100 * (sum(pb) - sum(pa)) / len(pa)
+    lines += ["", f"{label_b} minus {label_a}: {diff:+.1f} percentage points over {len(pa)} paired episodes; "
+              f"exact McNemar p = {rates.mcnemar_exact_p(p['a_only'], p['b_only']):.2g}."]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = sys.argv[1:] if argv is None else argv
+    if len(args) != 2 or not all("=" in x for x in args):
+        raise SystemExit("usage: python -m lerobot_blindgrasp.compare A_LABEL=PATH B_LABEL=PATH")
+    (la, pa), (lb, pb) = (x.split("=", 1) for x in args)
+    print(compare(load_successes(pa), load_successes(pb), la, lb))
+
+
+if __name__ == "__main__":
+    main()
