@@ -82,5 +82,6 @@ def test_progress_curves_sum_training_time_and_weigh_objects_equally(tmp_path):
     assert p["env_steps"] == [40, 80, 120, 160]
     assert p["wall_h"][-1] * 3600 == pytest.approx(4 + 4 + 5 + 5)  # the later session's value for iteration 2
     assert p["success_all18"][-1] == pytest.approx(1 / 18) and p["success_medium"][-1] == 0.0
-    plot_progress({"run": tmp_path, "same run again": tmp_path}, tmp_path / "p.png")
+    assert progress(tmp_path, window=1, until=2)["iteration"] == [0, 1, 2]  # one budget for side-by-side runs
+    plot_progress({"run": tmp_path, "same run again": tmp_path}, tmp_path / "p.png", until=2)
     assert (tmp_path / "p.png").stat().st_size > 1000

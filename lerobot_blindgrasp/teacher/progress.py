@@ -1,6 +1,9 @@
 """Training success against env steps and against training wall clock, from a run's TensorBoard scalars.
 
-    python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...]
+    python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...] [--until=ITER]
+
+`--until=ITER` cuts every curve after iteration ITER, to compare runs at one budget (a side-by-side run that was
+stopped earlier than the one it is compared with).
 
 Success here is the training-time rate rsl-rl logs per object (`Success/<object>`: episodes that ended in an
 iteration, stochastic actions, training seeds), averaged with equal weight over the 18 objects and over the 6
@@ -46,12 +49,13 @@ def _smooth(y: np.ndarray, window: int) -> np.ndarray:
     return out
 
 
-def progress(run_dir: Path, window: int = 25) -> dict[str, list[float]]:
-    """Per iteration: env steps, training hours, and smoothed success (all 18 objects, 6 medium)."""
+def progress(run_dir: Path, window: int = 25, until: int | None = None) -> dict[str, list[float]]:
+    """Per iteration (up to `until`, if given): env steps, training hours, and smoothed success (all 18 objects,
+    6 medium)."""
     cfg = json.loads((run_dir / CONFIG_NAME).read_text())
     steps_per_it = cfg["runner"]["num_steps_per_env"] * cfg["num_envs"]
     s = _scalars(run_dir)
-    its = sorted(s.get("Perf/collection_time", {}))
+    its = sorted(i for i in s.get("Perf/collection_time", {}) if until is None or i <= until)
     if not its:
         return {}
     secs = np.array([s["Perf/collection_time"][i] + s["Perf/learning_time"].get(i, 0.0) for i in its])
@@ -70,7 +74,8 @@ def progress(run_dir: Path, window: int = 25) -> dict[str, list[float]]:
         }
 
 
-def plot_progress(runs: dict[str, Path], path: Path, title: str = "Teacher training progress") -> dict:
+def plot_progress(runs: dict[str, Path], path: Path, title: str = "Teacher training progress",
+                  until: int | None = None) -> dict:
     """One figure, success against env steps (left) and training wall clock (right), one colour per run;
     solid: all 18 objects, dashed: the 6 medium ones."""
     import matplotlib
@@ -78,7 +83,7 @@ def plot_progress(runs: dict[str, Path], path: Path, title: str = "Teacher train
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    curves = {label: progress(run_dir) for label, run_dir in runs.items()}
+    curves = {label: progress(run_dir, until=until) for label, run_dir in runs.items()}
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
     for k, (label, p) in enumerate(curves.items()):
         if not p:
@@ -101,8 +106,12 @@ def plot_progress(runs: dict[str, Path], path: Path, title: str = "Teacher train
 
 
 def main(argv=None) -> None:
-    """python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...]"""
+    """python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...] [--until=ITER]"""
     argv = list(sys.argv[1:] if argv is None else argv)
+    until = None
+    for a in [a for a in argv if a.startswith("--until=")]:
+        argv.remove(a)
+        until = int(a.split("=", 1)[1])
     if len(argv) < 2:
         raise SystemExit("usage: python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR ...")
     runs = {}
@@ -112,7 +121,7 @@ def main(argv=None) -> None:
         if not (run_dir / CONFIG_NAME).is_file():
             raise SystemExit(f"{run_dir} is not a teacher run directory (no {CONFIG_NAME})")
         runs[label or run_dir.name] = run_dir
-    curves = plot_progress(runs, Path(argv[0]))
+    curves = plot_progress(runs, Path(argv[0]), until=until)
     last = {label: {k: v[-1] for k, v in p.items()} for label, p in curves.items() if p}
     print(json.dumps({"plot": argv[0], "last": last}, indent=2))
 
