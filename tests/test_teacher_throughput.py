@@ -65,7 +65,7 @@ def test_bench_teacher_reports_collection_update_and_raw_physics():
 def test_progress_curves_sum_training_time_and_weigh_objects_equally(tmp_path):
     from torch.utils.tensorboard import SummaryWriter
 
-    from lerobot_blindgrasp.teacher.progress import plot_progress, progress
+    from lerobot_blindgrasp.teacher.progress import plot_metrics, plot_progress, progress
 
     (tmp_path / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))
     # Two sessions (a resume): the second rewrites iteration 2, as rsl-rl does after loading model_2.pt.
@@ -84,4 +84,6 @@ def test_progress_curves_sum_training_time_and_weigh_objects_equally(tmp_path):
     assert p["success_all18"][-1] == pytest.approx(1 / 18) and p["success_medium"][-1] == 0.0
     assert progress(tmp_path, window=1, until=2)["iteration"] == [0, 1, 2]  # one budget for side-by-side runs
     plot_progress({"run": tmp_path, "same run again": tmp_path}, tmp_path / "p.png", until=2)
+    plot_metrics({"run": tmp_path}, ["Perf/learning_time", "Success/cuboid_a_large"], tmp_path / "m.png", until=2)
+    assert (tmp_path / "m.png").stat().st_size > 1000
     assert (tmp_path / "p.png").stat().st_size > 1000

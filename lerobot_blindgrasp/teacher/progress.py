@@ -3,7 +3,9 @@
     python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...] [--until=ITER]
 
 `--until=ITER` cuts every curve after iteration ITER, to compare runs at one budget (a side-by-side run that was
-stopped earlier than the one it is compared with).
+stopped earlier than the one it is compared with). `--metrics=TAG,TAG` adds a second figure, OUT_metrics.png, with
+those TensorBoard scalars of every run against env steps (e.g. `Metrics/mean_contacts,Metrics/mean_lift_cm`: what
+a policy does, where success alone only says that it fails).
 
 Success here is the training-time rate rsl-rl logs per object (`Success/<object>`: episodes that ended in an
 iteration, stochastic actions, training seeds), averaged with equal weight over the 18 objects and over the 6
@@ -105,15 +107,51 @@ def plot_progress(runs: dict[str, Path], path: Path, title: str = "Teacher train
     return curves
 
 
+def plot_metrics(runs: dict[str, Path], tags: list[str], path: Path, until: int | None = None,
+                 window: int = 25) -> None:
+    """One panel per TensorBoard scalar, every run against env steps (trailing mean over `window` iterations)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(tags), figsize=(4.2 * len(tags), 3.4), squeeze=False)
+    for k, (label, run_dir) in enumerate(runs.items()):
+        cfg = json.loads((run_dir / CONFIG_NAME).read_text())
+        steps_per_it = cfg["runner"]["num_steps_per_env"] * cfg["num_envs"]
+        s = _scalars(run_dir)
+        for ax, tag in zip(axes[0], tags):
+            its = sorted(i for i in s.get(tag, {}) if until is None or i <= until)
+            if not its:
+                continue
+            y = _smooth(np.array([s[tag][i] for i in its], dtype=float), window)
+            ax.plot(np.array([(i + 1) * steps_per_it for i in its]) / 1e6, y, f"C{k}", label=label)
+    for ax, tag in zip(axes[0], tags):
+        ax.set_title(tag, fontsize=9)
+        ax.set_xlabel("env steps (M)")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv=None) -> None:
     """python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...] [--until=ITER]"""
     argv = list(sys.argv[1:] if argv is None else argv)
-    until = None
-    for a in [a for a in argv if a.startswith("--until=")]:
+    until, metrics = None, []
+    for a in [a for a in argv if a.startswith("--")]:
         argv.remove(a)
-        until = int(a.split("=", 1)[1])
+        key, _, value = a.partition("=")
+        if key == "--until":
+            until = int(value)
+        elif key == "--metrics":
+            metrics = [t for t in value.split(",") if t]
+        else:
+            raise SystemExit(f"unknown option {a}; options: --until=ITER, --metrics=TAG,TAG")
     if len(argv) < 2:
-        raise SystemExit("usage: python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR ...")
+        raise SystemExit("usage: python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR ... "
+                         "[--until=ITER] [--metrics=TAG,TAG]")
     runs = {}
     for arg in argv[1:]:
         label, _, path = arg.rpartition("=")
@@ -122,6 +160,9 @@ def main(argv=None) -> None:
             raise SystemExit(f"{run_dir} is not a teacher run directory (no {CONFIG_NAME})")
         runs[label or run_dir.name] = run_dir
     curves = plot_progress(runs, Path(argv[0]), until=until)
+    if metrics:
+        out = Path(argv[0])
+        plot_metrics(runs, metrics, out.with_name(f"{out.stem}_metrics.png"), until=until)
     last = {label: {k: v[-1] for k, v in p.items()} for label, p in curves.items() if p}
     print(json.dumps({"plot": argv[0], "last": last}, indent=2))
 
