@@ -78,16 +78,22 @@ def write_table_v(out: Path) -> Path:
              f"Rows from `{out}`; every row on the same start states, 95 % Wilson intervals and counts.", "",
              "| row | demos |", "|---|---|"]
     lines += [f"| {TABLE_V[n].label} | {demo_budget(out, n)} |" for n in TABLE_V]
-    lines += ["", "| object | " + " | ".join(TABLE_V[n].label for n in done) + " |",
-              "|---|" + "---:|" * len(done)]
+    # The paper's last column: each object's success averaged over the rows, its difficulty whatever the method.
+    lines += ["", "| object | " + " | ".join(TABLE_V[n].label for n in done) + " | object average |",
+              "|---|" + "---:|" * (len(done) + 1)]
+
+    def average(subset: list[str]) -> str:
+        rows = [rates.count([x for o in subset for x in done[n].get(o, [])]) for n in done]
+        return f"{100 * sum(k / t for k, t in rows if t) / max(1, sum(1 for _, t in rows if t)):.1f} %"
+
     for o in names:
         lines.append(f"| {o} | " + " | ".join(rates.format_rate(*rates.count(done[n].get(o, []))) for n in done)
-                     + " |")
+                     + f" | {average([o])} |")
     medium = [o for o in names if o.endswith("_medium")]
     for label, subset in ((f"{len(medium)} medium", medium), (f"all {len(names)}", names)):
         cells = [rates.format_rate(*rates.count([x for o in subset for x in done[n].get(o, [])]), digits=1)
                  for n in done]
-        lines.append(f"| **{label}** | " + " | ".join(f"**{c}**" for c in cells) + " |")
+        lines.append(f"| **{label}** | " + " | ".join(f"**{c}**" for c in cells) + f" | {average(subset)} |")
     lines += paired_with_proposed(done, names)
     missing = [TABLE_V[n].label for n in TABLE_V if n not in done]
     if missing:

@@ -30,7 +30,8 @@ def test_table_v_reads_student_and_rl_rows_and_names_the_missing(tmp_path):
 
     md = table_v.write_table_v(tmp_path).read_text()
     assert (tmp_path / "table_v.png").stat().st_size > 1000
-    assert "| sphere_medium | 75 % [30-95] (3/4) | 25 % [5-70] (1/4) | 0 % [0-49] (0/4) |" in md
+    # Last column: the object's success averaged over the three rows, (75 + 25 + 0) / 3.
+    assert "| sphere_medium | 75 % [30-95] (3/4) | 25 % [5-70] (1/4) | 0 % [0-49] (0/4) | 33.3 % |" in md
     assert "| **all 2** | **37.5 % [13.7-69.4] (3/8)** |" in md  # proposed, pooled over both objects
     assert "| **1 medium** | **75.0 % [30.1-95.4] (3/4)** |" in md
     assert "80 episodes, 7000 frames (from 160 rollouts)" in md and "no demos (PPO on o_t)" in md
