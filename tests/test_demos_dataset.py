@@ -212,3 +212,26 @@ def test_card_validation_catches_bad_metadata():
     with pytest.raises(ValueError, match="tags"):
         cards.validate(good.replace("[LeRobot]", "['two words']"))
     assert isinstance(DatasetCard(good).data.to_dict(), dict)
+
+
+def test_demo_diversity_is_computed_per_object_from_the_written_episodes(written):
+    from lerobot_blindgrasp.demos.diversity import diversity
+
+    root, episodes, cuts = written
+    d = diversity(root, at_s=0.5)  # frame 10, inside every (trimmed) episode
+    assert d["episodes"] == 6 and set(d["objects"]) == set(OBJECTS)
+    # By hand from the synthetic episodes: spread across episodes of one object at frame 10 (objects with two
+    # episodes only), and the mean step-to-step command change over each episode's written frames.
+    by_object: dict[str, list[int]] = {}
+    for i, ep in enumerate(episodes):
+        by_object.setdefault(ep.object_name, []).append(i)
+    spreads, jitters = [], []
+    for name, idx in by_object.items():
+        if len(idx) > 1:
+            spreads.append(np.std([episodes[i].state[10, : spec.NUM_JOINTS] for i in idx], axis=0).mean())
+        diffs = [np.abs(np.diff(episodes[i].action[: cuts[i].keep_steps], axis=0)) for i in idx]
+        jitter = np.concatenate(diffs).mean()
+        jitters.append(jitter)
+        assert d["objects"][name]["command_jitter_rad"] == pytest.approx(jitter, rel=1e-5)
+    assert d["grasp_pose_spread_rad"] == pytest.approx(np.mean(spreads), rel=1e-5)
+    assert d["command_jitter_rad"] == pytest.approx(np.mean(jitters), rel=1e-5)
