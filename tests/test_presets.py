@@ -14,6 +14,7 @@ import pytest
 from lerobot_blindgrasp import pipeline, presets, recipe
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.policies.blindgrasp_transformer import configuration_blindgrasp_transformer as student_cfg
+from lerobot_blindgrasp.sim import rewards
 from lerobot_blindgrasp.teacher import presets as teacher_presets
 from lerobot_blindgrasp.teacher.train import TrainTeacherConfig
 
@@ -81,7 +82,7 @@ def test_existing_cpu_run_config_still_matches_the_cpu_preset():
     old = json.loads(run.read_text())
     cpu = teacher_presets.Variant().apply(teacher_presets.get_preset("cpu"))
     assert old["runner"] == cpu.runner_cfg()
-    assert old["reward"] == dataclasses.asdict(cpu.reward)
+    assert old["reward"] == rewards.as_record(cpu.reward)
     assert old["object_weights"] == (cpu.object_weights and list(cpu.object_weights))
     assert old["num_envs"] == cpu.num_envs and old["deviations"] == list(cpu.deviations)
 
@@ -100,6 +101,13 @@ def test_table_v_rows_and_the_no_r_i_teacher():
         assert getattr(no_ri.reward, term) == 0.0
     assert no_ri.reward.w_reach == teacher_presets.CPU.reward.w_reach and no_ri.reward.w_task == 1.0
     assert teacher_presets.CPU.reward.w_touch > 0  # the preset itself is untouched
+
+
+def test_cpu_v4_is_cpu_with_the_directional_touch_only():
+    cpu, v4 = teacher_presets.CPU, teacher_presets.get_preset("cpu_v4")
+    assert v4.reward == dataclasses.replace(cpu.reward, touch_max_downward=0.5)
+    assert v4.runner_cfg() == cpu.runner_cfg() and v4.num_envs == cpu.num_envs
+    assert v4.deviations[: len(cpu.deviations)] == cpu.deviations and "30 degrees" in v4.deviations[-1]
 
 
 def test_paper_student_steps_come_from_the_collected_frames(tmp_path):

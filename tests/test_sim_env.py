@@ -61,6 +61,22 @@ def test_total_uses_paper_weights_and_incentive_switch():
     assert rewards.total(terms, ablated)[0] == pytest.approx(1.0 - 500 - 0.04 - 0.01)
 
 
+def test_directional_touch_counts_only_tips_that_do_not_press_the_object_down():
+    force = np.array([[5.0, 5.0, 5.0], [0.05, 5.0, 5.0]])  # N on the object per tip
+    downward = np.array([[0.0, 0.49, 0.9], [0.0, -0.7, 0.51]])  # -F_z/|F|: sideways, 29 deg down, pressing down
+    np.testing.assert_allclose(rewards.r_touch(force), [1.0, 2 / 3])
+    np.testing.assert_allclose(rewards.r_touch_directional(force, downward, 0.5), [2 / 3, 1 / 3])
+    directional = replace(CFG, w_touch=0.5, touch_max_downward=0.5)
+    np.testing.assert_allclose(rewards.touch_term(force, downward, directional), [2 / 3, 1 / 3])
+    np.testing.assert_allclose(rewards.touch_term(force, None, replace(CFG, w_touch=0.5)), [1.0, 2 / 3])
+    with pytest.raises(ValueError, match="tip_object_downward"):
+        rewards.touch_term(force, None, directional)
+    # Records of runs made before the switch existed still match their preset.
+    assert "touch_max_downward" not in rewards.as_record(CFG)
+    assert rewards.as_record(directional)["touch_max_downward"] == 0.5
+    assert rewards.RewardConfig(**rewards.as_record(directional)) == directional
+
+
 def test_env_logs_each_term_and_reward_is_their_weighted_sum():
     env = BatchedGraspEnv(GraspEnvConfig(num_envs=4, seed=0))
     env.reset()

@@ -108,6 +108,18 @@ def test_uniaxial_sensor_reads_a_known_load_in_newtons():
         readings.append(uni()[0])
     settled = np.array(readings[20:])
     np.testing.assert_allclose(settled, mass * 9.81, rtol=0.03)
+    # The tip-on-object sensor sees the same load as a push straight down on the object: |F| = M g and
+    # -F_z / |F| = 1, the direction the directional touch term (rewards.r_touch_directional) refuses to pay for.
+    sd = d.sensordata[None]
+    from lerobot_blindgrasp.sim import observations
+
+    raw, _ = observations.observe(
+        d.qpos[None], d.qvel[None], sd, si, np.zeros(1), np.zeros((1, 9)),
+        np.zeros((1, observations.NOISE_DIM)), randomization.NO_DR,
+    )
+    assert raw["tip_object_force"][0, 0] == pytest.approx(mass * 9.81, rel=0.03)
+    assert raw["tip_object_downward"][0, 0] == pytest.approx(1.0, abs=0.02)
+    assert raw["tip_object_force"][0, 1:].max() == 0.0 and raw["tip_object_downward"][0, 1:].max() == 0.0
     # The other two sensors see nothing, and the deadband maps small readings to exactly 0.
     assert np.all(sensors.reading(uni()[1:]) == 0.0)
 
@@ -130,6 +142,8 @@ def test_scripted_closing_motion_lifts_the_medium_cylinder():
     # All three tips press on the object while it is held (tens of newtons at most, not physics blow-ups).
     held = forces[-20:]
     assert (held > spec.FORCE_THRESHOLD_N).all() and held.max() < 100.0
+    # A lifting grasp squeezes sideways: no tip presses the object down, so the directional touch pays in full.
+    assert np.abs(env._raw["tip_object_downward"]).max() < 0.3
 
 
 @pytest.mark.parametrize("name", objects.PAPER_OBJECTS)

@@ -123,6 +123,19 @@ CPU = TeacherPreset(
     external_force=False,
 )
 
+# Candidate successor of `cpu` (issue #9: the small capsule): the same preset with the directional touch term.
+CPU_V4 = replace(
+    CPU,
+    name="cpu_v4",
+    reward=replace(_CPU_REWARD, touch_max_downward=0.5),
+    deviations=_CPU_DEVIATIONS
+    + (
+        "touch counts only tips whose force on the object points at most 30 degrees below horizontal "
+        "(rewards.r_touch_directional): the cpu teacher pressed the small capsule into the table from above for "
+        "34 M steps, paid by touch for it (docs/results/teacher_cpu_v4.md)",
+    ),
+)
+
 QUICK = TeacherPreset(
     name="quick",
     num_envs=144,  # 18 objects x 8
@@ -135,7 +148,7 @@ QUICK = TeacherPreset(
     external_force=False,
 )
 
-PRESETS: dict[str, TeacherPreset] = {p.name: p for p in (PAPER, CPU, QUICK)}
+PRESETS: dict[str, TeacherPreset] = {p.name: p for p in (PAPER, CPU, CPU_V4, QUICK)}
 
 
 def get_preset(name: str) -> TeacherPreset:

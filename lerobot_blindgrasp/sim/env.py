@@ -231,6 +231,7 @@ class BatchedGraspEnv:
             prev_action=self.prev_action,
             tip_object_distance=raw["tip_object_distance"],
             tip_object_force=raw["tip_object_force"],
+            tip_object_downward=raw["tip_object_downward"],
             cfg=self.cfg.reward,
         )
         reward = rewards.total(terms, self.cfg.reward)

@@ -70,13 +70,17 @@ def observe(
     tip_quat = si.read(sensordata, "quat")
     uni_true = sensors.uniaxial_force(contact, si.read(sensordata, "zaxis"))
     obj_pos = qpos[:, OBJECT_POS]
+    tip_obj = si.read(sensordata, "objcontact")  # world frame, the force each tip exerts on the object
+    tip_obj_norm = np.linalg.norm(tip_obj, axis=2)
     raw = {
         "q": qpos[:, JOINTS],
         "uniaxial_clean": sensors.reading(uni_true),  # noise-free reading (rewards, curation)
         "d_xy": rewards.planar_distance(obj_pos[:, :2]),
         "lift": obj_pos[:, 2] - rest_height,
         "tip_object_distance": si.read(sensordata, "objdist")[:, :, 0],
-        "tip_object_force": np.linalg.norm(si.read(sensordata, "objcontact"), axis=2),
+        "tip_object_force": tip_obj_norm,
+        # -F_z / |F|: 1 when a tip presses the object straight down, 0 sideways (0 without contact)
+        "tip_object_downward": -tip_obj[..., 2] / np.maximum(tip_obj_norm, 1e-9),
     }
     nz = _scaled_noise(noise, dr)
     n = qpos.shape[0]

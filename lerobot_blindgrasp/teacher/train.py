@@ -11,7 +11,6 @@ to TorchScript and ONNX (`exported/`).
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import logging
 import os
@@ -25,7 +24,7 @@ from tqdm import tqdm
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_config
-from lerobot_blindgrasp.sim import randomization
+from lerobot_blindgrasp.sim import randomization, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.teacher import distributed, presets
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME, latest_checkpoint, observation_layout
@@ -100,7 +99,7 @@ def train(cfg: TrainTeacherConfig) -> Path:
         "seed": cfg.seed,
         "iterations": iterations,
         "runner": preset.runner_cfg(),
-        "reward": dataclasses.asdict(preset.reward),
+        "reward": rewards.as_record(preset.reward),
         "external_force": preset.external_force,
         "object_weights": preset.object_weights and list(preset.object_weights),
         "deviations": list(preset.deviations),
