@@ -18,11 +18,14 @@ from lerobot_blindgrasp import rates
 from lerobot_blindgrasp.sim import objects
 
 
-def load_successes(path: str | Path) -> dict[str, list[bool]]:
-    """Object -> episode successes in evaluation-index order, from either evaluation tool's output."""
+def load_successes(path: str | Path, mode: str | None = None) -> dict[str, list[bool]]:
+    """Object -> episode successes in evaluation-index order, from either evaluation tool's output. A teacher
+    eval's mode is `mode`, else a `:MODE` suffix of `path`, else deterministic."""
     from lerobot_blindgrasp.report import student_successes
 
-    text, _, mode = str(path).partition(":")
+    text = str(path)
+    if mode is None:
+        text, _, mode = text.partition(":")
     p = Path(text)
     if p.is_dir():
         p = p / "eval_info.json" if (p / "eval_info.json").exists() else p / "eval.json"
@@ -51,14 +54,11 @@ def compare(a: dict[str, list[bool]], b: dict[str, list[bool]], label_a: str = "
         p = rates.paired_counts(a[o], b[o])
         lines.append(f"| {o} | {rates.format_rate(*rates.count(a[o]))} | {rates.format_rate(*rates.count(b[o]))} "
                      f"| {p['a_only']} | {p['b_only']} |")
-    pa = [x for o in names for x in a[o]]
-    pb = [x for o in names for x in b[o]]
-    p = rates.paired_counts(pa, pb)
-    lines.append(f"| **all {len(names)}** | **{rates.format_rate(*rates.count(pa), digits=1)}** | "
-                 f"**{rates.format_rate(*rates.count(pb), digits=1)}** | **{p['a_only']}** | **{p['b_only']}** |")
-    diff = 100 * (sum(pb) - sum(pa)) / len(pa)
-    lines += ["", f"{label_b} minus {label_a}: {diff:+.1f} percentage points over {len(pa)} paired episodes; "
-              f"exact McNemar p = {rates.mcnemar_exact_p(p['a_only'], p['b_only']):.2g}."]
+    p = rates.paired_difference(a, b, names)
+    ra, rb = (rates.format_rate(p[k], p["n"], digits=1) for k in ("a_successes", "b_successes"))
+    lines.append(f"| **all {len(names)}** | **{ra}** | **{rb}** | **{p['a_only']}** | **{p['b_only']}** |")
+    lines += ["", f"{label_b} minus {label_a}: {p['diff_pp']:+.1f} percentage points over {p['n']} paired "
+              f"episodes; exact McNemar p = {p['p']:.2g}."]
     return "\n".join(lines)
 
 

@@ -7,7 +7,7 @@ collapses to a zero-width interval; per-object rates here are often 0/20 or 20/2
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 
 Z95 = 1.959963984540054  # two-sided 95 % normal quantile
 
@@ -63,3 +63,16 @@ def paired_counts(a: Iterable, b: Iterable) -> dict[str, int]:
     pairs = list(zip(a, b, strict=True))
     return {"both": sum(x and y for x, y in pairs), "a_only": sum(x and not y for x, y in pairs),
             "b_only": sum(y and not x for x, y in pairs), "neither": sum(not x and not y for x, y in pairs)}
+
+
+def paired_difference(a: Mapping[str, Sequence], b: Mapping[str, Sequence], keys: Iterable[str]) -> dict:
+    """B against A on the same start states, pooled over `keys` (objects; one missing from a side counts as no
+    episodes there), episode k of each key paired with episode k: `paired_counts`, plus `n` episodes,
+    `a_successes` and `b_successes`, `diff_pp` (B minus A, in percentage points) and the exact McNemar `p`.
+    Raises ValueError when the two sides do not hold the same number of episodes."""
+    keys = list(keys)
+    pa = [bool(x) for k in keys for x in a.get(k, [])]
+    pb = [bool(x) for k in keys for x in b.get(k, [])]
+    p = paired_counts(pa, pb)
+    return {**p, "n": len(pa), "a_successes": sum(pa), "b_successes": sum(pb),
+            "diff_pp": 100 * (sum(pb) - sum(pa)) / max(1, len(pa)), "p": mcnemar_exact_p(p["a_only"], p["b_only"])}

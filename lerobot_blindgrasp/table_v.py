@@ -22,17 +22,11 @@ from lerobot_blindgrasp.sim import objects
 
 def row_successes(out: Path, name: str) -> dict[str, list[bool]] | None:
     """Object -> episode successes of one Table V row, or None if that row has not been evaluated."""
-    from lerobot_blindgrasp.report import student_successes
+    from lerobot_blindgrasp.compare import load_successes
 
     row = TABLE_V[name]
-    if row.student:
-        path = out / f"eval_{name}" / "eval_info.json"
-        return student_successes(json.loads(path.read_text())) if path.exists() else None
-    path = out / f"{row.teacher}_eval" / "eval.json"
-    if not path.exists():
-        return None
-    per_object = json.loads(path.read_text())["modes"]["deterministic"]["per_object"]
-    return {o: r["successes"] for o, r in per_object.items()}
+    path = out / f"eval_{name}" / "eval_info.json" if row.student else out / f"{row.teacher}_eval" / "eval.json"
+    return load_successes(path, mode="deterministic") if path.exists() else None
 
 
 def demo_budget(out: Path, name: str) -> str:
@@ -50,21 +44,20 @@ def paired_with_proposed(done: dict[str, dict[str, list[bool]]], names: list[str
     one of the two solved, the difference in success, and the exact McNemar p-value of that difference."""
     if "proposed" not in done:
         return []
-    base = [x for o in names for x in done["proposed"].get(o, [])]
     lines = ["", "Paired with the proposed student, all objects pooled, episode by episode on the same start states:",
              "", "| row | success difference | only proposed solved | only this row solved | exact McNemar p |",
              "|---|---:|---:|---:|---:|"]
     for n, r in done.items():
         if n == "proposed":
             continue
-        row = [x for o in names for x in r.get(o, [])]
-        if len(row) != len(base):
-            lines.append(f"| {TABLE_V[n].label} | not paired: {len(row)} episodes vs {len(base)} | | | |")
+        try:
+            p = rates.paired_difference(done["proposed"], r, names)
+        except ValueError:
+            n_row, n_base = (sum(len(x.get(o, [])) for o in names) for x in (r, done["proposed"]))
+            lines.append(f"| {TABLE_V[n].label} | not paired: {n_row} episodes vs {n_base} | | | |")
             continue
-        p = rates.paired_counts(base, row)
-        diff = 100 * (sum(row) - sum(base)) / max(1, len(base))
-        lines.append(f"| {TABLE_V[n].label} | {diff:+.1f} pp | {p['a_only']} | {p['b_only']} | "
-                     f"{rates.mcnemar_exact_p(p['a_only'], p['b_only']):.2g} |")
+        lines.append(f"| {TABLE_V[n].label} | {p['diff_pp']:+.1f} pp | {p['a_only']} | {p['b_only']} | "
+                     f"{p['p']:.2g} |")
     return lines
 
 

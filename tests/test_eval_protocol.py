@@ -92,6 +92,18 @@ def test_paired_counts_and_the_exact_mcnemar_test():
     assert rates.mcnemar_exact_p(4, 4) == 1.0 and rates.mcnemar_exact_p(0, 0) == 1.0
 
 
+def test_paired_difference_pools_objects_in_the_given_order():
+    a = {"x": [True, True, False], "y": [True]}
+    b = {"x": [True, False, True], "y": [False], "z": [True]}  # z is not among the keys: left out
+    d = rates.paired_difference(a, b, ["x", "y"])
+    counts = ("both", "a_only", "b_only", "neither", "n", "a_successes", "b_successes")
+    assert [d[k] for k in counts] == [1, 2, 1, 0, 4, 3, 2]
+    assert d["diff_pp"] == pytest.approx(-25.0) and d["p"] == rates.mcnemar_exact_p(2, 1) == 1.0
+    # An object one side lacks counts as no episodes there, so the two no longer pair.
+    with pytest.raises(ValueError, match="equal counts"):
+        rates.paired_difference(a, b, ["x", "z"])
+
+
 def test_lerobot_eval_of_a_teacher_folder_is_a_one_line_error(monkeypatch):
     """The env config is parsed before LeRobot loads the policy: a teacher folder as --policy.path is caught there."""
     from lerobot_blindgrasp.envs.sim_env import BlindGraspEnvConfig

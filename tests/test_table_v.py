@@ -40,3 +40,10 @@ def test_table_v_reads_student_and_rl_rows_and_names_the_missing(tmp_path):
     # o_t loses all three the proposed student solved (p = 2 x 1/8).
     assert "| Student w/o Curation | -25.0 pp | 2 | 0 | 0.5 |" in md
     assert "| RL w/ o_t | -37.5 pp | 3 | 0 | 0.25 |" in md
+
+
+def test_a_row_with_other_episode_counts_is_listed_as_not_paired(tmp_path):
+    _student_eval(tmp_path / "eval_proposed", {"sphere_medium": [True, True, False, True]})
+    _student_eval(tmp_path / "eval_wo_curation", {"sphere_medium": [True, False]})
+    md = table_v.write_table_v(tmp_path).read_text()
+    assert "| Student w/o Curation | not paired: 2 episodes vs 4 | | | |" in md
