@@ -149,6 +149,33 @@ def parse_config(cls: type[T], argv: list[str] | None = None, legacy: Legacy | N
         raise SystemExit(f"error: {cause}") from None
 
 
+def parse_config_and_positionals(
+    cls: type[T], argv: list[str] | None = None, legacy: Legacy | None = None
+) -> tuple[T, list[str]]:
+    """For commands that take a list of positional arguments (`LABEL=PATH ...`) next to their config flags:
+    (the config parsed by `parse_config` from the flags, the positionals in order). A token starting with `-` is a
+    flag; a flag without `=` takes the next token as its value unless that is a flag too, or the flag is a boolean
+    field and the token is no boolean word."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    _, bools, _ = _field_kinds(cls)
+    flags: list[str] = []
+    positionals: list[str] = []
+    i = 0
+    while i < len(args):
+        arg = args[i]
+        i += 1
+        if not arg.startswith("-"):
+            positionals.append(arg)
+            continue
+        flags.append(arg)
+        if "=" in arg or arg in ("-h", "--help") or i == len(args) or args[i].startswith("-"):
+            continue
+        if arg[2:].replace("-", "_") not in bools or args[i].lower() in _BOOL_WORDS:
+            flags.append(args[i])
+            i += 1
+    return parse_config(cls, flags, legacy), positionals
+
+
 def command_line(prog: str, argv: list[str] | None = None) -> str:
     """The command as typed, for run records (`collection.json`, "to continue: ..." hints)."""
     return " ".join([prog, *(sys.argv[1:] if argv is None else argv)])

@@ -90,3 +90,23 @@ def test_new_spellings_pass_through_untouched():
     assert translate_legacy_args(BenchSimConfig, argv) == (argv, [])
     with pytest.raises(SystemExit, match="unknown mode"):
         parse_config(evaluate.EvalTeacherConfig, ["--modes=greedy"])
+
+
+def test_commands_with_positionals_parse_their_flags_with_draccus(capsys):
+    from lerobot_blindgrasp.cli import parse_config_and_positionals
+    from lerobot_blindgrasp.demos.diversity import DiversityConfig
+    from lerobot_blindgrasp.teacher.progress import ProgressConfig
+
+    argv = ["out.png", "a=runs/a", "--until=500", "runs/b", "--metrics=Metrics/x,Metrics/y"]
+    cfg, args = parse_config_and_positionals(ProgressConfig, argv)
+    assert args == ["out.png", "a=runs/a", "runs/b"]
+    assert cfg.until == 500 and cfg.metric_tags == ["Metrics/x", "Metrics/y"]
+    # draccus's own `--flag value` spelling: the value is no positional
+    cfg, args = parse_config_and_positionals(ProgressConfig, ["--until", "7", "out.png", "runs/a"])
+    assert cfg.until == 7 and args == ["out.png", "runs/a"] and cfg.metric_tags == []
+    cfg, args = parse_config_and_positionals(DiversityConfig, ["x=demos/x", "--at_s=0.5", "demos/y"])
+    assert cfg.at_s == 0.5 and args == ["x=demos/x", "demos/y"]
+    assert parse_config_and_positionals(DiversityConfig, ["demos/y"])[0].at_s == 3.0
+    assert capsys.readouterr().err == ""  # the documented spellings are no deprecated ones
+    with pytest.raises(SystemExit):
+        parse_config_and_positionals(ProgressConfig, ["out.png", "runs/a", "--unknown=1"])

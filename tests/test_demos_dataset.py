@@ -235,3 +235,17 @@ def test_demo_diversity_is_computed_per_object_from_the_written_episodes(written
         assert d["objects"][name]["command_jitter_rad"] == pytest.approx(jitter, rel=1e-5)
     assert d["grasp_pose_spread_rad"] == pytest.approx(np.mean(spreads), rel=1e-5)
     assert d["command_jitter_rad"] == pytest.approx(np.mean(jitters), rel=1e-5)
+
+
+def test_demo_diversity_command_line(written, capsys):
+    from lerobot_blindgrasp.demos.diversity import diversity, main
+
+    root = written[0]
+    main([f"demos={root}", "--at_s=0.5"])
+    d = diversity(root, at_s=0.5)
+    lines = capsys.readouterr().out.splitlines()
+    assert "grasp-pose spread at 0.5 s" in lines[0]
+    assert lines[2] == f"| demos | 6 | {d['grasp_pose_spread_rad']:.3f} | {d['command_jitter_rad']:.3f} |"
+    main([str(root)])  # no label: the root names the row; default time 3 s
+    out = capsys.readouterr().out
+    assert "spread at 3 s" in out and f"| {root} | 6 |" in out

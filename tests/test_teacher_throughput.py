@@ -87,3 +87,23 @@ def test_progress_curves_sum_training_time_and_weigh_objects_equally(tmp_path):
     plot_metrics({"run": tmp_path}, ["Perf/learning_time", "Success/cuboid_a_large"], tmp_path / "m.png", until=2)
     assert (tmp_path / "m.png").stat().st_size > 1000
     assert (tmp_path / "p.png").stat().st_size > 1000
+
+
+def test_progress_command_line_takes_the_runs_as_positionals_and_its_options_as_flags(tmp_path, capsys):
+    from torch.utils.tensorboard import SummaryWriter
+
+    from lerobot_blindgrasp.teacher.progress import main
+
+    (tmp_path / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))
+    w = SummaryWriter(str(tmp_path))
+    for it in range(4):
+        w.add_scalar("Perf/collection_time", 3.0, it)
+        w.add_scalar("Perf/learning_time", 1.0, it)
+    w.close()
+    out = tmp_path / "figs" / "q.png"
+    out.parent.mkdir()
+    main([str(out), f"run={tmp_path}", "--until=2", "--metrics=Perf/learning_time,Perf/collection_time"])
+    assert json.loads(capsys.readouterr().out)["last"]["run"]["iteration"] == 2
+    assert out.stat().st_size > 1000 and (out.parent / "q_metrics.png").stat().st_size > 1000
+    with pytest.raises(SystemExit, match="usage"):
+        main([str(out), "--until=2"])

@@ -14,12 +14,13 @@ Read with LeRobot's own loader, so any dataset the collector (or `lerobot-record
 from __future__ import annotations
 
 import json
-import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.cli import parse_config_and_positionals
 
 
 def diversity(root: str | Path, at_s: float = 3.0) -> dict:
@@ -60,19 +61,23 @@ def diversity(root: str | Path, at_s: float = 3.0) -> dict:
     }
 
 
+@dataclass
+class DiversityConfig:
+    """The options of `python -m lerobot_blindgrasp.demos.diversity LABEL=DATASET_ROOT ...`; the datasets are
+    positional arguments."""
+
+    at_s: float = 3.0  # seconds into each episode at which the grasp-pose spread is measured (mid-grasp)
+
+
 def main(argv: list[str] | None = None) -> None:
-    args = list(sys.argv[1:] if argv is None else argv)
-    at_s = 3.0
-    for a in [a for a in args if a.startswith("--at_s=")]:
-        args.remove(a)
-        at_s = float(a.split("=", 1)[1])
+    cfg, args = parse_config_and_positionals(DiversityConfig, argv)
     if not args:
         raise SystemExit("usage: python -m lerobot_blindgrasp.demos.diversity LABEL=DATASET_ROOT ... [--at_s=3.0]")
-    lines = [f"| dataset | episodes | grasp-pose spread at {at_s:g} s (rad) | command jitter (rad/step) |",
+    lines = [f"| dataset | episodes | grasp-pose spread at {cfg.at_s:g} s (rad) | command jitter (rad/step) |",
              "|---|---:|---:|---:|"]
     for arg in args:
         label, _, root = arg.rpartition("=")
-        d = diversity(root, at_s)
+        d = diversity(root, cfg.at_s)
         lines.append(f"| {label or root} | {d['episodes']} | {d['grasp_pose_spread_rad']:.3f} | "
                      f"{d['command_jitter_rad']:.3f} |")
     print("\n".join(lines))

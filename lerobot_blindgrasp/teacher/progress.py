@@ -1,6 +1,7 @@
 """Training success against env steps and against training wall clock, from a run's TensorBoard scalars.
 
     python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...] [--until=ITER]
+        [--metrics=TAG,TAG]
 
 `--until=ITER` cuts every curve after iteration ITER, to compare runs at one budget (a side-by-side run that was
 stopped earlier than the one it is compared with). `--metrics=TAG,TAG` adds a second figure, OUT_metrics.png, with
@@ -19,11 +20,12 @@ sessions reports its training time without the gaps (process start-up, about 10 
 from __future__ import annotations
 
 import json
-import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from lerobot_blindgrasp.cli import parse_config_and_positionals
 from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME
 
@@ -136,35 +138,42 @@ def plot_metrics(runs: dict[str, Path], tags: list[str], path: Path, until: int 
     plt.close(fig)
 
 
+USAGE = ("usage: python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...] "
+         "[--until=ITER] [--metrics=TAG,TAG]")
+
+
+@dataclass
+class ProgressConfig:
+    """The options of `python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR ...`; the figure and
+    the runs are positional arguments."""
+
+    until: int | None = None  # cut every curve after this iteration, to compare runs at one budget
+    # comma-separated TensorBoard scalar tags (Metrics/mean_contacts,Metrics/mean_lift_cm): a second figure,
+    # OUT_metrics.png, with them against env steps
+    metrics: str = ""
+
+    @property
+    def metric_tags(self) -> list[str]:
+        return [t for t in self.metrics.split(",") if t]
+
+
 def main(argv=None) -> None:
-    """python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...] [--until=ITER]"""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    until, metrics = None, []
-    for a in [a for a in argv if a.startswith("--")]:
-        argv.remove(a)
-        key, _, value = a.partition("=")
-        if key == "--until":
-            until = int(value)
-        elif key == "--metrics":
-            metrics = [t for t in value.split(",") if t]
-        else:
-            raise SystemExit(f"unknown option {a}; options: --until=ITER, --metrics=TAG,TAG")
-    if len(argv) < 2:
-        raise SystemExit("usage: python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR ... "
-                         "[--until=ITER] [--metrics=TAG,TAG]")
+    cfg, args = parse_config_and_positionals(ProgressConfig, argv)
+    if len(args) < 2:
+        raise SystemExit(USAGE)
     runs = {}
-    for arg in argv[1:]:
+    for arg in args[1:]:
         label, _, path = arg.rpartition("=")
         run_dir = Path(path)
         if not (run_dir / CONFIG_NAME).is_file():
             raise SystemExit(f"{run_dir} is not a teacher run directory (no {CONFIG_NAME})")
         runs[label or run_dir.name] = run_dir
-    curves = plot_progress(runs, Path(argv[0]), until=until)
-    if metrics:
-        out = Path(argv[0])
-        plot_metrics(runs, metrics, out.with_name(f"{out.stem}_metrics.png"), until=until)
+    out = Path(args[0])
+    curves = plot_progress(runs, out, until=cfg.until)
+    if cfg.metric_tags:
+        plot_metrics(runs, cfg.metric_tags, out.with_name(f"{out.stem}_metrics.png"), until=cfg.until)
     last = {label: {k: v[-1] for k, v in p.items()} for label, p in curves.items() if p}
-    print(json.dumps({"plot": argv[0], "last": last}, indent=2))
+    print(json.dumps({"plot": args[0], "last": last}, indent=2))
 
 
 if __name__ == "__main__":
