@@ -143,7 +143,7 @@ def test_scripted_closing_motion_lifts_the_medium_cylinder():
     held = forces[-20:]
     assert (held > spec.FORCE_THRESHOLD_N).all() and held.max() < 100.0
     # A lifting grasp squeezes sideways: no tip presses the object down, so the directional touch pays in full.
-    assert np.abs(env._raw["tip_object_downward"]).max() < 0.3
+    assert np.abs(info["tip_object_downward"]).max() < 0.3
 
 
 @pytest.mark.parametrize("name", objects.PAPER_OBJECTS)
@@ -158,3 +158,27 @@ def test_each_object_rests_stably_on_the_table(name):
     pos = env.object_position()[0]
     assert abs(pos[2] - o.rest_height) < 0.003, f"{name} did not rest at its expected height"
     assert np.linalg.norm(pos[:2]) < 0.005
+
+
+def test_contact_directions_tell_a_sideways_lift_from_a_press_from_above():
+    """`teacher.contacts` on two scripted grasps: the pinch at mid-height of the medium cylinder squeezes sideways
+    and lifts it; the same pinch closed on top of the small capsule presses it into the table (what the `cpu`
+    teacher does to that capsule: -F_z/|F| ~ 0.86, tips ~21 mm above its axis)."""
+    from lerobot_blindgrasp.sim.scripted import PinchLiftScript
+    from lerobot_blindgrasp.teacher.contacts import contact_directions
+
+    dr = replace(randomization.PAPER_DR, joint_offset_rad=0.0, object_xy_m=0.0, external_force=False)
+    on_top = 0.04 + gripper.TIP_CAPSULE_RADIUS - 0.004  # the capsule lies on its side, 4 cm high
+    found = {}
+    grasps = (("cylinder_a_medium", 0.03, 0.045, 0.03), ("capsule_small", 0.0, on_top, -0.005))
+    for obj, radius, height, lift in grasps:
+        env = BatchedGraspEnv(GraspEnvConfig(num_envs=2, objects=(obj,), dr=dr, autoreset=False))
+        obs = env.reset()
+        script = PinchLiftScript(radius, height, lift)
+        found[obj] = contact_directions(env, obs, lambda o: script(env.joint_positions()), 100, after_steps=40)
+    side, above = found["cylinder_a_medium"], found["capsule_small"]
+    assert side["success_rate"] == 1.0 and side["contacts"] > 0
+    assert abs(side["mean_downward"]) < 0.3 and side["share_pressing_down"] == 0.0
+    assert above["success_rate"] == 0.0 and above["contacts"] > 0
+    assert above["mean_downward"] > 0.7 and above["share_pressing_down"] == 1.0
+    assert above["mean_tip_height_mm"] > 15.0 > abs(side["mean_tip_height_mm"])

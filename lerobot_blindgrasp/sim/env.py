@@ -253,6 +253,8 @@ class BatchedGraspEnv:
             "lift": raw["lift"],
             "n_contact": rewards.num_contacts(raw["uniaxial_clean"]),
             "uniaxial_force": raw["uniaxial_clean"],  # noise-free, after the deadband (N)
+            "tip_object_force": raw["tip_object_force"],  # |net force| of each tip on the object (N)
+            "tip_object_downward": raw["tip_object_downward"],  # its -F_z/|F| (1: pressing straight down)
             "joint_target": self._ctrl.copy(),  # the absolute targets commanded this step (rad)
             "terms": terms,
             "physics_failed": failed,
@@ -331,6 +333,10 @@ class BatchedGraspEnv:
 
     def object_position(self) -> np.ndarray:
         return self._qpos[:, observations.OBJECT_POS].copy()
+
+    def fingertip_positions(self) -> np.ndarray:
+        """(N, 3 fingers, xyz) world positions of the tip sites (the load cells)."""
+        return self.sensor_index.read(self._sensordata, "pos")
 
     def mj_model_data(self, i: int) -> tuple[mujoco.MjModel, mujoco.MjData]:
         """Env i's model and a forwarded MjData of its current state (for rendering)."""

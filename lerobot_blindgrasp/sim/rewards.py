@@ -120,13 +120,17 @@ def r_touch_directional(
     return pressing.mean(axis=-1)
 
 
-def touch_term(tip_object_force: np.ndarray, tip_object_downward: np.ndarray | None, cfg: RewardConfig) -> np.ndarray:
+def touch_term(
+    tip_object_force: np.ndarray, tip_object_downward: np.ndarray | None, cfg: RewardConfig
+) -> np.ndarray:
     """The touch term the config asks for: any direction, or directional when `touch_max_downward` is set."""
     if cfg.touch_max_downward is None:
         return r_touch(tip_object_force, cfg.contact_threshold_n)
     if tip_object_downward is None:
         raise ValueError("touch_max_downward is set but the force directions (tip_object_downward) were not given")
-    return r_touch_directional(tip_object_force, tip_object_downward, cfg.touch_max_downward, cfg.contact_threshold_n)
+    return r_touch_directional(
+        tip_object_force, tip_object_downward, cfg.touch_max_downward, cfg.contact_threshold_n
+    )
 
 
 def compute_terms(
