@@ -58,8 +58,12 @@ def bar_chart(path: Path, names: list[str], series: dict[str, list[float]], titl
     ax.set_xticks(x, [n.replace("_", " ") for n in names], rotation=60, ha="right", fontsize=8)
     ax.set_ylabel(ylabel)
     ax.set_ylim(0, 100)  # every chart here is a percentage; a fixed axis keeps all-zero charts readable
-    ax.set_title(title)
-    ax.legend(fontsize=8)
+    # The legend goes between the title and the axes, never over a bar: as many columns as the width holds
+    # (about 4 pt a character at font size 8, plus the colour patch and the gap).
+    longest = max((len(label) for label in series), default=0)
+    ncol = max(1, min(len(series), int(fig.get_figwidth() * 72 / (4 * longest + 35))))
+    ax.legend(fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.01), ncol=ncol, frameon=False)
+    fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
