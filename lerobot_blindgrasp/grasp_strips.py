@@ -45,9 +45,27 @@ def pick_per_class(videos: dict[str, list[Path]]) -> dict[str, tuple[str, Path]]
 
 
 def read_frames(video: Path, n: int) -> tuple[list[np.ndarray], np.ndarray]:
-    """n RGB frames evenly spaced over the video (first and last included), and their frame indices."""
+    """n RGB frames evenly spaced over the video (first and last included), and their frame indices.
+
+    The container's frame count picks the indices up front, so decoding stops at the last one and only the picked
+    frames are converted to RGB; a video whose container gives no count, or a wrong one, is decoded whole."""
     import av  # lerobot[dataset] dependency; imported here so the report works without any video
 
+    with av.open(str(video)) as container:
+        total = container.streams.video[0].frames  # 0: the container does not say
+        if total > 0 and n > 0:
+            idx = np.linspace(0, total - 1, n).round().astype(int)
+            picked: dict[int, np.ndarray] = {}
+            decoded = container.decode(video=0)
+            for k, frame in enumerate(decoded):
+                if k in idx:
+                    picked[k] = frame.to_ndarray(format="rgb24")
+                if k == idx[-1]:
+                    break
+            # With n > 1 the last index is the last frame: no frame may follow it, or the count was wrong. With
+            # n == 1 the index is 0 whatever the count.
+            if len(picked) == len(set(idx.tolist())) and (n == 1 or next(decoded, None) is None):
+                return [picked[i] for i in idx], idx
     with av.open(str(video)) as container:
         frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
     if not frames:

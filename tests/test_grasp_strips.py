@@ -61,3 +61,57 @@ def test_no_successful_rendered_episode_gives_no_strip(tmp_path):
     info = {"per_task": [_task(0, [False], [_video(tmp_path / "v.mp4", 3, lambda f: 0)])]}
     assert write_grasp_strips(info, tmp_path / "s.png") is None
     assert not (tmp_path / "s.png").exists()
+
+
+class _CountingContainer:
+    """av.open's container, counting the frames decoded and converted, `stated_frames` overrides its count."""
+
+    def __init__(self, container, log: dict, stated_frames: int | None):
+        self._c, self._log, self._stated = container, log, stated_frames
+
+    def __enter__(self):
+        self._c.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        return self._c.__exit__(*exc)
+
+    @property
+    def streams(self):
+        if self._stated is None:
+            return self._c.streams
+        stream = type("Stream", (), {"frames": self._stated})()
+        return type("Streams", (), {"video": [stream]})()
+
+    def decode(self, **kw):
+        for f in self._c.decode(**kw):
+            self._log["decoded"] += 1
+            yield _CountingFrame(f, self._log)
+
+
+class _CountingFrame:
+    def __init__(self, frame, log):
+        self._f, self._log = frame, log
+
+    def to_ndarray(self, **kw):
+        self._log["converted"] += 1
+        return self._f.to_ndarray(**kw)
+
+
+def test_read_frames_converts_only_the_picked_frames_and_matches_a_full_decode(tmp_path, monkeypatch):
+    video = _video(tmp_path / "v.mp4", 10, lambda f: 20 * f)
+    with av.open(str(video)) as c:
+        everything = [f.to_ndarray(format="rgb24") for f in c.decode(video=0)]
+    real_open = av.open
+    for stated in (None, 0, 7, 13):  # the container's own count, none, too few, too many
+        log = {"decoded": 0, "converted": 0}
+        monkeypatch.setattr(av, "open", lambda p, *a, **k: _CountingContainer(real_open(p, *a, **k), log, stated))
+        for n in (1, 2, 4, 10, 15):
+            log.update(decoded=0, converted=0)
+            frames, idx = read_frames(video, n)
+            ref = np.linspace(0, 9, n).round().astype(int)
+            assert list(idx) == list(ref)
+            assert all(np.array_equal(a, everything[i]) for a, i in zip(frames, ref, strict=True))
+            if stated is None:  # the count is right: only the picked frames are converted, and n = 1 stops at once
+                assert log["converted"] == len(set(ref.tolist()))
+                assert log["decoded"] == (1 if n == 1 else 10)
