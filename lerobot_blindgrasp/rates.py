@@ -55,6 +55,13 @@ def mcnemar_exact_p(only_a: int, only_b: int) -> float:
     return min(1.0, 2 * tail)
 
 
+def paired_verdict(p: float, alpha: float = 0.05) -> str:
+    """How a report reads a paired p-value, in words that cannot be mistaken for the other verdict."""
+    if p < alpha:
+        return f"below {alpha:g}: the two differ beyond the luck of these start states"
+    return f"not below {alpha:g}: no difference beyond the luck of these start states"
+
+
 def paired_counts(a: Iterable, b: Iterable) -> dict[str, int]:
     """Episodes on the same start states, in order: both succeed, only A, only B, neither."""
     a, b = [bool(x) for x in a], [bool(x) for x in b]

@@ -136,9 +136,9 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     lines.append(f"| **all {len(names)}** | " + " | ".join(cells) + " | "
                  f"**{rates.format_rate(*rates.count(pooled_student), digits=1)}** | "
                  f"**{paired_all['both']} / {t_only} / {s_only}** |")
+    p_paired = rates.mcnemar_exact_p(t_only, s_only)
     lines += ["", f"Paired over all objects: the teacher alone solved {t_only} start states, the student alone "
-              f"{s_only}; exact McNemar p = {rates.mcnemar_exact_p(t_only, s_only):.3g} (below 0.05: the two "
-              "differ beyond the luck of these start states)."]
+              f"{s_only}; exact McNemar p = {p_paired:.3g} ({rates.paired_verdict(p_paired)})."]
     lines.append("")
     strip = write_grasp_strips(eval_info, figs / "grasp_strips.png")
     if strip is not None:

@@ -90,6 +90,9 @@ def test_paired_counts_and_the_exact_mcnemar_test():
     assert rates.mcnemar_exact_p(0, 6) == pytest.approx(2 / 64)
     assert rates.mcnemar_exact_p(9, 1) == pytest.approx(22 / 1024)
     assert rates.mcnemar_exact_p(4, 4) == 1.0 and rates.mcnemar_exact_p(0, 0) == 1.0
+    # A report's reading of p says which side of the threshold it is on (it once said "below 0.05" for p = 0.25).
+    assert rates.paired_verdict(0.253).startswith("not below 0.05: no difference")
+    assert rates.paired_verdict(0.01).startswith("below 0.05: the two differ")
 
 
 def test_paired_difference_pools_objects_in_the_given_order():
