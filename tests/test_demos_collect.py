@@ -324,6 +324,7 @@ def test_bench_demos_reports_speeds(teacher, capsys):
     assert result["curated_demos"] == 6 and result["rollouts"] >= 6
     assert result["curated_demos_per_cpu_minute"] > 0 and result["frames_written_per_s"] > 0
     assert result["frames_written_per_s_add_frame"] > 0 and result["writer_episodes"] == 6
+    assert result["backend"] == "batch"
     assert capsys.readouterr().out == ""  # --json: the dispatcher prints, run() stays quiet
 
 

@@ -97,3 +97,39 @@ def test_scripted_grasp_holds_the_same_on_both_backends():
     held_b, held_w = fb[-20:].sum(axis=2).mean(axis=0), fw[-20:].sum(axis=2).mean(axis=0)
     np.testing.assert_allclose(held_w, held_b, rtol=0.25)
     assert objects.get_object("cylinder_a_medium").mjcf_type == "cylinder"
+
+
+def test_collect_demos_on_warp_writes_the_same_start_states(tmp_path):
+    """`blindgrasp-collect-demos --backend=warp`: the shipped teacher's demos, one per geometry type, written as a
+    LeRobotDataset that LeRobot's loader reads, starting from the same observations as on the batch backend
+    (same env seeds, same draws; trajectories part ways only through contact, see above)."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from lerobot_blindgrasp.demos import curation, loop, provenance
+    from lerobot_blindgrasp.demos import dataset as demo_dataset
+    from lerobot_blindgrasp.demos.config import CollectConfig
+
+    names = "cuboid_a_medium,capsule_medium,cylinder_a_medium,sphere_medium"
+    first = {}
+    for backend in ("batch", "warp"):
+        out = tmp_path / backend
+        cfg = CollectConfig(
+            output_dir=out, repo_id="test/warp_demos", episodes_per_object=1, objects=names, num_envs=4,
+            seed=spec.DEMO_SEED + 7, curation=curation.NO_CURATION, stochastic=False, progress=False,
+            backend=backend, threads=1,
+        )
+        stats = loop.collect(cfg)
+        assert stats.kept == 4 and stats.stop_reason == "done"
+        assert provenance.load(out)["runs"][0]["backend"] == backend
+        ds = LeRobotDataset("test/warp_demos", root=out, video_backend="pyav")
+        frames = ds.hf_dataset.with_format("numpy")
+        state = np.stack(frames[spec.STATE_KEY])
+        starts = np.flatnonzero(np.asarray(frames["frame_index"]) == 0)
+        episode_object = dict(zip(*demo_dataset.episode_table(out)[["episode_index", "object"]].to_numpy().T))
+        first[backend] = {episode_object[int(frames["episode_index"][i])]: state[i] for i in starts}
+    assert sorted(first["warp"]) == sorted(names.split(","))
+    for name in first["batch"]:
+        # o_t at reset: the noisy joint readings and (zero) forces of the same draw; float32 on Warp
+        np.testing.assert_allclose(first["warp"][name], first["batch"][name], atol=1e-5)
+    with pytest.raises(ValueError, match="backend"):
+        CollectConfig(output_dir=tmp_path / "x", repo_id="a/b", backend="gpu")

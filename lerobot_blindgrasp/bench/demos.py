@@ -33,6 +33,7 @@ class BenchDemosConfig(BenchConfig):
     curation: bool = True  # false: keep every episode (the 'w/o curation' ablation)
     write_episodes: int = 40  # episodes re-written per writer path
     threads: int = 0  # physics threads (0: all CPUs)
+    backend: str = "batch"  # physics: batch or warp (pip install .[gpu]; a GPU if there is one, else Warp's CPU)
 
 
 CONFIG = BenchDemosConfig
@@ -103,6 +104,7 @@ def run(cfg: BenchDemosConfig) -> dict:
             curation=curation.PAPER_CURATION if cfg.curation else curation.NO_CURATION,
             num_envs=cfg.num_envs,
             threads=cfg.threads,
+            backend=cfg.backend,
             progress=False,
         )
         with contextlib.redirect_stderr(io.StringIO()):
@@ -122,6 +124,7 @@ def run(cfg: BenchDemosConfig) -> dict:
             "teacher": str(cfg.teacher) if cfg.teacher else "throwaway quick teacher (1 iteration)",
             "curation": cfg.curation,
             "num_envs": cfg.num_envs,
+            "backend": cfg.backend,
             "rollouts": stats.rollouts,
             "curated_demos": stats.kept,
             "frames": stats.frames,

@@ -9,6 +9,7 @@ from pathlib import Path
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.demos import curation as curation_mod
 from lerobot_blindgrasp.sim import objects as objects_mod
+from lerobot_blindgrasp.sim.backends import check_backend
 
 DEFAULT_ROLLOUT_BUDGET_FACTOR = 20
 
@@ -42,6 +43,9 @@ class CollectConfig:
     # first env seed, in spec.SEED_RANGES["demos"] (a resumed run continues after the last)
     seed: int = spec.DEMO_SEED
     threads: int = 0  # physics threads (0: all CPUs)
+    # physics: batch (mujoco.batch, CPU) or warp (MuJoCo Warp on this process's GPU, else its CPU device;
+    # pip install .[gpu]). The same task, draws and curation either way (docs/results/warp.md).
+    backend: str = "batch"
     resume: bool = False  # append to an existing output_dir until the targets are met
     progress: bool = True  # progress bar
 
@@ -51,6 +55,7 @@ class CollectConfig:
         if self.repo_id is None:
             raise ValueError("--repo_id is required (USER/NAME, the dataset's Hub id)")
         self.output_dir = Path(self.output_dir)
+        check_backend(self.backend)  # a clear error before the teacher is loaded
         if not self.curation.enabled and self.curation.trim_to_success:
             # Nothing is trimmed without curation; one spelling in the provenance, so --resume compares alike.
             self.curation = dataclasses.replace(self.curation, trim_to_success=False)

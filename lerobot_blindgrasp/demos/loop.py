@@ -181,6 +181,7 @@ def _build_env(cfg: CollectConfig, object_names: list[str], seed: int, dr, rewar
             reward=reward_cfg,
             nthread=cfg.threads,
             autoreset=True,
+            backend=cfg.backend,
         )
     )
 

@@ -122,6 +122,7 @@ def start_run(cfg: CollectConfig, prov: dict, command: str | None) -> dict:
         "episodes_per_object": cfg.episodes_per_object,
         "max_rollouts_per_object": cfg.rollout_budget,
         "num_envs": cfg.num_envs,
+        "backend": cfg.backend,
         "seed_start": prov["next_env_seed"],
     }
 
