@@ -123,7 +123,9 @@ CPU = TeacherPreset(
     external_force=False,
 )
 
-# Candidate successor of `cpu` (issue #9: the small capsule): the same preset with the directional touch term.
+# `cpu` with the directional touch term (issue #9, the small capsule). Tried and not adopted: from scratch it starved
+# learning (4 % vs 43 % training success at 12.9 M steps), switched on at iteration 350 it changed nothing held out
+# (docs/results/teacher_cpu_v4.md). Kept so that those runs resume and reproduce.
 CPU_V4 = replace(
     CPU,
     name="cpu_v4",
