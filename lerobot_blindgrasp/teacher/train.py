@@ -134,6 +134,10 @@ def train(cfg: TrainTeacherConfig) -> Path:
         runner.load(str(ckpt))
         done_its = runner.current_learning_iteration + 1
         runner.current_learning_iteration = done_its
+        if runner.alg.rnd is not None:
+            # rsl-rl keeps the RND weight schedule's env-step counter outside the checkpoint; without this a resumed
+            # run would restart the schedule (a decayed exploration bonus back at full weight).
+            runner.alg.rnd.update_counter = done_its * steps_per_it
         bar.update(done_its)
         log.info("resuming from %s (iteration %d)", ckpt, done_its)
     remaining = iterations - done_its

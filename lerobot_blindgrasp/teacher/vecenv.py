@@ -26,9 +26,15 @@ class RslRlGraspEnv(VecEnv):
         self.num_actions = spec.NUM_JOINTS
         self.max_episode_length = env.max_episode_steps
         self.device = device
+        self.step_dt = spec.CONTROL_DT  # seconds per env step; rsl-rl's RND scales its weight by it
         self.cfg = {"env": repr(env.cfg)}
         self._on_step = on_step  # e.g. a progress-bar tick
         self._obs = self._to_td(env.reset())
+
+    @property
+    def unwrapped(self) -> RslRlGraspEnv:
+        """No wrappers here; rsl-rl's extensions read `env.unwrapped.step_dt`."""
+        return self
 
     @property
     def episode_length_buf(self) -> torch.Tensor:
