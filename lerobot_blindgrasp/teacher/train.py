@@ -53,7 +53,7 @@ class TrainTeacherConfig:
     """PPO teacher training (paper Sec. III-B, Table III)."""
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
-    preset: str = "cpu"  # teacher preset: paper (Table III), cpu, quick
+    preset: str = "cpu"  # paper (Table III), cpu (the shipped teacher), quick; cpu_v4, cpu_rnd: experiments
     seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations
     num_envs: int | None = None  # override the preset's number of envs
