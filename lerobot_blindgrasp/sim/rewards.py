@@ -42,6 +42,8 @@ def as_record(cfg: RewardConfig) -> dict:
     run recorded before such a switch existed still matches its preset when resumed, and still loads with
     `RewardConfig(**record)`."""
     return {k: v for k, v in dataclasses.asdict(cfg).items() if v is not None}
+
+
 TERM_NAMES = ("task", "incentive", "joint_limit", "action", "action_rate", "reach", "touch")
 
 
@@ -114,8 +116,9 @@ def r_touch_directional(
     from above pushes the object into the table, so it can never lift it, yet `r_touch` (and the paper's r_i,
     which reads the uniaxial sensor) pays for it. On the small capsule the `cpu` teacher squeezed from above for
     34 M steps (99 % of its tip contacts at -F_z/|F| > 0.2, mean 0.86) and never lifted it, while its lifting
-    grasps press sideways (mean ~0.0; docs/results/teacher_cpu_v4.md). Lifting grasps are unaffected, so the
-    optimum of the paper's reward is kept."""
+    grasps press sideways (mean ~0.0). Lifting grasps are unaffected, so the optimum of the paper's reward is
+    kept. Tried (preset `cpu_v4`) and not adopted: it slows learning from scratch and does not change the capsule
+    grasp when switched on later (docs/results/teacher_cpu_v4.md)."""
     pressing = (tip_object_force > threshold) & (tip_object_downward <= max_downward)
     return pressing.mean(axis=-1)
 
