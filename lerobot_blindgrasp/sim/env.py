@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.sim import backends, gripper, objects, observations, randomization, rewards, rng, sensors
+from lerobot_blindgrasp.sim import backends, gripper, objects, observations, pregrasp, randomization, rewards, rng, sensors
 from lerobot_blindgrasp.sim.backends.batch import BatchBackend
 
 log = logging.getLogger(__name__)
@@ -46,6 +46,9 @@ class GraspEnvConfig:
     autoreset: bool = True
     backend: str = "batch"  # physics: "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp, GPU; needs the gpu extra)
     device: str | None = None  # warp only: "cuda:0", "cpu"; None: this process's GPU (LOCAL_RANK) if any, else CPU
+    # Training only: start a share of the hard objects' episodes beside the object (sim/pregrasp.py). None: the
+    # paper's start pose for every episode, as evaluation and demo collection must have.
+    pregrasp: pregrasp.PregraspStarts | None = None
 
     def __post_init__(self):
         backends.check_backend(self.backend)
@@ -95,6 +98,10 @@ class BatchedGraspEnv:
         obj_specs = [objects.get_object(name) for name in cfg.objects]
         self.rest_height = np.array([obj_specs[k].rest_height for k in self.object_index])
         self._rest_quat = np.array([self._body_quat(o) for o in obj_specs])[self.object_index]
+        self._bound_r = np.array([pregrasp.bounding_radius(o) for o in obj_specs])[self.object_index]
+        self._pregrasp_ok = np.array([o.name in (cfg.pregrasp.objects if cfg.pregrasp else ()) for o in obj_specs])[
+            self.object_index
+        ]
 
         templates = [
             gripper.compile_model(
@@ -127,6 +134,7 @@ class BatchedGraspEnv:
         self.episode_length = np.zeros(n, dtype=np.int64)
         self.lifted_steps = np.zeros(n, dtype=np.int64)  # consecutive steps lifted >= SUCCESS_LIFT_M
         self.success = np.zeros(n, dtype=bool)  # latched once held for SUCCESS_HOLD_S
+        self.pregrasp_start = np.zeros(n, dtype=bool)  # this episode began in a pre-grasp pose (training only)
         self.prev_action = np.zeros((n, spec.NUM_JOINTS))
         self.push_counter = np.zeros(n, dtype=np.int64)
         self.steps_to_push = np.zeros(n, dtype=np.int64)
@@ -180,6 +188,12 @@ class BatchedGraspEnv:
         seeds = self.env_seeds[ids]
         q0, xy = randomization.draw_reset(self.cfg.dr, seeds, self.episode[ids])
         q0 = np.clip(q0, spec.JOINT_LOWER, spec.JOINT_UPPER)
+        if self.cfg.pregrasp is not None:
+            u = rng.uniform(seeds, rng.STREAM_PREGRASP, self.episode[ids], 7)
+            pick = self._pregrasp_ok[ids] & (u[:, 0] < self.cfg.pregrasp.fraction)
+            if pick.any():
+                q0[pick] = pregrasp.pregrasp_pose(xy[pick], self._bound_r[ids][pick], u[pick, 1:], self.cfg.pregrasp)
+            self.pregrasp_start[ids] = pick
         self.physics.reset(ids)  # defaults; zero velocity, warm-start and applied forces
         qpos = self._qpos[ids]
         qpos[:, observations.JOINTS] = q0
@@ -269,6 +283,7 @@ class BatchedGraspEnv:
                 "env_ids": ids,
                 "object_index": self.object_index[ids],
                 "success": self.success[ids].copy(),
+                "pregrasp_start": self.pregrasp_start[ids].copy(),
                 "episode_return": self.episode_return[ids].copy(),
                 "episode_length": self.episode_length[ids].copy(),
                 "terminated": terminated[ids],

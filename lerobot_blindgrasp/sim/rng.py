@@ -19,6 +19,7 @@ STREAM_DR = 1  # per-env physics parameters, drawn once
 STREAM_RESET = 2  # joint offsets and object position, per episode
 STREAM_OBS_NOISE = 3  # per step
 STREAM_PUSH = 4  # external force schedule, per push
+STREAM_PREGRASP = 5  # pre-grasp start states (training only), per episode
 
 
 def _splitmix64(x: np.ndarray) -> np.ndarray:

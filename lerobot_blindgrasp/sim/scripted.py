@@ -13,18 +13,20 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import gripper
 
 _L1 = gripper.LINK_J11_J12
-_L2 = 0.073  # J12 -> centre of the tip capsule's end sphere
+_L2 = gripper.TIP_CAPSULE_END  # J12 -> centre of the tip capsule's end sphere (0.073 m)
 _R0 = gripper.BASE_RADIUS
-_ZJ11 = gripper.PLATE_HEIGHT - gripper.PLATE_TO_J10 - gripper.LINK_J10_J11
+J11_HEIGHT_M = gripper.PLATE_HEIGHT - gripper.PLATE_TO_J10 - gripper.LINK_J10_J11  # J11 pivot, fingers at J10 = 0
+FINGER_REACH_M = _L1 + _L2  # J11 pivot to the tip sphere's centre, finger straight
 
 
-def finger_ik(radius: float, height: float) -> tuple[float, float]:
-    """(J11, J12) putting the tip sphere centre at (radius from the claw axis, height above the table)."""
-    dx, dz = radius - _R0, _ZJ11 - height
+def finger_ik(radius, height):
+    """(J11, J12) putting the tip sphere centre at (radius from the claw axis, height above the table), in the
+    finger's plane (J10 = 0). Scalars or arrays of the same shape; out-of-reach targets get the straight finger."""
+    dx, dz = np.asarray(radius) - _R0, J11_HEIGHT_M - np.asarray(height)
     c2 = (dx * dx + dz * dz - _L1 * _L1 - _L2 * _L2) / (2 * _L1 * _L2)
-    t2 = -float(np.arccos(np.clip(c2, -1.0, 1.0)))  # distal curls inward (negative)
+    t2 = -np.arccos(np.clip(c2, -1.0, 1.0))  # distal curls inward (negative)
     alpha = np.arctan2(_L2 * np.sin(-t2), _L1 + _L2 * np.cos(t2))
-    return float(np.arctan2(dx, dz) + alpha), t2
+    return np.arctan2(dx, dz) + alpha, t2
 
 
 def pinch_lift_waypoints(object_radius: float, grasp_height: float, lift_m: float = 0.03, squeeze_m: float = 0.004):

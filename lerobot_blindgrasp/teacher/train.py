@@ -11,6 +11,7 @@ to TorchScript and ONNX (`exported/`).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import logging
 import os
@@ -45,6 +46,7 @@ def build_env_config(
         nthread=nthread,
         object_weights=preset.object_weights,
         backend=backend,
+        pregrasp=preset.pregrasp,
     )
 
 
@@ -53,7 +55,7 @@ class TrainTeacherConfig:
     """PPO teacher training (paper Sec. III-B, Table III)."""
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
-    preset: str = "cpu"  # paper (Table III), cpu (the shipped teacher), quick; cpu_v4, cpu_rnd: experiments
+    preset: str = "cpu"  # paper (Table III), cpu (the shipped teacher), quick; cpu_v4, cpu_rnd, cpu_pregrasp: experiments
     seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations
     num_envs: int | None = None  # override the preset's number of envs
@@ -102,6 +104,8 @@ def train(cfg: TrainTeacherConfig) -> Path:
         "reward": rewards.as_record(preset.reward),
         "external_force": preset.external_force,
         "object_weights": preset.object_weights and list(preset.object_weights),
+        # None for presets without pre-grasp starts, as in run configs written before the field existed.
+        "pregrasp": preset.pregrasp and json.loads(json.dumps(dataclasses.asdict(preset.pregrasp))),
         "deviations": list(preset.deviations),
         # Lets a loader refuse this checkpoint once spec.PRIVILEGED_LAYOUT changes.
         "observation_layout": observation_layout(),
@@ -110,7 +114,7 @@ def train(cfg: TrainTeacherConfig) -> Path:
     cfg_path = out / CONFIG_NAME
     if cfg_path.exists():
         old = json.loads(cfg_path.read_text())
-        for key in ("preset", "variant", "num_envs", "runner", "reward", "object_weights"):
+        for key in ("preset", "variant", "num_envs", "runner", "reward", "object_weights", "pregrasp"):
             if old.get(key) != config[key]:
                 raise SystemExit(f"{out} holds a run with a different {key!r}; use another --output_dir")
     elif lead:
