@@ -108,3 +108,14 @@ def test_only_the_pregrasp_teacher_preset_uses_it_and_it_is_validated():
         pregrasp.PregraspStarts(fraction=1.5)
     with pytest.raises(ValueError, match="catalogue"):
         pregrasp.PregraspStarts(objects=("teapot",))
+
+
+def test_contacts_tool_can_start_every_episode_beside_the_object():
+    """`teacher.contacts --pregrasp_starts=true` asks whether a teacher lifts an object once its tips are there."""
+    from lerobot_blindgrasp.teacher.contacts import ContactsConfig, env_config
+
+    plain = env_config(ContactsConfig(episodes=3), "capsule_small")
+    assert plain.pregrasp is None and plain.seed == env_config(ContactsConfig(), "capsule_small").seed
+    env = BatchedGraspEnv(env_config(ContactsConfig(episodes=3, pregrasp_starts=True), "capsule_small"))
+    env.reset()
+    assert env.pregrasp_start.all()

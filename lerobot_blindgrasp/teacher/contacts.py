@@ -9,7 +9,9 @@ it records -F_z/|F| (1: pressing the object straight down into the table, 0: squ
 tip sits above the object's centre. A tip pressing from above can never lift the object; a lifting grasp squeezes
 sideways (`rewards.r_touch_directional`, docs/results/teacher_cpu_v4.md).
 
-Start states are the evaluation ones (`--seed`, as `blindgrasp-eval-teacher`), deterministic actions.
+Start states are the evaluation ones (`--seed`, as `blindgrasp-eval-teacher`), deterministic actions. With
+`--pregrasp_starts=true` every episode starts instead with the tips low beside the object (`sim/pregrasp.py`): does
+the teacher lift the object once it is there, or does it fail to get there?
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp.sim import objects, pregrasp
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.gym_env import start_seed
 from lerobot_blindgrasp.sim.randomization import EVAL_DR
@@ -38,6 +40,7 @@ class ContactsConfig:
     episodes: int = 10  # episodes per object
     seed: int = spec.EVAL_SEED  # first evaluation index
     after_s: float = 2.0  # ignore the first seconds (the approach) of each episode
+    pregrasp_starts: bool = False  # start every episode with the tips low beside the object (sim/pregrasp.py)
 
 
 def contact_directions(env: BatchedGraspEnv, obs: dict, act, steps: int, after_steps: int) -> dict[str, float]:
@@ -64,21 +67,25 @@ def contact_directions(env: BatchedGraspEnv, obs: dict, act, steps: int, after_s
     }
 
 
+def env_config(cfg: ContactsConfig, name: str) -> GraspEnvConfig:
+    """One object's envs: its evaluation start states, or pre-grasp starts when asked."""
+    return GraspEnvConfig(
+        num_envs=cfg.episodes,
+        objects=(name,),
+        seed=start_seed(cfg.seed, name),
+        dr=EVAL_DR,
+        autoreset=False,
+        pregrasp=pregrasp.PregraspStarts(fraction=1.0, objects=(name,)) if cfg.pregrasp_starts else None,
+    )
+
+
 def teacher_contacts(cfg: ContactsConfig) -> dict[str, dict[str, float]]:
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
     teacher = TeacherPolicy(cfg.teacher or default_teacher())
     out = {}
     for name in objects.resolve_objects(cfg.objects):
-        env = BatchedGraspEnv(
-            GraspEnvConfig(
-                num_envs=cfg.episodes,
-                objects=(name,),
-                seed=start_seed(cfg.seed, name),
-                dr=EVAL_DR,
-                autoreset=False,
-            )
-        )
+        env = BatchedGraspEnv(env_config(cfg, name))
         obs = env.reset()
         after = int(round(cfg.after_s * spec.CONTROL_HZ))
         act = lambda o: teacher(o, stochastic=False)  # noqa: E731
