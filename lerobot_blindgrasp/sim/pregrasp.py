@@ -10,11 +10,12 @@ With `PregraspStarts`, a share of the training resets of the listed objects star
 almost straight and its tip low beside the object, clear of it by a random gap. From there, closing lifts, and the
 critic learns that such states are worth a lot. Exploration from the paper's start pose then only has to reach
 them (the reference-state-initialization idea of DeepMimic, Peng et al. 2018). Evaluation, demo collection and
-the `paper` preset never use it: it is a field of `GraspEnvConfig`, None by default.
+the `paper` preset never use it: it is a field of `GraspEnvConfig`, None by default. Switched on at iteration 350
+of the shipped run it changed nothing held out (docs/results/teacher_cpu_pregrasp.md); from scratch is untested.
 
 Geometry, in each finger's frame (x radial from the claw axis, y tangential, z up; `sim/gripper.py`):
 - J10 (axis +x) swings the finger's plane sideways; J11 and J12 bend within it.
-- The tip goes on the radial line through the object's centre, at horizontal distance
+- The tip goes on the finger's radial line through the object's centre, at horizontal distance
   bounding radius + tip radius + gap from the centre, so that no part of the finger starts inside the object.
 - Within the (swung) plane, the finger is extended to `extension` x its full reach (J11 pivot to tip centre).
 """
