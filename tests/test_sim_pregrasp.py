@@ -1,5 +1,5 @@
-"""Pre-grasp start states (sim/pregrasp.py): where they put the fingers, that nothing starts inside the object, that
-only training presets use them, and that a closing pinch from one lifts the small capsule."""
+"""Pre-grasp start states (sim/pregrasp.py): where they put the fingers, that nothing starts inside the object,
+that only training presets use them, and that a closing pinch from one lifts the small capsule."""
 
 from __future__ import annotations
 
@@ -14,14 +14,23 @@ from lerobot_blindgrasp.sim import gripper, objects, pregrasp, randomization, sc
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
-# The default hard objects, and two large ones whose fingers start farther out (nothing may start inside them either).
+# The default hard objects, and two large ones whose fingers start farther out (nothing may start inside them
+# either).
 CHECKED = pregrasp.HARD_OBJECTS + ("cuboid_a_large", "sphere_large")
 ALL = pregrasp.PregraspStarts(fraction=1.0, objects=CHECKED)
 
 
-def _env(num_envs=2 * len(CHECKED), cfg=ALL, objs=CHECKED, seed=3):
+def _env(num_envs=2 * len(CHECKED), cfg=ALL, objs=CHECKED, seed=3, episode_s=spec.EPISODE_S):
     return BatchedGraspEnv(
-        GraspEnvConfig(num_envs=num_envs, objects=objs, seed=seed, dr=randomization.EVAL_DR, pregrasp=cfg, nthread=1)
+        GraspEnvConfig(
+            num_envs=num_envs,
+            objects=objs,
+            seed=seed,
+            episode_s=episode_s,
+            dr=randomization.EVAL_DR,
+            pregrasp=cfg,
+            nthread=1,
+        )
     )
 
 
@@ -47,10 +56,13 @@ def test_pregrasp_tips_start_low_beside_every_object_and_nothing_starts_inside_i
             assert c.dist > -1e-4, f"{obj.name}: a geom starts {-c.dist * 1e3:.1f} mm inside another"
         for f in spec.FINGERS:
             # The tip sphere's centre, 3 mm above the tip site (TIP_CAPSULE_END vs LINK_J12_TIPSITE).
-            tip = d.site(f"{f}_tipsite").xpos + np.array([0, 0, gripper.LINK_J12_TIPSITE - gripper.TIP_CAPSULE_END])
-            clearance = np.linalg.norm(tip[:2] - centre[:2]) - pregrasp.bounding_radius(obj) - gripper.TIP_CAPSULE_RADIUS
+            lift = gripper.LINK_J12_TIPSITE - gripper.TIP_CAPSULE_END
+            tip = d.site(f"{f}_tipsite").xpos + np.array([0.0, 0.0, lift])
+            clearance = (
+                np.linalg.norm(tip[:2] - centre[:2]) - pregrasp.bounding_radius(obj) - gripper.TIP_CAPSULE_RADIUS
+            )
             assert ALL.gap_m[0] - 2e-3 < clearance < ALL.gap_m[1] + 2e-3, (obj.name, f, clearance)
-            if obj.name in pregrasp.HARD_OBJECTS:  # almost straight fingers, tips low: below the small capsule's top
+            if obj.name in pregrasp.HARD_OBJECTS:  # almost straight fingers: tips below the small capsule's top
                 assert tip[2] < 0.04, (obj.name, f, tip[2])
 
 
@@ -69,10 +81,9 @@ def test_fraction_and_object_list_choose_which_resets_start_in_a_pregrasp():
 
 
 def test_training_logs_success_from_the_paper_start_pose_apart():
-    env = _env(num_envs=4, cfg=pregrasp.PregraspStarts(fraction=1.0, objects=("capsule_small",)),
-               objs=("capsule_small", "cuboid_a_large"))
-    env.cfg.episode_s = 0.1
-    env.max_episode_steps = 2
+    capsule_only = pregrasp.PregraspStarts(fraction=1.0, objects=("capsule_small",))
+    env = _env(num_envs=4, cfg=capsule_only, objs=("capsule_small", "cuboid_a_large"), episode_s=0.1)
+    assert env.max_episode_steps == 2
     vec = RslRlGraspEnv(env, device="cpu")
     vec.step(torch.zeros(4, 9))
     _, _, dones, extras = vec.step(torch.zeros(4, 9))
@@ -87,7 +98,9 @@ def test_closing_from_a_pregrasp_start_lifts_the_small_capsule():
     holds the capsule that the teacher only ever pressed into the table."""
     cfg = pregrasp.PregraspStarts(fraction=1.0, objects=("capsule_small",))
     env = BatchedGraspEnv(
-        GraspEnvConfig(num_envs=3, objects=("capsule_small",), seed=0, dr=randomization.NO_DR, pregrasp=cfg, nthread=1)
+        GraspEnvConfig(
+            num_envs=3, objects=("capsule_small",), seed=0, dr=randomization.NO_DR, pregrasp=cfg, nthread=1
+        )
     )
     env.reset()
     script = scripted.PinchLiftScript(objects.get_object("capsule_small").size[0], grasp_height=0.027)

@@ -168,8 +168,9 @@ def with_rnd(runner: dict, weight: float, decay_iterations: tuple[int, int]) -> 
 
 
 # `cpu` plus an exploration bonus (issue #9: the small capsule's side grasp is never found, an exploration problem,
-# docs/results/teacher_cpu_v4.md section 5). Not yet run: the weight is a first guess (4 x 0.05 s = 0.2 per step on
-# a unit-scale novelty, the size of r_i), decayed to 0 over iterations 600-1000.
+# docs/results/teacher_cpu_v4.md section 5). The weight is a first guess (4 x 0.05 s = 0.2 per step on a unit-scale
+# novelty, the size of r_i), decayed to 0 over iterations 600-1000. From scratch it trailed `cpu` at iteration 300
+# (6 % vs 21 % training success) and was stopped at 340 (docs/results/teacher_cpu_pregrasp.md).
 CPU_RND = replace(
     CPU,
     name="cpu_rnd",
@@ -178,8 +179,10 @@ CPU_RND = replace(
     + ("rsl-rl's RND exploration bonus on the privileged state, decayed to 0 by iteration 1000 (with_rnd)",),
 )
 
-# `cpu` with half of the hard objects' training episodes (every small object, the medium capsule) started beside the
-# object with the fingers almost straight (issue #9: the low side grasp of the small capsule is never explored).
+# `cpu` with half of the hard objects' training episodes (every small object, the medium capsule) started beside
+# the object with the fingers almost straight (issue #9: the low side grasp of the small capsule is never explored).
+# Switched on at iteration 350 it changed nothing held out; from scratch it trailed `cpu` at iteration 371
+# (docs/results/teacher_cpu_pregrasp.md). Kept so that those runs resume and reproduce.
 CPU_PREGRASP = replace(
     CPU,
     name="cpu_pregrasp",

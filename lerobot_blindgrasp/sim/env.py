@@ -25,7 +25,17 @@ import mujoco
 import numpy as np
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.sim import backends, gripper, objects, observations, pregrasp, randomization, rewards, rng, sensors
+from lerobot_blindgrasp.sim import (
+    backends,
+    gripper,
+    objects,
+    observations,
+    pregrasp,
+    randomization,
+    rewards,
+    rng,
+    sensors,
+)
 from lerobot_blindgrasp.sim.backends.batch import BatchBackend
 
 log = logging.getLogger(__name__)
@@ -99,9 +109,8 @@ class BatchedGraspEnv:
         self.rest_height = np.array([obj_specs[k].rest_height for k in self.object_index])
         self._rest_quat = np.array([self._body_quat(o) for o in obj_specs])[self.object_index]
         self._bound_r = np.array([pregrasp.bounding_radius(o) for o in obj_specs])[self.object_index]
-        self._pregrasp_ok = np.array([o.name in (cfg.pregrasp.objects if cfg.pregrasp else ()) for o in obj_specs])[
-            self.object_index
-        ]
+        hard = set(cfg.pregrasp.objects) if cfg.pregrasp else set()
+        self._pregrasp_ok = np.array([name in hard for name in self.object_names])  # may start in a pre-grasp pose
 
         templates = [
             gripper.compile_model(
@@ -192,7 +201,8 @@ class BatchedGraspEnv:
             u = rng.uniform(seeds, rng.STREAM_PREGRASP, self.episode[ids], 7)
             pick = self._pregrasp_ok[ids] & (u[:, 0] < self.cfg.pregrasp.fraction)
             if pick.any():
-                q0[pick] = pregrasp.pregrasp_pose(xy[pick], self._bound_r[ids][pick], u[pick, 1:], self.cfg.pregrasp)
+                bound_r = self._bound_r[ids][pick]
+                q0[pick] = pregrasp.pregrasp_pose(xy[pick], bound_r, u[pick, 1:], self.cfg.pregrasp)
             self.pregrasp_start[ids] = pick
         self.physics.reset(ids)  # defaults; zero velocity, warm-start and applied forces
         qpos = self._qpos[ids]

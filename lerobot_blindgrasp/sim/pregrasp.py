@@ -11,7 +11,8 @@ almost straight and its tip low beside the object, clear of it by a random gap. 
 critic learns that such states are worth a lot. Exploration from the paper's start pose then only has to reach
 them (the reference-state-initialization idea of DeepMimic, Peng et al. 2018). Evaluation, demo collection and
 the `paper` preset never use it: it is a field of `GraspEnvConfig`, None by default. Switched on at iteration 350
-of the shipped run it changed nothing held out (docs/results/teacher_cpu_pregrasp.md); from scratch is untested.
+of the shipped run it changed nothing held out; from scratch it trailed the shipped run at iteration 371
+(docs/results/teacher_cpu_pregrasp.md).
 
 Geometry, in each finger's frame (x radial from the claw axis, y tangential, z up; `sim/gripper.py`):
 - J10 (axis +x) swings the finger's plane sideways; J11 and J12 bend within it.
@@ -32,7 +33,10 @@ from lerobot_blindgrasp.sim import gripper, objects, rng, scripted
 
 # The objects whose training success stayed lowest in the shipped `cpu` run (docs/results/teacher_cpu_v3_eval):
 # every small object and the medium capsule.
-HARD_OBJECTS: tuple[str, ...] = tuple(n for n in objects.PAPER_OBJECTS if n.endswith("_small")) + ("capsule_medium",)
+HARD_OBJECTS: tuple[str, ...] = (
+    *(n for n in objects.PAPER_OBJECTS if n.endswith("_small")),
+    "capsule_medium",
+)
 
 
 @dataclass(frozen=True)
@@ -73,7 +77,8 @@ def pregrasp_pose(object_xy: np.ndarray, bound_r: np.ndarray, u: np.ndarray, cfg
         ext = rng.between(u[:, 2 * i + 1], *cfg.extension)
         radius = d_r + bound_r + gripper.TIP_CAPSULE_RADIUS + gap  # tip centre, radial coordinate
         dx = radius - gripper.BASE_RADIUS
-        depth = np.sqrt(np.maximum((ext * scripted.FINGER_REACH_M) ** 2 - dx**2, 0.0))  # J11 pivot to tip, vertical
+        # J11 pivot to tip, vertical component
+        depth = np.sqrt(np.maximum((ext * scripted.FINGER_REACH_M) ** 2 - dx**2, 0.0))
         # J10 swings the plane so that the tip reaches the object's tangential offset; in the swung plane the J11
         # pivot hangs LINK_J10_J11 below J10 and the tip `depth` below that.
         swing = np.arcsin(np.clip(d_t / (gripper.LINK_J10_J11 + depth), -1.0, 1.0))

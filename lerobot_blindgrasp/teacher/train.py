@@ -55,7 +55,8 @@ class TrainTeacherConfig:
     """PPO teacher training (paper Sec. III-B, Table III)."""
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
-    preset: str = "cpu"  # paper (Table III), cpu (the shipped teacher), quick; cpu_v4, cpu_rnd, cpu_pregrasp: experiments
+    # paper (Table III), cpu (the shipped teacher), quick; experiments: cpu_v4, cpu_rnd, cpu_pregrasp
+    preset: str = "cpu"
     seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations
     num_envs: int | None = None  # override the preset's number of envs
@@ -104,7 +105,8 @@ def train(cfg: TrainTeacherConfig) -> Path:
         "reward": rewards.as_record(preset.reward),
         "external_force": preset.external_force,
         "object_weights": preset.object_weights and list(preset.object_weights),
-        # None for presets without pre-grasp starts, as in run configs written before the field existed.
+        # None for presets without pre-grasp starts, as in run configs written before the field existed; the JSON
+        # round trip turns tuples into lists, so that it compares equal to the record read back on resume.
         "pregrasp": preset.pregrasp and json.loads(json.dumps(dataclasses.asdict(preset.pregrasp))),
         "deviations": list(preset.deviations),
         # Lets a loader refuse this checkpoint once spec.PRIVILEGED_LAYOUT changes.
