@@ -12,6 +12,7 @@ import copy
 from dataclasses import dataclass, replace
 
 from lerobot_blindgrasp.sim import pregrasp, rewards
+from lerobot_blindgrasp.teacher.scripted_demos import ScriptedDemos
 
 
 def _ppo_cfg(
@@ -194,6 +195,22 @@ CPU_PREGRASP = replace(
     ),
 )
 
+# `cpu` plus behaviour cloning of scripted side grasps of the small objects and the medium capsule after every PPO
+# update, decayed to nothing by iteration 700 (issue #9: the small capsule, teacher/aux_bc.py;
+# docs/results/teacher_cpu_bc.md).
+CPU_BC = replace(
+    CPU,
+    name="cpu_bc",
+    runner=ScriptedDemos(pushes=CPU.external_force).runner_cfg(CPU.runner),
+    deviations=_CPU_DEVIATIONS
+    + (
+        "after every PPO update, 8 behaviour-cloning steps of the actor's mean on scripted side grasps of the small "
+        "objects and the medium capsule (teacher/aux_bc.py), learning rate decayed linearly to 0 by iteration 700: "
+        "the cpu teacher pressed the small capsule from above for 34 M steps, which no reward or exploration "
+        "change undid (docs/results/teacher_cpu_v4.md, teacher_cpu_pregrasp.md)",
+    ),
+)
+
 QUICK = TeacherPreset(
     name="quick",
     num_envs=144,  # 18 objects x 8
@@ -206,7 +223,7 @@ QUICK = TeacherPreset(
     external_force=False,
 )
 
-PRESETS: dict[str, TeacherPreset] = {p.name: p for p in (PAPER, CPU, CPU_V4, CPU_RND, CPU_PREGRASP, QUICK)}
+PRESETS: dict[str, TeacherPreset] = {p.name: p for p in (PAPER, CPU, CPU_V4, CPU_RND, CPU_PREGRASP, CPU_BC, QUICK)}
 
 
 def get_preset(name: str) -> TeacherPreset:

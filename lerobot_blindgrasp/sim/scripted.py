@@ -7,10 +7,12 @@ raises it by `lift_m` at the same radius. It assumes the object is centred, so u
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.sim import gripper
+from lerobot_blindgrasp.sim import gripper, objects
 
 _L1 = gripper.LINK_J11_J12
 _L2 = gripper.TIP_CAPSULE_END  # J12 -> centre of the tip capsule's end sphere (0.073 m)
@@ -76,3 +78,83 @@ def run_pinch_lift(env, steps: int, object_radius: float = 0.03, grasp_height: f
         lifts.append(info["lift"].copy())
         forces.append(info["uniaxial_force"].copy())
     return np.array(lifts), np.array(forces), info
+
+
+# --- A side grasp that works wherever the object stands (used as demonstrations for the teacher, teacher/aux_bc.py)
+
+
+def support_distance(o: objects.ObjectSpec, direction_xy: np.ndarray) -> np.ndarray:
+    """Horizontal distance from the object's centre to its surface, seen from unit directions (n, 2) in the object's
+    spawn pose (capsules lie along x; boxes are axis-aligned): how far in a tip approaching along -direction meets it."""
+    ux, uy = np.abs(direction_xy[:, 0]), np.abs(direction_xy[:, 1])
+    if o.mjcf_type == "box":
+        return o.size[0] * ux + o.size[1] * uy
+    if o.mjcf_type == "capsule":
+        return o.size[1] * ux + o.size[0]
+    return np.full(len(direction_xy), o.size[0])  # cylinder, sphere
+
+
+def side_pose(object_xy: np.ndarray, clearance: np.ndarray, height: np.ndarray) -> np.ndarray:
+    """Joint positions (n, 9) putting every finger's tip centre on that finger's radial line through the object's
+    centre, at horizontal distance `clearance` (n, 3) from the centre (outside it) and `height` (n, 3) above the table.
+
+    J10 (axis +x of the finger frame) swings the finger's plane sideways so the tip reaches the object's tangential
+    offset; in the swung plane the J11 pivot hangs LINK_J10_J11 below J10 and the tip `depth` below that. Heights out
+    of reach at that radius give the straight finger pointing at the target (finger_ik)."""
+    q = np.zeros((object_xy.shape[0], spec.NUM_JOINTS))
+    for i, phi in enumerate(spec.FINGER_BASE_ANGLES_RAD):
+        c, s = math.cos(phi), math.sin(phi)
+        d_r = object_xy[:, 0] * c + object_xy[:, 1] * s  # object centre in the finger's frame
+        d_t = -object_xy[:, 0] * s + object_xy[:, 1] * c
+        radius = d_r + clearance[:, i]
+        depth = np.maximum(J11_HEIGHT_M - height[:, i], 0.0)
+        swing = np.arcsin(np.clip(d_t / (gripper.LINK_J10_J11 + depth), -1.0, 1.0))
+        j11, j12 = finger_ik(radius, height[:, i])
+        q[:, 3 * i : 3 * i + 3] = np.column_stack([swing, j11, j12])
+    return np.clip(q, spec.JOINT_LOWER, spec.JOINT_UPPER)
+
+
+class SideGraspScript:
+    """Callable q (n, 9) -> delta-theta (n, 9): hover beside the object, descend, squeeze, lift, hold.
+
+    Unlike `PinchLiftScript` it reads where each object stands (privileged, as the teacher does) and squeezes at
+    the lowest height the tip reaches beside it, which is what lifts the small capsule (docs/results/
+    teacher_cpu_v4.md: every object the teacher fails on, it presses from above)."""
+
+    GAP_M = 0.02  # tip surface to the object's surface while hovering and descending
+    SQUEEZE_M = 0.006  # tip target this far inside the surface: the servo error that holds the object
+    LIFT_M = 0.035
+    # (steps, from phase, to phase): start -> hover, hover -> beside, beside -> squeeze, squeeze -> lift, then hold
+    SEGMENTS = ((15, 0, 1), (15, 1, 2), (15, 2, 3), (30, 3, 4))
+
+    def __init__(self, q0: np.ndarray, object_pos: np.ndarray, specs: list[objects.ObjectSpec]):
+        n = len(specs)
+        dirs = np.array([[math.cos(p), math.sin(p)] for p in spec.FINGER_BASE_ANGLES_RAD])
+        surface = np.stack([support_distance(o, dirs) for o in specs]) + gripper.TIP_CAPSULE_RADIUS  # (n, 3)
+        top = np.array([o.rest_height * 2.0 for o in specs])[:, None].repeat(3, axis=1)
+        # Squeeze at the object's centre height, or as low as the tip gets (finger_ik straightens the finger).
+        grasp_z = np.maximum(object_pos[:, 2:3].repeat(3, axis=1), gripper.TIP_CAPSULE_RADIUS + 0.004)
+        xy = object_pos[:, :2]
+        self.phases = np.stack([
+            np.asarray(q0, dtype=np.float64),
+            side_pose(xy, surface + self.GAP_M, top + 0.015),
+            side_pose(xy, surface + self.GAP_M, grasp_z),
+            side_pose(xy, surface - self.SQUEEZE_M, grasp_z),
+            side_pose(xy, surface - self.SQUEEZE_M, grasp_z + self.LIFT_M),
+        ])  # (5, n, 9)
+        assert self.phases.shape[1] == n
+        self.t = 0
+
+    def target(self, t: int) -> np.ndarray:
+        start = 0
+        for steps, a, b in self.SEGMENTS:
+            if t < start + steps:
+                frac = min(1.0, (t - start + 1) / (0.7 * steps))
+                return self.phases[a] + (self.phases[b] - self.phases[a]) * frac
+            start += steps
+        return self.phases[-1]
+
+    def __call__(self, q: np.ndarray) -> np.ndarray:
+        a = np.clip(self.target(self.t) - q, -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
+        self.t += 1
+        return a

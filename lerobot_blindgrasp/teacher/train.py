@@ -55,7 +55,7 @@ class TrainTeacherConfig:
     """PPO teacher training (paper Sec. III-B, Table III)."""
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
-    # paper (Table III), cpu (the shipped teacher), quick; experiments: cpu_v4, cpu_rnd, cpu_pregrasp
+    # paper (Table III), cpu (the shipped teacher), quick; experiments: cpu_v4, cpu_rnd, cpu_pregrasp, cpu_bc
     preset: str = "cpu"
     seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations
@@ -144,6 +144,8 @@ def train(cfg: TrainTeacherConfig) -> Path:
             # rsl-rl keeps the RND weight schedule's env-step counter outside the checkpoint; without this a resumed
             # run would restart the schedule (a decayed exploration bonus back at full weight).
             runner.alg.rnd.update_counter = done_its * steps_per_it
+        if hasattr(runner.alg, "bc_iteration"):  # the scripted-demo cloning's decay, likewise (teacher/aux_bc.py)
+            runner.alg.bc_iteration = done_its
         bar.update(done_its)
         log.info("resuming from %s (iteration %d)", ckpt, done_its)
     remaining = iterations - done_its

@@ -1,0 +1,88 @@
+"""The scripted side-grasp demonstrations that `teacher.aux_bc.PPOWithScriptedDemos` clones: their settings and
+their collection. Kept apart from the PPO subclass so that the preset registry can name them without importing torch.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim import objects, pregrasp, randomization, scripted
+from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+
+# Script rollouts draw their start states from the teacher-training seed range, far above the env seeds of any
+# training run (seed + env index), so that they never share a start state with evaluation or demo collection.
+SCRIPT_SEED = 1 << 32
+# The rsl-rl algorithm that clones them, as the runner config names it (resolved by rsl-rl when the run starts).
+ALGORITHM_CLASS = "lerobot_blindgrasp.teacher.aux_bc:PPOWithScriptedDemos"
+
+
+@dataclass(frozen=True)
+class ScriptedDemos:
+    objects: tuple[str, ...] = pregrasp.HARD_OBJECTS
+    episodes_per_object: int = 64  # script rollouts per object; the successful ones are kept
+    steps_per_episode: int = 120  # approach, squeeze, lift and 2 s of hold: the rest is more of the same hold
+    lr: float = 3e-4  # behaviour-cloning Adam learning rate at iteration 0
+    decay_iterations: int = 700  # ... linearly to 0 here; afterwards the paper's reward alone
+    steps: int = 8  # behaviour-cloning steps after each PPO update
+    batch_size: int = 2048
+    seed: int = SCRIPT_SEED
+    pushes: bool = False  # Table II's random pushes, as the training preset has them (`external_force`)
+
+    def __post_init__(self):
+        unknown = sorted(set(self.objects) - set(objects.CATALOGUE))
+        if unknown:
+            raise ValueError(f"scripted-demo objects not in the catalogue: {unknown}")
+        if min(self.episodes_per_object, self.steps_per_episode, self.decay_iterations, self.batch_size) < 1:
+            raise ValueError(f"scripted demos need positive sizes, got {self}")
+        spec.check_seeds("teacher_train", self.seed, self.episodes_per_object * len(self.objects))
+
+    def as_record(self) -> dict:
+        """The JSON form that goes into the runner config (lists, not tuples: it must survive a JSON round trip)."""
+        d = asdict(self)
+        d["objects"] = list(self.objects)
+        return d
+
+    def runner_cfg(self, runner: dict) -> dict:
+        """`runner` (an rsl-rl OnPolicyRunner config) with PPO replaced by PPO plus cloning of these demos."""
+        runner = copy.deepcopy(runner)
+        runner["algorithm"]["class_name"] = ALGORITHM_CLASS
+        runner["algorithm"]["scripted_demos"] = self.as_record()
+        return runner
+
+    def lr_at(self, iteration: int) -> float:
+        return self.lr * max(0.0, 1.0 - iteration / self.decay_iterations)
+
+
+def collect(cfg: ScriptedDemos) -> dict:
+    """Roll the side-grasp script out once per env from training start states; keep the successful episodes.
+
+    Returns {"obs": (M, 92) float32, "actions": (M, 9) float32, "success": {object: rate}}."""
+    n = cfg.episodes_per_object * len(cfg.objects)
+    dr = randomization.PAPER_DR if cfg.pushes else randomization.EVAL_DR  # as train.build_env_config chooses
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=n, objects=cfg.objects, seed=cfg.seed, dr=dr, autoreset=False,
+                                         nthread=1))
+    obs = env.reset()
+    script = scripted.SideGraspScript(env.joint_positions(), env.object_position(),
+                                      [objects.get_object(name) for name in env.object_names])
+    seen_obs, seen_act = [], []
+    success = np.zeros(n, dtype=bool)
+    for t in range(env.max_episode_steps):
+        action = script(env.joint_positions())
+        if t < cfg.steps_per_episode:
+            seen_obs.append(obs["privileged"].astype(np.float32))
+            seen_act.append(action.astype(np.float32))
+        obs, _, terminated, _, info = env.step(action)
+        success |= info["success"]
+        if terminated.any():  # an object left the workspace: that episode is not a demonstration
+            success &= ~terminated
+    env.close()
+    names = np.array(env.object_names)
+    rates = {name: float(success[names == name].mean()) for name in cfg.objects}
+    keep = np.flatnonzero(success)
+    o = np.stack(seen_obs, axis=1)[keep].reshape(-1, spec.PRIVILEGED_DIM)
+    a = np.stack(seen_act, axis=1)[keep].reshape(-1, spec.NUM_JOINTS)
+    return {"obs": o, "actions": a, "success": rates}
