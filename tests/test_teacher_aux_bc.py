@@ -1,0 +1,104 @@
+"""The scripted side grasp and its cloning into the PPO actor (`cpu_bc`, issue #9: the small capsule)."""
+
+from __future__ import annotations
+
+import math
+import signal
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+from rsl_rl.utils import resolve_callable
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.presets import teacher as teacher_presets
+from lerobot_blindgrasp.sim import objects, scripted
+from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+from lerobot_blindgrasp.teacher import aux_bc, scripted_demos
+
+
+def test_support_distance_is_the_surface_seen_from_each_side():
+    along_x, along_y = np.array([[1.0, 0.0]]), np.array([[0.0, 1.0]])
+    capsule = objects.get_object("capsule_small")  # radius 2 cm, half-length 1 cm, lying along x
+    assert scripted.support_distance(capsule, along_x)[0] == pytest.approx(0.03)
+    assert scripted.support_distance(capsule, along_y)[0] == pytest.approx(0.02)
+    box = objects.get_object("cuboid_a_medium")
+    diag = np.array([[math.sqrt(0.5), math.sqrt(0.5)]])
+    assert scripted.support_distance(box, diag)[0] == pytest.approx((box.size[0] + box.size[1]) * math.sqrt(0.5))
+    sphere = objects.get_object("sphere_small")
+    assert scripted.support_distance(sphere, diag)[0] == pytest.approx(sphere.size[0])
+
+
+def test_side_grasp_script_lifts_the_small_capsule_from_the_paper_start_pose_under_randomization():
+    """The premise of `cpu_bc`: from the paper's start pose, with the object anywhere in its Table II offset, joint
+    offsets, friction, mass and gain draws, the script lifts the object the teacher only ever pressed down."""
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=8, objects=("capsule_small", "sphere_small"), seed=1 << 32,
+                                         nthread=1, autoreset=False))
+    env.reset()
+    assert np.abs(env.object_position()[:, :2]).max() > 0.005  # the objects really are off-centre
+    script = scripted.SideGraspScript(env.joint_positions(), env.object_position(),
+                                      [objects.get_object(n) for n in env.object_names])
+    success = np.zeros(env.num_envs, dtype=bool)
+    for _ in range(120):
+        q = env.joint_positions()
+        assert (q >= spec.JOINT_LOWER - 0.05).all() and (q <= spec.JOINT_UPPER + 0.05).all()
+        *_, info = env.step(script(q))
+        success |= info["success"]
+    assert success.sum() >= 6, success  # measured: 87 % (capsule) and 93 % (sphere) over 30 draws each
+
+
+def test_scripted_demos_keep_only_successful_episodes_and_refuse_bad_settings():
+    cfg = scripted_demos.ScriptedDemos(objects=("capsule_small", "cuboid_a_large"), episodes_per_object=2,
+                                       steps_per_episode=10)
+    data = scripted_demos.collect(cfg)
+    # The script cannot lift the large cuboid (measured 0/4): only capsule episodes become demonstrations.
+    assert data["success"]["cuboid_a_large"] == 0.0 and data["success"]["capsule_small"] > 0
+    kept = round(data["success"]["capsule_small"] * 2)
+    assert data["obs"].shape == (kept * 10, spec.PRIVILEGED_DIM) and data["actions"].shape == (kept * 10, 9)
+    assert np.abs(data["actions"]).max() <= spec.ACTION_BOUND_RAD + 1e-6
+    with pytest.raises(ValueError, match="catalogue"):
+        scripted_demos.ScriptedDemos(objects=("teapot",))
+    with pytest.raises(ValueError, match="positive"):
+        scripted_demos.ScriptedDemos(decay_iterations=0)
+    with pytest.raises(ValueError, match="teacher_train"):
+        scripted_demos.ScriptedDemos(seed=spec.DEMO_SEED)  # demo-collection start states are not training data
+    assert cfg.lr_at(0) == cfg.lr and cfg.lr_at(cfg.decay_iterations) == 0.0 == cfg.lr_at(10**6)
+
+
+def test_cpu_bc_is_cpu_plus_the_cloning_algorithm_only():
+    cpu, bc = teacher_presets.CPU, teacher_presets.get_preset("cpu_bc")
+    alg = bc.runner_cfg()["algorithm"]
+    assert resolve_callable(alg["class_name"]) is aux_bc.PPOWithScriptedDemos
+    rest = {k: v for k, v in alg.items() if k not in ("class_name", "scripted_demos")}
+    assert rest == {k: v for k, v in cpu.runner_cfg()["algorithm"].items() if k != "class_name"}
+    assert {k: v for k, v in bc.runner_cfg().items() if k != "algorithm"} == {
+        k: v for k, v in cpu.runner_cfg().items() if k != "algorithm"}
+    assert bc.reward == cpu.reward and bc.pregrasp is None and bc.external_force == cpu.external_force
+    assert scripted_demos.ScriptedDemos(**{**alg["scripted_demos"], "objects": tuple(alg["scripted_demos"]["objects"])
+                                           }) == scripted_demos.ScriptedDemos(pushes=cpu.external_force)
+    assert bc.deviations[: len(cpu.deviations)] == cpu.deviations and len(bc.deviations) == len(cpu.deviations) + 1
+
+
+def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, monkeypatch):
+    """Two iterations, then a resumed third: the cloning loss is logged and falls, the learning rate follows the
+    decay across the resume (it is not restarted), and the checkpoint loads as a plain rsl-rl PPO one."""
+    from lerobot_blindgrasp.teacher import train
+    from lerobot_blindgrasp.teacher.progress import _scalars
+
+    demos = scripted_demos.ScriptedDemos(objects=("capsule_small",), episodes_per_object=3, decay_iterations=3,
+                                         steps=20, batch_size=256)
+    short = replace(teacher_presets.get_preset("cpu_bc"), runner=demos.runner_cfg(teacher_presets.CPU.runner))
+    monkeypatch.setitem(teacher_presets.PRESETS, "cpu_bc", short)
+    out = tmp_path / "bc"
+    previous = signal.getsignal(signal.SIGTERM)  # the trainer installs its own SIGTERM handler
+    try:
+        for its in (2, 3):
+            train.train(train.TrainTeacherConfig(output_dir=out, preset="cpu_bc", iterations=its, num_envs=18,
+                                                 threads=1, export=False))
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    s = _scalars(out)
+    assert [s["Loss/bc_lr"][i] for i in range(3)] == pytest.approx([3e-4, 2e-4, 1e-4])  # iterations 0, 1 and (resumed) 2
+    assert s["Loss/bc"][1] < s["Loss/bc"][0]
+    assert "actor_state_dict" in torch.load(out / "model_2.pt", weights_only=False)
