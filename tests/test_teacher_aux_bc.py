@@ -102,3 +102,9 @@ def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, m
     assert [s["Loss/bc_lr"][i] for i in range(3)] == pytest.approx([3e-4, 2e-4, 1e-4])  # iterations 0, 1 and (resumed) 2
     assert s["Loss/bc"][1] < s["Loss/bc"][0]
     assert "actor_state_dict" in torch.load(out / "model_2.pt", weights_only=False)
+
+
+def test_script_success_table_per_object(capsys):
+    scripted_demos.main(["--objects=capsule_small,cuboid_a_large", "--episodes_per_object=2", "--pushes=false"])
+    out = capsys.readouterr().out
+    assert "| cuboid_a_large | 0% (0/2) |" in out and "| capsule_small |" in out and "| **all** |" in out

@@ -86,3 +86,31 @@ def collect(cfg: ScriptedDemos) -> dict:
     o = np.stack(seen_obs, axis=1)[keep].reshape(-1, spec.PRIVILEGED_DIM)
     a = np.stack(seen_act, axis=1)[keep].reshape(-1, spec.NUM_JOINTS)
     return {"obs": o, "actions": a, "success": rates}
+
+
+@dataclass
+class ScriptSuccessConfig:
+    """How often the side-grasp script lifts each object from training start states (what `cpu_bc` can clone)."""
+
+    objects: str = "all"  # "all", "medium", or a comma-separated list of catalogue names
+    episodes_per_object: int = 30
+    pushes: bool = True  # Table II's random pushes (the paper's training randomization)
+
+
+def main(argv=None) -> None:
+    """python -m lerobot_blindgrasp.teacher.scripted_demos [--objects=all] [--episodes_per_object=30]"""
+    from lerobot_blindgrasp.cli import parse_config
+
+    cfg = parse_config(ScriptSuccessConfig, argv)
+    demos = ScriptedDemos(objects=objects.resolve_objects(cfg.objects), episodes_per_object=cfg.episodes_per_object,
+                          steps_per_episode=1, pushes=cfg.pushes)
+    rates = collect(demos)["success"]
+    print(f"side-grasp script, {cfg.episodes_per_object} episodes per object from seed {demos.seed}, "
+          f"pushes={cfg.pushes}\n\n| object | success |\n|---|---:|")
+    for name, rate in rates.items():
+        print(f"| {name} | {rate:.0%} ({round(rate * cfg.episodes_per_object)}/{cfg.episodes_per_object}) |")
+    print(f"| **all** | **{np.mean(list(rates.values())):.1%}** |")
+
+
+if __name__ == "__main__":
+    main()
