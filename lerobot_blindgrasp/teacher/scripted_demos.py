@@ -25,8 +25,9 @@ class ScriptedDemos:
     objects: tuple[str, ...] = pregrasp.HARD_OBJECTS
     episodes_per_object: int = 64  # script rollouts per object; the successful ones are kept
     steps_per_episode: int = 120  # approach, squeeze, lift and 2 s of hold: the rest is more of the same hold
-    lr: float = 3e-4  # behaviour-cloning Adam learning rate at iteration 0
-    decay_iterations: int = 700  # ... linearly to 0 here; afterwards the paper's reward alone
+    lr: float = 3e-4  # behaviour-cloning Adam learning rate at `start_iteration`
+    decay_iterations: int = 700  # ... linearly to 0 over this many iterations; afterwards the paper's reward alone
+    start_iteration: int = 0  # PPO alone before this iteration (cloning into a policy that already grasps)
     steps: int = 8  # behaviour-cloning steps after each PPO update
     batch_size: int = 2048
     seed: int = SCRIPT_SEED
@@ -36,7 +37,9 @@ class ScriptedDemos:
         unknown = sorted(set(self.objects) - set(objects.CATALOGUE))
         if unknown:
             raise ValueError(f"scripted-demo objects not in the catalogue: {unknown}")
-        if min(self.episodes_per_object, self.steps_per_episode, self.decay_iterations, self.batch_size) < 1:
+        if min(self.episodes_per_object, self.steps_per_episode, self.decay_iterations, self.batch_size) < 1 or (
+            self.start_iteration < 0
+        ):
             raise ValueError(f"scripted demos need positive sizes, got {self}")
         spec.check_seeds("teacher_train", self.seed, self.episodes_per_object * len(self.objects))
 
@@ -54,7 +57,9 @@ class ScriptedDemos:
         return runner
 
     def lr_at(self, iteration: int) -> float:
-        return self.lr * max(0.0, 1.0 - iteration / self.decay_iterations)
+        if iteration < self.start_iteration:
+            return 0.0
+        return self.lr * max(0.0, 1.0 - (iteration - self.start_iteration) / self.decay_iterations)
 
 
 def collect(cfg: ScriptedDemos) -> dict:
