@@ -63,7 +63,11 @@ def test_scripted_demos_keep_only_successful_episodes_and_refuse_bad_settings():
         scripted_demos.ScriptedDemos(decay_iterations=0)
     with pytest.raises(ValueError, match="teacher_train"):
         scripted_demos.ScriptedDemos(seed=spec.DEMO_SEED)  # demo-collection start states are not training data
-    assert cfg.lr_at(0) == cfg.lr and cfg.lr_at(cfg.decay_iterations) == 0.0 == cfg.lr_at(10**6)
+    assert cfg.weight_at(0) == cfg.lr and cfg.weight_at(cfg.decay_iterations) == 0.0 == cfg.weight_at(10**6)
+    late = scripted_demos.ScriptedDemos(mode="joint", coef=0.2, start_iteration=10, decay_iterations=4)
+    assert [late.weight_at(i) for i in (9, 10, 12, 14)] == pytest.approx([0.0, 0.2, 0.1, 0.0])
+    with pytest.raises(ValueError, match="mode"):
+        scripted_demos.ScriptedDemos(mode="both")
 
 
 def test_cpu_bc_is_cpu_plus_the_cloning_algorithm_only():
@@ -80,14 +84,15 @@ def test_cpu_bc_is_cpu_plus_the_cloning_algorithm_only():
     assert bc.deviations[: len(cpu.deviations)] == cpu.deviations and len(bc.deviations) == len(cpu.deviations) + 1
 
 
-def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, monkeypatch):
-    """Two iterations, then a resumed third: the cloning loss is logged and falls, the learning rate follows the
-    decay across the resume (it is not restarted), and the checkpoint loads as a plain rsl-rl PPO one."""
+@pytest.mark.parametrize("mode, full", [("interleaved", 3e-4), ("joint", 3.0)])
+def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, monkeypatch, mode, full):
+    """Two iterations, then a resumed third: the cloning loss is logged and falls, its weight follows the decay
+    across the resume (it is not restarted), and the checkpoint loads as a plain rsl-rl PPO one."""
     from lerobot_blindgrasp.teacher import train
     from lerobot_blindgrasp.teacher.progress import _scalars
 
     demos = scripted_demos.ScriptedDemos(objects=("capsule_small",), episodes_per_object=3, decay_iterations=3,
-                                         steps=20, batch_size=256)
+                                         steps=20, batch_size=256, mode=mode, lr=3e-4, coef=3.0)
     short = replace(teacher_presets.get_preset("cpu_bc"), runner=demos.runner_cfg(teacher_presets.CPU.runner))
     monkeypatch.setitem(teacher_presets.PRESETS, "cpu_bc", short)
     out = tmp_path / "bc"
@@ -99,8 +104,11 @@ def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, m
     finally:
         signal.signal(signal.SIGTERM, previous)
     s = _scalars(out)
-    assert [s["Loss/bc_lr"][i] for i in range(3)] == pytest.approx([3e-4, 2e-4, 1e-4])  # iterations 0, 1 and (resumed) 2
+    weights = [s["Loss/bc_weight"][i] for i in range(3)]  # iterations 0, 1 and (resumed) 2
+    assert weights == pytest.approx([full, full * 2 / 3, full / 3])
     assert s["Loss/bc"][1] < s["Loss/bc"][0]
+    if mode == "joint":  # the cloning gradient's size next to PPO's, per iteration
+        assert all(s["Loss/bc_grad_ratio"][i] > 0 for i in range(3))
     assert "actor_state_dict" in torch.load(out / "model_2.pt", weights_only=False)
 
 

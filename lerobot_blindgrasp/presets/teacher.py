@@ -223,6 +223,21 @@ CPU_BC_LATE = replace(
     ),
     deviations=_CPU_DEVIATIONS + (_BC_DEVIATION + ", from iteration 1398 to 1698",),
 )
+# As `cpu_bc_late`, with the cloning loss joined to PPO's (weight 0.1, decayed to 0 over 300 iterations) instead of
+# interleaved Adam steps, which overwrote the whole policy (55 % -> 1 % training success within 60 iterations).
+CPU_BC_JOINT = replace(
+    CPU_BC_LATE,
+    name="cpu_bc_joint",
+    runner=ScriptedDemos(pushes=CPU.external_force, start_iteration=1398, decay_iterations=300, mode="joint",
+                         coef=0.1).runner_cfg(CPU.runner),
+    deviations=_CPU_DEVIATIONS
+    + (
+        "from iteration 1398, the mean-squared error of the actor's mean against scripted side grasps of the small "
+        "objects and the medium capsule joins PPO's loss with weight 0.1, decayed linearly to 0 by iteration 1698 "
+        "(teacher/aux_bc.py): the cpu teacher pressed the small capsule from above for 34 M steps "
+        "(docs/results/teacher_cpu_v4.md)",
+    ),
+)
 
 QUICK = TeacherPreset(
     name="quick",
@@ -236,7 +251,7 @@ QUICK = TeacherPreset(
     external_force=False,
 )
 
-PRESETS: dict[str, TeacherPreset] = {p.name: p for p in (PAPER, CPU, CPU_V4, CPU_RND, CPU_PREGRASP, CPU_BC, CPU_BC_LATE, QUICK)}
+PRESETS: dict[str, TeacherPreset] = {p.name: p for p in (PAPER, CPU, CPU_V4, CPU_RND, CPU_PREGRASP, CPU_BC, CPU_BC_LATE, CPU_BC_JOINT, QUICK)}
 
 
 def get_preset(name: str) -> TeacherPreset:

@@ -33,7 +33,8 @@ log = logging.getLogger("blindgrasp.teacher")
 
 
 class PPOWithScriptedDemos(PPO):
-    """rsl-rl's PPO, then behaviour-cloning steps on scripted demonstrations after every update (module docstring)."""
+    """rsl-rl's PPO plus behaviour cloning of scripted demonstrations (module docstring): interleaved steps after
+    every update, or a joint loss term that `_JointCloningOptimizer` adds to each of PPO's own optimizer steps."""
 
     def __init__(self, actor, critic, storage, *, scripted_demos: dict, **kwargs):
         super().__init__(actor, critic, storage, **kwargs)
@@ -48,14 +49,45 @@ class PPOWithScriptedDemos(PPO):
         self.bc_optimizer = torch.optim.Adam(self.actor.parameters(), lr=self.demo_cfg.lr)
         self.bc_iteration = 0  # updates done; train.py sets it on resume so the decay continues
         self._gen = torch.Generator(device="cpu").manual_seed(self.demo_cfg.seed)
+        self._joint_losses: list[float] = []
+        self._grad_ratios: list[float] = []
+        if self.demo_cfg.mode == "joint":
+            self.optimizer = _JointCloningOptimizer(self.optimizer, self)
 
     def update(self) -> dict[str, float]:
+        weight = self.demo_cfg.weight_at(self.bc_iteration)
+        self._joint_weight = weight if self.demo_cfg.mode == "joint" else 0.0
+        self._joint_losses, self._grad_ratios = [], []
         losses = super().update()  # also refreshes the observation normalizer the cloning steps then use
-        lr = self.demo_cfg.lr_at(self.bc_iteration)
         self.bc_iteration += 1
-        losses["bc"] = self.bc_loss() if lr <= 0 else self._clone(lr)
-        losses["bc_lr"] = lr
+        if self._joint_losses:
+            losses["bc"] = sum(self._joint_losses) / len(self._joint_losses)
+            losses["bc_grad_ratio"] = sum(self._grad_ratios) / len(self._grad_ratios)
+        elif self.demo_cfg.mode == "interleaved" and weight > 0:
+            losses["bc"] = self._clone(weight)
+        else:
+            losses["bc"] = self.bc_loss()
+        losses["bc_weight"] = weight
         return losses
+
+    def add_joint_gradient(self) -> None:
+        """Add weight x the cloning loss's gradient to the actor's gradients PPO has just computed."""
+        if self._joint_weight <= 0:
+            return
+        obs, target = self._batch()
+        loss = ((self.actor(obs, stochastic_output=False) - target) / spec.ACTION_BOUND_RAD).pow(2).mean()
+        params = [p for p in self.actor.parameters() if p.requires_grad]
+        grads = torch.autograd.grad(self._joint_weight * loss, params, allow_unused=True)
+        ppo_sq = bc_sq = 0.0
+        for p, g in zip(params, grads):
+            if p.grad is not None:
+                ppo_sq += float(p.grad.pow(2).sum())
+            if g is not None:
+                bc_sq += float(g.pow(2).sum())
+                p.grad = g if p.grad is None else p.grad + g
+        self._joint_losses.append(loss.item())
+        # How hard the cloning pulls next to PPO (both on the actor): what a weight means, logged as Loss/bc_grad_ratio
+        self._grad_ratios.append((bc_sq / max(ppo_sq, 1e-30)) ** 0.5)
 
     def _batch(self) -> tuple[TensorDict, torch.Tensor]:
         idx = torch.randint(len(self.demo_obs), (self.demo_cfg.batch_size,), generator=self._gen)
@@ -82,3 +114,20 @@ class PPOWithScriptedDemos(PPO):
         """The cloning loss on one minibatch without a step (logged after the decay: does PPO keep the grasp?)."""
         obs, target = self._batch()
         return float(((self.actor(obs, stochastic_output=False) - target) / spec.ACTION_BOUND_RAD).pow(2).mean())
+
+
+class _JointCloningOptimizer:
+    """PPO's optimizer, whose `step` first adds the cloning gradient: the joint loss without rewriting
+    `PPO.update` (which calls zero_grad, backward, clip, step once per minibatch). Everything else is delegated, so
+    learning-rate schedules and checkpoints see the wrapped optimizer itself."""
+
+    def __init__(self, inner: torch.optim.Optimizer, alg: PPOWithScriptedDemos):
+        self._inner = inner
+        self._alg = alg
+
+    def step(self, *args, **kwargs):
+        self._alg.add_joint_gradient()
+        return self._inner.step(*args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._inner, name)

@@ -25,7 +25,13 @@ class ScriptedDemos:
     objects: tuple[str, ...] = pregrasp.HARD_OBJECTS
     episodes_per_object: int = 64  # script rollouts per object; the successful ones are kept
     steps_per_episode: int = 120  # approach, squeeze, lift and 2 s of hold: the rest is more of the same hold
-    lr: float = 3e-4  # behaviour-cloning Adam learning rate at `start_iteration`
+    # "interleaved": `steps` cloning steps with their own Adam after each PPO update, learning rate `lr`.
+    # "joint": the cloning loss, weighted by `coef`, joins PPO's loss in every PPO minibatch step (one optimizer,
+    # one gradient; DAPG's form). Adam normalizes each step's size, so interleaved cloning moves the actor by ~lr
+    # per step however small its loss, while a joint term moves it only as far as its gradient weighs against PPO's.
+    mode: str = "interleaved"
+    lr: float = 3e-4  # interleaved: behaviour-cloning Adam learning rate at `start_iteration`
+    coef: float = 0.1  # joint: weight of the cloning loss next to PPO's at `start_iteration`
     decay_iterations: int = 700  # ... linearly to 0 over this many iterations; afterwards the paper's reward alone
     start_iteration: int = 0  # PPO alone before this iteration (cloning into a policy that already grasps)
     steps: int = 8  # behaviour-cloning steps after each PPO update
@@ -41,6 +47,8 @@ class ScriptedDemos:
             self.start_iteration < 0
         ):
             raise ValueError(f"scripted demos need positive sizes, got {self}")
+        if self.mode not in ("interleaved", "joint"):
+            raise ValueError(f"scripted-demo mode must be 'interleaved' or 'joint', got {self.mode!r}")
         spec.check_seeds("teacher_train", self.seed, self.episodes_per_object * len(self.objects))
 
     def as_record(self) -> dict:
@@ -56,10 +64,13 @@ class ScriptedDemos:
         runner["algorithm"]["scripted_demos"] = self.as_record()
         return runner
 
-    def lr_at(self, iteration: int) -> float:
+    def weight_at(self, iteration: int) -> float:
+        """The cloning's learning rate (interleaved) or loss weight (joint) at a PPO iteration: 0 before
+        `start_iteration`, then decaying linearly to 0 over `decay_iterations`."""
         if iteration < self.start_iteration:
             return 0.0
-        return self.lr * max(0.0, 1.0 - (iteration - self.start_iteration) / self.decay_iterations)
+        full = self.lr if self.mode == "interleaved" else self.coef
+        return full * max(0.0, 1.0 - (iteration - self.start_iteration) / self.decay_iterations)
 
 
 def collect(cfg: ScriptedDemos) -> dict:
