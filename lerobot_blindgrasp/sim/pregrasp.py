@@ -68,20 +68,13 @@ def bounding_radius(o: objects.ObjectSpec) -> float:
 def pregrasp_pose(object_xy: np.ndarray, bound_r: np.ndarray, u: np.ndarray, cfg: PregraspStarts) -> np.ndarray:
     """Joint positions (n, 9) for objects at `object_xy` (n, 2) of bounding radius `bound_r` (n,), from uniform
     draws `u` (n, 6): a gap and an extension per finger."""
-    q = np.zeros((object_xy.shape[0], spec.NUM_JOINTS))
+    clearance = np.empty((object_xy.shape[0], len(spec.FINGERS)))
+    height = np.empty_like(clearance)
     for i, phi in enumerate(spec.FINGER_BASE_ANGLES_RAD):
-        c, s = math.cos(phi), math.sin(phi)
-        d_r = object_xy[:, 0] * c + object_xy[:, 1] * s  # object centre in the finger's frame
-        d_t = -object_xy[:, 0] * s + object_xy[:, 1] * c
-        gap = rng.between(u[:, 2 * i], *cfg.gap_m)
+        d_r = object_xy[:, 0] * math.cos(phi) + object_xy[:, 1] * math.sin(phi)  # object centre, finger's radial axis
+        clearance[:, i] = bound_r + gripper.TIP_CAPSULE_RADIUS + rng.between(u[:, 2 * i], *cfg.gap_m)
         ext = rng.between(u[:, 2 * i + 1], *cfg.extension)
-        radius = d_r + bound_r + gripper.TIP_CAPSULE_RADIUS + gap  # tip centre, radial coordinate
-        dx = radius - gripper.BASE_RADIUS
-        # J11 pivot to tip, vertical component
-        depth = np.sqrt(np.maximum((ext * scripted.FINGER_REACH_M) ** 2 - dx**2, 0.0))
-        # J10 swings the plane so that the tip reaches the object's tangential offset; in the swung plane the J11
-        # pivot hangs LINK_J10_J11 below J10 and the tip `depth` below that.
-        swing = np.arcsin(np.clip(d_t / (gripper.LINK_J10_J11 + depth), -1.0, 1.0))
-        j11, j12 = scripted.finger_ik(radius, scripted.J11_HEIGHT_M - depth)
-        q[:, 3 * i : 3 * i + 3] = np.column_stack([swing, j11, j12])
-    return np.clip(q, spec.JOINT_LOWER, spec.JOINT_UPPER)
+        dx = d_r + clearance[:, i] - gripper.BASE_RADIUS  # J11 pivot to the tip centre, horizontally
+        # the tip hangs as low as `ext` x the finger's full reach allows at that radius
+        height[:, i] = scripted.J11_HEIGHT_M - np.sqrt(np.maximum((ext * scripted.FINGER_REACH_M) ** 2 - dx**2, 0.0))
+    return scripted.side_pose(object_xy, clearance, height)
