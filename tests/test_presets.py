@@ -70,7 +70,7 @@ def test_quick_and_cpu_pipeline_numbers_are_unchanged():
     assert (q.student.size, q.student.steps, q.student.batch_size) == ("cpu", 1200, 128)
     assert (q.student.threads, q.student.num_workers) == (1, 1)  # one loader process next to one torch thread
     assert (q.evaluation.episodes_per_object, q.evaluation.teacher_modes) == (20, ("deterministic",))
-    # ~8 passes of the cpu student over its demos, not ~19 (the shipped student's recipe, models/student_cpu)
+    # 100 demos per object: ~8 passes of the cpu student over them (docs/results/student_cpu.md, 2026-11-30)
     assert (c.demos.episodes_per_object, c.demos.max_rollouts_per_object, c.demos.num_envs,
             c.demos.min_curated_episodes) == (100, 1000, 720, 90)
     assert (c.student.steps, c.student.batch_size) == (5000, 256)
