@@ -1,5 +1,7 @@
-"""A scripted pinch-and-lift, for physics tests and the sim demo (not a baseline policy).
+"""Scripted grasps: a pinch-and-lift for physics tests and the sim demo, and a side grasp (`SideGraspScript`) whose
+successful rollouts the `cpu_bc*` teachers clone (teacher/aux_bc.py). Neither is a baseline policy.
 
+The pinch:
 Each finger moves in its radial-vertical plane. Two-link inverse kinematics (proximal 0.068 m, distal to the tip
 sphere 0.073 m) places the tip sphere on the object's side at mid-height, presses 4 mm past the surface, then
 raises it by `lift_m` at the same radius. It assumes the object is centred, so use it without the xy offset.
@@ -45,13 +47,12 @@ def pinch_lift_waypoints(object_radius: float, grasp_height: float, lift_m: floa
     return np.stack(out)
 
 
-class PinchLiftScript:
-    """Callable q (N, 9) -> delta-theta (N, 9) following approach (15 steps), pinch (20), lift (30), hold."""
+class WaypointScript:
+    """Callable q (n, 9) -> delta-theta (n, 9) that moves the joint targets along `waypoints` in `segments` of
+    (steps, from waypoint, to waypoint), reaching each segment's end after 70 % of its steps, then holds the last."""
 
-    def __init__(self, object_radius: float, grasp_height: float, lift_m: float = 0.03):
-        self.waypoints = pinch_lift_waypoints(object_radius, grasp_height, lift_m)
-        self.segments = ((15, 0, 0), (20, 0, 1), (30, 1, 2))
-        self.t = 0
+    waypoints: np.ndarray  # (k, 9) or (k, n, 9)
+    segments: tuple[tuple[int, int, int], ...]
 
     def target(self, t: int) -> np.ndarray:
         start = 0
@@ -63,9 +64,18 @@ class PinchLiftScript:
         return self.waypoints[-1]
 
     def __call__(self, q: np.ndarray) -> np.ndarray:
-        a = np.clip(self.target(self.t)[None, :] - q, -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
+        a = np.clip(self.target(self.t) - q, -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
         self.t += 1
         return a
+
+
+class PinchLiftScript(WaypointScript):
+    """Approach (15 steps), pinch (20), lift (30), hold; the same targets for every env."""
+
+    def __init__(self, object_radius: float, grasp_height: float, lift_m: float = 0.03):
+        self.waypoints = pinch_lift_waypoints(object_radius, grasp_height, lift_m)
+        self.segments = ((15, 0, 0), (20, 0, 1), (30, 1, 2))
+        self.t = 0
 
 
 def run_pinch_lift(env, steps: int, object_radius: float = 0.03, grasp_height: float = 0.045, lift_m: float = 0.03):
@@ -114,8 +124,8 @@ def side_pose(object_xy: np.ndarray, clearance: np.ndarray, height: np.ndarray) 
     return np.clip(q, spec.JOINT_LOWER, spec.JOINT_UPPER)
 
 
-class SideGraspScript:
-    """Callable q (n, 9) -> delta-theta (n, 9): hover beside the object, descend, squeeze, lift, hold.
+class SideGraspScript(WaypointScript):
+    """Per-env targets: hover beside the object, descend, squeeze, lift, hold.
 
     Unlike `PinchLiftScript` it reads where each object stands (privileged, as the teacher does) and squeezes at
     the lowest height the tip reaches beside it, which is what lifts the small capsule (docs/results/
@@ -124,8 +134,8 @@ class SideGraspScript:
     GAP_M = 0.02  # tip surface to the object's surface while hovering and descending
     SQUEEZE_M = 0.006  # tip target this far inside the surface: the servo error that holds the object
     LIFT_M = 0.035
-    # (steps, from phase, to phase): start -> hover, hover -> beside, beside -> squeeze, squeeze -> lift, then hold
-    SEGMENTS = ((15, 0, 1), (15, 1, 2), (15, 2, 3), (30, 3, 4))
+    # (steps, from, to): start -> hover, hover -> beside, beside -> squeeze, squeeze -> lift, then hold
+    segments = ((15, 0, 1), (15, 1, 2), (15, 2, 3), (30, 3, 4))
 
     def __init__(self, q0: np.ndarray, object_pos: np.ndarray, specs: list[objects.ObjectSpec]):
         n = len(specs)
@@ -135,26 +145,12 @@ class SideGraspScript:
         # Squeeze at the object's centre height, or as low as the tip gets (finger_ik straightens the finger).
         grasp_z = np.maximum(object_pos[:, 2:3].repeat(3, axis=1), gripper.TIP_CAPSULE_RADIUS + 0.004)
         xy = object_pos[:, :2]
-        self.phases = np.stack([
+        self.waypoints = np.stack([
             np.asarray(q0, dtype=np.float64),
             side_pose(xy, surface + self.GAP_M, top + 0.015),
             side_pose(xy, surface + self.GAP_M, grasp_z),
             side_pose(xy, surface - self.SQUEEZE_M, grasp_z),
             side_pose(xy, surface - self.SQUEEZE_M, grasp_z + self.LIFT_M),
         ])  # (5, n, 9)
-        assert self.phases.shape[1] == n
+        assert self.waypoints.shape[1] == n
         self.t = 0
-
-    def target(self, t: int) -> np.ndarray:
-        start = 0
-        for steps, a, b in self.SEGMENTS:
-            if t < start + steps:
-                frac = min(1.0, (t - start + 1) / (0.7 * steps))
-                return self.phases[a] + (self.phases[b] - self.phases[a]) * frac
-            start += steps
-        return self.phases[-1]
-
-    def __call__(self, q: np.ndarray) -> np.ndarray:
-        a = np.clip(self.target(self.t) - q, -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
-        self.t += 1
-        return a
