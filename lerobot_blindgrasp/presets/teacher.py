@@ -11,7 +11,7 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass, replace
 
-from lerobot_blindgrasp.sim import pregrasp, rewards
+from lerobot_blindgrasp.sim import objects, pregrasp, rewards
 from lerobot_blindgrasp.teacher.scripted_demos import ScriptedDemos
 
 
@@ -239,6 +239,26 @@ CPU_BC_JOINT = replace(
     ),
 )
 
+# `cpu_bc_joint` lifted every object but the small capsule (0/20 held out at 1700). A second cloning stage aimed at
+# it alone, resumed from `cpu_bc_joint`'s iteration 1745: the script's small-capsule grasps only (256 start
+# states), weight 0.5 decayed to 0 over 300 iterations, and 4x the small capsule's share of training envs so that
+# PPO sees its rare lifts often enough to keep them (docs/results/teacher_cpu_bc.md section 7).
+_CAPSULE_WEIGHTS = tuple(4.0 if name == "capsule_small" else 1.0 for name in objects.PAPER_OBJECTS)
+CPU_BC_CAPSULE = replace(
+    CPU_BC_JOINT,
+    name="cpu_bc_capsule",
+    max_iterations=2100,
+    object_weights=_CAPSULE_WEIGHTS,
+    runner=ScriptedDemos(objects=("capsule_small",), episodes_per_object=256, pushes=CPU.external_force,
+                         start_iteration=1746, decay_iterations=300, mode="joint", coef=0.5).runner_cfg(CPU.runner),
+    deviations=CPU_BC_JOINT.deviations
+    + (
+        "from iteration 1746 (resumed from cpu_bc_joint), a second cloning stage on the small capsule's scripted "
+        "grasps alone, weight 0.5 decayed to 0 by 2046, and 4x its share of training envs: cpu_bc_joint still "
+        "pressed it from above (0/20 held out)",
+    ),
+)
+
 QUICK = TeacherPreset(
     name="quick",
     num_envs=144,  # 18 objects x 8
@@ -251,7 +271,10 @@ QUICK = TeacherPreset(
     external_force=False,
 )
 
-PRESETS: dict[str, TeacherPreset] = {p.name: p for p in (PAPER, CPU, CPU_V4, CPU_RND, CPU_PREGRASP, CPU_BC, CPU_BC_LATE, CPU_BC_JOINT, QUICK)}
+PRESETS: dict[str, TeacherPreset] = {
+    p.name: p
+    for p in (PAPER, CPU, CPU_V4, CPU_RND, CPU_PREGRASP, CPU_BC, CPU_BC_LATE, CPU_BC_JOINT, CPU_BC_CAPSULE, QUICK)
+}
 
 
 def get_preset(name: str) -> TeacherPreset:
