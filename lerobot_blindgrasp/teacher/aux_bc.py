@@ -40,11 +40,13 @@ class PPOWithScriptedDemos(PPO):
         super().__init__(actor, critic, storage, **kwargs)
         self.demo_cfg = ScriptedDemos(**{**scripted_demos, "objects": tuple(scripted_demos["objects"])})
         data = collect(self.demo_cfg)
-        if len(data["obs"]) == 0:
+        if len(data["actions"]) == 0:
             raise ValueError(f"the side-grasp script lifted none of {self.demo_cfg.objects}: no demonstrations")
-        log.info("scripted demos: %d pairs; script success %s", len(data["obs"]), data["success"])
+        log.info("scripted demos: %d pairs; script success %s", len(data["actions"]), data["success"])
         self.demo_success = data["success"]
-        self.demo_obs = torch.from_numpy(data["obs"]).to(self.device)
+        # Both observation groups: the actor reads whichever its obs_groups name (privileged, or o_t for "RL w/ o_t")
+        self.demo_obs = TensorDict({k: torch.from_numpy(v) for k, v in data["obs"].items()},
+                                   batch_size=[len(data["actions"])], device=self.device)
         self.demo_actions = torch.from_numpy(data["actions"]).to(self.device)
         self.bc_optimizer = torch.optim.Adam(self.actor.parameters(), lr=self.demo_cfg.lr)
         self.bc_iteration = 0  # updates done; train.py sets it on resume so the decay continues
@@ -90,9 +92,8 @@ class PPOWithScriptedDemos(PPO):
         self._grad_ratios.append((bc_sq / max(ppo_sq, 1e-30)) ** 0.5)
 
     def _batch(self) -> tuple[TensorDict, torch.Tensor]:
-        idx = torch.randint(len(self.demo_obs), (self.demo_cfg.batch_size,), generator=self._gen)
-        obs = TensorDict({"privileged": self.demo_obs[idx]}, batch_size=[len(idx)], device=self.device)
-        return obs, self.demo_actions[idx]
+        idx = torch.randint(len(self.demo_actions), (self.demo_cfg.batch_size,), generator=self._gen)
+        return self.demo_obs[idx], self.demo_actions[idx]
 
     def _clone(self, lr: float) -> float:
         for group in self.bc_optimizer.param_groups:

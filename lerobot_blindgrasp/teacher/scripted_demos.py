@@ -76,7 +76,9 @@ class ScriptedDemos:
 def collect(cfg: ScriptedDemos) -> dict:
     """Roll the side-grasp script out once per env from training start states; keep the successful episodes.
 
-    Returns {"obs": (M, 92) float32, "actions": (M, 9) float32, "success": {object: rate}}."""
+    Returns {"obs": {"privileged": (M, 92), "policy": (M, 12)}, "actions": (M, 9), "success": {object: rate}},
+    float32. Both observation groups are kept so that an actor reading either (the teacher's privileged one, or the
+    "RL w/ o_t" row's student one) can be cloned."""
     n = cfg.episodes_per_object * len(cfg.objects)
     dr = randomization.PAPER_DR if cfg.pushes else randomization.EVAL_DR  # as train.build_env_config chooses
     env = BatchedGraspEnv(GraspEnvConfig(num_envs=n, objects=cfg.objects, seed=cfg.seed, dr=dr, autoreset=False,
@@ -84,12 +86,13 @@ def collect(cfg: ScriptedDemos) -> dict:
     obs = env.reset()
     script = scripted.SideGraspScript(env.joint_positions(), env.object_position(),
                                       [objects.get_object(name) for name in env.object_names])
-    seen_obs, seen_act = [], []
+    seen_obs, seen_policy, seen_act = [], [], []
     success = np.zeros(n, dtype=bool)
     for t in range(env.max_episode_steps):
         action = script(env.joint_positions())
         if t < cfg.steps_per_episode:
             seen_obs.append(obs["privileged"].astype(np.float32))
+            seen_policy.append(obs["policy"].astype(np.float32))
             seen_act.append(action.astype(np.float32))
         obs, _, terminated, _, info = env.step(action)
         success |= info["success"]
@@ -100,8 +103,9 @@ def collect(cfg: ScriptedDemos) -> dict:
     rates = {name: float(success[names == name].mean()) for name in cfg.objects}
     keep = np.flatnonzero(success)
     o = np.stack(seen_obs, axis=1)[keep].reshape(-1, spec.PRIVILEGED_DIM)
+    p = np.stack(seen_policy, axis=1)[keep].reshape(-1, spec.STATE_DIM)
     a = np.stack(seen_act, axis=1)[keep].reshape(-1, spec.NUM_JOINTS)
-    return {"obs": o, "actions": a, "success": rates}
+    return {"obs": {"privileged": o, "policy": p}, "actions": a, "success": rates}
 
 
 @dataclass
