@@ -119,6 +119,45 @@ def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, m
     assert "actor_state_dict" in torch.load(out / "model_2.pt", weights_only=False)
 
 
+def test_relabelling_labels_the_policys_own_states_with_the_script():
+    """DAgger's data: the env follows the policy (here: never move), the labels are what the script would do there,
+    and every episode is kept. Each round draws fresh training start states."""
+    cfg = scripted_demos.ScriptedDemos(objects=("capsule_small",), episodes_per_object=2, steps_per_episode=5,
+                                       relabel_every=2, relabel_episodes=3, decay_iterations=4)
+    data = scripted_demos.relabel(cfg, lambda obs: np.zeros((len(obs["privileged"]), 9)), round_=0)
+    assert data["actions"].shape == (3 * 5, 9) and data["success"] == {"capsule_small": 0.0}
+    q = data["obs"]["privileged"].reshape(3, 5, -1)[:, :, spec.PRIVILEGED_SLICES["joint_pos"]]
+    np.testing.assert_allclose(q[:, 1:], q[:, :1].repeat(4, axis=1), atol=0.05)  # fingers stay (joint noise)
+    # ... while the script's label keeps asking for its hover pose (the same pull every step, up to joint noise)
+    assert (np.abs(data["actions"]).max(axis=1) > 0.05).all()
+    assert cfg.relabel_seed(1) - cfg.relabel_seed(0) == 3 and cfg.relabel_seed(0) == cfg.seed + 2
+    assert "relabel_every" not in scripted_demos.ScriptedDemos().as_record()  # old run configs still resume
+    with pytest.raises(ValueError, match="positive"):
+        scripted_demos.ScriptedDemos(relabel_every=-1)
+
+
+def test_relabelling_rounds_grow_the_demonstrations_during_training(tmp_path, monkeypatch):
+    from lerobot_blindgrasp.teacher import train
+    from lerobot_blindgrasp.teacher.progress import _scalars
+
+    demos = scripted_demos.ScriptedDemos(objects=("capsule_small",), episodes_per_object=2, steps_per_episode=10,
+                                         decay_iterations=3, mode="joint", coef=1.0, relabel_every=2,
+                                         relabel_episodes=2)
+    short = replace(teacher_presets.get_preset("cpu_bc"), runner=demos.runner_cfg(teacher_presets.CPU.runner))
+    monkeypatch.setitem(teacher_presets.PRESETS, "cpu_bc", short)
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        train.train(train.TrainTeacherConfig(output_dir=tmp_path / "dagger", preset="cpu_bc", iterations=3,
+                                             num_envs=18, threads=1, export=False))
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    s = _scalars(tmp_path / "dagger")
+    assert sorted(s["Loss/demo_pairs"]) == [0, 2]  # rounds after updates 0 and 2, none after 1
+    pairs = [s["Loss/demo_pairs"][i] for i in (0, 2)]
+    assert pairs[1] - pairs[0] == 2 * 10  # two relabelled episodes of 10 steps each
+    assert all(0.0 <= s["Loss/relabel_success"][i] <= 1.0 for i in (0, 2))
+
+
 def test_script_success_table_per_object(capsys):
     scripted_demos.main(["--objects=capsule_small,cuboid_a_large", "--episodes_per_object=2", "--pushes=false"])
     out = capsys.readouterr().out

@@ -259,6 +259,20 @@ CPU_BC_CAPSULE = replace(
     ),
 )
 
+# `cpu_bc_capsule` plus DAgger: every 5 updates the actor's own rollouts on 64 fresh small-capsule start states are
+# labelled with the script's action and join the demonstrations (teacher/scripted_demos.py `relabel`): on its own
+# states the actor drifts 0.2-0.4 rad from the script within 10 steps, where the script's demos never go.
+CPU_BC_DAGGER = replace(
+    CPU_BC_CAPSULE,
+    name="cpu_bc_dagger",
+    runner=ScriptedDemos(objects=("capsule_small",), episodes_per_object=256, pushes=CPU.external_force,
+                         start_iteration=1746, decay_iterations=300, mode="joint", coef=0.5, relabel_every=5,
+                         relabel_episodes=64).runner_cfg(CPU.runner),
+    deviations=CPU_BC_CAPSULE.deviations
+    + ("that second stage also clones the script's action on the actor's own small-capsule rollouts (DAgger), 64 "
+       "fresh start states every 5 updates",),
+)
+
 QUICK = TeacherPreset(
     name="quick",
     num_envs=144,  # 18 objects x 8
@@ -273,7 +287,8 @@ QUICK = TeacherPreset(
 
 PRESETS: dict[str, TeacherPreset] = {
     p.name: p
-    for p in (PAPER, CPU, CPU_V4, CPU_RND, CPU_PREGRASP, CPU_BC, CPU_BC_LATE, CPU_BC_JOINT, CPU_BC_CAPSULE, QUICK)
+    for p in (PAPER, CPU, CPU_V4, CPU_RND, CPU_PREGRASP, CPU_BC, CPU_BC_LATE, CPU_BC_JOINT, CPU_BC_CAPSULE,
+              CPU_BC_DAGGER, QUICK)
 }
 
 

@@ -13,6 +13,11 @@ on minibatches of those pairs, with their own Adam optimizer whose learning rate
 `decay_iterations`. Once it is 0 the actor optimizes the paper's reward alone, so the optimum is the paper's.
 Only the mean is cloned; the action std stays PPO's. The critic is untouched.
 
+With `relabel_every` set (DAgger, Ross et al. 2011), the current actor is also rolled out from fresh start states
+every few updates and the script's action at every state it reaches joins the demonstrations, so the cloning also
+corrects the actor where it drifts off the script's path, not only on the script's own states. A resumed run
+rebuilds the aggregate from the script's demos and the rounds after the resume.
+
 Wired into rsl-rl without changing its runner: the algorithm's `class_name` names `PPOWithScriptedDemos` and its
 config carries a `scripted_demos` dict (presets/teacher.py `with_scripted_demos`), so it is recorded in the run's
 `teacher_config.json` and checked on resume like every PPO setting.
@@ -22,12 +27,13 @@ from __future__ import annotations
 
 import logging
 
+import numpy as np
 import torch
 from rsl_rl.algorithms import PPO
 from tensordict import TensorDict
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.teacher.scripted_demos import ScriptedDemos, collect
+from lerobot_blindgrasp.teacher.scripted_demos import ScriptedDemos, collect, relabel
 
 log = logging.getLogger("blindgrasp.teacher")
 
@@ -44,10 +50,9 @@ class PPOWithScriptedDemos(PPO):
             raise ValueError(f"the side-grasp script lifted none of {self.demo_cfg.objects}: no demonstrations")
         log.info("scripted demos: %d pairs; script success %s", len(data["actions"]), data["success"])
         self.demo_success = data["success"]
-        # Both observation groups: the actor reads whichever its obs_groups name (privileged, or o_t for "RL w/ o_t")
-        self.demo_obs = TensorDict({k: torch.from_numpy(v) for k, v in data["obs"].items()},
-                                   batch_size=[len(data["actions"])], device=self.device)
-        self.demo_actions = torch.from_numpy(data["actions"]).to(self.device)
+        self.demo_obs: TensorDict | None = None
+        self.demo_actions: torch.Tensor | None = None
+        self._add_demos(data)
         self.bc_optimizer = torch.optim.Adam(self.actor.parameters(), lr=self.demo_cfg.lr)
         self.bc_iteration = 0  # updates done; train.py sets it on resume so the decay continues
         self._gen = torch.Generator(device="cpu").manual_seed(self.demo_cfg.seed)
@@ -70,7 +75,33 @@ class PPOWithScriptedDemos(PPO):
         else:
             losses["bc"] = self.bc_loss()
         losses["bc_weight"] = weight
+        cfg, done = self.demo_cfg, self.bc_iteration - 1 - self.demo_cfg.start_iteration
+        if cfg.relabel_every and weight > 0 and done % cfg.relabel_every == 0:
+            data = relabel(cfg, self._act, done // cfg.relabel_every)
+            self._add_demos(data)
+            # The actor's own success on the round's fresh start states: a held-out-like curve at no extra cost
+            losses["relabel_success"] = sum(data["success"].values()) / len(data["success"])
+            losses["demo_pairs"] = float(len(self.demo_actions))
         return losses
+
+    def _add_demos(self, data: dict) -> None:
+        """Append (observation, script action) pairs. Both observation groups are kept: the actor reads whichever
+        its obs_groups name (privileged, or o_t for "RL w/ o_t")."""
+        obs = TensorDict({k: torch.from_numpy(v) for k, v in data["obs"].items()},
+                         batch_size=[len(data["actions"])], device=self.device)
+        actions = torch.from_numpy(data["actions"]).to(self.device)
+        if self.demo_obs is None:
+            self.demo_obs, self.demo_actions = obs, actions
+        else:
+            self.demo_obs = torch.cat([self.demo_obs, obs])
+            self.demo_actions = torch.cat([self.demo_actions, actions])
+
+    @torch.no_grad()
+    def _act(self, obs: dict) -> np.ndarray:
+        """The actor's mean action on numpy observations, as the relabelling rollouts step the env with it."""
+        n = len(obs["privileged"])
+        td = TensorDict({k: torch.from_numpy(v).float() for k, v in obs.items()}, batch_size=[n], device=self.device)
+        return self.actor(td, stochastic_output=False).cpu().numpy().astype("float64")
 
     def add_joint_gradient(self) -> None:
         """Add weight x the cloning loss's gradient to the actor's gradients PPO has just computed."""

@@ -38,23 +38,43 @@ class ScriptedDemos:
     batch_size: int = 2048
     seed: int = SCRIPT_SEED
     pushes: bool = False  # Table II's random pushes, as the training preset has them (`external_force`)
+    # DAgger (Ross et al. 2011): every `relabel_every` updates while the weight is > 0, the current actor's mean is
+    # rolled out on `relabel_episodes` fresh start states of the listed objects and the script's action at every
+    # state it visits joins the demonstrations. The script's own states are not where the actor goes wrong: on the
+    # small capsule it drifts 0.2-0.4 rad (RMS) from the script's action within 10 steps of its own rollouts
+    # (docs/results/teacher_cpu_bc.md section 7). 0: off.
+    relabel_every: int = 0
+    relabel_episodes: int = 64
 
     def __post_init__(self):
         unknown = sorted(set(self.objects) - set(objects.CATALOGUE))
         if unknown:
             raise ValueError(f"scripted-demo objects not in the catalogue: {unknown}")
-        if min(self.episodes_per_object, self.steps_per_episode, self.decay_iterations, self.batch_size) < 1 or (
-            self.start_iteration < 0
-        ):
+        if min(self.episodes_per_object, self.steps_per_episode, self.decay_iterations, self.batch_size,
+               self.relabel_episodes) < 1 or min(self.start_iteration, self.relabel_every) < 0:
             raise ValueError(f"scripted demos need positive sizes, got {self}")
         if self.mode not in ("interleaved", "joint"):
             raise ValueError(f"scripted-demo mode must be 'interleaved' or 'joint', got {self.mode!r}")
         spec.check_seeds("teacher_train", self.seed, self.episodes_per_object * len(self.objects))
+        if self.relabel_every:
+            rounds = -(-self.decay_iterations // self.relabel_every)
+            spec.check_seeds("teacher_train", self.relabel_seed(0), self.relabel_per_object * len(self.objects) * rounds)
+
+    @property
+    def relabel_per_object(self) -> int:
+        return -(-self.relabel_episodes // len(self.objects))
+
+    def relabel_seed(self, round_: int) -> int:
+        """First env seed of relabelling round `round_`: after the script's own start states, never reused."""
+        per_round = self.relabel_per_object * len(self.objects)
+        return self.seed + self.episodes_per_object * len(self.objects) + round_ * per_round
 
     def as_record(self) -> dict:
         """The JSON form that goes into the runner config (lists, not tuples: it must survive a JSON round trip)."""
         d = asdict(self)
         d["objects"] = list(self.objects)
+        if not self.relabel_every:  # as run configs recorded before relabelling existed, so that they still resume
+            del d["relabel_every"], d["relabel_episodes"]
         return d
 
     def runner_cfg(self, runner: dict) -> dict:
@@ -79,9 +99,22 @@ def collect(cfg: ScriptedDemos) -> dict:
     Returns {"obs": {"privileged": (M, 92), "policy": (M, 12)}, "actions": (M, 9), "success": {object: rate}},
     float32. Both observation groups are kept so that an actor reading either (the teacher's privileged one, or the
     "RL w/ o_t" row's student one) can be cloned."""
-    n = cfg.episodes_per_object * len(cfg.objects)
+    return _rollout(cfg, cfg.episodes_per_object, cfg.seed, policy=None)
+
+
+def relabel(cfg: ScriptedDemos, policy, round_: int) -> dict:
+    """DAgger's step: roll `policy` (obs dict -> delta-theta) out from `cfg.relabel_episodes` fresh training start
+    states of each listed object and label every state it visits with the script's action there. Every episode is
+    kept, failed ones most of all; "success" is the policy's own rate on these start states."""
+    return _rollout(cfg, cfg.relabel_per_object, cfg.relabel_seed(round_), policy=policy)
+
+
+def _rollout(cfg: ScriptedDemos, per_object: int, seed: int, policy) -> dict:
+    """The script runs alongside every episode; its action drives the env (policy None: `collect`) or only labels
+    the states `policy` drives the env to (`relabel`)."""
+    n = per_object * len(cfg.objects)
     dr = randomization.PAPER_DR if cfg.pushes else randomization.EVAL_DR  # as train.build_env_config chooses
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=n, objects=cfg.objects, seed=cfg.seed, dr=dr, autoreset=False,
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=n, objects=cfg.objects, seed=seed, dr=dr, autoreset=False,
                                          nthread=1))
     obs = env.reset()
     script = scripted.SideGraspScript(env.joint_positions(), env.object_position(),
@@ -89,19 +122,19 @@ def collect(cfg: ScriptedDemos) -> dict:
     seen_obs, seen_policy, seen_act = [], [], []
     success = np.zeros(n, dtype=bool)
     for t in range(env.max_episode_steps):
-        action = script(env.joint_positions())
+        label = script(env.joint_positions())
         if t < cfg.steps_per_episode:
             seen_obs.append(obs["privileged"].astype(np.float32))
             seen_policy.append(obs["policy"].astype(np.float32))
-            seen_act.append(action.astype(np.float32))
-        obs, _, terminated, _, info = env.step(action)
+            seen_act.append(label.astype(np.float32))
+        obs, _, terminated, _, info = env.step(label if policy is None else policy(obs))
         success |= info["success"]
         if terminated.any():  # an object left the workspace: that episode is not a demonstration
             success &= ~terminated
     env.close()
     names = np.array(env.object_names)
     rates = {name: float(success[names == name].mean()) for name in cfg.objects}
-    keep = np.flatnonzero(success)
+    keep = np.flatnonzero(success) if policy is None else np.arange(n)
     o = np.stack(seen_obs, axis=1)[keep].reshape(-1, spec.PRIVILEGED_DIM)
     p = np.stack(seen_policy, axis=1)[keep].reshape(-1, spec.STATE_DIM)
     a = np.stack(seen_act, axis=1)[keep].reshape(-1, spec.NUM_JOINTS)
