@@ -89,6 +89,31 @@ def test_progress_curves_sum_training_time_and_weigh_objects_equally(tmp_path):
     assert (tmp_path / "p.png").stat().st_size > 1000
 
 
+def test_a_run_continued_in_another_directory_is_one_curve(tmp_path, capsys):
+    """RUN_A+RUN_B: A up to B's first iteration, then B, with B's training time added to A's."""
+    from torch.utils.tensorboard import SummaryWriter
+
+    from lerobot_blindgrasp.teacher.progress import main, progress
+
+    for name, its, secs in (("a", range(0, 5), 2.0), ("b", range(3, 6), 10.0)):  # b resumed a's model_2.pt
+        d = tmp_path / name
+        d.mkdir()
+        (d / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))
+        w = SummaryWriter(str(d))
+        for it in its:
+            w.add_scalar("Perf/collection_time", secs, it)
+            w.add_scalar("Perf/learning_time", 0.0, it)
+            for k, obj in enumerate(objects.PAPER_OBJECTS):  # b lifts cuboid_a_large, nothing else does
+                w.add_scalar(f"Success/{obj}", float(name == "b" and k == 0), it)
+        w.close()
+    p = progress((tmp_path / "a", tmp_path / "b"), window=1)
+    assert p["iteration"] == [0, 1, 2, 3, 4, 5] and p["env_steps"][-1] == 6 * 40
+    assert np.diff(p["wall_h"]) * 3600 == pytest.approx([2, 2, 10, 10, 10])
+    assert p["success_all18"][2] == 0.0 and p["success_all18"][3] == pytest.approx(1 / 18)
+    main([str(tmp_path / "c.png"), f"a then b={tmp_path / 'a'}+{tmp_path / 'b'}", "--metrics=Success/cuboid_a_large"])
+    assert '"a then b"' in capsys.readouterr().out and (tmp_path / "c_metrics.png").is_file()
+
+
 def test_progress_command_line_takes_the_runs_as_positionals_and_its_options_as_flags(tmp_path, capsys):
     from torch.utils.tensorboard import SummaryWriter
 

@@ -1,7 +1,11 @@
 """Training success against env steps and against training wall clock, from a run's TensorBoard scalars.
 
-    python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...] [--until=ITER]
+    python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR[+RUN_DIR...] [...] [--until=ITER]
         [--metrics=TAG,TAG]
+
+`RUN_A+RUN_B` is one training history kept in two directories: RUN_B was started from a checkpoint of RUN_A (for
+example the shipped teacher, whose cloning stage resumed the `cpu` run's iteration 1397 under another preset). Its
+curve is RUN_A up to RUN_B's first iteration, then RUN_B, with RUN_B's wall clock added to RUN_A's.
 
 `--until=ITER` cuts every curve after iteration ITER, to compare runs at one budget (a side-by-side run that was
 stopped earlier than the one it is compared with). `--metrics=TAG,TAG` adds a second figure, OUT_metrics.png, with
@@ -53,9 +57,11 @@ def _smooth(y: np.ndarray, window: int) -> np.ndarray:
     return out
 
 
-def progress(run_dir: Path, window: int = 25, until: int | None = None) -> dict[str, list[float]]:
+def progress(run_dir: Path | tuple[Path, ...], window: int = 25, until: int | None = None) -> dict[str, list[float]]:
     """Per iteration (up to `until`, if given): env steps, training hours, and smoothed success (all 18 objects,
-    6 medium)."""
+    6 medium). A tuple of run directories is one history continued from one directory into the next."""
+    if isinstance(run_dir, tuple):
+        return _chain([progress(d, window, until) for d in run_dir])
     cfg = json.loads((run_dir / CONFIG_NAME).read_text())
     steps_per_it = cfg["runner"]["num_steps_per_env"] * cfg["num_envs"]
     s = _scalars(run_dir)
@@ -78,7 +84,21 @@ def progress(run_dir: Path, window: int = 25, until: int | None = None) -> dict[
         }
 
 
-def plot_progress(runs: dict[str, Path], path: Path, title: str = "Teacher training progress",
+def _chain(parts: list[dict[str, list[float]]]) -> dict[str, list[float]]:
+    """Each part up to the next one's first iteration; wall clock accumulates across parts."""
+    parts = [p for p in parts if p]
+    out: dict[str, list[float]] = {k: [] for k in parts[0]} if parts else {}
+    hours = 0.0
+    for k, p in enumerate(parts):
+        stop = parts[k + 1]["iteration"][0] if k + 1 < len(parts) else float("inf")
+        n = sum(1 for i in p["iteration"] if i < stop)
+        for key in out:
+            out[key] += [v + hours for v in p[key][:n]] if key == "wall_h" else p[key][:n]
+        hours = out["wall_h"][-1] if out["wall_h"] else hours
+    return out
+
+
+def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: str = "Teacher training progress",
                   until: int | None = None) -> dict:
     """One figure, success against env steps (left) and training wall clock (right), one colour per run;
     solid: all 18 objects, dashed: the 6 medium ones."""
@@ -109,19 +129,24 @@ def plot_progress(runs: dict[str, Path], path: Path, title: str = "Teacher train
     return curves
 
 
-def plot_metrics(runs: dict[str, Path], tags: list[str], path: Path, until: int | None = None,
+def plot_metrics(runs: dict[str, Path | tuple[Path, ...]], tags: list[str], path: Path, until: int | None = None,
                  window: int = 25) -> None:
-    """One panel per TensorBoard scalar, every run against env steps (trailing mean over `window` iterations)."""
+    """One panel per TensorBoard scalar, every run against env steps (trailing mean over `window` iterations); a
+    chained run's later directories win where iterations repeat."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, len(tags), figsize=(4.2 * len(tags), 3.4), squeeze=False)
-    for k, (label, run_dir) in enumerate(runs.items()):
-        cfg = json.loads((run_dir / CONFIG_NAME).read_text())
+    for k, (label, run_dirs) in enumerate(runs.items()):
+        run_dirs = run_dirs if isinstance(run_dirs, tuple) else (run_dirs,)
+        cfg = json.loads((run_dirs[-1] / CONFIG_NAME).read_text())
         steps_per_it = cfg["runner"]["num_steps_per_env"] * cfg["num_envs"]
-        s = _scalars(run_dir)
+        s: dict[str, dict[int, float]] = {}
+        for run_dir in run_dirs:
+            for tag, values in _scalars(run_dir).items():
+                s.setdefault(tag, {}).update(values)
         for ax, tag in zip(axes[0], tags):
             its = sorted(i for i in s.get(tag, {}) if until is None or i <= until)
             if not its:
@@ -138,7 +163,7 @@ def plot_metrics(runs: dict[str, Path], tags: list[str], path: Path, until: int 
     plt.close(fig)
 
 
-USAGE = ("usage: python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR [[LABEL=]RUN_DIR ...] "
+USAGE = ("usage: python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR[+RUN_DIR...] [...] "
          "[--until=ITER] [--metrics=TAG,TAG]")
 
 
@@ -163,11 +188,12 @@ def main(argv=None) -> None:
         raise SystemExit(USAGE)
     runs = {}
     for arg in args[1:]:
-        label, _, path = arg.rpartition("=")
-        run_dir = Path(path)
-        if not (run_dir / CONFIG_NAME).is_file():
-            raise SystemExit(f"{run_dir} is not a teacher run directory (no {CONFIG_NAME})")
-        runs[label or run_dir.name] = run_dir
+        label, _, paths = arg.rpartition("=")
+        run_dirs = tuple(Path(p) for p in paths.split("+"))
+        for run_dir in run_dirs:
+            if not (run_dir / CONFIG_NAME).is_file():
+                raise SystemExit(f"{run_dir} is not a teacher run directory (no {CONFIG_NAME})")
+        runs[label or run_dirs[-1].name] = run_dirs if len(run_dirs) > 1 else run_dirs[0]
     out = Path(args[0])
     curves = plot_progress(runs, out, until=cfg.until)
     if cfg.metric_tags:
