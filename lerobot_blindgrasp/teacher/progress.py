@@ -59,43 +59,43 @@ def _smooth(y: np.ndarray, window: int) -> np.ndarray:
 
 def progress(run_dir: Path | tuple[Path, ...], window: int = 25, until: int | None = None) -> dict[str, list[float]]:
     """Per iteration (up to `until`, if given): env steps, training hours, and smoothed success (all 18 objects,
-    6 medium). A tuple of run directories is one history continued from one directory into the next."""
-    if isinstance(run_dir, tuple):
-        return _chain([progress(d, window, until) for d in run_dir])
-    cfg = json.loads((run_dir / CONFIG_NAME).read_text())
-    steps_per_it = cfg["runner"]["num_steps_per_env"] * cfg["num_envs"]
-    s = _scalars(run_dir)
-    its = sorted(i for i in s.get("Perf/collection_time", {}) if until is None or i <= until)
-    if not its:
+    6 medium). A tuple of run directories is one history continued from one directory into the next: each
+    directory up to the next one's first iteration, wall clock accumulated, smoothed across the seams."""
+    parts = [p for p in (_raw(d, until) for d in (run_dir if isinstance(run_dir, tuple) else (run_dir,))) if p]
+    if not parts:
         return {}
-    secs = np.array([s["Perf/collection_time"][i] + s["Perf/learning_time"].get(i, 0.0) for i in its])
-    per_obj = np.array(
-        [[s.get(f"Success/{n}", {}).get(i, np.nan) for i in its] for n in objects.PAPER_OBJECTS], dtype=float
-    )
-    per_obj = np.array([_smooth(row, window) for row in per_obj])
+    its, steps, secs, per_obj = [], [], [], []
+    for k, (i, st, sec, obj) in enumerate(parts):
+        n = sum(1 for x in i if k + 1 == len(parts) or x < parts[k + 1][0][0])
+        its += i[:n]
+        steps += st[:n]
+        secs.append(sec[:n])
+        per_obj.append(obj[:, :n])
+    per_obj = np.array([_smooth(row, window) for row in np.concatenate(per_obj, axis=1)])
     medium = [objects.PAPER_OBJECTS.index(n) for n in objects.MEDIUM_OBJECTS]
     with np.errstate(invalid="ignore"):
         return {
             "iteration": [float(i) for i in its],
-            "env_steps": [float((i + 1) * steps_per_it) for i in its],
-            "wall_h": list(np.cumsum(secs) / 3600.0),
+            "env_steps": [float(x) for x in steps],
+            "wall_h": list(np.cumsum(np.concatenate(secs)) / 3600.0),
             "success_all18": list(np.nan_to_num(per_obj.mean(axis=0))),
             "success_medium": list(np.nan_to_num(per_obj[medium].mean(axis=0))),
         }
 
 
-def _chain(parts: list[dict[str, list[float]]]) -> dict[str, list[float]]:
-    """Each part up to the next one's first iteration; wall clock accumulates across parts."""
-    parts = [p for p in parts if p]
-    out: dict[str, list[float]] = {k: [] for k in parts[0]} if parts else {}
-    hours = 0.0
-    for k, p in enumerate(parts):
-        stop = parts[k + 1]["iteration"][0] if k + 1 < len(parts) else float("inf")
-        n = sum(1 for i in p["iteration"] if i < stop)
-        for key in out:
-            out[key] += [v + hours for v in p[key][:n]] if key == "wall_h" else p[key][:n]
-        hours = out["wall_h"][-1] if out["wall_h"] else hours
-    return out
+def _raw(run_dir: Path, until: int | None):
+    """(iterations, env steps, seconds per iteration, per-object success (18, n) with NaN where none ended)."""
+    cfg = json.loads((run_dir / CONFIG_NAME).read_text())
+    steps_per_it = cfg["runner"]["num_steps_per_env"] * cfg["num_envs"]
+    s = _scalars(run_dir)
+    its = sorted(i for i in s.get("Perf/collection_time", {}) if until is None or i <= until)
+    if not its:
+        return None
+    secs = np.array([s["Perf/collection_time"][i] + s["Perf/learning_time"].get(i, 0.0) for i in its])
+    per_obj = np.array(
+        [[s.get(f"Success/{n}", {}).get(i, np.nan) for i in its] for n in objects.PAPER_OBJECTS], dtype=float
+    )
+    return its, [(i + 1) * steps_per_it for i in its], secs, per_obj
 
 
 def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: str = "Teacher training progress",
@@ -121,7 +121,7 @@ def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: s
         ax.set_ylim(0, 100)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("training success, stochastic (%)")
-    axes[0].legend(loc="upper left", fontsize=8)
+    axes[0].legend(loc="lower right", fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
