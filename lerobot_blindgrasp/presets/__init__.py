@@ -24,8 +24,8 @@ from lerobot_blindgrasp.presets.ablations import TABLE_V, TEACHERS, Ablation
 from lerobot_blindgrasp.presets.student import SIZES, Schedule, StudentStage, dataset_frames, schedule
 from lerobot_blindgrasp.presets.teacher import TeacherPreset, Variant
 
-__all__ = ["PRESETS", "SHIPPED_TEACHER_ITERATIONS", "SIZES", "TABLE_V", "TEACHERS", "Ablation", "DemoStage",
-           "EvalStage", "Preset", "Schedule", "StudentStage", "TeacherPreset", "TeacherStage", "Variant",
+__all__ = ["PRESETS", "SHIPPED_TEACHER_ITERATIONS", "SHIPPED_TEACHER_PRESET", "SIZES", "TABLE_V", "TEACHERS",
+           "Ablation", "DemoStage", "EvalStage", "Preset", "Schedule", "StudentStage", "TeacherPreset", "TeacherStage", "Variant",
            "dataset_frames", "get", "schedule"]
 
 
@@ -74,9 +74,10 @@ class Preset:
         return self.teacher.settings.deviations + self.deviations
 
 
-# Iterations the shipped default teacher was trained for (iterations 0..1397 of `blindgrasp-train-teacher
-# --preset=cpu --seed=1`): the budget every other teacher of the quick Table V gets.
-SHIPPED_TEACHER_ITERATIONS = 1398
+# The shipped default teacher (models/teacher_cpu_bc) was trained for iterations 0..1745 of `blindgrasp-train-teacher
+# --preset=cpu_bc_joint --seed=1`: the settings and budget every other teacher of the quick Table V gets.
+SHIPPED_TEACHER_PRESET = teacher.CPU_BC_JOINT
+SHIPPED_TEACHER_ITERATIONS = 1746
 
 _SIM_EVAL = "evaluated in simulation, not on the real gripper"
 
@@ -124,16 +125,16 @@ PRESETS: dict[str, Preset] = {
         Preset(
             name="quick",
             # Shipped: the proposed rows train no teacher. The Table V teachers (w/o r_i, RL w/ o_t) get the shipped
-            # teacher's budget: its run stopped after 1398 iterations (models/teacher_cpu_v3/README.md).
-            teacher=TeacherStage(settings=teacher.CPU, shipped=True, iterations=SHIPPED_TEACHER_ITERATIONS),
+            # teacher's settings and budget (models/teacher_cpu_bc/README.md).
+            teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET, shipped=True, iterations=SHIPPED_TEACHER_ITERATIONS),
             demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720,
                             min_curated_episodes=18),
             # 1200 steps at batch 128 is the recipe of docs/results/student_cpu.md (~8 min on 2 idle cores).
             student=StudentStage(size="cpu", batch_size=128, steps=1200, threads=1, num_workers=1),
             evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",), render_stride=4),
             deviations=(
-                "the shipped teacher (models/teacher_cpu_v3, trained with the cpu teacher settings), no teacher "
-                "training",
+                "the shipped teacher (models/teacher_cpu_bc, trained with the cpu_bc_joint teacher settings), no "
+                "teacher training",
                 "40 curated episodes per object (at most 400 rollouts) instead of ~5000",
                 "student size cpu (3 layers x 128, 4 heads, head [256, 256]) instead of 6 x 512",
                 "1200 steps at batch 128 with a constant LR instead of 2000 epochs at batch 256: minutes",

@@ -34,7 +34,7 @@ WEIGHTS_NAME = "teacher.safetensors"
 FORMAT = "blindgrasp-teacher/1"
 # The shipped default teacher: a folder under the repository's models/. A better teacher dropped there in the same
 # format (teacher.safetensors + teacher_config.json) becomes the default by changing this one name.
-SHIPPED_TEACHER = "teacher_cpu_v3"
+SHIPPED_TEACHER = "teacher_cpu_bc"
 TEACHER_ENV_VAR = "BLINDGRASP_TEACHER"
 
 
