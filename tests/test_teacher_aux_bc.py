@@ -131,9 +131,29 @@ def test_relabelling_labels_the_policys_own_states_with_the_script():
     # ... while the script's label keeps asking for its hover pose (the same pull every step, up to joint noise)
     assert (np.abs(data["actions"]).max(axis=1) > 0.05).all()
     assert cfg.relabel_seed(1) - cfg.relabel_seed(0) == 3 and cfg.relabel_seed(0) == cfg.seed + 2
+    # The same rollouts measure a teacher's drift from the script: here, the size of the script's own actions
+    d = scripted_demos.drift(lambda obs: np.zeros((len(obs["privileged"]), 9)), cfg, steps=(0, 4))
+    first = data["actions"].reshape(3, 5, 9)[:, 0]
+    assert d["rms_rad"][0] == pytest.approx(float(np.sqrt((first**2).mean())), rel=1e-5)
+    assert set(d["rms_rad"]) == {0, 4} and d["success"] == {"capsule_small": 0.0}
     assert "relabel_every" not in scripted_demos.ScriptedDemos().as_record()  # old run configs still resume
     with pytest.raises(ValueError, match="positive"):
         scripted_demos.ScriptedDemos(relabel_every=-1)
+
+
+def test_saturation_aware_cloning_loss_ignores_what_the_action_clip_hides():
+    b = spec.ACTION_BOUND_RAD
+    target = torch.tensor([[b, -b, 0.1]])
+    beyond = torch.tensor([[3 * b, -2 * b, 0.1]])  # executes exactly the target (the env clips)
+    short = torch.tensor([[0.5 * b, -0.5 * b, 0.1]])  # executes less than the target asks for
+    assert aux_bc.cloning_loss(beyond, target, saturation_aware=True) == 0.0
+    assert aux_bc.cloning_loss(beyond, target, saturation_aware=False) == pytest.approx((4 + 1) / 3)
+    assert aux_bc.cloning_loss(short, target, saturation_aware=True) == pytest.approx(
+        float(aux_bc.cloning_loss(short, target, saturation_aware=False)))
+    mean = beyond.clone().requires_grad_(True)
+    aux_bc.cloning_loss(mean, target, saturation_aware=True).backward()
+    assert torch.count_nonzero(mean.grad) == 0
+    assert "saturation_aware" not in scripted_demos.ScriptedDemos().as_record()  # old run configs still resume
 
 
 def test_relabelling_rounds_grow_the_demonstrations_during_training(tmp_path, monkeypatch):

@@ -108,7 +108,7 @@ class PPOWithScriptedDemos(PPO):
         if self._joint_weight <= 0:
             return
         obs, target = self._batch()
-        loss = ((self.actor(obs, stochastic_output=False) - target) / spec.ACTION_BOUND_RAD).pow(2).mean()
+        loss = self._loss(self.actor(obs, stochastic_output=False), target)
         params = [p for p in self.actor.parameters() if p.requires_grad]
         grads = torch.autograd.grad(self._joint_weight * loss, params, allow_unused=True)
         ppo_sq = bc_sq = 0.0
@@ -133,7 +133,7 @@ class PPOWithScriptedDemos(PPO):
         for _ in range(self.demo_cfg.steps):
             obs, target = self._batch()
             mean = self.actor(obs, stochastic_output=False)
-            loss = ((mean - target) / spec.ACTION_BOUND_RAD).pow(2).mean()  # in units of the action bound
+            loss = self._loss(mean, target)
             self.bc_optimizer.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(self.actor.parameters(), self.max_grad_norm)
@@ -145,7 +145,25 @@ class PPOWithScriptedDemos(PPO):
     def bc_loss(self) -> float:
         """The cloning loss on one minibatch without a step (logged after the decay: does PPO keep the grasp?)."""
         obs, target = self._batch()
-        return float(((self.actor(obs, stochastic_output=False) - target) / spec.ACTION_BOUND_RAD).pow(2).mean())
+        return float(self._loss(self.actor(obs, stochastic_output=False), target))
+
+    def _loss(self, mean: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        return cloning_loss(mean, target, self.demo_cfg.saturation_aware)
+
+
+def cloning_loss(mean: torch.Tensor, target: torch.Tensor, saturation_aware: bool) -> torch.Tensor:
+    """Mean squared error of the actor's mean against the script's action, in units of the action bound.
+
+    The env clips every action to +-ACTION_BOUND_RAD, and the script's own actions are clipped the same way, so a
+    target at the bound means "at least this far". `saturation_aware` then only penalizes a mean short of it: a
+    mean of 1 rad against a target of +0.3 executes the same action and costs nothing. Without it, such states
+    (most of DAgger's, where the actor is far off the script's path) dominate the loss."""
+    err = mean - target
+    if saturation_aware:
+        bound = spec.ACTION_BOUND_RAD - 1e-6
+        err = torch.where(target >= bound, torch.clamp(err, max=0.0), err)
+        err = torch.where(target <= -bound, torch.clamp(err, min=0.0), err)
+    return (err / spec.ACTION_BOUND_RAD).pow(2).mean()
 
 
 class _JointCloningOptimizer:

@@ -45,6 +45,8 @@ class ScriptedDemos:
     # (docs/results/teacher_cpu_bc.md section 7). 0: off.
     relabel_every: int = 0
     relabel_episodes: int = 64
+    # A target at the action bound only asks for "at least this far" (teacher/aux_bc.py `cloning_loss`)
+    saturation_aware: bool = False
 
     def __post_init__(self):
         unknown = sorted(set(self.objects) - set(objects.CATALOGUE))
@@ -75,6 +77,8 @@ class ScriptedDemos:
         d["objects"] = list(self.objects)
         if not self.relabel_every:  # as run configs recorded before relabelling existed, so that they still resume
             del d["relabel_every"], d["relabel_episodes"]
+        if not self.saturation_aware:
+            del d["saturation_aware"]
         return d
 
     def runner_cfg(self, runner: dict) -> dict:
@@ -148,13 +152,41 @@ class ScriptSuccessConfig:
     objects: str = "all"  # "all", "medium", or a comma-separated list of catalogue names
     episodes_per_object: int = 30
     pushes: bool = True  # Table II's random pushes (the paper's training randomization)
+    # A teacher (folder, run or checkpoint): instead of the script's success, how far the teacher's mean action
+    # is from the script's along the teacher's own rollouts, per step (what DAgger would correct)
+    drift_of: str = ""
+
+
+def drift(teacher, cfg: ScriptedDemos, steps=(0, 5, 10, 20, 40, 80, 119)) -> dict:
+    """RMS difference (rad) between `teacher`'s mean action, clipped to the action bound as the env executes it,
+    and the script's action on the states the teacher's own rollouts visit (one relabelling round), at the given
+    steps, and the teacher's success on them."""
+    data = relabel(cfg, teacher, round_=0)
+    n = len(data["actions"]) // cfg.steps_per_episode
+    executed = np.clip(teacher(data["obs"]), -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
+    err = (executed - data["actions"]).reshape(n, cfg.steps_per_episode, -1)
+    rms = np.sqrt((err**2).mean(axis=(0, 2)))
+    return {"rms_rad": {t: float(rms[t]) for t in steps if t < len(rms)}, "success": data["success"]}
 
 
 def main(argv=None) -> None:
-    """python -m lerobot_blindgrasp.teacher.scripted_demos [--objects=all] [--episodes_per_object=30]"""
+    """python -m lerobot_blindgrasp.teacher.scripted_demos [--objects=all] [--episodes_per_object=30]
+    [--drift_of=TEACHER]"""
     from lerobot_blindgrasp.cli import parse_config
 
     cfg = parse_config(ScriptSuccessConfig, argv)
+    if cfg.drift_of:
+        from lerobot_blindgrasp.teacher.policy import TeacherPolicy
+
+        names = objects.resolve_objects(cfg.objects)
+        demos = ScriptedDemos(objects=names, relabel_every=1, relabel_episodes=cfg.episodes_per_object * len(names),
+                              pushes=cfg.pushes)
+        out = drift(TeacherPolicy(cfg.drift_of), demos)
+        print(f"{cfg.drift_of} on its own rollouts ({cfg.episodes_per_object} per object from seed "
+              f"{demos.relabel_seed(0)}), success {out['success']}\n\n| step | RMS(teacher - script), rad |\n|---:|---:|")
+        for t, v in out["rms_rad"].items():
+            print(f"| {t} | {v:.3f} |")
+        return
     demos = ScriptedDemos(objects=objects.resolve_objects(cfg.objects), episodes_per_object=cfg.episodes_per_object,
                           steps_per_episode=1, pushes=cfg.pushes)
     rates = collect(demos)["success"]

@@ -56,7 +56,7 @@ class TrainTeacherConfig:
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
     # paper (Table III), cpu (the shipped teacher), quick; experiments: cpu_v4, cpu_rnd, cpu_pregrasp, cpu_bc,
-    # cpu_bc_late, cpu_bc_joint, cpu_bc_capsule, cpu_bc_dagger
+    # cpu_bc_late, cpu_bc_joint, cpu_bc_capsule, cpu_bc_dagger, cpu_bc_dagger_sat
     preset: str = "cpu"
     seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations
