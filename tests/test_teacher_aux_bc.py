@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import math
 import signal
 from dataclasses import replace
@@ -182,3 +184,29 @@ def test_script_success_table_per_object(capsys):
     scripted_demos.main(["--objects=capsule_small,cuboid_a_large", "--episodes_per_object=2", "--pushes=false"])
     out = capsys.readouterr().out
     assert "| cuboid_a_large | 0% (0/2) |" in out and "| capsule_small |" in out and "| **all** |" in out
+
+
+def test_a_staged_preset_trains_the_stage_it_continues_first(tmp_path, monkeypatch):
+    """One command from scratch: the preset it continues runs first in stages/<name>, this one resumes its last
+    checkpoint, and running the same command again resumes rather than restarting either stage."""
+    from lerobot_blindgrasp.teacher import train
+
+    second = replace(teacher_presets.QUICK, name="quick_second", continues=("quick", 2))
+    monkeypatch.setitem(teacher_presets.PRESETS, "quick_second", second)
+    out = tmp_path / "staged"
+    cfg = train.TrainTeacherConfig(output_dir=out, preset="quick_second", iterations=4, num_envs=18, threads=1,
+                                   export=False)
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        assert train.train(cfg) == out / "model_3.pt"
+        first = json.loads((out / "stages" / "quick" / "train_summary.json").read_text())
+        assert first["iterations"] == 2 and not first["interrupted"]
+        assert torch.equal(torch.load(out / "model_1.pt", weights_only=False)["actor_state_dict"]["mlp.0.weight"],
+                           torch.load(out / "stages" / "quick" / "model_1.pt",
+                                      weights_only=False)["actor_state_dict"]["mlp.0.weight"])
+        assert json.loads((out / "teacher_config.json").read_text())["preset"] == "quick_second"
+        stamp = (out / "stages" / "quick" / "model_1.pt").stat().st_mtime_ns
+        train.train(cfg)  # done: resumes at its last checkpoint, does not retrain the first stage
+        assert (out / "stages" / "quick" / "model_1.pt").stat().st_mtime_ns == stamp
+    finally:
+        signal.signal(signal.SIGTERM, previous)

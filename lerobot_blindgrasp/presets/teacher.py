@@ -75,6 +75,10 @@ class TeacherPreset:
     object_weights: tuple[float, ...] | None = None
     # Training-only pre-grasp start states for the hard objects (sim/pregrasp.py); None: the paper's start pose.
     pregrasp: pregrasp.PregraspStarts | None = None
+    # (preset, iterations) this one continues: a fresh run first trains that preset for that many iterations (in
+    # <output_dir>/stages/<preset>) and resumes its last checkpoint, so one command trains a staged teacher from
+    # scratch. None: this preset starts from scratch itself.
+    continues: tuple[str, int] | None = None
 
     def runner_cfg(self) -> dict:
         return copy.deepcopy(self.runner)
@@ -239,15 +243,17 @@ CPU_BC_JOINT = replace(
     ),
 )
 
-# `cpu_bc_joint` lifted every object but the small capsule (0/20 held out at 1700). A second cloning stage aimed at
-# it alone, resumed from `cpu_bc_joint`'s iteration 1745: the script's small-capsule grasps only (256 start
-# states), weight 0.5 decayed to 0 over 300 iterations, and 4x the small capsule's share of training envs so that
-# PPO sees its rare lifts often enough to keep them (docs/results/teacher_cpu_bc.md section 7).
+# The shipped teacher (models/teacher_cpu_bc). `cpu_bc_joint` lifted every object but the small capsule (0/20 held
+# out at 1700 and 1745). A second cloning stage aimed at it alone, continuing `cpu_bc_joint`'s iteration 1745: the
+# script's small-capsule grasps only (256 start states), weight 0.5 decayed to 0 over 300 iterations, and 4x the
+# small capsule's share of training envs so that PPO sees its rare lifts often enough to keep them. Held out at
+# 2099: 94.2 % over the 18 objects, small capsule 30 % (docs/results/teacher_cpu_bc.md section 7).
 _CAPSULE_WEIGHTS = tuple(4.0 if name == "capsule_small" else 1.0 for name in objects.PAPER_OBJECTS)
 CPU_BC_CAPSULE = replace(
     CPU_BC_JOINT,
     name="cpu_bc_capsule",
     max_iterations=2100,
+    continues=("cpu_bc_joint", 1746),
     object_weights=_CAPSULE_WEIGHTS,
     runner=ScriptedDemos(objects=("capsule_small",), episodes_per_object=256, pushes=CPU.external_force,
                          start_iteration=1746, decay_iterations=300, mode="joint", coef=0.5).runner_cfg(CPU.runner),

@@ -15,6 +15,7 @@ import dataclasses
 import json
 import logging
 import os
+import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -86,6 +87,8 @@ def train(cfg: TrainTeacherConfig) -> Path:
     iterations = cfg.iterations or preset.max_iterations
     spec.check_seeds("teacher_train", cfg.seed, num_envs)
     out = cfg.output_dir
+    if preset.continues and latest_checkpoint(out) is None:
+        _train_previous_stage(cfg, *preset.continues)
     out.mkdir(parents=True, exist_ok=True)
     device = cfg.device or distributed.default_device()
     rank_envs, rank_seed = distributed.split_envs(num_envs, cfg.seed)  # (num_envs, seed) outside torchrun
@@ -190,6 +193,16 @@ def train(cfg: TrainTeacherConfig) -> Path:
         print(f"interrupted: saved {final}; run the same command to resume", file=sys.stderr)
         raise SystemExit(130)
     return final
+
+
+def _train_previous_stage(cfg: TrainTeacherConfig, name: str, iterations: int) -> None:
+    """A staged preset starts from another preset's checkpoint (`TeacherPreset.continues`): train that one first,
+    with the same seed, envs and variant, in <output_dir>/stages/<name> (which resumes like any run), then start
+    this run from its last checkpoint. One process only: the copy is not coordinated across torchrun ranks."""
+    final = train(dataclasses.replace(cfg, preset=name, iterations=iterations, export=False,
+                                      output_dir=cfg.output_dir / "stages" / name))
+    cfg.output_dir.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(final, cfg.output_dir / final.name)
 
 
 def write_learning_curve(run_dir: Path) -> None:
