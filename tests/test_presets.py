@@ -47,8 +47,10 @@ def test_pipeline_teacher_and_student_read_the_same_objects():
     c = student_cfg.BlindgraspTransformerConfig(size="cpu", device="cpu")
     cpu = presets.SIZES["cpu"]
     assert c.n_layers == cpu["n_layers"] and c.head_hidden_dims == cpu["head_hidden_dims"]
-    cfg = parse_config(TrainTeacherConfig, ["--preset=cpu", "--output_dir=x"])
+    cfg = parse_config(TrainTeacherConfig, ["--preset=cpu_bc_capsule", "--output_dir=x"])
+    # The cpu pipeline trains the shipped teacher's recipe from scratch
     assert teacher_presets.get_preset(cfg.preset) is presets.PRESETS["cpu"].teacher.settings
+    assert presets.PRESETS["cpu"].teacher.settings is presets.SHIPPED_TEACHER_PRESET
 
 
 def test_paper_is_tables_iii_and_iv():

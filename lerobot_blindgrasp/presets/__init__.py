@@ -106,7 +106,9 @@ PRESETS: dict[str, Preset] = {
         ),
         Preset(
             name="cpu",
-            teacher=TeacherStage(settings=teacher.CPU),
+            # The shipped teacher's recipe from scratch (a staged preset: cpu, then two cloning stages; ~3.4 h on 2
+            # idle cores, models/teacher_cpu_bc/README.md).
+            teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET),
             # 100 per object rather than the quick preset's 40, so that 5000 steps at batch 256 are ~8 passes over
             # the data rather than ~19; collection is minutes, training the hour. Measured on the shipped teacher it
             # gives the same student as the quick recipe (75.6 vs 75.8 %, docs/results/student_cpu.md): the
