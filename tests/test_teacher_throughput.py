@@ -110,7 +110,8 @@ def test_a_run_continued_in_another_directory_is_one_curve(tmp_path, capsys):
     assert p["iteration"] == [0, 1, 2, 3, 4, 5] and p["env_steps"][-1] == 6 * 40
     assert np.diff(p["wall_h"]) * 3600 == pytest.approx([2, 2, 10, 10, 10])
     assert p["success_all18"][2] == 0.0 and p["success_all18"][3] == pytest.approx(1 / 18)
-    main([str(tmp_path / "c.png"), f"a then b={tmp_path / 'a'}+{tmp_path / 'b'}", "--metrics=Success/cuboid_a_large"])
+    chained = f"a then b={tmp_path / 'a'}+{tmp_path / 'b'}"
+    main([str(tmp_path / "c.png"), chained, "--metrics=Success/cuboid_a_large"])
     assert '"a then b"' in capsys.readouterr().out and (tmp_path / "c_metrics.png").is_file()
 
 

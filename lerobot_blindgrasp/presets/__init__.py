@@ -25,8 +25,8 @@ from lerobot_blindgrasp.presets.student import SIZES, Schedule, StudentStage, da
 from lerobot_blindgrasp.presets.teacher import TeacherPreset, Variant
 
 __all__ = ["PRESETS", "SHIPPED_TEACHER_ITERATIONS", "SHIPPED_TEACHER_PRESET", "SIZES", "TABLE_V", "TEACHERS",
-           "Ablation", "DemoStage", "EvalStage", "Preset", "Schedule", "StudentStage", "TeacherPreset", "TeacherStage", "Variant",
-           "dataset_frames", "get", "schedule"]
+           "Ablation", "DemoStage", "EvalStage", "Preset", "Schedule", "StudentStage", "TeacherPreset",
+           "TeacherStage", "Variant", "dataset_frames", "get", "schedule"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -129,7 +129,8 @@ PRESETS: dict[str, Preset] = {
             name="quick",
             # Shipped: the proposed rows train no teacher. The Table V teachers (w/o r_i, RL w/ o_t) get the shipped
             # teacher's settings and budget (models/teacher_cpu_bc/README.md).
-            teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET, shipped=True, iterations=SHIPPED_TEACHER_ITERATIONS),
+            teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET, shipped=True,
+                                 iterations=SHIPPED_TEACHER_ITERATIONS),
             demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720,
                             min_curated_episodes=18),
             # 1200 steps at batch 128 is the recipe of docs/results/student_cpu.md (~8 min on 2 idle cores).

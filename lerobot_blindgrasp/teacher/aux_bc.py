@@ -119,7 +119,7 @@ class PPOWithScriptedDemos(PPO):
                 bc_sq += float(g.pow(2).sum())
                 p.grad = g if p.grad is None else p.grad + g
         self._joint_losses.append(loss.item())
-        # How hard the cloning pulls next to PPO (both on the actor): what a weight means, logged as Loss/bc_grad_ratio
+        # How hard the cloning pulls next to PPO (both on the actor), logged as Loss/bc_grad_ratio
         self._grad_ratios.append((bc_sq / max(ppo_sq, 1e-30)) ** 0.5)
 
     def _batch(self) -> tuple[TensorDict, torch.Tensor]:

@@ -57,7 +57,8 @@ def _smooth(y: np.ndarray, window: int) -> np.ndarray:
     return out
 
 
-def progress(run_dir: Path | tuple[Path, ...], window: int = 25, until: int | None = None) -> dict[str, list[float]]:
+def progress(run_dir: Path | tuple[Path, ...], window: int = 25,
+             until: int | None = None) -> dict[str, list[float]]:
     """Per iteration (up to `until`, if given): env steps, training hours, and smoothed success (all 18 objects,
     6 medium). A tuple of run directories is one history continued from one directory into the next: each
     directory up to the next one's first iteration, wall clock accumulated, smoothed across the seams."""

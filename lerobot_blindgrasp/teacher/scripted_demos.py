@@ -60,7 +60,8 @@ class ScriptedDemos:
         spec.check_seeds("teacher_train", self.seed, self.episodes_per_object * len(self.objects))
         if self.relabel_every:
             rounds = -(-self.decay_iterations // self.relabel_every)
-            spec.check_seeds("teacher_train", self.relabel_seed(0), self.relabel_per_object * len(self.objects) * rounds)
+            per_round = self.relabel_per_object * len(self.objects)
+            spec.check_seeds("teacher_train", self.relabel_seed(0), per_round * rounds)
 
     @property
     def relabel_per_object(self) -> int:
@@ -183,7 +184,8 @@ def main(argv=None) -> None:
                               pushes=cfg.pushes)
         out = drift(TeacherPolicy(cfg.drift_of), demos)
         print(f"{cfg.drift_of} on its own rollouts ({cfg.episodes_per_object} per object from seed "
-              f"{demos.relabel_seed(0)}), success {out['success']}\n\n| step | RMS(teacher - script), rad |\n|---:|---:|")
+              f"{demos.relabel_seed(0)}), success {out['success']}\n")
+        print("| step | RMS(teacher - script), rad |\n|---:|---:|")
         for t, v in out["rms_rad"].items():
             print(f"| {t} | {v:.3f} |")
         return
