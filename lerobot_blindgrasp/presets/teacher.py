@@ -249,14 +249,15 @@ CPU_BC_JOINT = replace(
 # small capsule's share of training envs so that PPO sees its rare lifts often enough to keep them. Held out at
 # 2099: 94.2 % over the 18 objects, small capsule 30 % (docs/results/teacher_cpu_bc.md section 7).
 _CAPSULE_WEIGHTS = tuple(4.0 if name == "capsule_small" else 1.0 for name in objects.PAPER_OBJECTS)
+_CAPSULE_DEMOS = ScriptedDemos(objects=("capsule_small",), episodes_per_object=256, pushes=CPU.external_force,
+                               start_iteration=1746, decay_iterations=300, mode="joint", coef=0.5)
 CPU_BC_CAPSULE = replace(
     CPU_BC_JOINT,
     name="cpu_bc_capsule",
     max_iterations=2100,
     continues=("cpu_bc_joint", 1746),
     object_weights=_CAPSULE_WEIGHTS,
-    runner=ScriptedDemos(objects=("capsule_small",), episodes_per_object=256, pushes=CPU.external_force,
-                         start_iteration=1746, decay_iterations=300, mode="joint", coef=0.5).runner_cfg(CPU.runner),
+    runner=_CAPSULE_DEMOS.runner_cfg(CPU.runner),
     deviations=CPU_BC_JOINT.deviations
     + (
         "from iteration 1746 (resumed from cpu_bc_joint), a second cloning stage on the small capsule's scripted "
@@ -271,9 +272,7 @@ CPU_BC_CAPSULE = replace(
 CPU_BC_DAGGER = replace(
     CPU_BC_CAPSULE,
     name="cpu_bc_dagger",
-    runner=ScriptedDemos(objects=("capsule_small",), episodes_per_object=256, pushes=CPU.external_force,
-                         start_iteration=1746, decay_iterations=300, mode="joint", coef=0.5, relabel_every=5,
-                         relabel_episodes=64).runner_cfg(CPU.runner),
+    runner=replace(_CAPSULE_DEMOS, relabel_every=5, relabel_episodes=64).runner_cfg(CPU.runner),
     deviations=CPU_BC_CAPSULE.deviations
     + ("that second stage also clones the script's action on the actor's own small-capsule rollouts (DAgger), 64 "
        "fresh start states every 5 updates",),
@@ -285,9 +284,9 @@ CPU_BC_DAGGER = replace(
 CPU_BC_DAGGER_SAT = replace(
     CPU_BC_DAGGER,
     name="cpu_bc_dagger_sat",
-    runner=ScriptedDemos(objects=("capsule_small",), episodes_per_object=256, pushes=CPU.external_force,
-                         start_iteration=1746, decay_iterations=300, mode="joint", coef=0.5, relabel_every=5,
-                         relabel_episodes=64, saturation_aware=True).runner_cfg(CPU.runner),
+    runner=replace(_CAPSULE_DEMOS, relabel_every=5, relabel_episodes=64, saturation_aware=True).runner_cfg(
+        CPU.runner
+    ),
     deviations=CPU_BC_DAGGER.deviations
     + ("its cloning loss ignores the part of a mean beyond the action clip that a clipped target asks for",),
 )

@@ -8,9 +8,11 @@ randomization (docs/results/teacher_cpu_bc.md). So the actor is shown that grasp
 
 How (the demo-augmented policy gradient idea, Rajeswaran et al. 2018, "DAPG"): before training, the script is rolled
 out on the listed objects from training start states; the successful episodes' (92-d privileged observation,
-delta-theta) pairs are kept. After every PPO update, `steps` behaviour-cloning steps regress the actor's mean action
-on minibatches of those pairs, with their own Adam optimizer whose learning rate decays linearly from `lr` to 0 over
-`decay_iterations`. Once it is 0 the actor optimizes the paper's reward alone, so the optimum is the paper's.
+delta-theta) pairs are kept, and the actor's mean action is regressed on minibatches of them in one of two forms
+(`ScriptedDemos.mode`): "interleaved", `steps` cloning steps with their own Adam after every PPO update; or "joint",
+the cloning loss's gradient added to PPO's in each of PPO's minibatch steps (the form the shipped teacher uses).
+Either weight decays linearly to 0 over `decay_iterations`; once it is 0 the actor optimizes the paper's reward
+alone, so the optimum is the paper's.
 Only the mean is cloned; the action std stays PPO's. The critic is untouched.
 
 With `relabel_every` set (DAgger, Ross et al. 2011), the current actor is also rolled out from fresh start states
@@ -19,7 +21,7 @@ corrects the actor where it drifts off the script's path, not only on the script
 rebuilds the aggregate from the script's demos and the rounds after the resume.
 
 Wired into rsl-rl without changing its runner: the algorithm's `class_name` names `PPOWithScriptedDemos` and its
-config carries a `scripted_demos` dict (presets/teacher.py `with_scripted_demos`), so it is recorded in the run's
+config carries a `scripted_demos` dict (`ScriptedDemos.runner_cfg`), so it is recorded in the run's
 `teacher_config.json` and checked on resume like every PPO setting.
 """
 

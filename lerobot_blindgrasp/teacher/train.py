@@ -56,8 +56,8 @@ class TrainTeacherConfig:
     """PPO teacher training (paper Sec. III-B, Table III)."""
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
-    # paper (Table III), cpu (the shipped teacher), quick; experiments: cpu_v4, cpu_rnd, cpu_pregrasp, cpu_bc,
-    # cpu_bc_late, cpu_bc_joint, cpu_bc_capsule, cpu_bc_dagger, cpu_bc_dagger_sat
+    # paper (Table III), cpu, cpu_bc_capsule (the shipped teacher's staged recipe), quick; experiments: cpu_v4,
+    # cpu_rnd, cpu_pregrasp, cpu_bc, cpu_bc_late, cpu_bc_joint, cpu_bc_dagger, cpu_bc_dagger_sat
     preset: str = "cpu"
     seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations
