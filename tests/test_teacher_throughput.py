@@ -52,14 +52,41 @@ def test_env_uses_the_weighted_allocation_and_rejects_bad_weights():
 def test_bench_teacher_reports_collection_update_and_raw_physics():
     out = subprocess.run(
         [sys.executable, "-c", "from lerobot_blindgrasp.bench import main; main()", "teacher", "--preset", "quick",
-         "--num-envs", "18", "--iterations", "1", "--json"],
+         "--num-envs", "18", "--iterations", "1", "--threads", "1", "--update-threads", "2", "--json"],
         capture_output=True, text=True, timeout=300, check=True,
     ).stdout
     r = json.loads(out)  # stdout holds only the JSON (rsl-rl's model printout goes to stderr)
     assert r["num_envs"] == 18 and r["hidden_dims"] == [128, 64]
+    assert (r["physics_threads"], r["torch_threads"], r["update_threads"]) == (1, 1, 2)
     assert r["collect_s_per_it"] > 0 and r["update_s_per_it"] > 0 and r["raw_control_steps_per_s"] > 0
+    assert 0 < r["collect_cores_busy"] < 1.5 and 0 < r["update_cores_busy"] < 2.5  # 1 physics, 2 update threads
     assert r["update_over_collect"] == pytest.approx(r["update_s_per_it"] / r["collect_s_per_it"])
     assert r["loop_over_raw"] == pytest.approx(r["loop_env_steps_per_s"] / r["raw_control_steps_per_s"])
+
+
+def test_the_update_runs_with_its_own_torch_threads_and_acting_gets_its_count_back():
+    import torch
+
+    from lerobot_blindgrasp.teacher.train import with_torch_threads
+
+    previous = torch.get_num_threads()
+    seen = []
+
+    def update(fail=False):
+        seen.append(torch.get_num_threads())
+        if fail:
+            raise RuntimeError("nan in the loss")
+        return {"loss": 1.0}
+
+    try:
+        torch.set_num_threads(1)
+        threaded = with_torch_threads(update, 2)
+        assert threaded() == {"loss": 1.0} and seen == [2] and torch.get_num_threads() == 1
+        with pytest.raises(RuntimeError, match="nan"):
+            threaded(fail=True)
+        assert seen == [2, 2] and torch.get_num_threads() == 1  # restored when the update raises too
+    finally:
+        torch.set_num_threads(previous)
 
 
 def test_progress_curves_sum_training_time_and_weigh_objects_equally(tmp_path):

@@ -9,7 +9,7 @@ In the same process it times raw physics (`Batch.step` with the same per-env mod
 observation, reward or policy work) for as many control steps, so the ratio whole-loop / raw says how much of the
 machine the learner leaves to physics. Measured in one run because the machine may be shared.
 
-Overrides (`--hidden_dims`, `--mini_batches`, `--epochs`, `--torch_threads`, `--num_envs`) let levers be compared
+Overrides (`--hidden_dims`, `--mini_batches`, `--epochs`, `--torch_threads`, `--update_threads`, `--num_envs`) let levers be compared
 side by side without editing a preset.
 """
 
@@ -36,7 +36,8 @@ class BenchTeacherConfig(BenchConfig):
     iterations: int = 5  # timed PPO iterations (after one warm-up)
     num_envs: int | None = None  # default: the preset's
     threads: int = 0  # physics threads (0: all CPUs)
-    torch_threads: int | None = None  # torch threads (default: 1, as blindgrasp-train-teacher)
+    torch_threads: int = 1  # torch threads while acting (as blindgrasp-train-teacher)
+    update_threads: int = 0  # torch threads for the PPO update (0: as many as the physics threads, as training)
     hidden_dims: list[int] | None = None  # actor and critic MLP widths, e.g. [256,128] (default: the preset's)
     mini_batches: int | None = None  # PPO minibatches (default: the preset's)
     epochs: int | None = None  # PPO epochs (default: the preset's)
@@ -83,13 +84,12 @@ def run(cfg: BenchTeacherConfig) -> dict:
     from rsl_rl.runners import OnPolicyRunner
 
     from lerobot_blindgrasp.sim.env import BatchedGraspEnv
-    from lerobot_blindgrasp.teacher.train import build_env_config
+    from lerobot_blindgrasp.teacher.train import build_env_config, with_torch_threads
     from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
     preset = _preset(cfg)
     num_envs = cfg.num_envs or preset.num_envs
-    torch_threads = cfg.torch_threads or 1  # blindgrasp-train-teacher's default
-    torch.set_num_threads(torch_threads)
+    torch.set_num_threads(cfg.torch_threads)
     env = BatchedGraspEnv(build_env_config(preset, num_envs, seed=1, nthread=cfg.threads, backend=cfg.backend))
     device = "cpu"
     if cfg.backend == "warp":
@@ -103,20 +103,25 @@ def run(cfg: BenchTeacherConfig) -> dict:
     with contextlib.redirect_stdout(sys.stderr):
         runner = OnPolicyRunner(vec, runner_cfg, log_dir=None, device=device)  # no log dir: nothing written
     update_times: list[float] = []
-    inner_update = runner.alg.update
+    update_cpu: list[float] = []  # process CPU seconds (all threads) spent inside the updates
+    update_threads = cfg.update_threads or env.physics.nthread or cfg.torch_threads
+    inner_update = with_torch_threads(runner.alg.update, update_threads)
 
     def timed_update():
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         out = inner_update()
         update_times.append(time.perf_counter() - t)
+        update_cpu.append(time.process_time() - c)
         return out
 
     runner.alg.update = timed_update
     runner.learn(1, init_at_random_ep_len=True)  # warm-up: allocations, first normalizer stats
     update_times.clear()
-    t = time.perf_counter()
+    update_cpu.clear()
+    t, c = time.perf_counter(), time.process_time()
     runner.learn(cfg.iterations)
     wall = time.perf_counter() - t
+    cpu = time.process_time() - c
     update = float(np.sum(update_times))
     collect = wall - update
     raw = _raw_control_steps_per_s(env, steps_per_it * 2)
@@ -128,7 +133,8 @@ def run(cfg: BenchTeacherConfig) -> dict:
         "backend": cfg.backend,
         "device": device,
         "physics_threads": env.physics.nthread,
-        "torch_threads": torch_threads,
+        "torch_threads": cfg.torch_threads,
+        "update_threads": update_threads,
         "hidden_dims": runner_cfg["actor"]["hidden_dims"],
         "mini_batches": runner_cfg["algorithm"]["num_mini_batches"],
         "epochs": runner_cfg["algorithm"]["num_learning_epochs"],
@@ -136,6 +142,9 @@ def run(cfg: BenchTeacherConfig) -> dict:
         "collect_s_per_it": collect / cfg.iterations,
         "update_s_per_it": update / cfg.iterations,
         "update_over_collect": update / collect,
+        # Cores kept busy in each phase (process CPU time / wall time): what is left for overlapping the two.
+        "collect_cores_busy": (cpu - float(np.sum(update_cpu))) / collect,
+        "update_cores_busy": float(np.sum(update_cpu)) / update,
         "loop_env_steps_per_s": loop,
         "raw_control_steps_per_s": raw,
         "loop_over_raw": loop / raw,
@@ -146,17 +155,17 @@ def run(cfg: BenchTeacherConfig) -> dict:
         print(
             f"blindgrasp-bench teacher: preset {preset.name}, {num_envs} envs, {cfg.backend} backend on {device}, "
             f"{env.physics.nthread} physics threads, "
-            f"{torch_threads} torch threads, MLP {result['hidden_dims']}, {result['epochs']} epochs x "
-            f"{result['mini_batches']} minibatches"
+            f"torch threads {cfg.torch_threads} acting / {update_threads} updating, MLP {result['hidden_dims']}, "
+            f"{result['epochs']} epochs x {result['mini_batches']} minibatches"
         )
         print(
             "| collect s/it | update s/it | update / collect | loop steps/s | raw ctrl steps/s | loop / raw "
-            "| peak RSS GB |"
+            "| cores busy collect / update | peak RSS GB |"
         )
-        print("|---:|---:|---:|---:|---:|---:|---:|")
+        print("|---:|---:|---:|---:|---:|---:|---:|---:|")
         print(
             f"| {result['collect_s_per_it']:.2f} | {result['update_s_per_it']:.2f} | "
             f"{result['update_over_collect']:.2f} | {loop:,.0f} | {raw:,.0f} | {result['loop_over_raw']:.2f} "
-            f"| {result['max_rss_gb']:.2f} |"
+            f"| {result['collect_cores_busy']:.1f} / {result['update_cores_busy']:.1f} | {result['max_rss_gb']:.2f} |"
         )
     return result

@@ -57,7 +57,8 @@ class TrainTeacherConfig:
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
     # paper (Table III), cpu, cpu_bc_capsule (the shipped teacher's staged recipe), quick; experiments: cpu_v4,
-    # cpu_rnd, cpu_pregrasp, cpu_bc, cpu_bc_late, cpu_bc_joint, cpu_bc_dagger, cpu_bc_dagger_sat
+    # cpu_rnd, cpu_pregrasp, cpu_bc, cpu_bc_late, cpu_bc_joint, cpu_bc_dagger, cpu_bc_dagger_sat,
+    # cpu_e3
     preset: str = "cpu"
     seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations
@@ -65,7 +66,8 @@ class TrainTeacherConfig:
     no_incentive: bool = False  # 'Student w/o r_i' teacher: every contact-paying reward term at 0
     student_obs: bool = False  # 'RL w/ o_t' baseline: actor and critic see only o_t
     threads: int = 0  # physics threads (0: all CPUs)
-    torch_threads: int = 1  # torch intra-op threads for the PPO update
+    torch_threads: int = 1  # torch intra-op threads while acting (the forward passes between physics steps)
+    update_threads: int = 0  # torch intra-op threads for the PPO update (0: as many as the physics threads)
     export: bool = True  # TorchScript/ONNX export of the actor at the end
     backend: str = "batch"  # physics: batch (mujoco.batch, CPU) or warp (MuJoCo Warp; pip install .[gpu])
     # torch device for PPO; None: cuda:<LOCAL_RANK> if CUDA is there, else cpu. Under torchrun (WORLD_SIZE > 1)
@@ -94,8 +96,8 @@ def train(cfg: TrainTeacherConfig) -> Path:
     rank_envs, rank_seed = distributed.split_envs(num_envs, cfg.seed)  # (num_envs, seed) outside torchrun
     lead = distributed.world()[1] == 0  # only rank 0 writes files (rsl-rl already logs and saves on rank 0 only)
     torch.manual_seed(cfg.seed + distributed.world()[1])
-    # PPO on these small MLPs gains little from intra-op threads, and OpenMP threads that spin while MuJoCo's
-    # threads (or any other process) hold the cores made the update 5-8x slower on a busy 2-core machine.
+    # While acting, torch runs small forward passes between physics steps: OpenMP threads that spin there while
+    # MuJoCo's threads hold the cores made collection 2-3x slower on a busy 2-core machine, so acting keeps one.
     torch.set_num_threads(cfg.torch_threads)
 
     config = {
@@ -138,6 +140,9 @@ def train(cfg: TrainTeacherConfig) -> Path:
 
     vec = RslRlGraspEnv(env, device=device, on_step=tick)
     runner = distributed.runner_class(device)(vec, preset.runner_cfg(), log_dir=str(out), device=device)
+    runner.alg.update = with_torch_threads(
+        runner.alg.update, cfg.update_threads or env.physics.nthread or cfg.torch_threads  # Warp: nthread 0
+    )
     ckpt = latest_checkpoint(out)
     done_its = 0
     if ckpt is not None:
@@ -193,6 +198,22 @@ def train(cfg: TrainTeacherConfig) -> Path:
         print(f"interrupted: saved {final}; run the same command to resume", file=sys.stderr)
         raise SystemExit(130)
     return final
+
+
+def with_torch_threads(update, threads: int):
+    """`update` run with `threads` torch intra-op threads, then back to the acting count. Collection and update
+    alternate, so the update may use the cores the physics threads use while collecting: on an idle 2-core
+    machine two threads make the `cpu` preset's update 1.8x faster (docs/results/teacher_cpu_bc.md, section 9)."""
+
+    def threaded(*args, **kwargs):
+        acting = torch.get_num_threads()
+        torch.set_num_threads(threads)
+        try:
+            return update(*args, **kwargs)
+        finally:
+            torch.set_num_threads(acting)
+
+    return threaded
 
 
 def _train_previous_stage(cfg: TrainTeacherConfig, name: str, iterations: int) -> None:
