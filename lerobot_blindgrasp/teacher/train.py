@@ -1,6 +1,6 @@
 """`blindgrasp-train-teacher`: PPO teacher training with rsl-rl's OnPolicyRunner.
 
-    blindgrasp-train-teacher --preset=cpu --output_dir=runs/teacher_cpu
+    blindgrasp-train-teacher --output_dir=runs/teacher   # the shipped teacher's recipe, --preset=cpu_bc_capsule
 
 The run directory gets TensorBoard logs (reward terms, success per object, fps, collection/learning time),
 `model_<it>.pt` checkpoints every `save_interval` iterations, and `teacher_config.json`. Re-running the same
@@ -26,6 +26,7 @@ from tqdm import tqdm
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_config
+from lerobot_blindgrasp.presets import SHIPPED_TEACHER_PRESET
 from lerobot_blindgrasp.sim import randomization, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.teacher import distributed, presets
@@ -56,10 +57,10 @@ class TrainTeacherConfig:
     """PPO teacher training (paper Sec. III-B, Table III)."""
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
-    # paper (Table III), cpu, cpu_bc_capsule (the shipped teacher's staged recipe), quick; experiments: cpu_v4,
-    # cpu_rnd, cpu_pregrasp, cpu_bc, cpu_bc_late, cpu_bc_joint, cpu_bc_dagger, cpu_bc_dagger_sat,
-    # cpu_e3
-    preset: str = "cpu"
+    # cpu_bc_capsule (the shipped teacher's staged recipe: cpu, then two cloning stages), paper (Table III), cpu,
+    # quick; experiments: cpu_v4, cpu_rnd, cpu_pregrasp, cpu_bc, cpu_bc_late, cpu_bc_joint, cpu_bc_dagger,
+    # cpu_bc_dagger_sat, cpu_e3
+    preset: str = SHIPPED_TEACHER_PRESET.name
     seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations
     num_envs: int | None = None  # override the preset's number of envs
