@@ -19,9 +19,13 @@ import pytest
 DRIVER = textwrap.dedent(
     """
     import json, sys
+    from dataclasses import replace
     from pathlib import Path
     import torch
-    from lerobot_blindgrasp.teacher import distributed, train
+    from lerobot_blindgrasp.teacher import distributed, presets, train
+
+    # A staged preset (as the shipped recipe): `quick` for 1 iteration first, then this one resumes it.
+    presets.PRESETS["quick_staged"] = replace(presets.QUICK, name="quick_staged", continues=("quick", 1))
 
     seen = {}
     make = distributed.runner_class
@@ -64,7 +68,7 @@ def test_torchrun_two_cpu_processes_split_envs_and_sync_gradients(tmp_path):
     out = tmp_path / "run"
     cmd = [
         sys.executable, "-m", "torch.distributed.run", "--nproc_per_node=2", f"--master_port={_free_port()}",
-        str(driver), "--preset=quick", f"--output_dir={out}", "--iterations=2", "--num_envs=36", "--threads=1",
+        str(driver), "--preset=quick_staged", f"--output_dir={out}", "--iterations=2", "--num_envs=36", "--threads=1",
         "--export=false",
     ]  # fmt: skip
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=480)  # ~15 s of training; the rest is two cold imports (3 min on a loaded 2-core box)
@@ -74,9 +78,13 @@ def test_torchrun_two_cpu_processes_split_envs_and_sync_gradients(tmp_path):
     # envs split: 18 + 18, disjoint consecutive seeds covering the single-process run's 36
     assert len(r0["env_seeds"]) == len(r1["env_seeds"]) == 18
     assert sorted(r0["env_seeds"] + r1["env_seeds"]) == list(range(r0["env_seeds"][0], r0["env_seeds"][0] + 36))
-    # gradients synced: the same actor and critic on both ranks after two PPO updates on different data
+    # gradients synced: the same actor and critic on both ranks after PPO updates on different data
     assert r0["params"] == r1["params"]
-    # rank 0 alone writes the run: checkpoint, summary counting all ranks' env steps
+    # rank 0 alone writes the run: checkpoint, summary counting all ranks' env steps; the first stage ran
+    # iteration 0 (in its own process group), this one resumed its checkpoint and ran iteration 1
     summary = json.loads((out / "train_summary.json").read_text())
-    assert summary["env_steps_this_session"] == 2 * 24 * 36
+    assert summary["iterations"] == 2 and summary["env_steps_this_session"] == 1 * 24 * 36
+    stage = json.loads((out / "stages" / "quick" / "train_summary.json").read_text())
+    assert stage["iterations"] == 1 and stage["env_steps_this_session"] == 1 * 24 * 36
+    assert (out / "model_0.pt").read_bytes() == (out / "stages" / "quick" / "model_0.pt").read_bytes()
     assert (out / "model_1.pt").exists() and (out / "train_console_rank1.log").exists()

@@ -220,11 +220,17 @@ def with_torch_threads(update, threads: int):
 def _train_previous_stage(cfg: TrainTeacherConfig, name: str, iterations: int) -> None:
     """A staged preset starts from another preset's checkpoint (`TeacherPreset.continues`): train that one first,
     with the same seed, envs and variant, in <output_dir>/stages/<name> (which resumes like any run), then start
-    this run from its last checkpoint. One process only: the copy is not coordinated across torchrun ranks."""
+    this run from its last checkpoint."""
     final = train(dataclasses.replace(cfg, preset=name, iterations=iterations, export=False,
                                       output_dir=cfg.output_dir / "stages" / name))
-    cfg.output_dir.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(final, cfg.output_dir / final.name)
+    if distributed.world()[1] == 0:  # under torchrun one rank copies; the others must not read a half-written file
+        cfg.output_dir.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(final, cfg.output_dir / final.name)
+    if torch.distributed.is_initialized():
+        torch.distributed.barrier()
+        # The next stage's runner sets up its own process group (rsl-rl's multi-GPU mode initializes one per
+        # runner, and initializing a second one while the first exists is an error).
+        torch.distributed.destroy_process_group()
 
 
 def write_learning_curve(run_dir: Path) -> None:
