@@ -160,3 +160,16 @@ def test_progress_command_line_takes_the_runs_as_positionals_and_its_options_as_
     assert out.stat().st_size > 1000 and (out.parent / "q_metrics.png").stat().st_size > 1000
     with pytest.raises(SystemExit, match="usage"):
         main([str(out), "--until=2"])
+
+
+@pytest.mark.parametrize("user_setting", [None, "ACTIVE"])
+def test_openmp_threads_sleep_unless_the_user_chose_otherwise(user_setting):
+    """Set before torch loads OpenMP, which reads it once: a fresh process that imports the package first."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    if user_setting:
+        env["OMP_WAIT_POLICY"] = user_setting
+    code = "import lerobot_blindgrasp, os, sys; print(os.environ['OMP_WAIT_POLICY'], 'torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.split() == [user_setting or "PASSIVE", "True"]  # torch loaded by the package, after the setting
