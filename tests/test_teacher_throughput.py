@@ -64,6 +64,29 @@ def test_bench_teacher_reports_collection_update_and_raw_physics():
     assert r["loop_over_raw"] == pytest.approx(r["loop_env_steps_per_s"] / r["raw_control_steps_per_s"])
 
 
+@pytest.mark.slow
+def test_bench_teacher_times_a_trained_checkpoint_and_refuses_another_presets(tmp_path, capsys):
+    import signal
+
+    from lerobot_blindgrasp.bench.teacher import BenchTeacherConfig, run
+    from lerobot_blindgrasp.teacher import train
+
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        ckpt = train.train(train.TrainTeacherConfig(output_dir=tmp_path / "run", preset="quick", iterations=1,
+                                                    num_envs=18, threads=1, export=False))
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    r = run(BenchTeacherConfig(preset="quick", num_envs=18, iterations=1, threads=1, checkpoint=ckpt, json=True))
+    assert r["checkpoint"] == str(ckpt) and r["update_s_per_it"] > 0 and r["raw_control_steps_per_s"] > 0
+    with pytest.raises(SystemExit, match="not a checkpoint of preset 'cpu'"):
+        run(BenchTeacherConfig(preset="cpu", num_envs=18, iterations=1, threads=1, checkpoint=ckpt, json=True))
+    with pytest.raises(ValueError, match="drop --hidden_dims"):
+        BenchTeacherConfig(preset="quick", checkpoint=ckpt, hidden_dims=[64])
+    with pytest.raises(FileNotFoundError, match="no file"):
+        BenchTeacherConfig(preset="quick", checkpoint=tmp_path / "model_9.pt")
+
+
 def test_the_update_runs_with_its_own_torch_threads_and_acting_gets_its_count_back():
     import torch
 

@@ -1,6 +1,7 @@
 """Whole-loop PPO throughput: collection vs update time per iteration, against raw physics at the same env count.
 
     blindgrasp-bench teacher --preset=cpu --iterations=6 --json=true
+    blindgrasp-bench teacher --preset=cpu --checkpoint=runs/teacher_cpu/model_1397.pt   # a policy that grasps
 
 Builds the preset's env and rsl-rl `OnPolicyRunner` exactly as `blindgrasp-train-teacher` does (no logging to
 disk), runs a warm-up iteration and then `--iterations` timed ones. Per iteration it splits wall time into
@@ -20,6 +21,7 @@ import resource
 import sys
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -42,11 +44,20 @@ class BenchTeacherConfig(BenchConfig):
     mini_batches: int | None = None  # PPO minibatches (default: the preset's)
     epochs: int | None = None  # PPO epochs (default: the preset's)
     backend: str = "batch"  # physics backend: batch or warp
+    # A training checkpoint (model_<it>.pt) of this preset to time instead of an untrained policy: a policy that
+    # grasps keeps its fingers in contact, which makes physics dearer, so collection takes longer than at iteration 0.
+    checkpoint: Path | None = None
 
     def __post_init__(self):
         presets.get_preset(self.preset)  # unknown preset: a clear error before anything heavy
         if self.backend not in ("batch", "warp"):
             raise ValueError(f"--backend must be batch or warp, got {self.backend!r}")
+        if self.checkpoint is not None:
+            self.checkpoint = Path(self.checkpoint)
+            if not self.checkpoint.is_file():
+                raise FileNotFoundError(f"--checkpoint: no file at {self.checkpoint}")
+            if self.hidden_dims:
+                raise ValueError("--checkpoint fixes the MLP widths: drop --hidden_dims")
 
 
 CONFIG = BenchTeacherConfig
@@ -102,6 +113,11 @@ def run(cfg: BenchTeacherConfig) -> dict:
     # rsl-rl prints the models on construction; with --json=true stdout must hold only the JSON.
     with contextlib.redirect_stdout(sys.stderr):
         runner = OnPolicyRunner(vec, runner_cfg, log_dir=None, device=device)  # no log dir: nothing written
+    if cfg.checkpoint is not None:
+        try:
+            runner.load(str(cfg.checkpoint))
+        except (RuntimeError, KeyError) as e:  # state-dict shapes or keys of another preset
+            raise SystemExit(f"{cfg.checkpoint} is not a checkpoint of preset {preset.name!r}: {e}") from None
     update_times: list[float] = []
     update_cpu: list[float] = []  # process CPU seconds (all threads) spent inside the updates
     update_threads = cfg.update_threads or env.physics.nthread or cfg.torch_threads
@@ -139,6 +155,7 @@ def run(cfg: BenchTeacherConfig) -> dict:
         "mini_batches": runner_cfg["algorithm"]["num_mini_batches"],
         "epochs": runner_cfg["algorithm"]["num_learning_epochs"],
         "iterations": cfg.iterations,
+        "checkpoint": str(cfg.checkpoint) if cfg.checkpoint else None,
         "collect_s_per_it": collect / cfg.iterations,
         "update_s_per_it": update / cfg.iterations,
         "update_over_collect": update / collect,
