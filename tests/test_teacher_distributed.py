@@ -81,7 +81,7 @@ def test_torchrun_two_cpu_processes_split_envs_and_sync_gradients(tmp_path):
     # gradients synced: the same actor and critic on both ranks after PPO updates on different data
     assert r0["params"] == r1["params"]
     # rank 0 alone writes the run: checkpoint, summary counting all ranks' env steps; the first stage ran
-    # iteration 0 (in its own process group), this one resumed its checkpoint and ran iteration 1
+    # iteration 0, this one resumed its checkpoint and ran iteration 1
     summary = json.loads((out / "train_summary.json").read_text())
     assert summary["iterations"] == 2 and summary["env_steps_this_session"] == 1 * 24 * 36
     stage = json.loads((out / "stages" / "quick" / "train_summary.json").read_text())

@@ -227,10 +227,10 @@ def _train_previous_stage(cfg: TrainTeacherConfig, name: str, iterations: int) -
         cfg.output_dir.mkdir(parents=True, exist_ok=True)
         shutil.copy2(final, cfg.output_dir / final.name)
     if torch.distributed.is_initialized():
+        # The next stage's runner keeps this process group (distributed.runner_class's gloo runner does not open a
+        # second one). Closing and reopening it raced in CI. rsl-rl's own NCCL runner would try to open a second
+        # one, so staged presets stay CPU recipes.
         torch.distributed.barrier()
-        # The next stage's runner sets up its own process group (rsl-rl's multi-GPU mode initializes one per
-        # runner, and initializing a second one while the first exists is an error).
-        torch.distributed.destroy_process_group()
 
 
 def write_learning_curve(run_dir: Path) -> None:
