@@ -112,6 +112,22 @@ def test_the_update_runs_with_its_own_torch_threads_and_acting_gets_its_count_ba
         torch.set_num_threads(previous)
 
 
+def test_the_update_defaults_to_the_physics_threads_then_the_acting_threads():
+    from types import SimpleNamespace
+
+    from lerobot_blindgrasp.teacher.train import update_thread_count
+
+    def env(nthread):
+        return SimpleNamespace(physics=SimpleNamespace(nthread=nthread))
+
+    def cfg(update_threads):
+        return SimpleNamespace(update_threads=update_threads, torch_threads=1)
+
+    assert update_thread_count(cfg(3), env(2)) == 3  # asked for
+    assert update_thread_count(cfg(0), env(2)) == 2  # the cores collection used
+    assert update_thread_count(cfg(0), env(0)) == 1  # Warp: no CPU physics threads
+
+
 def test_progress_curves_sum_training_time_and_weigh_objects_equally(tmp_path):
     from torch.utils.tensorboard import SummaryWriter
 

@@ -95,7 +95,7 @@ def run(cfg: BenchTeacherConfig) -> dict:
     from rsl_rl.runners import OnPolicyRunner
 
     from lerobot_blindgrasp.sim.env import BatchedGraspEnv
-    from lerobot_blindgrasp.teacher.train import build_env_config, with_torch_threads
+    from lerobot_blindgrasp.teacher.train import build_env_config, update_thread_count, with_torch_threads
     from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
     preset = _preset(cfg)
@@ -120,7 +120,7 @@ def run(cfg: BenchTeacherConfig) -> dict:
             raise SystemExit(f"{cfg.checkpoint} is not a checkpoint of preset {preset.name!r}: {e}") from None
     update_times: list[float] = []
     update_cpu: list[float] = []  # process CPU seconds (all threads) spent inside the updates
-    update_threads = cfg.update_threads or env.physics.nthread or cfg.torch_threads
+    update_threads = update_thread_count(cfg, env)
     inner_update = with_torch_threads(runner.alg.update, update_threads)
 
     def timed_update():

@@ -141,9 +141,7 @@ def train(cfg: TrainTeacherConfig) -> Path:
 
     vec = RslRlGraspEnv(env, device=device, on_step=tick)
     runner = distributed.runner_class(device)(vec, preset.runner_cfg(), log_dir=str(out), device=device)
-    runner.alg.update = with_torch_threads(
-        runner.alg.update, cfg.update_threads or env.physics.nthread or cfg.torch_threads  # Warp: nthread 0
-    )
+    runner.alg.update = with_torch_threads(runner.alg.update, update_thread_count(cfg, env))
     ckpt = latest_checkpoint(out)
     done_its = 0
     if ckpt is not None:
@@ -199,6 +197,12 @@ def train(cfg: TrainTeacherConfig) -> Path:
         print(f"interrupted: saved {final}; run the same command to resume", file=sys.stderr)
         raise SystemExit(130)
     return final
+
+
+def update_thread_count(cfg, env) -> int:
+    """Torch threads for the PPO update: `cfg.update_threads`, else as many as the physics threads (the cores
+    collection just used), else the acting count (MuJoCo Warp has no CPU physics threads: `nthread` 0)."""
+    return cfg.update_threads or env.physics.nthread or cfg.torch_threads
 
 
 def with_torch_threads(update, threads: int):
