@@ -201,6 +201,53 @@ def test_progress_command_line_takes_the_runs_as_positionals_and_its_options_as_
         main([str(out), "--until=2"])
 
 
+def test_held_out_evals_are_marked_on_the_run_that_holds_their_checkpoint(tmp_path, capsys):
+    from torch.utils.tensorboard import SummaryWriter
+
+    from lerobot_blindgrasp.teacher.policy import file_sha256
+    from lerobot_blindgrasp.teacher.progress import main
+
+    runs = {}
+    for name in ("a", "b"):
+        d = tmp_path / name
+        d.mkdir()
+        (d / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))
+        w = SummaryWriter(str(d))
+        for it in range(4):
+            w.add_scalar("Perf/collection_time", 3.0, it)
+            w.add_scalar("Perf/learning_time", 1.0, it)
+        w.close()
+        (d / "model_3.pt").write_bytes(name.encode() * 10)  # a distinct checkpoint per run
+        runs[name] = d
+
+    def eval_of(run, iteration, det, stoch):
+        out = tmp_path / f"eval_{run}"
+        out.mkdir()
+        per_object = {  # success rates: `det` on one object, 0 on the others; objects weigh equally
+            mode: {"per_object": {o: {"success_rate": rate if k == 0 else 0.0}
+                                  for k, o in enumerate(objects.PAPER_OBJECTS)}}
+            for mode, rate in (("deterministic", det), ("stochastic", stoch))
+        }
+        (out / "eval.json").write_text(json.dumps({
+            "iteration": iteration, "checkpoint_sha256": file_sha256(runs[run] / "model_3.pt"), "modes": per_object,
+        }))
+        return out
+
+    fig = tmp_path / "p.png"
+    main([str(fig), f"A={runs['a']}", f"B={runs['b']}", f"--held_out={eval_of('b', 3, 0.9, 0.45)}"])
+    held = json.loads(capsys.readouterr().out)["held_out"]
+    assert list(held) == ["B"] and held["B"][0]["iteration"] == 3
+    assert held["B"][0]["success_all18"] == pytest.approx({"deterministic": 0.05, "stochastic": 0.025})
+    assert fig.stat().st_size > 1000
+    (tmp_path / "stray").mkdir()
+    (tmp_path / "stray" / "model_3.pt").write_bytes(b"another run")
+    runs["a"], stray = tmp_path / "stray", eval_of("a", 3, 1.0, 1.0)
+    with pytest.raises(SystemExit, match="none of the runs holds"):  # the runs plotted do not hold its weights
+        main([str(fig), f"B={runs['b']}", f"--held_out={stray}"])
+    with pytest.raises(SystemExit, match="no eval.json"):
+        main([str(fig), f"B={runs['b']}", f"--held_out={tmp_path / 'missing'}"])
+
+
 @pytest.mark.parametrize("user_setting", [None, "ACTIVE"])
 def test_openmp_threads_sleep_unless_the_user_chose_otherwise(user_setting):
     """Set before torch loads OpenMP, which reads it once: a fresh process that imports the package first."""

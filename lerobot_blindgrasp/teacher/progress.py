@@ -1,7 +1,7 @@
 """Training success against env steps and against training wall clock, from a run's TensorBoard scalars.
 
     python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR[+RUN_DIR...] [...] [--until=ITER]
-        [--metrics=TAG,TAG]
+        [--metrics=TAG,TAG] [--held_out=EVAL_DIR,EVAL_DIR]
 
 `RUN_A+RUN_B` is one training history kept in two directories: RUN_B was started from a checkpoint of RUN_A (for
 example the shipped teacher, whose cloning stage resumed the `cpu` run's iteration 1397 under another preset). Its
@@ -11,6 +11,10 @@ curve is RUN_A up to RUN_B's first iteration, then RUN_B, with RUN_B's wall cloc
 stopped earlier than the one it is compared with). `--metrics=TAG,TAG` adds a second figure, OUT_metrics.png, with
 those TensorBoard scalars of every run against env steps (e.g. `Metrics/mean_contacts,Metrics/mean_lift_cm`: what
 a policy does, where success alone only says that it fails).
+
+`--held_out=EVAL_DIR,...` marks `blindgrasp-eval-teacher` results on the curves: each eval sits on the run whose
+directories hold the checkpoint it evaluated (matched by the checkpoint's SHA-256, which the eval records), at that
+iteration's env steps and training hours; filled: deterministic, open: stochastic, all 18 objects.
 
 Success here is the training-time rate rsl-rl logs per object (`Success/<object>`: episodes that ended in an
 iteration, stochastic actions, training seeds), averaged with equal weight over the 18 objects and over the 6
@@ -99,17 +103,51 @@ def _raw(run_dir: Path, until: int | None):
     return its, [(i + 1) * steps_per_it for i in its], secs, per_obj
 
 
+def held_out_points(runs: dict[str, Path | tuple[Path, ...]], eval_dirs: list[Path]) -> dict[str, list[dict]]:
+    """Run label -> the held-out evals of its checkpoints: iteration and success over all 18 objects per mode
+    (objects weighted equally). An eval of a checkpoint that none of the runs holds is an error: a marker on the
+    wrong curve would be worse than none."""
+    from lerobot_blindgrasp.teacher.policy import file_sha256
+
+    owner = {}  # checkpoint SHA-256 -> run label
+    for label, run_dirs in runs.items():
+        for run_dir in run_dirs if isinstance(run_dirs, tuple) else (run_dirs,):
+            owner.update({file_sha256(ckpt): label for ckpt in run_dir.glob("model_*.pt")})
+    points: dict[str, list[dict]] = {}
+    for eval_dir in eval_dirs:
+        path = eval_dir / "eval.json" if eval_dir.is_dir() else eval_dir
+        if not path.is_file():
+            raise SystemExit(f"{eval_dir}: no eval.json (a blindgrasp-eval-teacher output)")
+        data = json.loads(path.read_text())
+        label = owner.get(data.get("checkpoint_sha256"))
+        if label is None:
+            raise SystemExit(f"{eval_dir} evaluated {data.get('checkpoint')}, which none of the runs holds")
+        rates = {mode: float(np.mean([r["success_rate"] for r in m["per_object"].values()]))
+                 for mode, m in data["modes"].items()}
+        points.setdefault(label, []).append({"iteration": int(data["iteration"]), "success_all18": rates})
+    return points
+
+
+def _at_iteration(curve: dict[str, list[float]], iteration: int) -> tuple[float, float] | None:
+    """(env steps, training hours) of `iteration` on a curve, None if the curve was cut before it."""
+    its = np.array(curve["iteration"])
+    k = int(np.searchsorted(its, iteration))
+    if k == len(its) or its[k] != iteration:
+        return None
+    return curve["env_steps"][k], curve["wall_h"][k]
+
+
 def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: str = "Teacher training progress",
-                  until: int | None = None) -> dict:
+                  until: int | None = None, held_out: dict[str, list[dict]] | None = None) -> dict:
     """One figure, success against env steps (left) and training wall clock (right), one colour per run;
-    solid: all 18 objects, dashed: the 6 medium ones."""
+    solid: all 18 objects, dashed: the 6 medium ones; `held_out` (from `held_out_points`) as markers."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     curves = {label: progress(run_dir, until=until) for label, run_dir in runs.items()}
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 5.2), sharey=True)
     for k, (label, p) in enumerate(curves.items()):
         if not p:
             continue
@@ -117,14 +155,35 @@ def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: s
         for ax, x in ((axes[0], np.array(p["env_steps"]) / 1e6), (axes[1], np.array(p["wall_h"]))):
             ax.plot(x, 100 * np.array(p["success_all18"]), colour, label=f"{label}: all 18")
             ax.plot(x, 100 * np.array(p["success_medium"]), colour, ls="--", label=f"{label}: 6 medium")
+        for point in (held_out or {}).get(label, []):
+            at = _at_iteration(p, point["iteration"])
+            if at is None:
+                continue
+            for mode, fill in (("deterministic", colour), ("stochastic", "none")):
+                if mode not in point["success_all18"]:
+                    continue
+                y = 100 * point["success_all18"][mode]
+                for ax, x in ((axes[0], at[0] / 1e6), (axes[1], at[1])):
+                    ax.plot([x], [y], "o", mec=colour, mfc=fill, ms=6, zorder=3)
+                    if mode == "deterministic":
+                        ax.annotate(f"{y:.1f}", (x, y), textcoords="offset points", xytext=(-4, 6), ha="right",
+                                    fontsize=7, color=colour)
     for ax, xlabel in zip(axes, ("env steps (M)", "training wall clock (h)")):
         ax.set_xlabel(xlabel)
         ax.set_ylim(0, 100)
         ax.grid(alpha=0.3)
-    axes[0].set_ylabel("training success, stochastic (%)")
-    axes[0].legend(loc="lower right", fontsize=8)
-    fig.suptitle(title)
-    fig.tight_layout()
+    axes[0].set_ylabel("success (%)")
+    handles, labels = axes[0].get_legend_handles_labels()
+    if held_out:
+        from matplotlib.lines import Line2D
+
+        handles += [Line2D([], [], ls="", marker="o", mec="k", mfc=fill, label=text) for fill, text in
+                    (("k", "held out, deterministic"), ("none", "held out, stochastic"))]
+        labels += ["held out, deterministic (all 18)", "held out, stochastic (all 18)"]
+    # Below the axes: the curves rise into every corner of the plot.
+    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
+    fig.suptitle(f"{title}\n(lines: training success, stochastic, trailing mean over 25 iterations)", fontsize=10)
+    fig.tight_layout(rect=(0, 0.045 * ((len(labels) + 1) // 2), 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return curves
@@ -165,7 +224,7 @@ def plot_metrics(runs: dict[str, Path | tuple[Path, ...]], tags: list[str], path
 
 
 USAGE = ("usage: python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR[+RUN_DIR...] [...] "
-         "[--until=ITER] [--metrics=TAG,TAG]")
+         "[--until=ITER] [--metrics=TAG,TAG] [--held_out=EVAL_DIR,EVAL_DIR]")
 
 
 @dataclass
@@ -177,6 +236,8 @@ class ProgressConfig:
     # comma-separated TensorBoard scalar tags (Metrics/mean_contacts,Metrics/mean_lift_cm): a second figure,
     # OUT_metrics.png, with them against env steps
     metrics: str = ""
+    # comma-separated blindgrasp-eval-teacher output folders, marked on the run that holds each one's checkpoint
+    held_out: str = ""
 
     @property
     def metric_tags(self) -> list[str]:
@@ -196,11 +257,12 @@ def main(argv=None) -> None:
                 raise SystemExit(f"{run_dir} is not a teacher run directory (no {CONFIG_NAME})")
         runs[label or run_dirs[-1].name] = run_dirs if len(run_dirs) > 1 else run_dirs[0]
     out = Path(args[0])
-    curves = plot_progress(runs, out, until=cfg.until)
+    held_out = held_out_points(runs, [Path(d) for d in cfg.held_out.split(",") if d]) if cfg.held_out else None
+    curves = plot_progress(runs, out, until=cfg.until, held_out=held_out)
     if cfg.metric_tags:
         plot_metrics(runs, cfg.metric_tags, out.with_name(f"{out.stem}_metrics.png"), until=cfg.until)
     last = {label: {k: v[-1] for k, v in p.items()} for label, p in curves.items() if p}
-    print(json.dumps({"plot": args[0], "last": last}, indent=2))
+    print(json.dumps({"plot": args[0], "last": last, "held_out": held_out or {}}, indent=2))
 
 
 if __name__ == "__main__":
