@@ -46,7 +46,7 @@ DEMO_SEED_BLOCK = recipe.DEMO_SEED_BLOCK
 BIGGER = """\
 Go bigger (same command, another preset):
 
-    blindgrasp-pipeline --preset=cpu     # a teacher from scratch on 2 cores (~1.5-2 h), then demos, student
+    blindgrasp-pipeline --preset=cpu     # the shipped teacher's recipe from scratch (~3 h on 2 cores), then demos, student
     blindgrasp-pipeline --preset=paper --device=cuda   # GPU machine, the paper's Tables III-IV
     bash scripts/paper_recipe.sh         # Table V: every ablation row at the paper preset's sizes
 """

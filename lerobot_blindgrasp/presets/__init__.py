@@ -106,7 +106,7 @@ PRESETS: dict[str, Preset] = {
         ),
         Preset(
             name="cpu",
-            # The shipped teacher's recipe from scratch (a staged preset: cpu, then two cloning stages; ~3.4 h on 2
+            # The shipped teacher's recipe from scratch (a staged preset: cpu, then two cloning stages; 2.8 h on 2
             # idle cores, models/teacher_cpu_bc/README.md).
             teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET),
             # 100 per object rather than the quick preset's 40, so that 5000 steps at batch 256 are ~8 passes over
