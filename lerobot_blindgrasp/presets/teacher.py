@@ -295,8 +295,9 @@ CPU_BC_DAGGER_SAT = replace(
 )
 
 # `cpu` with 3 PPO epochs instead of 5 (issue #9, throughput): the update's cost is proportional to its epochs, and
-# with two update threads 3 epochs bring it from 0.39x to 0.24x the collection (blindgrasp-bench teacher). Its cost
-# in learning per sample is measured side by side from scratch against `cpu` (docs/results/teacher_cpu_bc.md, 9).
+# with two update threads 3 epochs bring it from 0.39x to 0.24x the collection (blindgrasp-bench teacher). Not
+# adopted: side by side from scratch against `cpu` (same seed, 400 iterations) it held out 6 % against 33 % at
+# iteration 375 and trailed per wall-clock hour too (docs/results/teacher_cpu_bc.md, section 9).
 CPU_E3 = replace(
     CPU,
     name="cpu_e3",
