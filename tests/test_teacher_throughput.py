@@ -181,17 +181,24 @@ def test_a_run_continued_in_another_directory_is_one_curve(tmp_path, capsys):
     assert '"a then b"' in capsys.readouterr().out and (tmp_path / "c_metrics.png").is_file()
 
 
-def test_progress_command_line_takes_the_runs_as_positionals_and_its_options_as_flags(tmp_path, capsys):
+def _timed_run(run_dir, iterations):
+    """A teacher run directory with a config and `iterations` iterations of 3 s collection and 1 s update."""
     from torch.utils.tensorboard import SummaryWriter
 
-    from lerobot_blindgrasp.teacher.progress import main
-
-    (tmp_path / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))
-    w = SummaryWriter(str(tmp_path))
-    for it in range(4):
+    run_dir.mkdir(exist_ok=True)
+    (run_dir / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))
+    w = SummaryWriter(str(run_dir))
+    for it in range(iterations):
         w.add_scalar("Perf/collection_time", 3.0, it)
         w.add_scalar("Perf/learning_time", 1.0, it)
     w.close()
+    return run_dir
+
+
+def test_progress_command_line_takes_the_runs_as_positionals_and_its_options_as_flags(tmp_path, capsys):
+    from lerobot_blindgrasp.teacher.progress import main
+
+    _timed_run(tmp_path, iterations=4)
     out = tmp_path / "figs" / "q.png"
     out.parent.mkdir()
     main([str(out), f"run={tmp_path}", "--until=2", "--metrics=Perf/learning_time,Perf/collection_time"])
@@ -202,21 +209,12 @@ def test_progress_command_line_takes_the_runs_as_positionals_and_its_options_as_
 
 
 def test_held_out_evals_are_marked_on_the_run_that_holds_their_checkpoint(tmp_path, capsys):
-    from torch.utils.tensorboard import SummaryWriter
-
     from lerobot_blindgrasp.teacher.policy import file_sha256
     from lerobot_blindgrasp.teacher.progress import main
 
     runs = {}
     for name in ("a", "b"):
-        d = tmp_path / name
-        d.mkdir()
-        (d / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))
-        w = SummaryWriter(str(d))
-        for it in range(4):
-            w.add_scalar("Perf/collection_time", 3.0, it)
-            w.add_scalar("Perf/learning_time", 1.0, it)
-        w.close()
+        d = _timed_run(tmp_path / name, iterations=4)
         (d / "model_3.pt").write_bytes(name.encode() * 10)  # a distinct checkpoint per run
         runs[name] = d
 

@@ -38,6 +38,9 @@ from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME
 
 
+SMOOTHING = 25  # iterations in the trailing mean of every curve
+
+
 def _scalars(run_dir: Path) -> dict[str, dict[int, float]]:
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
@@ -61,7 +64,7 @@ def _smooth(y: np.ndarray, window: int) -> np.ndarray:
     return out
 
 
-def progress(run_dir: Path | tuple[Path, ...], window: int = 25,
+def progress(run_dir: Path | tuple[Path, ...], window: int = SMOOTHING,
              until: int | None = None) -> dict[str, list[float]]:
     """Per iteration (up to `until`, if given): env steps, training hours, and smoothed success (all 18 objects,
     6 medium). A tuple of run directories is one history continued from one directory into the next: each
@@ -177,12 +180,13 @@ def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: s
     if held_out:
         from matplotlib.lines import Line2D
 
-        handles += [Line2D([], [], ls="", marker="o", mec="k", mfc=fill, label=text) for fill, text in
-                    (("k", "held out, deterministic"), ("none", "held out, stochastic"))]
-        labels += ["held out, deterministic (all 18)", "held out, stochastic (all 18)"]
+        for fill, text in (("k", "held out, deterministic (all 18)"), ("none", "held out, stochastic (all 18)")):
+            handles.append(Line2D([], [], ls="", marker="o", mec="k", mfc=fill))
+            labels.append(text)
     # Below the axes: the curves rise into every corner of the plot.
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
-    fig.suptitle(f"{title}\n(lines: training success, stochastic, trailing mean over 25 iterations)", fontsize=10)
+    fig.suptitle(f"{title}\n(lines: training success, stochastic, trailing mean over {SMOOTHING} iterations)",
+                 fontsize=10)
     fig.tight_layout(rect=(0, 0.045 * ((len(labels) + 1) // 2), 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -190,7 +194,7 @@ def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: s
 
 
 def plot_metrics(runs: dict[str, Path | tuple[Path, ...]], tags: list[str], path: Path, until: int | None = None,
-                 window: int = 25) -> None:
+                 window: int = SMOOTHING) -> None:
     """One panel per TensorBoard scalar, every run against env steps (trailing mean over `window` iterations); a
     chained run's later directories win where iterations repeat."""
     import matplotlib
