@@ -167,6 +167,11 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
         if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
             os.replace(student, out / f"student_interrupted_{int(time.time())}")
         stage.run("student", cmd, env={**env1, "OMP_NUM_THREADS": str(preset.student.threads)})
+    record["student_recipe"] = preset.student_recipe
+    if preset.dagger is not None:
+        ckpt = _dagger_rounds(stage, preset, out, teacher_dir, train_set, ckpt, seed, device,
+                              {**env1, "OMP_NUM_THREADS": str(preset.student.threads)})
+    record["student_checkpoint"] = str(ckpt)
     student_eval = out / "student_eval"
     if (student_eval / "eval_info.json").exists():
         stage.skip("student_eval", "done")
@@ -177,6 +182,31 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     report = write_report(out, record, BIGGER)
     print(f"[pipeline] report: {report}", flush=True)
     return report
+
+
+def _dagger_rounds(stage: Stage, preset: presets.Preset, out: Path, teacher: Path, demos: Path, ckpt: Path,
+                   seed: int, device: str, env: dict) -> Path:
+    """DAgger rounds (beyond the paper): the latest student drives, the teacher labels, the student is fine-tuned on
+    the aggregate. Returns the final student's checkpoint."""
+    from lerobot_blindgrasp.demos.dagger import DONE
+
+    for r in range(1, preset.dagger.rounds + 1):
+        name, relabelled, student = f"dagger_{r}", out / f"dagger_{r}", out / f"student_dagger_{r}"
+        if (relabelled / DONE).is_file():
+            stage.skip(name, "relabelled")
+        else:
+            stage.run(name, recipe.dagger(preset, ckpt, teacher, demos, relabelled, recipe.dagger_seed(seed, r),
+                                          device), env=env)
+        demos, repo = relabelled / "aggregate", f"local/blindgrasp_{preset.name}_dagger_{r}"
+        if recipe.checkpoint(student).exists():
+            stage.skip(f"student_dagger_{r}", "trained")
+        else:
+            if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
+                os.replace(student, out / f"student_dagger_{r}_interrupted_{int(time.time())}")
+            stage.run(f"student_dagger_{r}", recipe.student_finetune(preset, ckpt, demos, repo, student, seed, device),
+                      env=env)
+        ckpt = recipe.checkpoint(student)
+    return ckpt
 
 
 def _teacher(stage: Stage, preset: presets.Preset, out: Path, seed: int, given: Path | None) -> tuple[Path, dict]:

@@ -86,6 +86,32 @@ def student_train(p: presets.Preset, dataset: Path, repo_id: str, out: Path, see
     return cmd, sched
 
 
+def dagger_seed(seed: int, round_: int) -> int:
+    """First env seed of DAgger round `round_` (1-based) of pipeline seed `seed`: its own demo-range block."""
+    from lerobot_blindgrasp.demos.dagger import DAGGER_SEED
+
+    return DAGGER_SEED + (8 * seed + round_) * DEMO_SEED_BLOCK
+
+
+def dagger(p: presets.Preset, student_ckpt: Path, teacher: Path, demos: Path, out: Path, first_seed: int,
+           device: str | None = None) -> list[str]:
+    d = p.dagger
+    return ["blindgrasp-dagger", f"--student={student_ckpt}", f"--teacher={teacher}", f"--demos={demos}",
+            f"--output_dir={out}", f"--episodes_per_object={d.episodes_per_object}", f"--num_envs={d.num_envs}",
+            f"--seed={first_seed}", f"--device={device or p.student.device}", "--progress=false"]
+
+
+def student_finetune(p: presets.Preset, init: Path, dataset: Path, repo_id: str, out: Path, seed: int,
+                     device: str | None = None) -> list[str]:
+    """lerobot-train from a student's weights (DAgger's retraining on the aggregate), `p.dagger.steps` steps."""
+    s, steps = p.student, p.dagger.steps
+    return ["lerobot-train", f"--policy.path={init}", f"--dataset.repo_id={repo_id}", f"--dataset.root={dataset}",
+            f"--output_dir={out}", f"--steps={steps}", f"--batch_size={s.batch_size}", f"--save_freq={steps}",
+            f"--log_freq={max(1, steps // 50)}", "--policy.push_to_hub=false",
+            f"--policy.device={device or s.device}", f"--num_workers={s.num_workers}", "--wandb.enable=false",
+            f"--seed={seed}"]
+
+
 def student_eval(p: presets.Preset, ckpt: Path, dest: Path, eval_seed: int,
                  device: str | None = None) -> list[str]:
     e = p.evaluation
@@ -94,7 +120,8 @@ def student_eval(p: presets.Preset, ckpt: Path, dest: Path, eval_seed: int,
             f"--policy.device={device or p.student.device}",
             # In-process envs: on a few cores, one worker process per env only adds start-up and contention.
             f"--eval.use_async_envs={'true' if e.async_envs else 'false'}",
-            f"--env.render_stride={e.render_stride}", f"--output_dir={dest}", f"--seed={eval_seed}"]
+            f"--env.render_stride={e.render_stride}", f"--env.render_episodes={e.render_episodes}",
+            f"--output_dir={dest}", f"--seed={eval_seed}"]
 
 
 def teacher_trained(run: Path) -> bool:

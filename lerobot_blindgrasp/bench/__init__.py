@@ -1,10 +1,10 @@
-"""`blindgrasp-bench {sim,teacher,demos,policy}`: benchmarks that print one table per run (JSON with --json=true).
+"""`blindgrasp-bench {sim,teacher,demos,policy,student}`: benchmarks that print one table per run (JSON with --json=true).
 
     blindgrasp-bench sim --num_envs=1026 --threads=[1,2]
     blindgrasp-bench teacher --preset=cpu --iterations=6 --json=true
 
 The first argument picks the benchmark; the rest is that benchmark's draccus config. Each lives in its own module
-(`bench/sim.py`, `bench/teacher.py`, `bench/demos.py`, `bench/policy.py`) exposing `CONFIG` (a `BenchConfig`
+(`bench/sim.py`, `bench/teacher.py`, `bench/demos.py`, `bench/policy.py`, `bench/student.py`) exposing `CONFIG` (a `BenchConfig`
 subclass) and `run(cfg) -> dict`; only the chosen one is imported.
 """
 
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from lerobot_blindgrasp.cli import parse_config
 
-SUBCOMMANDS = ("sim", "teacher", "demos", "policy")
+SUBCOMMANDS = ("sim", "teacher", "demos", "policy", "student")
 
 
 @dataclass

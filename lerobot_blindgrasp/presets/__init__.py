@@ -21,11 +21,11 @@ from dataclasses import dataclass
 
 from lerobot_blindgrasp.presets import teacher
 from lerobot_blindgrasp.presets.ablations import TABLE_V, TEACHERS, Ablation
-from lerobot_blindgrasp.presets.student import SIZES, Schedule, StudentStage, dataset_frames, schedule
+from lerobot_blindgrasp.presets.student import SIZES, DaggerStage, Schedule, StudentStage, dataset_frames, schedule
 from lerobot_blindgrasp.presets.teacher import TeacherPreset, Variant
 
 __all__ = ["PRESETS", "SHIPPED_TEACHER_ITERATIONS", "SHIPPED_TEACHER_PRESET", "SIZES", "TABLE_V", "TEACHERS",
-           "Ablation", "DemoStage", "EvalStage", "Preset", "Schedule", "StudentStage", "TeacherPreset",
+           "Ablation", "DaggerStage", "DemoStage", "EvalStage", "Preset", "Schedule", "StudentStage", "TeacherPreset",
            "TeacherStage", "Variant", "dataset_frames", "get", "schedule"]
 
 
@@ -58,6 +58,8 @@ class EvalStage:
     # lerobot-eval renders 10 episodes per task at every step; a new frame every N steps makes that N x cheaper
     # (~12 ms a frame with a software renderer was ~80 % of the quick preset's eval, docs/results/quick_pipeline.md)
     render_stride: int = 1
+    # Of the 10 episodes per object lerobot-eval records, how many get `render_stride`; the rest one frame a second.
+    render_episodes: int = 10
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -68,6 +70,18 @@ class Preset:
     student: StudentStage
     evaluation: EvalStage
     deviations: tuple[str, ...] = ()  # beyond the teacher settings' own
+    # DAgger-style relabelling after the first student (beyond the paper); None: the paper's offline recipe.
+    dagger: DaggerStage | None = None
+
+    @property
+    def student_recipe(self) -> str:
+        """Which recipe makes the student, in the words every report and card uses."""
+        if self.dagger is None:
+            return "the paper's: offline imitation of curated stochastic-teacher demos"
+        d = self.dagger
+        return (f"beyond the paper: the paper's offline imitation, then {d.rounds} round(s) of DAgger-style "
+                f"relabelling ({d.episodes_per_object} student episodes per object labelled by the teacher's mean "
+                f"action, {d.steps} fine-tuning steps on the aggregate)")
 
     @property
     def all_deviations(self) -> tuple[str, ...]:

@@ -57,6 +57,22 @@ class StudentStage:
             raise ValueError("constant_lr_epochs needs epochs: it is counted in passes over the data")
 
 
+@dataclass(frozen=True, kw_only=True)
+class DaggerStage:
+    """DAgger-style relabelling, beyond the paper (`blindgrasp-dagger`): `rounds` times, the latest student drives
+    `episodes_per_object` episodes per object, the teacher's mean action labels every state it visits, and the
+    student is fine-tuned from its own weights for `steps` on everything aggregated so far."""
+
+    episodes_per_object: int
+    steps: int
+    rounds: int = 1
+    num_envs: int = 360
+
+    def __post_init__(self):
+        if min(self.episodes_per_object, self.steps, self.rounds, self.num_envs) < 1:
+            raise ValueError("a DAgger stage needs at least one episode, step, round and env")
+
+
 @dataclass(frozen=True)
 class Schedule:
     """What lerobot-train is given for one dataset."""

@@ -27,6 +27,7 @@ class ObjectSpec:
     mjcf_type: str  # box | capsule | cylinder | sphere
     size: tuple[float, ...]  # MuJoCo geom size (half-extents / radius, half-length)
     euler: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mass_kg: float | None = None  # None: OBJECT_DENSITY x volume (the 3D-printed replicas)
 
     @property
     def rest_height(self) -> float:
@@ -50,7 +51,7 @@ class ObjectSpec:
 
     @property
     def mass(self) -> float:
-        return OBJECT_DENSITY * self.volume
+        return self.mass_kg if self.mass_kg is not None else OBJECT_DENSITY * self.volume
 
     @property
     def task(self) -> str:
@@ -89,11 +90,31 @@ PAPER_OBJECTS: tuple[str, ...] = tuple(CATALOGUE)  # the 18 training objects, Ta
 MEDIUM_OBJECTS: tuple[str, ...] = tuple(n for n in PAPER_OBJECTS if n.endswith("_medium"))
 
 
+# Everyday objects outside Table I, for held-out evaluation only (no demo or teacher episode ever saw them): real
+# dimensions and masses of things a three-finger gripper of this size picks up, each one MuJoCo primitive.
+EVERYDAY: tuple[ObjectSpec, ...] = (
+    ObjectSpec("everyday_tennis_ball", "tennis_ball", "everyday", "sphere", (0.0335,), mass_kg=0.058),
+    ObjectSpec("everyday_apple", "apple", "everyday", "sphere", (0.038,), mass_kg=0.180),
+    ObjectSpec("everyday_soda_can", "soda_can", "everyday", "cylinder", (0.033, 0.061), mass_kg=0.120),
+    ObjectSpec("everyday_pill_bottle", "pill_bottle", "everyday", "cylinder", (0.022, 0.040), mass_kg=0.040),
+    ObjectSpec("everyday_mug", "mug", "everyday", "cylinder", (0.041, 0.048), mass_kg=0.250),
+    ObjectSpec("everyday_tea_box", "tea_box", "everyday", "box", (0.035, 0.0375, 0.0625), mass_kg=0.100),
+    ObjectSpec("everyday_soap_bar", "soap_bar", "everyday", "box", (0.045, 0.030, 0.0175), mass_kg=0.110),
+    ObjectSpec("everyday_marker", "marker", "everyday", "capsule", (0.009, 0.060), (0.0, math.pi / 2, 0.0),
+               mass_kg=0.015),
+)
+
+
 def register_object(obj: ObjectSpec) -> None:
     """Add an object (e.g. an OOD proxy) to the catalogue. Its geom must be one primitive, like the others."""
     if obj.name in CATALOGUE:
         raise ValueError(f"object {obj.name!r} already in the catalogue")
     CATALOGUE[obj.name] = obj
+
+
+for _obj in EVERYDAY:
+    register_object(_obj)
+EVERYDAY_OBJECTS: tuple[str, ...] = tuple(o.name for o in EVERYDAY)
 
 
 def get_object(name: str) -> ObjectSpec:
@@ -104,11 +125,13 @@ def get_object(name: str) -> ObjectSpec:
 
 
 def resolve_objects(names: str | list[str] | tuple[str, ...] | None) -> tuple[str, ...]:
-    """Expand "all" / "medium" / a comma list into catalogue names, rejecting unknown ones."""
+    """Expand "all" (Table I) / "medium" / "everyday" / a comma list into catalogue names, rejecting unknown ones."""
     if names is None or names == "all":
         return PAPER_OBJECTS
     if names == "medium":
         return MEDIUM_OBJECTS
+    if names == "everyday":
+        return EVERYDAY_OBJECTS
     if isinstance(names, str):
         names = [n.strip() for n in names.split(",") if n.strip()]
     out = tuple(names)
