@@ -71,6 +71,9 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     preset = record["preset"]["name"]
     lines = [f"# Blind-grasp pipeline report: preset `{preset}`", ""]
     lines += _teacher_lines(record)
+    if record.get("student_recipe"):
+        lines += ["## Student recipe", "", f"**{record['student_recipe']}** (preset `{preset}`); evaluated: "
+                  f"`{record.get('student_checkpoint', '')}`.", ""]
 
     # --- stages
     lines += ["## Stages", "", "| stage | wall time | command |", "|---|---:|---|"]
@@ -151,10 +154,14 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     if tc:
         plot_curves(figs / "teacher_curves.png", tc, "Teacher (PPO)")
         lines += ["![teacher](figures/teacher_curves.png)", ""]
-    log = out / "logs" / "student.log"
-    steps, losses = student_loss_curve(log.read_text()) if log.exists() else ([], [])
-    if steps:
-        plot_curves(figs / "student_loss.png", {"train loss (MSE, normalized delta)": (steps, losses)}, "Student (BC)")
+    curves = {}
+    for log in sorted((out / "logs").glob("student*.log")):  # the student, then each DAgger round's fine-tuning
+        steps, losses = student_loss_curve(log.read_text())
+        if steps:
+            offset = max((max(c[0]) for c in curves.values()), default=0)
+            curves[f"{log.stem}: train loss (MSE, normalized delta)"] = ([offset + x for x in steps], losses)
+    if curves:
+        plot_curves(figs / "student_loss.png", curves, "Student (BC)")
         lines += ["![student](figures/student_loss.png)", ""]
 
     # --- demo yield

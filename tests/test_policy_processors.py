@@ -179,3 +179,38 @@ def test_action_normalization_must_stay_identity():
     with pytest.raises(ValueError, match="IDENTITY"):
         mapping = {"STATE": NormalizationMode.MEAN_STD, "ACTION": NormalizationMode.MIN_MAX}
         make_config(normalization_mapping=mapping)
+
+
+def test_sensor_augmentation_shifts_joints_and_target_together_and_only_in_training():
+    from lerobot_blindgrasp.policies.blindgrasp_transformer.processor_blindgrasp_transformer import SensorAugmentStep
+
+    cfg = make_config(augment_force_gain=0.3, augment_force_bias_n=2.0, augment_joint_offset_rad=0.05)
+    pre, _ = make_blindgrasp_transformer_pre_post_processors(cfg, make_stats())
+    plain_pre, _ = make_blindgrasp_transformer_pre_post_processors(make_config(), make_stats())
+    assert any(isinstance(s, SensorAugmentStep) for s in pre.steps)
+    assert not any(isinstance(s, SensorAugmentStep) for s in plain_pre.steps)  # the paper's recipe: no step
+    step = next(s for s in pre.steps if isinstance(s, SensorAugmentStep))
+    b = 256
+    state = random_state(b, T)
+    target = state[:, -1, spec.STATE_JOINT_SLICE] + 0.1
+    torch.manual_seed(0)
+    out = step(batch_to_transition({OBS_STATE: state, ACTION: target}))
+    new_state, new_target = out["observation"][OBS_STATE], out["action"]
+    offset = new_state[..., spec.STATE_JOINT_SLICE] - state[..., spec.STATE_JOINT_SLICE]
+    # One offset per sample and joint, held over the window, within the range, and the target moved with it.
+    assert torch.allclose(offset, offset[:, :1].expand_as(offset), atol=1e-6)
+    assert offset.abs().max() <= 0.05 + 1e-6 and offset.abs().max() > 0.04
+    assert torch.allclose(new_target - target, offset[:, 0], atol=1e-6)
+    # Forces: g f + b per sample, g in [1/1.3, 1.3], |b| <= 2 N (fit g, b from two frames of the window).
+    f, nf = state[..., spec.STATE_FORCE_SLICE], new_state[..., spec.STATE_FORCE_SLICE]
+    g = (nf[:, 1, 0] - nf[:, 0, 0]) / (f[:, 1, 0] - f[:, 0, 0])
+    bias = nf[:, 0, 0] - g * f[:, 0, 0]
+    assert g.min() >= 1 / 1.3 - 1e-4 and g.max() <= 1.3 + 1e-4 and bias.abs().max() <= 2.0 + 1e-4
+    assert torch.allclose(nf, g[:, None, None] * f + bias[:, None, None], atol=1e-4)
+    # Inference: a single observation (no action) and an action-less window pass unchanged.
+    obs = random_state(4)
+    assert torch.equal(step(batch_to_transition({OBS_STATE: obs}))["observation"][OBS_STATE], obs)
+    win = random_state(4, T)
+    assert torch.equal(step(batch_to_transition({OBS_STATE: win}))["observation"][OBS_STATE], win)
+    # Saved with the checkpoint's preprocessor: it reloads with its ranges.
+    assert step.get_config() == {"force_gain": 0.3, "force_bias_n": 2.0, "joint_offset_rad": 0.05, "enabled": True}

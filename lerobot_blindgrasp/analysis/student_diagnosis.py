@@ -55,6 +55,7 @@ class DiagnoseConfig:
     episodes: int = 20  # closed-loop episodes per object
     seed: int = spec.EVAL_SEED  # first evaluation index (lerobot-eval's --seed)
     student_eval: Path | None = None  # a lerobot-eval output folder of the same student and seed: checked against
+    teacher: Path | None = None  # the demos' teacher, for the label-noise floor of the loss; default: the shipped one
     output_dir: Path = Path("outputs/student_diagnosis")
     window: int = 10  # drift: demo frames within +-window steps of the same time are the reference
     run: int = 3  # drift: this many outside steps in a row
@@ -77,8 +78,15 @@ def load_student(path: Path, device: str = "cpu"):
     policy = BlindgraspTransformerPolicy.from_pretrained(str(path))
     policy.config.device = device
     policy.to(device).eval()
+    from lerobot_blindgrasp.policies.blindgrasp_transformer.processor_blindgrasp_transformer import (
+        SensorAugmentStep,
+    )
+
     pre, post = make_pre_post_processors(policy.config, pretrained_path=str(path),
                                          preprocessor_overrides={"device_processor": {"device": device}})
+    for step in pre.steps:  # the fit is measured on the sensors as recorded, not on training-time errors
+        if isinstance(step, SensorAugmentStep):
+            step.enabled = False
     return policy, pre, post
 
 
@@ -207,6 +215,15 @@ def imitation_loss(policy, pre, episodes: list[tuple[np.ndarray, np.ndarray]], b
     return {"mse": mse, "rms_rad": float(np.sqrt(mse)) * spec.ACTION_BOUND_RAD, "frames": n // spec.ACTION_DIM}
 
 
+def label_noise_floor(teacher: Path | None) -> float:
+    """The loss a perfect student still has on stochastic-teacher labels: mean over joints of (std / 0.3)^2, the
+    variance of the teacher's Gaussian in the loss's units (clipping at +-0.3 rad trims it slightly)."""
+    from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
+
+    std = TeacherPolicy(teacher or default_teacher()).action_std
+    return float(np.mean((std / spec.ACTION_BOUND_RAD) ** 2))
+
+
 # --- drift -------------------------------------------------------------------------------------------------------
 
 
@@ -264,7 +281,8 @@ def diagnose(cfg: DiagnoseConfig) -> dict:
     if train:
         std = np.concatenate([s for eps in train.values() for s, _ in eps]).std(0)
     result: dict = {"student": str(cfg.student), "seed": cfg.seed, "episodes": cfg.episodes,
-                    "demos": str(cfg.demos), "held_out": str(cfg.held_out), "objects": {}}
+                    "demos": str(cfg.demos), "held_out": str(cfg.held_out), "objects": {},
+                    "label_noise_floor": label_noise_floor(cfg.teacher)}
     act = student_actor(policy, pre, post)
     for name in tqdm(names, desc="diagnose", disable=not cfg.progress):
         torch.manual_seed(cfg.seed)
@@ -326,7 +344,9 @@ def markdown(result: dict) -> str:
             cells.append(_drift_cell(d, r["successes"]) if d else "-")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     lines += ["", "Drift: episodes that leave the demos' coverage / all, and the median step at which they do (20 "
-              "steps = 1 s). Loss: MSE of delta/0.3 (the training loss); rms: its open-loop error in rad."]
+              "steps = 1 s). Loss: MSE of delta/0.3 (the training loss); rms: its open-loop error in rad. "
+              f"Label-noise floor of the loss (the stochastic teacher's own variance): "
+              f"{result['label_noise_floor']:.4f}."]
     if "matches_lerobot_eval" in result:
         lines.append(f"Closed-loop successes equal lerobot-eval's: {result['matches_lerobot_eval']['all']}.")
     return "\n".join(lines) + "\n"
@@ -365,6 +385,7 @@ def plot(result: dict, path: Path) -> None:
         ax1.bar(x + (i - 0.5) * 0.4, [result["objects"][n]["fit"][split]["mse"] for n in fitted], 0.4,
                 label=split.replace("_", "-"))
     ax1.set_xticks(x, [n.replace("_", " ") for n in fitted], rotation=60, ha="right", fontsize=8)
+    ax1.axhline(result["label_noise_floor"], color="k", ls="--", lw=1, label="label-noise floor")
     ax1.set_ylabel("imitation loss (MSE of delta / 0.3)")
     ax1.set_title("Fit")
     ax1.legend(fontsize=7)

@@ -171,6 +171,11 @@ class TeacherPolicy:
         self.sha256 = file_sha256(self.checkpoint)
 
     @property
+    def action_std(self) -> np.ndarray:
+        """(9,) std of the stochastic teacher's Gaussian, rad: the noise in every demo's action label."""
+        return self.actor.distribution.std_param.detach().cpu().numpy().astype(np.float64)
+
+    @property
     def name(self) -> str:
         """Folder/file, e.g. `teacher_cpu/teacher.safetensors`, for reports and provenance."""
         return f"{self.checkpoint.parent.name}/{self.checkpoint.name}"

@@ -115,6 +115,18 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     scheduler_constant_steps: int | None = None
     scheduler_end_factor: float = 0.1
 
+    # Training-time sensor errors (beyond the paper; 0 = off, the paper's recipe), per sample over its window, in the
+    # preprocessor's `blindgrasp_sensor_augment` step: force gain error (g in [1/(1+x), 1+x]), force offset (+-N)
+    # and joint calibration offset (+-rad per joint). They teach the student the real sensors' errors the sim's
+    # Gaussian noise does not have.
+    augment_force_gain: float = 0.0
+    augment_force_bias_n: float = 0.0
+    augment_joint_offset_rad: float = 0.0
+
+    @property
+    def augmentation_active(self) -> bool:
+        return max(self.augment_force_gain, self.augment_force_bias_n, self.augment_joint_offset_rad) > 0
+
     def __post_init__(self):
         super().__post_init__()
         if self.size not in SIZES:
@@ -124,6 +136,8 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
                 setattr(self, name, list(value) if isinstance(value, list) else value)
         if self.embed_dim % self.n_heads != 0:
             raise ValueError(f"embed_dim ({self.embed_dim}) must be divisible by n_heads ({self.n_heads})")
+        if min(self.augment_force_gain, self.augment_force_bias_n, self.augment_joint_offset_rad) < 0:
+            raise ValueError("augment_* ranges must be >= 0")
         if self.n_obs_steps < 1:
             raise ValueError(f"n_obs_steps (context length) must be >= 1, got {self.n_obs_steps}")
         action_mode = self.normalization_mapping.get("ACTION", NormalizationMode.IDENTITY)

@@ -182,6 +182,56 @@ class NormalizedDeltaToTargetStep(_LinkedStep):
         return new_transition
 
 
+@ProcessorStepRegistry.register("blindgrasp_sensor_augment")
+@dataclass
+class SensorAugmentStep(ProcessorStep):
+    """Training-time sensor errors, drawn once per sample and held over its whole window (beyond the paper).
+
+    What a real gripper adds that the simulation's noise does not: a force gain error (g, log-uniform in
+    [1/(1+force_gain), 1+force_gain]), a force offset (b, uniform in +-force_bias_n) and a joint calibration offset
+    (d, uniform in +-joint_offset_rad per joint). The observation becomes (q + d, g f + b); the action target moves
+    by the same d, so the commanded step target - q is unchanged, as on a gripper whose encoders are off by d.
+
+    Acts only on training batches: a (B, T, 12) window that comes with an action. Inference observations (B, 12)
+    and evaluation windows pass through unchanged. Placed before the target->delta step and the normalizer.
+    """
+
+    force_gain: float = 0.0
+    force_bias_n: float = 0.0
+    joint_offset_rad: float = 0.0
+    enabled: bool = True
+
+    def get_config(self) -> dict[str, Any]:
+        return {"force_gain": self.force_gain, "force_bias_n": self.force_bias_n,
+                "joint_offset_rad": self.joint_offset_rad, "enabled": self.enabled}
+
+    def transform_features(self, features):
+        return features
+
+    @property
+    def active(self) -> bool:
+        return self.enabled and (self.force_gain > 0 or self.force_bias_n > 0 or self.joint_offset_rad > 0)
+
+    def __call__(self, transition: EnvTransition) -> EnvTransition:
+        observation = transition.get(TransitionKey.OBSERVATION) or {}
+        state, action = observation.get(OBS_STATE), transition.get(TransitionKey.ACTION)
+        if not self.active or action is None or state is None or state.ndim != 3:
+            return transition
+        b = state.shape[0]
+        u = torch.rand(b, 2 + spec.NUM_JOINTS, device=state.device, dtype=state.dtype) * 2 - 1
+        gain = torch.exp(u[:, :1] * torch.log1p(torch.tensor(self.force_gain, dtype=state.dtype)))
+        bias = u[:, 1:2] * self.force_bias_n
+        offset = u[:, 2:] * self.joint_offset_rad
+        state = state.clone()
+        state[..., spec.STATE_FORCE_SLICE] = state[..., spec.STATE_FORCE_SLICE] * gain[:, None] + bias[:, None]
+        state[..., spec.STATE_JOINT_SLICE] += offset[:, None]
+        shift = offset if action.ndim == 2 else offset[:, None]
+        new_transition = transition.copy()
+        new_transition[TransitionKey.OBSERVATION] = {**observation, OBS_STATE: state}
+        new_transition[TransitionKey.ACTION] = action + shift
+        return new_transition
+
+
 def make_blindgrasp_transformer_pre_post_processors(
     config: BlindgraspTransformerConfig,
     dataset_stats: dict[str, dict[str, torch.Tensor]] | None = None,
@@ -193,7 +243,10 @@ def make_blindgrasp_transformer_pre_post_processors(
     s = make_default_policy_processor_steps(config, dataset_stats)
     to_delta = TargetToNormalizedDeltaStep(action_bound=spec.ACTION_BOUND_RAD)
     to_target = NormalizedDeltaToTargetStep(link=to_delta.link, action_bound=spec.ACTION_BOUND_RAD)
+    augment = [] if not config.augmentation_active else [SensorAugmentStep(
+        force_gain=config.augment_force_gain, force_bias_n=config.augment_force_bias_n,
+        joint_offset_rad=config.augment_joint_offset_rad)]
     return make_policy_processor_pipelines(
-        input_steps=[s.rename_observations, s.add_batch_dim, s.to_device, to_delta, s.normalize],
+        input_steps=[s.rename_observations, s.add_batch_dim, s.to_device, *augment, to_delta, s.normalize],
         output_steps=[s.unnormalize, to_target, s.to_cpu],
     )
