@@ -76,16 +76,18 @@ class Preset:
     @property
     def student_recipe(self) -> str:
         """Which recipe makes the student, in the words every report and card uses."""
-        if self.dagger is None:
+        beyond = []
+        if self.dagger is not None:
+            d = self.dagger
+            beyond.append(f"{d.rounds} round(s) of DAgger-style relabelling ({d.episodes_per_object} student "
+                          f"episodes per object labelled by the teacher's mean action, {d.steps} fine-tuning steps "
+                          "on the aggregate)")
+        if self.student.policy_flags:
+            beyond.append("training-time sensor errors (" + ", ".join(
+                f.removeprefix("--policy.augment_") for f in self.student.policy_flags) + ")")
+        if not beyond:
             return "the paper's: offline imitation of curated stochastic-teacher demos"
-        d = self.dagger
-        return (f"beyond the paper: the paper's offline imitation, then {d.rounds} round(s) of DAgger-style "
-                f"relabelling ({d.episodes_per_object} student episodes per object labelled by the teacher's mean "
-                f"action, {d.steps} fine-tuning steps on the aggregate)")
-
-    @property
-    def all_deviations(self) -> tuple[str, ...]:
-        return self.teacher.settings.deviations + self.deviations
+        return "beyond the paper: the paper's offline imitation, then " + "; ".join(beyond)
 
 
 # The shipped default teacher (models/teacher_cpu_bc) is iterations 0..2099 of `blindgrasp-train-teacher

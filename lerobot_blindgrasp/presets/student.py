@@ -47,6 +47,17 @@ class StudentStage:
     # in the training process with 2 torch threads on 2 cores (same loss curve; docs/results/quick_pipeline.md).
     num_workers: int = 0
     device: str = "cpu"  # student training and eval; the pipeline's --device overrides
+    # Training-time sensor errors (beyond the paper; 0: off): the policy's augment_* settings, passed as
+    # --policy.augment_force_gain etc. (see the policy configuration).
+    augment_force_gain: float = 0.0
+    augment_force_bias_n: float = 0.0
+    augment_joint_offset_rad: float = 0.0
+
+    @property
+    def policy_flags(self) -> list[str]:
+        """lerobot-train --policy.* flags beyond size: the augmentation that is on."""
+        names = ("augment_force_gain", "augment_force_bias_n", "augment_joint_offset_rad")
+        return [f"--policy.{n}={getattr(self, n)}" for n in names if getattr(self, n) > 0]
 
     def __post_init__(self):
         if self.size not in SIZES:
