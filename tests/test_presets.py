@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_every_entry_is_complete():
-    assert set(presets.PRESETS) == {"smoke", "quick", "cpu", "paper"}
+    assert set(presets.PRESETS) == {"smoke", "quick", "cpu", "paper", "quick_dagger", "cpu_dagger"}
     for name, p in presets.PRESETS.items():
         assert p.name == name
         for part in (p.teacher, p.demos, p.student, p.evaluation):

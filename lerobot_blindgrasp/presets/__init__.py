@@ -17,7 +17,7 @@ teacher part, `presets.teacher`), the student policy's `--policy.size` (`presets
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from lerobot_blindgrasp.presets import teacher
 from lerobot_blindgrasp.presets.ablations import TABLE_V, TEACHERS, Ablation
@@ -88,6 +88,10 @@ class Preset:
         if not beyond:
             return "the paper's: offline imitation of curated stochastic-teacher demos"
         return "beyond the paper: the paper's offline imitation, then " + "; ".join(beyond)
+
+    @property
+    def all_deviations(self) -> tuple[str, ...]:
+        return self.teacher.settings.deviations + self.deviations
 
 
 # The shipped default teacher (models/teacher_cpu_bc) is iterations 0..2099 of `blindgrasp-train-teacher
@@ -173,6 +177,24 @@ PRESETS: dict[str, Preset] = {
         ),
     )
 }
+
+
+
+
+def _beyond_the_paper(base: Preset, name: str, note: str, **changes) -> Preset:
+    """A named recipe that goes beyond the paper: `base` with `changes`, and `note` added to its deviations."""
+    return replace(base, name=name, deviations=(*base.deviations, note), **changes)
+
+
+_DAGGER_NOTE = ("beyond the paper: DAgger-style relabelling after the offline student (the student drives, the "
+                "teacher's mean action labels what it visits, the student is fine-tuned on the aggregate)")
+# The smoke preset runs every stage the main job runs, DAgger included, at plumbing size.
+PRESETS["smoke"] = replace(PRESETS["smoke"], dagger=DaggerStage(episodes_per_object=1, steps=2, num_envs=18))
+for _base, _dagger in (
+    ("quick", DaggerStage(episodes_per_object=10, steps=600)),
+    ("cpu", DaggerStage(episodes_per_object=20, steps=2000, rounds=2)),
+):
+    PRESETS[f"{_base}_dagger"] = _beyond_the_paper(PRESETS[_base], f"{_base}_dagger", _DAGGER_NOTE, dagger=_dagger)
 
 
 def get(name: str) -> Preset:
