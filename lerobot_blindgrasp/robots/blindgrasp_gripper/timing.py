@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 
 logger = logging.getLogger(__name__)
 
@@ -36,6 +37,7 @@ class PeriodMonitor:
     periods: int = 0
     overruns: int = 0
     worst_s: float = 0.0
+    recent: deque = field(default_factory=lambda: deque(maxlen=200))  # the last periods measured (s)
     _last: float | None = None
     _streak_s: float = 0.0
     _streak_n: int = 0
@@ -55,6 +57,7 @@ class PeriodMonitor:
             self._streak_s, self._streak_n = 0.0, 0
             return None
         self.periods += 1
+        self.recent.append(period)
         if period <= self.period_s * (1.0 + self.tolerance):
             self._streak_s, self._streak_n = 0.0, 0
             return period
