@@ -74,12 +74,23 @@ status_packets = st.builds(
 )
 other_packets = st.builds(lambda i, inst, p: make_packet(i, inst, p), st.integers(0, 253), st.integers(0, 255),
                           st.binary(max_size=12))  # fmt: skip
-line = st.lists(st.one_of(st.binary(max_size=16), status_packets, other_packets), max_size=6)
+
+
+@st.composite
+def replies(draw):
+    """A read of `length` bytes from servo 11, and what the line holds: garbage, other packets, stray status packets,
+    the right reply (perhaps truncated, perhaps with a bad CRC), in any order."""
+    length = draw(st.sampled_from([1, 2, 4, 40]))
+    right = st.builds(lambda err, p, bad: make_packet(11, dx.INST_STATUS, bytes([err]) + p, bad_crc=bad),
+                      st.integers(0, 255), st.binary(min_size=length, max_size=length), st.booleans())  # fmt: skip
+    parts = draw(st.lists(st.one_of(st.binary(max_size=16), status_packets, other_packets, right), max_size=6))
+    return length, parts
 
 
 @FAST
-@given(parts=line, cuts=st.lists(st.integers(-1, 30), max_size=6), length=st.sampled_from([1, 2, 4, 40]))
-def test_status_packet_handling_never_returns_a_value_of_the_wrong_shape(parts, cuts, length):
+@given(reply=replies(), cuts=st.lists(st.integers(-1, 30), max_size=6))
+def test_status_packet_handling_never_returns_a_value_of_the_wrong_shape(reply, cuts):
+    length, parts = reply
     data = _chunks(parts, cuts)
     port = LineBytes(data)
     values, result, error = LineWatchingPacketHandler().readRx(port, 11, length)
@@ -198,6 +209,8 @@ datagrams = st.one_of(
     st.builds(_datagram, st.one_of(INT32, json_values), st.sampled_from(["left", "right", 3, None]),
               st.fixed_dictionaries({k: scalars for k in REQUIRED_KEYS})),
     st.builds(lambda s, cut: encode(s, OPEN)[:cut], st.integers(0, 2**32 - 1), st.integers(0, 400)),
+    st.builds(_datagram, st.integers(0, 2**32), st.just("right"),  # valid shape, values up to and past the range
+              st.fixed_dictionaries({k: st.floats(-400, 400) | st.integers(-400, 400) for k in REQUIRED_KEYS})),
 )  # fmt: skip
 
 
