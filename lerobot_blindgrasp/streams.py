@@ -90,7 +90,8 @@ class LatestFrameStream(Generic[F]):
         if len(content) != len(self._previous_content):
             self._runs = [0] * len(content)
         else:
-            self._runs = [r + 1 if a == b else 0 for r, a, b in zip(self._runs, content, self._previous_content)]
+            self._runs = [r + 1 if a == b and a is not None else 0  # None: no such channel in this frame
+                          for r, a, b in zip(self._runs, content, self._previous_content)]
         self._previous_content = content
 
     # --- lifecycle ----------------------------------------------------------------------------------------------
