@@ -189,9 +189,10 @@ def test_the_trial_rebases_after_a_stall_instead_of_bursting(rig, tmp_path, monk
             env.step(spec.HOME_POSE)
             if k == 5:
                 after_stall = len(timing.recent)
-        # The observation times (one per step, at the schedule's tick): no catch-up burst (it was 3 ms apart).
+        # The observation times (one per step, at the schedule's tick): no catch-up burst (it was 3 ms apart). A
+        # tick can come up to one sleep overshoot early relative to a late previous one, hence half a period.
         periods = np.array(timing.recent)[after_stall:]
-        assert len(periods) == 10 and periods.min() >= 0.9 * spec.CONTROL_DT, periods
+        assert len(periods) == 10 and periods.min() >= 0.5 * spec.CONTROL_DT, periods
         assert env._schedule.rebased >= 1 and timing.overruns >= 1
     finally:
         env.close()
