@@ -35,7 +35,7 @@ from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
 from lerobot_blindgrasp.teleoperators.manus_glove.stream import MAX_ABS_DEG, decode, encode
 from lerobot_blindgrasp.xm430 import NO_LOAD_SPEED_RAD_S, RAD_PER_TICK
 
-FAST = settings(max_examples=150, deadline=None)
+FAST = settings(max_examples=100, deadline=None)
 INT32 = st.integers(-(2**31), 2**31 - 1)
 
 
