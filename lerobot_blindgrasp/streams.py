@@ -83,7 +83,8 @@ class LatestFrameStream(Generic[F]):
         if not self.frozen_frames:
             return []
         names = self._content_names()
-        return [names[i] if i < len(names) else str(i) for i, r in enumerate(self._runs) if r + 1 >= self.frozen_frames]
+        runs = enumerate(self._runs)
+        return [names[i] if i < len(names) else str(i) for i, r in runs if r + 1 >= self.frozen_frames]
 
     def _note_content(self, frame: F) -> None:
         content = self._content(frame)

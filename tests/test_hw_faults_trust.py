@@ -291,7 +291,7 @@ def test_truncated_or_corrupt_gripper_calibration_is_refused(rig, robot, monkeyp
     for name, text in _file_variants(good):
         robot.calibration_fpath.write_bytes(text)
         r = BlindgraspGripper(rig.robot_config(robot.calibration_dir))
-        with pytest.raises(CalibrationFileError, match=r"invalid.*Run lerobot-calibrate --robot.type=blindgrasp_gripper"):
+        with pytest.raises(CalibrationFileError, match=r"invalid.*Run lerobot-calibrate --robot.type=blindgrasp_grip"):
             r.connect()
         assert not r.is_connected, name
     assert not rig.dxl.any_torque()

@@ -125,7 +125,7 @@ class BlindgraspGripperConfig(RobotConfig):
             raise ValueError(f"baudrate {self.baudrate} is not a Dynamixel rate {DYNAMIXEL_BAUDRATES}")
         if not self.port or not self.force_sensor.port:
             raise ValueError("port and force_sensor.port must name the serial devices")
-        if not (self.max_joint_speed_rad_s > 0 and self.plausibility_margin_rad > 0 and self.plausibility_rereads >= 1):
+        if not (self.max_joint_speed_rad_s > 0 and self.plausibility_margin_rad > 0 and self.plausibility_rereads > 0):
             raise ValueError("need max_joint_speed_rad_s > 0, plausibility_margin_rad > 0, plausibility_rereads >= 1")
         if not (self.loop_hz > 0 and self.max_overrun_s >= 0):
             raise ValueError("need loop_hz > 0 and max_overrun_s >= 0")

@@ -164,8 +164,10 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             self.foreign += 1
             if addr not in self._warned:
                 self._warned.add(addr)
-                logger.warning("Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. Another "
-                               "bridge or sender on the port? Reconnect to change the sender.", *addr, *self.bound)  # fmt: skip
+                logger.warning(
+                    "Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. Another bridge or "
+                    "sender on the port? Reconnect to change the sender.", *addr, *self.bound
+                )
             return []
         return [GloveFrame(seq, side, ergo, time.monotonic())]
 
