@@ -97,7 +97,8 @@ class BlindgraspGripperConfig(RobotConfig):
     plausibility_margin_rad: float = 0.1
     plausibility_rereads: int = 2
     # The control loop's rate (lerobot-record --dataset.fps, rollout --fps): get_observation measures its period.
-    # Overruns are counted and warned; overruns back to back for max_overrun_s stop the gripper (GripperTimingError).
+    # Overruns are counted and warned; overruns back to back for max_overrun_s (and >= 10 periods) stop the gripper
+    # (GripperTimingError).
     # 0 disables the stop (still counted and warned).
     loop_hz: float = spec.CONTROL_HZ
     max_overrun_s: float = 2.0

@@ -3,8 +3,9 @@
 `PeriodMonitor` measures the period of whatever loop calls it once per step: the robot ticks it in every
 `get_observation`, so lerobot-record, lerobot-rollout and the real eval env are all measured, whoever's loop it is.
 A period over `(1 + tolerance)` times the nominal one is an overrun: counted and warned (the first, then every
-`warn_every`-th). Overruns back to back for `max_overrun_s` are a sustained overrun (`LoopOverrunError`): the data
-would no longer come at the rate the policy and the dataset assume. A gap of `pause_s` or more is a pause of the
+`warn_every`-th). Overruns back to back for `max_overrun_s` and at least `min_overruns` periods are a sustained
+overrun (`LoopOverrunError`; the count keeps a few deliberately slow steps, e.g. a script that waits between calls,
+from looking sustained): the data would no longer come at the rate the policy and the dataset assume. A gap of `pause_s` or more is a pause of the
 loop (a dataset save, an operator prompt), not an overrun.
 
 `Schedule` paces a loop we own (the real eval env's trial). It sleeps to the next tick; when a step comes late it
@@ -32,6 +33,7 @@ class PeriodMonitor:
     max_overrun_s: float = 2.0  # 0: count and warn only
     tolerance: float = 0.5
     pause_s: float = 1.0
+    min_overruns: int = 10
     warn_every: int = 20
     what: str = "control loop"
     periods: int = 0
@@ -69,7 +71,7 @@ class PeriodMonitor:
             logger.warning("%s overran its %.0f ms period: %.0f ms (%d of %d periods so far, worst %.0f ms).",
                            self.what, self.period_s * 1e3, period * 1e3, self.overruns, self.periods,
                            self.worst_s * 1e3)  # fmt: skip
-        if self.max_overrun_s and self._streak_s >= self.max_overrun_s:
+        if self.max_overrun_s and self._streak_s >= self.max_overrun_s and self._streak_n >= self.min_overruns:
             rate = self._streak_n / self._streak_s
             raise LoopOverrunError(
                 f"The {self.what} has overrun its {self.period_s * 1e3:.0f} ms period for {self._streak_s:.1f} s "
