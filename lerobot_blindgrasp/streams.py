@@ -6,6 +6,14 @@ this host's monotonic clock. The control loop never blocks on the device. It ask
 and treats a frame older than `stale_timeout_s` as a fault. A device that fails (unplugged USB cable, closed
 socket) ends the thread. The failure is then raised at the next read, so it is not discarded.
 
+Liveness is judged by content, not only by arrival: a device can keep sending while its data died.
+- Counter: each subclass's `_keep` drops a frame whose counter repeats or runs backwards (`counter_faults`), so a
+  firmware that re-sends its last frame, or replays old ones, ages like a silent one and goes stale.
+- Frozen values: `_content` names the values that carry sensor noise (one tuple entry per channel). A channel
+  that stays identical bit for bit for `frozen_frames` frames in a row is beyond what the noise allows: from then
+  on the frames no longer count as fresh, so the stream goes stale by age with the reason in the message. 0 turns
+  the check off for devices whose values may legitimately repeat.
+
 Subclasses say how to open, receive and close (`_open`, `_receive`, `_close`), and may filter frames (`_keep`).
 Hand-written because neither LeRobot nor pyserial offers this; LeRobot's cameras do the same inside
 `OpenCVCamera.async_read`, which is specific to frames from OpenCV.
@@ -32,12 +40,16 @@ class LatestFrameStream(Generic[F]):
     error_type: type[ConnectionError] = StreamError
     lost_hint = "unplugged?"  # the likely cause of a failed device, for the operator
 
-    def __init__(self, source: str, stale_timeout_s: float):
+    def __init__(self, source: str, stale_timeout_s: float, frozen_frames: int = 0):
         self.source = source  # port or address, for messages
         self.stale_timeout_s = stale_timeout_s
+        self.frozen_frames = frozen_frames
         self.frames = 0  # frames kept since the stream started
+        self.counter_faults = 0  # frames dropped because their counter repeated or ran backwards
         self._latest: F | None = None
-        self._latest_t = 0.0
+        self._latest_t = 0.0  # arrival of the newest frame that proves the device alive (not frozen)
+        self._runs: list[int] = []  # per content channel: frames in a row with the same value
+        self._previous_content: tuple = ()
         self._error: BaseException | None = None
         self._cond = threading.Condition()
         self._thread: threading.Thread | None = None
@@ -59,6 +71,30 @@ class LatestFrameStream(Generic[F]):
         """Whether `frame` replaces the newest one (called under the lock; `self._latest` is the previous one)."""
         return True
 
+    def _content(self, frame: F) -> tuple:
+        """The noisy values of a frame, one entry per channel, for the frozen-value check."""
+        return ()
+
+    def _content_names(self) -> list[str]:
+        return [f"channel {i}" for i in range(len(self._runs))]
+
+    def frozen_channels(self) -> list[str]:
+        """Channels whose value has been identical for `frozen_frames` frames or more."""
+        if not self.frozen_frames:
+            return []
+        names = self._content_names()
+        runs = enumerate(self._runs)
+        return [names[i] if i < len(names) else str(i) for i, r in runs if r + 1 >= self.frozen_frames]
+
+    def _note_content(self, frame: F) -> None:
+        content = self._content(frame)
+        if len(content) != len(self._previous_content):
+            self._runs = [0] * len(content)
+        else:
+            self._runs = [r + 1 if a == b and a is not None else 0  # None: no such channel in this frame
+                          for r, a, b in zip(self._runs, content, self._previous_content)]
+        self._previous_content = content
+
     # --- lifecycle ----------------------------------------------------------------------------------------------
     @property
     def is_running(self) -> bool:
@@ -69,6 +105,7 @@ class LatestFrameStream(Generic[F]):
         with self._cond:
             # A frame from an earlier session must neither count as fresh nor shadow a restarted sender's counter.
             self._latest, self._error = None, None
+            self._runs, self._previous_content = [], ()
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name=f"{self.name}-stream", daemon=True)
         self._thread.start()
@@ -95,7 +132,10 @@ class LatestFrameStream(Generic[F]):
             with self._cond:
                 for f in frames:
                     if self._keep(f, now):
-                        self._latest, self._latest_t = f, now
+                        self._note_content(f)
+                        if self._latest is None or not self.frozen_channels():
+                            self._latest_t = now
+                        self._latest = f
                         self.frames += 1
                 self._cond.notify_all()
 
@@ -133,4 +173,10 @@ class LatestFrameStream(Generic[F]):
         return frame
 
     def _stale_detail(self) -> str:
-        return ""
+        out = ""
+        if frozen := self.frozen_channels():
+            out += (f"; {frozen} repeat the same value bit for bit for >= {self.frozen_frames} frames, which the "
+                    "sensor noise never does (frozen firmware or ADC)")  # fmt: skip
+        if self.counter_faults:
+            out += f"; {self.counter_faults} frames with a repeated or backward counter (re-sent or replayed frames)"
+        return out

@@ -251,7 +251,7 @@ def test_with_robot_disconnects_on_other_exceptions(rig, robot):
         (lambda c: c["th_j30"].update(drive_mode=3), "th_j30: drive_mode 3"),
         (lambda c: c["ff_j10"].update(id=99), "ff_j10: servo ID 99"),
         (lambda c: c["ff_j12"].update(range_min=3000, range_max=100), r"ff_j12: range \[3000, 100\]"),
-        (lambda c: c["ff_j11"].pop("homing_offset"), "unreadable"),
+        (lambda c: c["ff_j11"].pop("homing_offset"), r"ff_j11: lacks \['homing_offset'\]"),
     ],
 )
 def test_bad_calibration_file_is_refused_before_any_motion(rig, robot, monkeypatch, edit, why):

@@ -218,7 +218,8 @@ def _assert_stopped(rig, robot, exclude=()):
 
 def test_persistent_timeouts_stop_the_gripper(rig, robot):
     rig.dxl.drop_responses[21] = 10_000
-    with pytest.raises(GripperBusError, match=r"(?s)3 times.*Present_Position.*servo IDs \[21\]"):
+    # The state block is read first in each period, so its read is the one that fails.
+    with pytest.raises(GripperBusError, match=r"(?s)3 times.*Torque_Enable..Goal_Current.*servo IDs \[21\]"):
         robot.get_observation()
     _assert_stopped(rig, robot)  # the broadcast torque-off reached 21 too, it just cannot answer
 

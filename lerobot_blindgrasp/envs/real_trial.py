@@ -5,6 +5,9 @@ One trial (= one lerobot-eval episode):
    places the object at the claw centre and presses ENTER (unattended force mode: waits `unattended_reset_s`);
    the fingertip sensors are tared (fingers in free air).
 2. 200 steps at 20 Hz (10 s): action = absolute joint targets, through `robot.send_action` (clipped on the robot).
+   The steps keep time with a `Schedule`: after a late step (a stalled bus, a slow policy) it re-bases on now
+   rather than firing the missed steps back to back. The robot measures the period in every get_observation:
+   overruns are warned, counted in the trial log, and a sustained overrun ends the run (`GripperTimingError`).
 3. success, "lifted and held >= 1 s within 10 s", decided by
    - `success_mode=operator` (the paper's protocol): the operator presses `s` as soon as the object has been held
      off the table for 1 s (ends the trial, success) or `f` (ends it, failure); at 10 s without a key the env asks
@@ -27,6 +30,7 @@ import numpy as np
 
 from lerobot_blindgrasp import spaces, spec
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys
+from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import Schedule
 from lerobot_blindgrasp.sim import objects
 
 if TYPE_CHECKING:
@@ -93,6 +97,12 @@ class RealGraspEnv(gym.Env):
         self._held = 0
         self._decided: tuple[bool, str] | None = None
         self._peak = np.zeros(spec.NUM_FORCES)
+        self._schedule = Schedule(spec.CONTROL_DT)
+        self._overruns_at_start = self._overruns()
+
+    def _overruns(self) -> int:
+        timing = getattr(self.session.robot, "timing", None)
+        return timing.overruns if timing is not None else 0
 
     @property
     def robot(self):
@@ -135,14 +145,15 @@ class RealGraspEnv(gym.Env):
             self.robot.tare_forces()
         if self.cfg.success_mode == "operator":
             print("Running (10 s): press 's' once the object is held off the table for 1 s, 'f' to abort.")
-        self._next_tick = time.monotonic()
-        return self._observe(), {"is_success": False}
+        self._overruns_at_start = self._overruns()
+        obs = self._observe()
+        self._schedule.start()
+        return obs, {"is_success": False}
 
     def step(self, action):
         action = np.asarray(action, dtype=np.float64).reshape(spec.ACTION_DIM)
         self.robot.send_action(dict(zip(spec.ACTION_NAMES, action.tolist(), strict=True)))
-        self._next_tick += spec.CONTROL_DT
-        time.sleep(max(0.0, self._next_tick - time.monotonic()))
+        self._schedule.wait()
         obs = self._observe()
         self._t += 1
         forces = self._obs[spec.STATE_FORCE_SLICE]
@@ -191,6 +202,8 @@ class RealGraspEnv(gym.Env):
                 "decided_by": who,
                 "steps": self._t,
                 "peak_force_n": [round(float(f), 3) for f in self._peak],
+                "loop_overruns": self._overruns() - self._overruns_at_start,
+                "late_steps_rebased": self._schedule.rebased,
             }
             with Path(self.cfg.trial_log).open("a") as f:
                 f.write(json.dumps(record) + "\n")

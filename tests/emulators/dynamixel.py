@@ -17,6 +17,8 @@ What it implements (ROBOTIS e-Manual, "DYNAMIXEL Protocol 2.0" and the XM430-W35
   error until 0 is written (e-Manual, "Bus Watchdog").
 
 Fault injection (what the tests use): a missing ID, dropped status packets (timeouts), corrupted status CRCs,
+wrong positions with a valid CRC (`position_glitch`), stray late status packets (`stray_replies`), slow replies
+(`reply_delay_s`),
 hardware-error status bits (the firmware then drops torque per the Shutdown register and raises the alert bit),
 a servo reset (brown-out: RAM back to factory values, torque off, no error bit) and, from `PtyDevice`, an unplugged
 USB adapter.
@@ -267,6 +269,13 @@ class DynamixelBusEmulator(PtyDevice):
         # Seconds between the replies of a sync-read burst (real servos answer in turn, each after its
         # Return_Delay_Time): long gaps leave the line empty for a while in the middle of a burst.
         self.reply_gap_s = 0.0
+        # Every packet is answered this much later (a slow USB hub, a saturated adapter): the host loop slows down.
+        self.reply_delay_s = 0.0
+        # Wrong values with a valid CRC and no error bit: id -> [ticks added to Present_Position, replies left].
+        self.position_glitch: dict[int, list[int]] = {}
+        # Stray late status packets: (id, n data bytes) sent, with that servo's registers from Torque_Enable on,
+        # right before the replies to the next sync read (a reply of an earlier transaction arriving late).
+        self.stray_replies: list[tuple[int, int]] = []
         # Observability for tests.
         self.instruction_counts: dict[int, int] = {}
         self.rx_crc_errors = 0
@@ -345,6 +354,8 @@ class DynamixelBusEmulator(PtyDevice):
         self.write(make_packet(servo.id, dx.INST_STATUS, bytes([error]) + params, bad_crc=bad))
 
     def _handle(self, pkt: bytes) -> None:
+        if self.reply_delay_s:
+            time.sleep(self.reply_delay_s)
         self._tick()  # registers reflect the shaft at the moment the packet arrives (tests move shafts directly)
         self._handle_packet(pkt)
         for servo in self._pending_ids:
@@ -390,6 +401,10 @@ class DynamixelBusEmulator(PtyDevice):
                     self._status(servo, error)
         elif inst == dx.INST_SYNC_READ and broadcast:
             addr, size = params[0] | params[1] << 8, params[2] | params[3] << 8
+            while self.stray_replies:
+                i, n = self.stray_replies.pop(0)
+                regs = self.servos[i].regs
+                self.write(make_packet(i, dx.INST_STATUS, bytes([0]) + bytes(regs[64 : 64 + n])))
             for k, i in enumerate(params[4:]):
                 servo = self._alive(i)
                 if servo is not None:
@@ -417,7 +432,14 @@ class DynamixelBusEmulator(PtyDevice):
         if addr + size > TABLE_SIZE:
             self._status(servo, p2.ERRNUM_ACCESS)
             return
-        self._status(servo, 0, bytes(servo.regs[addr : addr + size]))
+        data = bytearray(servo.regs[addr : addr + size])
+        pos = CONTROL_TABLE["Present_Position"][0]
+        glitch = self.position_glitch.get(servo.id)
+        if glitch and glitch[1] > 0 and addr <= pos and pos + 4 <= addr + size:
+            glitch[1] -= 1
+            value = (servo.get("Present_Position") + glitch[0]) & 0xFFFFFFFF
+            data[pos - addr : pos - addr + 4] = value.to_bytes(4, "little")
+        self._status(servo, 0, bytes(data))
 
     def _write(self, servo: EmulatedServo, addr: int, data: bytes) -> int:
         """Apply a write like the firmware does; returns the status error code (0 = ok, nothing written else)."""

@@ -3,7 +3,8 @@
 It streams the frame format of `lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor` at `rate_hz`, with raw
 counts = offset + force / scale (+ noise), and can misbehave the ways a USB serial sensor does: dropped frames,
 garbage bytes between frames, frames with a bad CRC, a stalled stream, channel-fault status bits, a different
-channel count (firmware/config mismatch) and an unplugged cable (`unplug`).
+channel count (firmware/config mismatch), an unplugged cable (`unplug`), and dead data that still arrives: the last
+frame re-sent, a counter running backwards, a channel frozen at one value.
 """
 
 from __future__ import annotations
@@ -47,6 +48,13 @@ class ForceSensorEmulator(PtyDevice):
         self.corrupt_next = 0  # send the next n frames with a wrong CRC
         self.status = 0  # channel fault bits
         self.channels = 3  # channels per frame: firmware built for another number of load cells sends more or fewer
+        # Dead data that still arrives: re-send the last frame bit for bit, step SEQ by this (-1: backwards), hold
+        # these channels' counts at their last value (a hung ADC whose last conversion the firmware keeps sending).
+        self.resend_last = False
+        self.seq_step = 1
+        self.frozen_channels: set[int] = set()
+        self._last_frame = b""
+        self._last_counts: list[int] = []
         self.sent = 0
 
     def counts_for(self, forces) -> np.ndarray:
@@ -59,17 +67,26 @@ class ForceSensorEmulator(PtyDevice):
         self._next = max(self._next + self.period, now - self.period)
         if self.paused:
             return
-        seq, self.seq = self.seq, (self.seq + 1) % 65536
+        if self.resend_last and self._last_frame:
+            if self.write(self._last_frame):
+                self.sent += 1
+            return
+        seq, self.seq = self.seq, (self.seq + self.seq_step) % 65536
         if self.drop_prob and self.rng.random() < self.drop_prob:
             return
         forces = self.force_fn() if self.force_fn is not None else self.forces_n
         counts = self.counts_for(forces) + np.array([self.rng.gauss(0.0, self.noise) for _ in range(3)])
         counts = (np.round(counts).astype(np.int64).tolist() + [0] * self.channels)[: self.channels]
+        for c in self.frozen_channels:
+            if c < len(self._last_counts):
+                counts[c] = self._last_counts[c]
+        self._last_counts = counts
         frame = encode_frame(seq, counts, self.status)
         if self.corrupt_next > 0:
             self.corrupt_next -= 1
             frame = frame[:-1] + bytes([frame[-1] ^ 0xFF])
         if self.garbage_prob and self.rng.random() < self.garbage_prob:
             self.write(bytes(self.rng.randrange(256) for _ in range(self.rng.randrange(1, 21))))
+        self._last_frame = frame
         if self.write(frame):
             self.sent += 1

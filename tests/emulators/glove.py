@@ -42,9 +42,15 @@ class GloveEmulator:
         self.reorder = False
         self.seq = 0
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind((host, 0))  # a fixed source address from the start, like a bridge's
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="glove-emulator", daemon=True)
         self._t0 = time.monotonic()
+
+    @property
+    def source(self) -> tuple[str, int]:
+        """The address its datagrams come from (bound by the first send)."""
+        return self._sock.getsockname()
 
     def pose(self, closure: float) -> dict[str, float]:
         out = {k: OPEN[k] + closure * (FIST[k] - OPEN[k]) for k in OPEN}

@@ -6,9 +6,13 @@ retries, clean retries and raw registers: the calibration lives in the servos (D
 rad = (ticks - 2048) * 2pi/4096 needs no LeRobot normalization mode. The rest reads like LeRobot's `koch_follower`
 plus the safety latch (`_safety`).
 
+No reading is used unchecked: every position reading passes one plausibility gate (`plausibility.py`) before
+it is returned or used to bound a goal, the force stream is checked for liveness by content (`force_sensor.py`),
+get_observation measures the loop's period (`timing.py`), and both ports are opened for exclusive use (`ports.py`).
+
 Safety is latched: any failure while connected (bus error after the retries, a lost port, servo hardware error, a
-servo that reset or lost its settings, force overload, stale force data, an exception, Ctrl-C or SIGTERM/SIGHUP
-inside a call) turns the torque off on every servo that answers, closes the ports and raises one error that says
+servo that reset or lost its settings, an implausible reading, force overload, stale or frozen force data, a
+sustained loop overrun, an exception, Ctrl-C or SIGTERM/SIGHUP inside a call) turns the torque off on every servo that answers, closes the ports and raises one error that says
 so. Reconnecting is an explicit decision of the operator. The servos' bus watchdog stops them on their own when the
 host goes quiet (`bus_watchdog_ms`), and SIGTERM/SIGHUP unwind the LeRobot scripts like Ctrl-C (`signals.py`).
 
@@ -34,7 +38,13 @@ from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.xm430 import MODEL, WATCHDOG_UNIT_MS, amps_to_current_units, decode_hardware_error
+from lerobot_blindgrasp.xm430 import (
+    MODEL,
+    RAD_PER_TICK,
+    WATCHDOG_UNIT_MS,
+    amps_to_current_units,
+    decode_hardware_error,
+)
 
 from . import calibration as calib
 from . import servo_state, signals
@@ -44,12 +54,19 @@ from .config_blindgrasp_gripper import BlindgraspGripperConfig
 from .errors import (
     ForceOverloadError,
     ForceSensorError,
+    ForceTareError,
     GripperBusError,
     GripperHardwareError,
+    GripperPortBusyError,
+    GripperReadingError,
     GripperSafetyStop,
     GripperStateError,
+    GripperTimingError,
 )
 from .force_sensor import ForceSensorReader, ForceStreamError
+from .plausibility import ImplausibleReadingError, PositionGate
+from .ports import PortInUseError
+from .timing import LoopOverrunError, PeriodMonitor
 
 logger = logging.getLogger(__name__)
 
@@ -61,6 +78,18 @@ POSITIVE_POSE_HELP = (
     "POSITIVE pose: from the reference pose, move EVERY joint by hand by at least ~10-15 degrees in its positive "
     "direction: J*0 turns the fingertip counter-clockwise seen from above; J*1 and J*2 swing the fingertip away "
     "from the claw axis (opening the claw)."
+)
+
+
+# What the latched stop raises for a failure below it: (cause, named error or None to keep the type, prefix).
+_NAMED_STOPS = (
+    (GripperSafetyStop, None, ""),
+    (PortInUseError, GripperPortBusyError, ""),
+    (ImplausibleReadingError, GripperReadingError, "Stopped while {what}: "),
+    (LoopOverrunError, GripperTimingError, ""),
+    (ForceTareError, None, ""),
+    (PortLostError, GripperBusError, "Dynamixel port lost while {what}: "),
+    (ForceStreamError, ForceSensorError, "Force sensor failure while {what}: "),
 )
 
 
@@ -94,7 +123,17 @@ class BlindgraspGripper(Robot):
             channel_map=fs.channel_map,
             stale_timeout_s=fs.stale_timeout_s,
             connect_timeout_s=fs.connect_timeout_s,
+            frozen_frames=fs.frozen_frames,
+            tare_max_std_n=fs.tare_max_std_n,
+            tare_max_shift_n=fs.tare_max_shift_n,
+            negative_fault_n=fs.negative_fault_n,
         )
+        self.gate = PositionGate(
+            speed_ticks_s=config.max_joint_speed_rad_s / RAD_PER_TICK,
+            margin_ticks=config.plausibility_margin_rad / RAD_PER_TICK,
+            rereads=config.plausibility_rereads,
+        )
+        self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
         self.lower = np.asarray(config.joint_lower, dtype=np.float64)
         self.upper = np.asarray(config.joint_upper, dtype=np.float64)
         self._atexit = None
@@ -125,6 +164,9 @@ class BlindgraspGripper(Robot):
             raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
         with self._safety("connecting"):
             self.expected = {}
+            self.gate.forget()
+            # Both ports are taken (exclusively) before the first byte goes out: a second owner is refused here.
+            self.force.open()
             self.bus.connect()  # pings all nine, with retries
             self._register_atexit()
             signals.install(self)
@@ -132,15 +174,17 @@ class BlindgraspGripper(Robot):
             if self.calibration and not self.bus.is_calibrated:
                 logger.info("Writing the calibration file %s to the servos.", self.calibration_fpath)
                 self.bus.write_calibration(self.calibration)
+                self.gate.forget()  # the readings change frame
             if not self.bus.is_calibrated:
                 if not calibrate:
                     logger.warning("%s is not calibrated: run lerobot-calibrate before using it.", self)
-                    self.force.connect()
+                    self.force.wait_first_frame()
                     return
                 self.calibrate()
-            self.force.connect()
+            self.force.wait_first_frame()
             self.force.tare(self.config.force_sensor.tare_s)
             self.configure()
+        self.timing.restart()
         logger.info("%s connected (force tare %s counts).", self, np.round(self.force.offset).tolist())
 
     def configure(self) -> None:
@@ -151,6 +195,10 @@ class BlindgraspGripper(Robot):
             self.expected = {}
             self.bus.disable_torque()
             self.bus.configure_motors()  # Return_Delay_Time 0: status packets come back without the 500 us delay
+            for j in self.joints:
+                # A watchdog stop from the last session (the host went quiet before its stop, e.g. while a servo
+                # was losing power) outlives the torque-off and makes Goal_Current read-only: clear it first.
+                self.bus.write("Bus_Watchdog", j, 0)
             for j in self.joints:
                 self.bus.write("Operating_Mode", j, mode)
                 self.bus.write("Current_Limit", j, current)
@@ -171,7 +219,8 @@ class BlindgraspGripper(Robot):
 
     def _enable_torque_holding_pose(self) -> None:
         """Torque on with Goal_Position = the present pose, so nothing moves when the torque comes on."""
-        present = self.bus.sync_read("Present_Position")
+        ticks = self._trusted_ticks(free=True)  # the goal the torque comes on with: a confirmed reading only
+        present = {j: int(t) for j, t in zip(self.joints, ticks)}
         q = np.array([ticks_to_rad(present[j]) for j in self.joints])
         outside = [j for j, v, lo, hi in zip(self.joints, q, self.lower, self.upper) if not lo <= v <= hi]
         if outside and self.config.operating_mode == "POSITION":
@@ -190,6 +239,7 @@ class BlindgraspGripper(Robot):
             self.bus.write("Bus_Watchdog", j, 0)
             self.bus.write("Goal_Position", j, present[j])
         self.bus.enable_torque()
+        self.gate.goal = ticks
         for j in self.joints:
             self.bus.write("Bus_Watchdog", j, self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS)
 
@@ -200,16 +250,19 @@ class BlindgraspGripper(Robot):
         expected = self.expected
         with self._safety("turning the torque off"):
             self.expected = {}
+            self.gate.goal = None  # free: a hand may move the joints faster than the servos
             self.bus.disable_torque()
         yield
         if self.is_connected:  # a fault inside the block already stopped the gripper
             with self._safety("turning the torque back on"):
                 self._enable_torque_holding_pose()
                 self.expected = expected
+            self.timing.restart()
 
     def calibrate(self) -> None:
         with self._safety("calibrating"):
             self.expected = {}
+            self.gate.forget()  # readings change frame with Drive_Mode and Homing_Offset
             self.bus.disable_torque()
             if self.calibration:
                 answer = input(
@@ -274,15 +327,23 @@ class BlindgraspGripper(Robot):
     def tare_forces(self) -> None:
         """Re-zero the fingertip sensors (fingertips touching nothing), e.g. between evaluation trials: load cells
         drift with temperature and use."""
+        refused = None
         with self._safety("taring the force sensors"):
-            self.force.tare(self.config.force_sensor.tare_s)
+            try:
+                self.force.tare(self.config.force_sensor.tare_s)
+            except ForceTareError as e:  # a refusal stops nothing: the old zero stays, the pose is held
+                refused = e
+        self.timing.restart()  # the tare window is not a loop period
+        if refused is not None:
+            raise refused
 
     # --- control loop --------------------------------------------------------------------------------------------
     @check_if_not_connected
     def get_observation(self) -> dict[str, float]:
         with self._safety("reading the gripper state"):
+            self.timing.tick()
+            self._check_servo_state()  # first: a reset servo is named as such, not as an odd position
             q = self._read_q()
-            self._check_servo_state()
             forces = self.force.read()
             over = np.abs(forces) > self.config.force_sensor.overload_n
             if over.any():
@@ -307,23 +368,34 @@ class BlindgraspGripper(Robot):
         if not np.all(np.isfinite(target)):
             raise ValueError(f"Non-finite joint target {target.tolist()}; nothing was sent.")
         with self._safety("sending joint targets"):
-            q = self._read_q()
             if time.monotonic() - self._last_state_check > spec.CONTROL_DT:  # no get_observation this period
                 self._check_servo_state()
+            q = self._read_q()  # the trusted estimate: the bound is never centred on an unchecked reading
             bound = self.config.max_relative_target
             target = np.clip(np.clip(target, self.lower, self.upper), q - bound, q + bound)
             ticks = {j: rad_to_ticks(t) for j, t in zip(self.joints, target)}
             self.bus.sync_write("Goal_Position", ticks)
+            self.gate.goal = np.array([ticks[j] for j in self.joints], dtype=np.float64)
         return {f"{j}.pos": ticks_to_rad(ticks[j]) for j in self.joints}
 
+    def _trusted_ticks(self, *, free: bool | None = None) -> np.ndarray:
+        """Present_Position of all nine through the plausibility gate (`plausibility.py`)."""
+
+        def read() -> np.ndarray:
+            raw = self.bus.sync_read("Present_Position")
+            return np.array([raw[j] for j in self.joints], dtype=np.float64)
+
+        return self.gate.read(read, self.joints, free=not self.expected if free is None else free)
+
     def _read_q(self) -> np.ndarray:
-        raw = self.bus.sync_read("Present_Position")
-        return np.array([ticks_to_rad(raw[j]) for j in self.joints])
+        return np.array([ticks_to_rad(t) for t in self._trusted_ticks()])
 
     def _check_servo_state(self) -> None:
         """One sync read per control period (`servo_state.py`): hardware errors, then anything `configure()` set
         that changed (a reset), then a watchdog that stopped servos during a pause of this process."""
         report = servo_state.compare(self.bus.read_block(*servo_state.BLOCK, servo_state.READ), self.expected)
+        if report.changed:  # read again before stopping: one corrupt reply with a valid CRC must not stop it
+            report = servo_state.compare(self.bus.read_block(*servo_state.BLOCK, servo_state.READ), self.expected)
         self._last_state_check = time.monotonic()
         bad = {j: v for j, v in report.hardware_error.items() if self._confirm_hardware_error(j)}
         if bad:
@@ -347,11 +419,14 @@ class BlindgraspGripper(Robot):
         registers are read-only until then), hold the pose the servos stopped in, and arm the watchdog again."""
         logger.warning("Bus watchdog stopped %s after more than %d ms without bus traffic; re-arming it.",
                        joints, self.config.bus_watchdog_ms)  # fmt: skip
-        present = self.bus.sync_read("Present_Position")
+        ticks = self._trusted_ticks()
+        present = {j: int(t) for j, t in zip(self.joints, ticks)}
         for j in joints:
             self.bus.write("Bus_Watchdog", j, 0)
             self.bus.write("Goal_Position", j, present[j])
             self.bus.write("Bus_Watchdog", j, self.expected["Bus_Watchdog"])
+            if self.gate.goal is not None:
+                self.gate.goal[self.joints.index(j)] = ticks[self.joints.index(j)]
 
     def _confirm_hardware_error(self, joint: str) -> bool:
         """Re-read one servo's Hardware_Error_Status (unicast, alert bit allowed): a corrupted or stale sync-read
@@ -379,12 +454,10 @@ class BlindgraspGripper(Robot):
                 note = f"Torque-off NOT confirmed by servo IDs {unconfirmed}: cut the servo power."
             else:
                 note = "Torque is off on all servos."
-            if isinstance(e, GripperSafetyStop):
-                err = type(e)(f"{e} {note}")
-            elif isinstance(e, PortLostError):
-                err = GripperBusError(f"Dynamixel port lost while {what}: {e} {note}")
-            elif isinstance(e, ForceStreamError):
-                err = ForceSensorError(f"Force sensor failure while {what}: {e} {note}")
+            named = next(((stop, prefix) for cause, stop, prefix in _NAMED_STOPS if isinstance(e, cause)), None)
+            if named is not None:
+                stop, prefix = named
+                err = (stop or type(e))(f"{prefix.format(what=what)}{e} {note}")
             elif isinstance(e, (ConnectionError, RuntimeError, OSError)):
                 tries = self.bus.tries
                 err = GripperBusError(
@@ -400,6 +473,7 @@ class BlindgraspGripper(Robot):
     def _torque_off_all(self) -> list[int]:
         """Torque off on every servo; returns the IDs that did not confirm it."""
         self.expected = {}
+        self.gate.forget()
         return self.bus.torque_off_everywhere()
 
     def _stop(self) -> list[int]:
@@ -446,9 +520,11 @@ class BlindgraspGripper(Robot):
         and refused by `connect()` (lerobot-calibrate still works: it connects with calibrate=False)."""
         fpath = fpath or self.calibration_fpath
         try:
-            super()._load_calibration(fpath)
-            bad = calib.problems(self.calibration, dict(zip(self.joints, self.config.servo_ids, strict=True)))
-        except Exception as e:  # not JSON, missing fields, wrong types
+            bad = calib.schema_problems(calib.read_raw(fpath))
+            if not bad:
+                super()._load_calibration(fpath)
+                bad = calib.problems(self.calibration, dict(zip(self.joints, self.config.servo_ids, strict=True)))
+        except Exception as e:  # unreadable: empty, truncated, not JSON, not UTF-8
             bad = [f"unreadable ({type(e).__name__}: {e})"]
         if bad:
             self.calibration = {}

@@ -3,6 +3,10 @@
 - Every transaction is retried: `num_retry` is the floor for every read, write, sync read and sync write, including
   those LeRobot's own methods make (`read_calibration`, `disable_torque`, ...). Registers are raw by default: the
   calibration lives in the servos (Drive_Mode, Homing_Offset), so no LeRobot normalization applies.
+- The port is opened for exclusive use (`ports.py`): a second owner is refused before it sends a byte.
+- A status packet whose length or kind does not match the request (a stray late reply of another transaction with
+  the right ID and a valid CRC) is a corrupt reply, retried like a bad CRC; the SDK alone would decode its first
+  bytes as the value asked for.
 - Each try starts on an empty line (`FlushingPortHandler`, told by `LineWatchingPacketHandler` when a receive
   failed, so that it waits out the rest of an abandoned reply burst). The port also reports an unplugged adapter as one
   `PortLostError`.
@@ -22,12 +26,22 @@ import logging
 import termios
 import time
 
-from dynamixel_sdk import COMM_SUCCESS, PortHandler
+from dynamixel_sdk import COMM_RX_CORRUPT, COMM_SUCCESS, PortHandler
 from dynamixel_sdk import port_handler as dxl_port_handler
-from dynamixel_sdk.protocol2_packet_handler import Protocol2PacketHandler
+from dynamixel_sdk.protocol2_packet_handler import (
+    PKT_ERROR,
+    PKT_ID,
+    PKT_INSTRUCTION,
+    PKT_LENGTH_H,
+    PKT_LENGTH_L,
+    Protocol2PacketHandler,
+)
+from dynamixel_sdk.robotis_def import INST_STATUS
 from lerobot.motors import Motor, MotorCalibration
 from lerobot.motors.dynamixel import DynamixelMotorsBus
 from lerobot.motors.motors_bus import get_address
+
+from .ports import PortInUseError, open_exclusive
 
 logger = logging.getLogger(__name__)
 
@@ -48,6 +62,16 @@ class FlushingPortHandler(PortHandler):
        matches status packets by ID only.
     2. OS errors of a vanished adapter (pyserial's `SerialException`, `OSError`, `termios.error`) become one
        `PortLostError`, instead of a raw termios traceback."""
+
+    def setupPort(self, cflag_baud):
+        # The SDK's own setupPort with the exclusive lock (it also runs on every baud-rate change).
+        if self.is_open:
+            self.closePort()
+        self.ser = open_exclusive(self.port_name, self.baudrate, "Dynamixel bus", timeout=0)
+        self.is_open = True
+        self.ser.reset_input_buffer()
+        self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
+        return True
 
     def _lost(self, what: str, e: BaseException) -> PortLostError:
         return PortLostError(f"serial port '{self.port_name}' failed on {what} (USB adapter unplugged?): {e}")
@@ -116,6 +140,23 @@ class LineWatchingPacketHandler(Protocol2PacketHandler):
             port.line_dirty = True
         return rxpacket, result
 
+    def readRx(self, port, dxl_id, length):
+        """The SDK's readRx matches a reply by ID only and slices `length` bytes out of whatever came: a late status
+        packet of an earlier write (no data) or block read (40 bytes) would be decoded as this read's value. Here
+        the reply must be a status packet carrying exactly `length` data bytes, or it is a corrupt reply."""
+        while True:
+            rxpacket, result = self.rxPacket(port, False)
+            if result != COMM_SUCCESS or rxpacket[PKT_ID] == dxl_id:
+                break
+        if result != COMM_SUCCESS:
+            return [], result, 0
+        carried = (rxpacket[PKT_LENGTH_L] | rxpacket[PKT_LENGTH_H] << 8) - 4  # INST, ERR, CRC_L, CRC_H
+        if rxpacket[PKT_INSTRUCTION] != INST_STATUS or carried != length:
+            port.line_dirty = True
+            return [], COMM_RX_CORRUPT, 0
+        data = list(rxpacket[PKT_ERROR + 1 : PKT_ERROR + 1 + length])
+        return data, result, rxpacket[PKT_ERROR]
+
 class RetryingDynamixelBus(DynamixelMotorsBus):
     def __init__(
         self,
@@ -149,7 +190,12 @@ class RetryingDynamixelBus(DynamixelMotorsBus):
         self.use_latency_timer()
         # LeRobot's connect wraps any OSError of the handshake (ConnectionError is one) into "Could not connect ...
         # lerobot-find-port"; the handshake runs after it so that its message names the missing servos.
-        super().connect(handshake=False)
+        try:
+            super().connect(handshake=False)
+        except ConnectionError as e:  # LeRobot's "Could not connect ... wrong port?" would hide a busy port
+            if isinstance(e.__cause__, PortInUseError):
+                raise e.__cause__ from None
+            raise
         if handshake:
             self._handshake()
 

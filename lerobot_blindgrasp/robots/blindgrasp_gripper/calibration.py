@@ -16,6 +16,10 @@ horn was mounted: q = (ticks - ZERO_TICK) * 2 pi / 4096.
 
 from __future__ import annotations
 
+import dataclasses
+import json
+from pathlib import Path
+
 from lerobot.motors import MotorCalibration
 
 from lerobot_blindgrasp.xm430 import HOMING_OFFSET_MAX, RAD_PER_TICK, TICKS_PER_REV
@@ -82,6 +86,44 @@ def build(
 
 class CalibrationFileError(ValueError):
     """A calibration file that parses but cannot be right; the robot refuses it before any motion."""
+
+
+RECORD_FIELDS = tuple(f.name for f in dataclasses.fields(MotorCalibration))
+
+
+def schema_problems(raw: object) -> list[str]:
+    """The file's shape, checked on the raw JSON before anything converts it: an object of joint -> record, each
+    record exactly LeRobot's `MotorCalibration` fields, each an integer (not a bool, a float or a string that a
+    lenient decoder would coerce)."""
+    if not isinstance(raw, dict):
+        return [f"the top level is {type(raw).__name__}, not an object of joint -> record"]
+    out = []
+    for joint, record in raw.items():
+        if not isinstance(record, dict):
+            out.append(f"{joint}: {type(record).__name__}, not a record")
+            continue
+        missing = [f for f in RECORD_FIELDS if f not in record]
+        extra = [f for f in record if f not in RECORD_FIELDS]
+        wrong = [f"{f}={record[f]!r:.20}" for f in RECORD_FIELDS if f in record and type(record[f]) is not int]
+        if missing:
+            out.append(f"{joint}: lacks {missing}")
+        if extra:
+            out.append(f"{joint}: unknown fields {extra}")
+        if wrong:
+            out.append(f"{joint}: not integers: {', '.join(wrong)}")
+    return out
+
+
+def read_raw(fpath: Path) -> object:
+    """A calibration file's JSON (gripper and glove), or ValueError saying why it is not (empty, truncated, not
+    UTF-8, not JSON)."""
+    data = Path(fpath).read_bytes()
+    if not data.strip():
+        raise ValueError("the file is empty")
+    try:
+        return json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
+        raise ValueError(f"not complete JSON (truncated or corrupt): {e}") from e
 
 
 def problems(calibration: dict, ids: dict[str, int]) -> list[str]:

@@ -7,12 +7,22 @@ any LeRobot CLI with `--robot="include robot_configs/blindgrasp_gripper.yaml"` (
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from lerobot.robots.config import RobotConfig
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.xm430 import CURRENT_LIMIT_MAX_UNITS, CURRENT_UNIT_A, STALL_CURRENT_A, amps_to_current_units
+from lerobot_blindgrasp.xm430 import (
+    CURRENT_LIMIT_MAX_UNITS,
+    CURRENT_UNIT_A,
+    NO_LOAD_SPEED_RAD_S,
+    STALL_CURRENT_A,
+    amps_to_current_units,
+)
+
+# Baud rates an XM430 can be set to (its Baud_Rate register), bps.
+DYNAMIXEL_BAUDRATES = (9600, 57_600, 115_200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
 
 
 @dataclass
@@ -33,6 +43,15 @@ class ForceSensorConfig:
     connect_timeout_s: float = 1.0
     # A tip force above this stops the gripper (torque off): protects the load cells and the object.
     overload_n: float = 40.0
+    # Liveness by content: a channel whose raw counts repeat bit for bit for this many frames in a row is frozen
+    # (a load cell's ADC noise never does that), and the stream is stale. 0 disables the check.
+    frozen_frames: int = 10
+    # The at-rest envelope of a tare: per-channel standard deviation over the tare window, and how far a re-tare
+    # may move the zero (drift between trials). Beyond either, a pad is loaded and the tare is refused.
+    tare_max_std_n: float = 1.0
+    tare_max_shift_n: float = 1.0
+    # A compressive-only load cell reading below -this (N) is a fault (stop), not a value.
+    negative_fault_n: float = 1.0
 
 
 @RobotConfig.register_subclass("blindgrasp_gripper")
@@ -71,6 +90,18 @@ class BlindgraspGripperConfig(RobotConfig):
     # USB adapter latency timer (ms; FTDI/U2D2 default 16). dynamixel-sdk waits 2 x this + 2 ms for a reply, so
     # raise it on a loaded host or a slow USB hub instead of seeing timeouts.
     latency_timer_ms: int = 16
+    # Plausibility of every position reading: a joint moves at most max_joint_speed_rad_s (the XM430's no-load
+    # speed) plus plausibility_margin_rad between two readings; a reading that is not is read again up to
+    # plausibility_rereads times, then the gripper stops (GripperReadingError).
+    max_joint_speed_rad_s: float = NO_LOAD_SPEED_RAD_S
+    plausibility_margin_rad: float = 0.1
+    plausibility_rereads: int = 2
+    # The control loop's rate (lerobot-record --dataset.fps, rollout --fps): get_observation measures its period.
+    # Overruns are counted and warned; overruns back to back for max_overrun_s (and >= 10 periods) stop the gripper
+    # (GripperTimingError).
+    # 0 disables the stop (still counted and warned).
+    loop_hz: float = spec.CONTROL_HZ
+    max_overrun_s: float = 2.0
     # Calibration: a joint must move at least this far (rad) in the "positive" pose to read its direction.
     calibration_min_motion_rad: float = 0.15
     disable_torque_on_disconnect: bool = True
@@ -91,6 +122,14 @@ class BlindgraspGripperConfig(RobotConfig):
                     f"{j}: limits [{lo}, {hi}] must lie inside the sim's "
                     f"[{spec.JOINT_LOWER[k]}, {spec.JOINT_UPPER[k]}]"
                 )
+        if self.baudrate not in DYNAMIXEL_BAUDRATES:
+            raise ValueError(f"baudrate {self.baudrate} is not a Dynamixel rate {DYNAMIXEL_BAUDRATES}")
+        if not self.port or not self.force_sensor.port:
+            raise ValueError("port and force_sensor.port must name the serial devices")
+        if not (self.max_joint_speed_rad_s > 0 and self.plausibility_margin_rad > 0 and self.plausibility_rereads > 0):
+            raise ValueError("need max_joint_speed_rad_s > 0, plausibility_margin_rad > 0, plausibility_rereads >= 1")
+        if not (self.loop_hz > 0 and self.max_overrun_s >= 0):
+            raise ValueError("need loop_hz > 0 and max_overrun_s >= 0")
         if self.bus_watchdog_ms % 20 or not 0 <= self.bus_watchdog_ms <= 127 * 20:
             raise ValueError("bus_watchdog_ms must be a multiple of 20 in [0, 2540] (0 disables the watchdog)")
         if not 1 <= self.latency_timer_ms <= 500:
@@ -104,5 +143,13 @@ class BlindgraspGripperConfig(RobotConfig):
         fs = self.force_sensor
         if len(fs.scale_n_per_count) != spec.NUM_FORCES or len(fs.channel_map) != spec.NUM_FORCES:
             raise ValueError(f"force_sensor needs {spec.NUM_FORCES} scales and channel_map entries")
+        if not all(math.isfinite(x) and x != 0 for x in fs.scale_n_per_count):
+            raise ValueError(f"force_sensor.scale_n_per_count must be finite and non-zero, not {fs.scale_n_per_count}")
+        positive = ("tare_s", "stale_timeout_s", "connect_timeout_s", "overload_n", "tare_max_std_n",
+                    "tare_max_shift_n", "negative_fault_n")  # fmt: skip
+        if bad := [n for n in positive if not getattr(fs, n) > 0]:
+            raise ValueError(f"force_sensor.{bad} must be > 0")
+        if fs.frozen_frames < 0 or fs.frozen_frames == 1:
+            raise ValueError("force_sensor.frozen_frames must be 0 (off) or >= 2")
         if len(set(fs.channel_map)) != spec.NUM_FORCES or not all(0 <= c < 8 for c in fs.channel_map):
             raise ValueError(f"force_sensor.channel_map needs distinct channels 0..7, not {fs.channel_map}")

@@ -1,4 +1,5 @@
-"""Errors the gripper raises after a safety stop. Every one of them is raised with the torque already off."""
+"""Errors the gripper raises after a safety stop (`GripperSafetyStop` and its subclasses are all raised with the
+torque already off), and the one refusal that stops nothing (`ForceTareError`)."""
 
 from __future__ import annotations
 
@@ -25,3 +26,21 @@ class ForceSensorError(GripperSafetyStop, ConnectionError):
 
 class GripperStateError(GripperSafetyStop):
     """A servo no longer holds what `configure()` set (torque, gains, current limit, watchdog): it was reset."""
+
+
+class GripperReadingError(GripperSafetyStop):
+    """Servo position readings stayed physically implausible after the re-reads (`plausibility.py`)."""
+
+
+class GripperPortBusyError(GripperSafetyStop, ConnectionError):
+    """Another process (or robot object) owns the bus or force-sensor port; refused before a byte was sent."""
+
+
+class GripperTimingError(GripperSafetyStop):
+    """The control loop overran its period for longer than `max_overrun_s`: the data would no longer be at the
+    rate the policy and the dataset assume."""
+
+
+class ForceTareError(ValueError):
+    """A tare refused because a fingertip pad is loaded (beyond the at-rest envelope); the previous zero is kept.
+    Not a safety stop by itself: a re-tare between trials leaves the gripper holding its pose."""

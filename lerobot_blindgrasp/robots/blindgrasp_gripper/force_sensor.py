@@ -14,6 +14,16 @@ CRC-16/CCITT-FALSE of b"123456789" is 0x29B1 (check value for firmware authors).
 next SYNC after any bad length or CRC, so garbage bytes on the line cost frames, never wrong values. SEQ gaps count
 dropped frames; the age of the newest good frame detects a stalled or unplugged stream.
 
+Liveness by content (`LatestFrameStream`): a SEQ that repeats or runs backwards is a re-sent or replayed frame,
+dropped and counted, so a firmware stuck re-sending one frame goes stale like a silent one; a channel whose counts
+stay identical bit for bit for `frozen_frames` frames is frozen (a 24-bit ADC's noise never repeats that long),
+and the stream goes stale too. `dropped_frames` counts only forward SEQ gaps, so it stays a count of lost frames.
+
+A tare is trusted only at rest (`tare`): the samples must vary no more than an unloaded pad does, and a re-tare
+must not move the zero by more than drift explains; otherwise it is refused and the old zero kept. A load cell
+in a fingertip is compressive only, so a reading clearly below zero is a fault (a tare taken under load, a
+damaged cell, a wrong scale sign), never a value.
+
 Host side: counts -> newtons with a tare (mean counts over `tare_s` at connect, fingers in free air) and a
 per-channel scale in N/count from the robot config, then the sensor pipeline the sim uses too
 (`lerobot_blindgrasp.force.reading`: the measured newtons already hold the sensor's noise; |f| < 0.1 N reads 0).
@@ -30,6 +40,9 @@ import numpy as np
 
 from lerobot_blindgrasp import force, spec
 from lerobot_blindgrasp.streams import LatestFrameStream, StreamError
+
+from .errors import ForceTareError
+from .ports import open_exclusive
 
 SYNC = b"\xa5\x5a"
 MAX_CHANNELS = 8
@@ -117,8 +130,16 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         channel_map=(0, 1, 2),
         stale_timeout_s: float = 0.15,
         connect_timeout_s: float = 1.0,
+        frozen_frames: int = 0,
+        tare_max_std_n: float = float("inf"),
+        tare_max_shift_n: float = float("inf"),
+        negative_fault_n: float = float("inf"),
     ):
-        super().__init__(port, stale_timeout_s)
+        super().__init__(port, stale_timeout_s, frozen_frames)
+        self.tare_max_std_n = tare_max_std_n
+        self.tare_max_shift_n = tare_max_shift_n
+        self.negative_fault_n = negative_fault_n
+        self.tared = False
         self.port = port
         self.baudrate = baudrate
         self.scale = np.asarray(scale_n_per_count, dtype=np.float64)
@@ -134,7 +155,14 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         return self._serial is not None
 
     def connect(self) -> None:
+        self.open()
+        self.wait_first_frame()
+
+    def open(self) -> None:
+        """Take the port (exclusively) and start receiving."""
         self.start()
+
+    def wait_first_frame(self) -> None:
         if not self.wait_frames(1, self.connect_timeout_s):
             self.disconnect()
             raise ForceStreamError(
@@ -150,7 +178,9 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         import serial  # pyserial comes with lerobot[dynamixel]
 
         try:
-            self._serial = serial.Serial(self.port, self.baudrate, timeout=0.02)
+            self._serial = open_exclusive(self.port, self.baudrate, "force-sensor", timeout=0.02)
+        except ConnectionError:
+            raise  # PortInUseError: says itself what to do
         except (OSError, serial.SerialException) as e:
             raise ForceStreamError(f"Could not open the force-sensor port '{self.port}': {e}") from e
         self._serial.reset_input_buffer()
@@ -167,12 +197,22 @@ class ForceSensorReader(LatestFrameStream[Frame]):
                 self._serial = None
 
     def _keep(self, frame: Frame, now: float) -> bool:
-        if self._latest is not None:  # SEQ gaps are frames lost on the way (or dropped by the firmware)
-            self.dropped_frames += (frame.seq - self._latest.seq - 1) % 65536
+        if self._latest is not None:
+            step = (frame.seq - self._latest.seq) % 65536
+            if step == 0 or step > 32768:  # re-sent or replayed: a serial line never reorders frames
+                self.counter_faults += 1
+                return False
+            self.dropped_frames += step - 1  # forward SEQ gaps are frames lost on the way
         return True
 
+    def _content(self, frame: Frame) -> tuple:
+        return tuple(frame.counts[c] if c < len(frame.counts) else None for c in self.channel_map)
+
+    def _content_names(self) -> list[str]:
+        return list(spec.FORCE_SENSOR_NAMES)
+
     def _stale_detail(self) -> str:
-        return f"; {self.dropped_frames} frames dropped so far"
+        return f"{super()._stale_detail()}; {self.dropped_frames} frames dropped so far"
 
     def _channels(self, frame: Frame) -> np.ndarray:
         if max(self.channel_map) >= len(frame.counts):
@@ -183,17 +223,33 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         return np.array([frame.counts[c] for c in self.channel_map], dtype=np.float64)
 
     def tare(self, duration_s: float, min_frames: int = 5) -> np.ndarray:
-        """Zero the sensors: mean counts over `duration_s`, with no fingertip touching anything."""
+        """Zero the sensors: mean counts over `duration_s`, with no fingertip touching anything. Refused
+        (`ForceTareError`, the previous zero kept) when a pad is loaded: samples that vary more than an unloaded
+        pad does (`tare_max_std_n`), or a re-tare whose zero moved more than drift explains (`tare_max_shift_n`)."""
         samples = []
         deadline = time.monotonic() + duration_s
         while time.monotonic() < deadline or len(samples) < min_frames:
             if not self.wait_frames(1, self.stale_timeout_s * 4):
                 raise ForceStreamError(f"Force-sensor stream stopped during tare ({len(samples)} frames).")
-            frame, _ = self.latest()
+            frame = self.fresh()  # a frozen or re-sent stream cannot be tared
             if frame.status:
                 raise ForceStreamError(f"Force sensor channel fault during tare (status {frame.status}).")
             samples.append(self._channels(frame))
-        self.offset = np.mean(samples, axis=0)
+        samples = np.asarray(samples)
+        offset = samples.mean(axis=0)
+        std_n = samples.std(axis=0) * np.abs(self.scale)
+        shift_n = (offset - self.offset) * self.scale if self.tared else np.zeros_like(offset)
+        names = spec.FORCE_SENSOR_NAMES
+        loaded = [f"{n} varies by {s:.2f} N (at rest <= {self.tare_max_std_n} N)"
+                  for n, s in zip(names, std_n) if s > self.tare_max_std_n]  # fmt: skip
+        loaded += [f"{n} reads {d:+.2f} N against the current zero (drift <= {self.tare_max_shift_n} N)"
+                   for n, d in zip(names, shift_n) if abs(d) > self.tare_max_shift_n]  # fmt: skip
+        if loaded:
+            raise ForceTareError(
+                f"Tare refused, a fingertip pad is loaded: {'; '.join(loaded)}. The previous zero is kept. Free "
+                "the fingertips (nothing touching the pads, gripper still) and tare again."
+            )
+        self.offset, self.tared = offset, True
         return self.offset
 
     def read(self) -> np.ndarray:
@@ -202,4 +258,12 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         if frame.status:
             bad = [spec.FORCE_SENSOR_NAMES[i] for i, c in enumerate(self.channel_map) if frame.status >> c & 1]
             raise ForceStreamError(f"Force sensor reports a fault on {bad} (status {frame.status:#04x}).")
-        return force.reading(force.counts_to_newtons(counts, self.offset, self.scale))
+        newtons = force.counts_to_newtons(counts, self.offset, self.scale)
+        pulling = [f"{n} {f:+.2f} N" for n, f in zip(spec.FORCE_SENSOR_NAMES, newtons) if f < -self.negative_fault_n]
+        if pulling:
+            raise ForceStreamError(
+                f"Force sensor reads {pulling}, below -{self.negative_fault_n} N: a fingertip load cell only feels "
+                "compression, so this is a fault, not a force (tare taken with a loaded pad, damaged cell, or wrong "
+                "sign of scale_n_per_count). Re-tare with the fingertips free."
+            )
+        return force.reading(newtons)

@@ -16,6 +16,11 @@ class ManusGloveConfig(TeleoperatorConfig):
     host: str = "127.0.0.1"
     port: int = 50120
     side: str = "right"
+    # The one bridge to accept, "host:port" (its source address). None: the first valid sender, until a reconnect.
+    sender: str | None = None
+    # Datagrams whose ergonomics repeat bit for bit this many times in a row count as stale (a bridge re-sending
+    # cached data after the glove dropped). 0 (default): off, since a still hand may repeat filtered SDK values.
+    frozen_frames: int = 0
     # First datagram must arrive within this time at connect.
     connect_timeout_s: float = 2.0
     # Newest datagram older than this: the target freezes at its last value, so the gripper stops moving.
@@ -38,3 +43,16 @@ class ManusGloveConfig(TeleoperatorConfig):
             raise ValueError("open_pose and closed_pose need 9 values, spread_gain 3")
         if not 0 < self.hold_timeout_s < self.disconnect_timeout_s:
             raise ValueError("need 0 < hold_timeout_s < disconnect_timeout_s")
+        if not 0 < self.port < 65536 or not self.connect_timeout_s > 0 or not self.calibration_s > 0:
+            raise ValueError("need 0 < port < 65536, connect_timeout_s > 0 and calibration_s > 0")
+        if self.frozen_frames < 0 or self.frozen_frames == 1:
+            raise ValueError("frozen_frames must be 0 (off) or >= 2")
+        self.sender_address()  # a malformed sender is refused here, not at the first datagram
+
+    def sender_address(self) -> tuple[str, int] | None:
+        if self.sender is None:
+            return None
+        host, sep, port = self.sender.rpartition(":")
+        if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise ValueError(f"sender must be 'host:port' (the bridge's source address), not {self.sender!r}")
+        return host, int(port)

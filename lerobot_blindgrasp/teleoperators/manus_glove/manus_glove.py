@@ -20,6 +20,7 @@ from lerobot.utils.decorators import check_if_already_connected, check_if_not_co
 from lerobot.utils.errors import DeviceNotConnectedError
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import read_raw as read_json
 
 from . import retarget as rt
 from .config_manus_glove import ManusGloveConfig
@@ -42,6 +43,24 @@ class GloveStreamLost(DeviceNotConnectedError):
 
 class GloveCalibrationError(ValueError):
     """A glove calibration (recorded now or loaded from a file) that would map the hand wrongly or to NaN."""
+
+
+def calibration_schema_problems(raw: object) -> list[str]:
+    """The file's shape on the raw JSON: exactly {"open": {...}, "fist": {...}}, each pose an object of channel name
+    -> number (a bool or a string is not a number, whatever a lenient decoder would make of it)."""
+    if not isinstance(raw, dict) or set(raw) != {"open", "fist"}:
+        keys = sorted(raw) if isinstance(raw, dict) else type(raw).__name__
+        return [f"expected exactly the poses ['fist', 'open'], found {keys}"]
+    out = []
+    for name in ("open", "fist"):
+        pose = raw[name]
+        if not isinstance(pose, dict):
+            out.append(f"{name} pose is {type(pose).__name__}, not an object")
+            continue
+        wrong = [k for k, v in pose.items() if isinstance(v, bool) or not isinstance(v, (int, float))]
+        if wrong:
+            out.append(f"{name} pose has non-numbers at {sorted(wrong)[:5]}")
+    return out
 
 
 def calibration_problems(open_pose: dict, fist_pose: dict, min_flex_range_deg: float) -> list[str]:
@@ -77,7 +96,8 @@ class ManusGlove(Teleoperator):
         super().__init__(config)  # loads the calibration file through our _load_calibration, if there is one
         if not isinstance(self.calibration, GloveCalibration):
             self.calibration: GloveCalibration | None = None
-        self.receiver = GloveReceiver(config.host, config.port, config.side, rt.REQUIRED_KEYS, config.hold_timeout_s)
+        self.receiver = GloveReceiver(config.host, config.port, config.side, rt.REQUIRED_KEYS, config.hold_timeout_s,
+                                      sender=config.sender_address(), frozen_frames=config.frozen_frames)  # fmt: skip
         self._last_target: np.ndarray | None = None
         self._holding = False
 
@@ -102,10 +122,12 @@ class ManusGlove(Teleoperator):
         lerobot-calibrate (connect(calibrate=False), then calibrate()) replaces it."""
         fpath = fpath or self.calibration_fpath
         try:
-            with open(fpath) as f, draccus.config_type("json"):
-                cal = draccus.load(GloveCalibration, f)
-            bad = calibration_problems(cal.open, cal.fist, self.config.min_flex_range_deg)
-        except Exception as e:  # not JSON, missing fields, wrong types
+            bad = calibration_schema_problems(read_json(fpath))
+            if not bad:
+                with open(fpath) as f, draccus.config_type("json"):
+                    cal = draccus.load(GloveCalibration, f)
+                bad = calibration_problems(cal.open, cal.fist, self.config.min_flex_range_deg)
+        except Exception as e:  # unreadable: empty, truncated, not JSON, not UTF-8
             bad = [f"unreadable ({type(e).__name__}: {e})"]
         if bad:
             self.calibration = None

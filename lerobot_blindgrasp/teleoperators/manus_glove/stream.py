@@ -14,6 +14,11 @@ A small bridge next to the vendor's SDK (MANUS Core SDK, or its ROS 2 `manus_dat
 - `t`: sender wall time (s), informational; staleness is judged on the receiver's clock.
 - `side`: "left" | "right"; datagrams for the other hand are ignored (two gloves may share a port).
 
+One glove per teleoperator: the receiver binds to one sender, the configured `sender` address or else the first that
+sends a valid datagram for its hand, and drops every other sender's datagrams (counted in `foreign`, warned once
+per address). A second bridge, or anyone else on the port, cannot take over the teleoperation. Changing the sender
+(a bridge restarted on a new source port, another machine) takes a reconnect, which binds afresh.
+
 UDP fits a 60-120 Hz pose stream: the newest datagram wins, a lost one is replaced 10 ms later, and the sender
 needs no connection state. The default destination is 127.0.0.1:50120 (same machine as the bridge).
 """
@@ -96,10 +101,24 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
     name = "Glove"
     lost_hint = "socket closed"
 
-    def __init__(self, host: str, port: int, side: str, required: set[str], stale_timeout_s: float = 0.15):
-        super().__init__(f"udp://{host}:{port}", stale_timeout_s)
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        side: str,
+        required: set[str],
+        stale_timeout_s: float = 0.15,
+        *,
+        sender: tuple[str, int] | None = None,
+        frozen_frames: int = 0,
+    ):
+        super().__init__(f"udp://{host}:{port}", stale_timeout_s, frozen_frames)
         self.host, self.port, self.side, self.required = host, port, side, required
+        self.sender = sender  # the configured sender, or None: bind to the first valid one
+        self.bound: tuple[str, int] | None = None
         self.rejected = 0
+        self.foreign = 0  # valid datagrams from another sender than the bound one, dropped
+        self._warned: set[tuple[str, int]] = set()
         self._sock: socket.socket | None = None
 
     @property
@@ -121,10 +140,12 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             raise ConnectionError(f"Cannot listen for the glove on udp://{self.host}:{self.port}: {e}") from e
         sock.settimeout(0.05)
         self._sock = sock
+        self.bound = self.sender  # each connection binds afresh
+        self._warned.clear()
 
     def _receive(self) -> list[GloveFrame]:
         try:
-            datagram = self._sock.recv(65536)
+            datagram, addr = self._sock.recvfrom(65536)
         except TimeoutError:
             return []
         try:
@@ -133,15 +154,39 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             self.rejected += 1
             logger.debug("glove datagram rejected: %s", e)
             return []
-        return [GloveFrame(seq, side, ergo, time.monotonic())] if side == self.side else []
+        if side != self.side:
+            return []
+        addr = (addr[0], addr[1])
+        if self.bound is None:
+            self.bound = addr
+            logger.info("Glove receiver bound to the bridge at %s:%d.", *addr)
+        elif addr != self.bound:
+            self.foreign += 1
+            if addr not in self._warned:
+                self._warned.add(addr)
+                logger.warning(
+                    "Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. Another bridge or "
+                    "sender on the port? Reconnect to change the sender.", *addr, *self.bound
+                )
+            return []
+        return [GloveFrame(seq, side, ergo, time.monotonic())]
 
     def _close(self) -> None:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
 
+    def _content(self, frame: GloveFrame) -> tuple:
+        return (tuple(frame.ergonomics[k] for k in sorted(frame.ergonomics)),)
+
+    def _content_names(self) -> list[str]:
+        return ["ergonomics"]
+
     def _keep(self, frame: GloveFrame, now: float) -> bool:
         last = self._latest
+        if last is not None and frame.seq == last.seq:  # a duplicate datagram
+            self.counter_faults += 1
+            return False
         # A little older than what we have, just after it: reordered on the way. Further back: a restarted bridge.
         return not (last is not None and 0 < (last.seq - frame.seq) % 2**32 <= REORDER_WINDOW
                     and now - last.received < REORDER_MAX_S)  # fmt: skip

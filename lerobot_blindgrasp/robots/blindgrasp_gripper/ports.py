@@ -1,0 +1,33 @@
+"""One owner per gripper: its serial ports are opened for exclusive use, as serial terminals do.
+
+pyserial's `exclusive=True` takes an advisory `flock(LOCK_EX | LOCK_NB)` on the device the moment it is opened,
+before any byte is written or any termios setting changes. A second process (or a second robot object in this one)
+that opens the same bus or force-sensor port is refused right there: it cannot ping the servos, let alone turn the
+first owner's torque off. The lock goes with the file descriptor, so a crashed owner never leaves a stale lock.
+"""
+
+from __future__ import annotations
+
+import errno
+
+import serial
+
+_BUSY = {errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES}
+
+
+class PortInUseError(ConnectionError):
+    """The serial port is held by another process (or another robot object): refused before sending a byte."""
+
+
+def open_exclusive(port: str, baudrate: int, what: str, **kwargs) -> serial.Serial:
+    """`serial.Serial(port, baudrate, exclusive=True, **kwargs)`, with a busy port as `PortInUseError`."""
+    try:
+        return serial.Serial(port, baudrate, exclusive=True, **kwargs)
+    except serial.SerialException as e:
+        if e.errno in _BUSY:
+            raise PortInUseError(
+                f"The {what} port '{port}' is already in use by another process (another lerobot script, a "
+                "serial monitor, or a second robot object on the same gripper). One gripper has one owner: stop the "
+                f"other one first (`fuser {port}` names it). Nothing was sent."
+            ) from e
+        raise

@@ -1,0 +1,106 @@
+"""Keeping time in the host's control loop.
+
+`PeriodMonitor` measures the period of whatever loop calls it once per step: the robot ticks it in every
+`get_observation`, so lerobot-record, lerobot-rollout and the real eval env are all measured, whoever's loop it is.
+A period over `(1 + tolerance)` times the nominal one is an overrun: counted and warned (the first, then every
+`warn_every`-th). Overruns back to back for `max_overrun_s` and at least `min_overruns` periods are a sustained
+overrun (`LoopOverrunError`; the count keeps a few deliberately slow steps, e.g. a script that waits between calls,
+from looking sustained): the data would no longer come at the rate the policy and the dataset assume. A gap of `pause_s` or more is a pause of the
+loop (a dataset save, an operator prompt), not an overrun.
+
+`Schedule` paces a loop we own (the real eval env's trial). It sleeps to the next tick; when a step comes late it
+re-bases the schedule on now, so after a stall the loop goes on at its period instead of firing the missed ticks
+back to back.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+logger = logging.getLogger(__name__)
+
+
+class LoopOverrunError(RuntimeError):
+    """The loop overran its period for longer than `max_overrun_s`."""
+
+
+@dataclass
+class PeriodMonitor:
+    period_s: float
+    max_overrun_s: float = 2.0  # 0: count and warn only
+    tolerance: float = 0.5
+    pause_s: float = 1.0
+    min_overruns: int = 10
+    warn_every: int = 20
+    what: str = "control loop"
+    periods: int = 0
+    overruns: int = 0
+    worst_s: float = 0.0
+    recent: deque = field(default_factory=lambda: deque(maxlen=200))  # the last periods measured (s)
+    _last: float | None = None
+    _streak_s: float = 0.0
+    _streak_n: int = 0
+
+    def restart(self) -> None:
+        """The next tick starts a new measurement (after a deliberate non-loop operation: connect, tare)."""
+        self._last, self._streak_s, self._streak_n = None, 0.0, 0
+
+    def tick(self, now: float | None = None) -> float | None:
+        """Call once per loop step; returns the period just measured (None on the first tick or after a pause)."""
+        now = time.monotonic() if now is None else now
+        last, self._last = self._last, now
+        if last is None:
+            return None
+        period = now - last
+        if period >= self.pause_s:
+            self._streak_s, self._streak_n = 0.0, 0
+            return None
+        self.periods += 1
+        self.recent.append(period)
+        if period <= self.period_s * (1.0 + self.tolerance):
+            self._streak_s, self._streak_n = 0.0, 0
+            return period
+        self.overruns += 1
+        self._streak_s += period
+        self._streak_n += 1
+        self.worst_s = max(self.worst_s, period)
+        if self.overruns == 1 or self.overruns % self.warn_every == 0:
+            logger.warning("%s overran its %.0f ms period: %.0f ms (%d of %d periods so far, worst %.0f ms).",
+                           self.what, self.period_s * 1e3, period * 1e3, self.overruns, self.periods,
+                           self.worst_s * 1e3)  # fmt: skip
+        if self.max_overrun_s and self._streak_s >= self.max_overrun_s and self._streak_n >= self.min_overruns:
+            rate = self._streak_n / self._streak_s
+            raise LoopOverrunError(
+                f"The {self.what} has overrun its {self.period_s * 1e3:.0f} ms period for {self._streak_s:.1f} s "
+                f"in a row (last period {period * 1e3:.0f} ms, about {rate:.1f} Hz instead of "
+                f"{1 / self.period_s:.0f} Hz; {self.overruns} overruns in {self.periods} periods). A slow bus "
+                "(latency_timer_ms, USB hub), a loaded host or a slow policy: fix it, or lower the rate and set "
+                "loop_hz to match."
+            )
+        return period
+
+
+class Schedule:
+    """Ticks every `period_s`, re-based after a late step (never a burst of catch-up steps)."""
+
+    def __init__(self, period_s: float):
+        self.period_s = period_s
+        self.rebased = 0
+        self._next = time.monotonic() + period_s
+
+    def start(self) -> None:
+        self._next = time.monotonic() + self.period_s
+
+    def wait(self) -> None:
+        """Sleep until the next tick. If it has already passed, return at once and put the tick after it one
+        full period from now."""
+        now = time.monotonic()
+        if now < self._next:
+            time.sleep(self._next - now)
+            self._next += self.period_s
+        else:
+            self.rebased += 1
+            self._next = now + self.period_s
