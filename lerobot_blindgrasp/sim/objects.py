@@ -14,7 +14,7 @@ replicas like the paper's 3D-printed ID objects. The large cuboid A is then 300 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 OBJECT_DENSITY = 400.0  # kg/m^3
 
@@ -87,6 +87,13 @@ CATALOGUE: dict[str, ObjectSpec] = {
 }
 PAPER_OBJECTS: tuple[str, ...] = tuple(CATALOGUE)  # the 18 training objects, Table I order
 MEDIUM_OBJECTS: tuple[str, ...] = tuple(n for n in PAPER_OBJECTS if n.endswith("_medium"))
+
+
+def scaled(obj: ObjectSpec, scale: float) -> ObjectSpec:
+    """`obj` with every dimension x `scale` (same density, so mass x scale^3); `obj` itself at scale 1."""
+    if scale == 1.0:
+        return obj
+    return replace(obj, size=tuple(scale * v for v in obj.size))
 
 
 def register_object(obj: ObjectSpec) -> None:
