@@ -292,7 +292,6 @@ class BatchedGraspEnv:
             self._action_ring = np.roll(self._action_ring, -1, axis=0)
             self._action_ring[-1] = target
             target = self._action_ring[0].copy()
-        self._clear_hold_push()
         if dr.external_force:
             self._update_pushes()
 
@@ -305,6 +304,7 @@ class BatchedGraspEnv:
             self._ctrl[:] = target
             failed = self.physics.step(self.cfg.physics.substeps, ids)
         self._last_target = target
+        self._clear_hold_push()  # a hold push lasts the one control period it was set for
 
         obs = self._observe()
         raw = self._raw
