@@ -50,6 +50,9 @@ class RobustnessConfig:
     episodes: int | None = None  # per object and point; default: the preset's
     objects: str | None = None  # "all", "medium" or a comma list; default: the preset's
     factors: str | None = None  # comma list of factor names to run (default: all of the preset)
+    # only these points, as a comma list of factor=label (labels as in summary.md, e.g. "force_bias=2 N"); each
+    # factor's nominal point always runs. For a cut-down run on a busy machine; the rest show as not run.
+    points: str | None = None
     seed: int = spec.EVAL_SEED  # first evaluation index: episode k of every object is index seed + k
     threads: int = 0  # physics threads (0: all CPUs); torch uses the same number
     progress: bool = True
@@ -74,6 +77,14 @@ class RobustnessConfig:
                 raise ValueError(f"unknown factor(s) {unknown}; this preset has {', '.join(sorted(known))}")
             all_factors = [f for f in all_factors if f.name in wanted]
         self.factor_list = all_factors
+        self.point_filter = None
+        if self.points:
+            pairs = {tuple(x.strip().split("=", 1)) for x in self.points.split(",") if x.strip()}
+            labels = {(f.name, p.label) for f in all_factors for p in f.points}
+            unknown = sorted("=".join(pr) for pr in pairs if pr not in labels)
+            if unknown:
+                raise ValueError(f"unknown point(s) {unknown}; use factor=label as summary.md lists them")
+            self.point_filter = pairs
 
 
 def default_student(models_dir: Path | None = None) -> Path:
@@ -123,8 +134,9 @@ def run(cfg: RobustnessConfig, command: str = "") -> dict:
     (out / "points").mkdir(parents=True, exist_ok=True)
     todo: dict[str, factors.Point] = {}
     for f in cfg.factor_list:
-        for p in f.points:
-            todo.setdefault(point_id(p, context), p)
+        for i, p in enumerate(f.points):
+            if cfg.point_filter is None or i == f.nominal or (f.name, p.label) in cfg.point_filter:
+                todo.setdefault(point_id(p, context), p)
     done = {pid for pid in todo if (out / "points" / f"{pid}.json").is_file()}
     if done:
         print(f"continuing: {len(done)} of {len(todo)} points already in {out / 'points'}")
