@@ -60,7 +60,7 @@ def test_envelope_grows_from_nominal_and_stops_at_the_first_failure():
     assert envelope.describe(f, criterion="rate") == "m1 (fails at m0) to m2 (fails at m3)"
     assert envelope.envelope(_factor([80, 99], 0)["points"], 0, criterion="rate") == (None, None)
     summary = {"objects": ["a"] * 18, "episodes_per_object": 10, "seed": 1000, "command": "x",
-               "factors": [_factor([95, 85, 60], 0, [99, 99, 99], "gain"), _factor([95, 94, 50], 0, name="lag")]}
+               "factors": [_factor([95, 80, 60], 0, [99, 99, 99], "gain"), _factor([95, 94, 50], 0, name="lag")]}
     text = envelope.card_section(summary)
     assert "| gain | m0 |" in text and "gain at m1" in text
     assert envelope.first_to_break(summary)[0][:2] == ("gain", "m1")  # one step out, before lag's two

@@ -50,9 +50,13 @@ class Factor:
 
 
 def _single(name, title, unit, group, field_name, values, labels, nominal_value, train_range=None, transform=None):
+    """One field swept over `values`. A factor that fixes a field Table II draws (`train_range` given) has the
+    training draw itself as its nominal point ("train"), so it shares the plain EVAL_DR simulation."""
     pts = []
     for v, lab in zip(values, labels, strict=True):
         ov = transform(v) if transform else {field_name: v}
+        if train_range is not None and v == nominal_value:
+            ov, lab = {}, "train"
         pts.append(Point(lab, float(v), tuple(sorted(ov.items()))))
     return Factor(name, title, unit, group, tuple(pts), list(values).index(nominal_value), train_range)
 

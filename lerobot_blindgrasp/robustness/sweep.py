@@ -49,7 +49,7 @@ class RobustnessConfig:
     teacher: Path | None = None  # a teacher folder; default: the shipped teacher ($BLINDGRASP_TEACHER or models/)
     episodes: int | None = None  # per object and point; default: the preset's
     objects: str | None = None  # "all", "medium" or a comma list; default: the preset's
-    factors: str | None = None  # comma list of factor names to run (default: all of the preset)
+    factors: str | None = None  # comma list of factor names to run, in this order (default: all of the preset)
     # only these points, as a comma list of factor=label (labels as in summary.md, e.g. "force_bias=2 N"); each
     # factor's nominal point always runs. For a cut-down run on a busy machine; the rest show as not run.
     points: str | None = None
@@ -75,7 +75,8 @@ class RobustnessConfig:
             unknown = [w for w in wanted if w not in known]
             if unknown:
                 raise ValueError(f"unknown factor(s) {unknown}; this preset has {', '.join(sorted(known))}")
-            all_factors = [f for f in all_factors if f.name in wanted]
+            by_name = {f.name: f for f in all_factors}
+            all_factors = [by_name[w] for w in wanted]  # run in the order given
         self.factor_list = all_factors
         self.point_filter = None
         if self.points:
