@@ -61,17 +61,14 @@ def describe(factor: dict, role: str = "student", criterion: str = "ci") -> str:
 
     def edge(last: int, nxt: int | None) -> str:
         if nxt is None:
-            return f"{pts[last]['label']} (all tested)"
+            return f"{pts[last]['label']} (largest tested)"
         return f"{pts[last]['label']} (" + ("fails at " if pts[nxt].get(role) else "not run at ") + f"{pts[nxt]['label']})"
 
-    sides = []
-    if nom > 0:
-        sides.append(edge(lo, lo - 1 if lo > 0 else None))
-    if nom < len(pts) - 1:
-        sides.append(edge(hi, hi + 1 if hi + 1 < len(pts) else None))
-    if len(sides) == 2:
-        return f"{sides[0]} to {sides[1]}"
-    return f"up to {sides[0]}" if sides else pts[nom]["label"]
+    low = edge(lo, lo - 1 if lo > 0 else None) if nom > 0 else None
+    high = edge(hi, hi + 1 if hi + 1 < len(pts) else None) if nom < len(pts) - 1 else None
+    if low and high:
+        return f"{low} to {high}"
+    return f"down to {low}" if low else f"up to {high}" if high else pts[nom]["label"]
 
 
 def card_section(summary: dict, threshold: float = THRESHOLD) -> str:
