@@ -15,6 +15,12 @@ whenever |noise| < 0.1 N, just as the real sensor's noise is cut to 0 in free ai
 the noise after the deadband, so a free fingertip read N(0, 0.5 N) and never 0.
 
 The noise-free reading (`reading(true_force)`, no noise argument) is what the rewards and demo curation see.
+
+A real load cell also has a scale error, a tare error (bias) and a range. `load_cell` models them in the order the
+hardware applies them, for the sim's robustness factors:
+
+    signal  = clip(gain x true force + bias + noise, -range, +range)      the cell and its ADC
+    reading = deadband(signal)                                             the host
 """
 
 from __future__ import annotations
@@ -38,6 +44,21 @@ def reading(true_force, noise=0.0, threshold: float = DEADBAND_N) -> np.ndarray:
     Sim: `true_force` is the contact force projected on the tip's z axis, `noise` the drawn Gaussian sample.
     Real: the noise is already inside the measured newtons (`counts_to_newtons`), so `noise` stays 0."""
     return deadband(np.asarray(true_force, dtype=np.float64) + noise, threshold)
+
+
+def load_cell(true_force, noise=0.0, gain: float = 1.0, bias=0.0, range_n: float = 0.0) -> np.ndarray:
+    """The signal a load cell delivers (N) for `true_force`: its gain and bias errors, its noise sample, and
+    saturation at +-`range_n` (0: none). Each error is applied only when set, so the defaults give exactly
+    true force + noise."""
+    f = np.asarray(true_force, dtype=np.float64)
+    if gain != 1.0:
+        f = gain * f
+    if np.any(bias):
+        f = f + bias
+    f = f + noise
+    if range_n > 0:
+        f = np.clip(f, -range_n, range_n)
+    return f
 
 
 def counts_to_newtons(counts, tare_counts, scale_n_per_count) -> np.ndarray:

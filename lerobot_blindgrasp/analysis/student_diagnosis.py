@@ -34,7 +34,7 @@ from tqdm import tqdm
 
 from lerobot_blindgrasp import rates, spec
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.durable import atomic_write_json, atomic_write_text, atomic_writer
+from lerobot_blindgrasp.durable import atomic_write_json, atomic_write_text, atomic_path
 from lerobot_blindgrasp.sim import objects
 
 KINDS = ("success", "never touches", "presses from above", "touches, never lifts", "knocked out of reach",
@@ -390,7 +390,7 @@ def plot(result: dict, path: Path) -> None:
     ax1.set_title("Fit")
     ax1.legend(fontsize=7)
     fig.tight_layout()
-    with atomic_writer(path) as tmp:
+    with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
 

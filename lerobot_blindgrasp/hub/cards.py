@@ -94,6 +94,8 @@ def _randomization_rows(dr: dict) -> list[tuple[str, str]]:
         if f.name in ("push_force_n", "push_period_s") and not dr.get("external_force"):
             continue  # irrelevant while pushes are off
         value = dr.get(f.name)
+        if f.name in randomization.ROBUSTNESS_FIELDS and value in (None, f.default):
+            continue  # beyond Table II and off (or recorded before it existed)
         if isinstance(value, (list, tuple)):
             value = f"[{value[0]:g}, {value[1]:g}]"
         elif isinstance(value, bool):

@@ -13,6 +13,18 @@ Step (paper Sec. III-B): a_t = delta-theta in R^9 is clipped to +-0.3 rad, the s
 the joint limits, as the real robot does), and `substeps` physics steps cover one 50 ms control period.
 Episodes last 10 s; an episode terminates when the object leaves the 10 cm workspace. Envs auto-reset inside
 `step` (rsl-rl never calls reset); `info["final"]` describes the episodes that ended.
+
+The servo and timing factors beyond Table II (`DomainRandomization`, all off by default) act here:
+- torque limit: the actuators' forcerange (the current limit caps torque, xm430.torque_at_current_nm);
+- action latency: a ring of the last k targets, the servos get the one sent k steps ago;
+- observation latency: a ring of the last k observations, the policy gets the one measured k steps ago;
+- velocity limit, backlash, period jitter: the control period is then stepped one physics substep at a time; the
+  setpoint moves towards the target at most `velocity_limit_rad_s` (the servo's profile velocity), the servo
+  exerts no torque within +-backlash/2 of it (a dead zone in the position error), and the new target takes over
+  from the previous one only after the step's random delay;
+- joint calibration offset: readings are q + offset, and the servo reaches an absolute target in that frame
+  (`delta_for_target`), as a real servo does with a wrong homing offset;
+- the hold push: one push of `hold_push_n` on the object 0.5 s after it is first lifted in an episode.
 """
 
 from __future__ import annotations
@@ -40,6 +52,10 @@ from lerobot_blindgrasp.sim.backends.batch import BatchBackend
 
 log = logging.getLogger(__name__)
 
+# The hold push comes this many control steps (0.5 s) after the object is first lifted in an episode: half-way
+# through the 1 s hold that success needs.
+HOLD_PUSH_AFTER_STEPS = spec.SUCCESS_HOLD_STEPS // 2
+
 
 @dataclass
 class GraspEnvConfig:
@@ -48,6 +64,9 @@ class GraspEnvConfig:
     # Relative share of envs per object (same order as `objects`); None: even, as the paper's 18 x 500.
     object_weights: tuple[float, ...] | None = None
     seed: int = 0  # env i uses seed + i
+    # Explicit per-env seeds (length num_envs), instead of seed + i: lets one batch hold several objects' evaluation
+    # seed blocks (spec.eval_env_seed), each env on exactly the start state the one-env gym env gives it.
+    env_seeds: tuple[int, ...] | None = None
     episode_s: float = spec.EPISODE_S
     dr: randomization.DomainRandomization = field(default_factory=lambda: randomization.PAPER_DR)
     reward: rewards.RewardConfig = field(default_factory=lambda: rewards.PAPER_REWARD)
@@ -65,6 +84,8 @@ class GraspEnvConfig:
         self.objects = objects.resolve_objects(self.objects)
         if self.num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {self.num_envs}")
+        if self.env_seeds is not None and len(self.env_seeds) != self.num_envs:
+            raise ValueError(f"env_seeds needs one seed per env ({self.num_envs}), got {len(self.env_seeds)}")
         if self.object_weights is not None:
             w = np.asarray(self.object_weights, dtype=float)
             if w.shape != (len(self.objects),) or not np.isfinite(w).all() or (w <= 0).any():
@@ -102,10 +123,13 @@ class BatchedGraspEnv:
         self.cfg = cfg
         n = self.num_envs = cfg.num_envs
         self.max_episode_steps = int(round(cfg.episode_s * spec.CONTROL_HZ))
-        self.env_seeds = (np.uint64(cfg.seed) + np.arange(n, dtype=np.uint64)).astype(np.uint64)
+        if cfg.env_seeds is not None:
+            self.env_seeds = np.array([int(x) for x in cfg.env_seeds], dtype=np.uint64)
+        else:
+            self.env_seeds = (np.uint64(cfg.seed) + np.arange(n, dtype=np.uint64)).astype(np.uint64)
         self.object_index = allocate_objects(n, len(cfg.objects), cfg.object_weights)  # index into cfg.objects
         self.object_names = [cfg.objects[k] for k in self.object_index]
-        obj_specs = [objects.get_object(name) for name in cfg.objects]
+        obj_specs = [objects.scaled(objects.get_object(name), cfg.dr.object_size_scale) for name in cfg.objects]
         self.rest_height = np.array([obj_specs[k].rest_height for k in self.object_index])
         self._rest_quat = np.array([self._body_quat(o) for o in obj_specs])[self.object_index]
         self._bound_r = np.array([pregrasp.bounding_radius(o) for o in obj_specs])[self.object_index]
@@ -120,6 +144,7 @@ class BatchedGraspEnv:
         ]
         self._templates = templates
         self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)
+        self.sensor_draw = randomization.draw_sensors(cfg.dr, self.env_seeds)
         if cfg.backend == "batch":
             self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
             self.physics = BatchBackend(self.models, nthread=cfg.nthread)
@@ -151,6 +176,13 @@ class BatchedGraspEnv:
         self.episode_return = np.zeros(n)
         self.episode_terms = {k: np.zeros(n) for k in rewards.TERM_NAMES}
         self.physics_resets = 0  # envs reset because their physics went unstable
+        # Servo and timing factors (unused at their defaults).
+        self._action_ring = np.zeros((cfg.dr.action_latency_steps + 1, n, spec.NUM_JOINTS))  # newest last
+        self._obs_ring: dict[str, np.ndarray] = {}  # key -> (obs_latency_steps + 1, n, dim), newest last
+        self._setpoint = np.zeros((n, spec.NUM_JOINTS))  # velocity-limited servo setpoint
+        self._last_target = np.zeros((n, spec.NUM_JOINTS))  # the target in force before this step's arrives
+        self.hold_pushed = np.zeros(n, dtype=bool)  # this episode's hold push was given
+        self._hold_pushing = np.zeros(n, dtype=bool)
         self._raw: dict[str, np.ndarray] = {}
 
     # --- construction ----------------------------------------------------------------------------------------
@@ -182,14 +214,20 @@ class BatchedGraspEnv:
         m.actuator_gainprm[:, 0] = kp
         m.actuator_biasprm[:, 1] = -kp
         m.actuator_biasprm[:, 2] = -kv
+        if self.cfg.dr.torque_limit_scale != 1.0:
+            m.actuator_forcerange[:] *= self.cfg.dr.torque_limit_scale
         mujoco.mj_setConst(m, mujoco.MjData(m))  # mass-dependent constants (e.g. constraint scaling)
         return m
 
     # --- reset ------------------------------------------------------------------------------------------------
     def reset(self) -> dict[str, np.ndarray]:
         self.episode[:] = 0
-        self._reset_envs(np.arange(self.num_envs))
-        return self._observe()
+        ids = np.arange(self.num_envs)
+        self._reset_envs(ids)
+        obs = self._observe()
+        if self.cfg.dr.obs_latency_steps:
+            self._obs_ring = {k: np.repeat(v[None], self.cfg.dr.obs_latency_steps + 1, axis=0) for k, v in obs.items()}
+        return obs
 
     def _reset_envs(self, ids: np.ndarray) -> None:
         if ids.size == 0:
@@ -211,6 +249,11 @@ class BatchedGraspEnv:
         qpos[:, observations.OBJECT_QUAT] = self._rest_quat[ids]
         self._qpos[ids] = qpos
         self._ctrl[ids] = q0
+        self._action_ring[:, ids] = q0  # a late target: the servos hold the start pose until the first arrives
+        self._setpoint[ids] = q0
+        self._last_target[ids] = q0
+        self.hold_pushed[ids] = False
+        self._hold_pushing[ids] = False
         self._pushing[ids] = False
         self.physics.forward(ids)
         self.episode_length[ids] = 0
@@ -235,14 +278,33 @@ class BatchedGraspEnv:
             raise ValueError(f"action has NaN/inf entries for envs {bad[:10].tolist()}")
         return a
 
-    def step(self, action):
+    def step(self, action, active: np.ndarray | None = None):
+        """One control step. `active` (batch backend only): the envs to simulate; the others keep their physics
+        state, which evaluation uses for episodes whose outcome is already final (their rows are then stale)."""
+        ids = None if active is None else np.flatnonzero(active)
+        if ids is not None and self.batch is None:
+            raise NotImplementedError("stepping a subset of envs needs the batch backend")
         a = np.clip(self.validate_action(action), -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
         q = self._qpos[:, observations.JOINTS]
-        self._ctrl[:] = np.clip(q + a, spec.JOINT_LOWER, spec.JOINT_UPPER)
-        if self.cfg.dr.external_force:
+        dr = self.cfg.dr
+        target = np.clip(q + a, spec.JOINT_LOWER, spec.JOINT_UPPER)
+        if dr.action_latency_steps:
+            self._action_ring = np.roll(self._action_ring, -1, axis=0)
+            self._action_ring[-1] = target
+            target = self._action_ring[0].copy()
+        if dr.external_force:
             self._update_pushes()
 
-        failed = self.physics.step(self.cfg.physics.substeps)  # unstable envs: reset below
+        if dr.substep_servo:
+            failed = self._step_servo_substeps(target, ids)
+        elif ids is None:
+            self._ctrl[:] = target
+            failed = self.physics.step(self.cfg.physics.substeps)  # unstable envs: reset below
+        else:
+            self._ctrl[:] = target
+            failed = self.physics.step(self.cfg.physics.substeps, ids)
+        self._last_target = target
+        self._clear_hold_push()  # a hold push lasts the one control period it was set for
 
         obs = self._observe()
         raw = self._raw
@@ -265,6 +327,8 @@ class BatchedGraspEnv:
         lifted = raw["lift"] >= spec.SUCCESS_LIFT_M
         self.lifted_steps = np.where(lifted, self.lifted_steps + 1, 0)
         self.success |= self.lifted_steps >= spec.SUCCESS_HOLD_STEPS
+        if dr.hold_push_n:
+            self._start_hold_push()
         self.prev_action = a
         self.episode_return += reward
         for k, v in terms.items():
@@ -279,7 +343,7 @@ class BatchedGraspEnv:
             "uniaxial_force": raw["uniaxial_clean"],  # noise-free, after the deadband (N)
             "tip_object_force": raw["tip_object_force"],  # |net force| of each tip on the object (N)
             "tip_object_downward": raw["tip_object_downward"],  # its -F_z/|F| (1: pressing straight down)
-            "joint_target": self._ctrl.copy(),  # the absolute targets commanded this step (rad)
+            "joint_target": target.copy(),  # the absolute targets the servos received this step (rad)
             "terms": terms,
             "physics_failed": failed,
         }
@@ -307,7 +371,76 @@ class BatchedGraspEnv:
                 fresh = self._observe(ids)
                 for k in obs:
                     obs[k][ids] = fresh[k]
+                for k, ring in self._obs_ring.items():  # a new episode starts with its own observation
+                    ring[:, ids] = fresh[k]
+        if dr.obs_latency_steps:
+            obs = self._delayed(obs, done)
         return obs, reward, terminated, truncated, info
+
+    # --- servo and timing factors (beyond Table II) -------------------------------------------------------------
+    def _step_servo_substeps(self, target: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
+        """One control period, one physics substep at a time: the step's target arrives after its jitter delay,
+        the setpoint follows it at most at the velocity limit, and backlash leaves a dead zone around it."""
+        dr, n_sub = self.cfg.dr, self.cfg.physics.substeps
+        dt = self.cfg.physics.timestep
+        delay = np.zeros(self.num_envs, dtype=np.int64)
+        if dr.period_jitter_s:
+            counter = self.episode * 100_003 + self.episode_length
+            delay = randomization.draw_jitter_substeps(dr, self.env_seeds, counter, n_sub)
+        failed = np.zeros(self.num_envs, dtype=bool)
+        for k in range(n_sub):
+            goal = np.where((k >= delay)[:, None], target, self._last_target)
+            if dr.velocity_limit_rad_s:
+                step = dr.velocity_limit_rad_s * dt
+                self._setpoint = self._setpoint + np.clip(goal - self._setpoint, -step, step)
+            else:
+                self._setpoint = goal
+            cmd = self._setpoint
+            if dr.backlash_rad:
+                q = self._qpos[:, observations.JOINTS]
+                err = cmd - q
+                cmd = q + np.sign(err) * np.maximum(np.abs(err) - dr.backlash_rad / 2, 0.0)
+            self._ctrl[:] = cmd
+            failed |= self.physics.step(1) if ids is None else self.physics.step(1, ids)
+        return failed
+
+    def delta_for_target(self, target: np.ndarray, ids: slice | np.ndarray | None = None) -> np.ndarray:
+        """The step (n, 9) that makes the servos of all envs (or `ids`) go to absolute `target`s given in the
+        joints' measured frame: target - (q + calibration offset). Without an offset, target - q."""
+        sel = slice(None) if ids is None else ids
+        q = self._qpos[sel, observations.JOINTS]
+        if self.cfg.dr.joint_calibration_rad:
+            q = q + self.sensor_draw.joint_offset[sel]
+        return np.asarray(target, dtype=np.float64) - q
+
+    def _delayed(self, obs: dict[str, np.ndarray], done: np.ndarray) -> dict[str, np.ndarray]:
+        """Push this step's observation into the ring and return the one from `obs_latency_steps` ago (an episode
+        that just ended reports its own final observation, and a fresh one its first, undelayed)."""
+        out = {}
+        for k, v in obs.items():
+            ring = np.roll(self._obs_ring[k], -1, axis=0)
+            ring[-1] = v
+            self._obs_ring[k] = ring
+            out[k] = np.where(done[:, None], v, ring[0])
+        return out
+
+    def _start_hold_push(self) -> None:
+        due = np.flatnonzero((self.lifted_steps == HOLD_PUSH_AFTER_STEPS) & ~self.hold_pushed)
+        if due.size:
+            force = randomization.draw_hold_push(self.cfg.dr, self.env_seeds[due], self.episode[due])
+            xfrc = self._xfrc[due]
+            xfrc[:, self._object_body, :3] += force
+            self._xfrc[due] = xfrc
+            self.hold_pushed[due] = True
+            self._hold_pushing[due] = True
+
+    def _clear_hold_push(self) -> None:
+        ids = np.flatnonzero(self._hold_pushing)
+        if ids.size:
+            xfrc = self._xfrc[ids]
+            xfrc[:, self._object_body, :3] = 0.0
+            self._xfrc[ids] = xfrc
+            self._hold_pushing[ids] = False
 
     def _update_pushes(self) -> None:
         """Table II random force: a push of U[-0.3, 0.3] N per axis lasting one control step (50 ms), at random
@@ -347,6 +480,7 @@ class BatchedGraspEnv:
             self.prev_action[sel],
             noise,
             self.cfg.dr,
+            randomization.SensorDraw(self.sensor_draw.force_bias[sel], self.sensor_draw.joint_offset[sel]),
         )
         if ids is None:
             self._raw = raw

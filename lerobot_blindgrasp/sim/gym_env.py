@@ -145,7 +145,7 @@ class BlindGraspGymEnv(gym.Env):
             raise ValueError(f"action has NaN/inf entries: {target.tolist()}")
         # Targets beyond the joint limits are not rejected (a policy may overshoot a limit slightly: a command, not
         # a bug): the sim clips the step to +-0.3 rad and the servo target to the limits, as the real gripper does.
-        delta = target - self._sim.joint_positions()[0]
+        delta = self._sim.delta_for_target(target[None, :])[0]  # in the joints' measured (calibrated) frame
         obs, reward, terminated, truncated, info = self._sim.step(delta[None, :])
         self._done = bool(terminated[0] or truncated[0])
         step_info = {

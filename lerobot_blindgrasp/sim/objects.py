@@ -14,7 +14,7 @@ replicas like the paper's 3D-printed ID objects. The large cuboid A is then 300 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 OBJECT_DENSITY = 400.0  # kg/m^3
 
@@ -104,6 +104,14 @@ EVERYDAY: tuple[ObjectSpec, ...] = (
 )
 # Tried and left out: a marker lying down (radius 0.9 cm) and a flat soap bar (3.5 cm tall). The teacher itself lifts
 # them 0/10 and 6/10 times: they are outside what this gripper reaches at table height, not a test of the student.
+
+
+def scaled(obj: ObjectSpec, scale: float) -> ObjectSpec:
+    """`obj` with every dimension x `scale` (same density, so mass x scale^3); `obj` itself at scale 1."""
+    if scale == 1.0:
+        return obj
+    mass = None if obj.mass_kg is None else obj.mass_kg * scale**3
+    return replace(obj, size=tuple(scale * v for v in obj.size), mass_kg=mass)
 
 
 def register_object(obj: ObjectSpec) -> None:

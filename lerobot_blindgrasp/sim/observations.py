@@ -14,7 +14,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import force, spec
 from lerobot_blindgrasp.sim import randomization, rewards, sensors
 
 # Where the state lives in qpos/qvel: the nine gripper hinges first (spec.JOINT_NAMES order), then the object's
@@ -55,6 +55,16 @@ def _scaled_noise(noise: np.ndarray, dr: randomization.DomainRandomization) -> d
     return out
 
 
+def _uniaxial_reading(uni_true, noise, dr, sensor_draw) -> np.ndarray:
+    """The load cells' readings: gain, bias, noise and range (force.load_cell), a dead cell, then the deadband."""
+    bias = sensor_draw.force_bias if sensor_draw is not None and dr.force_bias_n else 0.0
+    signal = force.load_cell(uni_true, noise, gain=dr.force_gain, bias=bias, range_n=dr.force_range_n)
+    if dr.dead_force_sensor >= 0:
+        signal = signal.copy()
+        signal[:, dr.dead_force_sensor] = 0.0
+    return sensors.reading(signal)
+
+
 def observe(
     qpos: np.ndarray,
     qvel: np.ndarray,
@@ -64,8 +74,14 @@ def observe(
     prev_action: np.ndarray,
     noise: np.ndarray,
     dr: randomization.DomainRandomization,
+    sensor_draw: randomization.SensorDraw | None = None,
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """(raw, obs) for the envs whose state is given (rows of qpos, qvel, sensordata, ...)."""
+    """(raw, obs) for the envs whose state is given (rows of qpos, qvel, sensordata, ...; `sensor_draw` holds the
+    same rows' force biases and joint calibration offsets, None when both are zero).
+
+    The sensor errors beyond Table II (gain, bias, range, a dead cell, calibration offset) act on the two measured
+    quantities a real gripper has, `joint_pos` and `uniaxial_force`, in the student's o_t and in the teacher's
+    vector alike; the teacher's sim-only readings (contact force, wrench) keep Table II's noise only."""
     contact = si.read(sensordata, "contact")
     tip_quat = si.read(sensordata, "quat")
     uni_true = sensors.uniaxial_force(contact, si.read(sensordata, "zaxis"))
@@ -85,8 +101,11 @@ def observe(
     nz = _scaled_noise(noise, dr)
     n = qpos.shape[0]
     wrench = np.concatenate([si.read(sensordata, "force"), si.read(sensordata, "torque")], axis=2)
+    joint_pos = raw["q"] + nz["joint_pos"]
+    if sensor_draw is not None and dr.joint_calibration_rad:
+        joint_pos = joint_pos + sensor_draw.joint_offset
     parts = {
-        "joint_pos": raw["q"] + nz["joint_pos"],
+        "joint_pos": joint_pos,
         "joint_vel": qvel[:, JOINTS],
         "fingertip_pos": si.read(sensordata, "pos").reshape(n, -1),
         "fingertip_quat": tip_quat.reshape(n, -1),
@@ -97,7 +116,7 @@ def observe(
         "fingertip_contact_force": sensors.contact_force_tip_frame(contact, tip_quat).reshape(n, -1)
         + nz["fingertip_contact_force"],
         "object_planar_distance": raw["d_xy"][:, None],
-        "uniaxial_force": sensors.reading(uni_true, nz["uniaxial_force"]),  # noise, then the deadband
+        "uniaxial_force": _uniaxial_reading(uni_true, nz["uniaxial_force"], dr, sensor_draw),
         "fingertip_wrench": wrench.reshape(n, -1) + nz["fingertip_wrench"],
         "previous_action": prev_action,
     }

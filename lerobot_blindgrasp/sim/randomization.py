@@ -9,6 +9,13 @@ construction (paper, Sec. III-B). Deviations and readings of the table:
 - Random force: each env pushes its object with a force whose components are U[-0.3, 0.3] N for one control step
   (50 ms) "at randomly selected times", U[0, 10] s apart. A force held between pushes rolls spheres and capsules
   off the table (see `BatchedGraspEnv._update_pushes`). Off for demo collection and lerobot-eval.
+
+Beyond Table II, the same dataclass carries the conditions a real gripper may differ in (sensor gain, bias, range,
+a dead load cell, joint calibration, backlash, torque and velocity limits, latency, period jitter, object size,
+pushes during the hold). Their defaults are the paper's sim exactly, so every preset above is unchanged; the
+robustness sweep (`lerobot_blindgrasp/robustness/`) sets them one at a time, and training can set them too. Where
+each acts: the sensor model in `sim/observations.py` and `force.py`, the servo and timing model in `sim/env.py`,
+the object size in `sim/objects.py`. `ROBUSTNESS_FIELDS` names them.
 """
 
 from __future__ import annotations
@@ -35,6 +42,45 @@ class DomainRandomization:
     external_force: bool = True
     joint_noise_rad: float = spec.JOINT_NOISE_STD_RAD
     force_noise_n: float = spec.FORCE_NOISE_STD_N
+    # --- beyond Table II (robustness); the defaults are the paper's sim exactly -----------------------------------
+    # Load cells: reading = clip(gain x true + bias + noise, +-range), then the deadband (force.reading).
+    force_gain: float = 1.0  # every load cell's scale error (x true force)
+    force_bias_n: float = 0.0  # constant tare error of this size on each load cell, sign drawn per env and cell
+    force_range_n: float = 0.0  # saturation: readings clipped to +-range (N); 0 = no saturation
+    dead_force_sensor: int = -1  # index into spec.FINGERS of a load cell that reads 0 throughout; -1 = none
+    # Joints: a reading is q + calibration offset + noise; the servo holds its target in that same (offset) frame.
+    joint_calibration_rad: float = 0.0  # offset of this size on every joint, sign drawn per env and joint
+    backlash_rad: float = 0.0  # gearbox play: the servo exerts no torque within +-backlash/2 of its target
+    # Servos (the position gains are kp_scale/kv_scale above).
+    torque_limit_scale: float = 1.0  # x the 4.1 N m stall torque: a lower current limit caps actuator force
+    velocity_limit_rad_s: float = 0.0  # profile velocity: the setpoint moves at most this fast; 0 = no limit
+    # Timing, in 20 Hz control steps / seconds.
+    obs_latency_steps: int = 0  # the observation returned at step t is the one measured at t - k
+    action_latency_steps: int = 0  # the target sent at step t reaches the servos at step t + k
+    period_jitter_s: float = 0.0  # each step's target reaches the servos U[0, jitter] late (5 ms substeps)
+    # Objects.
+    object_size_scale: float = 1.0  # every object's dimensions x this (same density: mass x scale^3)
+    hold_push_n: float = 0.0  # one push of this size (random 3-D direction, 50 ms) 0.5 s into each hold
+
+    def __post_init__(self):
+        for name in ("force_range_n", "joint_calibration_rad", "backlash_rad", "velocity_limit_rad_s",
+                     "period_jitter_s", "hold_push_n", "force_bias_n", "joint_noise_rad", "force_noise_n"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("force_gain", "torque_limit_scale", "object_size_scale"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.obs_latency_steps < 0 or self.action_latency_steps < 0:
+            raise ValueError("latencies are whole control steps >= 0")
+        if not -1 <= self.dead_force_sensor < spec.NUM_FORCES:
+            raise ValueError(f"dead_force_sensor must be -1 or a finger index < {spec.NUM_FORCES}")
+        if self.period_jitter_s > spec.CONTROL_DT:
+            raise ValueError(f"period_jitter_s must be <= one control period ({spec.CONTROL_DT} s)")
+
+    @property
+    def substep_servo(self) -> bool:
+        """Whether the servo model needs the control period stepped one physics substep at a time."""
+        return bool(self.backlash_rad or self.velocity_limit_rad_s or self.period_jitter_s)
 
 
 PAPER_DR = DomainRandomization()
@@ -53,6 +99,13 @@ NO_DR = DomainRandomization(
     external_force=False,
     joint_noise_rad=0.0,
     force_noise_n=0.0,
+)
+
+# The fields past Table II; a dataset card lists them only where they differ from the default.
+ROBUSTNESS_FIELDS: tuple[str, ...] = (
+    "force_gain", "force_bias_n", "force_range_n", "dead_force_sensor", "joint_calibration_rad", "backlash_rad",
+    "torque_limit_scale", "velocity_limit_rad_s", "obs_latency_steps", "action_latency_steps", "period_jitter_s",
+    "object_size_scale", "hold_push_n",
 )
 
 
@@ -96,3 +149,38 @@ def draw_push(dr: DomainRandomization, seeds: np.ndarray, counter: np.ndarray) -
     period_s = rng.between(u[:, 3], *dr.push_period_s)
     steps = np.maximum(1, np.ceil(period_s * spec.CONTROL_HZ)).astype(np.int64)
     return force, steps
+
+
+@dataclass
+class SensorDraw:
+    """Per-env sensor errors, drawn once: (num_envs, 3) force bias (N) and (num_envs, 9) joint offsets (rad)."""
+
+    force_bias: np.ndarray
+    joint_offset: np.ndarray
+
+
+def _signs(u: np.ndarray) -> np.ndarray:
+    return np.where(u < 0.5, -1.0, 1.0)
+
+
+def draw_sensors(dr: DomainRandomization, seeds: np.ndarray) -> SensorDraw:
+    """Each load cell's bias and each joint's calibration offset: the configured size, a random sign per env."""
+    u = rng.uniform(seeds, rng.STREAM_SENSOR, 0, spec.NUM_FORCES + spec.NUM_JOINTS)
+    return SensorDraw(
+        force_bias=dr.force_bias_n * _signs(u[:, : spec.NUM_FORCES]),
+        joint_offset=dr.joint_calibration_rad * _signs(u[:, spec.NUM_FORCES :]),
+    )
+
+
+def draw_hold_push(dr: DomainRandomization, seeds: np.ndarray, episode: np.ndarray) -> np.ndarray:
+    """(n, 3) the hold push of each env's episode: `hold_push_n` in a uniformly random 3-D direction."""
+    g = rng.normal(seeds, rng.STREAM_HOLD_PUSH, episode, 3)
+    return dr.hold_push_n * g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+
+
+def draw_jitter_substeps(dr: DomainRandomization, seeds: np.ndarray, counter: np.ndarray, substeps: int) -> np.ndarray:
+    """(n,) integer substeps by which this control step's target reaches the servos late: U[0, jitter], quantized
+    to the physics timestep (the period lasts 50 ms on average; each command arrives 0..jitter late)."""
+    dt = spec.CONTROL_DT / substeps
+    u = rng.uniform(seeds, rng.STREAM_JITTER, counter, 1)[:, 0]
+    return np.minimum(np.floor(u * (dr.period_jitter_s / dt + 1)), substeps - 1).astype(np.int64)

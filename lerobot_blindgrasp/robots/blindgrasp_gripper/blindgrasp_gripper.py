@@ -38,6 +38,7 @@ from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.robustness.envelope import force_bias_warning
 from lerobot_blindgrasp.xm430 import (
     MODEL,
     RAD_PER_TICK,
@@ -184,6 +185,8 @@ class BlindgraspGripper(Robot):
             self.force.wait_first_frame()
             self.force.tare(self.config.force_sensor.tare_s)
             self.configure()
+            if warning := force_bias_warning(self.force.read()):  # at rest, holding the start pose
+                logger.warning(warning)
         self.timing.restart()
         logger.info("%s connected (force tare %s counts).", self, np.round(self.force.offset).tolist())
 

@@ -42,10 +42,11 @@ class BatchBackend:
         # warnings raised by the reset itself are not failures of the next step
         self._warnings_seen[ids] = self.batch.warning[ids, :, 1].sum(axis=1)
 
-    def step(self, nstep: int) -> np.ndarray:
+    def step(self, nstep: int, ids: np.ndarray | None = None) -> np.ndarray:
+        """`nstep` physics steps for all envs, or only `ids` (the others keep their state)."""
         failed = np.zeros(self.num_envs, dtype=bool)
         try:
-            self.batch.step(nstep=nstep)
+            self.batch.step(ids=ids, nstep=nstep)
         except mjbatch.SimulationError as e:  # those sims kept their old state; the env resets them
             failed[e.ids] = True
         warn = self.batch.warning[:, :, 1].sum(axis=1)
