@@ -20,6 +20,7 @@ from lerobot_blindgrasp.envs.sim_env import object_for_task_id
 from lerobot_blindgrasp.grasp_strips import write_grasp_strips
 from lerobot_blindgrasp.plots import bar_chart, plot_curves, teacher_curves
 from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp import durable
 
 _LOSS_LINE = re.compile(r"step:\s*([\d.]+[KMB]?)\b.*?\bloss:\s*([\d.eE+-]+)")
 
@@ -188,5 +189,5 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
         lines += [f"- {d}" for d in record["deviations"]] + [""]
     lines += ["## Next", "", bigger]
     path = out / "report.md"
-    path.write_text("\n".join(lines) + "\n")
+    durable.atomic_write_text(path, "\n".join(lines) + "\n")
     return path

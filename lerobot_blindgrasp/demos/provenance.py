@@ -8,6 +8,7 @@ and to continue with env seeds no earlier run used.
 from __future__ import annotations
 
 import json
+from lerobot_blindgrasp import durable
 from pathlib import Path
 
 PROVENANCE_NAME = "collection.json"
@@ -32,10 +33,7 @@ def load(root: Path) -> dict:
 
 
 def save(root: Path, data: dict) -> None:
-    p = path(root)
-    tmp = p.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2))
-    tmp.replace(p)  # atomic: a crash never leaves half a file
+    durable.atomic_write_json(path(root), data, indent=2)
 
 
 def mismatches(old: dict, new: dict) -> list[str]:

@@ -7,6 +7,7 @@ that already had their quota (their curation outcome still measures the yield); 
 from __future__ import annotations
 
 import json
+from lerobot_blindgrasp import durable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -89,7 +90,7 @@ def format_table(tally: Tally, order: list[str] | None = None) -> str:
 
 def write_report(root: Path, tally: Tally, extra: dict) -> Path:
     path = Path(root) / REPORT_NAME
-    path.write_text(json.dumps({**extra, **tally.to_json()}, indent=2))
+    durable.atomic_write_json(path, {**extra, **tally.to_json()}, indent=2)
     return path
 
 

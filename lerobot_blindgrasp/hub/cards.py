@@ -24,6 +24,7 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, report
 from lerobot_blindgrasp.sim import objects, randomization
+from lerobot_blindgrasp import durable
 
 TEMPLATE_PACKAGE, TEMPLATE_DIR = "lerobot_blindgrasp.hub", "card_templates"
 TEMPLATES = {"sim": "sim_teacher_demos.md", "glove": "glove_teleop_demos.md"}
@@ -214,7 +215,7 @@ def write_card(root: Path, repo_id: str, **kwargs) -> Path:
     card = build_card(card_kwargs(root, repo_id, **kwargs), repo_id)
     validate(str(card))
     out = Path(root) / CARD_NAME
-    card.save(out)
+    durable.atomic_write_text(out, str(card))  # what DatasetCard.save writes, but atomically
     return out
 
 

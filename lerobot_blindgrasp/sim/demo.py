@@ -23,6 +23,7 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import gym_env, objects, randomization
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
+from lerobot_blindgrasp import durable
 
 LIFT_M = 0.03
 
@@ -136,7 +137,8 @@ def run_demo(
         from lerobot.utils.io_utils import write_video  # the writer lerobot-eval uses for its videos (PyAV, H.264)
 
         output.parent.mkdir(parents=True, exist_ok=True)
-        write_video(str(output), frames, spec.CONTROL_HZ)
+        with durable.atomic_path(output) as tmp:
+            write_video(str(tmp), frames, spec.CONTROL_HZ)
         summary["video"] = str(output)
     return summary
 

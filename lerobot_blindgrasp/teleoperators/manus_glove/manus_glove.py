@@ -20,6 +20,7 @@ from lerobot.utils.decorators import check_if_already_connected, check_if_not_co
 from lerobot.utils.errors import DeviceNotConnectedError
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import durable
 
 from . import retarget as rt
 from .config_manus_glove import ManusGloveConfig
@@ -119,7 +120,8 @@ class ManusGlove(Teleoperator):
         self.calibration = cal
 
     def _save_calibration(self, fpath: Path | None = None) -> None:
-        with open(fpath or self.calibration_fpath, "w") as f, draccus.config_type("json"):
+        # Atomic: a failed save (a full disk) keeps the previous calibration and says why (durable.WriteError).
+        with durable.atomic_open(fpath or self.calibration_fpath) as f, draccus.config_type("json"):
             draccus.dump(self.calibration, f, indent=4)
 
     @check_if_already_connected

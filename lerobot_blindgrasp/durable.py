@@ -1,0 +1,171 @@
+"""Atomic file writes: a file is either its old self or completely replaced, whatever happens during the write.
+
+The standard idiom (as in SQLite's rollback journal spirit, Orbax and PyTorch Lightning checkpoints): write a
+temporary file in the target's folder (same filesystem, so the rename is atomic), flush and fsync it, `os.replace`
+it over the target, then fsync the folder so the rename itself survives a power cut. A kill at any instant leaves
+the old file byte-identical or the new one complete, plus at worst a hidden `.NAME.tmp-*` file that
+`remove_stale_temps` clears.
+
+    atomic_write_text(path, text)            atomic_write_bytes(path, data)
+    atomic_write_json(path, obj, indent=2)   with atomic_path(path) as tmp: writer(tmp)   # writers that want a path
+    with atomic_open(path) as f: draccus.dump(cfg, f)                                        # writers that want a file
+
+A failed write raises `WriteError`, which names the file and the cause in words (a full disk, the file-size limit,
+a quota) and leaves the old file as it was. `WriteError` deliberately is not an `OSError`: code that maps OSError to
+a device fault (the gripper's safety latch calls it a bus failure) must not relabel a disk problem.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import io
+import json
+import os
+import resource
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+TEMP_MARK = ".tmp-"
+
+_CAUSES = {
+    errno.ENOSPC: "the disk is full",
+    errno.EFBIG: "the file-size limit was reached (ulimit -f / RLIMIT_FSIZE)",
+    errno.EDQUOT: "the disk quota is exhausted",
+    errno.EROFS: "the filesystem is read-only",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "operation not permitted",
+}
+
+
+class WriteError(Exception):
+    """A file could not be written; the previous file (if any) is unchanged. `errno` as in OSError, or None."""
+
+    def __init__(self, path: Path, cause: str, errno_: int | None = None):
+        self.path, self.cause, self.errno = Path(path), cause, errno_
+        super().__init__(f"could not write {path}: {cause}; the previous file is unchanged")
+
+
+def describe(e: BaseException) -> str:
+    """A write failure in words: 'the disk is full (ENOSPC)' rather than an errno number."""
+    code = getattr(e, "errno", None)
+    if code in _CAUSES:
+        return f"{_CAUSES[code]} ({errno.errorcode[code]})"
+    return f"{type(e).__name__}: {e}"
+
+
+def _diagnose(tmp: Path) -> tuple[str, int] | None:
+    """Why a third-party writer failed when it reports a generic error (torch.save raises RuntimeError 'file write
+    failed'): the temp file at the file-size limit, or no free space left. None when neither holds."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    with contextlib.suppress(OSError):
+        if soft != resource.RLIM_INFINITY and tmp.stat().st_size >= soft:
+            return _CAUSES[errno.EFBIG] + " (EFBIG)", errno.EFBIG
+    with contextlib.suppress(OSError):
+        if shutil.disk_usage(tmp.parent).free == 0:
+            return _CAUSES[errno.ENOSPC] + " (ENOSPC)", errno.ENOSPC
+    return None
+
+
+def fsync_dir(folder: Path) -> None:
+    """Make a rename in `folder` durable (a no-op where folders cannot be opened, e.g. Windows)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # some filesystems refuse fsync on directories; the rename is still atomic
+    finally:
+        os.close(fd)
+
+
+def _temp_name(path: Path) -> Path:
+    # Hidden, in the same folder, and ending in the target's suffix: writers that pick a format from the name
+    # (savefig, torch exporters) still do, and globs such as model_*.pt never match a temp file.
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}{TEMP_MARK}", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    return Path(name)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike, mode: int | None = None) -> Iterator[Path]:
+    """Yield a temporary path beside `path`; once the block ends normally, the temp file is fsynced and renamed over
+    `path`. On any error the temp file is removed and `path` is untouched. `mode`: the new file's permissions
+    (default: the old file's, else 0o644 less the umask)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        tmp = _temp_name(path)
+    except OSError as e:
+        raise WriteError(path, describe(e), e.errno) from e
+    try:
+        yield tmp
+        _fsync_file(tmp)
+        os.chmod(tmp, mode if mode is not None else _mode_for(path))
+        os.replace(tmp, path)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise WriteError(path, describe(e), e.errno) from e
+    except BaseException as e:
+        why = _diagnose(tmp) if isinstance(e, Exception) else None
+        tmp.unlink(missing_ok=True)
+        if why is not None:
+            raise WriteError(path, f"{why[0]} ({type(e).__name__}: {e})", why[1]) from e
+        raise
+    fsync_dir(path.parent)
+
+
+@contextlib.contextmanager
+def atomic_open(path: str | os.PathLike, mode: str = "w", encoding: str | None = "utf-8") -> Iterator[io.IOBase]:
+    """A file object for writers that want one (json.dump, draccus.dump); replaced atomically on success."""
+    with atomic_path(path) as tmp, open(tmp, mode, encoding=None if "b" in mode else encoding) as f:
+        yield f
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> Path:
+    return atomic_write_bytes(path, text.encode(encoding))
+
+
+def atomic_write_json(path: str | os.PathLike, obj, **json_kwargs) -> Path:
+    """json.dumps(obj, **json_kwargs) written atomically (serialized first: a bad object leaves no temp file)."""
+    return atomic_write_text(path, json.dumps(obj, **json_kwargs))
+
+
+def remove_stale_temps(folder: str | os.PathLike, recursive: bool = False) -> list[Path]:
+    """Delete temp files that a killed writer left in `folder`; returns them. Only for folders this process
+    owns (another process writing there at the same time would lose its temp file)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    pattern = f"**/.*{TEMP_MARK}*" if recursive else f".*{TEMP_MARK}*"
+    gone = [p for p in folder.glob(pattern) if p.is_file()]
+    for p in gone:
+        p.unlink(missing_ok=True)
+    return gone
+
+
+def _fsync_file(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _mode_for(path: Path) -> int:
+    try:
+        return path.stat().st_mode & 0o777
+    except FileNotFoundError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask
