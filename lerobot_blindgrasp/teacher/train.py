@@ -302,6 +302,7 @@ def export(runner, path: Path) -> None:
 
 def main(argv=None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    logging.getLogger("blindgrasp").setLevel(logging.INFO)  # LeRobot's imports may have configured the root first
     train(parse_config(TrainTeacherConfig, argv))
 
 
