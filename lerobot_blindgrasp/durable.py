@@ -92,10 +92,12 @@ def _temp_name(path: Path) -> Path:
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike, mode: int | None = None) -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike, mode: int | None = None, fsync: bool = True) -> Iterator[Path]:
     """Yield a temporary path beside `path`; once the block ends normally, the temp file is fsynced and renamed over
     `path`. On any error the temp file is removed and `path` is untouched. `mode`: the new file's permissions
-    (default: the old file's, else 0o644 less the umask)."""
+    (default: the old file's, else 0o644 less the umask). fsync=False: still atomic against a killed process (the
+    page cache outlives it), not against a power cut; for files rewritten many times a second whose caller fsyncs
+    at its own checkpoints (`fsync_tree`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
@@ -104,7 +106,8 @@ def atomic_path(path: str | os.PathLike, mode: int | None = None) -> Iterator[Pa
         raise WriteError(path, describe(e), e.errno) from e
     try:
         yield tmp
-        _fsync_file(tmp)
+        if fsync:
+            _fsync_file(tmp)
         os.chmod(tmp, mode if mode is not None else _mode_for(path))
         os.replace(tmp, path)
     except OSError as e:
@@ -116,7 +119,8 @@ def atomic_path(path: str | os.PathLike, mode: int | None = None) -> Iterator[Pa
         if why is not None:
             raise WriteError(path, f"{why[0]} ({type(e).__name__}: {e})", why[1]) from e
         raise
-    fsync_dir(path.parent)
+    if fsync:
+        fsync_dir(path.parent)
 
 
 @contextlib.contextmanager
@@ -126,19 +130,41 @@ def atomic_open(path: str | os.PathLike, mode: str = "w", encoding: str | None =
         yield f
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
-    with atomic_path(path) as tmp:
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, fsync: bool = True) -> Path:
+    with atomic_path(path, fsync=fsync) as tmp:
         tmp.write_bytes(data)
     return Path(path)
 
 
-def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> Path:
-    return atomic_write_bytes(path, text.encode(encoding))
+def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8", fsync: bool = True) -> Path:
+    return atomic_write_bytes(path, text.encode(encoding), fsync=fsync)
 
 
-def atomic_write_json(path: str | os.PathLike, obj, **json_kwargs) -> Path:
+def atomic_write_json(path: str | os.PathLike, obj, fsync: bool = True, **json_kwargs) -> Path:
     """json.dumps(obj, **json_kwargs) written atomically (serialized first: a bad object leaves no temp file)."""
-    return atomic_write_text(path, json.dumps(obj, **json_kwargs))
+    return atomic_write_text(path, json.dumps(obj, **json_kwargs), fsync=fsync)
+
+
+def atomic_append_text(path: str | os.PathLike, text: str) -> Path:
+    """`text` appended to a small file (a log of trials) by rewriting it whole: a kill never leaves half a line."""
+    path = Path(path)
+    old = path.read_bytes() if path.exists() else b""
+    return atomic_write_bytes(path, old + text.encode())
+
+
+def fsync_tree(folder: str | os.PathLike, since: float = 0.0) -> int:
+    """fsync every file under `folder` modified at or after `since` (a time.time()), and their folders: what a
+    checkpoint makes durable against a power cut. Returns the number of files."""
+    folders, n = set(), 0
+    for p in Path(folder).rglob("*"):
+        with contextlib.suppress(OSError):
+            if p.is_file() and p.stat().st_mtime >= since:
+                _fsync_file(p)
+                folders.add(p.parent)
+                n += 1
+    for d in folders:
+        fsync_dir(d)
+    return n
 
 
 def remove_stale_temps(folder: str | os.PathLike, recursive: bool = False) -> list[Path]:

@@ -10,7 +10,8 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from lerobot_blindgrasp import durable
+
+from lerobot_blindgrasp import durable  # noqa: E402
 
 TEACHER_TAGS = (
     "Train/mean_reward",

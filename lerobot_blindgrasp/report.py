@@ -15,12 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_blindgrasp import rates
+from lerobot_blindgrasp import durable, rates
 from lerobot_blindgrasp.envs.sim_env import object_for_task_id
 from lerobot_blindgrasp.grasp_strips import write_grasp_strips
 from lerobot_blindgrasp.plots import bar_chart, plot_curves, teacher_curves
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp import durable
 
 _LOSS_LINE = re.compile(r"step:\s*([\d.]+[KMB]?)\b.*?\bloss:\s*([\d.eE+-]+)")
 

@@ -15,10 +15,9 @@ import json
 import sys
 from pathlib import Path
 
-from lerobot_blindgrasp import rates
+from lerobot_blindgrasp import durable, rates
 from lerobot_blindgrasp.presets import TABLE_V
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp import durable
 
 
 def row_successes(out: Path, name: str) -> dict[str, list[bool]] | None:

@@ -16,8 +16,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from lerobot_blindgrasp import durable  # noqa: E402
 from lerobot_blindgrasp.plots import teacher_curves  # noqa: E402
-from lerobot_blindgrasp import durable
 
 TAGS = (
     "Metrics/mean_contacts",

@@ -8,8 +8,9 @@ and to continue with env seeds no earlier run used.
 from __future__ import annotations
 
 import json
-from lerobot_blindgrasp import durable
 from pathlib import Path
+
+from lerobot_blindgrasp import durable
 
 PROVENANCE_NAME = "collection.json"
 FORMAT = "blindgrasp-demos/1"

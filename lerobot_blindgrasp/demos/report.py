@@ -7,9 +7,10 @@ that already had their quota (their curation outcome still measures the yield); 
 from __future__ import annotations
 
 import json
-from lerobot_blindgrasp import durable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+from lerobot_blindgrasp import durable
 
 REPORT_NAME = "yield_report.json"
 

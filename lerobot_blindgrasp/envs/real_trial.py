@@ -19,13 +19,12 @@ from __future__ import annotations
 import json
 import logging
 import time
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import gymnasium as gym
 import numpy as np
 
-from lerobot_blindgrasp import spaces, spec
+from lerobot_blindgrasp import durable, spaces, spec
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys
 from lerobot_blindgrasp.sim import objects
 
@@ -192,8 +191,7 @@ class RealGraspEnv(gym.Env):
                 "steps": self._t,
                 "peak_force_n": [round(float(f), 3) for f in self._peak],
             }
-            with Path(self.cfg.trial_log).open("a") as f:
-                f.write(json.dumps(record) + "\n")
+            durable.atomic_append_text(self.cfg.trial_log, json.dumps(record) + "\n")  # a kill leaves no half line
 
     def render(self) -> np.ndarray:
         """A 64 x 96 strip chart of the state (no camera on a blind gripper): 9 joint bars, 3 force bars."""

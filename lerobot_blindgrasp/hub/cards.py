@@ -20,11 +20,10 @@ from pathlib import Path
 
 import jinja2
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, report
 from lerobot_blindgrasp.sim import objects, randomization
-from lerobot_blindgrasp import durable
 
 TEMPLATE_PACKAGE, TEMPLATE_DIR = "lerobot_blindgrasp.hub", "card_templates"
 TEMPLATES = {"sim": "sim_teacher_demos.md", "glove": "glove_teleop_demos.md"}

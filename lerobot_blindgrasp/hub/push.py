@@ -18,9 +18,9 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import Legacy, parse_config
 from lerobot_blindgrasp.hub import REPO_ID_PATTERN, cards
-from lerobot_blindgrasp import durable
 
 # Not uploaded by LeRobot's push_to_hub (it ignores images/; state-only datasets have none anyway).
 _IGNORED_DIRS = ("images",)

@@ -19,11 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import gym_env, objects, randomization
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
-from lerobot_blindgrasp import durable
 
 LIFT_M = 0.03
 

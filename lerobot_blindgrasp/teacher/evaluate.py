@@ -15,7 +15,6 @@ states (paired), and none of them was used in teacher training or demo collectio
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,14 +22,13 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_blindgrasp import rates, spec
+from lerobot_blindgrasp import durable, rates, spec
 from lerobot_blindgrasp.cli import Legacy, parse_config
 from lerobot_blindgrasp.sim import objects, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.gym_env import start_seed
 from lerobot_blindgrasp.sim.randomization import EVAL_DR
 from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, default_teacher
-from lerobot_blindgrasp import durable
 
 MODES = ("deterministic", "stochastic")
 

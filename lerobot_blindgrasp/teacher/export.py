@@ -18,9 +18,9 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import Legacy, parse_config
 from lerobot_blindgrasp.teacher import policy
-from lerobot_blindgrasp import durable
 
 CARD_NAME = "README.md"
 PACKAGE = "lerobot_policy_blindgrasp"

@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
+from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import parse_config_and_positionals
 from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME
-from lerobot_blindgrasp import durable
 
 
 SMOOTHING = 25  # iterations in the trailing mean of every curve

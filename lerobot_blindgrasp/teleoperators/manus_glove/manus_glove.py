@@ -19,8 +19,7 @@ from lerobot.teleoperators.teleoperator import Teleoperator
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 from lerobot.utils.errors import DeviceNotConnectedError
 
-from lerobot_blindgrasp import spec
-from lerobot_blindgrasp import durable
+from lerobot_blindgrasp import durable, spec
 
 from . import retarget as rt
 from .config_manus_glove import ManusGloveConfig
