@@ -7,12 +7,13 @@ the old file byte-identical or the new one complete, plus at worst a hidden `.NA
 `remove_stale_temps` clears.
 
     atomic_write_text(path, text)            atomic_write_bytes(path, data)
-    atomic_write_json(path, obj, indent=2)   with atomic_path(path) as tmp: writer(tmp)   # writers that want a path
-    with atomic_open(path) as f: draccus.dump(cfg, f)                                        # writers that want a file
+    atomic_write_json(path, obj, indent=2)
+    with atomic_path(path) as tmp: writer(tmp)            # writers that want a path (savefig, torch.save)
+    with atomic_open(path) as f: draccus.dump(cfg, f)     # writers that want a file object
 
 A failed write raises `WriteError`, which names the file and the cause in words (a full disk, the file-size limit,
-a quota) and leaves the old file as it was. `WriteError` deliberately is not an `OSError`: code that maps OSError to
-a device fault (the gripper's safety latch calls it a bus failure) must not relabel a disk problem.
+a quota) and leaves the old file as it was. `WriteError` deliberately is not an `OSError`: code that maps OSError
+to a device fault (the gripper's safety latch calls it a bus failure) must not relabel a disk problem.
 """
 
 from __future__ import annotations
@@ -93,8 +94,8 @@ def _temp_name(path: Path) -> Path:
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, mode: int | None = None, fsync: bool = True) -> Iterator[Path]:
-    """Yield a temporary path beside `path`; once the block ends normally, the temp file is fsynced and renamed over
-    `path`. On any error the temp file is removed and `path` is untouched. `mode`: the new file's permissions
+    """Yield a temporary path beside `path`; once the block ends normally, the temp file is fsynced and renamed
+    over `path`. On any error the temp file is removed and `path` is untouched. `mode`: the new file's permissions
     (default: the old file's, else 0o644 less the umask). fsync=False: still atomic against a killed process (the
     page cache outlives it), not against a power cut; for files rewritten many times a second whose caller fsyncs
     at its own checkpoints (`fsync_tree`)."""

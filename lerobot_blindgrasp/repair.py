@@ -156,7 +156,8 @@ def inspect(root: Path) -> tuple[dict, RepairReport, dict]:
         if idx is None:
             report.first_problem = f"episode {k}'s frames are not in a readable data file"
             break
-        if lo != next_from or hi - lo != length or len(idx) != length or not np.array_equal(idx, np.arange(lo, hi)):
+        consistent = lo == next_from and hi - lo == length == len(idx) and np.array_equal(idx, np.arange(lo, hi))
+        if not consistent:
             report.first_problem = f"episode {k}'s frames do not match its metadata ({len(idx)} of {length} rows)"
             break
         missing = [
@@ -200,7 +201,7 @@ def repair(root: str | Path, dry_run: bool = False) -> RepairReport:
     report.removed = [rel(p) for p in plan["remove"]]
     report.rewritten = [rel(p) for p in plan["rewrite"]]
     tasks_ok = (root / TASKS).is_file() and _readable(root / TASKS) is not None
-    stats_ok = _json_ok(root / STATS)
+    stats_ok = _json_ok(root / STATS) if k else not (root / STATS).exists()
     counts = (info.get("total_episodes"), info.get("total_frames"))
     needs_meta = report.changed or counts != (k, report.kept_frames) or not tasks_ok or not stats_ok
     if needs_meta:
@@ -255,7 +256,8 @@ def _rebuild_tasks(root: Path, meta) -> None:
             tasks = meta.loc[meta["episode_index"] == ep, "tasks"]
             if len(tasks) and len(tasks.iloc[0]) == 1:
                 pairs.setdefault(int(ti), str(tasks.iloc[0][0]))
-    df = pd.DataFrame({"task_index": sorted(pairs)}, index=pd.Index([pairs[i] for i in sorted(pairs)], name="task"))
+    order = sorted(pairs)
+    df = pd.DataFrame({"task_index": order}, index=pd.Index([pairs[i] for i in order], name="task"))
     with durable.atomic_path(root / TASKS) as tmp:
         df.to_parquet(tmp)
 
@@ -279,8 +281,10 @@ def _write_stats(root: Path, meta, features: dict) -> None:
                 arr = np.array([np.asarray(v, dtype=np.float64).reshape(-1)[0] for v in arr]).reshape(-1, 1, 1)
             stats.setdefault(name, {})[stat] = arr
         per_episode.append(stats)
-    stats = aggregate_stats(per_episode) if per_episode else {}
-    durable.atomic_write_json(root / STATS, serialize_dict(stats), indent=4)
+    if not per_episode:  # no episode left: LeRobot expects no stats file rather than an empty one
+        (root / STATS).unlink(missing_ok=True)
+        return
+    durable.atomic_write_json(root / STATS, serialize_dict(aggregate_stats(per_episode)), indent=4)
 
 
 @dataclass

@@ -7,10 +7,11 @@ see `demos.dataset.skip_empty_image_embedding`), the same with LeRobot's default
 (LeRobot's default, as lerobot-record writes). Without --teacher a throwaway `quick` teacher is trained for one
 iteration: the speeds are real, its yield is not.
 
-With --durable_side_by_side=true (default) the same collection (same seeds, so the same rollouts) runs twice in this
-one process: first without crash checkpoints (`--checkpoint_s=0`, finalize only at the end: the behaviour before
-durable collection), then with them every `checkpoint_s` seconds (or `num_envs` episodes), so their cost is measured
-side by side: the `durable_*` keys, and `checkpoint_share_of_wall`, the time spent finalizing and reopening.
+With --durable_side_by_side=true (default) the same collection (same seeds, so the same rollouts) runs twice in
+this one process: first without crash checkpoints (`--checkpoint_s=0`, finalize only at the end: the behaviour
+before durable collection), then with them every `checkpoint_s` seconds (or `num_envs` episodes), so their cost is
+measured side by side: the `durable_*` keys, and `checkpoint_share_of_wall`, the time spent finalizing and
+reopening.
 """
 
 from __future__ import annotations
@@ -164,7 +165,7 @@ def run(cfg: BenchDemosConfig) -> dict:
                 durable_demos_per_minute=durable_run.demos_per_minute,
                 durable_throughput_ratio=durable_run.demos_per_minute / stats.demos_per_minute
                 if stats.demos_per_minute else 0.0,
-                checkpoint_share_of_wall=durable_run.checkpoint_s / durable_run.wall_s if durable_run.wall_s else 0.0,
+                checkpoint_share_of_wall=durable_run.checkpoint_s / max(durable_run.wall_s, 1e-9),
             )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

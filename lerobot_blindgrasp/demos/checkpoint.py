@@ -34,8 +34,8 @@ log = logging.getLogger("blindgrasp.demos")
 
 
 class Checkpoints:
-    """Holds the open dataset (`.ds`); call `written()` after every saved episode. `on_checkpoint()` runs after each
-    finalize, before the reopen: it records the run state that goes with the episodes now on disk."""
+    """Holds the open dataset (`.ds`); call `written()` after every saved episode. `on_checkpoint()` runs after
+    each finalize, before the reopen: it records the run state that goes with the episodes now on disk."""
 
     def __init__(self, ds, root, repo_id: str, every_s: float, every_episodes: int,
                  on_checkpoint: Callable[[int], None]):

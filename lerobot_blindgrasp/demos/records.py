@@ -139,12 +139,12 @@ def _repair(out: Path) -> None:
 
 def _existing_counts(root: Path, tally: report.Tally) -> None:
     """Kept episodes and frames per object, from the dataset itself (authoritative after a crash)."""
-    try:
-        table = demo_dataset.episode_table(root)
-    except FileNotFoundError:  # no episode written yet
-        return
     for o in tally.objects.values():
         o.kept, o.frames = 0, 0
+    try:
+        table = demo_dataset.episode_table(root)
+    except FileNotFoundError:  # no episode written yet (or none survived a crash)
+        return
     for name, group in table.groupby("object"):
         t = tally.of(name)
         t.kept, t.frames = len(group), int(group["length"].sum())
