@@ -163,6 +163,10 @@ def run(cfg: BenchDemosConfig) -> dict:
                 durable_wall_s=durable_run.wall_s,
                 durable_env_steps_per_s=durable_run.env_steps / durable_run.wall_s if durable_run.wall_s else 0.0,
                 durable_demos_per_minute=durable_run.demos_per_minute,
+                durable_cpu_s=durable_run.cpu_s,
+                durable_curated_demos_per_cpu_minute=durable_run.demos_per_cpu_minute,
+                durable_cpu_throughput_ratio=durable_run.demos_per_cpu_minute / stats.demos_per_cpu_minute
+                if stats.demos_per_cpu_minute else 0.0,
                 durable_throughput_ratio=durable_run.demos_per_minute / stats.demos_per_minute
                 if stats.demos_per_minute else 0.0,
                 checkpoint_share_of_wall=durable_run.checkpoint_s / max(durable_run.wall_s, 1e-9),
