@@ -60,7 +60,7 @@ def _kill_when(cmd: list[str], log: Path, ready, delay: float, timeout: float = 
     return log.read_text()
 
 
-def _run(cmd: list[str], timeout: float = 300) -> subprocess.CompletedProcess:
+def _run(cmd: list[str], timeout: float = 900) -> subprocess.CompletedProcess:
     proc = subprocess.run(cmd, capture_output=True, text=True, env=ENV, timeout=timeout)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
     return proc
