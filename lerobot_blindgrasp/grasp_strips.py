@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.envs.sim_env import object_for_task_id
 from lerobot_blindgrasp.sim import objects
 
@@ -99,7 +99,8 @@ def write_grasp_strips(eval_info: dict, out_png: Path, frames_per_row: int = 5, 
     fig.suptitle("Successful student grasps (lerobot-eval videos), one per shape", fontsize=9)
     fig.tight_layout()
     out_png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out_png, dpi=100)
+    with durable.atomic_path(out_png) as tmp:
+        fig.savefig(tmp, dpi=100)
     plt.close(fig)
     return out_png
 

@@ -20,7 +20,11 @@ Stages, each a real CLI run as a subprocess (its command and log are kept in <ou
 5. `report.md` with PNG plots: which teacher, teacher vs student success per object with 95 % Wilson intervals
    and paired counts, learning curves, demo yield, the preset's deviations from the paper, and the commands to
    go bigger.
-A stage whose output is complete is skipped, so re-running after an interruption continues where it stopped.
+Re-running the same command after an interruption or a kill continues where it stopped: a stage is skipped once
+it is marked completed in `pipeline.json`, a mark written (atomically) only after the stage's command succeeded,
+so a stage's partial output is never taken for a finished one. A stage cut short is run again, and resumes where
+its command can: the teacher from its newest checkpoint, the demos with `--resume=true` (repaired to their last
+checkpoint); the student and the evaluations start over.
 Env seeds: teacher training from `--seed`, demos from the demo range, evaluation from the eval range
 (`spec.SEED_RANGES`), so no start state is used twice.
 """
@@ -31,16 +35,18 @@ import json
 import os
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp import presets, recipe, spec
+from lerobot_blindgrasp import durable, presets, recipe, spec
 from lerobot_blindgrasp.cli import parse_config
 
 PRESETS = presets.PRESETS  # the registry itself, not a copy
+COMPLETED = "completed"  # pipeline.json: the stages that finished, in order
 DEMO_SEED_BLOCK = recipe.DEMO_SEED_BLOCK
 
 BIGGER = """\
@@ -88,21 +94,45 @@ class Stage:
         print(f"[pipeline] {name}: {shlex.join(cmd)}", flush=True)
         t = time.time()
         with open(log_path, "w") as log:
-            proc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, **(env or {})})
+            proc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, **(env or {})},
+                                  preexec_fn=_die_with_parent)
         wall = time.time() - t
-        self.record["stages"][name] = {"command": shlex.join(cmd), "wall_s": wall, "log": str(log_path)}
-        self._save()
+        self.record["stages"][name] = {"command": shlex.join(cmd), "wall_s": wall, "log": str(log_path),
+                                       "returncode": proc.returncode}
         if proc.returncode not in ok:
+            self._save()
             tail = log_path.read_text().splitlines()[-25:]
             raise SystemExit(f"[pipeline] {name} failed (exit {proc.returncode}); last lines of {log_path}:\n" + "\n".join(tail))
+        self.complete(name)
         print(f"[pipeline] {name} done in {wall:.0f} s", flush=True)
         return proc.returncode
 
     def skip(self, name: str, why: str) -> None:
         print(f"[pipeline] {name}: skipped ({why})", flush=True)
 
+    def complete(self, name: str) -> None:
+        """Mark a stage finished: the last thing written for it, after all of its output."""
+        done = self.record.setdefault(COMPLETED, [])
+        if name not in done:
+            done.append(name)
+        self._save()
+
+    def done(self, name: str, legacy: bool = False) -> bool:
+        """Whether a stage finished. `legacy`: the output check of pipeline.json files written before completion
+        marks existed (they have no COMPLETED list); ignored otherwise."""
+        return name in self.record[COMPLETED] if COMPLETED in self.record else legacy
+
     def _save(self) -> None:
-        (self.out / "pipeline.json").write_text(json.dumps(self.record, indent=2))
+        durable.atomic_write_json(self.out / "pipeline.json", self.record, indent=2)
+
+
+def _die_with_parent() -> None:
+    """In the stage's process, before exec: on Linux, be killed when the pipeline dies, even by SIGKILL. Otherwise
+    an orphaned stage would go on writing while the re-run pipeline starts the same stage in the same folder."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
 
 
 def _bin(name: str) -> str:
@@ -120,7 +150,7 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     spec.eval_env_seed(eval_seed + preset.evaluation.episodes_per_object - 1, 0)
     out.mkdir(parents=True, exist_ok=True)
     record_path = out / "pipeline.json"
-    record = json.loads(record_path.read_text()) if record_path.exists() else {"stages": {}}
+    record = json.loads(record_path.read_text()) if record_path.exists() else {"stages": {}, COMPLETED: []}
     record["preset"] = asdict(preset)
     record["deviations"] = list(preset.all_deviations)
     record["seeds"] = {"pipeline": seed, "demos_first_env_seed": demo_seed, "eval_index": eval_seed}
@@ -133,11 +163,12 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     teacher_dir, record["teacher"] = _teacher(stage, preset, out, seed, cfg.teacher)
     eval_objects = recipe.objects_of(preset.evaluation.task)
     teacher_eval = out / "teacher_eval"
-    if (teacher_eval / "eval.json").exists():
+    if stage.done("teacher_eval", legacy=(teacher_eval / "eval.json").exists()):
         stage.skip("teacher_eval", "done")
     elif _reuse_teacher_eval(teacher_dir, teacher_eval, preset, eval_seed, eval_objects):
         stage.skip("teacher_eval", f"the same start states were evaluated for this teacher in {teacher_dir / 'eval'}")
         record["teacher"]["eval_reused_from"] = str(teacher_dir / "eval")
+        stage.complete("teacher_eval")
     else:
         stage.run("teacher_eval", recipe.teacher_eval(preset, teacher_dir, teacher_eval, eval_seed))
 
@@ -161,7 +192,7 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     ckpt = recipe.checkpoint(student)
     cmd, sched = recipe.student_train(preset, train_set, repo, student, seed, device)
     record["student_schedule"] = asdict(sched)
-    if ckpt.exists():
+    if stage.done("student", legacy=ckpt.exists()):
         stage.skip("student", "trained")
     else:
         if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
@@ -173,7 +204,7 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
                               {**env1, "OMP_NUM_THREADS": str(preset.student.threads)})
     record["student_checkpoint"] = str(ckpt)
     student_eval = out / "student_eval"
-    if (student_eval / "eval_info.json").exists():
+    if stage.done("student_eval", legacy=(student_eval / "eval_info.json").exists()):
         stage.skip("student_eval", "done")
     else:
         stage.run("student_eval", recipe.student_eval(preset, ckpt, student_eval, eval_seed, device), env=env1)
@@ -224,7 +255,7 @@ def _teacher(stage: Stage, preset: presets.Preset, out: Path, seed: int, given: 
         return path, {"source": source, "path": str(path), "file": t.name, "sha256": t.sha256,
                       "iteration": t.iteration, "preset": t.config.get("preset")}
     teacher_dir = out / "teacher"
-    if recipe.teacher_trained(teacher_dir):
+    if stage.done("teacher", legacy=recipe.teacher_trained(teacher_dir)):
         stage.skip("teacher", "trained")
     else:
         spec.check_seeds("teacher_train", seed, preset.teacher.num_envs or preset.teacher.settings.num_envs)
@@ -256,20 +287,25 @@ def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: presets.Preset, e
         and prev.get("objects") == list(eval_objects)
         and set(preset.evaluation.teacher_modes) <= set(prev.get("modes", {}))
     )
-    if same:
-        shutil.copytree(src.parent, dest)
+    if same:  # copied beside dest, then renamed: a kill mid-copy leaves no eval.json that looks finished
+        tmp = dest.with_name(f".{dest.name}{durable.TEMP_MARK}copy")
+        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.copytree(src.parent, tmp)
+        shutil.rmtree(dest, ignore_errors=True)
+        os.replace(tmp, dest)
     return same
 
 
 def _collect(stage: Stage, preset: presets.Preset, teacher: Path, root: Path, repo_id: str, first_seed: int,
              curate: bool) -> Path:
     name = "demos" if curate else "demos_uncurated"
-    if recipe.demos_collected(root):
+    if stage.done(name, legacy=recipe.demos_collected(root)):
         stage.skip(name, "collected")
         return root
     from lerobot_blindgrasp.demos.collect import EXIT_EMPTY
 
-    # An empty curated set is handled by the caller (uncurated fallback).
+    # An empty curated set is handled by the caller (uncurated fallback). A collection cut short is resumed
+    # (recipe.collect adds --resume=true; the collector repairs a crashed folder first).
     stage.run(name, recipe.collect(preset, teacher, root, repo_id, first_seed, curate=curate), ok=(0, EXIT_EMPTY))
     return root
 

@@ -11,6 +11,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from lerobot_blindgrasp import durable  # noqa: E402
+
 TEACHER_TAGS = (
     "Train/mean_reward",
     "Metrics/success",
@@ -45,7 +47,8 @@ def plot_curves(path: Path, curves: dict, title: str) -> None:
         ax.grid(alpha=0.3)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with durable.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 
@@ -65,5 +68,6 @@ def bar_chart(path: Path, names: list[str], series: dict[str, list[float]], titl
     ax.legend(fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.01), ncol=ncol, frameon=False)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with durable.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)

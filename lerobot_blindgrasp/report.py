@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_blindgrasp import rates
+from lerobot_blindgrasp import durable, rates
 from lerobot_blindgrasp.envs.sim_env import object_for_task_id
 from lerobot_blindgrasp.grasp_strips import write_grasp_strips
 from lerobot_blindgrasp.plots import bar_chart, plot_curves, teacher_curves
@@ -195,5 +195,5 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
         lines += [f"- {d}" for d in record["deviations"]] + [""]
     lines += ["## Next", "", bigger]
     path = out / "report.md"
-    path.write_text("\n".join(lines) + "\n")
+    durable.atomic_write_text(path, "\n".join(lines) + "\n")
     return path

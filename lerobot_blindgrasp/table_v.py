@@ -15,7 +15,7 @@ import json
 import sys
 from pathlib import Path
 
-from lerobot_blindgrasp import rates
+from lerobot_blindgrasp import durable, rates
 from lerobot_blindgrasp.presets import TABLE_V
 from lerobot_blindgrasp.sim import objects
 
@@ -97,7 +97,7 @@ def write_table_v(out: Path) -> Path:
                   for n, r in done.items()}
         bar_chart(out / "table_v.png", names, series, "Table V in simulation: success per object", "success (%)")
     path = out / "table_v.md"
-    path.write_text("\n".join(lines) + "\n")
+    durable.atomic_write_text(path, "\n".join(lines) + "\n")
     return path
 
 

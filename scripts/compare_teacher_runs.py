@@ -16,6 +16,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from lerobot_blindgrasp import durable  # noqa: E402
 from lerobot_blindgrasp.plots import teacher_curves  # noqa: E402
 
 TAGS = (
@@ -46,7 +47,8 @@ def main() -> None:
         ax.grid(alpha=0.3)
     axes.flat[0].legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    with durable.atomic_path(out) as tmp:
+        fig.savefig(tmp, dpi=110)
 
 
 if __name__ == "__main__":

@@ -6,11 +6,18 @@ collection uses (`save_episode(episode_data=...)` with whole arrays, LeRobot's e
 see `demos.dataset.skip_empty_image_embedding`), the same with LeRobot's default pass, and `add_frame` per frame
 (LeRobot's default, as lerobot-record writes). Without --teacher a throwaway `quick` teacher is trained for one
 iteration: the speeds are real, its yield is not.
+
+With --durable_side_by_side=true (default) the same collection (same seeds, so the same rollouts) runs twice in
+this one process: first without crash checkpoints (`--checkpoint_s=0`, finalize only at the end: the behaviour
+before durable collection), then with them every `checkpoint_s` seconds (or `num_envs` episodes), so their cost is
+measured side by side: the `durable_*` keys, and `checkpoint_share_of_wall`, the time spent finalizing and
+reopening.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import shutil
 import tempfile
@@ -34,6 +41,8 @@ class BenchDemosConfig(BenchConfig):
     write_episodes: int = 40  # episodes re-written per writer path
     threads: int = 0  # physics threads (0: all CPUs)
     backend: str = "batch"  # physics: batch or warp (pip install .[gpu]; a GPU if there is one, else Warp's CPU)
+    durable_side_by_side: bool = True  # also run the collection with crash checkpoints, and compare
+    checkpoint_s: float = 10.0  # their interval here: 6x as often as the collector's default 60 s, a worst case
 
 
 CONFIG = BenchDemosConfig
@@ -94,6 +103,11 @@ def run(cfg: BenchDemosConfig) -> dict:
             if len(seen) < cfg.write_episodes and not ep.physics_failed:
                 seen.append(ep)
 
+        def collect_into(folder: str, checkpoint_s: float, on_episode=None):
+            c = dataclasses.replace(collect_cfg, output_dir=tmp / folder, checkpoint_s=checkpoint_s)
+            with contextlib.redirect_stderr(io.StringIO()):
+                return collect(c, on_episode=on_episode)
+
         collect_cfg = CollectConfig(
             teacher=teacher,
             output_dir=tmp / "demos",
@@ -107,8 +121,8 @@ def run(cfg: BenchDemosConfig) -> dict:
             backend=cfg.backend,
             progress=False,
         )
-        with contextlib.redirect_stderr(io.StringIO()):
-            stats = collect(collect_cfg, on_episode=keep_some)
+        stats = collect_into("demos", 0.0 if cfg.durable_side_by_side else cfg.checkpoint_s, keep_some)
+        durable_run = collect_into("demos_durable", cfg.checkpoint_s) if cfg.durable_side_by_side else None
         cpu_min = stats.cpu_s / 60.0
         whole = whole_default = per_frame = 0.0
         bars_were_off = datasets.are_progress_bars_disabled()
@@ -140,6 +154,23 @@ def run(cfg: BenchDemosConfig) -> dict:
             "frames_written_per_s_add_frame": per_frame,
             "writer_episodes": len(seen),
         }
+        if durable_run is not None:
+            result.update(
+                durable_checkpoint_s=cfg.checkpoint_s,
+                durable_checkpoints=durable_run.checkpoints,
+                durable_checkpoint_ms_mean=1000 * durable_run.checkpoint_s / max(1, durable_run.checkpoints),
+                durable_curated_demos=durable_run.kept,
+                durable_wall_s=durable_run.wall_s,
+                durable_env_steps_per_s=durable_run.env_steps / durable_run.wall_s if durable_run.wall_s else 0.0,
+                durable_demos_per_minute=durable_run.demos_per_minute,
+                durable_cpu_s=durable_run.cpu_s,
+                durable_curated_demos_per_cpu_minute=durable_run.demos_per_cpu_minute,
+                durable_cpu_throughput_ratio=durable_run.demos_per_cpu_minute / stats.demos_per_cpu_minute
+                if stats.demos_per_cpu_minute else 0.0,
+                durable_throughput_ratio=durable_run.demos_per_minute / stats.demos_per_minute
+                if stats.demos_per_minute else 0.0,
+                checkpoint_share_of_wall=durable_run.checkpoint_s / max(durable_run.wall_s, 1e-9),
+            )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     if not cfg.json:

@@ -38,6 +38,7 @@ LEGACY = Legacy(
 
 def main(argv=None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    logging.getLogger("blindgrasp").setLevel(logging.INFO)  # LeRobot's imports may have configured the root first
     cfg = parse_config(CollectConfig, argv, LEGACY)
     command = command_line("blindgrasp-collect-demos", argv)
     try:

@@ -46,7 +46,11 @@ class CollectConfig:
     # physics: batch (mujoco.batch, CPU) or warp (MuJoCo Warp on this process's GPU, else its CPU device;
     # pip install .[gpu]). The same task, draws and curation either way (docs/results/warp.md).
     backend: str = "batch"
-    resume: bool = False  # append to an existing output_dir until the targets are met
+    resume: bool = False  # append to an existing output_dir until the targets are met (repairs a crashed one first)
+    # Crash safety: the dataset is finalized and reopened (LeRobot rolls to fresh parquet files) at least every
+    # checkpoint_s seconds and every num_envs written episodes, so a kill loses at most that much. 0: only at the
+    # end (a kill then loses every episode of the run).
+    checkpoint_s: float = 60.0
     progress: bool = True  # progress bar
 
     def __post_init__(self):
@@ -56,6 +60,8 @@ class CollectConfig:
             raise ValueError("--repo_id is required (USER/NAME, the dataset's Hub id)")
         self.output_dir = Path(self.output_dir)
         check_backend(self.backend)  # a clear error before the teacher is loaded
+        if self.checkpoint_s < 0:
+            raise ValueError("--checkpoint_s must be >= 0 (0: finalize only at the end)")
         if not self.curation.enabled and self.curation.trim_to_success:
             # Nothing is trimmed without curation; one spelling in the provenance, so --resume compares alike.
             self.curation = dataclasses.replace(self.curation, trim_to_success=False)

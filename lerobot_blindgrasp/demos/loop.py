@@ -12,6 +12,8 @@ objects (new env seeds), so physics time goes to objects that still need demos.
 
 A first SIGINT/SIGTERM stops after the current control step; a second aborts at once, still finalizing
 (`cli.GracefulStop`). The dataset is finalized and the run recorded (`demos/records.py`) however the loop ends.
+A process killed without any handler (SIGKILL, a power cut) loses at most the episodes since the last checkpoint
+(`demos/checkpoint.py`: every `checkpoint_s` seconds or `num_envs` episodes); `--resume=true` goes on from there.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from collections.abc import Callable
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import GracefulStop
+from lerobot_blindgrasp.demos import checkpoint as checkpoint_mod
 from lerobot_blindgrasp.demos import curation as curation_mod
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, records
@@ -65,7 +68,7 @@ def _check_inputs(cfg: CollectConfig):
     if cfg.resume:
         if not out.is_dir():
             raise CollectError(f"--resume: {out} does not exist; drop --resume to start a new dataset")
-        if not provenance.path(out).is_file():
+        if not provenance.path(out).is_file() and not records.empty_leftover(out):
             raise CollectError(f"--resume: {out} was not written by blindgrasp-collect-demos (no collection.json)")
     elif out.exists():
         raise CollectError(f"{out} already exists; pass --resume=true to append to it, or a new --output_dir")
@@ -86,6 +89,11 @@ def collect(
 ) -> CollectStats:
     """Run a collection. Raises CollectError (nothing touched) for bad inputs; any later exception propagates
     after the dataset is finalized and the run is recorded. `command` is recorded as the run's command line."""
+    with checkpoint_mod.atomic_lerobot_metadata():  # LeRobot's info/stats/tasks files, atomically
+        return _collect(cfg, on_episode, command)
+
+
+def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: str | None) -> CollectStats:
     import datasets
     import torch
     from tqdm import tqdm
@@ -103,6 +111,14 @@ def collect(
     target, budget = cfg.episodes_per_object, cfg.rollout_budget
     stats = CollectStats(tally=tally)
     run = records.start_run(cfg, prov, command)
+    t_wall, t_cpu = time.perf_counter(), time.process_time()
+
+    def record_checkpoint(episodes: int) -> None:
+        stats.wall_s, stats.cpu_s = time.perf_counter() - t_wall, time.process_time() - t_cpu
+        records.checkpoint_run(cfg, prov, run, tally, stats)
+
+    saved = checkpoint_mod.Checkpoints(ds, cfg.output_dir, cfg.repo_id, cfg.checkpoint_s, cfg.num_envs,
+                                       record_checkpoint)
     torch.manual_seed(prov["next_env_seed"])  # the stochastic teacher's samples
 
     def done(name: str) -> bool:
@@ -112,7 +128,6 @@ def collect(
     # `datasets` draws a progress bar for every map LeRobot runs while saving; one per episode is noise here.
     bars_were_off = datasets.are_progress_bars_disabled()
     datasets.disable_progress_bars()
-    t_wall, t_cpu = time.perf_counter(), time.process_time()
     bar = tqdm(
         total=target * len(object_names),
         initial=sum(min(tally.of(n).kept, target) for n in object_names),
@@ -131,6 +146,8 @@ def collect(
                 spec.check_seeds("demos", prov["next_env_seed"], cfg.num_envs)  # a long --resume stays in range
                 env = _build_env(cfg, todo, prov["next_env_seed"], dr, reward_cfg)
                 prov["next_env_seed"] += cfg.num_envs  # later envs (and --resume) never repeat a draw
+                # On disk before any episode of these envs is: a resume after a kill never repeats their draws.
+                record_checkpoint(saved.ds.meta.total_episodes)
                 stats.env_builds += 1
                 env_objects = env.object_names
                 stale = {"now": False}
@@ -142,7 +159,9 @@ def collect(
                 episodes = run_episodes(env, act, lambda s=stale: stop.requested is not None or s["now"])
                 for ep in episodes:
                     with stop.saving():
-                        cut, written = _handle_episode(ds, ep, cfg.curation, tally, stats, target, bar)
+                        cut, written = _handle_episode(saved.ds, ep, cfg.curation, tally, stats, target, bar)
+                        if written:
+                            saved.written()
                     if on_episode is not None:
                         on_episode(ep, cut, written, stats)
                     if done(ep.object_name):
@@ -160,9 +179,10 @@ def collect(
         bar.close()
         if not bars_were_off:
             datasets.enable_progress_bars()
-        ds.finalize()  # closes the parquet writers: every saved episode is readable from here on
+        saved.ds.finalize()  # closes the parquet writers: every saved episode is readable from here on
         stats.wall_s = time.perf_counter() - t_wall
         stats.cpu_s = time.process_time() - t_cpu
+        stats.checkpoints, stats.checkpoint_s = saved.count, saved.seconds
         records.finish_run(cfg, prov, run, tally, stats)
     return stats
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from lerobot_blindgrasp import durable
+
 PROVENANCE_NAME = "collection.json"
 FORMAT = "blindgrasp-demos/1"
 
@@ -32,10 +34,7 @@ def load(root: Path) -> dict:
 
 
 def save(root: Path, data: dict) -> None:
-    p = path(root)
-    tmp = p.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2))
-    tmp.replace(p)  # atomic: a crash never leaves half a file
+    durable.atomic_write_json(path(root), data, indent=2)
 
 
 def mismatches(old: dict, new: dict) -> list[str]:

@@ -3,13 +3,18 @@
 A collection is one or more runs (`--resume=true` adds one) into one dataset folder. `open_dataset` starts or
 reopens the folder and its provenance; `start_run` and `finish_run` bracket each run, so `collection.json` lists
 every run with its outcome, however it ended, and `yield_report.json` and the card always describe the whole
-dataset.
+dataset. `yield_report.json` is written only when a run ends: it marks a finished collection.
+
+A run that is killed cannot record its end. `checkpoint_run` keeps `collection.json` current instead (the run in
+progress with its tally, and the next env seed before any episode of those envs is written), and `open_dataset`
+with --resume repairs the folder to its last checkpoint (`repair.py`), marks that run as killed and takes its tally.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
+import shutil
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -33,6 +38,8 @@ class CollectStats:
     frames: int = 0
     env_builds: int = 0
     stop_reason: str = ""  # "done" | "interrupted" | "error: ..."
+    checkpoints: int = 0  # finalize-and-reopen cycles (demos/checkpoint.py)
+    checkpoint_s: float = 0.0  # time they took
     tally: report.Tally = field(default_factory=report.Tally)
 
     @property
@@ -85,7 +92,11 @@ def open_dataset(cfg: CollectConfig, prov_new: dict):
     """Create the dataset folder, or reopen it for --resume after checking it was collected alike.
     Returns (dataset, provenance, tally)."""
     out = cfg.output_dir
-    if not cfg.resume:
+    if not cfg.resume or empty_leftover(out):
+        if cfg.resume:  # killed between LeRobot's create and the first collection.json: nothing to keep
+            log.warning("--resume: %s holds no episode and no collection.json (a run killed while starting); "
+                        "starting it afresh", out)
+            shutil.rmtree(out)
         ds = demo_dataset.create(out, cfg.repo_id)
         provenance.save(out, prov_new)
         return ds, prov_new, report.Tally()
@@ -93,23 +104,47 @@ def open_dataset(cfg: CollectConfig, prov_new: dict):
     bad = provenance.mismatches(prov, prov_new)
     if bad:
         raise CollectError(f"--resume: {out} was collected with different {', '.join(bad)}; use a new output_dir")
+    _repair(out)
     try:
         ds = demo_dataset.resume(out, cfg.repo_id)
     except (ValueError, FileNotFoundError) as e:
         raise CollectError(f"--resume: {e}") from None
     tally = report.load_tally(out)
+    last = prov["runs"][-1] if prov["runs"] else {}
+    if last.get("stop_reason") == RUNNING:  # the previous run was killed: its last checkpoint has the newest tally
+        last["stop_reason"], last["interrupted"] = "killed (resumed from its last checkpoint)", True
+        if "tally" in last:
+            tally = report.Tally.from_json(last.pop("tally"))
+        provenance.save(out, prov)
     _existing_counts(out, tally)
     return ds, prov, tally
 
 
+def empty_leftover(out: Path) -> bool:
+    """A folder that a collection killed while starting left behind: no collection.json, no data file."""
+    return out.is_dir() and not provenance.path(out).is_file() and not any((out / "data").rglob("*.parquet"))
+
+
+def _repair(out: Path) -> None:
+    """A crashed collection's folder back to its last checkpoint, saying what was kept and lost."""
+    from lerobot_blindgrasp import repair
+
+    try:
+        result = repair.repair(out)
+    except repair.RepairError as e:
+        raise CollectError(f"--resume: {e}") from None
+    if result.changed:
+        log.warning("--resume: the dataset was left unfinished by a crash; repaired it:\n%s", result.summary())
+
+
 def _existing_counts(root: Path, tally: report.Tally) -> None:
     """Kept episodes and frames per object, from the dataset itself (authoritative after a crash)."""
-    try:
-        table = demo_dataset.episode_table(root)
-    except FileNotFoundError:  # no episode written yet
-        return
     for o in tally.objects.values():
         o.kept, o.frames = 0, 0
+    try:
+        table = demo_dataset.episode_table(root)
+    except FileNotFoundError:  # no episode written yet (or none survived a crash)
+        return
     for name, group in table.groupby("object"):
         t = tally.of(name)
         t.kept, t.frames = len(group), int(group["length"].sum())
@@ -127,20 +162,34 @@ def start_run(cfg: CollectConfig, prov: dict, command: str | None) -> dict:
     }
 
 
+RUNNING = "running"  # the stop_reason of a run in progress; still there after a kill
+
+
+def checkpoint_run(cfg: CollectConfig, prov: dict, run: dict, tally: report.Tally, stats: CollectStats) -> None:
+    """Save collection.json with this run in progress and the tally that goes with the dataset on disk now."""
+    record = {**_run_outcome(run, stats, RUNNING), "tally": tally.to_json()}
+    provenance.save(cfg.output_dir, {**prov, "runs": [*prov["runs"], record]})
+
+
+def _run_outcome(run: dict, stats: CollectStats, stop_reason: str) -> dict:
+    return {
+        **run,
+        "ended": datetime.now(UTC).isoformat(timespec="seconds"),
+        "stop_reason": stop_reason,
+        "interrupted": stop_reason != "done",
+        "wall_s": stats.wall_s,
+        "cpu_s": stats.cpu_s,
+        "rollouts": stats.rollouts,
+        "kept": stats.kept,
+        "frames": stats.frames,
+        "env_steps": stats.env_steps,
+    }
+
+
 def finish_run(cfg: CollectConfig, prov: dict, run: dict, tally: report.Tally, stats: CollectStats) -> None:
     """Record the run (however it ended) in collection.json, then rewrite the yield report and the card."""
     out = cfg.output_dir
-    run.update(
-        ended=datetime.now(UTC).isoformat(timespec="seconds"),
-        stop_reason=stats.stop_reason,
-        interrupted=stats.stop_reason != "done",
-        wall_s=stats.wall_s,
-        cpu_s=stats.cpu_s,
-        rollouts=stats.rollouts,
-        kept=stats.kept,
-        frames=stats.frames,
-        env_steps=stats.env_steps,
-    )
+    run.update(_run_outcome(run, stats, stats.stop_reason))
     prov["runs"].append(run)
     provenance.save(out, prov)
     _write_report(out, cfg, prov, tally)

@@ -10,6 +10,8 @@ import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from lerobot_blindgrasp import durable
+
 REPORT_NAME = "yield_report.json"
 
 
@@ -89,7 +91,7 @@ def format_table(tally: Tally, order: list[str] | None = None) -> str:
 
 def write_report(root: Path, tally: Tally, extra: dict) -> Path:
     path = Path(root) / REPORT_NAME
-    path.write_text(json.dumps({**extra, **tally.to_json()}, indent=2))
+    durable.atomic_write_json(path, {**extra, **tally.to_json()}, indent=2)
     return path
 
 

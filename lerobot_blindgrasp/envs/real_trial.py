@@ -22,13 +22,12 @@ from __future__ import annotations
 import json
 import logging
 import time
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import gymnasium as gym
 import numpy as np
 
-from lerobot_blindgrasp import spaces, spec
+from lerobot_blindgrasp import durable, spaces, spec
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys
 from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import Schedule
 from lerobot_blindgrasp.sim import objects
@@ -205,8 +204,7 @@ class RealGraspEnv(gym.Env):
                 "loop_overruns": self._overruns() - self._overruns_at_start,
                 "late_steps_rebased": self._schedule.rebased,
             }
-            with Path(self.cfg.trial_log).open("a") as f:
-                f.write(json.dumps(record) + "\n")
+            durable.atomic_append_text(self.cfg.trial_log, json.dumps(record) + "\n")  # a kill leaves no half line
 
     def render(self) -> np.ndarray:
         """A 64 x 96 strip chart of the state (no camera on a blind gripper): 9 joint bars, 3 force bars."""

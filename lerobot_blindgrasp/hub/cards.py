@@ -20,7 +20,7 @@ from pathlib import Path
 
 import jinja2
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, report
 from lerobot_blindgrasp.sim import objects, randomization
@@ -216,7 +216,7 @@ def write_card(root: Path, repo_id: str, **kwargs) -> Path:
     card = build_card(card_kwargs(root, repo_id, **kwargs), repo_id)
     validate(str(card))
     out = Path(root) / CARD_NAME
-    card.save(out)
+    durable.atomic_write_text(out, str(card))  # what DatasetCard.save writes, but atomically
     return out
 
 

@@ -18,6 +18,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import Legacy, parse_config
 from lerobot_blindgrasp.hub import REPO_ID_PATTERN, cards
 
@@ -65,7 +66,7 @@ def prepare(
         raise PushError(str(e)) from None
     card = cards.build_card(kwargs, repo_id)
     cards.validate(str(card))
-    card.save(root / cards.CARD_NAME)
+    durable.atomic_write_text(root / cards.CARD_NAME, str(card))  # DatasetCard.save's text, atomically
     ds = LeRobotDataset(repo_id, root=root, video_backend="pyav")  # reads local files only
     push_kwargs = {k: v for k, v in kwargs.items() if not k.startswith("_")}
     return ds, push_kwargs, upload_plan(root)

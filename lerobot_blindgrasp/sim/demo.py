@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import gym_env, objects, randomization
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
@@ -136,7 +136,8 @@ def run_demo(
         from lerobot.utils.io_utils import write_video  # the writer lerobot-eval uses for its videos (PyAV, H.264)
 
         output.parent.mkdir(parents=True, exist_ok=True)
-        write_video(str(output), frames, spec.CONTROL_HZ)
+        with durable.atomic_path(output) as tmp:
+            write_video(str(tmp), frames, spec.CONTROL_HZ)
         summary["video"] = str(output)
     return summary
 

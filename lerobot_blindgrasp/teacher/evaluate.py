@@ -15,7 +15,6 @@ states (paired), and none of them was used in teacher training or demo collectio
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,7 +22,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_blindgrasp import rates, spec
+from lerobot_blindgrasp import durable, rates, spec
 from lerobot_blindgrasp.cli import Legacy, parse_config
 from lerobot_blindgrasp.sim import objects, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
@@ -211,15 +210,17 @@ def bar_chart(results: dict, path: Path) -> None:
     ax.set_title(f"Teacher success, {results['episodes_per_object']} episodes per object (iteration {results['iteration']})")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    with durable.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
     plt.close(fig)
 
 
 def write_outputs(results: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    (out / "eval.json").write_text(json.dumps(results, indent=2))
-    (out / "eval.md").write_text(markdown_table(results))
+    # eval.json last: it is what marks the evaluation as done (the pipeline skips a stage that has it).
+    durable.atomic_write_text(out / "eval.md", markdown_table(results))
     bar_chart(results, out / "eval.png")
+    durable.atomic_write_json(out / "eval.json", results, indent=2)
 
 
 def main(argv=None) -> None:

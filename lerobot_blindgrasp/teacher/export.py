@@ -18,6 +18,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import Legacy, parse_config
 from lerobot_blindgrasp.teacher import policy
 
@@ -80,11 +81,12 @@ def export_teacher(source: str | Path, out_dir: str | Path, overwrite_card: bool
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     # safetensors wants contiguous tensors that share no memory.
-    save_file({k: v.detach().contiguous().clone() for k, v in state.items()}, str(out / policy.WEIGHTS_NAME),
-              metadata={"format": policy.FORMAT})  # fmt: skip
-    (out / policy.CONFIG_NAME).write_text(json.dumps(config, indent=2) + "\n")
+    with durable.atomic_path(out / policy.WEIGHTS_NAME) as tmp:
+        save_file({k: v.detach().contiguous().clone() for k, v in state.items()}, str(tmp),
+                  metadata={"format": policy.FORMAT})  # fmt: skip
+    durable.atomic_write_text(out / policy.CONFIG_NAME, json.dumps(config, indent=2) + "\n")
     if overwrite_card or not (out / CARD_NAME).exists():
-        (out / CARD_NAME).write_text(card(config))
+        durable.atomic_write_text(out / CARD_NAME, card(config))
     return out
 
 

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import parse_config_and_positionals
 from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME
@@ -188,7 +189,8 @@ def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: s
     fig.suptitle(f"{title}\n(lines: training success, stochastic, trailing mean over {SMOOTHING} iterations)",
                  fontsize=10)
     fig.tight_layout(rect=(0, 0.045 * ((len(labels) + 1) // 2), 1, 1))
-    fig.savefig(path, dpi=110)
+    with durable.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return curves
 
@@ -223,7 +225,8 @@ def plot_metrics(runs: dict[str, Path | tuple[Path, ...]], tags: list[str], path
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with durable.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 

@@ -4,8 +4,13 @@
 
 The run directory gets TensorBoard logs (reward terms, success per object, fps, collection/learning time),
 `model_<it>.pt` checkpoints every `save_interval` iterations, and `teacher_config.json`. Re-running the same
-command resumes from the latest checkpoint; Ctrl-C saves one before exiting. At the end the actor is exported
-to TorchScript and ONNX (`exported/`).
+command resumes from the newest checkpoint that loads; Ctrl-C saves one before exiting. At the end the actor is
+exported to TorchScript and ONNX (`exported/`), and `train_summary.json` is written last: it marks a finished run.
+
+Crash safety: every checkpoint is written to a temporary file and renamed into place (`durable.atomic_path`), so a
+kill during a save leaves the previous checkpoints and no `model_<it>.pt` that is cut short. A newest checkpoint
+that does not load all the same (a copy gone wrong, a disk error) is renamed `*.corrupt` with a warning naming it,
+and the run resumes from the one before. A kill costs at most the iterations since the last save (`save_interval`).
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ import dataclasses
 import json
 import logging
 import os
+import re
 import shutil
 import sys
 import time
@@ -24,7 +30,7 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_config
 from lerobot_blindgrasp.presets import SHIPPED_TEACHER_PRESET
 from lerobot_blindgrasp.sim import randomization, rewards
@@ -90,7 +96,7 @@ def train(cfg: TrainTeacherConfig) -> Path:
     iterations = cfg.iterations or preset.max_iterations
     spec.check_seeds("teacher_train", cfg.seed, num_envs)
     out = cfg.output_dir
-    if preset.continues and latest_checkpoint(out) is None:
+    if preset.continues and newest_loadable_checkpoint(out) is None:
         _train_previous_stage(cfg, *preset.continues)
     out.mkdir(parents=True, exist_ok=True)
     device = cfg.device or distributed.default_device()
@@ -127,7 +133,7 @@ def train(cfg: TrainTeacherConfig) -> Path:
             if old.get(key) != config[key]:
                 raise SystemExit(f"{out} holds a run with a different {key!r}; use another --output_dir")
     elif lead:
-        cfg_path.write_text(json.dumps(config, indent=2))
+        durable.atomic_write_json(cfg_path, config, indent=2)
 
     env = BatchedGraspEnv(build_env_config(preset, rank_envs, rank_seed, cfg.threads, cfg.backend))
     bar = tqdm(total=iterations, desc=f"teacher[{preset.name}]", unit="it", dynamic_ncols=True)
@@ -142,7 +148,8 @@ def train(cfg: TrainTeacherConfig) -> Path:
     vec = RslRlGraspEnv(env, device=device, on_step=tick)
     runner = distributed.runner_class(device)(vec, preset.runner_cfg(), log_dir=str(out), device=device)
     runner.alg.update = with_torch_threads(runner.alg.update, update_thread_count(cfg, env))
-    ckpt = latest_checkpoint(out)
+    runner.save = atomic_save(runner.save)
+    ckpt = newest_loadable_checkpoint(out)
     done_its = 0
     if ckpt is not None:
         runner.load(str(ckpt))
@@ -191,12 +198,46 @@ def train(cfg: TrainTeacherConfig) -> Path:
         "env_steps_per_s": its_run * steps_per_it * num_envs / max(wall, 1e-9),
         "physics_resets": env.physics_resets,
     }
-    (out / "train_summary.json").write_text(json.dumps(summary, indent=2))
+    durable.atomic_write_json(out / "train_summary.json", summary, indent=2)  # last: marks the run finished
     print(json.dumps(summary, indent=2))
     if interrupted:
         print(f"interrupted: saved {final}; run the same command to resume", file=sys.stderr)
         raise SystemExit(130)
     return final
+
+
+def atomic_save(save):
+    """rsl-rl's `OnPolicyRunner.save(path, infos)` (a plain torch.save, in place) made atomic: it writes a temp file
+    beside `path`, which is renamed over `path` once complete."""
+
+    def save_atomically(path, infos=None):
+        with durable.atomic_path(path) as tmp:
+            save(str(tmp), infos)
+
+    return save_atomically
+
+
+def newest_loadable_checkpoint(run_dir: Path) -> Path | None:
+    """The newest model_<it>.pt that torch can read. Newer ones that cannot be read are renamed `<name>.corrupt`
+    (kept for inspection, out of the way of every later resume) with a warning; killed saves' temp files go.
+    Under torchrun only rank 0 renames or deletes; the other ranks skip the same files."""
+    lead = distributed.world()[1] == 0
+    if lead:
+        for stale in durable.remove_stale_temps(run_dir):
+            log.info("removed %s, the temp file of a save that was killed", stale)
+    ckpts = sorted(Path(run_dir).glob("model_*.pt"), key=lambda p: int(re.findall(r"\d+", p.stem)[-1]))
+    for ckpt in reversed(ckpts):
+        try:
+            torch.load(ckpt, map_location="cpu", weights_only=False)
+            return ckpt
+        except Exception as e:  # noqa: BLE001  (truncated zip, bad pickle, I/O error: all mean "cannot resume here")
+            why = f"{type(e).__name__}: {str(e).splitlines()[0][:200] if str(e) else ''}"
+            if lead:
+                aside = ckpt.with_name(ckpt.name + ".corrupt")
+                os.replace(ckpt, aside)
+                log.warning("checkpoint %s cannot be read (%s); set aside as %s, resuming from the one before",
+                            ckpt, why, aside.name)
+    return None
 
 
 def update_thread_count(cfg, env) -> int:
@@ -229,7 +270,8 @@ def _train_previous_stage(cfg: TrainTeacherConfig, name: str, iterations: int) -
                                       output_dir=cfg.output_dir / "stages" / name))
     if distributed.world()[1] == 0:  # under torchrun one rank copies; the others must not read a half-written file
         cfg.output_dir.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(final, cfg.output_dir / final.name)
+        with durable.atomic_path(cfg.output_dir / final.name) as tmp:  # a kill mid-copy leaves no half checkpoint
+            shutil.copy2(final, tmp)
     if torch.distributed.is_initialized():
         # The next stage's runner keeps this process group (distributed.runner_class's gloo runner does not open a
         # second one). Closing and reopening it raced in CI. rsl-rl's own NCCL runner would try to open a second
@@ -248,15 +290,19 @@ def write_learning_curve(run_dir: Path) -> None:
 
 def export(runner, path: Path) -> None:
     """TorchScript and ONNX of the actor's mean (the deterministic teacher), via rsl-rl's exporters."""
-    runner.export_policy_to_jit(str(path), "teacher.pt")
+    # rsl-rl's exporters write in place; they write temp files here that are renamed once complete.
+    with durable.atomic_path(path / "teacher.pt") as tmp:
+        runner.export_policy_to_jit(str(path), tmp.name)
     try:
-        runner.export_policy_to_onnx(str(path), "teacher.onnx")
+        with durable.atomic_path(path / "teacher.onnx") as tmp:
+            runner.export_policy_to_onnx(str(path), tmp.name)
     except Exception as e:  # ONNX export depends on optional onnxscript versions; JIT is enough for us
         log.warning("ONNX export failed: %s", e)
 
 
 def main(argv=None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    logging.getLogger("blindgrasp").setLevel(logging.INFO)  # LeRobot's imports may have configured the root first
     train(parse_config(TrainTeacherConfig, argv))
 
 

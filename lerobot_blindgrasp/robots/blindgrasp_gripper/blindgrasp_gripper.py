@@ -31,13 +31,14 @@ import weakref
 from contextlib import contextmanager
 from functools import cached_property
 
+import draccus
 import numpy as np
 from lerobot.motors import Motor, MotorNormMode
 from lerobot.motors.dynamixel import OperatingMode
 from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.robustness.envelope import force_bias_warning
 from lerobot_blindgrasp.xm430 import (
     MODEL,
@@ -544,6 +545,13 @@ class BlindgraspGripper(Robot):
             j: dataclasses.replace(self.calibration[j], range_min=rad_to_ticks(lo), range_max=rad_to_ticks(hi))
             for j, lo, hi in zip(self.joints, cfg.joint_lower, cfg.joint_upper, strict=True)
         }
+
+    def _save_calibration(self, fpath=None) -> None:
+        """LeRobot's base class writes the file in place, so a full disk truncates the previous calibration. Written
+        atomically instead: on failure the old file is unchanged, and `durable.WriteError` (not an OSError, so the
+        safety latch does not call it a bus failure) names the file and the cause."""
+        with durable.atomic_open(fpath or self.calibration_fpath) as f, draccus.config_type("json"):
+            draccus.dump(self.calibration, f, indent=4)
 
     @check_if_not_connected
     def disconnect(self) -> None:

@@ -19,7 +19,7 @@ from lerobot.teleoperators.teleoperator import Teleoperator
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 from lerobot.utils.errors import DeviceNotConnectedError
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import read_raw as read_json
 
 from . import retarget as rt
@@ -141,7 +141,8 @@ class ManusGlove(Teleoperator):
         self.calibration = cal
 
     def _save_calibration(self, fpath: Path | None = None) -> None:
-        with open(fpath or self.calibration_fpath, "w") as f, draccus.config_type("json"):
+        # Atomic: a failed save (a full disk) keeps the previous calibration and says why (durable.WriteError).
+        with durable.atomic_open(fpath or self.calibration_fpath) as f, draccus.config_type("json"):
             draccus.dump(self.calibration, f, indent=4)
 
     @check_if_already_connected
