@@ -223,13 +223,13 @@ def _dagger_rounds(stage: Stage, preset: presets.Preset, out: Path, teacher: Pat
 
     for r in range(1, preset.dagger.rounds + 1):
         name, relabelled, student = f"dagger_{r}", out / f"dagger_{r}", out / f"student_dagger_{r}"
-        if (relabelled / DONE).is_file():
+        if stage.done(name, legacy=(relabelled / DONE).is_file()):
             stage.skip(name, "relabelled")
         else:
             stage.run(name, recipe.dagger(preset, ckpt, teacher, demos, relabelled, recipe.dagger_seed(seed, r),
                                           device), env=env)
         demos, repo = relabelled / "aggregate", f"local/blindgrasp_{preset.name}_dagger_{r}"
-        if recipe.checkpoint(student).exists():
+        if stage.done(f"student_dagger_{r}", legacy=recipe.checkpoint(student).exists()):
             stage.skip(f"student_dagger_{r}", "trained")
         else:
             if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
