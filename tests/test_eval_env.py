@@ -319,3 +319,14 @@ def test_sim_and_real_env_configs_share_one_definition_of_features_and_spaces():
     assert sim.features_map == real.features_map == spaces.env_features_map()
     env = gym_env.BlindGraspGymEnv("cylinder_a_medium", render_mode=None)
     assert env.observation_space == spaces.observation_space() and env.action_space == spaces.action_space()
+
+
+def test_only_the_first_render_episodes_get_the_full_video_rate():
+    cfg = BlindGraspEnvConfig(task="cuboid_a_medium", render_stride=4, render_episodes=2)
+    assert [cfg.env_kwargs(i)["render_stride"] for i in range(4)] == [4, 4, 20, 20]
+    assert BlindGraspEnvConfig(task="cuboid_a_medium").env_kwargs(9)["render_stride"] == 1  # LeRobot's default: all
+    vec = cfg.create_envs(n_envs=3)["blindgrasp"]
+    envs = next(iter(vec.values())).envs
+    assert [e.unwrapped.render_stride for e in envs] == [4, 4, 20]
+    with pytest.raises(ValueError, match="render_episodes"):
+        BlindGraspEnvConfig(task="cuboid_a_medium", render_episodes=-1)

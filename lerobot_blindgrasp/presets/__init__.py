@@ -137,7 +137,7 @@ PRESETS: dict[str, Preset] = {
                             min_curated_episodes=90),
             # lerobot-train reads ~2 ms per 30-frame sample here: 5000 steps at batch 256 is about an hour.
             student=StudentStage(size="cpu", batch_size=256, steps=5_000, threads=1, num_workers=1),
-            evaluation=EvalStage(episodes_per_object=20, render_stride=4),
+            evaluation=EvalStage(episodes_per_object=20, render_stride=4, render_episodes=2),
             deviations=(
                 "100 curated episodes per object (at most 1000 rollouts) instead of ~5000",
                 "student size cpu (3 layers x 128, 4 heads, head [256, 256]) instead of 6 x 512",
@@ -155,7 +155,8 @@ PRESETS: dict[str, Preset] = {
                             min_curated_episodes=18),
             # 1200 steps at batch 128 is the recipe of docs/results/student_cpu.md (~8 min on 2 idle cores).
             student=StudentStage(size="cpu", batch_size=128, steps=1200, threads=1, num_workers=1),
-            evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",), render_stride=4),
+            evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",), render_stride=4,
+                                  render_episodes=2),
             deviations=(
                 "the shipped teacher (models/teacher_cpu_bc, trained with the cpu_bc_capsule teacher settings), no "
                 "teacher training",
