@@ -182,7 +182,9 @@ def train(cfg: TrainTeacherConfig) -> Path:
         console.close()
         bar.close()
     wall = time.time() - t0
-    its_run = runner.current_learning_iteration + 1 - done_its
+    # A resume that finds every iteration done runs none: its count is the checkpoint's, not one past it.
+    completed = runner.current_learning_iteration + 1 if remaining > 0 else done_its
+    its_run = completed - done_its
     final = latest_checkpoint(out)
     if not lead:
         return final
@@ -191,7 +193,7 @@ def train(cfg: TrainTeacherConfig) -> Path:
     write_learning_curve(out)
     summary = {
         "checkpoint": str(final),
-        "iterations": runner.current_learning_iteration + 1,
+        "iterations": completed,
         "interrupted": interrupted,
         "wall_clock_s_this_session": wall,
         "env_steps_this_session": its_run * steps_per_it * num_envs,
