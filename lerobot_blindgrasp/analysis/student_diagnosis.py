@@ -104,6 +104,23 @@ def student_actor(policy, pre, post):
 # --- closed loop -------------------------------------------------------------------------------------------------
 
 
+class Outcomes:
+    """Per-env outcome of a batch of episodes stepped without auto-reset: success, left the workspace, length."""
+
+    def __init__(self, n: int, horizon: int):
+        self.alive, self.success, self.left = np.ones(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+        self.length = np.full(n, horizon)
+
+    def update(self, t: int, info: dict, term: np.ndarray, trunc: np.ndarray) -> bool:
+        """Record control step t's result; False once every episode has ended."""
+        self.success |= info["success"] & self.alive
+        ended = self.alive & (term | trunc)
+        self.left |= ended & term
+        self.length[ended] = t + 1
+        self.alive &= ~(term | trunc)
+        return bool(self.alive.any())
+
+
 def closed_loop(act_targets, object_name: str, episodes: int, seed: int, reset=None) -> dict[str, np.ndarray]:
     """Run `episodes` evaluation episodes of one object (env k = evaluation index seed + k) and keep the traces.
 
@@ -125,10 +142,7 @@ def closed_loop(act_targets, object_name: str, episodes: int, seed: int, reset=N
         "touch_force": np.zeros((episodes, horizon, spec.NUM_FORCES)),
         "downward": np.zeros((episodes, horizon, spec.NUM_FORCES)),
     }
-    success = np.zeros(episodes, bool)
-    left = np.zeros(episodes, bool)
-    alive = np.ones(episodes, bool)
-    length = np.full(episodes, horizon)
+    ends = Outcomes(episodes, horizon)
     obs = env.reset()
     for t in range(horizon):
         out["state"][:, t] = obs["policy"]
@@ -137,15 +151,10 @@ def closed_loop(act_targets, object_name: str, episodes: int, seed: int, reset=N
         out["lift"][:, t] = info["lift"]
         out["touch_force"][:, t] = info["tip_object_force"]
         out["downward"][:, t] = info["tip_object_downward"]
-        success |= info["success"] & alive
-        ended = alive & (term | trunc)
-        left |= ended & term
-        length[ended] = t + 1
-        alive &= ~(term | trunc)
-        if not alive.any():
+        if not ends.update(t, info, term, trunc):
             break
     env.close()
-    return {**out, "success": success, "left": left, "length": length}
+    return {**out, "success": ends.success, "left": ends.left, "length": ends.length}
 
 
 def failure_kind(trace: dict[str, np.ndarray], k: int) -> str:

@@ -79,6 +79,7 @@ def label_targets(q: np.ndarray, teacher_action: np.ndarray) -> np.ndarray:
 def relabelled_episodes(act_student, reset_student, teacher, names: list[str], seed: int, device_note: str = ""):
     """Run one batch (env i: object names[i], seed + i) for 10 s under the student; yield one Episode per env with
     the teacher's labels."""
+    from lerobot_blindgrasp.analysis.student_diagnosis import Outcomes
     from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
     from lerobot_blindgrasp.sim.randomization import EVAL_DR
 
@@ -91,8 +92,7 @@ def relabelled_episodes(act_student, reset_student, teacher, names: list[str], s
     label = np.zeros((n, horizon, spec.ACTION_DIM), np.float32)
     task = np.zeros((n, horizon))
     force = np.zeros((n, horizon, spec.NUM_FORCES))
-    alive, success, left = np.ones(n, bool), np.zeros(n, bool), np.zeros(n, bool)
-    length = np.full(n, horizon)
+    ends = Outcomes(n, horizon)
     reset_student()
     obs = env.reset()
     start_xy = env.object_position()[:, :2].copy()
@@ -103,20 +103,15 @@ def relabelled_episodes(act_student, reset_student, teacher, names: list[str], s
         obs, _, term, trunc, info = env.step(act_student(obs) - q)
         task[:, t] = info["terms"]["task"]
         force[:, t] = info["uniaxial_force"]
-        success |= info["success"] & alive
-        ended = alive & (term | trunc)
-        left |= ended & term
-        length[ended] = t + 1
-        alive &= ~(term | trunc)
-        if not alive.any():
+        if not ends.update(t, info, term, trunc):
             break
     draws = [env.physics_draw.row(i) for i in range(n)]
     env.close()
     for i in range(n):
-        k = int(length[i])
+        k = int(ends.length[i])
         yield Episode(
             object_name=names[i], state=state[i, :k], action=label[i, :k], task_reward=task[i, :k],
-            uniaxial_force=force[i, :k], success=bool(success[i]), left_workspace=bool(left[i]),
+            uniaxial_force=force[i, :k], success=bool(ends.success[i]), left_workspace=bool(ends.left[i]),
             physics_failed=False, env_seed=seed + i, env_episode=0,
             randomization=np.array([*(draws[i][p] for p in RANDOMIZATION_NAMES[:5]), *start_xy[i]], np.float64),
         )
