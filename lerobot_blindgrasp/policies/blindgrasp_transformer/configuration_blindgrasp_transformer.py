@@ -118,7 +118,8 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     # Training-time sensor errors (beyond the paper; 0 = off, the paper's recipe), per sample over its window, in the
     # preprocessor's `blindgrasp_sensor_augment` step: force gain error (g in [1/(1+x), 1+x]), force offset (+-N)
     # and joint calibration offset (+-rad per joint). They teach the student the real sensors' errors the sim's
-    # Gaussian noise does not have.
+    # Gaussian noise does not have. The step is built with the processors: `--policy.path` fine-tuning reuses the
+    # checkpoint's saved processors, so it keeps the augmentation its checkpoint was trained with and cannot add one.
     augment_force_gain: float = 0.0
     augment_force_bias_n: float = 0.0
     augment_joint_offset_rad: float = 0.0
