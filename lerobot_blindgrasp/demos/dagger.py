@@ -76,7 +76,7 @@ def label_targets(q: np.ndarray, teacher_action: np.ndarray) -> np.ndarray:
     return np.clip(q + step, spec.JOINT_LOWER, spec.JOINT_UPPER)
 
 
-def relabelled_episodes(act_student, reset_student, teacher, names: list[str], seed: int, device_note: str = ""):
+def relabelled_episodes(act_student, reset_student, teacher, names: list[str], seed: int):
     """Run one batch (env i: object names[i], seed + i) for 10 s under the student; yield one Episode per env with
     the teacher's labels."""
     from lerobot_blindgrasp.analysis.student_diagnosis import Outcomes
