@@ -17,7 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from lerobot_blindgrasp import durable  # noqa: E402
-from lerobot_blindgrasp.plots import teacher_curves  # noqa: E402
+from lerobot_blindgrasp.analysis.plots import teacher_curves  # noqa: E402
 
 TAGS = (
     "Metrics/mean_contacts",

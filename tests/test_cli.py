@@ -93,9 +93,9 @@ def test_new_spellings_pass_through_untouched():
 
 
 def test_commands_with_positionals_parse_their_flags_with_draccus(capsys):
+    from lerobot_blindgrasp.analysis.diversity import DiversityConfig
+    from lerobot_blindgrasp.analysis.progress import ProgressConfig
     from lerobot_blindgrasp.cli import parse_config_and_positionals
-    from lerobot_blindgrasp.demos.diversity import DiversityConfig
-    from lerobot_blindgrasp.teacher.progress import ProgressConfig
 
     argv = ["out.png", "a=runs/a", "--until=500", "runs/b", "--metrics=Metrics/x,Metrics/y"]
     cfg, args = parse_config_and_positionals(ProgressConfig, argv)

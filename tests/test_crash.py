@@ -23,8 +23,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from lerobot_blindgrasp import durable, repair, spec
+from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.demos import dataset as demo_dataset
+from lerobot_blindgrasp.demos import repair
 
 SEED = 29  # every kill instant is drawn from this
 ROOT = Path(__file__).resolve().parents[1]
@@ -318,7 +319,7 @@ def test_pipeline_killed_in_a_stage_reruns_only_unfinished_stages(tmp_path):
     the stage's own process dies with it, the killed stage is never marked completed, and the re-run skips exactly
     the completed stages and resumes the killed one. (The whole smoke pipeline to its end: test_pipeline.py.)"""
     out = tmp_path / "pipe"
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.pipeline", "--preset=smoke", f"--output_dir={out}"]
+    cmd = [sys.executable, "-m", "lerobot_blindgrasp.pipeline.run", "--preset=smoke", f"--output_dir={out}"]
     rng = random.Random(SEED + 2)
     _kill_when(cmd, tmp_path / "p0.log", lambda t: "[pipeline] teacher:" in t, rng.uniform(1.0, 6.0))
     time.sleep(0.5)

@@ -6,7 +6,6 @@ No teacher needed: episodes are synthetic but go through the real curation, writ
 from __future__ import annotations
 
 import dataclasses
-
 import json
 
 import numpy as np
@@ -215,7 +214,7 @@ def test_card_validation_catches_bad_metadata():
 
 
 def test_demo_diversity_is_computed_per_object_from_the_written_episodes(written):
-    from lerobot_blindgrasp.demos.diversity import diversity
+    from lerobot_blindgrasp.analysis.diversity import diversity
 
     root, episodes, cuts = written
     d = diversity(root, at_s=0.5)  # frame 10, inside every (trimmed) episode
@@ -238,7 +237,7 @@ def test_demo_diversity_is_computed_per_object_from_the_written_episodes(written
 
 
 def test_demo_diversity_command_line(written, capsys):
-    from lerobot_blindgrasp.demos.diversity import diversity, main
+    from lerobot_blindgrasp.analysis.diversity import diversity, main
 
     root = written[0]
     main([f"demos={root}", "--at_s=0.5"])

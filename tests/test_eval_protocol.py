@@ -7,8 +7,10 @@ import itertools
 import numpy as np
 import pytest
 
-from lerobot_blindgrasp import pipeline, rates, spec
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.demos import collect
+from lerobot_blindgrasp.pipeline import run as pipeline
 from lerobot_blindgrasp.sim import objects
 
 

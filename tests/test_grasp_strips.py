@@ -6,7 +6,12 @@ import av
 import numpy as np
 
 from lerobot_blindgrasp.envs.sim_env import object_for_task_id
-from lerobot_blindgrasp.grasp_strips import pick_per_class, read_frames, successful_videos, write_grasp_strips
+from lerobot_blindgrasp.pipeline.grasp_strips import (
+    pick_per_class,
+    read_frames,
+    successful_videos,
+    write_grasp_strips,
+)
 from lerobot_blindgrasp.sim import objects
 
 

@@ -13,8 +13,8 @@ from emulators.fixtures import rig  # noqa: F401  (fixture)
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.envs.operator import OperatorKeys
 from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
-from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 from lerobot_blindgrasp.envs.real_report import success_table
+from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 
 CLOSE = np.tile([0.0, -0.2, -0.3], 3)[None]  # squeezes past the emulated object's contact at J*1 = 0.2 rad
 

@@ -23,6 +23,7 @@ from emulators.harness import Operator, cli_env
 from emulators.rig import LATENCY_TIMER_MS
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware.xm430 import RAD_PER_TICK, WATCHDOG_TRIPPED
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, servo_state
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
@@ -31,7 +32,6 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     GripperSafetyStop,
     GripperStateError,
 )
-from lerobot_blindgrasp.xm430 import RAD_PER_TICK, WATCHDOG_TRIPPED
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
 from lerobot_blindgrasp.teleoperators.manus_glove.stream import PROTO

@@ -23,6 +23,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware.xm430 import NO_LOAD_SPEED_RAD_S, RAD_PER_TICK
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
 from lerobot_blindgrasp.robots.blindgrasp_gripper import calibration as calib
 from lerobot_blindgrasp.robots.blindgrasp_gripper.bus import LineWatchingPacketHandler
@@ -33,7 +34,6 @@ from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveC
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
 from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
 from lerobot_blindgrasp.teleoperators.manus_glove.stream import MAX_ABS_DEG, decode, encode
-from lerobot_blindgrasp.xm430 import NO_LOAD_SPEED_RAD_S, RAD_PER_TICK
 
 FAST = settings(max_examples=100, deadline=None)
 INT32 = st.integers(-(2**31), 2**31 - 1)

@@ -25,6 +25,7 @@ from lerobot.teleoperators.config import TeleoperatorConfig
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
 from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
+from lerobot_blindgrasp.hardware.xm430 import RAD_PER_TICK
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
@@ -38,7 +39,6 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSenso
 from lerobot_blindgrasp.robots.blindgrasp_gripper.ports import PortInUseError
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
-from lerobot_blindgrasp.xm430 import RAD_PER_TICK
 
 TICK = RAD_PER_TICK
 

@@ -1,4 +1,4 @@
-"""Sim and real read the uniaxial force the same way (`lerobot_blindgrasp.force`): true force + noise, then the deadband.
+"""Sim and real read the uniaxial force the same way (`lerobot_blindgrasp.hardware.force`): true force + noise, then the deadband.
 
 The real side is the real reader (`ForceSensorReader`: serial port, frame parser, tare, scale) on the emulated
 load-cell microcontroller; the sim side is the pipeline `BatchedGraspEnv` builds its observation with, and the env
@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 from emulators.force_sensor import ForceSensorEmulator
 
-from lerobot_blindgrasp import force, spec
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader
 from lerobot_blindgrasp.sim import randomization, sensors
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig

@@ -22,15 +22,20 @@ from lerobot.robots.config import RobotConfig
 from lerobot.utils.feature_utils import combine_feature_dicts
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware.xm430 import (
+    CURRENT_UNIT_A,
+    RAD_PER_TICK,
+    amps_to_current_units,
+    torque_at_current_nm,
+)
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
+from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import rad_to_ticks
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     ForceOverloadError,
     ForceSensorError,
     GripperBusError,
     GripperHardwareError,
 )
-from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import rad_to_ticks
-from lerobot_blindgrasp.xm430 import CURRENT_UNIT_A, RAD_PER_TICK, amps_to_current_units, torque_at_current_nm
 
 ROOT = Path(__file__).resolve().parents[1]
 TICK = RAD_PER_TICK

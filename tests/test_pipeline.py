@@ -10,13 +10,15 @@ import sys
 
 import pytest
 
-from lerobot_blindgrasp import pipeline, recipe, spec
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.pipeline import recipe
+from lerobot_blindgrasp.pipeline import run as pipeline
 
 
 @pytest.mark.slow
 def test_smoke_pipeline_runs_every_stage_and_writes_the_report(tmp_path):
     out = tmp_path / "p"
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.pipeline", "--preset=smoke", f"--output_dir={out}"]
+    cmd = [sys.executable, "-m", "lerobot_blindgrasp.pipeline.run", "--preset=smoke", f"--output_dir={out}"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     record = json.loads((out / "pipeline.json").read_text())
@@ -42,7 +44,7 @@ def test_smoke_pipeline_runs_every_stage_and_writes_the_report(tmp_path):
 
 
 def test_step_counts_in_lerobot_logs_parse():
-    from lerobot_blindgrasp.report import parse_step
+    from lerobot_blindgrasp.pipeline.report import parse_step
 
     assert parse_step("300") == 300
     assert parse_step("1K") == 1000

@@ -182,7 +182,9 @@ def test_action_normalization_must_stay_identity():
 
 
 def test_sensor_augmentation_shifts_joints_and_target_together_and_only_in_training():
-    from lerobot_blindgrasp.policies.blindgrasp_transformer.processor_blindgrasp_transformer import SensorAugmentStep
+    from lerobot_blindgrasp.policies.blindgrasp_transformer.processor_blindgrasp_transformer import (
+        SensorAugmentStep,
+    )
 
     cfg = make_config(augment_force_gain=0.3, augment_force_bias_n=2.0, augment_joint_offset_rad=0.05)
     pre, _ = make_blindgrasp_transformer_pre_post_processors(cfg, make_stats())

@@ -11,8 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from lerobot_blindgrasp import pipeline, presets, recipe
+from lerobot_blindgrasp import presets
 from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.pipeline import recipe
+from lerobot_blindgrasp.pipeline import run as pipeline
 from lerobot_blindgrasp.policies.blindgrasp_transformer import configuration_blindgrasp_transformer as student_cfg
 from lerobot_blindgrasp.sim import rewards
 from lerobot_blindgrasp.teacher import presets as teacher_presets
@@ -176,7 +178,7 @@ def test_table_v_commands_for_the_recipe(tmp_path):
 
 
 def test_report_does_not_import_the_pipeline():
-    code = "import sys, lerobot_blindgrasp.report; sys.exit('lerobot_blindgrasp.pipeline' in sys.modules)"
+    code = "import sys, lerobot_blindgrasp.pipeline.report; sys.exit('lerobot_blindgrasp.pipeline.run' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
 

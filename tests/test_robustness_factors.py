@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from lerobot_blindgrasp import spec, xm430
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware import xm430
 from lerobot_blindgrasp.sim import objects, randomization
 from lerobot_blindgrasp.sim.env import HOLD_PUSH_AFTER_STEPS, BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript

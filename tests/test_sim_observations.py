@@ -7,7 +7,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from lerobot_blindgrasp import force, spec
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.sim import randomization
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.scripted import run_pinch_lift

@@ -125,7 +125,7 @@ def test_only_the_pregrasp_teacher_preset_uses_it_and_it_is_validated():
 
 def test_contacts_tool_can_start_every_episode_beside_the_object():
     """`teacher.contacts --pregrasp_starts=true` asks whether a teacher lifts an object once its tips are there."""
-    from lerobot_blindgrasp.teacher.contacts import ContactsConfig, env_config
+    from lerobot_blindgrasp.analysis.contacts import ContactsConfig, env_config
 
     plain = env_config(ContactsConfig(episodes=3), "capsule_small")
     assert plain.pregrasp is None and plain.seed == env_config(ContactsConfig(), "capsule_small").seed

@@ -2,7 +2,7 @@
 
 import json
 
-from lerobot_blindgrasp import table_v
+from lerobot_blindgrasp.analysis import table_v
 from lerobot_blindgrasp.presets import TABLE_V
 from lerobot_blindgrasp.sim import objects
 

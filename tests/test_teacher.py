@@ -165,9 +165,9 @@ def test_rnd_preset_adds_rsl_rl_exploration_bonus_and_resumes_its_schedule(tmp_p
     import signal
     from dataclasses import replace
 
+    from lerobot_blindgrasp.analysis.progress import _scalars
     from lerobot_blindgrasp.presets import teacher as teacher_presets
     from lerobot_blindgrasp.teacher import train
-    from lerobot_blindgrasp.teacher.progress import _scalars
 
     cpu_rnd = teacher_presets.get_preset("cpu_rnd")
     assert cpu_rnd.runner["algorithm"]["rnd_cfg"]["weight_schedule"]["final_step"] == 1000 * 24

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-
 import math
 import signal
 from dataclasses import replace
@@ -94,8 +93,8 @@ def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, m
     """Two iterations, then a resumed third: the cloning loss is logged and falls, its weight follows the decay
     across the resume (it is not restarted), and the checkpoint loads as a plain rsl-rl PPO one. The "RL w/ o_t"
     actor (student observation only) clones the same demonstrations through their o_t group."""
+    from lerobot_blindgrasp.analysis.progress import _scalars
     from lerobot_blindgrasp.teacher import train
-    from lerobot_blindgrasp.teacher.progress import _scalars
 
     demos = scripted_demos.ScriptedDemos(objects=("capsule_small",), episodes_per_object=3, decay_iterations=3,
                                          steps=20, batch_size=256, mode=mode, lr=3e-4, coef=3.0)
@@ -159,8 +158,8 @@ def test_saturation_aware_cloning_loss_ignores_what_the_action_clip_hides():
 
 
 def test_relabelling_rounds_grow_the_demonstrations_during_training(tmp_path, monkeypatch):
+    from lerobot_blindgrasp.analysis.progress import _scalars
     from lerobot_blindgrasp.teacher import train
-    from lerobot_blindgrasp.teacher.progress import _scalars
 
     demos = scripted_demos.ScriptedDemos(objects=("capsule_small",), episodes_per_object=2, steps_per_episode=10,
                                          decay_iterations=3, mode="joint", coef=1.0, relabel_every=2,

@@ -12,7 +12,6 @@ import pytest
 from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig, allocate_objects
 
-
 # Harder objects (small, capsules) weighted up, as tried in docs/results/teacher_cpu_v2.md.
 HARD_FIRST = tuple(
     {"large": 0.5, "medium": 1.0, "small": 1.5}[objects.get_object(n).size_label]
@@ -131,7 +130,7 @@ def test_the_update_defaults_to_the_physics_threads_then_the_acting_threads():
 def test_progress_curves_sum_training_time_and_weigh_objects_equally(tmp_path):
     from torch.utils.tensorboard import SummaryWriter
 
-    from lerobot_blindgrasp.teacher.progress import plot_metrics, plot_progress, progress
+    from lerobot_blindgrasp.analysis.progress import plot_metrics, plot_progress, progress
 
     (tmp_path / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))
     # Two sessions (a resume): the second rewrites iteration 2, as rsl-rl does after loading model_2.pt.
@@ -159,7 +158,7 @@ def test_a_run_continued_in_another_directory_is_one_curve(tmp_path, capsys):
     """RUN_A+RUN_B: A up to B's first iteration, then B, with B's training time added to A's."""
     from torch.utils.tensorboard import SummaryWriter
 
-    from lerobot_blindgrasp.teacher.progress import main, progress
+    from lerobot_blindgrasp.analysis.progress import main, progress
 
     for name, its, secs in (("a", range(0, 5), 2.0), ("b", range(3, 6), 10.0)):  # b resumed a's model_2.pt
         d = tmp_path / name
@@ -196,7 +195,7 @@ def _timed_run(run_dir, iterations):
 
 
 def test_progress_command_line_takes_the_runs_as_positionals_and_its_options_as_flags(tmp_path, capsys):
-    from lerobot_blindgrasp.teacher.progress import main
+    from lerobot_blindgrasp.analysis.progress import main
 
     _timed_run(tmp_path, iterations=4)
     out = tmp_path / "figs" / "q.png"
@@ -209,8 +208,8 @@ def test_progress_command_line_takes_the_runs_as_positionals_and_its_options_as_
 
 
 def test_held_out_evals_are_marked_on_the_run_that_holds_their_checkpoint(tmp_path, capsys):
+    from lerobot_blindgrasp.analysis.progress import main
     from lerobot_blindgrasp.teacher.policy import file_sha256
-    from lerobot_blindgrasp.teacher.progress import main
 
     runs = {}
     for name in ("a", "b"):

@@ -25,7 +25,7 @@ from lerobot_blindgrasp.demos.loop import collect
 
 EXIT_EMPTY = 3  # the collection ran but wrote no episode
 
-# Release-0.1 spellings that the generic translation cannot guess (pipeline.py and recorded commands use them).
+# Release-0.1 spellings that the generic translation cannot guess (`pipeline/run.py` and recorded commands use them).
 LEGACY = Legacy(
     flags={
         "out": "output_dir",

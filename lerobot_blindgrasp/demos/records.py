@@ -127,7 +127,7 @@ def empty_leftover(out: Path) -> bool:
 
 def _repair(out: Path) -> None:
     """A crashed collection's folder back to its last checkpoint, saying what was kept and lost."""
-    from lerobot_blindgrasp import repair
+    from lerobot_blindgrasp.demos import repair
 
     try:
         result = repair.repair(out)

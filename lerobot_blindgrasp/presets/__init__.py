@@ -8,7 +8,7 @@
 
 Who reads it: `blindgrasp-pipeline --preset=NAME` (every stage), `blindgrasp-train-teacher --preset=NAME` (the
 teacher part, `presets.teacher`), the student policy's `--policy.size` (`presets.student.SIZES`) and
-`scripts/paper_recipe.sh` (through `lerobot_blindgrasp.recipe`). Nothing else restates a number.
+`scripts/paper_recipe.sh` (through `lerobot_blindgrasp.pipeline.recipe`). Nothing else restates a number.
 
 - `paper` is exactly Tables III and IV; its only deviations are where the paper measured on the real robot.
 - `cpu` is the largest that is useful on a 2-core machine (hours); `quick` is the README's main job on the

@@ -1,4 +1,4 @@
-"""The D'Claw-derived three-finger gripper, built in code from ROBEL's D'Claw and the XM430 facts (`xm430.py`).
+"""The D'Claw-derived three-finger gripper, built in code from ROBEL's D'Claw and the XM430 facts (`hardware/xm430.py`).
 
 Geometry (ROBEL `chain3xh.xml`): three fingers at 120 deg on a 6 cm circle, plate -> J10 = 17.25 mm, link lengths
 0.0675 / 0.068 / 0.076 m (J10->J11, J11->J12, J12->tip site), tip capsule r = 11 mm reaching 84 mm past J12.
@@ -26,7 +26,8 @@ from dataclasses import dataclass
 
 import mujoco
 
-from lerobot_blindgrasp import spec, xm430
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware import xm430
 
 # --- Facts (metres, kilograms) -----------------------------------------------------------------------------------
 BASE_RADIUS = 0.060

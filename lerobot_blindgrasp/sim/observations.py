@@ -14,7 +14,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from lerobot_blindgrasp import force, spec
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.sim import randomization, rewards, sensors
 
 # Where the state lives in qpos/qvel: the nine gripper hinges first (spec.JOINT_NAMES order), then the object's

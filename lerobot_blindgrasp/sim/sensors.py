@@ -7,7 +7,7 @@ tip, so a push on the tip end (compression, what a uniaxial cell under the tip m
     f_uni = -(F_on_tip . z) = F_reported . z        (positive in compression)
 
 That is the true force. What the policy sees goes through the sensor pipeline shared with the real gripper,
-`lerobot_blindgrasp.force.reading` (re-exported here as `reading`): true force + noise, then the 0.1 N deadband.
+`lerobot_blindgrasp.hardware.force.reading` (re-exported here as `reading`): true force + noise, then the 0.1 N deadband.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.force import reading  # noqa: F401  (the env reads its fingertip sensing from this module)
+from lerobot_blindgrasp.hardware.force import reading  # noqa: F401  (the env reads its fingertip sensing from this module)
 
 PER_TIP = ("contact", "objcontact", "force", "torque", "pos", "quat", "zaxis", "objdist")
 

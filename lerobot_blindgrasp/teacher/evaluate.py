@@ -22,7 +22,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_blindgrasp import durable, rates, spec
+from lerobot_blindgrasp import durable, spec
+from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.cli import Legacy, parse_config
 from lerobot_blindgrasp.sim import objects, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from lerobot.motors import MotorCalibration
 
-from lerobot_blindgrasp.xm430 import HOMING_OFFSET_MAX, RAD_PER_TICK, TICKS_PER_REV
+from lerobot_blindgrasp.hardware.xm430 import HOMING_OFFSET_MAX, RAD_PER_TICK, TICKS_PER_REV
 
 REVERSE_BIT = 0x01
 ZERO_TICK = 2048  # Present_Position at q = 0 after calibration: mid-turn, far from 0/4095 on both sides

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from lerobot.robots.config import RobotConfig
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.xm430 import (
+from lerobot_blindgrasp.hardware.xm430 import (
     CURRENT_LIMIT_MAX_UNITS,
     CURRENT_UNIT_A,
     NO_LOAD_SPEED_RAD_S,

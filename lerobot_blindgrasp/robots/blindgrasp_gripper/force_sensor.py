@@ -26,7 +26,7 @@ damaged cell, a wrong scale sign), never a value.
 
 Host side: counts -> newtons with a tare (mean counts over `tare_s` at connect, fingers in free air) and a
 per-channel scale in N/count from the robot config, then the sensor pipeline the sim uses too
-(`lerobot_blindgrasp.force.reading`: the measured newtons already hold the sensor's noise; |f| < 0.1 N reads 0).
+(`lerobot_blindgrasp.hardware.force.reading`: the measured newtons already hold the sensor's noise; |f| < 0.1 N reads 0).
 """
 
 from __future__ import annotations
@@ -38,8 +38,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lerobot_blindgrasp import force, spec
-from lerobot_blindgrasp.streams import LatestFrameStream, StreamError
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware import force
+from lerobot_blindgrasp.hardware.streams import LatestFrameStream, StreamError
 
 from .errors import ForceTareError
 from .ports import open_exclusive

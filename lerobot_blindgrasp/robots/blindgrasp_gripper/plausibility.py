@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lerobot_blindgrasp.xm430 import TICKS_PER_REV
+from lerobot_blindgrasp.hardware.xm430 import TICKS_PER_REV
 
 
 class ImplausibleReadingError(RuntimeError):

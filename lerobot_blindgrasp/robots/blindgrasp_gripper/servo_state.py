@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from lerobot_blindgrasp.xm430 import WATCHDOG_TRIPPED
+from lerobot_blindgrasp.hardware.xm430 import WATCHDOG_TRIPPED
 
 CHECKED = ("Torque_Enable", "Position_P_Gain", "Position_I_Gain", "Position_D_Gain", "Bus_Watchdog", "Goal_Current")
 BLOCK = ("Torque_Enable", "Goal_Current")  # first and last register of the block read (40 bytes per servo)

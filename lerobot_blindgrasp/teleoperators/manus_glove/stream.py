@@ -32,7 +32,7 @@ import socket
 import time
 from dataclasses import dataclass
 
-from lerobot_blindgrasp.streams import LatestFrameStream
+from lerobot_blindgrasp.hardware.streams import LatestFrameStream
 
 logger = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """Table V (the paper's ablations) from a recipe output folder: per-object success of every row, with intervals.
 
-    python -m lerobot_blindgrasp.table_v OUT_DIR      # after `bash scripts/paper_recipe.sh OUT_DIR`
+    python -m lerobot_blindgrasp.analysis.table_v OUT_DIR      # after `bash scripts/paper_recipe.sh OUT_DIR`
 
 Reads what `scripts/paper_recipe.sh` (`blindgrasp-pipeline --print_commands=STAGE`) leaves in OUT_DIR: each student
 row's lerobot-eval (`eval_<row>/eval_info.json`), the RL w/ o_t teacher's own eval (`<teacher>_eval/eval.json`,
@@ -15,14 +15,15 @@ import json
 import sys
 from pathlib import Path
 
-from lerobot_blindgrasp import durable, rates
+from lerobot_blindgrasp import durable
+from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.presets import TABLE_V
 from lerobot_blindgrasp.sim import objects
 
 
 def row_successes(out: Path, name: str) -> dict[str, list[bool]] | None:
     """Object -> episode successes of one Table V row, or None if that row has not been evaluated."""
-    from lerobot_blindgrasp.compare import load_successes
+    from lerobot_blindgrasp.analysis.compare import load_successes
 
     row = TABLE_V[name]
     path = out / f"eval_{name}" / "eval_info.json" if row.student else out / f"{row.teacher}_eval" / "eval.json"
@@ -62,7 +63,7 @@ def paired_with_proposed(done: dict[str, dict[str, list[bool]]], names: list[str
 
 
 def write_table_v(out: Path) -> Path:
-    from lerobot_blindgrasp.plots import bar_chart
+    from lerobot_blindgrasp.analysis.plots import bar_chart
 
     results = {name: row_successes(out, name) for name in TABLE_V}
     done = {n: r for n, r in results.items() if r}
@@ -104,7 +105,7 @@ def write_table_v(out: Path) -> Path:
 def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 1:
-        raise SystemExit("usage: python -m lerobot_blindgrasp.table_v OUT_DIR")
+        raise SystemExit("usage: python -m lerobot_blindgrasp.analysis.table_v OUT_DIR")
     print(write_table_v(Path(args[0])))
 
 

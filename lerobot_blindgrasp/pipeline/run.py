@@ -6,7 +6,7 @@
     blindgrasp-pipeline --preset=quick --teacher=runs/teacher_cpu     # any teacher folder instead
 
 Every size comes from the preset registry (`lerobot_blindgrasp/presets/`); the command lines from
-`lerobot_blindgrasp/recipe.py`, which `scripts/paper_recipe.sh` uses too (`--print_commands=STAGE`). A draccus
+`lerobot_blindgrasp/pipeline/recipe.py`, which `scripts/paper_recipe.sh` uses too (`--print_commands=STAGE`). A draccus
 config like LeRobot's scripts (`--help`, `--config_path`); the 0.1 spellings (`--output-dir`) still work.
 
 Stages, each a real CLI run as a subprocess (its command and log are kept in <out>/logs/):
@@ -42,8 +42,9 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp import durable, presets, recipe, spec
+from lerobot_blindgrasp import durable, presets, spec
 from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.pipeline import recipe
 
 PRESETS = presets.PRESETS  # the registry itself, not a copy
 COMPLETED = "completed"  # pipeline.json: the stages that finished, in order
@@ -208,7 +209,7 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
         stage.skip("student_eval", "done")
     else:
         stage.run("student_eval", recipe.student_eval(preset, ckpt, student_eval, eval_seed, device), env=env1)
-    from lerobot_blindgrasp.report import write_report  # matplotlib, only now
+    from lerobot_blindgrasp.pipeline.report import write_report  # matplotlib, only now
 
     report = write_report(out, record, BIGGER)
     print(f"[pipeline] report: {report}", flush=True)

@@ -1,6 +1,6 @@
 """How a teacher touches each object: the direction of its fingertip forces, next to its success.
 
-    python -m lerobot_blindgrasp.teacher.contacts --teacher=docs/results/teacher_runs/cpu_v3 \
+    python -m lerobot_blindgrasp.analysis.contacts --teacher=docs/results/teacher_runs/cpu_v3 \
         --objects=capsule_small,sphere_small,sphere_medium --episodes=10
 
 Success says *that* a teacher fails on an object; this says *how*. For every control step after the approach

@@ -1,6 +1,6 @@
 """Two evaluations side by side, paired start state by start state: per-object rates and an exact McNemar test.
 
-    python -m lerobot_blindgrasp.compare A_LABEL=PATH B_LABEL=PATH
+    python -m lerobot_blindgrasp.analysis.compare A_LABEL=PATH B_LABEL=PATH
 
 PATH is a lerobot-eval output (`eval_info.json`, or its folder) or a `blindgrasp-eval-teacher` output (`eval.json`,
 or its folder; deterministic mode unless written `PATH:stochastic`). Both must have been run with the same seed
@@ -14,14 +14,14 @@ import json
 import sys
 from pathlib import Path
 
-from lerobot_blindgrasp import rates
+from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.sim import objects
 
 
 def load_successes(path: str | Path, mode: str | None = None) -> dict[str, list[bool]]:
     """Object -> episode successes in evaluation-index order, from either evaluation tool's output. A teacher
     eval's mode is `mode`, else a `:MODE` suffix of `path`, else deterministic."""
-    from lerobot_blindgrasp.report import student_successes
+    from lerobot_blindgrasp.pipeline.report import student_successes
 
     text = str(path)
     if mode is None:
@@ -65,7 +65,7 @@ def compare(a: dict[str, list[bool]], b: dict[str, list[bool]], label_a: str = "
 def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 2 or not all("=" in x for x in args):
-        raise SystemExit("usage: python -m lerobot_blindgrasp.compare A_LABEL=PATH B_LABEL=PATH")
+        raise SystemExit("usage: python -m lerobot_blindgrasp.analysis.compare A_LABEL=PATH B_LABEL=PATH")
     (la, pa), (lb, pb) = (x.split("=", 1) for x in args)
     print(compare(load_successes(pa), load_successes(pb), la, lb))
 

@@ -1,6 +1,6 @@
 """Training success against env steps and against training wall clock, from a run's TensorBoard scalars.
 
-    python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR[+RUN_DIR...] [...] [--until=ITER]
+    python -m lerobot_blindgrasp.analysis.progress OUT.png [LABEL=]RUN_DIR[+RUN_DIR...] [...] [--until=ITER]
         [--metrics=TAG,TAG] [--held_out=EVAL_DIR,EVAL_DIR]
 
 `RUN_A+RUN_B` is one training history kept in two directories: RUN_B was started from a checkpoint of RUN_A (for
@@ -37,7 +37,6 @@ from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import parse_config_and_positionals
 from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME
-
 
 SMOOTHING = 25  # iterations in the trailing mean of every curve
 
@@ -230,13 +229,13 @@ def plot_metrics(runs: dict[str, Path | tuple[Path, ...]], tags: list[str], path
     plt.close(fig)
 
 
-USAGE = ("usage: python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR[+RUN_DIR...] [...] "
+USAGE = ("usage: python -m lerobot_blindgrasp.analysis.progress OUT.png [LABEL=]RUN_DIR[+RUN_DIR...] [...] "
          "[--until=ITER] [--metrics=TAG,TAG] [--held_out=EVAL_DIR,EVAL_DIR]")
 
 
 @dataclass
 class ProgressConfig:
-    """The options of `python -m lerobot_blindgrasp.teacher.progress OUT.png [LABEL=]RUN_DIR ...`; the figure and
+    """The options of `python -m lerobot_blindgrasp.analysis.progress OUT.png [LABEL=]RUN_DIR ...`; the figure and
     the runs are positional arguments."""
 
     until: int | None = None  # cut every curve after this iteration, to compare runs at one budget

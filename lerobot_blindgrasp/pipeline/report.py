@@ -15,10 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_blindgrasp import durable, rates
+from lerobot_blindgrasp import durable
+from lerobot_blindgrasp.analysis import rates
+from lerobot_blindgrasp.analysis.plots import bar_chart, plot_curves, teacher_curves
 from lerobot_blindgrasp.envs.sim_env import object_for_task_id
-from lerobot_blindgrasp.grasp_strips import write_grasp_strips
-from lerobot_blindgrasp.plots import bar_chart, plot_curves, teacher_curves
+from lerobot_blindgrasp.pipeline.grasp_strips import write_grasp_strips
 from lerobot_blindgrasp.sim import objects
 
 _LOSS_LINE = re.compile(r"step:\s*([\d.]+[KMB]?)\b.*?\bloss:\s*([\d.eE+-]+)")

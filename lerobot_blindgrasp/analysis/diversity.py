@@ -1,6 +1,6 @@
 """How varied a demo set is: the spread of grasp poses across episodes, and how much the commands jitter.
 
-    python -m lerobot_blindgrasp.demos.diversity LABEL=DATASET_ROOT [LABEL=DATASET_ROOT ...] [--at_s=3.0]
+    python -m lerobot_blindgrasp.analysis.diversity LABEL=DATASET_ROOT [LABEL=DATASET_ROOT ...] [--at_s=3.0]
 
 The paper credits the stochastic teacher with "trajectory diversity". Two numbers separate the two kinds a demo set
 can have, per object, averaged with equal weight over the objects it holds:
@@ -63,7 +63,7 @@ def diversity(root: str | Path, at_s: float = 3.0) -> dict:
 
 @dataclass
 class DiversityConfig:
-    """The options of `python -m lerobot_blindgrasp.demos.diversity LABEL=DATASET_ROOT ...`; the datasets are
+    """The options of `python -m lerobot_blindgrasp.analysis.diversity LABEL=DATASET_ROOT ...`; the datasets are
     positional arguments."""
 
     at_s: float = 3.0  # seconds into each episode at which the grasp-pose spread is measured (mid-grasp)
@@ -72,7 +72,7 @@ class DiversityConfig:
 def main(argv: list[str] | None = None) -> None:
     cfg, args = parse_config_and_positionals(DiversityConfig, argv)
     if not args:
-        raise SystemExit("usage: python -m lerobot_blindgrasp.demos.diversity LABEL=DATASET_ROOT ... [--at_s=3.0]")
+        raise SystemExit("usage: python -m lerobot_blindgrasp.analysis.diversity LABEL=DATASET_ROOT ... [--at_s=3.0]")
     lines = [f"| dataset | episodes | grasp-pose spread at {cfg.at_s:g} s (rad) | command jitter (rad/step) |",
              "|---|---:|---:|---:|"]
     for arg in args:

@@ -1,0 +1,3 @@
+"""What the simulation and the real gripper share about the hardware: the XM430 servo's facts (`xm430`), the
+fingertip load cell's signal chain (`force`) and the force board's serial frames (`streams`). `sim/` models these
+and `robots/` talks to them; neither imports MuJoCo from here."""
