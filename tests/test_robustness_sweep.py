@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.robustness import envelope
 
 REPO = Path(__file__).resolve().parents[1]
@@ -67,9 +68,9 @@ def test_envelope_grows_from_nominal_and_stops_at_the_first_failure():
 
 
 def test_connect_check_warns_only_beyond_the_tolerated_force_bias():
-    tol = envelope.FORCE_BIAS_TOLERANCE_N
-    assert envelope.force_bias_warning([0.0, 0.5 * tol, -tol]) is None
-    msg = envelope.force_bias_warning([0.0, -(tol + 0.5), 0.0])
+    tol = force.FORCE_BIAS_TOLERANCE_N
+    assert force.force_bias_warning([0.0, 0.5 * tol, -tol]) is None
+    msg = force.force_bias_warning([0.0, -(tol + 0.5), 0.0])
     assert "mf_tip" in msg and "re-tare" in msg
     with pytest.raises(ValueError):
         envelope.passes(1, 2, criterion="median")

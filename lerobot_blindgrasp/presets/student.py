@@ -1,6 +1,6 @@
-"""The student part of the preset registry: architecture sizes and the training length of each preset.
+"""The student part of the preset registry: the size and the training length of each preset's student.
 
-`SIZES` is what `--policy.size` of the `blindgrasp_transformer` policy picks from; `paper` is Table IV.
+Each stage names a `SIZES` entry of the `blindgrasp_transformer` policy (`--policy.size`); `paper` is Table IV.
 
 Training length. Table IV gives 2000 epochs at batch 256 with the LR constant for 100 epochs, then decaying. An
 epoch here is one pass over the frames of the dataset actually collected (lerobot-train draws one sample per
@@ -25,11 +25,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-SIZES: dict[str, dict] = {
-    "paper": {"n_layers": 6, "embed_dim": 512, "n_heads": 8, "head_hidden_dims": [1024, 1024]},  # Table IV
-    "cpu": {"n_layers": 3, "embed_dim": 128, "n_heads": 4, "head_hidden_dims": [256, 256]},
-    "quick": {"n_layers": 2, "embed_dim": 64, "n_heads": 4, "head_hidden_dims": [128, 128]},
-}
+# The architecture sizes are the policy's own table; the stages below name one of them.
+from lerobot_blindgrasp.policies.blindgrasp_transformer.configuration_blindgrasp_transformer import SIZES
 
 
 @dataclass(frozen=True, kw_only=True)

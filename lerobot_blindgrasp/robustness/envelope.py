@@ -1,5 +1,5 @@
 """The robustness envelope: per factor, how far from its training condition the student stays >= 90 %, and what
-the real gripper checks against it. No MuJoCo and no torch here (the robot imports this at connect).
+how a student's card reports it. No MuJoCo and no torch here.
 
 Two readings of "stays >= 90 %", both reported:
 - `rate`: the measured rate itself is >= 90 % (the strict reading);
@@ -14,12 +14,6 @@ from __future__ import annotations
 from lerobot_blindgrasp.analysis import rates
 
 THRESHOLD = 0.90
-
-# Force bias (N, on any one load cell at rest) that the shipped student (models/student_cpu) was measured to
-# tolerate: the robustness sweep with a bias of this size on every cell (random signs) gave the student the same
-# rate as without (89 %, 80 of 90 episodes over the 18 objects), while 3 N cost it 5 points (84 %, 76/90). A
-# reading beyond it at connect means the sensors need a new tare before a policy runs.
-FORCE_BIAS_TOLERANCE_N = 1.0
 
 
 def passes(k: int, n: int, criterion: str = "ci", threshold: float = THRESHOLD) -> bool:
@@ -118,17 +112,3 @@ def first_to_break(summary: dict, threshold: float = THRESHOLD) -> list[tuple[st
                 break
     out.sort()
     return [(t, lab, r) for _, _, t, lab, r in out]
-
-
-def force_bias_warning(bias_n, tolerance_n: float = FORCE_BIAS_TOLERANCE_N) -> str | None:
-    """A warning for the gripper's connect check when a load cell reads more than the student tolerates at rest
-    (fingers in free air, after the tare): None when every |bias| is within `tolerance_n`."""
-    from lerobot_blindgrasp import spec
-
-    values = [float(b) for b in (bias_n if hasattr(bias_n, "__len__") else [bias_n])]
-    bad = {name: v for name, v in zip(spec.FORCE_SENSOR_NAMES, values, strict=False) if abs(v) > tolerance_n}
-    if not bad:
-        return None
-    read = ", ".join(f"{k} {v:+.2f} N" for k, v in bad.items())
-    return (f"Fingertip force at rest reads {read}, beyond the +-{tolerance_n:g} N bias the shipped student was "
-            "measured to tolerate in simulation; re-tare the sensors (fingers in free air) before running a policy.")

@@ -23,8 +23,8 @@ Table IV -> field:
     activation GELU                     -> the transformer MLP (fixed)
     MLP head [1024, 1024]               -> `head_hidden_dims` (via `size="paper"`)
 
-Sizes. `size` picks the architecture from `SIZES` (the preset registry's student table,
-`lerobot_blindgrasp/presets/student.py`); any of `n_layers`, `embed_dim`, `n_heads`, `head_hidden_dims` given
+Sizes. `size` picks the architecture from `SIZES` below (the preset registry's student stages name these
+sizes); any of `n_layers`, `embed_dim`, `n_heads`, `head_hidden_dims` given
 explicitly wins over the preset. The resolved numbers are what `config.json` stores, so a
 checkpoint reloads with the exact architecture it was trained with.
     --policy.size=paper   (default) Table IV, ~1.1 GFLOP per control step; `cpu` and `quick` are smaller
@@ -43,7 +43,14 @@ from torch.optim import Optimizer
 from torch.optim.lr_scheduler import LambdaLR
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.presets.student import SIZES  # noqa: F401  (the registry's table; --policy.size picks)
+
+# What `--policy.size` picks from; `paper` is Table IV. Defined here, with the policy, so that loading the policy
+# (plugin discovery, the real gripper) never imports the preset registry and the simulator behind it.
+SIZES: dict[str, dict] = {
+    "paper": {"n_layers": 6, "embed_dim": 512, "n_heads": 8, "head_hidden_dims": [1024, 1024]},  # Table IV
+    "cpu": {"n_layers": 3, "embed_dim": 128, "n_heads": 4, "head_hidden_dims": [256, 256]},
+    "quick": {"n_layers": 2, "embed_dim": 64, "n_heads": 4, "head_hidden_dims": [128, 128]},
+}
 
 
 @LRSchedulerConfig.register_subclass("blindgrasp_constant_then_linear")

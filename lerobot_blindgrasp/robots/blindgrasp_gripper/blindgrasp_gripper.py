@@ -39,6 +39,7 @@ from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 
 from lerobot_blindgrasp import durable, spec
+from lerobot_blindgrasp.hardware.force import force_bias_warning
 from lerobot_blindgrasp.hardware.xm430 import (
     MODEL,
     RAD_PER_TICK,
@@ -46,7 +47,6 @@ from lerobot_blindgrasp.hardware.xm430 import (
     amps_to_current_units,
     decode_hardware_error,
 )
-from lerobot_blindgrasp.robustness.envelope import force_bias_warning
 
 from . import calibration as calib
 from . import servo_state, signals
