@@ -15,6 +15,7 @@ The trial itself (reset to the start pose, 200 steps at 20 Hz, who decides succe
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass, field
 
@@ -24,7 +25,6 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.robots.config import RobotConfig
 
 from lerobot_blindgrasp import spaces, spec
-from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig
 from lerobot_blindgrasp.sim import objects
 
@@ -75,21 +75,27 @@ class BlindGraspRealEnvConfig(EnvConfig):
     def gym_kwargs(self) -> dict:
         return {}
 
+    def trial_settings(self):
+        """The trial's part of this config, as `real_trial.TrialSettings`."""
+        # Imported here: the trial is needed only when envs are made, and it never imports this module back.
+        from lerobot_blindgrasp.envs.real_trial import TrialSettings
+
+        return TrialSettings(
+            robot=self.robot, episode_s=self.episode_s, success_mode=self.success_mode,
+            hold_force_n=self.hold_force_n, min_contacts=self.min_contacts,
+            home_tolerance_rad=self.home_tolerance_rad, home_timeout_s=self.home_timeout_s,
+            unattended_reset_s=self.unattended_reset_s, tare_each_trial=self.tare_each_trial,
+            trial_log=self.trial_log,
+        )
+
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
+        from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
+
         if n_envs != 1 or use_async_envs:
             logger.warning("One physical gripper: evaluating with one synchronous env (asked n_envs=%s).", n_envs)
-        session = GripperSession(self)
+        session = GripperSession(self.trial_settings())
         out = {}
         for name in self.objects:
-            env_fn = _EnvFactory(session, name)
+            env_fn = functools.partial(RealGraspEnv, session, name)
             out[name] = {0: gym.vector.SyncVectorEnv([env_fn], autoreset_mode=gym.vector.AutoresetMode.NEXT_STEP)}
         return out
-
-
-@dataclass
-class _EnvFactory:
-    session: GripperSession
-    object_name: str
-
-    def __call__(self) -> RealGraspEnv:
-        return RealGraspEnv(self.session, self.object_name)

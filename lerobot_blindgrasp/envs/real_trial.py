@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
@@ -32,10 +32,24 @@ from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, Operato
 from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import Schedule
 from lerobot_blindgrasp.sim import objects
 
-if TYPE_CHECKING:
-    from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
-
 logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrialSettings:
+    """What a trial needs from `--env.*`: `BlindGraspRealEnvConfig.trial_settings()` makes it, and its fields (and
+    their defaults) are documented there."""
+
+    robot: object  # a LeRobot RobotConfig: `make_robot_from_config` builds the one robot of the session from it
+    episode_s: float
+    success_mode: str  # "operator" | "force"
+    hold_force_n: float
+    min_contacts: int
+    home_tolerance_rad: float
+    home_timeout_s: float
+    unattended_reset_s: float
+    tare_each_trial: bool
+    trial_log: str | None
 
 
 def task_string(name: str) -> str:
@@ -48,7 +62,7 @@ class GripperSession:
     """The one robot (one serial bus) shared by the per-object envs: connected at the first reset, disconnected
     once at the end (or on any error, by the robot's own latched stop)."""
 
-    def __init__(self, cfg: BlindGraspRealEnvConfig, keys: OperatorKeys | None = None):
+    def __init__(self, cfg: TrialSettings, keys: OperatorKeys | None = None):
         from lerobot.robots.utils import make_robot_from_config
 
         self.cfg = cfg
