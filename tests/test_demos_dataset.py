@@ -240,11 +240,11 @@ def test_demo_diversity_command_line(written, capsys):
     from lerobot_blindgrasp.analysis.diversity import diversity, main
 
     root = written[0]
-    main([f"demos={root}", "--at_s=0.5"])
+    main([f"--datasets=[demos={root}]", "--at_s=0.5"])
     d = diversity(root, at_s=0.5)
     lines = capsys.readouterr().out.splitlines()
     assert "grasp-pose spread at 0.5 s" in lines[0]
     assert lines[2] == f"| demos | 6 | {d['grasp_pose_spread_rad']:.3f} | {d['command_jitter_rad']:.3f} |"
-    main([str(root)])  # no label: the root names the row; default time 3 s
+    main([f"--datasets=[{root}]"])  # no label: the root names the row; default time 3 s
     out = capsys.readouterr().out
     assert "spread at 3 s" in out and f"| {root} | 6 |" in out

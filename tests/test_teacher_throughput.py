@@ -176,7 +176,7 @@ def test_a_run_continued_in_another_directory_is_one_curve(tmp_path, capsys):
     assert np.diff(p["wall_h"]) * 3600 == pytest.approx([2, 2, 10, 10, 10])
     assert p["success_all18"][2] == 0.0 and p["success_all18"][3] == pytest.approx(1 / 18)
     chained = f"a then b={tmp_path / 'a'}+{tmp_path / 'b'}"
-    main([str(tmp_path / "c.png"), chained, "--metrics=Success/cuboid_a_large"])
+    main([f"--output={tmp_path / 'c.png'}", f"--runs=[{chained}]", "--metrics=[Success/cuboid_a_large]"])
     assert '"a then b"' in capsys.readouterr().out and (tmp_path / "c_metrics.png").is_file()
 
 
@@ -194,17 +194,22 @@ def _timed_run(run_dir, iterations):
     return run_dir
 
 
-def test_progress_command_line_takes_the_runs_as_positionals_and_its_options_as_flags(tmp_path, capsys):
+def test_progress_command_line_takes_the_figure_and_the_runs_as_named_flags(tmp_path, capsys):
     from lerobot_blindgrasp.analysis.progress import main
 
     _timed_run(tmp_path, iterations=4)
     out = tmp_path / "figs" / "q.png"
     out.parent.mkdir()
-    main([str(out), f"run={tmp_path}", "--until=2", "--metrics=Perf/learning_time,Perf/collection_time"])
+    main([f"--output={out}", f"--runs=[run={tmp_path}]", "--until=2",
+          "--metrics=[Perf/learning_time,Perf/collection_time]"])
     assert json.loads(capsys.readouterr().out)["last"]["run"]["iteration"] == 2
     assert out.stat().st_size > 1000 and (out.parent / "q_metrics.png").stat().st_size > 1000
-    with pytest.raises(SystemExit, match="usage"):
-        main([str(out), "--until=2"])
+    with pytest.raises(SystemExit, match="give the runs"):
+        main([f"--output={out}", "--until=2"])
+    with pytest.raises(SystemExit, match="output"):  # the figure is required
+        main([f"--runs=[run={tmp_path}]"])
+    with pytest.raises(SystemExit):  # positional arguments are no longer accepted
+        main([str(out), f"run={tmp_path}"])
 
 
 def test_held_out_evals_are_marked_on_the_run_that_holds_their_checkpoint(tmp_path, capsys):
@@ -231,7 +236,7 @@ def test_held_out_evals_are_marked_on_the_run_that_holds_their_checkpoint(tmp_pa
         return out
 
     fig = tmp_path / "p.png"
-    main([str(fig), f"A={runs['a']}", f"B={runs['b']}", f"--held_out={eval_of('b', 3, 0.9, 0.45)}"])
+    main([f"--output={fig}", f"--runs=[A={runs['a']},B={runs['b']}]", f"--held_out=[{eval_of('b', 3, 0.9, 0.45)}]"])
     held = json.loads(capsys.readouterr().out)["held_out"]
     assert list(held) == ["B"] and held["B"][0]["iteration"] == 3
     assert held["B"][0]["success_all18"] == pytest.approx({"deterministic": 0.05, "stochastic": 0.025})
@@ -240,19 +245,6 @@ def test_held_out_evals_are_marked_on_the_run_that_holds_their_checkpoint(tmp_pa
     (tmp_path / "stray" / "model_3.pt").write_bytes(b"another run")
     runs["a"], stray = tmp_path / "stray", eval_of("a", 3, 1.0, 1.0)
     with pytest.raises(SystemExit, match="none of the runs holds"):  # the runs plotted do not hold its weights
-        main([str(fig), f"B={runs['b']}", f"--held_out={stray}"])
+        main([f"--output={fig}", f"--runs=[B={runs['b']}]", f"--held_out=[{stray}]"])
     with pytest.raises(SystemExit, match="no eval.json"):
-        main([str(fig), f"B={runs['b']}", f"--held_out={tmp_path / 'missing'}"])
-
-
-@pytest.mark.parametrize("user_setting", [None, "ACTIVE"])
-def test_openmp_threads_sleep_unless_the_user_chose_otherwise(user_setting):
-    """Set before torch loads OpenMP, which reads it once: a fresh process that imports the package first."""
-    import os
-
-    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
-    if user_setting:
-        env["OMP_WAIT_POLICY"] = user_setting
-    code = "import lerobot_blindgrasp, os, sys; print(os.environ['OMP_WAIT_POLICY'], 'torch' in sys.modules)"
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
-    assert out.split() == [user_setting or "PASSIVE", "True"]  # torch loaded by the package, after the setting
+        main([f"--output={fig}", f"--runs=[B={runs['b']}]", f"--held_out=[{tmp_path / 'missing'}]"])

@@ -1,6 +1,6 @@
 """Two evaluations side by side, paired start state by start state: per-object rates and an exact McNemar test.
 
-    python -m lerobot_blindgrasp.analysis.compare A_LABEL=PATH B_LABEL=PATH
+    python -m lerobot_blindgrasp.analysis.compare --a=PATH --b=PATH [--a_label=teacher --b_label=student]
 
 PATH is a lerobot-eval output (`eval_info.json`, or its folder) or a `blindgrasp-eval-teacher` output (`eval.json`,
 or its folder; deterministic mode unless written `PATH:stochastic`). Both must have been run with the same seed
@@ -11,10 +11,11 @@ shows up as discordant pairs, which the McNemar test weighs, rather than as two 
 from __future__ import annotations
 
 import json
-import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 from lerobot_blindgrasp.analysis import rates
+from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import objects
 
 
@@ -62,12 +63,20 @@ def compare(a: dict[str, list[bool]], b: dict[str, list[bool]], label_a: str = "
     return "\n".join(lines)
 
 
+@dataclass
+class CompareConfig:
+    # The two evaluations: an eval_info.json or eval.json, or the folder holding it (a teacher's as `PATH:stochastic`
+    # for its stochastic mode). Same seed and episode count, so that they pair.
+    a: str
+    b: str
+    # Their names in the table and in "b minus a".
+    a_label: str = "a"
+    b_label: str = "b"
+
+
 def main(argv: list[str] | None = None) -> None:
-    args = sys.argv[1:] if argv is None else argv
-    if len(args) != 2 or not all("=" in x for x in args):
-        raise SystemExit("usage: python -m lerobot_blindgrasp.analysis.compare A_LABEL=PATH B_LABEL=PATH")
-    (la, pa), (lb, pb) = (x.split("=", 1) for x in args)
-    print(compare(load_successes(pa), load_successes(pb), la, lb))
+    cfg = parse_config(CompareConfig, argv)
+    print(compare(load_successes(cfg.a), load_successes(cfg.b), cfg.a_label, cfg.b_label))
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """How varied a demo set is: the spread of grasp poses across episodes, and how much the commands jitter.
 
-    python -m lerobot_blindgrasp.analysis.diversity LABEL=DATASET_ROOT [LABEL=DATASET_ROOT ...] [--at_s=3.0]
+    python -m lerobot_blindgrasp.analysis.diversity --datasets=[LABEL=DATASET_ROOT,...] [--at_s=3.0]
 
 The paper credits the stochastic teacher with "trajectory diversity". Two numbers separate the two kinds a demo set
 can have, per object, averaged with equal weight over the objects it holds:
@@ -14,13 +14,13 @@ Read with LeRobot's own loader, so any dataset the collector (or `lerobot-record
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.cli import parse_config_and_positionals
+from lerobot_blindgrasp.cli import parse_config
 
 
 def diversity(root: str | Path, at_s: float = 3.0) -> dict:
@@ -63,16 +63,16 @@ def diversity(root: str | Path, at_s: float = 3.0) -> dict:
 
 @dataclass
 class DiversityConfig:
-    """The options of `python -m lerobot_blindgrasp.analysis.diversity LABEL=DATASET_ROOT ...`; the datasets are
-    positional arguments."""
-
+    # The demo sets, each `[LABEL=]DATASET_ROOT` (label: the root when not given), one table row each
+    datasets: list[str] = field(default_factory=list)
     at_s: float = 3.0  # seconds into each episode at which the grasp-pose spread is measured (mid-grasp)
 
 
 def main(argv: list[str] | None = None) -> None:
-    cfg, args = parse_config_and_positionals(DiversityConfig, argv)
+    cfg = parse_config(DiversityConfig, argv)
+    args = cfg.datasets
     if not args:
-        raise SystemExit("usage: python -m lerobot_blindgrasp.analysis.diversity LABEL=DATASET_ROOT ... [--at_s=3.0]")
+        raise SystemExit("error: give the demo sets: --datasets=[LABEL=DATASET_ROOT,...]")
     lines = [f"| dataset | episodes | grasp-pose spread at {cfg.at_s:g} s (rad) | command jitter (rad/step) |",
              "|---|---:|---:|---:|"]
     for arg in args:

@@ -1,18 +1,18 @@
 """Training success against env steps and against training wall clock, from a run's TensorBoard scalars.
 
-    python -m lerobot_blindgrasp.analysis.progress OUT.png [LABEL=]RUN_DIR[+RUN_DIR...] [...] [--until=ITER]
-        [--metrics=TAG,TAG] [--held_out=EVAL_DIR,EVAL_DIR]
+    python -m lerobot_blindgrasp.analysis.progress --output=OUT.png --runs=[[LABEL=]RUN_DIR[+RUN_DIR...],...]
+        [--until=ITER] [--metrics=[TAG,TAG]] [--held_out=[EVAL_DIR,EVAL_DIR]]
 
 `RUN_A+RUN_B` is one training history kept in two directories: RUN_B was started from a checkpoint of RUN_A (for
 example the shipped teacher, whose cloning stage resumed the `cpu` run's iteration 1397 under another preset). Its
 curve is RUN_A up to RUN_B's first iteration, then RUN_B, with RUN_B's wall clock added to RUN_A's.
 
 `--until=ITER` cuts every curve after iteration ITER, to compare runs at one budget (a side-by-side run that was
-stopped earlier than the one it is compared with). `--metrics=TAG,TAG` adds a second figure, OUT_metrics.png, with
+stopped earlier than the one it is compared with). `--metrics=[TAG,TAG]` adds a second figure, OUT_metrics.png, with
 those TensorBoard scalars of every run against env steps (e.g. `Metrics/mean_contacts,Metrics/mean_lift_cm`: what
 a policy does, where success alone only says that it fails).
 
-`--held_out=EVAL_DIR,...` marks `blindgrasp-eval-teacher` results on the curves: each eval sits on the run whose
+`--held_out=[EVAL_DIR,...]` marks `blindgrasp-eval-teacher` results on the curves: each eval sits on the run whose
 directories hold the checkpoint it evaluated (matched by the checkpoint's SHA-256, which the eval records), at that
 iteration's env steps and training hours; filled: deterministic, open: stochastic, all 18 objects.
 
@@ -28,13 +28,13 @@ sessions reports its training time without the gaps (process start-up, about 10 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from lerobot_blindgrasp import durable
-from lerobot_blindgrasp.cli import parse_config_and_positionals
+from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME
 
@@ -229,46 +229,37 @@ def plot_metrics(runs: dict[str, Path | tuple[Path, ...]], tags: list[str], path
     plt.close(fig)
 
 
-USAGE = ("usage: python -m lerobot_blindgrasp.analysis.progress OUT.png [LABEL=]RUN_DIR[+RUN_DIR...] [...] "
-         "[--until=ITER] [--metrics=TAG,TAG] [--held_out=EVAL_DIR,EVAL_DIR]")
-
-
 @dataclass
 class ProgressConfig:
-    """The options of `python -m lerobot_blindgrasp.analysis.progress OUT.png [LABEL=]RUN_DIR ...`; the figure and
-    the runs are positional arguments."""
-
+    output: Path  # the figure (png); `--metrics` adds OUT_metrics.png next to it
+    # The runs, each `[LABEL=]RUN_DIR[+RUN_DIR...]` (label: the last folder's name when not given)
+    runs: list[str] = field(default_factory=list)
     until: int | None = None  # cut every curve after this iteration, to compare runs at one budget
-    # comma-separated TensorBoard scalar tags (Metrics/mean_contacts,Metrics/mean_lift_cm): a second figure,
-    # OUT_metrics.png, with them against env steps
-    metrics: str = ""
-    # comma-separated blindgrasp-eval-teacher output folders, marked on the run that holds each one's checkpoint
-    held_out: str = ""
-
-    @property
-    def metric_tags(self) -> list[str]:
-        return [t for t in self.metrics.split(",") if t]
+    # TensorBoard scalar tags (Metrics/mean_contacts, Metrics/mean_lift_cm): a second figure with them against env steps
+    metrics: list[str] = field(default_factory=list)
+    # blindgrasp-eval-teacher output folders, marked on the run that holds each one's checkpoint
+    held_out: list[Path] = field(default_factory=list)
 
 
 def main(argv=None) -> None:
-    cfg, args = parse_config_and_positionals(ProgressConfig, argv)
-    if len(args) < 2:
-        raise SystemExit(USAGE)
+    cfg = parse_config(ProgressConfig, argv)
+    if not cfg.runs:
+        raise SystemExit("error: give the runs to plot: --runs=[[LABEL=]RUN_DIR[+RUN_DIR...],...]")
     runs = {}
-    for arg in args[1:]:
+    for arg in cfg.runs:
         label, _, paths = arg.rpartition("=")
         run_dirs = tuple(Path(p) for p in paths.split("+"))
         for run_dir in run_dirs:
             if not (run_dir / CONFIG_NAME).is_file():
                 raise SystemExit(f"{run_dir} is not a teacher run directory (no {CONFIG_NAME})")
         runs[label or run_dirs[-1].name] = run_dirs if len(run_dirs) > 1 else run_dirs[0]
-    out = Path(args[0])
-    held_out = held_out_points(runs, [Path(d) for d in cfg.held_out.split(",") if d]) if cfg.held_out else None
+    out = cfg.output
+    held_out = held_out_points(runs, cfg.held_out) if cfg.held_out else None
     curves = plot_progress(runs, out, until=cfg.until, held_out=held_out)
-    if cfg.metric_tags:
-        plot_metrics(runs, cfg.metric_tags, out.with_name(f"{out.stem}_metrics.png"), until=cfg.until)
+    if cfg.metrics:
+        plot_metrics(runs, cfg.metrics, out.with_name(f"{out.stem}_metrics.png"), until=cfg.until)
     last = {label: {k: v[-1] for k, v in p.items()} for label, p in curves.items() if p}
-    print(json.dumps({"plot": args[0], "last": last, "held_out": held_out or {}}, indent=2))
+    print(json.dumps({"plot": str(out), "last": last, "held_out": held_out or {}}, indent=2))
 
 
 if __name__ == "__main__":

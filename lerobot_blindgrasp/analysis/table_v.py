@@ -1,6 +1,6 @@
 """Table V (the paper's ablations) from a recipe output folder: per-object success of every row, with intervals.
 
-    python -m lerobot_blindgrasp.analysis.table_v OUT_DIR      # after `bash scripts/paper_recipe.sh OUT_DIR`
+    python -m lerobot_blindgrasp.analysis.table_v --output_dir=OUT_DIR   # after `bash scripts/paper_recipe.sh OUT_DIR`
 
 Reads what `scripts/paper_recipe.sh` (`blindgrasp-pipeline --print_commands=STAGE`) leaves in OUT_DIR: each student
 row's lerobot-eval (`eval_<row>/eval_info.json`), the RL w/ o_t teacher's own eval (`<teacher>_eval/eval.json`,
@@ -12,11 +12,12 @@ Writes `OUT_DIR/table_v.md` and `OUT_DIR/table_v.png` (bar chart per object).
 from __future__ import annotations
 
 import json
-import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.analysis import rates
+from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.presets import TABLE_V
 from lerobot_blindgrasp.sim import objects
 
@@ -102,11 +103,13 @@ def write_table_v(out: Path) -> Path:
     return path
 
 
+@dataclass
+class TableVConfig:
+    output_dir: Path  # the recipe's folder (`scripts/paper_recipe.sh OUT_DIR`): table_v.md and table_v.png go there
+
+
 def main(argv: list[str] | None = None) -> None:
-    args = sys.argv[1:] if argv is None else argv
-    if len(args) != 1:
-        raise SystemExit("usage: python -m lerobot_blindgrasp.analysis.table_v OUT_DIR")
-    print(write_table_v(Path(args[0])))
+    print(write_table_v(parse_config(TableVConfig, argv).output_dir))
 
 
 if __name__ == "__main__":

@@ -9,7 +9,7 @@ is exactly lerobot-eval's model (tasks x episodes, `info["is_success"]`, `pc_suc
 policy's own pre/post-processors and no extra code path. lerobot-rollout runs a policy on a robot but has no notion
 of trials, resets or success. So the gripper is wrapped as a gymnasium env, one task group per object:
 `eval_info.json` -> `per_group[<object>].pc_success` is the per-object success table
-(`python -m lerobot_blindgrasp.envs.real_report <eval_info.json>` prints it as markdown).
+(`python -m lerobot_blindgrasp.envs.real_report --eval_info=PATH` prints it as markdown).
 The trial itself (reset to the start pose, 200 steps at 20 Hz, who decides success) is `real_trial.py`.
 """
 

@@ -1,6 +1,6 @@
 """Per-object success table of a real-gripper evaluation, from lerobot-eval's `eval_info.json`.
 
-    python -m lerobot_blindgrasp.envs.real_report outputs/eval/<run>/eval_info.json
+    python -m lerobot_blindgrasp.envs.real_report --eval_info=outputs/eval/<run>/eval_info.json
 
 `--env.type=blindgrasp_real` makes each object its own task group, so `per_group[<object>]` holds its trials.
 """
@@ -8,8 +8,10 @@
 from __future__ import annotations
 
 import json
-import sys
+from dataclasses import dataclass
 from pathlib import Path
+
+from lerobot_blindgrasp.cli import parse_config
 
 
 def success_table(eval_info: dict) -> str:
@@ -24,11 +26,13 @@ def success_table(eval_info: dict) -> str:
     return "\n".join(rows)
 
 
+@dataclass
+class RealReportConfig:
+    eval_info: Path  # lerobot-eval's eval_info.json of a `--env.type=blindgrasp_real` run
+
+
 def main(argv: list[str] | None = None) -> None:
-    args = sys.argv[1:] if argv is None else argv
-    if len(args) != 1:
-        raise SystemExit("usage: python -m lerobot_blindgrasp.envs.real_report <eval_info.json>")
-    print(success_table(json.loads(Path(args[0]).read_text())))
+    print(success_table(json.loads(parse_config(RealReportConfig, argv).eval_info.read_text())))
 
 
 if __name__ == "__main__":

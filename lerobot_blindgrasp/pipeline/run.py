@@ -43,7 +43,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from lerobot_blindgrasp import durable, presets, spec
-from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.cli import parse_config, sleeping_openmp_threads
 from lerobot_blindgrasp.pipeline import recipe
 
 PRESETS = presets.PRESETS  # the registry itself, not a copy
@@ -317,6 +317,7 @@ def _kept(root: Path) -> int:
 
 
 def main(argv=None) -> None:
+    sleeping_openmp_threads(restart=False)  # for the stages it starts; the pipeline itself computes little
     cfg = parse_config(PipelineConfig, argv)
     try:
         if cfg.print_commands:

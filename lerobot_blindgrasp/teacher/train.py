@@ -31,7 +31,7 @@ import torch
 from tqdm import tqdm
 
 from lerobot_blindgrasp import durable, spec
-from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_config
+from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_config, sleeping_openmp_threads
 from lerobot_blindgrasp.presets import SHIPPED_TEACHER_PRESET
 from lerobot_blindgrasp.sim import randomization, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
@@ -303,6 +303,7 @@ def export(runner, path: Path) -> None:
 
 
 def main(argv=None) -> None:
+    sleeping_openmp_threads(restart=argv is None)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     logging.getLogger("blindgrasp").setLevel(logging.INFO)  # LeRobot's imports may have configured the root first
     train(parse_config(TrainTeacherConfig, argv))
