@@ -1,4 +1,4 @@
-"""`blindgrasp-bench policy` runs end to end (at a small size) and reports a consistent result."""
+"""`blindgrasp-bench --bench.type=policy` runs end to end (at a small size) and reports a consistent result."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from lerobot_blindgrasp.bench import main
 def test_policy_bench_json(capsys):
     previous = torch.get_num_threads()
     try:
-        main(["policy", "--size", "quick", "--steps", "35", "--rounds", "1", "--json"])
+        main(["--bench.type=policy", "--bench.size=quick", "--bench.steps=35", "--bench.rounds=1", "--bench.json=true"])
     finally:
         torch.set_num_threads(previous)  # the bench pins torch to one thread, as it measures
     result = json.loads(capsys.readouterr().out)
@@ -32,7 +32,7 @@ def test_policy_bench_json(capsys):
 def test_policy_bench_table(capsys):
     previous = torch.get_num_threads()
     try:
-        main(["policy", "--size", "quick", "--steps", "32", "--rounds", "1"])
+        main(["--bench.type=policy", "--bench.size=quick", "--bench.steps=32", "--bench.rounds=1"])
     finally:
         torch.set_num_threads(previous)
     table = capsys.readouterr().out

@@ -50,8 +50,9 @@ def test_env_uses_the_weighted_allocation_and_rejects_bad_weights():
 @pytest.mark.slow
 def test_bench_teacher_reports_collection_update_and_raw_physics():
     out = subprocess.run(
-        [sys.executable, "-c", "from lerobot_blindgrasp.bench import main; main()", "teacher", "--preset", "quick",
-         "--num-envs", "18", "--iterations", "1", "--threads", "1", "--update-threads", "2", "--json"],
+        [sys.executable, "-c", "from lerobot_blindgrasp.bench import main; main()", "--bench.type=teacher",
+         "--bench.preset=quick", "--bench.num_envs=18", "--bench.iterations=1", "--bench.threads=1",
+         "--bench.update_threads=2", "--bench.json=true"],
         capture_output=True, text=True, timeout=300, check=True,
     ).stdout
     r = json.loads(out)  # stdout holds only the JSON (rsl-rl's model printout goes to stderr)

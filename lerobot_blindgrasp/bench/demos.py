@@ -28,6 +28,7 @@ from pathlib import Path
 from lerobot_blindgrasp.bench import BenchConfig
 
 
+@BenchConfig.register_subclass("demos")
 @dataclass
 class BenchDemosConfig(BenchConfig):
     """Demo collection speed: curated demos per CPU-minute and dataset frames written per second."""
@@ -43,9 +44,6 @@ class BenchDemosConfig(BenchConfig):
     backend: str = "batch"  # physics: batch or warp (pip install .[gpu]; a GPU if there is one, else Warp's CPU)
     durable_side_by_side: bool = True  # also run the collection with crash checkpoints, and compare
     checkpoint_s: float = 10.0  # their interval here: 6x as often as the collector's default 60 s, a worst case
-
-
-CONFIG = BenchDemosConfig
 
 
 def _throwaway_teacher(tmp: Path) -> Path:

@@ -39,6 +39,7 @@ TARGET_RATIO = 1.3
 PEAK_GEMM_N = 1024
 
 
+@BenchConfig.register_subclass("policy")
 @dataclass
 class BenchPolicyConfig(BenchConfig):
     """select_action latency of blindgrasp_transformer on one CPU thread, against the model's compute floor."""
@@ -51,10 +52,7 @@ class BenchPolicyConfig(BenchConfig):
 
     def __post_init__(self):
         if self.size not in SIZES:
-            raise ValueError(f"--size must be one of {sorted(SIZES)}, got {self.size!r}")
-
-
-CONFIG = BenchPolicyConfig
+            raise ValueError(f"--bench.size must be one of {sorted(SIZES)}, got {self.size!r}")
 
 
 def flops_per_step(config: BlindgraspTransformerConfig, last_token_only: bool = False) -> int:

@@ -25,6 +25,7 @@ from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.gripper import PhysicsOptions
 
 
+@BenchConfig.register_subclass("sim")
 @dataclass
 class BenchSimConfig(BenchConfig):
     """Simulation throughput: raw physics vs the env's control step, per physics thread count."""
@@ -37,10 +38,7 @@ class BenchSimConfig(BenchConfig):
 
     def __post_init__(self):
         if self.backend not in ("batch", "warp"):
-            raise ValueError(f"--backend must be batch or warp, got {self.backend!r}")
-
-
-CONFIG = BenchSimConfig
+            raise ValueError(f"--bench.backend must be batch or warp, got {self.backend!r}")
 
 
 def _measure(num_envs: int, nthread: int, steps: int, blocks: int, backend: str = "batch") -> dict:

@@ -1,6 +1,8 @@
-"""`blindgrasp-bench student`: what one lerobot-train sample of the student costs, against its compute floor.
+"""`blindgrasp-bench --bench.type=student`: what one lerobot-train sample of the student costs, against its
+compute floor.
 
-    blindgrasp-bench student --dataset_root=outputs/pipeline_quick/demos --size=cpu --batch_size=128 --json=true
+    blindgrasp-bench --bench.type=student --bench.dataset_root=outputs/pipeline_quick/demos --bench.size=cpu \\
+        --bench.batch_size=128 --bench.json=true
 
 Three figures, each per training sample, measured in this process on one torch thread:
 - **load**: LeRobotDataset `__getitem__` with the policy's 30-frame observation window (what each lerobot-train
@@ -34,6 +36,7 @@ from lerobot_blindgrasp.bench.policy import flops_per_step, make_policy
 from lerobot_blindgrasp.presets.student import SIZES
 
 
+@BenchConfig.register_subclass("student")
 @dataclass
 class BenchStudentConfig(BenchConfig):
     """Per-sample cost of student training: data loading, the update, and the model's FLOP floor."""
@@ -49,12 +52,9 @@ class BenchStudentConfig(BenchConfig):
 
     def __post_init__(self):
         if self.size not in SIZES:
-            raise ValueError(f"--size must be one of {sorted(SIZES)}, got {self.size!r}")
+            raise ValueError(f"--bench.size must be one of {sorted(SIZES)}, got {self.size!r}")
         if self.dataset_root is None or not (Path(self.dataset_root) / "meta" / "info.json").is_file():
-            raise ValueError(f"--dataset_root must be a LeRobotDataset folder, got {self.dataset_root}")
-
-
-CONFIG = BenchStudentConfig
+            raise ValueError(f"--bench.dataset_root must be a LeRobotDataset folder, got {self.dataset_root}")
 
 
 def load_ms(root: Path, n_obs_steps: int, samples: int, seed: int) -> float:

@@ -1,7 +1,7 @@
 """Whole-loop PPO throughput: collection vs update time per iteration, against raw physics at the same env count.
 
-    blindgrasp-bench teacher --preset=cpu --iterations=6 --json=true
-    blindgrasp-bench teacher --preset=cpu --checkpoint=runs/teacher_cpu/model_1397.pt   # a policy that grasps
+    blindgrasp-bench --bench.type=teacher --bench.preset=cpu --bench.iterations=6 --bench.json=true
+    blindgrasp-bench --bench.type=teacher --bench.preset=cpu --bench.checkpoint=runs/teacher_cpu/model_1397.pt
 
 Builds the preset's env and rsl-rl `OnPolicyRunner` exactly as `blindgrasp-train-teacher` does (no logging to
 disk), runs a warm-up iteration and then `--iterations` timed ones. Per iteration it splits wall time into
@@ -10,8 +10,8 @@ In the same process it times raw physics (`Batch.step` with the same per-env mod
 observation, reward or policy work) for as many control steps, so the ratio whole-loop / raw says how much of the
 machine the learner leaves to physics. Measured in one run because the machine may be shared.
 
-Overrides (`--hidden_dims`, `--mini_batches`, `--epochs`, `--torch_threads`, `--update_threads`, `--num_envs`) let levers be compared
-side by side without editing a preset.
+Overrides (`--bench.hidden_dims`, `--bench.mini_batches`, `--bench.epochs`, `--bench.torch_threads`,
+`--bench.update_threads`, `--bench.num_envs`) let levers be compared side by side without editing a preset.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from lerobot_blindgrasp.bench import BenchConfig
 from lerobot_blindgrasp.teacher import presets
 
 
+@BenchConfig.register_subclass("teacher")
 @dataclass
 class BenchTeacherConfig(BenchConfig):
     """Whole-loop PPO throughput: collection vs update time per iteration, against raw physics."""
@@ -51,16 +52,13 @@ class BenchTeacherConfig(BenchConfig):
     def __post_init__(self):
         presets.get_preset(self.preset)  # unknown preset: a clear error before anything heavy
         if self.backend not in ("batch", "warp"):
-            raise ValueError(f"--backend must be batch or warp, got {self.backend!r}")
+            raise ValueError(f"--bench.backend must be batch or warp, got {self.backend!r}")
         if self.checkpoint is not None:
             self.checkpoint = Path(self.checkpoint)
             if not self.checkpoint.is_file():
                 raise FileNotFoundError(f"--checkpoint: no file at {self.checkpoint}")
             if self.hidden_dims:
                 raise ValueError("--checkpoint fixes the MLP widths: drop --hidden_dims")
-
-
-CONFIG = BenchTeacherConfig
 
 
 def _preset(cfg: BenchTeacherConfig) -> presets.TeacherPreset:

@@ -18,28 +18,17 @@ from __future__ import annotations
 import logging
 import sys
 
-from lerobot_blindgrasp.cli import Legacy, command_line, parse_config
+from lerobot_blindgrasp.cli import command_line, parse_config
 from lerobot_blindgrasp.demos import report
 from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
 from lerobot_blindgrasp.demos.loop import collect
 
 EXIT_EMPTY = 3  # the collection ran but wrote no episode
 
-# Release-0.1 spellings that the generic translation cannot guess (`pipeline/run.py` and recorded commands use them).
-LEGACY = Legacy(
-    flags={
-        "out": "output_dir",
-        "deterministic": "stochastic=false",
-        "no_curation": "curation.enabled=false",
-        "trim_at_criteria": "curation.trim_to_success=true",
-    }
-)
-
-
 def main(argv=None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     logging.getLogger("blindgrasp").setLevel(logging.INFO)  # LeRobot's imports may have configured the root first
-    cfg = parse_config(CollectConfig, argv, LEGACY)
+    cfg = parse_config(CollectConfig, argv)
     command = command_line("blindgrasp-collect-demos", argv)
     try:
         stats = collect(cfg, command=command)

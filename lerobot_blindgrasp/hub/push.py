@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lerobot_blindgrasp import durable
-from lerobot_blindgrasp.cli import Legacy, parse_config
+from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.hub import REPO_ID_PATTERN, cards
 
 # Not uploaded by LeRobot's push_to_hub (it ignores images/; state-only datasets have none anyway).
@@ -114,10 +114,6 @@ class PushDatasetConfig:
         self.root = Path(self.root).expanduser()
 
 
-# Release-0.1 spellings: `blindgrasp-push-dataset ROOT --repo-id ID --tag T --operator NAME`.
-LEGACY = Legacy(positionals=("root",), flags={"tag": "tags", "operator": "operators"})
-
-
 def push_dataset(cfg: PushDatasetConfig) -> str | None:
     """Prepare (card, checks) and upload. Returns the dataset URL, or None for a dry run. Raises PushError for a
     folder that cannot be pushed, and the network errors of `_network_errors()` for a failed upload."""
@@ -135,7 +131,7 @@ def push_dataset(cfg: PushDatasetConfig) -> str | None:
 
 
 def main(argv=None) -> None:
-    cfg = parse_config(PushDatasetConfig, argv, LEGACY)
+    cfg = parse_config(PushDatasetConfig, argv)
     try:
         url = push_dataset(cfg)
     except PushError as e:

@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.analysis import rates
-from lerobot_blindgrasp.cli import Legacy, parse_config
+from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import objects, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.gym_env import start_seed
@@ -58,10 +58,6 @@ class EvalTeacherConfig:
     @property
     def mode_names(self) -> tuple[str, ...]:
         return tuple(m.strip() for m in self.modes.split(",") if m.strip())
-
-
-# Release-0.1 spellings: `blindgrasp-eval-teacher RUN_DIR --out DIR`.
-LEGACY = Legacy(positionals=("teacher",), flags={"out": "output_dir", "checkpoint": "teacher"})
 
 
 def sim_fingerprint() -> str:
@@ -225,7 +221,7 @@ def write_outputs(results: dict, out: Path) -> None:
 
 
 def main(argv=None) -> None:
-    cfg = parse_config(EvalTeacherConfig, argv, LEGACY)
+    cfg = parse_config(EvalTeacherConfig, argv)
     try:
         results, out = evaluate(cfg)
     except (TeacherError, ValueError) as e:

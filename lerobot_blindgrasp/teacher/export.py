@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lerobot_blindgrasp import durable
-from lerobot_blindgrasp.cli import Legacy, parse_config
+from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.teacher import policy
 
 CARD_NAME = "README.md"
@@ -41,10 +41,6 @@ class ExportTeacherConfig:
             raise ValueError("--source is required (a training run directory or checkpoint file)")
         if self.output_dir is None:
             raise ValueError("--output_dir is required (the teacher folder to write)")
-
-
-# Release-0.1 spellings: `blindgrasp-export-teacher RUN_DIR OUT_DIR`.
-LEGACY = Legacy(positionals=("source", "output_dir"), flags={"out_dir": "output_dir"})
 
 
 def export(cfg: ExportTeacherConfig) -> Path:
@@ -136,7 +132,7 @@ def push_teacher(folder: str | Path, repo_id: str, private: bool | None = None) 
 
 
 def main(argv=None) -> None:
-    cfg = parse_config(ExportTeacherConfig, argv, LEGACY)
+    cfg = parse_config(ExportTeacherConfig, argv)
     try:
         export(cfg)
     except policy.TeacherError as e:
