@@ -1,6 +1,6 @@
 """`blindgrasp-eval-teacher`: per-object success table of a trained teacher.
 
-    blindgrasp-eval-teacher --episodes=20 --output_dir=docs/results/teacher_eval     # the shipped default teacher
+    blindgrasp-eval-teacher --episodes=20 --output_dir=outputs/teacher_eval     # the shipped default teacher
     blindgrasp-eval-teacher --teacher=runs/teacher_cpu --episodes=20
 
 Runs N episodes per object (10 s each, the paper's randomization and observation noise, external forces off as in
