@@ -107,16 +107,3 @@ def test_paired_difference_pools_objects_in_the_given_order():
     # An object one side lacks counts as no episodes there, so the two no longer pair.
     with pytest.raises(ValueError, match="equal counts"):
         rates.paired_difference(a, b, ["x", "z"])
-
-
-def test_lerobot_eval_of_a_teacher_folder_is_a_one_line_error(monkeypatch):
-    """The env config is parsed before LeRobot loads the policy: a teacher folder as --policy.path is caught there."""
-    from lerobot_blindgrasp.envs.sim_env import BlindGraspEnvConfig
-    from lerobot_blindgrasp.teacher.policy import default_teacher
-
-    monkeypatch.setattr("sys.argv", ["lerobot-eval", f"--policy.path={default_teacher()}", "--env.type=blindgrasp"])
-    with pytest.raises(ValueError, match="is a blindgrasp PPO teacher, not a LeRobot policy") as e:
-        BlindGraspEnvConfig()
-    assert "\n" not in str(e.value) and "blindgrasp-eval-teacher" in str(e.value)
-    monkeypatch.setattr("sys.argv", ["lerobot-eval", "--env.type=blindgrasp"])
-    BlindGraspEnvConfig()  # no policy path: nothing to refuse

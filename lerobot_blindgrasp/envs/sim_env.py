@@ -43,21 +43,6 @@ def object_for_task_id(tid: int) -> str:
     return names[tid]
 
 
-def _refuse_teacher_as_policy() -> None:
-    """`lerobot-eval --policy.path=<a blindgrasp teacher folder>` would otherwise end in LeRobot looking for a
-    config.json on the Hub. The env config is parsed before the policy is loaded, so say it here, in one line."""
-    from pathlib import Path
-
-    from lerobot.configs import parser
-
-    path = parser.get_path_arg("policy")
-    if path and (Path(path) / "teacher_config.json").is_file() and not (Path(path) / "config.json").is_file():
-        raise ValueError(
-            f"--policy.path={path} is a blindgrasp PPO teacher, not a LeRobot policy; evaluate it with "
-            f"`blindgrasp-eval-teacher --teacher={path}` (the same start states as lerobot-eval --seed)"
-        )
-
-
 # The 18 paper objects; OOD objects registered later get the next ids (see `task_id`).
 TASK_IDS: dict[int, str] = {task_id(n): n for n in objects.PAPER_OBJECTS}
 
@@ -88,7 +73,6 @@ class BlindGraspEnvConfig(EnvConfig):
         self.objects = objects.resolve_objects(self.task)
         if self.render_episodes < 0:
             raise ValueError(f"render_episodes must be >= 0, got {self.render_episodes}")
-        _refuse_teacher_as_policy()
 
     @property
     def gym_kwargs(self) -> dict:
