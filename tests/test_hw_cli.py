@@ -268,7 +268,7 @@ def test_lerobot_eval_on_the_real_env_reports_per_object_success(station, checkp
     assert [(t["object"], t["trial"]) for t in trials] == [
         ("cylinder_a_medium", 1), ("cylinder_a_medium", 2), ("wine_glass", 1), ("wine_glass", 2)
     ]  # fmt: skip
-    report = [str(BIN / "python"), "-m", "lerobot_blindgrasp.envs.real_report", str(out / "eval_info.json")]
+    report = [str(BIN / "python"), "-m", "lerobot_blindgrasp.envs.real_report", f"--eval_info={out / 'eval_info.json'}"]
     table = subprocess.run(report, env=station.env, capture_output=True, text=True, check=True).stdout
     assert "| cylinder_a_medium | 2 |" in table and "| **overall** | 4 |" in table
 
