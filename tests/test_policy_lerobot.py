@@ -25,6 +25,10 @@ from lerobot_blindgrasp.policies.blindgrasp_transformer import (
     BlindgraspTransformerConfig,
     BlindgraspTransformerPolicy,
 )
+from lerobot_blindgrasp.policies.blindgrasp_transformer.processor_blindgrasp_transformer import (
+    Q_NOW,
+    normalized_delta_to_target,
+)
 
 REPO_ID = "local/blindgrasp_policy_test"
 EPISODE_LENGTHS = (36, 40)  # longer than the 30-step context, so windows go from fully padded to unpadded
@@ -103,8 +107,8 @@ def test_lerobot_train_cli_writes_a_self_contained_checkpoint(dataset_root, tmp_
     post_json = json.loads((ckpt / "policy_postprocessor.json").read_text())
     pre_steps = [s.get("registry_name") for s in pre_json["steps"]]
     assert pre_steps[3:] == ["blindgrasp_target_to_delta", "normalizer_processor"]
-    assert post_json["steps"][1]["registry_name"] == "blindgrasp_delta_to_target"
-    assert pre_json["steps"][3]["config"]["link"] == post_json["steps"][1]["config"]["link"]
+    assert pre_json["steps"][3]["config"] == {"action_bound": spec.ACTION_BOUND_RAD}
+    assert [s.get("registry_name") for s in post_json["steps"]] == ["unnormalizer_processor", "device_processor"]
 
     # Both ways LeRobot loads processors give a working pre -> policy -> post loop that outputs joint targets.
     loaded = PolicyProcessorPipeline.from_pretrained(ckpt, "policy_preprocessor.json")
@@ -145,16 +149,17 @@ def test_rolling_context_equals_lerobot_training_windows(dataset_root):
     with torch.no_grad():
         train_batch = pre({k: batch[k] for k in (OBS_STATE, f"{OBS_STATE}_is_pad", ACTION)})
         batched = policy.model(train_batch[OBS_STATE], train_batch[f"{OBS_STATE}_is_pad"])
-        batched_targets = post(batched)  # q_now = the last frame of each window
+        # q_now = the last frame of each window, as the preprocessor passes it along
+        batched_targets = post(normalized_delta_to_target(batched, train_batch[Q_NOW]))
 
     policy.reset()
     stepped, stepped_targets = [], []
     with torch.inference_mode():
         for item in items:
             obs = pre({OBS_STATE: item[OBS_STATE][-1]})  # lerobot-eval sends one (12,) observation per step
-            pred = policy.select_action(obs)
-            stepped.append(pred)
-            stepped_targets.append(post(pred))
+            target = post(policy.select_action(obs))
+            stepped.append((target - obs[Q_NOW]) / spec.ACTION_BOUND_RAD)
+            stepped_targets.append(target)
     torch.testing.assert_close(torch.cat(stepped), batched, atol=1e-5, rtol=1e-5)
     torch.testing.assert_close(torch.cat(stepped_targets), batched_targets, atol=1e-5, rtol=1e-5)
     # The training target the model is fit to is the dataset action seen as delta / 0.3.

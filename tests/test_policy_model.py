@@ -14,6 +14,7 @@ from lerobot_blindgrasp.policies.blindgrasp_transformer import (
     BlindgraspTransformerConfig,
     BlindgraspTransformerPolicy,
 )
+from lerobot_blindgrasp.policies.blindgrasp_transformer.processor_blindgrasp_transformer import Q_NOW
 
 FEATURES = {
     "input_features": {OBS_STATE: PolicyFeature(FeatureType.STATE, (spec.STATE_DIM,))},
@@ -112,19 +113,25 @@ def test_select_action_shapes_and_reset():
     policy = make_policy()
     episode = torch.randn(5, 2, spec.STATE_DIM)
     policy.reset()
-    first = [policy.select_action({OBS_STATE: obs}) for obs in episode]
+    q_now = torch.zeros(2, spec.NUM_JOINTS)  # what the preprocessor passes along: the raw joints
+
+    def act(obs):
+        return policy.select_action({OBS_STATE: obs, Q_NOW: q_now})
+
+    first = [act(obs) for obs in episode]
     assert first[0].shape == (2, spec.ACTION_DIM)
-    assert policy.predict_action_chunk({OBS_STATE: episode[0]}).shape == (2, 1, spec.ACTION_DIM)
+    assert policy.predict_action_chunk({OBS_STATE: episode[0], Q_NOW: q_now}).shape == (2, 1, spec.ACTION_DIM)
     policy.reset()
-    again = [policy.select_action({OBS_STATE: obs}) for obs in episode]
+    again = [act(obs) for obs in episode]
     for a, b in zip(first, again, strict=True):
         torch.testing.assert_close(a, b)
     # Without reset the context carries the previous episode: the same first observation predicts differently.
-    assert (policy.select_action({OBS_STATE: episode[0]}) - first[0]).abs().max() > 1e-5
+    assert (act(episode[0]) - first[0]).abs().max() > 1e-5
 
 
 def test_rolling_context_is_the_padded_training_window():
-    """Step by step through select_action == one batched forward on LeRobot-style windows of the same episode.
+    """Step by step through select_action's rolling context == one batched forward on LeRobot-style windows of the
+    same episode.
 
     LeRobot's window for frame i holds frames max(0, i - 29 + k), k = 0..29, padding flagged where i - 29 + k < 0.
     """
@@ -132,7 +139,7 @@ def test_rolling_context_is_the_padded_training_window():
     n, t = 40, policy.config.n_obs_steps
     episode = torch.randn(n, spec.STATE_DIM)
     policy.reset()
-    stepped = torch.cat([policy.select_action({OBS_STATE: episode[i : i + 1]}) for i in range(n)])
+    stepped = torch.cat([policy.predict_normalized_delta({OBS_STATE: episode[i : i + 1]}) for i in range(n)])
 
     idx = torch.arange(n)[:, None] + torch.arange(1 - t, 1)[None, :]
     windows, is_pad = episode[idx.clamp(min=0)], idx < 0

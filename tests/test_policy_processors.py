@@ -1,4 +1,4 @@
-"""blindgrasp_transformer processors: target <-> delta / 0.3, q_now sharing, state z-scoring, save/load."""
+"""blindgrasp_transformer processors: target <-> delta / 0.3, q_now passed along, state z-scoring, save/load."""
 
 from __future__ import annotations
 
@@ -18,7 +18,13 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.policies.blindgrasp_transformer import (
     BlindgraspTransformerConfig,
+    BlindgraspTransformerPolicy,
     make_blindgrasp_transformer_pre_post_processors,
+)
+from lerobot_blindgrasp.policies.blindgrasp_transformer.processor_blindgrasp_transformer import (
+    Q_NOW,
+    TargetToNormalizedDeltaStep,
+    normalized_delta_to_target,
 )
 
 BOUND = spec.ACTION_BOUND_RAD
@@ -81,24 +87,27 @@ def test_state_is_z_scored_with_dataset_stats(pipelines):
 
 
 def test_round_trip_target_delta_target_at_inference(pipelines):
-    pre, post = pipelines
+    pre, _ = pipelines
     obs = random_state(3, seed=1)  # one observation per env, as lerobot-eval sends it
     delta = torch.empty(3, spec.ACTION_DIM).uniform_(-BOUND, BOUND)
     target = obs[:, spec.STATE_JOINT_SLICE] + delta
-    normalized = pre({OBS_STATE: obs, ACTION: target})[ACTION]
-    torch.testing.assert_close(normalized, delta / BOUND, atol=1e-5, rtol=0)
-    torch.testing.assert_close(post(normalized), target, atol=1e-5, rtol=0)
+    out = pre({OBS_STATE: obs, ACTION: target})
+    torch.testing.assert_close(out[ACTION], delta / BOUND, atol=1e-5, rtol=0)
+    torch.testing.assert_close(normalized_delta_to_target(out[ACTION], out[Q_NOW]), target, atol=1e-5, rtol=0)
 
 
-def test_postprocessor_turns_prediction_into_absolute_target(pipelines):
+def test_the_observation_carries_its_raw_joints_and_the_policy_acts_with_them(pipelines):
     pre, post = pipelines
     obs = random_state(2, seed=2)
-    pre({OBS_STATE: obs})  # inference: no action, only q_now is remembered
-    pred = torch.tensor([[0.5] * 9, [-1.0] * 9])
-    expected = obs[:, spec.STATE_JOINT_SLICE] + BOUND * pred
-    torch.testing.assert_close(post(pred), expected, atol=1e-6, rtol=0)
+    batch = pre({OBS_STATE: obs})  # inference: no action
+    torch.testing.assert_close(batch[Q_NOW], obs[:, spec.STATE_JOINT_SLICE])  # raw radians, not z-scored
+    policy = BlindgraspTransformerPolicy(make_config()).eval()
+    target = post(policy.select_action(batch))
+    policy.reset()
+    pred = policy.predict_normalized_delta(batch)
+    torch.testing.assert_close(target, obs[:, spec.STATE_JOINT_SLICE] + BOUND * pred, atol=1e-6, rtol=0)
     # (B, 1, 9) chunks from predict_action_chunk broadcast over the chunk axis.
-    torch.testing.assert_close(post(pred[:, None]), expected[:, None], atol=1e-6, rtol=0)
+    torch.testing.assert_close(normalized_delta_to_target(pred[:, None], batch[Q_NOW]), target[:, None])
 
 
 def test_training_deltas_beyond_the_bound_are_clipped_and_actions_are_bounded_once(pipelines):
@@ -107,54 +116,47 @@ def test_training_deltas_beyond_the_bound_are_clipped_and_actions_are_bounded_on
     q = obs[:, spec.STATE_JOINT_SLICE]
     normalized = pre({OBS_STATE: obs, ACTION: q + torch.linspace(-1.0, 1.0, 9)})[ACTION]
     assert normalized.min() == -1.0 and normalized.max() == 1.0  # training targets fit the model's tanh
-    # The postprocessor adds no bound of its own: the model's output mapping is the policy's one bound, the env's
-    # or the robot's +-0.3 rad step clip the next one.
-    torch.testing.assert_close(post(torch.full((1, 9), 7.0)), q + 7.0 * BOUND, atol=1e-5, rtol=0)
+    # Nothing after the model adds a bound of its own: the model's output mapping is the policy's one bound, the
+    # env's or the robot's +-0.3 rad step clip the next one.
+    torch.testing.assert_close(normalized_delta_to_target(torch.full((1, 9), 7.0), q), q + 7.0 * BOUND, atol=1e-5,
+                               rtol=0)
+    torch.testing.assert_close(post(torch.full((1, 9), 7.0)), torch.full((1, 9), 7.0))
 
 
 @pytest.mark.parametrize("tanh_output", [True, False])
 def test_the_model_bounds_its_action_to_the_unit_box(tanh_output):
-    from lerobot_blindgrasp.policies.blindgrasp_transformer import BlindgraspTransformerPolicy
-
     policy = BlindgraspTransformerPolicy(make_config(tanh_output=tanh_output)).eval()
     with torch.no_grad():  # a last layer scaled up so that the raw output leaves [-1, 1] by far
         policy.model.head[-1].weight.mul_(1e4)
         policy.model.head[-1].bias.fill_(3.0)
-    pred = policy.select_action({OBS_STATE: random_state(4, seed=5)})
+    pred = policy.predict_normalized_delta({OBS_STATE: random_state(4, seed=5)})
     assert pred.abs().max() <= 1.0 and pred.abs().max() > 0.99
 
 
-def test_postprocessor_needs_an_observation_first():
-    _, post = make_blindgrasp_transformer_pre_post_processors(make_config(), make_stats())
-    with pytest.raises(RuntimeError, match="no observation seen yet"):
-        post(torch.zeros(1, spec.ACTION_DIM))
+def test_the_policy_acts_only_on_preprocessed_observations():
+    policy = BlindgraspTransformerPolicy(make_config()).eval()
+    with pytest.raises(KeyError, match=Q_NOW):
+        policy.select_action({OBS_STATE: random_state(1)})
 
 
-def test_two_policies_do_not_share_q_now():
-    pre_a, post_a = make_blindgrasp_transformer_pre_post_processors(make_config(), make_stats())
-    pre_b, post_b = make_blindgrasp_transformer_pre_post_processors(make_config(), make_stats())
+def test_interleaved_policies_share_nothing():
+    """No state outside the objects: two policies' pre -> act calls interleaved give each its own targets."""
+    (pre_a, post_a), (pre_b, post_b) = (make_blindgrasp_transformer_pre_post_processors(make_config(), make_stats())
+                                        for _ in range(2))
+    policy_a, policy_b = (BlindgraspTransformerPolicy(make_config()).eval() for _ in range(2))
     obs_a, obs_b = random_state(1, seed=4), random_state(1, seed=5)
-    pre_a({OBS_STATE: obs_a})
-    pre_b({OBS_STATE: obs_b})
-    zero = torch.zeros(1, spec.ACTION_DIM)
-    torch.testing.assert_close(post_a(zero), obs_a[:, spec.STATE_JOINT_SLICE])
-    torch.testing.assert_close(post_b(zero), obs_b[:, spec.STATE_JOINT_SLICE])
+    batch_a, batch_b = pre_a({OBS_STATE: obs_a}), pre_b({OBS_STATE: obs_b})
+    target_b, target_a = post_b(policy_b.select_action(batch_b)), post_a(policy_a.select_action(batch_a))
+    for target, obs in ((target_a, obs_a), (target_b, obs_b)):
+        assert (target - obs[:, spec.STATE_JOINT_SLICE]).abs().max() <= BOUND + 1e-6
+    assert not any(isinstance(v, torch.Tensor) for v in vars(pre_a.steps[3]).values())
 
 
-def _check_linked(pre, post, seed: int) -> None:
-    obs = random_state(2, seed=seed)
-    delta = torch.empty(2, spec.ACTION_DIM).uniform_(-BOUND, BOUND)
-    normalized = pre({OBS_STATE: obs, ACTION: obs[:, spec.STATE_JOINT_SLICE] + delta})[ACTION]
-    torch.testing.assert_close(normalized, delta / BOUND, atol=1e-5, rtol=0)
-    torch.testing.assert_close(post(normalized), obs[:, spec.STATE_JOINT_SLICE] + delta, atol=1e-5, rtol=0)
-
-
-def test_saved_pipelines_reload_linked(tmp_path):
+def test_saved_pipelines_reload(tmp_path):
     config = make_config()
     pre, post = make_blindgrasp_transformer_pre_post_processors(config, make_stats())
     pre.save_pretrained(tmp_path)
     post.save_pretrained(tmp_path)
-    del pre, post  # the reloaded pair must find each other through the saved link id alone
 
     pre2 = PolicyProcessorPipeline.from_pretrained(
         tmp_path, "policy_preprocessor.json", to_transition=batch_to_transition, to_output=transition_to_batch
@@ -165,10 +167,16 @@ def test_saved_pipelines_reload_linked(tmp_path):
         to_transition=policy_action_to_transition,
         to_output=transition_to_policy_action,
     )
-    _check_linked(pre2, post2, seed=6)
-
+    step = next(s for s in pre2.steps if isinstance(s, TargetToNormalizedDeltaStep))
+    assert step.get_config() == {"action_bound": BOUND}
     pre3, post3 = make_pre_post_processors(config, pretrained_path=str(tmp_path))
-    _check_linked(pre3, post3, seed=7)
+    for p, q in ((pre2, post2), (pre3, post3)):
+        obs = random_state(2, seed=6)
+        delta = torch.empty(2, spec.ACTION_DIM).uniform_(-BOUND, BOUND)
+        out = p({OBS_STATE: obs, ACTION: obs[:, spec.STATE_JOINT_SLICE] + delta})
+        torch.testing.assert_close(out[ACTION], delta / BOUND, atol=1e-5, rtol=0)
+        torch.testing.assert_close(out[Q_NOW], obs[:, spec.STATE_JOINT_SLICE])
+        torch.testing.assert_close(q(out[ACTION]), out[ACTION])  # the postprocessor leaves the action as it is
     # The saved normalizer stats came back too.
     stats = make_stats()[OBS_STATE]
     obs = random_state(1, seed=8)

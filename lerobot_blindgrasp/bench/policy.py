@@ -1,8 +1,9 @@
 """select_action latency of blindgrasp_transformer on one CPU thread, against the compute floor of the model.
 
 What one run measures, interleaved round by round so that every number sees the same machine load:
-- `fast`: `BlindgraspTransformerPolicy.select_action`, the deployed path (rolling context, fused attention, last
-  layer on the last token only), over whole episodes from `reset()` (so the padded start is included);
+- `fast`: `BlindgraspTransformerPolicy.predict_normalized_delta`, the network part of `select_action` (rolling
+  context, fused attention, last layer on the last token only), over whole episodes from `reset()` (so the padded
+  start is included);
 - `plain`: `BlindgraspGPT.forward_reference` on the same windows, every token through every layer with explicit
   softmax attention; the fast outputs must equal it (asserted, atol 1e-5);
 - matmul throughput of one thread, two ways:
@@ -136,7 +137,7 @@ def run(cfg: BenchPolicyConfig) -> dict:
         # Warm-up: allocator, BLAS buffers, weights into cache as far as they fit.
         policy.reset()
         for _ in range(5):
-            policy.select_action({OBS_STATE: torch.randn(1, spec.STATE_DIM)})
+            policy.predict_normalized_delta({OBS_STATE: torch.randn(1, spec.STATE_DIM)})
         gemms()
         a @ a
         for _ in range(cfg.rounds):
@@ -146,7 +147,7 @@ def run(cfg: BenchPolicyConfig) -> dict:
             windows, fast_out = [], []
             for obs in episode:
                 w0, c0 = time.perf_counter(), time.thread_time()
-                fast_out.append(policy.select_action({OBS_STATE: obs}))
+                fast_out.append(policy.predict_normalized_delta({OBS_STATE: obs}))
                 samples["fast"][1].append(time.thread_time() - c0)
                 samples["fast"][0].append(time.perf_counter() - w0)
                 states, is_pad = policy.current_context()

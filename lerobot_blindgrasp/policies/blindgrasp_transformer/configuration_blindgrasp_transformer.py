@@ -2,8 +2,9 @@
 
 The student is robomimic's BC-Transformer as the paper uses it: one token per 20 Hz step built from
 o_t = 9 joint positions + 3 uniaxial forces, a causal GPT over the last 30 steps, and an MLP head that predicts
-delta-theta / 0.3 in [-1, 1] from the last token. The delta <-> absolute-target conversion and the 0.3 rad scaling
-live in the processors (`processor_blindgrasp_transformer.py`), so the network only ever sees normalized deltas.
+delta-theta / 0.3 in [-1, 1] from the last token. The preprocessor turns the dataset's absolute targets into those
+and `select_action` turns the prediction back into a target (`processor_blindgrasp_transformer.py`), so the network
+only ever sees normalized deltas.
 
 Table IV -> field:
     batch size 256                      -> lerobot-train `--batch_size=256` (a training-loop setting)

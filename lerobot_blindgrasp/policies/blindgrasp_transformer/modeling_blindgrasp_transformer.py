@@ -7,8 +7,9 @@ Network (robomimic `TransformerActorNetwork` + `GPT_Backbone`, deterministic hea
     n_layers x pre-LN block: x + Attn(LN(x)), x + MLP(LN(x))      fused qkv (no bias), GELU MLP 4x
     final LayerNorm -> MLP head [1024, 1024] on the LAST token -> A -> tanh
 
-Inputs and outputs are normalized: `observation.state` is z-scored and the prediction is delta-theta / 0.3 in
-[-1, 1]; the processors turn the dataset's absolute targets into that and back (see the processor module).
+The network's inputs and outputs are normalized: `observation.state` is z-scored and the prediction is delta-theta /
+0.3 in [-1, 1]; the preprocessor turns the dataset's absolute targets into that, and `select_action` returns the
+absolute target q_now + 0.3 * prediction, with the raw q_now the preprocessor passes along (see the processor module).
 
 Padding. LeRobot pads a window that starts before the episode by repeating the episode's first frame and flags
 those steps in `observation.state_is_pad`. Padded keys are masked out of attention, so they cannot reach the real
@@ -37,6 +38,7 @@ from torch import Tensor, nn
 from lerobot_blindgrasp import spec
 
 from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
+from .processor_blindgrasp_transformer import Q_NOW, normalized_delta_to_target
 
 STATE_IS_PAD = f"{OBS_STATE}_is_pad"
 # The distribution that registers this policy type with LeRobot; without it `--policy.path=<hub id>` cannot
@@ -276,26 +278,34 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         return torch.stack(list(self._context), dim=1), torch.stack(list(self._context_is_pad), dim=1)
 
     @torch.no_grad()
-    def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
-        """(B, 1, 9) normalized delta.
+    def predict_normalized_delta(self, batch: dict[str, Tensor]) -> Tensor:
+        """(B, 9) prediction delta / 0.3, bounded: what the network is trained to output.
 
         A (B, 12) `observation.state` is one new observation: it goes into the rolling context (like
         `select_action`). A (B, T, 12) one is a full window (with optional `observation.state_is_pad`), used as is.
         """
         state = batch[OBS_STATE]
         if state.ndim == 3:
-            return self._bounded(self.model(state, batch.get(STATE_IS_PAD)))[:, None]
+            return self._bounded(self.model(state, batch.get(STATE_IS_PAD)))
         states, is_pad = self._push_observation(state)
-        return self._bounded(self.model(states, is_pad))[:, None]
+        return self._bounded(self.model(states, is_pad))
+
+    @torch.no_grad()
+    def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
+        """(B, 1, 9) absolute joint targets (rad) from a preprocessed batch (see `predict_normalized_delta`)."""
+        if Q_NOW not in batch:
+            raise KeyError(f"blindgrasp_transformer acts on preprocessed observations: '{Q_NOW}' (the raw joint "
+                           "positions the policy's preprocessor adds) is missing")
+        return normalized_delta_to_target(self.predict_normalized_delta(batch), batch[Q_NOW])[:, None]
 
     def _bounded(self, pred: Tensor) -> Tensor:
         """The action's one bound in the policy: tanh, or without it a clamp at inference (training regresses the
-        raw output). The postprocessor adds none."""
+        raw output). Nothing after it adds another."""
         return pred if self.config.tanh_output else pred.clamp(-1.0, 1.0)
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
-        """One (B, 12) observation in, (B, 9) normalized delta out (the postprocessor makes it a joint target)."""
+        """One preprocessed (B, 12) observation in, (B, 9) absolute joint targets (rad) out."""
         return self.predict_action_chunk(batch)[:, 0]
 
     def forward(self, batch: dict[str, Tensor], reduction: str = "mean") -> tuple[Tensor, dict]:

@@ -1,38 +1,33 @@
 """Pre/post processors of `blindgrasp_transformer`: state z-scoring and the absolute-target <-> delta conversion.
 
 The action contract (`spec.ACTION_NAMES`): a LeRobot `action` is the ABSOLUTE joint target in radians, target = q_now +
-delta, while the paper's network predicts delta / 0.3 in [-1, 1]. Both conversions live here, in the pipelines
-saved with the checkpoint, so a checkpoint is self-contained:
+delta, while the paper's network predicts delta / 0.3 in [-1, 1]. The pipelines saved with the checkpoint prepare
+both directions, so a checkpoint is self-contained:
 
     preprocessor  (training batch or one observation -> model input)
         rename -> add batch dim -> device
-        -> blindgrasp_target_to_delta   action := clip((target - q_now) / 0.3, -1, 1); remembers q_now
+        -> blindgrasp_target_to_delta   q_now := the raw joints of observation.state, passed on as `Q_NOW`;
+                                        action (training) := clip((target - q_now) / 0.3, -1, 1)
         -> normalizer                   observation.state z-scored with dataset stats (MEAN_STD)
-    postprocessor (model output -> action for the robot / sim env)
+    policy.select_action                action := q_now + 0.3 * pred, with the q_now that came with the observation
+    postprocessor (policy output -> action for the robot / sim env)
         -> unnormalizer                 identity for the action (kept so lerobot-train's fine-tuning overrides,
                                         which address `unnormalizer_processor`, find their step)
-        -> blindgrasp_delta_to_target   action := q_now + 0.3 * pred
         -> device(cpu)
 
 q_now is the current step's 9 joint positions, raw radians, from `observation.state`: its last frame for a training
 window (B, T, 12), the observation itself at inference (B, 12). The target->delta step reads it before the
 normalizer, so it is never z-scored.
 
+Why the policy, not the postprocessor, turns its prediction into a target: LeRobot calls `postprocessor(action)`
+with nothing but the policy's output tensor, and loads the two pipelines of a checkpoint independently of each
+other, so a postprocessor step could only learn q_now through state shared behind LeRobot's back. The observation
+does reach the policy, so q_now travels with it (`Q_NOW`) and nothing is remembered between calls: any number of
+policies and pipelines can run interleaved in one process.
+
 The action is bounded once per layer: the model's output mapping keeps pred in [-1, 1] (tanh), and the env or the
 robot clips the step to +-0.3 rad around the joints it measures and the target to the joint limits. This module adds
 no third bound; the clip in the target -> delta step is of training targets, not of actions.
-
-How the postprocessor knows q_now. LeRobot calls `postprocessor(action_tensor)` with nothing but the policy's
-output tensor, so the observation cannot travel with it. Instead the two steps form a pair sharing one
-`CurrentJoints` holder: the preprocessor step writes q_now into it on every call, the postprocessor step reads it.
-LeRobot's policy loops (lerobot-eval, lerobot-rollout's sync engine) run pre -> policy -> post once per
-observation, which is exactly the protocol this needs. The pair is linked by a `link` id
-that both steps save in their JSON config; steps with the same id share one holder in this process (a registry of
-weak references), so the link survives any way of loading, `PolicyProcessorPipeline.from_pretrained` twice or
-LeRobot's `make_pre_post_processors(..., pretrained_path=...)`, with no reconnection code. Loading the same
-checkpoint twice in one process gives two pipeline pairs on one holder: fine as long as each observation's pre/post
-calls are not interleaved with the other pair's. The postprocessor raises if it runs before any observation was
-seen, and if the batch size of the action and of the remembered q_now differ.
 
 Why not LeRobot's own `RelativeActionsProcessorStep` / `AbsoluteActionsProcessorStep`: they take the whole state
 (not the last frame of a window), do no bound scaling, and lerobot-rollout's sync engine refuses any pipeline that
@@ -41,9 +36,7 @@ contains an enabled `RelativeActionsProcessorStep` (it assumes action chunks); t
 
 from __future__ import annotations
 
-import uuid
-import weakref
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import torch
@@ -62,25 +55,8 @@ from lerobot_blindgrasp import spec
 
 from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
 
-
-class CurrentJoints:
-    """q_now (B, 9), raw radians, of the last observation the paired preprocessor step saw."""
-
-    __slots__ = ("q", "__weakref__")
-
-    def __init__(self):
-        self.q: Tensor | None = None
-
-
-_LINKS: weakref.WeakValueDictionary[str, CurrentJoints] = weakref.WeakValueDictionary()
-
-
-def _current_joints(link: str) -> CurrentJoints:
-    holder = _LINKS.get(link)
-    if holder is None:
-        holder = CurrentJoints()
-        _LINKS[link] = holder
-    return holder
+# The raw joint positions (B, 9) of the observation being acted on, added to the batch by the preprocessor.
+Q_NOW = "observation.blindgrasp_q_now"
 
 
 def current_joints_from_state(state: Tensor) -> Tensor:
@@ -106,35 +82,23 @@ def normalized_delta_to_target(pred: Tensor, q_now: Tensor, bound: float = spec.
     return q_now + bound * pred
 
 
+@ProcessorStepRegistry.register("blindgrasp_target_to_delta")
 @dataclass
-class _LinkedStep(ProcessorStep):
-    """What both halves share: the `link` naming their `CurrentJoints` holder, the bound, and their saved config."""
+class TargetToNormalizedDeltaStep(ProcessorStep):
+    """Passes q_now on to the policy (`Q_NOW`) and turns an absolute-target action into delta / bound.
 
-    link: str = ""
+    Runs on raw (not yet normalized) state. Observations without an action (inference) only get `Q_NOW`.
+    """
+
     action_bound: float = spec.ACTION_BOUND_RAD
-    _joints: CurrentJoints = field(init=False, repr=False)
 
     def get_config(self) -> dict[str, Any]:
-        return {"link": self.link, "action_bound": self.action_bound}
+        return {"action_bound": self.action_bound}
 
     def transform_features(
         self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
     ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
-        return features  # same keys and shapes; only the meaning of `action` changes
-
-
-@ProcessorStepRegistry.register("blindgrasp_target_to_delta")
-@dataclass
-class TargetToNormalizedDeltaStep(_LinkedStep):
-    """Preprocessor half of the pair: remembers q_now and turns an absolute-target action into delta / bound.
-
-    Runs on raw (not yet normalized) state. Observations without an action (inference) only update q_now.
-    """
-
-    def __post_init__(self):
-        if not self.link:
-            self.link = uuid.uuid4().hex
-        self._joints = _current_joints(self.link)
+        return features  # `Q_NOW` is the policy's input only, never a dataset feature; `action` changes meaning
 
     def __call__(self, transition: EnvTransition) -> EnvTransition:
         observation = transition.get(TransitionKey.OBSERVATION) or {}
@@ -142,43 +106,11 @@ class TargetToNormalizedDeltaStep(_LinkedStep):
         if state is None:
             raise KeyError(f"blindgrasp_target_to_delta needs '{OBS_STATE}' to know the current joint positions")
         q_now = current_joints_from_state(state)
-        self._joints.q = q_now
-        action = transition.get(TransitionKey.ACTION)
-        if action is None:
-            return transition
         new_transition = transition.copy()
-        new_transition[TransitionKey.ACTION] = target_to_normalized_delta(action, q_now, self.action_bound)
-        return new_transition
-
-
-@ProcessorStepRegistry.register("blindgrasp_delta_to_target")
-@dataclass
-class NormalizedDeltaToTargetStep(_LinkedStep):
-    """Postprocessor half of the pair: delta / bound from the network -> absolute target, with q_now shared by the
-    preprocessor step of the same `link`."""
-
-    def __post_init__(self):
-        if not self.link:
-            raise ValueError("blindgrasp_delta_to_target needs the `link` of its blindgrasp_target_to_delta step")
-        self._joints = _current_joints(self.link)
-
-    def __call__(self, transition: EnvTransition) -> EnvTransition:
+        new_transition[TransitionKey.OBSERVATION] = {**observation, Q_NOW: q_now}
         action = transition.get(TransitionKey.ACTION)
-        if action is None:
-            return transition
-        q_now = self._joints.q
-        if q_now is None:
-            raise RuntimeError(
-                "blindgrasp_delta_to_target: no observation seen yet. Run the policy's preprocessor on the "
-                "observation before postprocessing the action computed from it."
-            )
-        if q_now.shape[0] != action.shape[0]:
-            raise RuntimeError(
-                f"blindgrasp_delta_to_target: action batch {action.shape[0]} != batch {q_now.shape[0]} of the "
-                "last preprocessed observation; pre/post calls of two pipelines were interleaved."
-            )
-        new_transition = transition.copy()
-        new_transition[TransitionKey.ACTION] = normalized_delta_to_target(action, q_now, self.action_bound)
+        if action is not None:
+            new_transition[TransitionKey.ACTION] = target_to_normalized_delta(action, q_now, self.action_bound)
         return new_transition
 
 
@@ -242,11 +174,10 @@ def make_blindgrasp_transformer_pre_post_processors(
     """The policy's pipeline pair (see the module docstring); LeRobot finds it by name for `lerobot-train`."""
     s = make_default_policy_processor_steps(config, dataset_stats)
     to_delta = TargetToNormalizedDeltaStep(action_bound=spec.ACTION_BOUND_RAD)
-    to_target = NormalizedDeltaToTargetStep(link=to_delta.link, action_bound=spec.ACTION_BOUND_RAD)
     augment = [] if not config.augmentation_active else [SensorAugmentStep(
         force_gain=config.augment_force_gain, force_bias_n=config.augment_force_bias_n,
         joint_offset_rad=config.augment_joint_offset_rad)]
     return make_policy_processor_pipelines(
         input_steps=[s.rename_observations, s.add_batch_dim, s.to_device, *augment, to_delta, s.normalize],
-        output_steps=[s.unnormalize, to_target, s.to_cpu],
+        output_steps=[s.unnormalize, s.to_cpu],
     )
