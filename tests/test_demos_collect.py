@@ -231,16 +231,16 @@ def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
         "lerobot_blindgrasp.demos.collect",
         "--teacher",
         str(teacher),
-        "--out",
+        "--output_dir",
         str(out),
-        "--repo-id",
+        "--repo_id",
         "test/sig",
-        "--episodes-per-object",
+        "--episodes_per_object",
         "50",
-        "--num-envs",
+        "--num_envs",
         str(N_ENVS),
-        "--no-curation",
-        "--no-progress",
+        "--curation.enabled=false",
+        "--progress=false",
         "--seed",
         str(spec.DEMO_SEED + 11),
     ]
@@ -308,7 +308,7 @@ def test_push_prepares_everything_then_stops_at_the_network(tiny, monkeypatch, c
     assert "18 episodes" in captured.out and "files" in captured.out
 
     with pytest.raises(SystemExit) as exc:
-        push.main([str(out / "meta"), "--repo-id", "test/pushed"])  # the release-0.1 spelling still works
+        push.main([f"--root={out / 'meta'}", "--repo_id=test/pushed"])
     assert exc.value.code == 2 and "not a LeRobot dataset" in capsys.readouterr().err
 
 

@@ -146,10 +146,10 @@ def test_paper_student_steps_come_from_the_collected_frames(tmp_path):
     assert "--policy.scheduler_constant_steps=400" in cmd and "--policy.size=paper" in cmd
 
 
-def test_pipeline_config_reads_old_and_new_spellings():
+def test_pipeline_config_spellings():
     new = parse_config(pipeline.PipelineConfig, ["--preset=smoke", "--output_dir=o", "--eval_seed=1001"])
-    old = parse_config(pipeline.PipelineConfig, ["--preset", "smoke", "--output-dir", "o", "--eval-seed", "1001"])
-    assert new == old and new.output_dir == Path("o") and new.eval_seed == 1001
+    spaced = parse_config(pipeline.PipelineConfig, ["--preset", "smoke", "--output_dir", "o", "--eval_seed", "1001"])
+    assert new == spaced and new.output_dir == Path("o") and new.eval_seed == 1001
     assert parse_config(pipeline.PipelineConfig, []).output_dir == Path("outputs/pipeline_quick")
     with pytest.raises(SystemExit, match="unknown preset"):
         parse_config(pipeline.PipelineConfig, ["--preset=huge"])

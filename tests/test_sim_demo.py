@@ -20,7 +20,7 @@ DEMO = Path(sys.executable).with_name("blindgrasp-sim-demo")
 def test_demo_cli_writes_a_video_and_prints_the_summary(tmp_path):
     out = tmp_path / "demo.mp4"
     env = {**os.environ, "MUJOCO_GL": "egl", "HF_HUB_OFFLINE": "1"}
-    args = ["--steps", "100", "--width", "160", "--height", "120", "--no-shadows", "--output", str(out)]
+    args = ["--steps", "100", "--width", "160", "--height", "120", "--shadows=false", "--output", str(out)]
     res = subprocess.run([str(DEMO), *args], env=env, capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     assert "cylinder_a_medium" in res.stdout and "success       yes" in res.stdout, res.stdout

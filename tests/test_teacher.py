@@ -71,8 +71,8 @@ def test_variants():
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("teacher") / "run"
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.teacher.train", "--preset", "quick", "--output-dir", str(out),
-           "--iterations", "3", "--num-envs", "36", "--threads", "1"]
+    cmd = [sys.executable, "-m", "lerobot_blindgrasp.teacher.train", "--preset", "quick", "--output_dir", str(out),
+           "--iterations", "3", "--num_envs", "36", "--threads", "1"]
     subprocess.run(cmd, check=True, capture_output=True, timeout=300)
     return out, cmd
 
@@ -102,7 +102,7 @@ def test_short_ppo_run_saves_exports_and_reloads_deterministically(quick_run):
 @pytest.mark.slow
 def test_rerunning_the_command_resumes(quick_run):
     out, cmd = quick_run
-    more = [*cmd[:-4], "--iterations", "4", "--num-envs", "36", "--threads", "1"]
+    more = [*cmd[:-4], "--iterations", "4", "--num_envs", "36", "--threads", "1"]
     subprocess.run(more, check=True, capture_output=True, timeout=300)
     assert (out / "model_3.pt").exists()
     assert torch.load(out / "model_3.pt", weights_only=False)["iter"] == 3
@@ -117,8 +117,8 @@ def test_sigterm_saves_a_checkpoint_and_a_summary(tmp_path):
     import time
 
     out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.teacher.train", "--preset", "quick", "--output-dir", str(out),
-           "--iterations", "500", "--num-envs", "18", "--threads", "1", "--no-export"]
+    cmd = [sys.executable, "-m", "lerobot_blindgrasp.teacher.train", "--preset", "quick", "--output_dir", str(out),
+           "--iterations", "500", "--num_envs", "18", "--threads", "1", "--export=false"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 240
     while not (out / "model_0.pt").exists() and time.time() < deadline:

@@ -7,7 +7,7 @@
 
 Every size comes from the preset registry (`lerobot_blindgrasp/presets/`); the command lines from
 `lerobot_blindgrasp/pipeline/recipe.py`, which `scripts/paper_recipe.sh` uses too (`--print_commands=STAGE`). A draccus
-config like LeRobot's scripts (`--help`, `--config_path`); the 0.1 spellings (`--output-dir`) still work.
+config like LeRobot's scripts (`--help`, `--config_path`).
 
 Stages, each a real CLI run as a subprocess (its command and log are kept in <out>/logs/):
 1. the teacher: the shipped default teacher (`quick`), a given `--teacher`, or trained from scratch
