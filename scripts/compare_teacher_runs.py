@@ -1,6 +1,6 @@
 """Overlay the TensorBoard curves of several teacher runs (for docs/results/teacher_cpu.md).
 
-    .venv/bin/python scripts/compare_teacher_runs.py OUT.png LABEL=RUN_DIR [LABEL=RUN_DIR ...]
+    .venv/bin/python scripts/compare_teacher_runs.py --output=OUT.png --runs=[LABEL=RUN_DIR,...]
 
 x axis: env steps (iteration x num_envs x steps per env, from each run's teacher_config.json).
 """
@@ -8,7 +8,7 @@ x axis: env steps (iteration x num_envs x steps per env, from each run's teacher
 from __future__ import annotations
 
 import json
-import sys
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import matplotlib
@@ -18,6 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from lerobot_blindgrasp import durable  # noqa: E402
 from lerobot_blindgrasp.analysis.plots import teacher_curves  # noqa: E402
+from lerobot_blindgrasp.cli import parse_config  # noqa: E402
 
 TAGS = (
     "Metrics/mean_contacts",
@@ -29,9 +30,16 @@ TAGS = (
 )
 
 
-def main() -> None:
-    out = Path(sys.argv[1])
-    runs = [a.split("=", 1) for a in sys.argv[2:]]
+@dataclass
+class CompareRunsConfig:
+    output: Path  # the figure (png)
+    runs: list[str] = field(default_factory=list)  # LABEL=RUN_DIR, one curve each
+
+
+def main(argv: list[str] | None = None) -> None:
+    cfg = parse_config(CompareRunsConfig, argv)
+    out = cfg.output
+    runs = [a.split("=", 1) for a in cfg.runs]
     fig, axes = plt.subplots(2, 3, figsize=(14, 7))
     for label, run in runs:
         cfg = json.loads((Path(run) / "teacher_config.json").read_text())

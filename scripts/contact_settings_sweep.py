@@ -1,6 +1,6 @@
 """Which contact settings hold a grasp without creep, and what each costs.
 
-    .venv/bin/python scripts/contact_settings_sweep.py [--envs 128]
+    .venv/bin/python scripts/contact_settings_sweep.py [--envs=128]
 
 A scripted pinch-and-lift (sim/scripted.py) grips the medium cylinder and lifts it 3 cm under the paper's servo-gain,
 friction and mass randomization (no xy offset, no pushes). For each setting it reports success, the final lift after
@@ -10,12 +10,12 @@ time per control step relative to the first row, all measured in one run.
 
 from __future__ import annotations
 
-import argparse
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import gripper, randomization
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
@@ -61,10 +61,13 @@ def run_setting(n: int, timestep: float, impratio: float, noslip: int) -> dict:
     }
 
 
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--envs", type=int, default=128)
-    args = p.parse_args()
+@dataclass
+class SweepConfig:
+    envs: int = 128  # parallel envs per setting
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_config(SweepConfig, argv)
     rows = [(label, run_setting(args.envs, *s)) for label, *s in SETTINGS]
     base = rows[0][1]["ms_per_step"]
     print(f"| setting ({args.envs} envs, 1 thread) | success | median final lift (cm) | max lift (cm) | step cost |")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import sys
 import tomllib
 from pathlib import Path
@@ -70,6 +71,18 @@ def test_every_command_has_help(monkeypatch, capsys):
         out = capsys.readouterr().out
         assert e.value.code in (0, None), name
         assert "usage:" in out and "--" in out.split("usage:", 1)[1], name
+
+
+@pytest.mark.parametrize("script", sorted((ROOT / "scripts").glob("*.py")), ids=lambda p: p.name)
+def test_every_script_has_help(script, monkeypatch, capsys):
+    spec = importlib.util.spec_from_file_location(f"scripts_{script.stem}", script)
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, module)  # draccus resolves the config's annotations through it
+    spec.loader.exec_module(module)
+    main = module.main
+    with pytest.raises(SystemExit) as e:
+        main(["--help"])
+    assert e.value.code == 0 and "usage:" in capsys.readouterr().out
 
 
 def test_the_benchmark_is_picked_by_its_type():
