@@ -9,7 +9,6 @@ and `--help` lists every field with its comment. There are no positional argumen
 from __future__ import annotations
 
 import contextlib
-import logging
 import os
 import signal
 import sys
@@ -18,8 +17,6 @@ import typing
 from collections.abc import Callable, Iterator, Sequence
 
 import draccus
-
-log = logging.getLogger("blindgrasp.cli")
 
 T = typing.TypeVar("T")
 

@@ -13,6 +13,10 @@ import sys
 import pytest
 
 HEAVY = ("mujoco", "rsl_rl")
+# Parts of the package that registering the plugin types needs none of (the real trial is imported when its envs
+# are made; the robot needs no analysis code, the policy no preset registry).
+UNNEEDED = ("lerobot_blindgrasp.analysis", "lerobot_blindgrasp.presets", "lerobot_blindgrasp.robustness",
+            "lerobot_blindgrasp.teacher", "lerobot_blindgrasp.pipeline", "lerobot_blindgrasp.envs.real_trial")
 
 
 def _fresh(code: str, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -37,10 +41,11 @@ def test_plugin_discovery_imports_neither_mujoco_nor_rsl_rl_and_sets_nothing():
         "                            EnvConfig.get_choice_class('blindgrasp').__name__,\n"
         "                            RobotConfig.get_choice_class('blindgrasp_gripper').__name__],\n"
         "                  'omp_wait_policy': os.environ.get('OMP_WAIT_POLICY'),\n"
-        f"                  'heavy': [m for m in {HEAVY!r} if m in sys.modules]}}))\n"
+        f"                  'heavy': [m for m in {HEAVY!r} if m in sys.modules],\n"
+        f"                  'unneeded': [m for m in sys.modules if m.startswith({UNNEEDED!r})]}}))\n"
     )
     out = json.loads(_fresh(code, env).stdout.strip().splitlines()[-1])
-    assert out == {"loaded": True, "heavy": [], "omp_wait_policy": None,
+    assert out == {"loaded": True, "heavy": [], "unneeded": [], "omp_wait_policy": None,
                    "types": ["BlindgraspTransformerConfig", "BlindGraspEnvConfig", "BlindgraspGripperConfig"]}
 
 

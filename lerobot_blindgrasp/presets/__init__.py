@@ -7,8 +7,9 @@
     TABLE_V["wo_r_i"]                          # the ablation rows (ablations.py)
 
 Who reads it: `blindgrasp-pipeline --preset=NAME` (every stage), `blindgrasp-train-teacher --preset=NAME` (the
-teacher part, `presets.teacher`), the student policy's `--policy.size` (`presets.student.SIZES`) and
-`scripts/paper_recipe.sh` (through `lerobot_blindgrasp.pipeline.recipe`). Nothing else restates a number.
+teacher part, `presets.teacher`) and `scripts/paper_recipe.sh` (through `lerobot_blindgrasp.pipeline.recipe`).
+Nothing else restates a number. The student architectures are the policy's own `SIZES` (`--policy.size`, re-exported
+here); the student stages name one, and the policy never imports this registry.
 
 - `paper` is exactly Tables III and IV; its only deviations are where the paper measured on the real robot.
 - `cpu` is the largest that is useful on a 2-core machine (hours); `quick` is the README's main job on the
