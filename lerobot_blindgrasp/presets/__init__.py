@@ -56,7 +56,7 @@ class EvalStage:
     teacher_modes: tuple[str, ...] = ("deterministic", "stochastic")
     async_envs: bool = False  # lerobot-eval worker processes: worth it only with many cores
     # lerobot-eval renders 10 episodes per task at every step; a new frame every N steps makes that N x cheaper
-    # (~12 ms a frame with a software renderer was ~80 % of the quick preset's eval, docs/results/quick_pipeline.md)
+    # (~12 ms a frame with a software renderer was ~80 % of the quick preset's eval)
     render_stride: int = 1
     # Of the 10 episodes per object lerobot-eval records, how many get `render_stride`; the rest one frame a second.
     render_episodes: int = 10
@@ -131,7 +131,7 @@ PRESETS: dict[str, Preset] = {
             teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET),
             # 100 per object rather than the quick preset's 40, so that 5000 steps at batch 256 are ~8 passes over
             # the data rather than ~19; collection is minutes, training the hour. Measured on the shipped teacher it
-            # gives the same student as the quick recipe (75.6 vs 75.8 %, docs/results/student_cpu.md): the
+            # gave the same student as the quick recipe (75.6 vs 75.8 % with an earlier teacher): the
             # student follows its teacher.
             demos=DemoStage(episodes_per_object=100, max_rollouts_per_object=1000, num_envs=720,
                             min_curated_episodes=90),
@@ -153,7 +153,7 @@ PRESETS: dict[str, Preset] = {
                                  iterations=SHIPPED_TEACHER_ITERATIONS),
             demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720,
                             min_curated_episodes=18),
-            # 1200 steps at batch 128 is the recipe of docs/results/student_cpu.md (~8 min on 2 idle cores).
+            # 1200 steps at batch 128: ~2 passes over the quick demos, ~7 min on 2 idle cores.
             student=StudentStage(size="cpu", batch_size=128, steps=1200, threads=1, num_workers=1),
             evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",), render_stride=4,
                                   render_episodes=2),
