@@ -1,13 +1,13 @@
 """How a teacher touches each object: the direction of its fingertip forces, next to its success.
 
-    python -m lerobot_blindgrasp.analysis.contacts --teacher=docs/results/teacher_runs/cpu_v3 \
+    python -m lerobot_blindgrasp.analysis.contacts --teacher=models/teacher_cpu_bc \
         --objects=capsule_small,sphere_small,sphere_medium --episodes=10
 
 Success says *that* a teacher fails on an object; this says *how*. For every control step after the approach
 (`--after_s`) and every fingertip touching the object (> 0.1 N, world-frame net force of the tip on the object),
 it records -F_z/|F| (1: pressing the object straight down into the table, 0: squeezing sideways) and how high the
 tip sits above the object's centre. A tip pressing from above can never lift the object; a lifting grasp squeezes
-sideways (`rewards.r_touch_directional`, docs/results/teacher_cpu_v4.md).
+sideways.
 
 Start states are the evaluation ones (`--seed`, as `blindgrasp-eval-teacher`), deterministic actions. With
 `--pregrasp_starts=true` every episode starts instead with the tips low beside the object (`sim/pregrasp.py`): does
