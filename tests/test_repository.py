@@ -1,7 +1,8 @@
 """What every clone carries: a small tree, shipped and recorded models as safetensors, no training state.
 
 Training checkpoints (optimizer state, pickled) and TensorBoard event files belong to a run, not to the product:
-runs keep them locally or on a tag, and what a doc or a user loads is an exported actor (`blindgrasp-export-teacher`).
+runs keep them locally or on a git tag, and what a doc or a user loads is an exported actor
+(`blindgrasp-export-teacher`).
 Skipped outside a git checkout (an sdist or wheel has no tracked-file list).
 """
 
