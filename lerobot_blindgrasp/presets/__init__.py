@@ -161,7 +161,8 @@ PRESETS: dict[str, Preset] = {
             ablation_teacher=ABLATION_TEACHER,
             # 100 per object rather than the quick preset's 40, so that 5000 steps at batch 256 are ~8 passes over
             # the data rather than ~19; collection is minutes, training the hour. Measured on the shipped teacher it
-            # gives the same student as the quick recipe (75.6 vs 75.8 %): the student follows its teacher.
+            # gave the same student as the quick recipe (75.6 vs 75.8 % with an earlier teacher): the
+            # student follows its teacher.
             demos=DemoStage(episodes_per_object=100, max_rollouts_per_object=1000, num_envs=720,
                             min_curated_episodes=90),
             # lerobot-train reads ~2 ms per 30-frame sample here: 5000 steps at batch 256 is about an hour.
@@ -183,7 +184,7 @@ PRESETS: dict[str, Preset] = {
             ablation_teacher=ABLATION_TEACHER,
             demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720,
                             min_curated_episodes=18),
-            # 1200 steps at batch 128: the shipped student's recipe (models/student_cpu; ~8 min on 2 idle cores).
+            # 1200 steps at batch 128: ~2 passes over the quick demos, ~7 min on 2 idle cores.
             student=StudentStage(size="cpu", batch_size=128, steps=1200, threads=1, num_workers=1),
             evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",), render_stride=4,
                                   render_episodes=2),

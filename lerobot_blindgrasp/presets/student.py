@@ -44,7 +44,7 @@ class StudentStage:
     threads: int = 1  # OMP threads of lerobot-train (nothing else runs during that stage)
     # lerobot-train's data-loader processes. Reading a 30-frame window costs ~2.8 ms a sample here, longer than the
     # cpu-size update: one loader process next to one torch thread overlaps the two, 1.5x faster than loading
-    # in the training process with 2 torch threads on 2 cores (same loss curve; docs/results/quick_pipeline.md).
+    # in the training process with 2 torch threads on 2 cores (same loss curve).
     num_workers: int = 0
     device: str = "cpu"  # student training and eval; the pipeline's --device overrides
     # Training-time sensor errors (beyond the paper; 0: off): the policy's augment_* settings, passed as
