@@ -124,7 +124,7 @@ def test_frames_are_the_observation_before_each_step_and_the_commanded_target(te
             seed=SEED,
             episode_s=spec.DEMO_EPISODE_S,
             dr=randomization.EVAL_DR,
-            reward=rewards.RewardConfig(**policy.config["reward"]),
+            reward=rewards.RewardConfig.from_record(policy.config["reward"]),
         )
     )
     obs = env.reset()

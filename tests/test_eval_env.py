@@ -107,6 +107,28 @@ def test_scripted_lift_of_the_medium_cylinder_is_a_success():
     assert np.all(info["uniaxial_force_n"] > 1.0) and np.all(obs["agent_pos"][spec.STATE_FORCE_SLICE] > 0.0)
 
 
+def test_with_end_on_success_the_episode_ends_where_its_success_latches():
+    """lerobot-eval's default: the same success at the same step, and the episode terminates there."""
+    def run(end_on_success: bool):
+        env = gym_env.make_env("cylinder_a_medium", dr=gym_env.eval_dr(object_xy=False), render_mode=None,
+                               end_on_success=end_on_success)
+        env.reset(seed=0)
+        script = PinchLiftScript(object_radius=0.03, grasp_height=0.045, lift_m=0.03)
+        success = []
+        for t in range(spec.EPISODE_STEPS):
+            _, _, terminated, truncated, info = env.step(script.target(t).astype(np.float32))
+            success.append(info["is_success"])
+            if terminated or truncated:
+                return success, terminated, truncated
+        raise AssertionError("the episode never ended")
+
+    full, ended_full, truncated_full = run(False)
+    short, ended_short, truncated_short = run(True)
+    assert (ended_full, truncated_full) == (False, True) and (ended_short, truncated_short) == (True, False)
+    first = full.index(True)
+    assert short == full[: first + 1]  # the same rollout up to the step success latched, which ends it
+
+
 def test_render_gives_rgb_frames_of_the_scene():
     with pytest.raises(RuntimeError, match="reset"):
         gym_env.BlindGraspGymEnv("cuboid_a_medium").render()

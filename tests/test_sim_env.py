@@ -17,11 +17,20 @@ CFG = rewards.PAPER_REWARD
 
 
 # --- reward terms against hand-computed values --------------------------------------------------------------------
+def _step(n: int, **given) -> rewards.StepQuantities:
+    """Step quantities for n envs: zeros except what a test gives."""
+    zeros = {"lift": np.zeros(n), "d_xy": np.zeros(n), "uniaxial_force": np.zeros((n, 3)), "q": np.zeros((n, 9)),
+             "action": np.zeros((n, 9)), "prev_action": np.zeros((n, 9)), "tip_object_distance": np.zeros((n, 3)),
+             "tip_object_force": np.zeros((n, 3))}
+    return rewards.StepQuantities(**{**zeros, **given})
+
+
 def test_r_task_hand_computed():
     lift = np.array([0.0, 0.0075, 0.03, 0.05, 0.0075, 0.0075])
     d = np.array([0.0, 0.025, 0.025, 0.0, 0.12, 0.025])
     n = np.array([1, 2, 3, 1, 3, 0])
-    got = rewards.r_task(lift, d, n, CFG)
+    force = (np.arange(3)[None] < n[:, None]) * 1.0  # n tips at 1 N, the rest at 0
+    got = rewards.r_task(_step(6, lift=lift, d_xy=d, uniaxial_force=force), CFG)
     # h_t = 0.03: (1 - sqrt((0.03 - 0.0075)/0.03)) (1 - sqrt(0.025/0.1)) = (1 - sqrt(0.75)) * 0.5
     expected = [
         0.0,  # resting object: height factor 0
@@ -37,44 +46,50 @@ def test_r_task_hand_computed():
 def test_r_incentive_needs_all_three_contacts_above_0_1_newton():
     f = np.array([[0.2, 0.3, 5.0], [0.2, 0.3, 0.1], [0.0, 0.0, 0.0], [0.11, 0.11, 0.11]])
     np.testing.assert_array_equal(rewards.num_contacts(f), [3, 2, 0, 3])
-    np.testing.assert_array_equal(rewards.r_incentive(rewards.num_contacts(f)), [1.0, 0.0, 0.0, 1.0])
+    np.testing.assert_array_equal(rewards.r_incentive(_step(4, uniaxial_force=f), CFG), [1.0, 0.0, 0.0, 1.0])
 
 
 def test_r_joint_limit_sums_violations():
     q = spec.HOME_POSE.copy()[None].repeat(2, 0)
     q[1, 0] = spec.JOINT_UPPER[0] + 0.1
     q[1, 4] = spec.JOINT_LOWER[4] - 0.05
-    np.testing.assert_allclose(rewards.r_joint_limit(q), [0.0, 0.15], atol=1e-12)
+    np.testing.assert_allclose(rewards.r_joint_limit(_step(2, q=q), CFG), [0.0, 0.15], atol=1e-12)
 
 
 def test_r_action_and_rate():
     a = np.array([[0.1] * 9, [0.3, -0.3] + [0.0] * 7])
     prev = np.array([[0.0] * 9, [0.3, 0.3] + [0.0] * 7])
-    np.testing.assert_allclose(rewards.r_action(a), [0.09, 0.18])
-    np.testing.assert_allclose(rewards.r_action_rate(a, prev), [0.09, 0.36])
+    s = _step(2, action=a, prev_action=prev)
+    np.testing.assert_allclose(rewards.r_action(s, CFG), [0.09, 0.18])
+    np.testing.assert_allclose(rewards.r_action_rate(s, CFG), [0.09, 0.36])
 
 
-def test_total_uses_paper_weights_and_incentive_switch():
+def test_total_uses_paper_weights_and_an_ablation_drops_a_term_by_name():
     terms = {k: np.array([1.0]) for k in rewards.TERM_NAMES}
     assert rewards.total(terms, CFG)[0] == pytest.approx(1.0 + 0.2 - 500 - 0.04 - 0.01)
-    ablated = replace(CFG, w_incentive=0.0)
+    ablated = CFG.without("incentive")
     assert rewards.total(terms, ablated)[0] == pytest.approx(1.0 - 500 - 0.04 - 0.01)
+    assert CFG.weight("incentive") == 0.2  # the paper's config itself is untouched
+    with pytest.raises(ValueError, match="unknown reward term"):
+        CFG.without("incentives")
 
 
-def test_directional_touch_counts_only_tips_that_do_not_press_the_object_down():
+def test_every_term_is_named_after_its_equation_and_records_round_trip():
+    assert rewards.TERM_NAMES == ("task", "incentive", "joint_limit", "action", "action_rate", "reach", "touch")
+    assert [fn.__name__ for fn in rewards.TERMS.values()] == [f"r_{k}" for k in rewards.TERM_NAMES]
+    shaped = replace(CFG.with_weights(reach=0.5, touch=0.5), reach_scale=20.0)
+    record = shaped.as_record()
+    assert record["w_reach"] == 0.5 and record["w_incentive"] == 0.2 and record["reach_scale"] == 20.0
+    assert rewards.RewardConfig.from_record(record) == shaped
+    # A teacher's recorded config (its teacher_config.json) reads back as the preset it was trained with.
+    assert rewards.RewardConfig.from_record(CFG.as_record()) == CFG
+    with pytest.raises(ValueError, match="unknown reward setting"):
+        rewards.RewardConfig.from_record({**record, "touch_max_downward": 0.5})
+
+
+def test_touch_counts_tips_pressing_on_the_object():
     force = np.array([[5.0, 5.0, 5.0], [0.05, 5.0, 5.0]])  # N on the object per tip
-    downward = np.array([[0.0, 0.49, 0.9], [0.0, -0.7, 0.51]])  # -F_z/|F|: sideways, 29 deg down, pressing down
-    np.testing.assert_allclose(rewards.r_touch(force), [1.0, 2 / 3])
-    np.testing.assert_allclose(rewards.r_touch_directional(force, downward, 0.5), [2 / 3, 1 / 3])
-    directional = replace(CFG, w_touch=0.5, touch_max_downward=0.5)
-    np.testing.assert_allclose(rewards.touch_term(force, downward, directional), [2 / 3, 1 / 3])
-    np.testing.assert_allclose(rewards.touch_term(force, None, replace(CFG, w_touch=0.5)), [1.0, 2 / 3])
-    with pytest.raises(ValueError, match="tip_object_downward"):
-        rewards.touch_term(force, None, directional)
-    # Records of runs made before the switch existed still match their preset.
-    assert "touch_max_downward" not in rewards.as_record(CFG)
-    assert rewards.as_record(directional)["touch_max_downward"] == 0.5
-    assert rewards.RewardConfig(**rewards.as_record(directional)) == directional
+    np.testing.assert_allclose(rewards.r_touch(_step(2, tip_object_force=force), CFG), [1.0, 2 / 3])
 
 
 def test_env_logs_each_term_and_reward_is_their_weighted_sum():

@@ -12,9 +12,10 @@ import torch
 from tensordict import TensorDict
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.sim import objects, randomization
+from lerobot_blindgrasp.presets import teacher as presets
+from lerobot_blindgrasp.sim import objects, randomization, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.teacher import evaluate, presets
+from lerobot_blindgrasp.teacher import evaluate
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
@@ -57,15 +58,15 @@ def test_presets_paper_is_table_iii_exactly():
     assert (alg["value_loss_coef"], alg["clip_param"], alg["gamma"], alg["lam"], alg["max_grad_norm"]) == (
         1.0, 0.2, 0.99, 0.95, 1.0
     )
-    assert p.reward.w_reach == 0.0 and p.deviations == () and p.external_force
-    assert presets.CPU.deviations and presets.CPU.reward.w_reach > 0
+    assert p.reward.weight("reach") == 0.0 and p.reward.weights == {**rewards.PAPER_WEIGHTS, "reach": 0.0, "touch": 0.0} and p.deviations == () and p.external_force
+    assert presets.CPU.deviations and presets.CPU.reward.weight("reach") > 0
 
 
 def test_variants():
     v = presets.Variant(no_incentive=True, student_obs=True).apply(presets.CPU)
-    assert v.reward.w_incentive == 0.0
+    assert v.reward.weight("incentive") == 0.0 == v.reward.weight("touch")
     assert v.runner["obs_groups"] == {"actor": ["policy"], "critic": ["policy"]}
-    assert presets.CPU.reward.w_incentive == 0.2  # the preset itself is untouched
+    assert presets.CPU.reward.weight("incentive") == 0.2  # the preset itself is untouched
 
 
 @pytest.fixture(scope="module")
@@ -157,35 +158,3 @@ def test_eval_outputs_table_json_and_chart(quick_run, tmp_path):
     assert any(line.startswith("| **1 medium objects**") for line in md)
     assert any(line.startswith("| **all 2**") for line in md)
     assert (tmp_path / "eval.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-
-
-def test_rnd_preset_adds_rsl_rl_exploration_bonus_and_resumes_its_schedule(tmp_path, monkeypatch):
-    """`cpu_rnd`: rsl-rl's own RND extension on the privileged state. Its weight schedule counts env steps in a
-    counter rsl-rl does not checkpoint; a resumed run continues the schedule instead of restarting it."""
-    import signal
-    from dataclasses import replace
-
-    from lerobot_blindgrasp.analysis.progress import _scalars
-    from lerobot_blindgrasp.presets import teacher as teacher_presets
-    from lerobot_blindgrasp.teacher import train
-
-    cpu_rnd = teacher_presets.get_preset("cpu_rnd")
-    assert cpu_rnd.runner["algorithm"]["rnd_cfg"]["weight_schedule"]["final_step"] == 1000 * 24
-    assert cpu_rnd.runner["obs_groups"]["rnd_state"] == ["privileged"] and cpu_rnd.reward == teacher_presets.CPU.reward
-    # The same preset with the bonus decaying from full weight to 0 over iterations 0-2, so two iterations show it.
-    short = replace(cpu_rnd, runner=teacher_presets.with_rnd(teacher_presets.CPU.runner, weight=4.0, decay_iterations=(0, 2)))
-    monkeypatch.setitem(teacher_presets.PRESETS, "cpu_rnd", short)
-    out = tmp_path / "rnd"
-    previous = signal.getsignal(signal.SIGTERM)  # the trainer installs its own SIGTERM handler
-    try:
-        for its in (1, 2):  # one iteration, then resume for the second
-            train.train(train.TrainTeacherConfig(output_dir=out, preset="cpu_rnd", iterations=its, num_envs=18,
-                                                 threads=1, export=False))
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-    ckpt = torch.load(out / "model_1.pt", weights_only=False)
-    assert "rnd_state_dict" in ckpt
-    s = _scalars(out)
-    assert s["Rnd/mean_intrinsic_reward"][0] > 0 and "Loss/rnd" in s
-    # weight = 4 x step_dt x (1 - env steps / 48), read after each iteration's 24 steps: 0.1, then 0 (not 0.1 again)
-    assert s["Rnd/weight"][0] == pytest.approx(0.1) and s["Rnd/weight"][1] == pytest.approx(0.0)

@@ -22,7 +22,8 @@ DRIVER = textwrap.dedent(
     from dataclasses import replace
     from pathlib import Path
     import torch
-    from lerobot_blindgrasp.teacher import distributed, presets, train
+    from lerobot_blindgrasp.presets import teacher as presets
+    from lerobot_blindgrasp.teacher import distributed, train
 
     # A staged preset (as the shipped recipe): `quick` for 1 iteration first, then this one resumes it.
     presets.PRESETS["quick_staged"] = replace(presets.QUICK, name="quick_staged", continues=("quick", 1))

@@ -1,17 +1,14 @@
 """How a teacher touches each object: the direction of its fingertip forces, next to its success.
 
-    python -m lerobot_blindgrasp.analysis.contacts --teacher=docs/results/teacher_runs/cpu_v3 \
-        --objects=capsule_small,sphere_small,sphere_medium --episodes=10
+    python -m lerobot_blindgrasp.analysis.contacts --objects=capsule_small,sphere_small,sphere_medium --episodes=10
 
 Success says *that* a teacher fails on an object; this says *how*. For every control step after the approach
 (`--after_s`) and every fingertip touching the object (> 0.1 N, world-frame net force of the tip on the object),
 it records -F_z/|F| (1: pressing the object straight down into the table, 0: squeezing sideways) and how high the
 tip sits above the object's centre. A tip pressing from above can never lift the object; a lifting grasp squeezes
-sideways (`rewards.r_touch_directional`, docs/results/teacher_cpu_v4.md).
+sideways. This is how the small capsule's failure mode was found: the `cpu` teacher pressed it into the table.
 
-Start states are the evaluation ones (`--seed`, as `blindgrasp-eval-teacher`), deterministic actions. With
-`--pregrasp_starts=true` every episode starts instead with the tips low beside the object (`sim/pregrasp.py`): does
-the teacher lift the object once it is there, or does it fail to get there?
+Start states are the evaluation ones (`--seed`, as `blindgrasp-eval-teacher`), deterministic actions.
 """
 
 from __future__ import annotations
@@ -23,12 +20,12 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.sim import objects, pregrasp
+from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.gym_env import start_seed
 from lerobot_blindgrasp.sim.randomization import EVAL_DR
 
-PRESSING_DOWN = 0.5  # -F_z/|F| above this: more than 30 degrees below horizontal (cpu_v4's touch threshold)
+PRESSING_DOWN = 0.5  # -F_z/|F| above this: more than 30 degrees below horizontal
 
 
 @dataclass
@@ -40,7 +37,6 @@ class ContactsConfig:
     episodes: int = 10  # episodes per object
     seed: int = spec.EVAL_SEED  # first evaluation index
     after_s: float = 2.0  # ignore the first seconds (the approach) of each episode
-    pregrasp_starts: bool = False  # start every episode with the tips low beside the object (sim/pregrasp.py)
 
 
 def contact_directions(env: BatchedGraspEnv, obs: dict, act, steps: int, after_steps: int) -> dict[str, float]:
@@ -68,14 +64,13 @@ def contact_directions(env: BatchedGraspEnv, obs: dict, act, steps: int, after_s
 
 
 def env_config(cfg: ContactsConfig, name: str) -> GraspEnvConfig:
-    """One object's envs: its evaluation start states, or pre-grasp starts when asked."""
+    """One object's envs, on its evaluation start states."""
     return GraspEnvConfig(
         num_envs=cfg.episodes,
         objects=(name,),
         seed=start_seed(cfg.seed, name),
         dr=EVAL_DR,
         autoreset=False,
-        pregrasp=pregrasp.PregraspStarts(fraction=1.0, objects=(name,)) if cfg.pregrasp_starts else None,
     )
 
 

@@ -24,7 +24,6 @@ Outputs: `diagnosis.json`, `diagnosis.md` and `diagnosis.png` under `--output_di
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 

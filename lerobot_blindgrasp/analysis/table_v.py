@@ -6,6 +6,8 @@ Reads what `scripts/paper_recipe.sh` (`blindgrasp-pipeline --print_commands=STAG
 row's lerobot-eval (`eval_<row>/eval_info.json`), the RL w/ o_t teacher's own eval (`<teacher>_eval/eval.json`,
 deterministic) and each row's demo yield (`demos_<row>/yield_report.json`). Rows not run yet are listed as missing.
 All rows are evaluated on the same start states (the preset's eval seed), so the per-object columns are paired.
+Each row names the teacher it was made with, as the run recorded it: the demos' provenance (`collection.json`) for
+a student row, the teacher's own `teacher_config.json` for RL w/ o_t.
 Writes `OUT_DIR/table_v.md` and `OUT_DIR/table_v.png` (bar chart per object).
 """
 
@@ -18,7 +20,9 @@ from pathlib import Path
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.demos.provenance import PROVENANCE_NAME
 from lerobot_blindgrasp.presets import TABLE_V
+from lerobot_blindgrasp.presets.ablations import teacher_words
 from lerobot_blindgrasp.sim import objects
 
 
@@ -29,6 +33,30 @@ def row_successes(out: Path, name: str) -> dict[str, list[bool]] | None:
     row = TABLE_V[name]
     path = out / f"eval_{name}" / "eval_info.json" if row.student else out / f"{row.teacher}_eval" / "eval.json"
     return load_successes(path, mode="deterministic") if path.exists() else None
+
+
+def row_teacher(out: Path, name: str) -> str:
+    """Which teacher recipe made this row, from what its run recorded (not from the registry, which may have
+    changed since): preset, switches, iterations, whether it clones scripted grasps, and the checkpoint."""
+    row = TABLE_V[name]
+    if row.student:
+        prov = out / f"demos_{name}" / PROVENANCE_NAME
+        if not prov.exists():
+            return "not collected"
+        t = json.loads(prov.read_text())["teacher"]
+        words = teacher_words(t.get("preset") or "?", t.get("variant"), t.get("iteration"))
+        return f"{words} ({t['checkpoint_name']})"
+    path = out / f"{row.teacher}_eval" / "eval.json"
+    if not path.exists():
+        return "not evaluated"
+    ev = json.loads(path.read_text())
+    ckpt = Path(ev["checkpoint"])
+    # The recipe trains it in OUT/<teacher>; the eval names the checkpoint as it was given (maybe relative).
+    for config in (out / row.teacher / "teacher_config.json", ckpt.parent / "teacher_config.json"):
+        if config.exists():
+            c = json.loads(config.read_text())
+            return f"{teacher_words(c.get('preset') or '?', c.get('variant'), ev.get('iteration'))} ({ckpt.name})"
+    return f"`{ckpt}`, iteration {ev.get('iteration')} (its teacher_config.json is not there)"
 
 
 def demo_budget(out: Path, name: str) -> str:
@@ -71,8 +99,8 @@ def write_table_v(out: Path) -> Path:
     names = [o for o in objects.PAPER_OBJECTS if any(o in r for r in done.values())]
     lines = ["# Table V in simulation", "",
              f"Rows from `{out}`; every row on the same start states, 95 % Wilson intervals and counts.", "",
-             "| row | demos |", "|---|---|"]
-    lines += [f"| {TABLE_V[n].label} | {demo_budget(out, n)} |" for n in TABLE_V]
+             "| row | teacher | demos |", "|---|---|---|"]
+    lines += [f"| {TABLE_V[n].label} | {row_teacher(out, n)} | {demo_budget(out, n)} |" for n in TABLE_V]
     # The paper's last column: each object's success averaged over the rows, its difficulty whatever the method.
     lines += ["", "| object | " + " | ".join(TABLE_V[n].label for n in done) + " | object average |",
               "|---|" + "---:|" * (len(done) + 1)]

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from lerobot_blindgrasp.bench import BenchConfig
-from lerobot_blindgrasp.teacher import presets
+from lerobot_blindgrasp.presets import teacher as presets
 
 
 @BenchConfig.register_subclass("teacher")

@@ -9,7 +9,7 @@ complete on disk; a kill costs at most the episodes since the last checkpoint, a
 folder to that point (`repair.py`) and goes on.
 
 `LeRobotDataset.resume` itself re-reads meta/episodes through `datasets` (about 1 s for a small dataset, more as it
-grows, measured in docs/results/demos_durable.md), so `reopen_in_place` sets the few fields resume would rebuild
+grows), so `reopen_in_place` sets the few fields resume would rebuild
 from the metadata LeRobot already holds in memory: the last episode's file indices and frame range. It checks that
 LeRobot's writer has the fields it expects and falls back to `LeRobotDataset.resume` otherwise.
 

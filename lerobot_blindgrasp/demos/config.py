@@ -44,7 +44,7 @@ class CollectConfig:
     seed: int = spec.DEMO_SEED
     threads: int = 0  # physics threads (0: all CPUs)
     # physics: batch (mujoco.batch, CPU) or warp (MuJoCo Warp on this process's GPU, else its CPU device;
-    # pip install .[gpu]). The same task, draws and curation either way (docs/results/warp.md).
+    # pip install .[gpu]). The same task, draws and curation either way.
     backend: str = "batch"
     resume: bool = False  # append to an existing output_dir until the targets are met (repairs a crashed one first)
     # Crash safety: the dataset is finalized and reopened (LeRobot rolls to fresh parquet files) at least every

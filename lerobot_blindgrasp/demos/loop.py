@@ -102,7 +102,7 @@ def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: st
 
     teacher, object_names = _check_inputs(cfg)
     try:  # the teacher's own reward settings: r_t must be the task reward it was trained on
-        reward_cfg = rewards.RewardConfig(**teacher.config["reward"])
+        reward_cfg = rewards.RewardConfig.from_record(teacher.config["reward"])
     except (KeyError, TypeError) as e:
         raise CollectError(f"teacher config has no usable reward settings: {e}") from None
     dr = randomization.EVAL_DR

@@ -34,7 +34,9 @@ def objects_of(task: str) -> tuple[str, ...]:
 
 def teacher_train(p: presets.Preset, out: Path, seed: int,
                   variant: presets.Variant = presets.Variant()) -> list[str]:
-    t = p.teacher
+    """blindgrasp-train-teacher of the preset's teacher, or of a Table V teacher ablation (`variant`) on the preset's
+    ablation teacher."""
+    t = p.teacher_stage(variant)
     cmd = ["blindgrasp-train-teacher", f"--preset={t.settings.name}", f"--output_dir={out}", f"--seed={seed}"]
     if t.iterations:
         cmd.append(f"--iterations={t.iterations}")

@@ -5,6 +5,7 @@
     PRESETS["cpu"].student, PRESETS["cpu"].evaluation
     PRESETS["cpu"].all_deviations              # what differs from the paper, and why
     TABLE_V["wo_r_i"]                          # the ablation rows (ablations.py)
+    PRESETS["quick"].teacher_recipe(TEACHERS["teacher_no_ri"])   # which teacher a row's teacher is
 
 Who reads it: `blindgrasp-pipeline --preset=NAME` (every stage), `blindgrasp-train-teacher --preset=NAME` (the
 teacher part, `presets.teacher`) and `scripts/paper_recipe.sh` (through `lerobot_blindgrasp.pipeline.recipe`).
@@ -20,14 +21,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from lerobot_blindgrasp.presets import teacher
+from lerobot_blindgrasp.presets import ablations, teacher
 from lerobot_blindgrasp.presets.ablations import TABLE_V, TEACHERS, Ablation
 from lerobot_blindgrasp.presets.student import SIZES, DaggerStage, Schedule, StudentStage, dataset_frames, schedule
 from lerobot_blindgrasp.presets.teacher import TeacherPreset, Variant
 
-__all__ = ["PRESETS", "SHIPPED_TEACHER_ITERATIONS", "SHIPPED_TEACHER_PRESET", "SIZES", "TABLE_V", "TEACHERS",
-           "Ablation", "DaggerStage", "DemoStage", "EvalStage", "Preset", "Schedule", "StudentStage", "TeacherPreset",
-           "TeacherStage", "Variant", "dataset_frames", "get", "schedule"]
+__all__ = ["ABLATION_TEACHER", "PRESETS", "SHIPPED_TEACHER_ITERATIONS", "SHIPPED_TEACHER_PRESET", "SIZES",
+           "TABLE_V", "TEACHERS", "Ablation", "DaggerStage", "DemoStage", "EvalStage", "Preset", "Schedule",
+           "StudentStage", "TeacherPreset", "TeacherStage", "Variant", "dataset_frames", "get", "schedule"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -57,7 +58,7 @@ class EvalStage:
     teacher_modes: tuple[str, ...] = ("deterministic", "stochastic")
     async_envs: bool = False  # lerobot-eval worker processes: worth it only with many cores
     # lerobot-eval renders 10 episodes per task at every step; a new frame every N steps makes that N x cheaper
-    # (~12 ms a frame with a software renderer was ~80 % of the quick preset's eval, docs/results/quick_pipeline.md)
+    # (~12 ms a frame with a software renderer was ~80 % of the quick preset's eval)
     render_stride: int = 1
     # Of the 10 episodes per object lerobot-eval records, how many get `render_stride`; the rest one frame a second.
     render_episodes: int = 10
@@ -73,6 +74,30 @@ class Preset:
     deviations: tuple[str, ...] = ()  # beyond the teacher settings' own
     # DAgger-style relabelling after the first student (beyond the paper); None: the paper's offline recipe.
     dagger: DaggerStage | None = None
+    # What the Table V teacher ablations (w/o r_i, RL w/ o_t) train with their switch flipped: a recipe without
+    # scripted-grasp cloning (ablations.py says why). None: `teacher` itself, which then must have no cloning.
+    ablation_teacher: TeacherStage | None = None
+
+    def __post_init__(self):
+        t = self.teacher_stage(TEACHERS["rl_with_ot"])
+        if t.shipped or ablations.has_scripted_cloning(t.settings):
+            raise ValueError(f"preset {self.name!r}: the Table V teacher ablations would train on "
+                             f"{t.settings.name!r}{' (shipped)' if t.shipped else ''}, which clones scripted grasps "
+                             "or is not trained; give it an ablation_teacher without cloning")
+
+    def teacher_stage(self, variant: Variant = Variant()) -> TeacherStage:
+        """The stage that makes a teacher with `variant`'s switches: the preset's own teacher for the plain one,
+        the ablation teacher for a Table V teacher ablation."""
+        if ablations.is_teacher_ablation(variant):
+            return self.ablation_teacher or self.teacher
+        return self.teacher
+
+    def teacher_recipe(self, variant: Variant = Variant()) -> str:
+        """Which teacher a row with `variant` uses here, in the words the Table V report uses."""
+        t = self.teacher_stage(variant)
+        iterations = t.iterations or t.settings.max_iterations
+        words = ablations.teacher_words(t.settings.name, variant, iterations - 1)
+        return f"the shipped teacher: {words}" if t.shipped else f"trained by the recipe: {words}"
 
     @property
     def student_recipe(self) -> str:
@@ -96,10 +121,14 @@ class Preset:
 
 
 # The shipped default teacher (models/teacher_cpu_bc) is iterations 0..2099 of `blindgrasp-train-teacher
-# --preset=cpu_bc_capsule --seed=1` (a staged preset: cpu_bc_joint to 1745 first): the settings and budget every
-# other teacher of the quick Table V gets.
+# --preset=cpu_bc_capsule --seed=1` (a staged preset: cpu_bc_joint to 1745 first).
 SHIPPED_TEACHER_PRESET = teacher.CPU_BC_CAPSULE
 SHIPPED_TEACHER_ITERATIONS = 2100
+# The Table V teacher ablations of `cpu` and `quick`: the shipped recipe up to where its cloning begins. Those
+# iterations (0..1397) are the `cpu` preset exactly (nothing of the cloning touches PPO, its random numbers or the
+# normalizer before then), so each ablated teacher differs from the shipped teacher's own PPO-only prefix by its
+# one switch, and none clones a script.
+ABLATION_TEACHER = TeacherStage(settings=teacher.CPU, iterations=ablations.cloning_start(SHIPPED_TEACHER_PRESET))
 
 _SIM_EVAL = "evaluated in simulation, not on the real gripper"
 
@@ -130,9 +159,10 @@ PRESETS: dict[str, Preset] = {
             # The shipped teacher's recipe from scratch (a staged preset: cpu, then two cloning stages; 2.8 h on 2
             # idle cores, models/teacher_cpu_bc/README.md).
             teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET),
+            ablation_teacher=ABLATION_TEACHER,
             # 100 per object rather than the quick preset's 40, so that 5000 steps at batch 256 are ~8 passes over
             # the data rather than ~19; collection is minutes, training the hour. Measured on the shipped teacher it
-            # gives the same student as the quick recipe (75.6 vs 75.8 %, docs/results/student_cpu.md): the
+            # gave the same student as the quick recipe (75.6 vs 75.8 % with an earlier teacher): the
             # student follows its teacher.
             demos=DemoStage(episodes_per_object=100, max_rollouts_per_object=1000, num_envs=720,
                             min_curated_episodes=90),
@@ -148,19 +178,20 @@ PRESETS: dict[str, Preset] = {
         ),
         Preset(
             name="quick",
-            # Shipped: the proposed rows train no teacher. The Table V teachers (w/o r_i, RL w/ o_t) get the shipped
-            # teacher's settings and budget (models/teacher_cpu_bc/README.md).
+            # Shipped: the proposed rows train no teacher. The Table V teacher ablations (w/o r_i, RL w/ o_t) train
+            # the shipped recipe's PPO-only prefix with their switch flipped.
             teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET, shipped=True,
                                  iterations=SHIPPED_TEACHER_ITERATIONS),
+            ablation_teacher=ABLATION_TEACHER,
             demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720,
                             min_curated_episodes=18),
-            # 1200 steps at batch 128 is the recipe of docs/results/student_cpu.md (~8 min on 2 idle cores).
+            # 1200 steps at batch 128: ~2 passes over the quick demos, ~7 min on 2 idle cores.
             student=StudentStage(size="cpu", batch_size=128, steps=1200, threads=1, num_workers=1),
             evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",), render_stride=4,
                                   render_episodes=2),
             deviations=(
                 "the shipped teacher (models/teacher_cpu_bc, trained with the cpu_bc_capsule teacher settings), no "
-                "teacher training",
+                "teacher training except Table V's teacher ablations (the cpu teacher settings, no cloning)",
                 "40 curated episodes per object (at most 400 rollouts) instead of ~5000",
                 "student size cpu (3 layers x 128, 4 heads, head [256, 256]) instead of 6 x 512",
                 "1200 steps at batch 128 with a constant LR instead of 2000 epochs at batch 256: minutes",

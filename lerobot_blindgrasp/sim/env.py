@@ -1,9 +1,9 @@
 """Batched blind-grasp environment: N grippers, each with one object, stepped together.
 
-This module is the task definition, written once: resets and their randomization draws, actions, pushes, rewards,
-success and termination, all numpy over the env axis (no Python loop over envs); what the envs observe is
-`sim/observations.py`. It runs a little over 300 lines because these share one set of per-env counters (episode,
-step, push schedule) that every draw is keyed on; split apart, each part would reach into the others' state. Physics
+This module steps the task, written once, numpy over the env axis (no Python loop over envs): resets, actions and
+the servo and timing model. What it combines lives in one module each: the randomization draws, Table II's
+application and the push schedule in `sim/randomization.py`, the reward terms in `sim/rewards.py`, success and
+termination in `sim/termination.py`, what the envs observe in `sim/observations.py`. Physics
 runs in a backend (`sim/backends/`) chosen by `GraspEnvConfig.backend`:
 - "batch" (default): `mujoco.batch.Batch` (MuJoCo >= 3.17) on CPU threads, each env on its own MjModel copy
   carrying its object and its domain-randomization draw (friction, mass, servo gains);
@@ -29,7 +29,6 @@ The servo and timing factors beyond Table II (`DomainRandomization`, all off by 
 
 from __future__ import annotations
 
-import copy
 import logging
 from dataclasses import dataclass, field
 
@@ -42,11 +41,11 @@ from lerobot_blindgrasp.sim import (
     gripper,
     objects,
     observations,
-    pregrasp,
     randomization,
     rewards,
     rng,
     sensors,
+    termination,
 )
 from lerobot_blindgrasp.sim.backends.batch import BatchBackend
 
@@ -75,9 +74,6 @@ class GraspEnvConfig:
     autoreset: bool = True
     backend: str = "batch"  # physics: "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp, GPU; needs the gpu extra)
     device: str | None = None  # warp only: "cuda:0", "cpu"; None: this process's GPU (LOCAL_RANK) if any, else CPU
-    # Training only: start a share of the hard objects' episodes beside the object (sim/pregrasp.py). None: the
-    # paper's start pose for every episode, as evaluation and demo collection must have.
-    pregrasp: pregrasp.PregraspStarts | None = None
 
     def __post_init__(self):
         backends.check_backend(self.backend)
@@ -132,9 +128,6 @@ class BatchedGraspEnv:
         obj_specs = [objects.scaled(objects.get_object(name), cfg.dr.object_size_scale) for name in cfg.objects]
         self.rest_height = np.array([obj_specs[k].rest_height for k in self.object_index])
         self._rest_quat = np.array([self._body_quat(o) for o in obj_specs])[self.object_index]
-        self._bound_r = np.array([pregrasp.bounding_radius(o) for o in obj_specs])[self.object_index]
-        hard = set(cfg.pregrasp.objects) if cfg.pregrasp else set()
-        self._pregrasp_ok = np.array([name in hard for name in self.object_names])  # may start in a pre-grasp pose
 
         templates = [
             gripper.compile_model(
@@ -168,11 +161,8 @@ class BatchedGraspEnv:
         self.episode_length = np.zeros(n, dtype=np.int64)
         self.lifted_steps = np.zeros(n, dtype=np.int64)  # consecutive steps lifted >= SUCCESS_LIFT_M
         self.success = np.zeros(n, dtype=bool)  # latched once held for SUCCESS_HOLD_S
-        self.pregrasp_start = np.zeros(n, dtype=bool)  # this episode began in a pre-grasp pose (training only)
         self.prev_action = np.zeros((n, spec.NUM_JOINTS))
-        self.push_counter = np.zeros(n, dtype=np.int64)
-        self.steps_to_push = np.zeros(n, dtype=np.int64)
-        self._pushing = np.zeros(n, dtype=bool)
+        self.pushes = randomization.PushSchedule(cfg.dr, self.env_seeds)  # Table II's random pushes
         self.episode_return = np.zeros(n)
         self.episode_terms = {k: np.zeros(n) for k in rewards.TERM_NAMES}
         self.physics_resets = 0  # envs reset because their physics went unstable
@@ -199,25 +189,7 @@ class BatchedGraspEnv:
         return self._randomized_model(self._templates[self.object_index[i]], i)
 
     def _randomized_model(self, template: mujoco.MjModel, i: int) -> mujoco.MjModel:
-        """A copy of the object's model with env i's Table II draw written into it."""
-        m = copy.copy(template)
-        d = self.physics_draw
-        obj_geom = m.geom("object_geom").id
-        m.geom_friction[obj_geom, 0] = d.object_friction[i]
-        for f in spec.FINGERS:
-            m.geom_friction[m.geom(f"{f}_tipgeom").id, 0] = d.robot_friction[i]
-        body = m.body("object").id
-        m.body_mass[body] *= d.object_mass_scale[i]
-        m.body_inertia[body] *= d.object_mass_scale[i]
-        kp = m.actuator_gainprm[:, 0] * d.kp_scale[i]
-        kv = -m.actuator_biasprm[:, 2] * d.kv_scale[i]
-        m.actuator_gainprm[:, 0] = kp
-        m.actuator_biasprm[:, 1] = -kp
-        m.actuator_biasprm[:, 2] = -kv
-        if self.cfg.dr.torque_limit_scale != 1.0:
-            m.actuator_forcerange[:] *= self.cfg.dr.torque_limit_scale
-        mujoco.mj_setConst(m, mujoco.MjData(m))  # mass-dependent constants (e.g. constraint scaling)
-        return m
+        return randomization.apply_physics_draw(template, self.physics_draw, i, self.cfg.dr.torque_limit_scale)
 
     # --- reset ------------------------------------------------------------------------------------------------
     def reset(self) -> dict[str, np.ndarray]:
@@ -235,13 +207,6 @@ class BatchedGraspEnv:
         seeds = self.env_seeds[ids]
         q0, xy = randomization.draw_reset(self.cfg.dr, seeds, self.episode[ids])
         q0 = np.clip(q0, spec.JOINT_LOWER, spec.JOINT_UPPER)
-        if self.cfg.pregrasp is not None:
-            u = rng.uniform(seeds, rng.STREAM_PREGRASP, self.episode[ids], 7)
-            pick = self._pregrasp_ok[ids] & (u[:, 0] < self.cfg.pregrasp.fraction)
-            if pick.any():
-                bound_r = self._bound_r[ids][pick]
-                q0[pick] = pregrasp.pregrasp_pose(xy[pick], bound_r, u[pick, 1:], self.cfg.pregrasp)
-            self.pregrasp_start[ids] = pick
         self.physics.reset(ids)  # defaults; zero velocity, warm-start and applied forces
         qpos = self._qpos[ids]
         qpos[:, observations.JOINTS] = q0
@@ -254,7 +219,6 @@ class BatchedGraspEnv:
         self._last_target[ids] = q0
         self.hold_pushed[ids] = False
         self._hold_pushing[ids] = False
-        self._pushing[ids] = False
         self.physics.forward(ids)
         self.episode_length[ids] = 0
         self.lifted_steps[ids] = 0
@@ -264,9 +228,7 @@ class BatchedGraspEnv:
         for v in self.episode_terms.values():
             v[ids] = 0.0
         if self.cfg.dr.external_force:
-            _, steps = randomization.draw_push(self.cfg.dr, seeds, self.push_counter[ids])
-            self.push_counter[ids] += 1
-            self.steps_to_push[ids] = steps
+            self.pushes.reset(ids)
 
     # --- step -------------------------------------------------------------------------------------------------
     def validate_action(self, action) -> np.ndarray:
@@ -308,7 +270,7 @@ class BatchedGraspEnv:
 
         obs = self._observe()
         raw = self._raw
-        terms = rewards.compute_terms(
+        step = rewards.StepQuantities(
             lift=raw["lift"],
             d_xy=raw["d_xy"],
             uniaxial_force=raw["uniaxial_clean"],
@@ -317,16 +279,15 @@ class BatchedGraspEnv:
             prev_action=self.prev_action,
             tip_object_distance=raw["tip_object_distance"],
             tip_object_force=raw["tip_object_force"],
-            tip_object_downward=raw["tip_object_downward"],
-            cfg=self.cfg.reward,
+            contact_threshold_n=self.cfg.reward.contact_threshold_n,
         )
+        terms = rewards.compute_terms(step, self.cfg.reward)
         reward = rewards.total(terms, self.cfg.reward)
         reward[failed] = 0.0
 
         self.episode_length += 1
-        lifted = raw["lift"] >= spec.SUCCESS_LIFT_M
-        self.lifted_steps = np.where(lifted, self.lifted_steps + 1, 0)
-        self.success |= self.lifted_steps >= spec.SUCCESS_HOLD_STEPS
+        self.lifted_steps = termination.held_steps(self.lifted_steps, raw["lift"])
+        self.success |= termination.is_success(self.lifted_steps)
         if dr.hold_push_n:
             self._start_hold_push()
         self.prev_action = a
@@ -334,8 +295,8 @@ class BatchedGraspEnv:
         for k, v in terms.items():
             self.episode_terms[k] += v
 
-        terminated = (raw["d_xy"] > self.cfg.reward.workspace_radius_m) | failed
-        truncated = (self.episode_length >= self.max_episode_steps) & ~terminated
+        terminated = termination.out_of_workspace(raw["d_xy"], self.cfg.reward.workspace_radius_m) | failed
+        truncated = termination.timed_out(self.episode_length, self.max_episode_steps, terminated)
         info = {
             "success": self.success.copy(),
             "lift": raw["lift"],
@@ -357,7 +318,6 @@ class BatchedGraspEnv:
                 "env_ids": ids,
                 "object_index": self.object_index[ids],
                 "success": self.success[ids].copy(),
-                "pregrasp_start": self.pregrasp_start[ids].copy(),
                 "episode_return": self.episode_return[ids].copy(),
                 "episode_length": self.episode_length[ids].copy(),
                 "terminated": terminated[ids],
@@ -443,26 +403,16 @@ class BatchedGraspEnv:
             self._hold_pushing[ids] = False
 
     def _update_pushes(self) -> None:
-        """Table II random force: a push of U[-0.3, 0.3] N per axis lasting one control step (50 ms), at random
-        times U[0, 10] s apart. Held forces would blow spheres and capsules (23-300 g, rolling) off the table in
-        well under a second (37 % of untouched episodes ended out of reach), so "applied at randomly selected
-        times" is read as a push, not a lasting force."""
-        pushed = np.flatnonzero(self._pushing)
-        if pushed.size:
-            xfrc = self._xfrc[pushed]
+        """Table II's pushes (`randomization.PushSchedule`): end last step's, start the ones now due."""
+        ended, due, force = self.pushes.step()
+        if ended.size:
+            xfrc = self._xfrc[ended]
             xfrc[:, self._object_body, :3] = 0.0
-            self._xfrc[pushed] = xfrc
-            self._pushing[pushed] = False
-        self.steps_to_push -= 1
-        due = np.flatnonzero(self.steps_to_push <= 0)
+            self._xfrc[ended] = xfrc
         if due.size:
-            force, steps = randomization.draw_push(self.cfg.dr, self.env_seeds[due], self.push_counter[due])
-            self.push_counter[due] += 1
-            self.steps_to_push[due] = steps
             xfrc = self._xfrc[due]
             xfrc[:, self._object_body, :3] = force
             self._xfrc[due] = xfrc
-            self._pushing[due] = True
 
     # --- observation --------------------------------------------------------------------------------------------
     def _observe(self, ids: np.ndarray | None = None) -> dict[str, np.ndarray]:

@@ -62,7 +62,8 @@ class ServoParams:
 
 @dataclass(frozen=True)
 class PhysicsOptions:
-    """Solver settings, chosen by `scripts/contact_settings_sweep.py` (results in docs/results/sim.md).
+    """Solver settings, chosen by a sweep of contact settings against scripted grasps
+    (`scripts/contact_settings_sweep.py`).
 
     Elliptic cones + noslip (3 iterations) hold a scripted grasp without creep under the paper's gain
     randomization, for ~20 % more step time. impratio = 10, the usual anti-creep knob, made squeezed objects

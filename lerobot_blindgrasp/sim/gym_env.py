@@ -10,6 +10,10 @@ LeRobot-facing contract (spec.py):
   delta = target - q_now, which `BatchedGraspEnv.step` clips to +-0.3 rad and to the joint limits, as the real
   gripper does. So a policy cannot move a joint farther than 0.3 rad in one 50 ms step, whatever it asks for.
 - `info["is_success"]`: the shared success rule (lifted >= SUCCESS_LIFT_M for SUCCESS_HOLD_S), latched.
+- With `end_on_success` (lerobot-eval's default, `--env.end_on_success`), an episode terminates at the step its
+  success latches: nothing after it can change the outcome, and lerobot-eval stops a batch once every episode in
+  it has ended, so a batch of successes costs 3-5 s of simulation instead of 10. The rates are the same either way
+  (lerobot-eval counts a success at any step up to the episode's end); only the summed rewards cover less.
 
 Seeding: `reset(seed=s)` takes s as an evaluation index (lerobot-eval passes its --seed plus the episode number)
 and runs the first episode of `BatchedGraspEnv(GraspEnvConfig(seed=start_seed(s, object)))`, where
@@ -69,6 +73,7 @@ class BlindGraspGymEnv(gym.Env):
         render_shadows: bool = False,
         camera: str = "side",
         render_stride: int = 1,
+        end_on_success: bool = False,
     ):
         self.object = objects.get_object(object_name)  # raises on unknown names, listing the known ones
         if render_mode not in (None, *self.metadata["render_modes"]):
@@ -92,6 +97,7 @@ class BlindGraspGymEnv(gym.Env):
         if int(render_stride) < 1:
             raise ValueError(f"render_stride must be >= 1, got {render_stride}")
         self.render_stride = int(render_stride)
+        self.end_on_success = bool(end_on_success)
         self._frame: np.ndarray | None = None
         self._frame_step = 0
         self.observation_space = spaces.observation_space()
@@ -147,14 +153,17 @@ class BlindGraspGymEnv(gym.Env):
         # a bug): the sim clips the step to +-0.3 rad and the servo target to the limits, as the real gripper does.
         delta = self._sim.delta_for_target(target[None, :])[0]  # in the joints' measured (calibrated) frame
         obs, reward, terminated, truncated, info = self._sim.step(delta[None, :])
-        self._done = bool(terminated[0] or truncated[0])
+        success = bool(info["success"][0])
+        terminated = bool(terminated[0]) or (self.end_on_success and success)
+        truncated = bool(truncated[0]) and not terminated
+        self._done = terminated or truncated
         step_info = {
-            "is_success": bool(info["success"][0]),
+            "is_success": success,
             "lift_m": float(info["lift"][0]),
             "uniaxial_force_n": info["uniaxial_force"][0].astype(np.float32),  # noise-free, after the deadband
             "joint_target": info["joint_target"][0].astype(np.float32),  # what the servos were sent
         }
-        return self._obs(obs), float(reward[0]), bool(terminated[0]), bool(truncated[0]), step_info
+        return self._obs(obs), float(reward[0]), terminated, truncated, step_info
 
     def render(self):
         if self.render_mode is None:

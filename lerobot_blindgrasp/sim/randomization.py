@@ -8,7 +8,10 @@ construction (paper, Sec. III-B). Deviations and readings of the table:
   coefficient per object and one for the fingertips, each from [0.7, 1.3]. MuJoCo combines a pair with max().
 - Random force: each env pushes its object with a force whose components are U[-0.3, 0.3] N for one control step
   (50 ms) "at randomly selected times", U[0, 10] s apart. A force held between pushes rolls spheres and capsules
-  off the table (see `BatchedGraspEnv._update_pushes`). Off for demo collection and lerobot-eval.
+  off the table (see `PushSchedule`). Off for demo collection and lerobot-eval.
+
+Where Table II lands: `apply_physics_draw` writes an env's friction, mass and servo gains into its MjModel;
+`draw_reset` gives each episode's start pose and object position; `PushSchedule` times the random pushes.
 
 Beyond Table II, the same dataclass carries the conditions a real gripper may differ in (sensor gain, bias, range,
 a dead load cell, joint calibration, backlash, torque and velocity limits, latency, period jitter, object size,
@@ -20,8 +23,10 @@ the object size in `sim/objects.py`. `ROBUSTNESS_FIELDS` names them.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 
+import mujoco
 import numpy as np
 
 from lerobot_blindgrasp import spec
@@ -184,3 +189,66 @@ def draw_jitter_substeps(dr: DomainRandomization, seeds: np.ndarray, counter: np
     dt = spec.CONTROL_DT / substeps
     u = rng.uniform(seeds, rng.STREAM_JITTER, counter, 1)[:, 0]
     return np.minimum(np.floor(u * (dr.period_jitter_s / dt + 1)), substeps - 1).astype(np.int64)
+
+
+def apply_physics_draw(template: mujoco.MjModel, draw: PhysicsDraw, i: int,
+                       torque_limit_scale: float = 1.0) -> mujoco.MjModel:
+    """A copy of an object's model with env i's Table II draw written into it: the object's and the fingertips'
+    friction, the object's mass (and inertia, so its shape's mass distribution stays), the servos' position gain kp
+    and damping kv (MuJoCo's position actuator: gain kp, bias -kp q - kv qdot), and the torque limit beyond it."""
+    m = copy.copy(template)
+    m.geom_friction[m.geom("object_geom").id, 0] = draw.object_friction[i]
+    for f in spec.FINGERS:
+        m.geom_friction[m.geom(f"{f}_tipgeom").id, 0] = draw.robot_friction[i]
+    body = m.body("object").id
+    m.body_mass[body] *= draw.object_mass_scale[i]
+    m.body_inertia[body] *= draw.object_mass_scale[i]
+    kp = m.actuator_gainprm[:, 0] * draw.kp_scale[i]
+    kv = -m.actuator_biasprm[:, 2] * draw.kv_scale[i]
+    m.actuator_gainprm[:, 0] = kp
+    m.actuator_biasprm[:, 1] = -kp
+    m.actuator_biasprm[:, 2] = -kv
+    if torque_limit_scale != 1.0:
+        m.actuator_forcerange[:] *= torque_limit_scale
+    mujoco.mj_setConst(m, mujoco.MjData(m))  # mass-dependent constants (e.g. constraint scaling)
+    return m
+
+
+class PushSchedule:
+    """Table II's random force: a push of U[-0.3, 0.3] N per axis lasting one control step (50 ms), at random
+    times U[0, 10] s apart, per env. Held forces would blow spheres and capsules (23-300 g, rolling) off the table
+    in well under a second (37 % of untouched episodes ended out of reach), so "applied at randomly selected
+    times" is read as a push, not a lasting force.
+
+    The schedule only decides; the env writes the forces into its physics (`step` returns which envs' pushes end
+    and which start, with what force). Draws are keyed on each env's own push counter, so an env's pushes are the
+    same in any batch."""
+
+    def __init__(self, dr: DomainRandomization, seeds: np.ndarray):
+        n = len(seeds)
+        self.dr, self.seeds = dr, seeds
+        self.counter = np.zeros(n, dtype=np.int64)  # pushes drawn so far, per env
+        self.steps_to_push = np.zeros(n, dtype=np.int64)
+        self.pushing = np.zeros(n, dtype=bool)  # a push is being applied this control step
+
+    def reset(self, ids: np.ndarray) -> None:
+        """A new episode: no push under way, and the time to the first one drawn."""
+        self.pushing[ids] = False
+        _, steps = draw_push(self.dr, self.seeds[ids], self.counter[ids])
+        self.counter[ids] += 1
+        self.steps_to_push[ids] = steps
+
+    def step(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Advance one control step. Returns (envs whose push ends now, envs whose push starts now, their forces
+        (k, 3) in N)."""
+        ended = np.flatnonzero(self.pushing)
+        self.pushing[ended] = False
+        self.steps_to_push -= 1
+        due = np.flatnonzero(self.steps_to_push <= 0)
+        force = np.zeros((0, 3))
+        if due.size:
+            force, steps = draw_push(self.dr, self.seeds[due], self.counter[due])
+            self.counter[due] += 1
+            self.steps_to_push[due] = steps
+            self.pushing[due] = True
+        return ended, due, force

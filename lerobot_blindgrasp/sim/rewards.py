@@ -1,15 +1,32 @@
-"""The paper's reward, eq. 1-7, one function per term, vectorized over envs.
+"""The paper's reward, eq. 1-7, as named terms (mjlab's manager style, in numpy over envs).
 
-    r = w1 r_t + w2 r_i + w31 r_l + w32 r_a + w33 r_ar            (eq. 1)
+    r = w1 r_t + w2 r_i + w31 r_l + w32 r_a + w33 r_ar            (eq. 1, `total`)
 
-with w = (1.0, 0.2, -500, -0.04, -0.01). `RewardConfig` holds the weights; the `cpu`/`quick` teacher presets add
-two shaping terms that are not in the paper, reach and touch (see docs/results/teacher_cpu.md for why).
+with w = (1.0, 0.2, -500, -0.04, -0.01). `TERMS` maps each term's name to the function of its equation;
+`RewardConfig.weights` gives each name its weight. The env computes every term after each control step
+(`compute_terms`), sums weight x term (`total`) and logs each term on its own; an ablation switches a term off by its
+name (`RewardConfig.without`).
+
+Two shaping terms that are not in the paper, `reach` and `touch`, are weighted by the `cpu`/`quick` teacher presets
+only (their `deviations` say why); the paper's weights leave them at 0.
+
+| paper            | name          | function        |
+|------------------|---------------|-----------------|
+| eq. 2, d_xy      |               | `planar_distance` |
+| eq. 3, r_t       | `task`        | `r_task`        |
+| eq. 4, r_i       | `incentive`   | `r_incentive`   |
+| eq. 5, r_l       | `joint_limit` | `r_joint_limit` |
+| eq. 6, r_a       | `action`      | `r_action`      |
+| eq. 7, r_ar      | `action_rate` | `r_action_rate` |
+| (shaping)        | `reach`       | `r_reach`       |
+| (shaping)        | `touch`       | `r_touch`       |
 """
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -17,34 +34,69 @@ from lerobot_blindgrasp import spec
 
 
 @dataclass(frozen=True)
+class StepQuantities:
+    """What the reward terms read after a control step, (num_envs, ...) numpy arrays."""
+
+    lift: np.ndarray  # h_o: object height above its resting height (m)
+    d_xy: np.ndarray  # eq. 2's distance of the object from the gripper centre in the table plane (m)
+    uniaxial_force: np.ndarray  # (n, 3) fingertip sensor readings, noise-free (N)
+    q: np.ndarray  # (n, 9) joint positions (rad)
+    action: np.ndarray  # (n, 9) a_t, clipped delta-theta (rad)
+    prev_action: np.ndarray  # (n, 9) a_{t-1}
+    tip_object_distance: np.ndarray  # (n, 3) each tip's end to the object's surface (m)
+    tip_object_force: np.ndarray  # (n, 3) |net force| of each tip on the object (N)
+    contact_threshold_n: float = spec.FORCE_THRESHOLD_N
+
+    @cached_property
+    def n_contact(self) -> np.ndarray:
+        return num_contacts(self.uniaxial_force, self.contact_threshold_n)
+
+
+PAPER_WEIGHTS: dict[str, float] = {"task": 1.0, "incentive": 0.2, "joint_limit": -500.0, "action": -0.04,
+                                   "action_rate": -0.01}
+
+
+@dataclass(frozen=True)
 class RewardConfig:
-    w_task: float = 1.0
-    w_incentive: float = 0.2  # 0 for the "Student w/o r_i" ablation teacher
-    w_joint_limit: float = -500.0
-    w_action: float = -0.04
-    w_action_rate: float = -0.01
-    w_reach: float = 0.0  # not in the paper; cpu preset only
+    # eq. 1's weight of each term, by name (`TERMS`); a name left out weighs 0
+    weights: Mapping[str, float] = field(default_factory=lambda: dict(PAPER_WEIGHTS))
     reach_scale: float = 10.0  # r_reach = mean over tips of 1 - tanh(reach_scale * d_tip_object)
-    w_touch: float = 0.0  # not in the paper; cpu preset only
-    # Touch counts a tip only if its force on the object points at most this far down (-F_z / |F|); None: any
-    # direction. 0.5 = at most 30 degrees below horizontal. Why: r_touch_directional.
-    touch_max_downward: float | None = None
     target_lift_m: float = spec.TARGET_LIFT_M  # h_t
     contact_threshold_n: float = spec.FORCE_THRESHOLD_N
     workspace_radius_m: float = spec.WORKSPACE_RADIUS_M
 
+    def __post_init__(self):
+        unknown = sorted(set(self.weights) - set(TERMS))
+        if unknown:
+            raise ValueError(f"unknown reward term(s) {unknown}; the terms are {', '.join(TERMS)}")
+        # Every term gets its weight, 0 for one left out, so that two configs that weigh the same compare equal
+        object.__setattr__(self, "weights", {name: float(self.weights.get(name, 0.0)) for name in TERMS})
 
-PAPER_REWARD = RewardConfig()
+    def weight(self, name: str) -> float:
+        return self.weights[name]
 
+    def with_weights(self, **weights: float) -> RewardConfig:
+        """This config with the named terms' weights set (e.g. a shaping term switched on)."""
+        return replace(self, weights={**self.weights, **weights})
 
-def as_record(cfg: RewardConfig) -> dict:
-    """The config as a run records it (teacher_config.json). Optional switches left at None are omitted, so a
-    run recorded before such a switch existed still matches its preset when resumed, and still loads with
-    `RewardConfig(**record)`."""
-    return {k: v for k, v in dataclasses.asdict(cfg).items() if v is not None}
+    def without(self, *names: str) -> RewardConfig:
+        """This config with the named terms switched off (weight 0): how an ablation drops a term."""
+        return self.with_weights(**dict.fromkeys(names, 0.0))
 
+    def as_record(self) -> dict:
+        """The config as a run records it (teacher_config.json): `w_<term>` for every term, then the parameters."""
+        return {**{f"w_{name}": self.weight(name) for name in TERMS},
+                "reach_scale": self.reach_scale, "target_lift_m": self.target_lift_m,
+                "contact_threshold_n": self.contact_threshold_n, "workspace_radius_m": self.workspace_radius_m}
 
-TERM_NAMES = ("task", "incentive", "joint_limit", "action", "action_rate", "reach", "touch")
+    @classmethod
+    def from_record(cls, record: Mapping) -> RewardConfig:
+        """The inverse of `as_record` (what a teacher's teacher_config.json holds)."""
+        params = {k: v for k, v in record.items() if not k.startswith("w_")}
+        unknown = sorted(set(params) - {"reach_scale", "target_lift_m", "contact_threshold_n", "workspace_radius_m"})
+        if unknown:
+            raise ValueError(f"unknown reward setting(s) {unknown} in {dict(record)}")
+        return cls(weights={k[2:]: float(v) for k, v in record.items() if k.startswith("w_")}, **params)
 
 
 def planar_distance(object_xy: np.ndarray) -> np.ndarray:
@@ -57,119 +109,74 @@ def num_contacts(uniaxial_force: np.ndarray, threshold: float = spec.FORCE_THRES
     return (uniaxial_force > threshold).sum(axis=-1)
 
 
-def r_task(lift: np.ndarray, d_xy: np.ndarray, n_contact: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+def r_task(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
     """Eq. 3. Active only with >= 1 fingertip contact and the object inside the workspace; else 0.
 
-    `lift` is h_o, the object's height above its resting height (clipped at 0, so that resting penetration does
-    not make the square root's argument exceed 1).
-    """
+    h_o is clipped at 0, so that resting penetration does not make the square root's argument exceed 1."""
     h_t = cfg.target_lift_m
-    h_o = np.clip(lift, 0.0, None)
-    centred = 1.0 - np.sqrt(np.clip(d_xy / cfg.workspace_radius_m, 0.0, 1.0))
+    h_o = np.clip(s.lift, 0.0, None)
+    centred = 1.0 - np.sqrt(np.clip(s.d_xy / cfg.workspace_radius_m, 0.0, 1.0))
     height = np.where(h_o < h_t, 1.0 - np.sqrt(np.clip((h_t - h_o) / h_t, 0.0, 1.0)), 1.0)
-    active = (n_contact >= 1) & (d_xy < cfg.workspace_radius_m)
+    active = (s.n_contact >= 1) & (s.d_xy < cfg.workspace_radius_m)
     return np.where(active, height * centred, 0.0)
 
 
-def r_incentive(n_contact: np.ndarray) -> np.ndarray:
+def r_incentive(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
     """Eq. 4: 1 when all three fingertips sense contact."""
-    return (n_contact == spec.NUM_FORCES).astype(np.float64)
+    return (s.n_contact == spec.NUM_FORCES).astype(np.float64)
 
 
-def r_joint_limit(q: np.ndarray, lower=spec.JOINT_LOWER, upper=spec.JOINT_UPPER) -> np.ndarray:
+def r_joint_limit(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
     """Eq. 5: summed violation (rad) of the allowed joint range over the nine joints."""
-    return (np.clip(lower - q, 0.0, None) + np.clip(q - upper, 0.0, None)).sum(axis=-1)
+    return (np.clip(spec.JOINT_LOWER - s.q, 0.0, None) + np.clip(s.q - spec.JOINT_UPPER, 0.0, None)).sum(axis=-1)
 
 
-def r_action(action: np.ndarray) -> np.ndarray:
+def r_action(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
     """Eq. 6: |a_t|^2, a_t = delta-theta in rad."""
-    return np.square(action).sum(axis=-1)
+    return np.square(s.action).sum(axis=-1)
 
 
-def r_action_rate(action: np.ndarray, prev_action: np.ndarray) -> np.ndarray:
+def r_action_rate(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
     """Eq. 7: |a_t - a_{t-1}|^2."""
-    return np.square(action - prev_action).sum(axis=-1)
+    return np.square(s.action - s.prev_action).sum(axis=-1)
 
 
-def r_reach(tip_object_distance: np.ndarray, cfg: RewardConfig) -> np.ndarray:
-    """Shaping (not in the paper): pulls fingertips toward the object surface before any contact exists."""
-    return (1.0 - np.tanh(cfg.reach_scale * np.clip(tip_object_distance, 0.0, None))).mean(axis=-1)
+def r_reach(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
+    """Shaping (not in the paper): pulls fingertips toward the object surface before any contact exists. r_t is 0
+    until the object lifts, so PPO on a small budget without it learns to keep still."""
+    return (1.0 - np.tanh(cfg.reach_scale * np.clip(s.tip_object_distance, 0.0, None))).mean(axis=-1)
 
 
-def r_touch(tip_object_force: np.ndarray, threshold: float = spec.FORCE_THRESHOLD_N) -> np.ndarray:
+def r_touch(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
     """Shaping (not in the paper): fraction of fingertips pressing on the *object* (any direction, > 0.1 N).
 
     Unlike n_contact it ignores pushes on the table, and unlike the uniaxial sensor it sees side contacts, so it
     rewards every touch that could become a grasp."""
-    return (tip_object_force > threshold).mean(axis=-1)
+    return (s.tip_object_force > cfg.contact_threshold_n).mean(axis=-1)
 
 
-def r_touch_directional(
-    tip_object_force: np.ndarray,
-    tip_object_downward: np.ndarray,
-    max_downward: float,
-    threshold: float = spec.FORCE_THRESHOLD_N,
-) -> np.ndarray:
-    """Shaping (not in the paper): `r_touch`, counting only tips that do not press the object into the table.
-
-    `tip_object_downward` is -F_z / |F| of the force a tip exerts on the object (1: straight down). A tip pressing
-    from above pushes the object into the table, so it can never lift it, yet `r_touch` (and the paper's r_i,
-    which reads the uniaxial sensor) pays for it. On the small capsule the `cpu` teacher squeezed from above for
-    34 M steps (99 % of its tip contacts at -F_z/|F| > 0.2, mean 0.86) and never lifted it, while its lifting
-    grasps press sideways (mean ~0.0). Lifting grasps are unaffected, so the optimum of the paper's reward is
-    kept. Tried (preset `cpu_v4`) and not adopted: it slows learning from scratch and does not change the capsule
-    grasp when switched on later (docs/results/teacher_cpu_v4.md)."""
-    pressing = (tip_object_force > threshold) & (tip_object_downward <= max_downward)
-    return pressing.mean(axis=-1)
+# Every term, by name, in eq. 1's order (the shaping terms last): the order `total` sums in.
+TERMS: dict[str, Callable[[StepQuantities, RewardConfig], np.ndarray]] = {
+    "task": r_task,
+    "incentive": r_incentive,
+    "joint_limit": r_joint_limit,
+    "action": r_action,
+    "action_rate": r_action_rate,
+    "reach": r_reach,
+    "touch": r_touch,
+}
+TERM_NAMES = tuple(TERMS)
+PAPER_REWARD = RewardConfig()
 
 
-def touch_term(
-    tip_object_force: np.ndarray, tip_object_downward: np.ndarray | None, cfg: RewardConfig
-) -> np.ndarray:
-    """The touch term the config asks for: any direction, or directional when `touch_max_downward` is set."""
-    if cfg.touch_max_downward is None:
-        return r_touch(tip_object_force, cfg.contact_threshold_n)
-    if tip_object_downward is None:
-        raise ValueError("touch_max_downward is set but the force directions (tip_object_downward) were not given")
-    return r_touch_directional(
-        tip_object_force, tip_object_downward, cfg.touch_max_downward, cfg.contact_threshold_n
-    )
+def compute_terms(s: StepQuantities, cfg: RewardConfig) -> dict[str, np.ndarray]:
+    """Every term, unweighted, by name (the env logs each one separately)."""
+    return {name: fn(s, cfg) for name, fn in TERMS.items()}
 
 
-def compute_terms(
-    *,
-    lift: np.ndarray,
-    d_xy: np.ndarray,
-    uniaxial_force: np.ndarray,
-    q: np.ndarray,
-    action: np.ndarray,
-    prev_action: np.ndarray,
-    tip_object_distance: np.ndarray,
-    tip_object_force: np.ndarray,
-    cfg: RewardConfig,
-    tip_object_downward: np.ndarray | None = None,
-) -> dict[str, np.ndarray]:
-    """Unweighted terms, by name (for logging each one separately)."""
-    n = num_contacts(uniaxial_force, cfg.contact_threshold_n)
-    return {
-        "task": r_task(lift, d_xy, n, cfg),
-        "incentive": r_incentive(n),
-        "joint_limit": r_joint_limit(q),
-        "action": r_action(action),
-        "action_rate": r_action_rate(action, prev_action),
-        "reach": r_reach(tip_object_distance, cfg) if cfg.w_reach else np.zeros_like(d_xy),
-        "touch": touch_term(tip_object_force, tip_object_downward, cfg) if cfg.w_touch else np.zeros_like(d_xy),
-    }
-
-
-def total(terms: dict[str, np.ndarray], cfg: RewardConfig) -> np.ndarray:
-    """Eq. 1 (plus the optional shaping terms)."""
-    return (
-        cfg.w_task * terms["task"]
-        + cfg.w_incentive * terms["incentive"]
-        + cfg.w_joint_limit * terms["joint_limit"]
-        + cfg.w_action * terms["action"]
-        + cfg.w_action_rate * terms["action_rate"]
-        + cfg.w_reach * terms["reach"]
-        + cfg.w_touch * terms["touch"]
-    )
+def total(terms: Mapping[str, np.ndarray], cfg: RewardConfig) -> np.ndarray:
+    """Eq. 1: the weighted sum of the terms (with the shaping terms' weights, 0 in the paper)."""
+    out = 0.0
+    for name in TERMS:
+        out = out + cfg.weight(name) * terms[name]
+    return out

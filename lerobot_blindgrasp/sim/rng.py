@@ -19,7 +19,7 @@ STREAM_DR = 1  # per-env physics parameters, drawn once
 STREAM_RESET = 2  # joint offsets and object position, per episode
 STREAM_OBS_NOISE = 3  # per step
 STREAM_PUSH = 4  # external force schedule, per push
-STREAM_PREGRASP = 5  # pre-grasp start states (training only), per episode
+# 5: retired (a training-only start-state draw); kept unused so that no other stream changes number
 STREAM_SENSOR = 6  # sensor errors beyond Table II (force bias signs, joint calibration signs), drawn once
 STREAM_HOLD_PUSH = 7  # direction of the push during the hold, per episode
 STREAM_JITTER = 8  # how late each control step's command reaches the servos, per step

@@ -128,8 +128,8 @@ class SideGraspScript(WaypointScript):
     """Per-env targets: hover beside the object, descend, squeeze, lift, hold.
 
     Unlike `PinchLiftScript` it reads where each object stands (privileged, as the teacher does) and squeezes at
-    the lowest height the tip reaches beside it, which is what lifts the small capsule (docs/results/
-    teacher_cpu_v4.md: every object the teacher fails on, it presses from above)."""
+    the lowest height the tip reaches beside it, which is what lifts the small capsule (a teacher that fails on
+    an object presses it from above)."""
 
     GAP_M = 0.02  # tip surface to the object's surface while hovering and descending
     SQUEEZE_M = 0.006  # tip target this far inside the surface: the servo error that holds the object

@@ -33,9 +33,10 @@ from tqdm import tqdm
 from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_config, sleeping_openmp_threads
 from lerobot_blindgrasp.presets import SHIPPED_TEACHER_PRESET
-from lerobot_blindgrasp.sim import randomization, rewards
+from lerobot_blindgrasp.presets import teacher as presets
+from lerobot_blindgrasp.sim import randomization
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.teacher import distributed, presets
+from lerobot_blindgrasp.teacher import distributed
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME, latest_checkpoint, observation_layout
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
@@ -54,7 +55,6 @@ def build_env_config(
         nthread=nthread,
         object_weights=preset.object_weights,
         backend=backend,
-        pregrasp=preset.pregrasp,
     )
 
 
@@ -63,9 +63,8 @@ class TrainTeacherConfig:
     """PPO teacher training (paper Sec. III-B, Table III)."""
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
-    # cpu_bc_capsule (the shipped teacher's staged recipe: cpu, then two cloning stages), paper (Table III), cpu,
-    # quick; experiments: cpu_v4, cpu_rnd, cpu_pregrasp, cpu_bc, cpu_bc_late, cpu_bc_joint, cpu_bc_dagger,
-    # cpu_bc_dagger_sat, cpu_e3
+    # cpu_bc_capsule (the shipped teacher's staged recipe: cpu, then two cloning stages; cpu_bc_joint is its
+    # first cloning stage), paper (Table III), cpu, quick
     preset: str = SHIPPED_TEACHER_PRESET.name
     seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations
@@ -115,12 +114,9 @@ def train(cfg: TrainTeacherConfig) -> Path:
         "seed": cfg.seed,
         "iterations": iterations,
         "runner": preset.runner_cfg(),
-        "reward": rewards.as_record(preset.reward),
+        "reward": preset.reward.as_record(),
         "external_force": preset.external_force,
         "object_weights": preset.object_weights and list(preset.object_weights),
-        # None for presets without pre-grasp starts, as in run configs written before the field existed; the JSON
-        # round trip turns tuples into lists, so that it compares equal to the record read back on resume.
-        "pregrasp": preset.pregrasp and json.loads(json.dumps(dataclasses.asdict(preset.pregrasp))),
         "deviations": list(preset.deviations),
         # Lets a loader refuse this checkpoint once spec.PRIVILEGED_LAYOUT changes.
         "observation_layout": observation_layout(),
@@ -129,7 +125,7 @@ def train(cfg: TrainTeacherConfig) -> Path:
     cfg_path = out / CONFIG_NAME
     if cfg_path.exists():
         old = json.loads(cfg_path.read_text())
-        for key in ("preset", "variant", "num_envs", "runner", "reward", "object_weights", "pregrasp"):
+        for key in ("preset", "variant", "num_envs", "runner", "reward", "object_weights"):
             if old.get(key) != config[key]:
                 raise SystemExit(f"{out} holds a run with a different {key!r}; use another --output_dir")
     elif lead:
@@ -155,11 +151,7 @@ def train(cfg: TrainTeacherConfig) -> Path:
         runner.load(str(ckpt))
         done_its = runner.current_learning_iteration + 1
         runner.current_learning_iteration = done_its
-        if runner.alg.rnd is not None:
-            # rsl-rl keeps the RND weight schedule's env-step counter outside the checkpoint; without this a resumed
-            # run would restart the schedule (a decayed exploration bonus back at full weight).
-            runner.alg.rnd.update_counter = done_its * steps_per_it
-        if hasattr(runner.alg, "bc_iteration"):  # the scripted-demo cloning's decay, likewise (teacher/aux_bc.py)
+        if hasattr(runner.alg, "bc_iteration"):  # the scripted-demo cloning's decay continues where it stopped
             runner.alg.bc_iteration = done_its
         bar.update(done_its)
         log.info("resuming from %s (iteration %d)", ckpt, done_its)
@@ -251,7 +243,7 @@ def update_thread_count(cfg, env) -> int:
 def with_torch_threads(update, threads: int):
     """`update` run with `threads` torch intra-op threads, then back to the acting count. Collection and update
     alternate, so the update may use the cores the physics threads use while collecting: on an idle 2-core
-    machine two threads make the `cpu` preset's update 1.8x faster (docs/results/teacher_cpu_bc.md, section 9)."""
+    machine two threads make the `cpu` preset's update 1.8x faster (`blindgrasp-bench teacher`)."""
 
     def threaded(*args, **kwargs):
         acting = torch.get_num_threads()

@@ -15,7 +15,6 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.sim import rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv
 
 
@@ -77,21 +76,14 @@ class RslRlGraspEnv(VecEnv):
         if final is None:
             return log
         cfg = self.env.cfg.reward
-        weights = {t: getattr(cfg, f"w_{t}") for t in rewards.TERM_NAMES}
         seconds = final["episode_length"] / spec.CONTROL_HZ
         for term, sums in final["terms"].items():
-            log[f"Episode_Reward/{term}"] = float((weights[term] * sums / seconds).mean())
+            log[f"Episode_Reward/{term}"] = float((cfg.weight(term) * sums / seconds).mean())
         log["Episode_Termination/time_out"] = float(final["truncated"].mean())
         log["Episode_Termination/object_out_of_reach"] = float(final["terminated"].mean())
-        # Success counts episodes from the paper's start pose only, so that curves stay comparable across presets;
-        # episodes begun in a pre-grasp pose (sim/pregrasp.py) are logged on their own.
-        nominal = ~final["pregrasp_start"]
-        if nominal.any():
-            log["Metrics/success"] = float(final["success"][nominal].mean())
-        if not nominal.all():
-            log["Metrics/success_pregrasp_start"] = float(final["success"][~nominal].mean())
+        log["Metrics/success"] = float(final["success"].mean())
         names = self.env.cfg.objects
-        for k in np.unique(final["object_index"][nominal]):
-            mask = nominal & (final["object_index"] == k)
+        for k in np.unique(final["object_index"]):
+            mask = final["object_index"] == k
             log[f"Success/{names[k]}"] = float(final["success"][mask].mean())
         return log

@@ -309,11 +309,16 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         return self.predict_action_chunk(batch)[:, 0]
 
     def forward(self, batch: dict[str, Tensor], reduction: str = "mean") -> tuple[Tensor, dict]:
-        """MSE between the last token's prediction and the normalized delta action (the paper's imitation loss)."""
+        """The paper's imitation loss (`imitation_loss`) of the last token's prediction, per sample or averaged."""
         pred = self.model(batch[OBS_STATE], batch.get(STATE_IS_PAD))
-        per_element = F.mse_loss(pred, batch[ACTION], reduction="none")
+        per_sample = imitation_loss(pred, batch[ACTION])
         if reduction == "none":
-            per_sample = per_element.mean(dim=-1)
             return per_sample, {"mse": per_sample.mean().item()}
-        loss = per_element.mean()
+        loss = per_sample.mean()
         return loss, {"mse": loss.item()}
+
+
+def imitation_loss(pred: Tensor, action: Tensor) -> Tensor:
+    """Eq. 8, L = |pi_s(o_t) - a_t|^2, per sample (B,): both in units of the action bound (0.3 rad), so in [-1, 1].
+    Averaged over the 9 joints rather than summed, as robomimic's MSE does: the same minimizer, a scale-free loss."""
+    return F.mse_loss(pred, action, reduction="none").mean(dim=-1)

@@ -13,7 +13,7 @@ State. The env reads and writes host (numpy, float64) mirrors of qpos, qvel, ctr
 `step` uploads ctrl and forces, steps each group, and downloads qpos, qvel and sensordata (about 100 floats per env
 per control step). On CUDA the `nstep` substeps of each group run as one captured CUDA graph.
 
-Differences from the batch backend (see docs/results/warp.md for the measured effect):
+Differences from the batch backend:
 - float32 throughout (MuJoCo Warp's `float`), against float64 on CPU;
 - contacts: MuJoCo Warp's own collision pipeline (primitive colliders and GJK/EPA with multi-contact for
   capsule/cylinder pairs) against CPU MuJoCo's; contact points and counts differ slightly;
