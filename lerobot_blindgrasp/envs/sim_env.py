@@ -65,6 +65,10 @@ class BlindGraspEnvConfig(EnvConfig):
     # `render_stride`; the others get a new frame once a second (RENDER_STRIDE_REST), a slideshow at 1/20 of the
     # cost. With a software renderer video otherwise dominates a CPU evaluation.
     render_episodes: int = 10
+    # End an episode at the step its success latches (nothing after it can change the outcome; the rates are the
+    # same). lerobot-eval's freeze wrapper then stops simulating it while the rest of the batch runs on. false:
+    # every episode runs its full 10 s (videos that show the whole hold).
+    end_on_success: bool = True
     features: dict[str, PolicyFeature] = field(default_factory=spaces.env_features)
     features_map: dict[str, str] = field(default_factory=spaces.env_features_map)
 
@@ -85,6 +89,7 @@ class BlindGraspEnvConfig(EnvConfig):
             "render_height": self.render_height,
             "render_shadows": self.render_shadows,
             "render_stride": self.render_stride,
+            "end_on_success": self.end_on_success,
             "disable_env_checker": self.disable_env_checker,
         }
 

@@ -108,7 +108,7 @@ _CPU_DEVIATIONS = (
     "empirical observation normalization: privileged forces span 0-100 N next to radians",
     "1026 envs x 24 steps, 4 minibatches: what 2 cores step in ~4 s per iteration",
     "actor and critic MLPs [256, 128, 64] instead of [512, 256, 128]: the PPO update on 1 CPU thread took longer "
-    "than collection (4.5 s vs 3.5 s per iteration); the smaller MLPs cut it to 1.9 s (blindgrasp-bench teacher)",
+    "than collection (4.5 s vs 3.5 s per iteration); the smaller MLPs cut it to 1.9 s (blindgrasp-bench --bench.type=teacher)",
     _NO_PUSHES,
 )
 

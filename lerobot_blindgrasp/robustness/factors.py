@@ -128,7 +128,7 @@ def build_factors(size: str = "default") -> list[Factor]:
 # Several factors at once, at growing severity: what a first build of the gripper may well combine.
 COMBINED_LEVELS: tuple[tuple[str, dict], ...] = (
     ("nominal", {}),
-    ("issue goals", {"obs_latency_steps": 1, "force_gain": 0.7, "joint_calibration_rad": 0.05}),
+    ("hardening goals", {"obs_latency_steps": 1, "force_gain": 0.7, "joint_calibration_rad": 0.05}),
     ("mild", {"force_gain": 0.8, "force_bias_n": 0.5, "joint_calibration_rad": 0.02, "obs_latency_steps": 1,
               "backlash_rad": 0.02, "period_jitter_s": 0.01}),
     ("moderate", {"force_gain": 0.7, "force_bias_n": 1.0, "joint_calibration_rad": 0.05, "obs_latency_steps": 1,
