@@ -5,7 +5,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$ROOT/scripts/bootstrap.sh"
 cd "$ROOT"
 set +e
-python -m pytest -q "$@"
+python -m pytest -q --durations=15 "$@"
 code=$?
 set -e
 if [ "$code" -eq 5 ]; then
