@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from emulators.glove import GloveEmulator, free_udp_port
-from emulators.harness import BIN, Operator, cli_env, tiny_student_train
+from emulators.harness import BIN, Operator, as_from_a_terminal, cli_env, tiny_student_train
 from emulators.rig import LATENCY_TIMER_MS, MOUNT_SIGN, GripperRig
 
 from lerobot_blindgrasp import spec
@@ -164,7 +164,8 @@ def test_ctrl_c_during_recording_turns_the_torque_off(station, tmp_path):
         rig.hand_move(spec.HOME_POSE)
         glove.closure = 0.5
         cmd = _record_cmd(rig, glove, tmp_path / "ds", episodes=1, episode_s=60)
-        proc = subprocess.Popen(cmd, env=station.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(as_from_a_terminal(cmd), env=station.env, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT)
         _wait_for_torque(rig, proc)
         time.sleep(1.0)  # recording
         proc.send_signal(signal.SIGINT)
@@ -177,7 +178,8 @@ def test_glove_loss_during_recording_stops_with_torque_off(station, tmp_path):
         rig.hand_move(spec.HOME_POSE)
         glove.closure = 0.3
         cmd = _record_cmd(rig, glove, tmp_path / "ds", episodes=1, episode_s=60)
-        proc = subprocess.Popen(cmd, env=station.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(as_from_a_terminal(cmd), env=station.env, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT)
         _wait_for_torque(rig, proc)
         time.sleep(0.5)
         glove.paused = True  # the SDK bridge dies

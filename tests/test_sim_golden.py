@@ -1,7 +1,8 @@
 """The simulation's task definition reproduces bit for bit: the shipped teacher, driven deterministically through
 `BatchedGraspEnv`, sees the same observations, rewards (term by term), targets and successes as when this file's
 golden digests were recorded (tests/data/sim_golden.json, written by `python tests/test_sim_golden.py --record`
-from the code before a refactor). Two settings: evaluation (`EVAL_DR`, on the shipped teacher's own evaluation
+from the code before a refactor: the current record from commit c75800d, before the reward terms were named and
+the rejected teacher experiments retired). Two settings: evaluation (`EVAL_DR`, on the shipped teacher's own evaluation
 start states, whose successes must also match its recorded `models/teacher_cpu_bc/eval/eval.json`) and training
 (`PAPER_DR`: Table II's pushes, a multi-object batch with autoreset).
 
@@ -53,6 +54,19 @@ def _rollout(env: BatchedGraspEnv, teacher: TeacherPolicy, steps: int) -> tuple[
 
 
 def compute() -> dict:
+    """One torch thread: a matrix product's rounding depends on how many threads split it, and earlier tests in the
+    same process may have changed the count."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _compute()
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _compute() -> dict:
     teacher = TeacherPolicy(default_teacher())
     reward = rewards.RewardConfig.from_record(teacher.config["reward"]) if hasattr(
         rewards.RewardConfig, "from_record") else rewards.RewardConfig(**teacher.config["reward"])

@@ -52,12 +52,20 @@ def cli_env(home: Path) -> dict[str, str]:
     }
 
 
+def as_from_a_terminal(cmd: list[str]) -> list[str]:
+    """`cmd` started with SIGHUP, SIGINT and SIGTERM at their default disposition, as from a terminal. A process
+    inherits ignored signals: under `nohup` or as a shell's background job the test runner ignores SIGHUP or SIGINT,
+    and the code under test rightly leaves an ignored signal ignored, so a test that sends one must reset it.
+    coreutils' `env` execs the command, so the pid the test signals is the command's."""
+    return ["env", "--default-signal=HUP,INT,TERM", *cmd]
+
+
 class Operator:
     """Runs a CLI whose `input()` prompts an operator: waits for each prompt text, acts, then presses ENTER."""
 
     def __init__(self, cmd: list[str], env: dict[str, str]):
         self.proc = subprocess.Popen(
-            cmd, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+            as_from_a_terminal(cmd), env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
         )
         self.output = bytearray()
         self._pos = 0
