@@ -86,8 +86,10 @@ def test_action_is_an_absolute_target_clipped_to_0p3_rad_from_the_current_positi
     assert np.isclose(info["joint_target"], spec.JOINT_UPPER).sum() >= 6  # abduction and proximal got there
 
 
-def test_scripted_lift_of_the_medium_cylinder_is_a_success():
-    env = gym_env.make_env("cylinder_a_medium", dr=gym_env.eval_dr(object_xy=False))
+def _scripted_lift(**env_kwargs):
+    """A pinch-and-lift of the centred medium cylinder until the episode ends: (per-step success, terminated,
+    truncated, last observation, last info)."""
+    env = gym_env.make_env("cylinder_a_medium", dr=gym_env.eval_dr(object_xy=False), **env_kwargs)
     env.reset(seed=0)
     script = PinchLiftScript(object_radius=0.03, grasp_height=0.045, lift_m=0.03)
     success = []
@@ -95,7 +97,12 @@ def test_scripted_lift_of_the_medium_cylinder_is_a_success():
         obs, _, terminated, truncated, info = env.step(script.target(t).astype(np.float32))
         success.append(info["is_success"])
         if terminated or truncated:
-            break
+            return success, terminated, truncated, obs, info
+    raise AssertionError("the episode never ended")
+
+
+def test_scripted_lift_of_the_medium_cylinder_is_a_success():
+    success, terminated, truncated, obs, info = _scripted_lift()
     assert truncated and not terminated
     # Success needs the lift held for 1 s: the pinch is done by step 35 and the lift by ~step 60, so success
     # latches about 20 steps later, and stays.
@@ -109,21 +116,8 @@ def test_scripted_lift_of_the_medium_cylinder_is_a_success():
 
 def test_with_end_on_success_the_episode_ends_where_its_success_latches():
     """lerobot-eval's default: the same success at the same step, and the episode terminates there."""
-    def run(end_on_success: bool):
-        env = gym_env.make_env("cylinder_a_medium", dr=gym_env.eval_dr(object_xy=False), render_mode=None,
-                               end_on_success=end_on_success)
-        env.reset(seed=0)
-        script = PinchLiftScript(object_radius=0.03, grasp_height=0.045, lift_m=0.03)
-        success = []
-        for t in range(spec.EPISODE_STEPS):
-            _, _, terminated, truncated, info = env.step(script.target(t).astype(np.float32))
-            success.append(info["is_success"])
-            if terminated or truncated:
-                return success, terminated, truncated
-        raise AssertionError("the episode never ended")
-
-    full, ended_full, truncated_full = run(False)
-    short, ended_short, truncated_short = run(True)
+    full, ended_full, truncated_full, _, _ = _scripted_lift(render_mode=None, end_on_success=False)
+    short, ended_short, truncated_short, _, _ = _scripted_lift(render_mode=None, end_on_success=True)
     assert (ended_full, truncated_full) == (False, True) and (ended_short, truncated_short) == (True, False)
     first = full.index(True)
     assert short == full[: first + 1]  # the same rollout up to the step success latched, which ends it
