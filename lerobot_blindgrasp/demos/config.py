@@ -38,6 +38,9 @@ class CollectConfig:
     max_rollouts_per_object: int | None = None  # rollout budget per object (default 20 x episodes_per_object)
     objects: str = "all"  # 'all', 'medium' or a comma list of catalogue names
     stochastic: bool = True  # sample the teacher's Gaussian; false: its mean ('w/o stochastic teacher' ablation)
+    # the start-state and physics randomization of the rollouts: 'paper' (Table II without pushes) or 'hardened'
+    # (beyond the paper: lower friction, stiffer servos and a wider start spread, sim.randomization.HARDENED_DR)
+    randomization: str = "paper"
     curation: curation_mod.CurationConfig = field(default_factory=curation_mod.CurationConfig)
     num_envs: int = 180  # parallel envs (18 objects x 10)
     # first env seed, in spec.SEED_RANGES["demos"] (a resumed run continues after the last)
@@ -60,6 +63,10 @@ class CollectConfig:
             raise ValueError("--repo_id is required (USER/NAME, the dataset's Hub id)")
         self.output_dir = Path(self.output_dir)
         check_backend(self.backend)  # a clear error before the teacher is loaded
+        from lerobot_blindgrasp.sim.randomization import COLLECTION_DR
+
+        if self.randomization not in COLLECTION_DR:
+            raise ValueError(f"--randomization must be one of {sorted(COLLECTION_DR)}, got {self.randomization!r}")
         if self.checkpoint_s < 0:
             raise ValueError("--checkpoint_s must be >= 0 (0: finalize only at the end)")
         if not self.curation.enabled and self.curation.trim_to_success:

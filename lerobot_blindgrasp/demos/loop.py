@@ -105,7 +105,7 @@ def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: st
         reward_cfg = rewards.RewardConfig.from_record(teacher.config["reward"])
     except (KeyError, TypeError) as e:
         raise CollectError(f"teacher config has no usable reward settings: {e}") from None
-    dr = randomization.EVAL_DR
+    dr = randomization.COLLECTION_DR[cfg.randomization]
     ds, prov, tally = records.open_dataset(cfg, records.new_provenance(cfg, teacher, object_names, dr))
 
     target, budget = cfg.episodes_per_object, cfg.rollout_budget
