@@ -1,11 +1,17 @@
 """Fingertip heights before first contact: teacher vs student, per object (evaluation start states, seed 1000)."""
-import json, sys, numpy as np, torch
+import json
+import sys
+
+import numpy as np
+import torch
+
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.analysis.student_diagnosis import load_student, student_actor, Outcomes
+from lerobot_blindgrasp.analysis.student_diagnosis import Outcomes, load_student, student_actor
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.gym_env import start_seed
 from lerobot_blindgrasp.sim.randomization import EVAL_DR
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
+
 torch.set_num_threads(1)
 if len(sys.argv) == 3 and sys.argv[1] == "--plot":  # redraw the figure from a saved JSON
     objs = None

@@ -1,6 +1,10 @@
 """How often do scripted grasps lift each object when they know / do not know where it lies?"""
-import sys, time, numpy as np
-from lerobot_blindgrasp.sim import objects, randomization, scripted, gripper
+import sys
+import time
+
+import numpy as np
+
+from lerobot_blindgrasp.sim import gripper, objects, randomization, scripted
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.teacher.scripted_demos import SCRIPT_SEED
 
@@ -12,6 +16,7 @@ class BlindSweep(scripted.SideGraspScript):
     descent never lands on the object; the squeeze then sweeps it to the centre."""
     def __init__(self, q0, object_pos, specs, wide=0.035):
         import math
+
         from lerobot_blindgrasp import spec
         n = len(specs)
         dirs = np.array([[math.cos(p), math.sin(p)] for p in spec.FINGER_BASE_ANGLES_RAD])
