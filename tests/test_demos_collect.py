@@ -180,15 +180,15 @@ def test_bad_inputs_are_refused_and_touch_nothing(teacher, tiny, tmp_path, capsy
 
 
 def test_hardened_randomization_is_recorded_drawn_and_held_on_resume(teacher, tmp_path, capsys):
-    """--randomization=hardened (beyond the paper) rolls out under sim.randomization.HARDENED_DR: the provenance and
+    """--randomization=hardened (beyond the paper) rolls out under demos.config.HARDENED_DR: the provenance and
     the card say so, the stored draws lie in its ranges, and a resume under the paper's randomization is refused."""
     import dataclasses
 
-    from lerobot_blindgrasp.sim import randomization
+    from lerobot_blindgrasp.demos.config import HARDENED_DR
 
     out = tmp_path / "hardened"
     loop.collect(config(teacher, out, randomization="hardened"))
-    dr = randomization.HARDENED_DR
+    dr = HARDENED_DR
     assert provenance.load(out)["randomization"] == json.loads(json.dumps(dataclasses.asdict(dr)))
     card = (out / cards.CARD_NAME).read_text()
     assert "[0.5, 1.3]" in card and "[0.3, 6]" in card

@@ -92,19 +92,6 @@ PAPER_DR = DomainRandomization()
 # The paper's randomization and sensor noise without the pushes: the pushes are a training-time robustness aid, and
 # evaluation (lerobot-eval, the teacher eval) and demo collection run undisturbed trials.
 EVAL_DR = replace(PAPER_DR, external_force=False)
-# Beyond the paper: demo collection widened over the three factors the robustness sweep found the student to break
-# on first (tip-object friction 0.5, servo gain x6, start spread x1.5), so that a student sees them in its demos.
-# The teacher is not retrained: it acts as it was trained, and curation keeps only the episodes it still lifts.
-HARDENED_DR = replace(
-    EVAL_DR,
-    object_friction=(0.5, 1.3),
-    robot_friction=(0.5, 1.3),
-    kp_scale=(0.3, 6.0),
-    joint_offset_rad=1.5 * PAPER_DR.joint_offset_rad,
-    object_xy_m=1.5 * PAPER_DR.object_xy_m,
-)
-# The randomizations a demo collection may run under, by the name `blindgrasp-collect-demos --randomization` takes.
-COLLECTION_DR: dict[str, DomainRandomization] = {"paper": EVAL_DR, "hardened": HARDENED_DR}
 # No randomization at all: for physics tests and scripted checks.
 NO_DR = DomainRandomization(
     joint_offset_rad=0.0,
