@@ -179,36 +179,6 @@ def test_bad_inputs_are_refused_and_touch_nothing(teacher, tiny, tmp_path, capsy
     assert snapshot(out) == before
 
 
-def test_hardened_randomization_is_recorded_drawn_and_held_on_resume(teacher, tmp_path, capsys):
-    """--randomization=hardened (beyond the paper) rolls out under demos.config.HARDENED_DR: the provenance and
-    the card say so, the stored draws lie in its ranges, and a resume under the paper's randomization is refused."""
-    import dataclasses
-
-    from lerobot_blindgrasp.demos.config import HARDENED_DR
-
-    out = tmp_path / "hardened"
-    loop.collect(config(teacher, out, randomization="hardened"))
-    dr = HARDENED_DR
-    assert provenance.load(out)["randomization"] == json.loads(json.dumps(dataclasses.asdict(dr)))
-    card = (out / cards.CARD_NAME).read_text()
-    assert "[0.5, 1.3]" in card and "[0.3, 6]" in card
-    table = demo_dataset.episode_table(out)
-    assert len(table) == len(objects.PAPER_OBJECTS)
-    assert table["object_friction"].between(*dr.object_friction).all()
-    assert table["kp_scale"].between(*dr.kp_scale).all()
-    xy = table[["object_x", "object_y"]].abs().to_numpy()
-    assert (xy <= dr.object_xy_m + 1e-9).all() and dr.object_xy_m == pytest.approx(1.5 * spec.OBJECT_XY_RANGE_M)
-    with pytest.raises(SystemExit) as exc:
-        collect.main([f"--teacher={teacher}", f"--output_dir={out}", "--repo_id=test/demos", "--resume=true",
-                      "--curation.enabled=false", "--stochastic=true", "--progress=false"])
-    assert exc.value.code == 2 and "different randomization" in capsys.readouterr().err
-    with pytest.raises(SystemExit) as exc:
-        collect.main([f"--teacher={teacher}", f"--output_dir={tmp_path / 'x'}", "--repo_id=test/demos",
-                      "--randomization=wide"])
-    assert "--randomization must be one of ['hardened', 'paper']" in str(exc.value.code)
-    assert not (tmp_path / "x").exists()
-
-
 def test_exception_mid_collection_leaves_finished_episodes_readable(teacher, tmp_path):
     """An error raised from inside the collection loop (here the per-episode callback) still finalizes."""
     out = tmp_path / "crash"

@@ -10,25 +10,8 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.demos import curation as curation_mod
 from lerobot_blindgrasp.sim import objects as objects_mod
 from lerobot_blindgrasp.sim.backends import check_backend
-from lerobot_blindgrasp.sim.randomization import EVAL_DR, PAPER_DR, DomainRandomization
 
 DEFAULT_ROLLOUT_BUDGET_FACTOR = 20
-
-# Beyond the paper: demo collection widened over the three factors the robustness sweep found the student to break
-# on first (tip-object friction 0.5, servo gain x6, start spread x1.5), so that a student sees them in its demos.
-# The teacher is not retrained: it acts as it was trained, and curation keeps only the episodes it still lifts.
-HARDENED_DR = dataclasses.replace(
-    EVAL_DR,
-    object_friction=(0.5, 1.3),
-    robot_friction=(0.5, 1.3),
-    kp_scale=(0.3, 6.0),
-    joint_offset_rad=1.5 * PAPER_DR.joint_offset_rad,
-    object_xy_m=1.5 * PAPER_DR.object_xy_m,
-)
-# The randomizations a demo collection may run under, by the name `blindgrasp-collect-demos --randomization` takes.
-COLLECTION_DR: dict[str, DomainRandomization] = {"paper": EVAL_DR, "hardened": HARDENED_DR}
-# (These live here, not in sim/randomization.py, because they choose what a collection runs, not how the sim works:
-# sim/'s sources are the evaluation records' fingerprint.)
 
 
 class CollectError(Exception):
@@ -55,9 +38,6 @@ class CollectConfig:
     max_rollouts_per_object: int | None = None  # rollout budget per object (default 20 x episodes_per_object)
     objects: str = "all"  # 'all', 'medium' or a comma list of catalogue names
     stochastic: bool = True  # sample the teacher's Gaussian; false: its mean ('w/o stochastic teacher' ablation)
-    # the start-state and physics randomization of the rollouts: 'paper' (Table II without pushes) or 'hardened'
-    # (beyond the paper: lower friction, stiffer servos and a wider start spread, HARDENED_DR below)
-    randomization: str = "paper"
     curation: curation_mod.CurationConfig = field(default_factory=curation_mod.CurationConfig)
     num_envs: int = 180  # parallel envs (18 objects x 10)
     # first env seed, in spec.SEED_RANGES["demos"] (a resumed run continues after the last)
@@ -80,8 +60,6 @@ class CollectConfig:
             raise ValueError("--repo_id is required (USER/NAME, the dataset's Hub id)")
         self.output_dir = Path(self.output_dir)
         check_backend(self.backend)  # a clear error before the teacher is loaded
-        if self.randomization not in COLLECTION_DR:
-            raise ValueError(f"--randomization must be one of {sorted(COLLECTION_DR)}, got {self.randomization!r}")
         if self.checkpoint_s < 0:
             raise ValueError("--checkpoint_s must be >= 0 (0: finalize only at the end)")
         if not self.curation.enabled and self.curation.trim_to_success:

@@ -57,9 +57,6 @@ class DaggerConfig:
     episodes_per_object: int = 10
     objects: str = "all"  # "all", "medium", or a comma-separated list of catalogue names
     num_envs: int = 360  # envs stepped together (episodes of all objects at once)
-    # length of each relabelled episode: the evaluation's 10 s by default; the demos' 5 s keeps the aggregate's mix
-    # of approach, lift and hold what the demos have, instead of adding 5 s more hold per episode
-    episode_s: float = spec.EPISODE_S
     seed: int = DAGGER_SEED  # first env seed, in the demo seed range
     device: str = "cpu"
     progress: bool = True
@@ -69,8 +66,6 @@ class DaggerConfig:
             if getattr(self, name) is None:
                 raise ValueError(f"--{name} is required")
         self.student, self.demos, self.output_dir = Path(self.student), Path(self.demos), Path(self.output_dir)
-        if not 0 < self.episode_s <= spec.EPISODE_S:
-            raise ValueError(f"--episode_s must be in (0, {spec.EPISODE_S}] s, got {self.episode_s}")
         n = len(objects.resolve_objects(self.objects)) * self.episodes_per_object
         spec.check_seeds("demos", self.seed, n)
 
@@ -81,16 +76,15 @@ def label_targets(q: np.ndarray, teacher_action: np.ndarray) -> np.ndarray:
     return np.clip(q + step, spec.JOINT_LOWER, spec.JOINT_UPPER)
 
 
-def relabelled_episodes(act_student, reset_student, teacher, names: list[str], seed: int,
-                        episode_s: float = spec.EPISODE_S):
-    """Run one batch (env i: object names[i], seed + i) for `episode_s` under the student; yield one Episode per env
-    with the teacher's labels."""
+def relabelled_episodes(act_student, reset_student, teacher, names: list[str], seed: int):
+    """Run one batch (env i: object names[i], seed + i) for 10 s under the student; yield one Episode per env with
+    the teacher's labels."""
     from lerobot_blindgrasp.analysis.student_diagnosis import Outcomes
     from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
     from lerobot_blindgrasp.sim.randomization import EVAL_DR
 
     env = BatchedGraspEnv(GraspEnvConfig(num_envs=len(names), objects=tuple(dict.fromkeys(names)), seed=seed,
-                                         dr=EVAL_DR, episode_s=episode_s, autoreset=False))
+                                         dr=EVAL_DR, autoreset=False))
     if list(env.object_names) != list(names):
         raise RuntimeError("object allocation differs from the requested batch")
     n, horizon = env.num_envs, env.max_episode_steps
@@ -151,7 +145,7 @@ def run(cfg: DaggerConfig) -> dict:
     try:
         for start in range(0, len(todo), cfg.num_envs):
             batch = todo[start:start + cfg.num_envs]
-            for ep in relabelled_episodes(act, policy.reset, teacher, batch, cfg.seed + start, cfg.episode_s):
+            for ep in relabelled_episodes(act, policy.reset, teacher, batch, cfg.seed + start):
                 cut = curation.CurationResult(passed=False, keep=True, keep_steps=ep.length, longest_hold_steps=0,
                                               force_sum_n=float(ep.uniaxial_force.sum()), criteria_step=-1)
                 stats["frames"] += demo_dataset.write_episode(ds, ep, cut)
@@ -166,8 +160,7 @@ def run(cfg: DaggerConfig) -> dict:
                        roots=[cfg.demos, out / "relabelled"], aggr_root=out / "aggregate")
     record = {
         "student": str(cfg.student), "teacher": str(teacher.checkpoint), "teacher_sha256": teacher.sha256,
-        "demos": str(cfg.demos), "episodes_per_object": cfg.episodes_per_object, "episode_s": cfg.episode_s,
-        "first_env_seed": cfg.seed,
+        "demos": str(cfg.demos), "episodes_per_object": cfg.episodes_per_object, "first_env_seed": cfg.seed,
         "wall_s": time.perf_counter() - t0, **stats,
         "student_success_per_object": {k: float(np.mean(v)) for k, v in per_object.items() if v},
         "aggregate": str(out / "aggregate"),

@@ -27,10 +27,11 @@ from lerobot_blindgrasp.demos import checkpoint as checkpoint_mod
 from lerobot_blindgrasp.demos import curation as curation_mod
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, records
-from lerobot_blindgrasp.demos.config import COLLECTION_DR, CollectConfig, CollectError
+from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
 from lerobot_blindgrasp.demos.records import CollectStats
 from lerobot_blindgrasp.demos.rollout import Episode, run_episodes
 from lerobot_blindgrasp.hub import REPO_ID_PATTERN
+from lerobot_blindgrasp.sim import randomization
 
 # Rebuild the env for the remaining objects once this fraction of envs holds finished objects. A rebuild drops the
 # running episodes of the other envs (half an episode each on average) and costs ~1 s; waiting wastes this fraction
@@ -104,7 +105,7 @@ def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: st
         reward_cfg = rewards.RewardConfig.from_record(teacher.config["reward"])
     except (KeyError, TypeError) as e:
         raise CollectError(f"teacher config has no usable reward settings: {e}") from None
-    dr = COLLECTION_DR[cfg.randomization]
+    dr = randomization.EVAL_DR
     ds, prov, tally = records.open_dataset(cfg, records.new_provenance(cfg, teacher, object_names, dr))
 
     target, budget = cfg.episodes_per_object, cfg.rollout_budget
