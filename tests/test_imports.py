@@ -75,3 +75,20 @@ def test_called_from_python_the_setting_only_reaches_the_processes_it_starts():
             "child = \"import os; print('child', os.environ['OMP_WAIT_POLICY'])\"\n"
             "print(subprocess.run([sys.executable, '-c', child], capture_output=True, text=True).stdout.strip())\n")
     assert _fresh(code, env).stdout.split() == ["start", "child", "PASSIVE"]
+
+
+def test_the_sim_modules_left_out_of_the_fingerprint_are_not_run_by_any_episode():
+    """`teacher.evaluate.sim_fingerprint` leaves out sim modules that no policy episode runs, so that editing a
+    scripted grasp does not void the recorded evals. That holds only while the env, the lerobot-eval gym env and
+    the teacher eval never import them."""
+    from lerobot_blindgrasp.teacher.evaluate import NOT_IN_EPISODES
+
+    code = (
+        "import json, sys\n"
+        "import lerobot_blindgrasp.sim.env, lerobot_blindgrasp.sim.gym_env, lerobot_blindgrasp.teacher.evaluate\n"
+        "print(json.dumps(sorted(m for m in sys.modules if m.startswith('lerobot_blindgrasp.sim.'))))"
+    )
+    loaded = json.loads(_fresh(code).stdout.strip().splitlines()[-1])
+    assert "lerobot_blindgrasp.sim.env" in loaded  # the check sees sim modules at all
+    left_out = {f"lerobot_blindgrasp.sim.{name.removesuffix('.py')}" for name in NOT_IN_EPISODES}
+    assert not left_out & set(loaded), left_out & set(loaded)

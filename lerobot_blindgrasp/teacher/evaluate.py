@@ -60,14 +60,21 @@ class EvalTeacherConfig:
         return tuple(m.strip() for m in self.modes.split(",") if m.strip())
 
 
+# sim/ modules that no policy episode runs: the scripted grasps (physics checks, cloning targets) and the sim demo
+# CLI. Editing them must not invalidate the recorded evals (a new script once forced the main job to re-evaluate
+# the shipped teacher).
+NOT_IN_EPISODES = ("scripted.py", "demo.py")
+
+
 def sim_fingerprint() -> str:
-    """sha256 of the sources that decide an episode's outcome (sim/ and spec.py): an eval recorded under another
-    fingerprint ran other physics, so it is not reused as the paired eval of a new run."""
+    """sha256 of the sources that decide an episode's outcome (sim/ but NOT_IN_EPISODES, and spec.py): an eval
+    recorded under another fingerprint ran other physics, so it is not reused as the paired eval of a new run."""
     import hashlib
 
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
-    for path in sorted([*(root / "sim").rglob("*.py"), root / "spec.py"]):
+    sources = [p for p in (root / "sim").rglob("*.py") if p.relative_to(root / "sim").as_posix() not in NOT_IN_EPISODES]
+    for path in sorted([*sources, root / "spec.py"]):
         h.update(path.relative_to(root).as_posix().encode())
         h.update(path.read_bytes())
     return h.hexdigest()
