@@ -1,4 +1,4 @@
-"""The scripted grasps (side grasp, blind sweep) and their cloning into the PPO actor (`cpu_bc*`: the small capsule)."""
+"""The scripted side grasp and its cloning into the PPO actor (`cpu_bc`, issue #9: the small capsule)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from rsl_rl.utils import resolve_callable
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.presets import teacher as teacher_presets
-from lerobot_blindgrasp.sim import objects, randomization, scripted
+from lerobot_blindgrasp.sim import objects, scripted
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.teacher import aux_bc, scripted_demos
 
@@ -47,63 +47,6 @@ def test_side_grasp_script_lifts_the_small_capsule_from_the_paper_start_pose_und
         *_, info = env.step(script(q))
         success |= info["success"]
     assert success.sum() >= 6, success  # measured: 87 % (capsule) and 93 % (sphere) over 30 draws each
-
-
-def test_blind_sweep_ignores_where_the_object_lies_and_lifts_the_small_capsule():
-    """`cpu_bc_sweep`'s premise: the sweep's targets do not depend on the object's xy (a blind student can copy
-    them), only on its size and rest height, and from the same randomized start states it still lifts the small
-    capsule that the side grasp needs the pose for."""
-    # EVAL_DR: the training randomization without pushes, as cpu_bc_sweep (external_force=False) collects its demos
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=8, objects=("capsule_small",), seed=1 << 32, nthread=1,
-                                         autoreset=False, dr=randomization.EVAL_DR))
-    env.reset()
-    pos, specs = env.object_position(), [objects.get_object(n) for n in env.object_names]
-    assert np.abs(pos[:, :2]).max() > 0.005
-    moved = pos.copy()
-    moved[:, :2] += 0.02
-    sweep = scripted.BlindSweepScript(env.joint_positions(), pos, specs)
-    np.testing.assert_array_equal(sweep.waypoints, scripted.BlindSweepScript(env.joint_positions(), moved,
-                                                                             specs).waypoints)
-    side = scripted.SideGraspScript(env.joint_positions(), pos, specs)
-    assert not np.allclose(side.waypoints, scripted.SideGraspScript(env.joint_positions(), moved, specs).waypoints)
-    # Opened wider than the side grasp of a centred object at the hover and the descent: J11 (the finger's swing
-    # away from the axis, finger_ik) is larger on every finger, and nothing else differs there.
-    centred = pos.copy()
-    centred[:, :2] = 0.0
-    side0 = scripted.SideGraspScript(env.joint_positions(), centred, specs)
-    for k in (1, 2):
-        assert (sweep.waypoints[k][:, 1::3] > side0.waypoints[k][:, 1::3] + 0.05).all()
-        np.testing.assert_array_equal(sweep.waypoints[k][:, 0::3], side0.waypoints[k][:, 0::3])
-    success = np.zeros(env.num_envs, dtype=bool)
-    for _ in range(120):
-        q = env.joint_positions()
-        assert (q >= spec.JOINT_LOWER - 0.05).all() and (q <= spec.JOINT_UPPER + 0.05).all()
-        *_, info = env.step(sweep(q))
-        success |= info["success"]
-    assert success.sum() >= 6, success  # measured: 8/8 here, 29/30 over 30 draws (under pushes: 5/8)
-
-
-def test_scripted_demos_name_their_script_and_old_records_still_match():
-    sweep = scripted_demos.ScriptedDemos(script="sweep")
-    assert sweep.as_record()["script"] == "sweep"
-    # A side-grasp record has no `script` key, as every run recorded before the sweep existed: they still resume.
-    assert "script" not in scripted_demos.ScriptedDemos().as_record()
-    assert scripted_demos.ScriptedDemos(**{**sweep.as_record(), "objects": tuple(sweep.objects)}) == sweep
-    with pytest.raises(ValueError, match="unknown scripted grasp"):
-        scripted_demos.ScriptedDemos(script="pinch")
-
-
-def test_cpu_bc_sweep_differs_from_the_shipped_stage_only_in_what_it_clones():
-    """Side by side with `cpu_bc_capsule`: the same start checkpoint, iterations, env weights, PPO and reward."""
-    sweep, capsule = teacher_presets.get_preset("cpu_bc_sweep"), teacher_presets.get_preset("cpu_bc_capsule")
-    assert (sweep.continues, sweep.max_iterations, sweep.object_weights, sweep.reward) == (
-        capsule.continues, capsule.max_iterations, capsule.object_weights, capsule.reward)
-    a, b = sweep.runner_cfg()["algorithm"], capsule.runner_cfg()["algorithm"]
-    assert {k: v for k, v in a.items() if k != "scripted_demos"} == {k: v for k, v in b.items() if k != "scripted_demos"}
-    demos = a["scripted_demos"]
-    assert demos["script"] == "sweep" and tuple(demos["objects"]) == scripted_demos.HARD_OBJECTS
-    assert (demos["coef"], demos["start_iteration"], demos["decay_iterations"]) == (0.5, 1746, 300)
-    assert "blind" in sweep.deviations[-1]
 
 
 def test_scripted_demos_keep_only_successful_episodes_and_refuse_bad_settings():

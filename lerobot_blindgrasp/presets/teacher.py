@@ -12,7 +12,7 @@ import copy
 from dataclasses import dataclass, replace
 
 from lerobot_blindgrasp.sim import objects, rewards
-from lerobot_blindgrasp.teacher.scripted_demos import HARD_OBJECTS, ScriptedDemos
+from lerobot_blindgrasp.teacher.scripted_demos import ScriptedDemos
 
 
 def _ppo_cfg(
@@ -173,28 +173,6 @@ CPU_BC_CAPSULE = replace(
     ),
 )
 
-# Beyond the shipped recipe, for the blind student (#24): `cpu_bc_capsule`'s second stage, from the same
-# `cpu_bc_joint` iteration 1745, with the same weight, decay, iterations and 4x small-capsule share, but cloning the
-# pose-free blind sweep (sim/scripted.py, `BlindSweepScript`) on every object the first stage cloned, instead of the
-# side grasp on the small capsule alone. The side-grasp teacher reads the small capsule's pose after first touch to
-# stay low; its student cannot and lifts too early (docs/results/student_gap.md, part 1). A teacher whose small
-# objects all get the same centred, wide, low descent gives demos in which the approach does not depend on what the
-# student cannot see.
-_SWEEP_DEMOS = ScriptedDemos(objects=HARD_OBJECTS, episodes_per_object=96, pushes=CPU.external_force,
-                             start_iteration=1746, decay_iterations=300, coef=0.5, script="sweep")
-CPU_BC_SWEEP = replace(
-    CPU_BC_CAPSULE,
-    name="cpu_bc_sweep",
-    runner=_SWEEP_DEMOS.runner_cfg(CPU.runner),
-    deviations=CPU_BC_JOINT.deviations
-    + (
-        "from iteration 1746 (resumed from cpu_bc_joint), a second cloning stage on a centred wide sweep that does "
-        "not read the object's pose (sim/scripted.py BlindSweepScript), on the small objects and the medium capsule, "
-        "weight 0.5 decayed to 0 by 2046, and 4x the small capsule's share of training envs: a grasp whose approach "
-        "a blind student can copy",
-    ),
-)
-
 QUICK = TeacherPreset(
     name="quick",
     num_envs=144,  # 18 objects x 8
@@ -209,7 +187,7 @@ QUICK = TeacherPreset(
 
 PRESETS: dict[str, TeacherPreset] = {
     p.name: p
-    for p in (PAPER, CPU, CPU_BC_JOINT, CPU_BC_CAPSULE, CPU_BC_SWEEP, QUICK)
+    for p in (PAPER, CPU, CPU_BC_JOINT, CPU_BC_CAPSULE, QUICK)
 }
 
 

@@ -1,6 +1,5 @@
-"""Scripted grasps: a pinch-and-lift for physics tests and the sim demo, and two grasps whose successful rollouts
-the `cpu_bc*` teachers clone (teacher/aux_bc.py): a side grasp placed from the object's pose (`SideGraspScript`)
-and a centred wide sweep that does not need it (`BlindSweepScript`). None is a baseline policy.
+"""Scripted grasps: a pinch-and-lift for physics tests and the sim demo, and a side grasp (`SideGraspScript`) whose
+successful rollouts the `cpu_bc*` teachers clone (teacher/aux_bc.py). Neither is a baseline policy.
 
 The pinch:
 Each finger moves in its radial-vertical plane. Two-link inverse kinematics (proximal 0.068 m, distal to the tip
@@ -138,8 +137,7 @@ class SideGraspScript(WaypointScript):
     # (steps, from, to): start -> hover, hover -> beside, beside -> squeeze, squeeze -> lift, then hold
     segments = ((15, 0, 1), (15, 1, 2), (15, 2, 3), (30, 3, 4))
 
-    def __init__(self, q0: np.ndarray, object_pos: np.ndarray, specs: list[objects.ObjectSpec],
-                 open_extra_m: float = 0.0):
+    def __init__(self, q0: np.ndarray, object_pos: np.ndarray, specs: list[objects.ObjectSpec]):
         n = len(specs)
         dirs = np.array([[math.cos(p), math.sin(p)] for p in spec.FINGER_BASE_ANGLES_RAD])
         surface = np.stack([support_distance(o, dirs) for o in specs]) + gripper.TIP_CAPSULE_RADIUS  # (n, 3)
@@ -149,30 +147,10 @@ class SideGraspScript(WaypointScript):
         xy = object_pos[:, :2]
         self.waypoints = np.stack([
             np.asarray(q0, dtype=np.float64),
-            side_pose(xy, surface + self.GAP_M + open_extra_m, top + 0.015),
-            side_pose(xy, surface + self.GAP_M + open_extra_m, grasp_z),
+            side_pose(xy, surface + self.GAP_M, top + 0.015),
+            side_pose(xy, surface + self.GAP_M, grasp_z),
             side_pose(xy, surface - self.SQUEEZE_M, grasp_z),
             side_pose(xy, surface - self.SQUEEZE_M, grasp_z + self.LIFT_M),
         ])  # (5, n, 9)
         assert self.waypoints.shape[1] == n
         self.t = 0
-
-
-class BlindSweepScript(SideGraspScript):
-    """The side grasp's hover, descent, squeeze and lift, centred on the claw's axis instead of the object, and
-    opened `WIDE_M` wider so that the descent passes beside an object anywhere in the start spread: the closing
-    fingers push it to the centre. It uses the object's size and rest height but not where it lies, so a blind
-    student can copy it: every small object gets the same descent, and the lift follows contact.
-
-    Why: the student loses the small capsule after first touch, where the side-grasp teacher reads the capsule's
-    pose to stay low (docs/results/student_gap.md, part 1). Scripted, this sweep lifts the small capsule 93 % against
-    the side grasp's 90 % (30 start states each). The squeeze gets more steps than the side grasp's: it closes
-    from farther out."""
-
-    WIDE_M = 0.035  # the start spread's half-width (spec.OBJECT_XY_RANGE_M, 3 cm) plus a margin
-    segments = ((15, 0, 1), (15, 1, 2), (25, 2, 3), (30, 3, 4))
-
-    def __init__(self, q0: np.ndarray, object_pos: np.ndarray, specs: list[objects.ObjectSpec]):
-        centred = np.array(object_pos, dtype=np.float64, copy=True)
-        centred[:, :2] = 0.0  # the object's height stays: it is its rest height (size), not where it lies
-        super().__init__(q0, centred, specs, open_extra_m=self.WIDE_M)

@@ -1,4 +1,4 @@
-"""The scripted grasp demonstrations (a side grasp or a blind sweep, sim/scripted.py) that `teacher.aux_bc.PPOWithScriptedDemos` clones: their settings and
+"""The scripted side-grasp demonstrations that `teacher.aux_bc.PPOWithScriptedDemos` clones: their settings and
 their collection. Kept apart from the PPO subclass so that the preset registry can name them without importing torch.
 """
 
@@ -26,13 +26,6 @@ HARD_OBJECTS: tuple[str, ...] = (
 )
 
 
-# The scripts a stage can clone, by the name its record gives (classes in sim/scripted.py, imported with MuJoCo).
-SCRIPTS: dict[str, str] = {
-    "side": "SideGraspScript",  # placed from the object's pose: the shipped teacher's (cpu_bc_capsule)
-    "sweep": "BlindSweepScript",  # centred and opened wide, pose-free: cpu_bc_sweep's, for a blind student
-}
-
-
 @dataclass(frozen=True)
 class ScriptedDemos:
     """Which script grasps are cloned, and how strongly: the cloning loss, weighted by `coef`, joins PPO's loss in
@@ -48,11 +41,8 @@ class ScriptedDemos:
     batch_size: int = 2048
     seed: int = SCRIPT_SEED
     pushes: bool = False  # Table II's random pushes, as the training preset has them (`external_force`)
-    script: str = "side"  # which grasp: a key of SCRIPTS
 
     def __post_init__(self):
-        if self.script not in SCRIPTS:
-            raise ValueError(f"unknown scripted grasp {self.script!r}; choose from {', '.join(SCRIPTS)}")
         unknown = sorted(set(self.objects) - set(objects.CATALOGUE))
         if unknown:
             raise ValueError(f"scripted-demo objects not in the catalogue: {unknown}")
@@ -66,8 +56,6 @@ class ScriptedDemos:
         """The JSON form that goes into the runner config (lists, not tuples: it must survive a JSON round trip)."""
         d = asdict(self)
         d["objects"] = list(self.objects)
-        if self.script == "side":  # the default is left out so that runs recorded before `script` existed still resume
-            del d["script"]
         return d
 
     def runner_cfg(self, runner: dict) -> dict:
@@ -86,7 +74,7 @@ class ScriptedDemos:
 
 
 def collect(cfg: ScriptedDemos) -> dict:
-    """Roll the script out once per env from training start states; keep the successful episodes.
+    """Roll the side-grasp script out once per env from training start states; keep the successful episodes.
 
     Returns {"obs": {"privileged": (M, 92), "policy": (M, 12)}, "actions": (M, 9), "success": {object: rate}},
     float32. Both observation groups are kept so that an actor reading either (the teacher's privileged one, or the
@@ -100,8 +88,8 @@ def collect(cfg: ScriptedDemos) -> dict:
     env = BatchedGraspEnv(GraspEnvConfig(num_envs=n, objects=cfg.objects, seed=cfg.seed, dr=dr, autoreset=False,
                                          nthread=1))
     obs = env.reset()
-    script = getattr(scripted, SCRIPTS[cfg.script])(env.joint_positions(), env.object_position(),
-                                                    [objects.get_object(name) for name in env.object_names])
+    script = scripted.SideGraspScript(env.joint_positions(), env.object_position(),
+                                      [objects.get_object(name) for name in env.object_names])
     seen_obs, seen_policy, seen_act = [], [], []
     success = np.zeros(n, dtype=bool)
     for t in range(env.max_episode_steps):
@@ -126,23 +114,22 @@ def collect(cfg: ScriptedDemos) -> dict:
 
 @dataclass
 class ScriptSuccessConfig:
-    """How often a scripted grasp lifts each object from training start states (what cloning can use)."""
+    """How often the side-grasp script lifts each object from training start states (what cloning can use)."""
 
     objects: str = "all"  # "all", "medium", or a comma-separated list of catalogue names
     episodes_per_object: int = 30
-    script: str = "side"  # side (placed from the object's pose) or sweep (centred, opened wide)
     pushes: bool = True  # Table II's random pushes (the paper's training randomization)
 
 
 def main(argv=None) -> None:
-    """python -m lerobot_blindgrasp.teacher.scripted_demos [--objects=all] [--episodes_per_object=30] [--script=side]"""
+    """python -m lerobot_blindgrasp.teacher.scripted_demos [--objects=all] [--episodes_per_object=30]"""
     from lerobot_blindgrasp.cli import parse_config
 
     cfg = parse_config(ScriptSuccessConfig, argv)
     demos = ScriptedDemos(objects=objects.resolve_objects(cfg.objects), episodes_per_object=cfg.episodes_per_object,
-                          steps_per_episode=1, pushes=cfg.pushes, script=cfg.script)
+                          steps_per_episode=1, pushes=cfg.pushes)
     rates = collect(demos)["success"]
-    print(f"{cfg.script} script, {cfg.episodes_per_object} episodes per object from seed {demos.seed}, "
+    print(f"side-grasp script, {cfg.episodes_per_object} episodes per object from seed {demos.seed}, "
           f"pushes={cfg.pushes}\n\n| object | success |\n|---|---:|")
     for name, rate in rates.items():
         print(f"| {name} | {rate:.0%} ({round(rate * cfg.episodes_per_object)}/{cfg.episodes_per_object}) |")
