@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.durable import atomic_write_text
 from lerobot_blindgrasp.sim import objects, randomization, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.gym_env import start_seed
@@ -129,12 +130,12 @@ def test_the_golden_successes_are_the_shipped_teachers_recorded_evaluation():
 
 
 if __name__ == "__main__" and "--record" in sys.argv:
-    GOLDEN.write_text(json.dumps(compute(), indent=1) + "\n")
+    atomic_write_text(GOLDEN, json.dumps(compute(), indent=1) + "\n")
     print("wrote", GOLDEN)
 elif __name__ == "__main__" and "--record-platform" in sys.argv:
     golden, got = json.loads(GOLDEN.read_text()), compute()
     assert got["evaluation_success"] == golden["evaluation_success"], "the successes differ: not a float-only change"
     golden.setdefault("other_platforms", []).append(
         {"cpu": _cpu(), "evaluation": got["evaluation"], "training": got["training"]})
-    GOLDEN.write_text(json.dumps(golden, indent=1) + "\n")
+    atomic_write_text(GOLDEN, json.dumps(golden, indent=1) + "\n")
     print("added", _cpu(), "to", GOLDEN)
