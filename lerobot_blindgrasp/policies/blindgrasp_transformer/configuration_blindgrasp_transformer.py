@@ -15,8 +15,7 @@ Table IV -> field:
     lr schedule: linear decay after
       100 epochs                        -> `scheduler_constant_steps` (= 100 epochs' worth of steps),
                                            `scheduler_end_factor`
-    loss: MSE                           -> `BlindgraspTransformerPolicy.forward` (`action_head="mse"`; "gmm" is
-                                           robomimic's GMM variant, beyond the paper)
+    loss: MSE                           -> `BlindgraspTransformerPolicy.forward`
     Transformer layers 6                -> `n_layers`   (via `size="paper"`)
     embedding dimension 512             -> `embed_dim`  (via `size="paper"`)
     attention heads 8                   -> `n_heads`    (via `size="paper"`)
@@ -99,14 +98,6 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     dropout: float = 0.1
     # robomimic's deterministic BC-Transformer squashes the action output with tanh (targets lie in [-1, 1]).
     tanh_output: bool = True
-    # The action head. "mse": the paper's Eq. 8, one action regressed with MSE. "gmm": beyond the paper, robomimic's
-    # BC_Transformer_GMM head (`gmm_head.py`): a mixture of `gmm_modes` Gaussians trained by -log-likelihood, acting
-    # with one mode's mean (`gmm_eval`: "sample" draws the mode by its weight, robomimic's low-noise eval; "mode"
-    # takes the heaviest). robomimic's defaults: 5 modes, min std 1e-4.
-    action_head: str = "mse"
-    gmm_modes: int = 5
-    gmm_min_std: float = 1e-4
-    gmm_eval: str = "sample"
 
     # State: z-scored with dataset stats. Action: IDENTITY here because the action is scaled by the 0.3 rad bound
     # in the blindgrasp target->delta processor step, not by dataset stats (must stay IDENTITY, see validation).
@@ -152,12 +143,6 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
         for name, value in SIZES[self.size].items():
             if getattr(self, name) is None:
                 setattr(self, name, list(value) if isinstance(value, list) else value)
-        if self.action_head not in ("mse", "gmm"):
-            raise ValueError(f"action_head must be 'mse' (the paper) or 'gmm', got {self.action_head!r}")
-        if self.gmm_modes < 1 or self.gmm_min_std <= 0:
-            raise ValueError(f"gmm_modes must be >= 1 and gmm_min_std > 0, got {self.gmm_modes}, {self.gmm_min_std}")
-        if self.gmm_eval not in ("sample", "mode"):
-            raise ValueError(f"gmm_eval must be 'sample' or 'mode', got {self.gmm_eval!r}")
         if self.embed_dim % self.n_heads != 0:
             raise ValueError(f"embed_dim ({self.embed_dim}) must be divisible by n_heads ({self.n_heads})")
         if min(self.augment_force_gain, self.augment_force_bias_n, self.augment_joint_offset_rad) < 0:

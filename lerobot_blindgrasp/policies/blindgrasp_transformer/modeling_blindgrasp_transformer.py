@@ -6,7 +6,6 @@ Network (robomimic `TransformerActorNetwork` + `GPT_Backbone`, deterministic hea
     token_t = Dropout(LayerNorm(Linear(12 -> D)(o_t) + pos[t]))      learned pos = nn.Parameter(1, T, D), zeros
     n_layers x pre-LN block: x + Attn(LN(x)), x + MLP(LN(x))      fused qkv (no bias), GELU MLP 4x
     final LayerNorm -> MLP head [1024, 1024] on the LAST token -> A -> tanh
-    (`action_head="gmm"`, beyond the paper: the head's last layer outputs a K-mode mixture instead, `gmm_head.py`)
 
 The network's inputs and outputs are normalized: `observation.state` is z-scored and the prediction is delta-theta /
 0.3 in [-1, 1]; the preprocessor turns the dataset's absolute targets into that, and `select_action` returns the
@@ -38,7 +37,6 @@ from torch import Tensor, nn
 
 from lerobot_blindgrasp import spec
 
-from . import gmm_head
 from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
 from .processor_blindgrasp_transformer import Q_NOW, normalized_delta_to_target
 
@@ -155,8 +153,7 @@ class Block(nn.Module):
 
 
 class BlindgraspGPT(nn.Module):
-    """(B, T, 12) normalized observations + optional (B, T) padding flags -> (B, 9) normalized delta, or with a
-    GMM head the mixture's raw parameters (B, gmm_head.output_dim(K))."""
+    """(B, T, 12) normalized observations + optional (B, T) padding flags -> (B, 9) normalized delta."""
 
     def __init__(self, config: BlindgraspTransformerConfig):
         super().__init__()
@@ -173,11 +170,9 @@ class BlindgraspGPT(nn.Module):
             # ReLU: robomimic's MLP default; Table IV's GELU is the transformer's activation.
             layers += [nn.Linear(width, hidden), nn.ReLU()]
             width = hidden
-        gmm = config.action_head == "gmm"
-        layers.append(nn.Linear(width, gmm_head.output_dim(config.gmm_modes) if gmm else spec.ACTION_DIM))
+        layers.append(nn.Linear(width, spec.ACTION_DIM))
         self.head = nn.Sequential(*layers)
-        # The GMM head squashes its means itself (gmm_head.split); its scales and logits must stay raw.
-        self.tanh_output = config.tanh_output and not gmm
+        self.tanh_output = config.tanh_output
         self.apply(self._init_weights)
 
     @staticmethod
@@ -291,9 +286,9 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         """
         state = batch[OBS_STATE]
         if state.ndim == 3:
-            return self._act(self.model(state, batch.get(STATE_IS_PAD)))
+            return self._bounded(self.model(state, batch.get(STATE_IS_PAD)))
         states, is_pad = self._push_observation(state)
-        return self._act(self.model(states, is_pad))
+        return self._bounded(self.model(states, is_pad))
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
@@ -302,13 +297,6 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
             raise KeyError(f"blindgrasp_transformer acts on preprocessed observations: '{Q_NOW}' (the raw joint "
                            "positions the policy's preprocessor adds) is missing")
         return normalized_delta_to_target(self.predict_normalized_delta(batch), batch[Q_NOW])[:, None]
-
-    def _act(self, out: Tensor) -> Tensor:
-        """The network's output -> the (B, 9) bounded action: the regression, or one mode of the GMM."""
-        c = self.config
-        if c.action_head == "gmm":  # mode means are tanh-bounded already
-            return gmm_head.act(out, c.gmm_modes, c.gmm_min_std, c.gmm_eval)
-        return self._bounded(out)
 
     def _bounded(self, pred: Tensor) -> Tensor:
         """The action's one bound in the policy: tanh, or without it a clamp at inference (training regresses the
@@ -321,21 +309,13 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         return self.predict_action_chunk(batch)[:, 0]
 
     def forward(self, batch: dict[str, Tensor], reduction: str = "mean") -> tuple[Tensor, dict]:
-        """The paper's imitation loss (`imitation_loss`) of the last token's prediction, per sample or averaged.
-
-        With the GMM head the loss is the mixture's -log-likelihood; "mse" is then the mixture mean's error, logged
-        so that the two heads' fits read on one scale."""
-        out = self.model(batch[OBS_STATE], batch.get(STATE_IS_PAD))
-        c = self.config
-        if c.action_head == "gmm":
-            per_sample = gmm_head.negative_log_likelihood(out, batch[ACTION], c.gmm_modes, c.gmm_min_std)
-            with torch.no_grad():
-                mse = imitation_loss(gmm_head.mixture_mean(out, c.gmm_modes, c.gmm_min_std), batch[ACTION])
-            info = {"nll": per_sample.mean().item(), "mse": mse.mean().item()}
-        else:
-            per_sample = imitation_loss(out, batch[ACTION])
-            info = {"mse": per_sample.mean().item()}
-        return (per_sample if reduction == "none" else per_sample.mean()), info
+        """The paper's imitation loss (`imitation_loss`) of the last token's prediction, per sample or averaged."""
+        pred = self.model(batch[OBS_STATE], batch.get(STATE_IS_PAD))
+        per_sample = imitation_loss(pred, batch[ACTION])
+        if reduction == "none":
+            return per_sample, {"mse": per_sample.mean().item()}
+        loss = per_sample.mean()
+        return loss, {"mse": loss.item()}
 
 
 def imitation_loss(pred: Tensor, action: Tensor) -> Tensor:
