@@ -7,7 +7,6 @@ Usage: python handover_check.py OBJECTS(comma) STUDENT_DIR OUT.json [K,K,...]
 import json
 import sys
 
-import numpy as np
 import torch
 
 from lerobot_blindgrasp.analysis.student_diagnosis import Outcomes, load_student, student_actor
