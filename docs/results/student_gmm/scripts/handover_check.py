@@ -8,11 +8,9 @@ import json
 import sys
 
 import torch
+from episodes import successes
 
-from lerobot_blindgrasp.analysis.student_diagnosis import Outcomes, load_student, student_actor
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.sim.gym_env import start_seed
-from lerobot_blindgrasp.sim.randomization import EVAL_DR
+from lerobot_blindgrasp.analysis.student_diagnosis import load_student, student_actor
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
 torch.set_num_threads(1)
@@ -25,19 +23,13 @@ student = student_actor(policy, pre, post)
 
 
 def run(name: str, k: int) -> list[bool]:
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=EPS, objects=(name,), seed=start_seed(SEED, name), dr=EVAL_DR,
-                                         autoreset=False))
     policy.reset()
-    obs = env.reset()
-    ends = Outcomes(EPS, env.max_episode_steps)
-    for t in range(env.max_episode_steps):
+
+    def act(t, obs, env):
         s_delta = student(obs) - env.joint_positions()  # always: the student's context sees every step
-        delta = teacher(obs) if t < k else s_delta
-        obs, _, term, trunc, info = env.step(delta)
-        if not ends.update(t, info, term, trunc):
-            break
-    env.close()
-    return ends.success.tolist()
+        return teacher(obs) if t < k else s_delta
+
+    return successes(name, act, episodes=EPS, seed=SEED)
 
 
 res = {}

@@ -13,13 +13,10 @@ import sys
 
 import numpy as np
 import torch
+from episodes import successes
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.analysis.student_diagnosis import Outcomes
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.sim.gym_env import start_seed
-from lerobot_blindgrasp.sim.randomization import EVAL_DR
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 
 POS, DXY = spec.PRIVILEGED_SLICES["object_pos"], spec.PRIVILEGED_SLICES["object_planar_distance"]
@@ -41,17 +38,8 @@ class MaskedTeacher(TeacherPolicy):
         return super().__call__(mask_before_contact(obs), stochastic=stochastic)
 
 
-def run(teacher, name: str, eps: int = 20, seed: int = 1000) -> list[bool]:
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=eps, objects=(name,), seed=start_seed(seed, name), dr=EVAL_DR,
-                                         autoreset=False))
-    obs = env.reset()
-    ends = Outcomes(eps, env.max_episode_steps)
-    for t in range(env.max_episode_steps):
-        obs, _, term, trunc, info = env.step(teacher(obs))
-        if not ends.update(t, info, term, trunc):
-            break
-    env.close()
-    return ends.success.tolist()
+def run(teacher, name: str) -> list[bool]:
+    return successes(name, lambda t, obs, env: teacher(obs))
 
 
 if __name__ == "__main__" and sys.argv[1] == "eval":

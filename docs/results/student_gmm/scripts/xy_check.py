@@ -8,12 +8,11 @@ import sys
 from dataclasses import replace
 
 import torch
+from episodes import successes
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.analysis.student_diagnosis import Outcomes, load_student, student_actor
+from lerobot_blindgrasp.analysis.student_diagnosis import load_student, student_actor
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.sim.gym_env import start_seed
 from lerobot_blindgrasp.sim.randomization import EVAL_DR
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
@@ -29,18 +28,12 @@ student = student_actor(policy, pre, post)
 
 def run(name: str, xy_scale: float, role: str) -> list[bool]:
     dr = replace(EVAL_DR, object_xy_m=xy_scale * spec.OBJECT_XY_RANGE_M)
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=EPS, objects=(name,), seed=start_seed(SEED, name), dr=dr,
-                                         autoreset=False))
     policy.reset()
-    obs = env.reset()
-    ends = Outcomes(EPS, env.max_episode_steps)
-    for t in range(env.max_episode_steps):
-        delta = teacher(obs) if role == "teacher" else student(obs) - env.joint_positions()
-        obs, _, term, trunc, info = env.step(delta)
-        if not ends.update(t, info, term, trunc):
-            break
-    env.close()
-    return ends.success.tolist()
+
+    def act(t, obs, env):
+        return teacher(obs) if role == "teacher" else student(obs) - env.joint_positions()
+
+    return successes(name, act, dr=dr, episodes=EPS, seed=SEED)
 
 
 res = {}
