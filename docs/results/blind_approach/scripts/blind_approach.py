@@ -20,7 +20,9 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from episodes import successes
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "student_gmm" / "scripts"))
+from episodes import successes  # noqa: E402  (the shared episode loop of the student_gmm scripts)
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import objects
