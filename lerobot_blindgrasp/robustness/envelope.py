@@ -53,13 +53,13 @@ def describe(factor: dict, role: str = "student", criterion: str = "ci") -> str:
     if lo is None:
         return "below at the nominal point" if pts[nom].get(role) else "not run"
 
-    def edge(last: int, nxt: int | None) -> str:
+    def edge(last: int, nxt: int | None, end: str) -> str:
         if nxt is None:
-            return f"{pts[last]['label']} (largest tested)"
+            return f"{pts[last]['label']} ({end} tested)"
         return f"{pts[last]['label']} (" + ("fails at " if pts[nxt].get(role) else "not run at ") + f"{pts[nxt]['label']})"
 
-    low = edge(lo, lo - 1 if lo > 0 else None) if nom > 0 else None
-    high = edge(hi, hi + 1 if hi + 1 < len(pts) else None) if nom < len(pts) - 1 else None
+    low = edge(lo, lo - 1 if lo > 0 else None, "smallest") if nom > 0 else None
+    high = edge(hi, hi + 1 if hi + 1 < len(pts) else None, "largest") if nom < len(pts) - 1 else None
     if low and high:
         return f"{low} to {high}"
     return f"down to {low}" if low else f"up to {high}" if high else pts[nom]["label"]
