@@ -28,6 +28,7 @@ from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.teacher import blind_approach
 
 CONFIG_NAME = "teacher_config.json"
 WEIGHTS_NAME = "teacher.safetensors"
@@ -153,7 +154,7 @@ class TeacherPolicy:
                 f"{self.checkpoint} was trained on another observation layout than spec.PRIVILEGED_LAYOUT; "
                 "retrain or use a teacher from this version"
             )
-        dims = {"policy": spec.STATE_DIM, "privileged": spec.PRIVILEGED_DIM}
+        dims = {"policy": spec.STATE_DIM, "privileged": spec.PRIVILEGED_DIM, blind_approach.GROUP: spec.PRIVILEGED_DIM}
         dummy = TensorDict({k: torch.zeros(1, d) for k, d in dims.items()}, batch_size=[1])
         self.actor = MLPModel(dummy, self.obs_groups, "actor", spec.NUM_JOINTS, **actor_cfg)
         state, iteration = load_actor_state(self.checkpoint)
@@ -182,6 +183,8 @@ class TeacherPolicy:
 
     @torch.inference_mode()
     def __call__(self, obs: dict[str, np.ndarray], stochastic: bool = False) -> np.ndarray:
+        if blind_approach.GROUP in self.obs_groups["actor"] and blind_approach.GROUP not in obs:
+            obs = blind_approach.with_blind_group(obs)  # a blind-approach teacher: the env gives "privileged"
         n = next(iter(obs.values())).shape[0]
         td = TensorDict({k: torch.from_numpy(np.asarray(v)).to(self.device) for k, v in obs.items()}, batch_size=[n])
         return self.actor(td, stochastic_output=stochastic).cpu().numpy().astype(np.float64)

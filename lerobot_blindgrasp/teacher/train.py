@@ -64,7 +64,8 @@ class TrainTeacherConfig:
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
     # cpu_bc_capsule (the shipped teacher's staged recipe: cpu, then two cloning stages; cpu_bc_joint is its
-    # first cloning stage), paper (Table III), cpu, quick
+    # first cloning stage), cpu_bc_blind_approach (beyond the paper: it, fine-tuned with the object hidden from
+    # the actor until a touch), paper (Table III), cpu, quick
     preset: str = SHIPPED_TEACHER_PRESET.name
     seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations

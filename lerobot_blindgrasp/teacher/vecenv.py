@@ -1,7 +1,7 @@
 """rsl-rl-lib 5.x `VecEnv` adapter over the batched blind-grasp env.
 
-Observation groups (TensorDict): "policy" = the student's 12-d o_t, "privileged" = the teacher's 92-d vector.
-Presets pick which group the actor and critic read (`obs_groups`). The env auto-resets inside `step`.
+Observation groups (TensorDict): "policy" = the student's 12-d o_t, "privileged" = the teacher's 92-d vector,
+"privileged_blind" = that vector with the object hidden until a touch (`teacher/blind_approach.py`). Presets pick which group the actor and critic read (`obs_groups`). The env auto-resets inside `step`.
 extras["time_outs"] marks truncations (PPO bootstraps them); extras["log"] carries, for the episodes that ended
 this step, each reward term (weighted, per second of episode), success overall and per object, and termination
 reasons. rsl-rl averages these over an iteration and writes them to TensorBoard.
@@ -16,6 +16,7 @@ from tensordict import TensorDict
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv
+from lerobot_blindgrasp.teacher.blind_approach import with_blind_group
 
 
 class RslRlGraspEnv(VecEnv):
@@ -45,6 +46,7 @@ class RslRlGraspEnv(VecEnv):
         self.env.episode_length[:] = value.cpu().numpy()
 
     def _to_td(self, obs: dict[str, np.ndarray]) -> TensorDict:
+        obs = with_blind_group(obs)
         return TensorDict(
             {k: torch.from_numpy(v).to(self.device) for k, v in obs.items()},
             batch_size=[self.num_envs],

@@ -1,5 +1,8 @@
 """A teacher fine-tuned to approach blind: its actor sees nothing of the object until a fingertip reads a force.
 
+The mask now lives in the package (lerobot_blindgrasp/teacher/blind_approach.py, preset cpu_bc_blind_approach);
+this script is how the shipped teacher_cpu_bc_blind was made, and it names the masked vector "privileged".
+
 The student cannot see where the object stands, nor which object it is, before a fingertip touches it; the shipped
 teacher sees both from step 0 and steers its approach by them (docs/results/student_gmm.md). Here the teacher's
 ACTOR reads the object's pose, velocities and planar distance as 0 while no load cell reads above TOUCH_N (the
@@ -18,29 +21,16 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "student_gmm" / "scripts"))
 from episodes import successes  # noqa: E402  (the shared episode loop of the student_gmm scripts)
 
-from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp.teacher.blind_approach import TOUCH_N, mask_before_touch
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 
-HIDDEN = ("object_pos", "object_quat", "object_linvel", "object_angvel", "object_planar_distance")
-UNIAXIAL = spec.PRIVILEGED_SLICES["uniaxial_force"]
-TOUCH_N = 2.0  # 4 sigma of the load cells' 0.5 N noise: a reading above it is a touch the student sees too
 START = "docs/results/teacher_runs/shipped_from_scratch/model_2099.pt"  # at git tag teacher-experiments
-
-
-def mask_before_touch(priv: np.ndarray) -> np.ndarray:
-    """(n, 92) privileged rows with the object's state zeroed where no load cell reads above TOUCH_N."""
-    priv = priv.copy()
-    blind = (priv[:, UNIAXIAL] < TOUCH_N).all(axis=1)
-    for name in HIDDEN:
-        priv[np.ix_(blind, np.arange(spec.PRIVILEGED_DIM)[spec.PRIVILEGED_SLICES[name]])] = 0.0
-    return priv
 
 
 class BlindApproachTeacher(TeacherPolicy):
