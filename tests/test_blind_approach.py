@@ -63,7 +63,8 @@ def test_shipped_blind_teacher_acts_the_same_wherever_the_object_is_until_it_tou
 
 def test_the_blind_group_flows_from_the_env_through_ppo_to_the_loaded_teacher(tmp_path, monkeypatch):
     env = BatchedGraspEnv(GraspEnvConfig(num_envs=6, seed=0, episode_s=0.25, dr=randomization.NO_DR, nthread=1))
-    obs = RslRlGraspEnv(env).get_observations()
+    assert blind_approach.GROUP not in RslRlGraspEnv(env).get_observations().keys()  # only when a model reads it
+    obs = RslRlGraspEnv(env, blind_group=True).get_observations()
     np.testing.assert_array_equal(obs[blind_approach.GROUP].numpy(),
                                   blind_approach.mask_before_touch(obs["privileged"].numpy()))
     env.close()

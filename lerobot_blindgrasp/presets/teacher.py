@@ -177,7 +177,7 @@ CPU_BC_CAPSULE = replace(
 # object's state as 0 until a fingertip load cell reads a touch; the critic reads everything. It continues
 # cpu_bc_capsule's iteration 2099 (the shipped teacher) for 250 PPO iterations with the `cpu` PPO settings and the
 # capsule stage's object weights. Held out: 95.8 % over the 18 objects (shipped: 97.8 %), and its students gain
-# 5.6-6.4 pp over the shipped teacher's on the same recipe (docs/results/blind_approach.md). models/teacher_cpu_bc_blind.
+# 5.6-6.4 pp over the shipped teacher's on the same recipe. Shipped as models/teacher_cpu_bc_blind.
 _BLIND_RUNNER = CPU.runner_cfg()
 _BLIND_RUNNER["obs_groups"] = {"actor": ["privileged_blind"], "critic": ["privileged"]}
 CPU_BC_BLIND_APPROACH = replace(

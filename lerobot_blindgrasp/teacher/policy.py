@@ -166,6 +166,7 @@ class TeacherPolicy:
                 f"{self.checkpoint} does not fit its config or this observation layout ({first})"
             ) from None
         self.actor.to(device).eval()
+        self._blind = blind_approach.reads_blind_group({"actor": self.obs_groups["actor"]})
         self.device = device
         weights = self.config.get("weights", {})
         self.iteration = iteration if iteration is not None else int(weights.get("iteration", -1))
@@ -183,7 +184,7 @@ class TeacherPolicy:
 
     @torch.inference_mode()
     def __call__(self, obs: dict[str, np.ndarray], stochastic: bool = False) -> np.ndarray:
-        if blind_approach.GROUP in self.obs_groups["actor"] and blind_approach.GROUP not in obs:
+        if self._blind and blind_approach.GROUP not in obs:
             obs = blind_approach.with_blind_group(obs)  # a blind-approach teacher: the env gives "privileged"
         n = next(iter(obs.values())).shape[0]
         td = TensorDict({k: torch.from_numpy(np.asarray(v)).to(self.device) for k, v in obs.items()}, batch_size=[n])

@@ -36,7 +36,7 @@ from lerobot_blindgrasp.presets import SHIPPED_TEACHER_PRESET
 from lerobot_blindgrasp.presets import teacher as presets
 from lerobot_blindgrasp.sim import randomization
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.teacher import distributed
+from lerobot_blindgrasp.teacher import blind_approach, distributed
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME, latest_checkpoint, observation_layout
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
@@ -142,7 +142,8 @@ def train(cfg: TrainTeacherConfig) -> Path:
         if counter["steps"] % steps_per_it == 0:
             bar.update(1)
 
-    vec = RslRlGraspEnv(env, device=device, on_step=tick)
+    vec = RslRlGraspEnv(env, device=device, on_step=tick,
+                        blind_group=blind_approach.reads_blind_group(preset.runner["obs_groups"]))
     runner = distributed.runner_class(device)(vec, preset.runner_cfg(), log_dir=str(out), device=device)
     runner.alg.update = with_torch_threads(runner.alg.update, update_thread_count(cfg, env))
     runner.save = atomic_save(runner.save)
