@@ -83,6 +83,8 @@ def student_train(p: presets.Preset, dataset: Path, repo_id: str, out: Path, see
            f"--steps={sched.steps}", f"--batch_size={s.batch_size}"]
     if sched.constant_lr_steps is not None:
         cmd.append(f"--policy.scheduler_constant_steps={sched.constant_lr_steps}")
+    if s.lr is not None:
+        cmd.append(f"--policy.optimizer_lr={s.lr}")
     cmd += s.policy_flags
     cmd += [f"--save_freq={sched.steps}", f"--log_freq={max(1, sched.steps // 50)}", "--policy.push_to_hub=false",
             f"--policy.device={device or s.device}", f"--num_workers={s.num_workers}", "--wandb.enable=false", f"--seed={seed}"]

@@ -247,7 +247,7 @@ def _teacher(stage: Stage, preset: presets.Preset, out: Path, seed: int, given: 
 
     if given is not None or preset.teacher.shipped:
         try:
-            path = Path(given) if given is not None else default_teacher()
+            path = Path(given) if given is not None else default_teacher(preset.teacher.shipped_folder)
             t = TeacherPolicy(path)
         except TeacherError as e:
             raise SystemExit(f"[pipeline] error: {e}") from None

@@ -25,6 +25,7 @@ from lerobot_blindgrasp.presets import ablations, teacher
 from lerobot_blindgrasp.presets.ablations import TABLE_V, TEACHERS, Ablation
 from lerobot_blindgrasp.presets.student import SIZES, DaggerStage, Schedule, StudentStage, dataset_frames, schedule
 from lerobot_blindgrasp.presets.teacher import TeacherPreset, Variant
+from lerobot_blindgrasp.teacher import blind_approach
 
 __all__ = ["ABLATION_TEACHER", "PRESETS", "SHIPPED_TEACHER_ITERATIONS", "SHIPPED_TEACHER_PRESET", "SIZES",
            "TABLE_V", "TEACHERS", "Ablation", "DaggerStage", "DemoStage", "EvalStage", "Preset", "Schedule",
@@ -34,7 +35,9 @@ __all__ = ["ABLATION_TEACHER", "PRESETS", "SHIPPED_TEACHER_ITERATIONS", "SHIPPED
 @dataclass(frozen=True, kw_only=True)
 class TeacherStage:
     settings: TeacherPreset  # PPO settings and reward (teacher.PRESETS)
-    shipped: bool = False  # True: use the shipped default teacher (trained with `settings`), train nothing
+    shipped: bool = False  # True: use a shipped teacher (trained with `settings`), train nothing
+    # Which shipped teacher: a folder under the repository's models/; None: the default one (teacher.policy).
+    shipped_folder: str | None = None
     iterations: int | None = None  # None: settings.max_iterations
     num_envs: int | None = None  # None: settings.num_envs
 
@@ -111,9 +114,18 @@ class Preset:
         if self.student.policy_flags:
             beyond.append("training-time sensor errors (" + ", ".join(
                 f.removeprefix("--policy.augment_") for f in self.student.policy_flags) + ")")
-        if not beyond:
-            return "the paper's: offline imitation of curated stochastic-teacher demos"
-        return "beyond the paper: the paper's offline imitation, then " + "; ".join(beyond)
+        imitation = "offline imitation of curated stochastic-teacher demos"
+        if self.blind_teacher:
+            imitation += (" from a teacher whose actor approaches blind (it sees nothing of the object until a "
+                          "fingertip reads a force, as the student)")
+        elif not beyond:
+            return f"the paper's: {imitation}"
+        return f"beyond the paper: the paper's {imitation}" + "".join(f"; then {b}" for b in beyond)
+
+    @property
+    def blind_teacher(self) -> bool:
+        """Whether the teacher's actor reads the blind-approach group (teacher/blind_approach.py)."""
+        return blind_approach.reads_blind_group(self.teacher.settings.runner.get("obs_groups", {}))
 
     @property
     def all_deviations(self) -> tuple[str, ...]:
@@ -228,6 +240,31 @@ for _base, _dagger in (
     ("cpu", DaggerStage(episodes_per_object=20, steps=2000, rounds=2)),
 ):
     PRESETS[f"{_base}_dagger"] = _beyond_the_paper(PRESETS[_base], f"{_base}_dagger", _DAGGER_NOTE, dagger=_dagger)
+
+
+# The main job (README command 1) beyond the paper: the shipped teacher fine-tuned to approach blind
+# (models/teacher_cpu_bc_blind), whose demos ask the student only for what it can observe, and a shorter student
+# stage at a 5x learning rate. docs/results/quick_pipeline.md has the side-by-side runs that chose it.
+PRESETS["quick_blind"] = _beyond_the_paper(
+    PRESETS["quick"], "quick_blind",
+    "beyond the paper: the demos come from models/teacher_cpu_bc_blind, the shipped teacher fine-tuned (teacher "
+    "preset cpu_bc_blind_approach) with the object hidden from its actor until a fingertip reads a force",
+    teacher=TeacherStage(settings=teacher.CPU_BC_BLIND_APPROACH, shipped=True, shipped_folder="teacher_cpu_bc_blind",
+                         iterations=teacher.CPU_BC_BLIND_APPROACH.max_iterations),
+    # 800 steps at batch 128 (1.4 passes over the demos) at lr 5e-4, constant for 400 steps then decaying: the
+    # stage that fits the 10-minute main job and still lifts >= 90 %.
+    student=replace(PRESETS["quick"].student, steps=800, lr=5e-4, constant_lr_steps=400),
+)
+_QUICK_BLIND_SAYS = {  # the quick deviations this preset changes, by their first words
+    "the shipped teacher": "the shipped blind-approach teacher (models/teacher_cpu_bc_blind, teacher preset "
+                           "cpu_bc_blind_approach), no teacher training except Table V's teacher ablations (the cpu "
+                           "teacher settings, no cloning)",
+    "1200 steps": "800 steps at batch 128 at lr 5e-4 (constant for 400 steps, then linear decay) instead of 2000 "
+                  "epochs at batch 256 at 1e-4: minutes",
+}
+PRESETS["quick_blind"] = replace(PRESETS["quick_blind"], deviations=tuple(
+    next((new for old, new in _QUICK_BLIND_SAYS.items() if d.startswith(old)), d)
+    for d in PRESETS["quick_blind"].deviations))
 
 
 def get(name: str) -> Preset:

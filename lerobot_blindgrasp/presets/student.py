@@ -38,6 +38,8 @@ class StudentStage:
     steps: int | None = None  # fixed optimizer steps (small presets: a measured wall-clock budget)
     epochs: int | None = None  # passes over the collected dataset (paper); steps then follow from its frames
     constant_lr_epochs: int | None = None  # LR constant this many epochs, then linear decay (Table IV)
+    constant_lr_steps: int | None = None  # the same for a fixed-step stage: LR constant this many steps, then decay
+    lr: float | None = None  # AdamW learning rate; None: the policy's (Table IV's 1e-4)
     threads: int = 1  # OMP threads of lerobot-train (nothing else runs during that stage)
     # lerobot-train's data-loader processes. Reading a 30-frame window costs ~2.8 ms a sample here, longer than the
     # cpu-size update: one loader process next to one torch thread overlaps the two, 1.5x faster than loading
@@ -63,6 +65,10 @@ class StudentStage:
             raise ValueError("a student stage gives exactly one of steps and epochs")
         if self.constant_lr_epochs is not None and self.epochs is None:
             raise ValueError("constant_lr_epochs needs epochs: it is counted in passes over the data")
+        if self.constant_lr_steps is not None and self.steps is None:
+            raise ValueError("constant_lr_steps needs steps (an epoch-sized stage gives constant_lr_epochs)")
+        if self.lr is not None and not self.lr > 0:
+            raise ValueError(f"the student's learning rate must be > 0, not {self.lr}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -94,7 +100,7 @@ class Schedule:
 def schedule(stage: StudentStage, total_frames: int | None) -> Schedule:
     """Steps (and the LR schedule) for `stage` on a dataset of `total_frames` frames."""
     if stage.steps is not None:
-        return Schedule(steps=stage.steps, constant_lr_steps=None, total_frames=total_frames)
+        return Schedule(steps=stage.steps, constant_lr_steps=stage.constant_lr_steps, total_frames=total_frames)
     if not total_frames or total_frames < 1:
         raise ValueError("an epoch-sized student stage needs the dataset's total_frames (collect the demos first)")
     per_epoch = math.ceil(total_frames / stage.batch_size)

@@ -49,11 +49,12 @@ def models_dir() -> Path:
     return Path(__file__).resolve().parents[2] / "models"
 
 
-def default_teacher() -> Path:
-    """The teacher a command uses when none is given: $BLINDGRASP_TEACHER, else the shipped one."""
+def default_teacher(folder: str | None = None) -> Path:
+    """The teacher a command uses when none is given: $BLINDGRASP_TEACHER, else the shipped one (`folder`: another
+    shipped teacher under models/, as a pipeline preset may name)."""
     if os.environ.get(TEACHER_ENV_VAR):
         return Path(os.environ[TEACHER_ENV_VAR])
-    d = models_dir() / SHIPPED_TEACHER
+    d = models_dir() / (folder or SHIPPED_TEACHER)
     if not (d / WEIGHTS_NAME).is_file():
         raise TeacherError(
             f"the shipped teacher is not at {d} (it lives in the repository's models/ folder, which only an "
