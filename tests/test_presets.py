@@ -25,13 +25,14 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_every_entry_is_complete():
-    assert set(presets.PRESETS) == {"smoke", "quick", "cpu", "paper", "quick_dagger", "cpu_dagger"}
+    assert set(presets.PRESETS) == {"smoke", "quick", "cpu", "paper", "quick_dagger", "cpu_dagger", "quick_blind"}
     for name, p in presets.PRESETS.items():
         assert p.name == name
         for part in (p.teacher, p.demos, p.student, p.evaluation):
             for f in dataclasses.fields(part):
                 value = getattr(part, f.name)
-                optional = f.name in ("iterations", "num_envs", "steps", "epochs", "constant_lr_epochs")
+                optional = f.name in ("iterations", "num_envs", "steps", "epochs", "constant_lr_epochs",
+                                      "constant_lr_steps", "lr", "shipped_folder")
                 assert value is not None or optional, (name, f.name)
         assert p.teacher.settings is teacher_presets.PRESETS[p.teacher.settings.name]
         assert p.student.size in presets.SIZES
@@ -79,6 +80,30 @@ def test_quick_and_cpu_pipeline_numbers_are_unchanged():
     assert (c.demos.episodes_per_object, c.demos.max_rollouts_per_object, c.demos.num_envs,
             c.demos.min_curated_episodes) == (100, 1000, 720, 90)
     assert (c.student.steps, c.student.batch_size) == (5000, 256)
+
+
+def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_paper(tmp_path):
+    """quick_blind: the shipped blind-approach teacher (its recorded run config is its preset's), the quick demos,
+    a shorter student stage at a higher LR that reaches lerobot-train, and every report word says beyond the paper."""
+    q, b = presets.PRESETS["quick"], presets.PRESETS["quick_blind"]
+    assert pipeline.PipelineConfig().preset == "quick_blind"  # README command 1
+    assert b.teacher.shipped and b.teacher.settings is teacher_presets.CPU_BC_BLIND_APPROACH
+    folder = ROOT / "models" / b.teacher.shipped_folder
+    rec = json.loads((folder / "teacher_config.json").read_text())
+    assert rec["preset"] == b.teacher.settings.name and rec["runner"] == b.teacher.settings.runner_cfg()
+    assert b.blind_teacher and not q.blind_teacher
+    assert b.student_recipe.startswith("beyond the paper") and "approaches blind" in b.student_recipe
+    assert q.student_recipe.startswith("the paper's")
+    assert any("teacher_cpu_bc_blind" in d for d in b.deviations) and not any("1200 steps" in d for d in b.deviations)
+    assert (b.demos, b.evaluation) == (q.demos, q.evaluation)  # only the teacher and the student stage differ
+    cmd, sched = recipe.student_train(b, tmp_path / "demos", "local/x", tmp_path / "student", seed=1)
+    assert (sched.steps, sched.constant_lr_steps) == (800, 400)
+    assert {"--steps=800", "--policy.scheduler_constant_steps=400", "--policy.optimizer_lr=0.0005"} <= set(cmd)
+    assert not any(c.startswith("--policy.optimizer_lr") for c in recipe.student_train(q, tmp_path, "x", tmp_path, 1)[0])
+    with pytest.raises(ValueError, match="constant_lr_steps needs steps"):
+        presets.StudentStage(size="cpu", batch_size=8, epochs=2, constant_lr_steps=3)
+    with pytest.raises(ValueError, match="must be > 0"):
+        presets.StudentStage(size="cpu", batch_size=8, steps=2, lr=0.0)
 
 
 # The one recorded run that is not resumable: its object allocation was tried under the `cpu` name and not kept
@@ -139,7 +164,7 @@ def test_pipeline_config_spellings():
     new = parse_config(pipeline.PipelineConfig, ["--preset=smoke", "--output_dir=o", "--eval_seed=1001"])
     spaced = parse_config(pipeline.PipelineConfig, ["--preset", "smoke", "--output_dir", "o", "--eval_seed", "1001"])
     assert new == spaced and new.output_dir == Path("o") and new.eval_seed == 1001
-    assert parse_config(pipeline.PipelineConfig, []).output_dir == Path("outputs/pipeline_quick")
+    assert parse_config(pipeline.PipelineConfig, []).output_dir == Path("outputs/pipeline_quick_blind")
     with pytest.raises(SystemExit, match="unknown preset"):
         parse_config(pipeline.PipelineConfig, ["--preset=huge"])
 

@@ -112,6 +112,25 @@ def test_calibration_offset_shifts_joint_readings_not_the_true_pose():
     np.testing.assert_allclose(off.joint_positions(), ref.joint_positions(), atol=1e-5)
 
 
+def test_under_a_calibration_offset_the_recorded_target_is_in_the_measured_frame():
+    """What a demo collected under an offset records (`info["joint_target"]`) is the target the servos were sent
+    in the frame the joints read: the true target + d. Commanding it back through `delta_for_target` from the same
+    state reproduces the teacher's step; without an offset it is the true target."""
+    env, _ = _env(replace(randomization.NO_DR, joint_calibration_rad=0.05))
+    twin, _ = _env(replace(randomization.NO_DR, joint_calibration_rad=0.05))
+    step = np.full((1, spec.NUM_JOINTS), 0.1)
+    q = env.joint_positions().copy()
+    *_, info = env.step(step)
+    true_target = np.clip(q + step, spec.JOINT_LOWER, spec.JOINT_UPPER)
+    np.testing.assert_allclose(info["joint_target"] - env.sensor_draw.joint_offset, true_target, atol=1e-12)
+    twin.step(twin.delta_for_target(info["joint_target"]))  # the student's path: an absolute measured-frame target
+    np.testing.assert_allclose(twin.joint_positions(), env.joint_positions(), atol=1e-9)
+    plain, _ = _env(randomization.NO_DR)
+    q = plain.joint_positions().copy()
+    *_, info = plain.step(step)
+    np.testing.assert_allclose(info["joint_target"], np.clip(q + step, spec.JOINT_LOWER, spec.JOINT_UPPER))
+
+
 def test_velocity_limit_and_backlash_shape_the_servo_motion():
     slow, _ = _env(replace(randomization.NO_DR, velocity_limit_rad_s=1.0))
     fast, _ = _env(randomization.NO_DR)

@@ -1,6 +1,6 @@
 """`blindgrasp-diagnose-student`: why a student trails its teacher, object by object, before anyone tunes it.
 
-    blindgrasp-diagnose-student --student=models/student_cpu --demos=outputs/pipeline_quick/demos \
+    blindgrasp-diagnose-student --student=models/student_cpu --demos=outputs/pipeline_quick_blind/demos \
         --held_out=outputs/held_out_demos --objects=capsule_small,sphere_small --episodes=20
 
 Per object it measures:

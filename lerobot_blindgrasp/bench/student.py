@@ -1,7 +1,7 @@
 """`blindgrasp-bench --bench.type=student`: what one lerobot-train sample of the student costs, against its
 compute floor.
 
-    blindgrasp-bench --bench.type=student --bench.dataset_root=outputs/pipeline_quick/demos --bench.size=cpu \\
+    blindgrasp-bench --bench.type=student --bench.dataset_root=outputs/pipeline_quick_blind/demos --bench.size=cpu \\
         --bench.batch_size=128 --bench.json=true
 
 Three figures, each per training sample, measured in this process on one torch thread:

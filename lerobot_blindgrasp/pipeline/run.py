@@ -1,6 +1,7 @@
-"""`blindgrasp-pipeline --preset={quick,cpu,paper,smoke}`: the whole method, end to end, ending in a report.
+"""`blindgrasp-pipeline --preset={quick_blind,quick,cpu,paper,smoke}`: the whole method, end to end, ending in a report.
 
-    blindgrasp-pipeline --preset=quick     # README command 1: the shipped teacher -> demos -> student -> eval, ~15 min
+    blindgrasp-pipeline                    # README command 1 (quick_blind, beyond the paper): ~10 min on 2 cores
+    blindgrasp-pipeline --preset=quick     # the paper's student recipe on the default shipped teacher, ~13 min
     blindgrasp-pipeline --preset=cpu       # trains its own teacher from scratch: hours on 2 cores
     blindgrasp-pipeline --preset=paper --device=cuda    # the paper's Tables III-IV: a GPU machine
     blindgrasp-pipeline --preset=quick --teacher=runs/teacher_cpu     # any teacher folder instead
@@ -10,7 +11,7 @@ Every size comes from the preset registry (`lerobot_blindgrasp/presets/`); the c
 config like LeRobot's scripts (`--help`, `--config_path`).
 
 Stages, each a real CLI run as a subprocess (its command and log are kept in <out>/logs/):
-1. the teacher: the shipped default teacher (`quick`), a given `--teacher`, or trained from scratch
+1. the teacher: a shipped teacher (`quick_blind`, `quick`), a given `--teacher`, or trained from scratch
    (`blindgrasp-train-teacher`, presets `cpu`, `paper`, `smoke`);
 2. curated demos (`blindgrasp-collect-demos`) as a LeRobotDataset;
 3. the student (`lerobot-train --policy.type=blindgrasp_transformer`; an epoch-sized preset such as `paper` gets
@@ -63,7 +64,9 @@ Go bigger (same command, another preset):
 class PipelineConfig:
     """The method end to end (teacher -> curated demos -> student -> paired sim eval -> report)."""
 
-    preset: str = "quick"  # registry preset (lerobot_blindgrasp/presets): smoke, quick, cpu, paper
+    # registry preset (lerobot_blindgrasp/presets): quick_blind (README command 1, beyond the paper), quick (the
+    # paper's student recipe on the default shipped teacher), cpu, paper, smoke, ...
+    preset: str = "quick_blind"
     output_dir: Path | None = None  # default outputs/pipeline_<preset>; re-running continues where it stopped
     seed: int = spec.TEACHER_TRAIN_SEED  # teacher-training env seed and torch seed; also picks the demo seed block
     teacher: Path | None = None  # this teacher folder instead of the preset's (shipped or trained from scratch)
@@ -251,8 +254,9 @@ def _teacher(stage: Stage, preset: presets.Preset, out: Path, seed: int, given: 
             t = TeacherPolicy(path)
         except TeacherError as e:
             raise SystemExit(f"[pipeline] error: {e}") from None
-        stage.skip("teacher", f"using {'the given' if given is not None else 'the shipped default'} teacher {path}")
-        source = "given (--teacher)" if given is not None else "shipped default"
+        shipped = "shipped" if preset.teacher.shipped_folder else "shipped default"
+        stage.skip("teacher", f"using {'the given' if given is not None else 'the ' + shipped} teacher {path}")
+        source = "given (--teacher)" if given is not None else shipped
         return path, {"source": source, "path": str(path), "file": t.name, "sha256": t.sha256,
                       "iteration": t.iteration, "preset": t.config.get("preset")}
     teacher_dir = out / "teacher"

@@ -304,7 +304,10 @@ class BatchedGraspEnv:
             "uniaxial_force": raw["uniaxial_clean"],  # noise-free, after the deadband (N)
             "tip_object_force": raw["tip_object_force"],  # |net force| of each tip on the object (N)
             "tip_object_downward": raw["tip_object_downward"],  # its -F_z/|F| (1: pressing straight down)
-            "joint_target": target.copy(),  # the absolute targets the servos received this step (rad)
+            # The absolute targets the servos were sent this step (rad), in the joints' measured frame: with a
+            # calibration offset d the servos reached `target` by being sent target + d (`delta_for_target`), and
+            # that is the action a demo recorded under the offset must teach.
+            "joint_target": self._measured_frame(target),
             "terms": terms,
             "physics_failed": failed,
         }
@@ -363,6 +366,12 @@ class BatchedGraspEnv:
             self._ctrl[:] = cmd
             failed |= self.physics.step(1) if ids is None else self.physics.step(1, ids)
         return failed
+
+    def _measured_frame(self, target: np.ndarray) -> np.ndarray:
+        """Absolute joint positions of every env in the joints' measured frame (+ the calibration offset; a copy)."""
+        if self.cfg.dr.joint_calibration_rad:
+            return target + self.sensor_draw.joint_offset
+        return target.copy()
 
     def delta_for_target(self, target: np.ndarray, ids: slice | np.ndarray | None = None) -> np.ndarray:
         """The step (n, 9) that makes the servos of all envs (or `ids`) go to absolute `target`s given in the
