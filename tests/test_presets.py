@@ -82,7 +82,7 @@ def test_quick_and_cpu_pipeline_numbers_are_unchanged():
     assert (c.student.steps, c.student.batch_size) == (5000, 256)
 
 
-def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_paper(tmp_path):
+def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_paper(tmp_path, monkeypatch):
     """quick_blind: the shipped blind-approach teacher (its recorded run config is its preset's), the quick demos,
     a shorter student stage at a higher LR that reaches lerobot-train, and every report word says beyond the paper."""
     q, b = presets.PRESETS["quick"], presets.PRESETS["quick_blind"]
@@ -96,6 +96,10 @@ def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_pa
     assert q.student_recipe.startswith("the paper's")
     assert any("teacher_cpu_bc_blind" in d for d in b.deviations) and not any("1200 steps" in d for d in b.deviations)
     assert (b.demos, b.evaluation) == (q.demos, q.evaluation)  # only the teacher and the student stage differ
+    monkeypatch.delenv("BLINDGRASP_TEACHER", raising=False)
+    path, about = pipeline._teacher(pipeline.Stage(tmp_path, {}), b, tmp_path, 1, given=None)
+    assert path == folder and about["source"] == "shipped" and about["preset"] == b.teacher.settings.name
+    assert pipeline._teacher(pipeline.Stage(tmp_path, {}), q, tmp_path, 1, given=None)[0].name == "teacher_cpu_bc"
     cmd, sched = recipe.student_train(b, tmp_path / "demos", "local/x", tmp_path / "student", seed=1)
     assert (sched.steps, sched.constant_lr_steps) == (800, 400)
     assert {"--steps=800", "--policy.scheduler_constant_steps=400", "--policy.optimizer_lr=0.0005"} <= set(cmd)
