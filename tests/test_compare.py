@@ -23,16 +23,19 @@ def _teacher_eval(path, per_object, mode="deterministic"):
 
 
 def test_a_student_and_a_teacher_eval_are_paired_episode_by_episode(tmp_path, capsys):
-    _teacher_eval(tmp_path / "t", {"sphere_small": [True, True, False, False], "cuboid_a_large": [True] * 4})
-    _lerobot_eval(tmp_path / "s", {"sphere_small": [True, False, True, True], "cuboid_a_large": [True] * 4})
+    _teacher_eval(tmp_path / "t", {"sphere_small": [True, True, False, False], "cuboid_a_large": [True] * 4,
+                                   "everyday_mug": [True] * 4})
+    _lerobot_eval(tmp_path / "s", {"sphere_small": [True, False, True, True], "cuboid_a_large": [True] * 4,
+                                   "everyday_mug": [True] * 4})
     compare.main([f"--a={tmp_path / 't'}", f"--b={tmp_path / 's' / 'eval_info.json'}", "--a_label=teacher",
                   "--b_label=student"])
     md = capsys.readouterr().out
-    # Rows in the paper's object order; the student alone solved start states 3 and 4, the teacher alone 2.
-    assert md.index("cuboid_a_large") < md.index("sphere_small")
+    # The student alone solved start states 3 and 4 of the small sphere, the teacher alone 2.
+    # Rows in the paper's object order, then the everyday objects (held-out evaluations pair too).
+    assert md.index("cuboid_a_large") < md.index("sphere_small") < md.index("everyday_mug")
     assert "| sphere_small | 50 % [15-85] (2/4) | 75 % [30-95] (3/4) | 1 | 2 |" in md
-    assert "| **all 2** | **75.0 % [40.9-92.9] (6/8)** | **87.5 % [52.9-97.8] (7/8)** | **1** | **2** |" in md
-    assert "student minus teacher: +12.5 percentage points over 8 paired episodes; exact McNemar p = 1." in md
+    assert "| **all 3** | **83.3 % [55.2-95.3] (10/12)** | **91.7 % [64.6-98.5] (11/12)** | **1** | **2** |" in md
+    assert "student minus teacher: +8.3 percentage points over 12 paired episodes; exact McNemar p = 1." in md
 
 
 def test_unpairable_or_missing_evaluations_are_clear_errors(tmp_path):

@@ -44,7 +44,7 @@ def load_successes(path: str | Path, mode: str | None = None) -> dict[str, list[
 
 def compare(a: dict[str, list[bool]], b: dict[str, list[bool]], label_a: str = "A", label_b: str = "B") -> str:
     """Markdown: per object, both rates and the discordant pairs; then all objects pooled, with the McNemar p."""
-    names = [o for o in objects.PAPER_OBJECTS if o in a and o in b]
+    names = [o for o in objects.CATALOGUE if o in a and o in b]  # Table I order, then the everyday set
     if not names:
         raise ValueError("the two evaluations share no object")
     for o in names:
