@@ -244,7 +244,7 @@ for _base, _dagger in (
 
 # The main job (README command 1) beyond the paper: the shipped teacher fine-tuned to approach blind
 # (models/teacher_cpu_bc_blind), whose demos ask the student only for what it can observe, and a shorter student
-# stage at a 5x learning rate. docs/results/quick_pipeline.md has the side-by-side runs that chose it.
+# stage at a 5x learning rate, both chosen by side-by-side runs (same demos, same seed; the README links them).
 PRESETS["quick_blind"] = _beyond_the_paper(
     PRESETS["quick"], "quick_blind",
     "beyond the paper: the demos come from models/teacher_cpu_bc_blind, the shipped teacher fine-tuned (teacher "
