@@ -245,16 +245,6 @@ for _base, _dagger in (
 # The main job (README command 1) beyond the paper: the shipped teacher fine-tuned to approach blind
 # (models/teacher_cpu_bc_blind), whose demos ask the student only for what it can observe, and a shorter student
 # stage at a 5x learning rate, both chosen by side-by-side runs (same demos, same seed; the README links them).
-PRESETS["quick_blind"] = _beyond_the_paper(
-    PRESETS["quick"], "quick_blind",
-    "beyond the paper: the demos come from models/teacher_cpu_bc_blind, the shipped teacher fine-tuned (teacher "
-    "preset cpu_bc_blind_approach) with the object hidden from its actor until a fingertip reads a force",
-    teacher=TeacherStage(settings=teacher.CPU_BC_BLIND_APPROACH, shipped=True, shipped_folder="teacher_cpu_bc_blind",
-                         iterations=teacher.CPU_BC_BLIND_APPROACH.max_iterations),
-    # 800 steps at batch 128 (1.4 passes over the demos) at lr 5e-4, constant for 400 steps then decaying: the
-    # stage that fits the 10-minute main job and still lifts >= 90 %.
-    student=replace(PRESETS["quick"].student, steps=800, lr=5e-4, constant_lr_steps=400),
-)
 _QUICK_BLIND_SAYS = {  # the quick deviations this preset changes, by their first words
     "the shipped teacher": "the shipped blind-approach teacher (models/teacher_cpu_bc_blind, teacher preset "
                            "cpu_bc_blind_approach), no teacher training except Table V's teacher ablations (the cpu "
@@ -262,9 +252,21 @@ _QUICK_BLIND_SAYS = {  # the quick deviations this preset changes, by their firs
     "1200 steps": "800 steps at batch 128 at lr 5e-4 (constant for 400 steps, then linear decay) instead of 2000 "
                   "epochs at batch 256 at 1e-4: minutes",
 }
-PRESETS["quick_blind"] = replace(PRESETS["quick_blind"], deviations=tuple(
-    next((new for old, new in _QUICK_BLIND_SAYS.items() if d.startswith(old)), d)
-    for d in PRESETS["quick_blind"].deviations))
+PRESETS["quick_blind"] = replace(
+    PRESETS["quick"],
+    name="quick_blind",
+    teacher=TeacherStage(settings=teacher.CPU_BC_BLIND_APPROACH, shipped=True, shipped_folder="teacher_cpu_bc_blind",
+                         iterations=teacher.CPU_BC_BLIND_APPROACH.max_iterations),
+    # 800 steps at batch 128 (1.4 passes over the demos) at lr 5e-4, constant for 400 steps then decaying: the
+    # stage that fits the 10-minute main job and still lifts >= 90 %.
+    student=replace(PRESETS["quick"].student, steps=800, lr=5e-4, constant_lr_steps=400),
+    deviations=(
+        *(next((new for old, new in _QUICK_BLIND_SAYS.items() if d.startswith(old)), d)
+          for d in PRESETS["quick"].deviations),
+        "beyond the paper: the demos come from models/teacher_cpu_bc_blind, the shipped teacher fine-tuned (teacher "
+        "preset cpu_bc_blind_approach) with the object hidden from its actor until a fingertip reads a force",
+    ),
+)
 
 
 def get(name: str) -> Preset:

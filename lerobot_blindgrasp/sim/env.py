@@ -367,20 +367,17 @@ class BatchedGraspEnv:
             failed |= self.physics.step(1) if ids is None else self.physics.step(1, ids)
         return failed
 
-    def _measured_frame(self, target: np.ndarray) -> np.ndarray:
-        """Absolute joint positions of every env in the joints' measured frame (+ the calibration offset; a copy)."""
+    def _measured_frame(self, q: np.ndarray, sel: slice | np.ndarray = slice(None)) -> np.ndarray:
+        """Absolute joint positions of envs `sel` in the joints' measured frame (+ the calibration offset; a copy)."""
         if self.cfg.dr.joint_calibration_rad:
-            return target + self.sensor_draw.joint_offset
-        return target.copy()
+            return q + self.sensor_draw.joint_offset[sel]
+        return q.copy()
 
     def delta_for_target(self, target: np.ndarray, ids: slice | np.ndarray | None = None) -> np.ndarray:
         """The step (n, 9) that makes the servos of all envs (or `ids`) go to absolute `target`s given in the
         joints' measured frame: target - (q + calibration offset). Without an offset, target - q."""
         sel = slice(None) if ids is None else ids
-        q = self._qpos[sel, observations.JOINTS]
-        if self.cfg.dr.joint_calibration_rad:
-            q = q + self.sensor_draw.joint_offset[sel]
-        return np.asarray(target, dtype=np.float64) - q
+        return np.asarray(target, dtype=np.float64) - self._measured_frame(self._qpos[sel, observations.JOINTS], sel)
 
     def _delayed(self, obs: dict[str, np.ndarray], done: np.ndarray) -> dict[str, np.ndarray]:
         """Push this step's observation into the ring and return the one from `obs_latency_steps` ago (an episode
