@@ -103,6 +103,7 @@ def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_pa
     cmd, sched = recipe.student_train(b, tmp_path / "demos", "local/x", tmp_path / "student", seed=1)
     assert (sched.steps, sched.constant_lr_steps) == (800, 400)
     assert {"--steps=800", "--policy.scheduler_constant_steps=400", "--policy.optimizer_lr=0.0005"} <= set(cmd)
+    assert "--num_workers=2" in cmd and "--num_workers=1" in recipe.student_train(q, tmp_path, "x", tmp_path, 1)[0]
     assert not any(c.startswith("--policy.optimizer_lr") for c in recipe.student_train(q, tmp_path, "x", tmp_path, 1)[0])
     with pytest.raises(ValueError, match="constant_lr_steps needs steps"):
         presets.StudentStage(size="cpu", batch_size=8, epochs=2, constant_lr_steps=3)
