@@ -262,3 +262,13 @@ def test_no_teacher_ablation_clones_scripted_grasps_and_every_row_names_its_teac
     with pytest.raises(ValueError, match="clones scripted grasps"):
         dataclasses.replace(presets.PRESETS["paper"],
                             ablation_teacher=presets.TeacherStage(settings=presets.teacher.CPU_BC_JOINT))
+
+
+def test_the_shipped_teachers_carried_evals_are_of_the_current_sim():
+    """The main job reuses a shipped teacher's `eval/eval.json` only under the same sim sources; a sim change that
+    leaves them stale silently costs every main job a teacher eval. Re-run it and refresh the fingerprint."""
+    from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
+
+    for folder in ("teacher_cpu_bc", "teacher_cpu_bc_blind"):
+        rec = json.loads((ROOT / "models" / folder / "eval" / "eval.json").read_text())
+        assert rec["sim_fingerprint"] == sim_fingerprint(), f"models/{folder}/eval is of another sim"
