@@ -4,7 +4,6 @@ How much does it rely on the object's pose after contact? Same start states as l
 
     python always_masked.py models/teacher_cpu_bc_blind all OUT.json
 """
-import json
 import sys
 from pathlib import Path
 
@@ -12,9 +11,8 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "student_gmm" / "scripts"))
-from episodes import successes  # noqa: E402  (the shared episode loop of the student_gmm scripts)
+from episodes import every_object  # noqa: E402  (the shared episode loop of the student_gmm scripts)
 
-from lerobot_blindgrasp.sim import objects  # noqa: E402
 from lerobot_blindgrasp.teacher import blind_approach  # noqa: E402
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy  # noqa: E402
 
@@ -28,13 +26,7 @@ def main(folder: str, which: str, out: str) -> None:
         hidden[:, blind_approach._HIDDEN_COLUMNS] = 0.0  # the mask's columns, whatever the load cells read
         return teacher({**obs, blind_approach.GROUP: hidden})
 
-    res = {}
-    for name in objects.resolve_objects(which):
-        res[name] = successes(name, lambda t, obs, env: act(obs))
-        print(name, sum(res[name]), flush=True)
-    print("all", sum(map(sum, res.values())), "/", sum(map(len, res.values())))
-    Path(out).write_text(json.dumps(res, separators=(",", ":")))
-
+    every_object(which, act, out)
 
 if __name__ == "__main__":
     main(*sys.argv[1:4])

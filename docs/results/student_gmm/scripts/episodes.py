@@ -17,3 +17,19 @@ def successes(name: str, act_delta, dr=EVAL_DR, episodes: int = 20, seed: int = 
             break
     env.close()
     return ends.success.tolist()
+
+
+def every_object(which: str, act, out: str, dr=EVAL_DR) -> dict[str, list[bool]]:
+    """`successes` for each object of `which` (act(obs) -> delta), printed as it goes and written to `out` (json)."""
+    import json
+    from pathlib import Path
+
+    from lerobot_blindgrasp.sim import objects
+
+    res = {}
+    for name in objects.resolve_objects(which):
+        res[name] = successes(name, lambda t, obs, env: act(obs), dr=dr)
+        print(name, sum(res[name]), flush=True)
+    print("all", sum(map(sum, res.values())), "/", sum(map(len, res.values())))
+    Path(out).write_text(json.dumps(res, separators=(",", ":")))
+    return res
