@@ -112,18 +112,39 @@ def test_tiny_collection_loads_back(tiny):
 def test_frames_are_the_observation_before_each_step_and_the_commanded_target(teacher, tiny):
     """Replay: env i of the collection holds object i with env seed SEED + i; its first episode must match a rollout
     of a fresh env built from the same settings, frame by frame."""
-    from lerobot_blindgrasp.sim import randomization, rewards
+    from lerobot_blindgrasp.sim import randomization
+
+    _assert_replays(teacher, tiny[0], randomization.EVAL_DR)
+
+
+def test_demos_under_a_calibration_offset_record_it_and_act_in_the_measured_frame(teacher, tmp_path):
+    """--joint_calibration_rad (beyond the paper): the rollouts run with the offset, the provenance and the card
+    say so, and every frame is what an env with that offset observes and is sent (targets in the measured frame)."""
+    from dataclasses import replace
+
+    from lerobot_blindgrasp.sim import randomization
+
+    out = tmp_path / "demos"
+    loop.collect(config(teacher, out, stochastic=False, joint_calibration_rad=0.05))
+    assert json.loads((out / "collection.json").read_text())["randomization"]["joint_calibration_rad"] == 0.05
+    assert "joint_calibration_rad" in (out / "README.md").read_text()
+    _assert_replays(teacher, out, replace(randomization.EVAL_DR, joint_calibration_rad=0.05))
+    with pytest.raises(ValueError, match="joint_calibration_rad"):
+        config(teacher, tmp_path / "x", joint_calibration_rad=-0.1)
+
+
+def _assert_replays(teacher: Path, out: Path, dr) -> None:
+    from lerobot_blindgrasp.sim import rewards
     from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 
-    out, _ = tiny
     policy = TeacherPolicy(teacher)
     env = BatchedGraspEnv(
         GraspEnvConfig(
             num_envs=N_ENVS,
             seed=SEED,
             episode_s=spec.DEMO_EPISODE_S,
-            dr=randomization.EVAL_DR,
+            dr=dr,
             reward=rewards.RewardConfig.from_record(policy.config["reward"]),
         )
     )

@@ -83,19 +83,25 @@ def test_quick_and_cpu_pipeline_numbers_are_unchanged():
 
 
 def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_paper(tmp_path, monkeypatch):
-    """quick_blind: the shipped blind-approach teacher (its recorded run config is its preset's), the quick demos,
+    """quick_blind: the shipped calibration-blind teacher (its recorded run config is its preset's), the quick demos,
     a shorter student stage at a higher LR that reaches lerobot-train, and every report word says beyond the paper."""
     q, b = presets.PRESETS["quick"], presets.PRESETS["quick_blind"]
     assert pipeline.PipelineConfig().preset == "quick_blind"  # README command 1
-    assert b.teacher.shipped and b.teacher.settings is teacher_presets.CPU_BC_BLIND_APPROACH
+    assert b.teacher.shipped and b.teacher.settings is teacher_presets.CPU_BC_CALIB_BLIND
     folder = ROOT / "models" / b.teacher.shipped_folder
     rec = json.loads((folder / "teacher_config.json").read_text())
     assert rec["preset"] == b.teacher.settings.name and rec["runner"] == b.teacher.settings.runner_cfg()
+    assert rec["actor_input"] == b.teacher.settings.actor_input.as_record()
+    assert rec["deviations"] == list(b.teacher.settings.deviations)
     assert b.blind_teacher and not q.blind_teacher
     assert b.student_recipe.startswith("beyond the paper") and "approaches blind" in b.student_recipe
+    assert "reading off by +-0.05 rad" in b.student_recipe
     assert q.student_recipe.startswith("the paper's")
-    assert any("teacher_cpu_bc_blind" in d for d in b.deviations) and not any("1200 steps" in d for d in b.deviations)
-    assert (b.demos, b.evaluation) == (q.demos, q.evaluation)  # only the teacher and the student stage differ
+    assert any("teacher_cpu_bc_calib" in d for d in b.deviations) and not any("1200 steps" in d for d in b.deviations)
+    # only the teacher, the demos' calibration offset (the teacher's training one) and the student stage differ
+    assert b.demos == dataclasses.replace(q.demos, joint_calibration_rad=0.05) and b.evaluation == q.evaluation
+    assert "--joint_calibration_rad=0.05" in recipe.collect(b, folder, tmp_path / "d", "x/y", 1)
+    assert not any("calibration" in c for c in recipe.collect(q, folder, tmp_path / "d", "x/y", 1))
     monkeypatch.delenv("BLINDGRASP_TEACHER", raising=False)
     path, about = pipeline._teacher(pipeline.Stage(tmp_path, {}), b, tmp_path, 1, given=None)
     assert path == folder and about["source"] == "shipped" and about["preset"] == b.teacher.settings.name
@@ -271,6 +277,6 @@ def test_the_shipped_teachers_carried_evals_are_of_the_current_sim():
     from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
 
     carried = sorted((ROOT / "models").glob("*/eval/eval.json"))
-    assert {p.parent.parent.name for p in carried} >= {"teacher_cpu_bc", "teacher_cpu_bc_blind"}
+    assert {p.parent.parent.name for p in carried} >= {"teacher_cpu_bc", "teacher_cpu_bc_calib"}
     for path in carried:
         assert json.loads(path.read_text())["sim_fingerprint"] == sim_fingerprint(), f"{path} is of another sim"

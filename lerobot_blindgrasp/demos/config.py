@@ -39,6 +39,10 @@ class CollectConfig:
     objects: str = "all"  # 'all', 'medium' or a comma list of catalogue names
     stochastic: bool = True  # sample the teacher's Gaussian; false: its mean ('w/o stochastic teacher' ablation)
     curation: curation_mod.CurationConfig = field(default_factory=curation_mod.CurationConfig)
+    # Beyond the paper: roll out with every joint reading off by +-this (rad; sign per env and joint, as
+    # blindgrasp-robustness's calibration factor) so that the demos show the teacher correcting for it. The actions
+    # are recorded in the measured frame, as a gripper homed off by that much is commanded. 0: the paper's demos.
+    joint_calibration_rad: float = 0.0
     num_envs: int = 180  # parallel envs (18 objects x 10)
     # first env seed, in spec.SEED_RANGES["demos"] (a resumed run continues after the last)
     seed: int = spec.DEMO_SEED
@@ -60,6 +64,8 @@ class CollectConfig:
             raise ValueError("--repo_id is required (USER/NAME, the dataset's Hub id)")
         self.output_dir = Path(self.output_dir)
         check_backend(self.backend)  # a clear error before the teacher is loaded
+        if not 0 <= self.joint_calibration_rad < 0.5:
+            raise ValueError("--joint_calibration_rad is a reading offset in rad, >= 0 and well under a joint's range")
         if self.checkpoint_s < 0:
             raise ValueError("--checkpoint_s must be >= 0 (0: finalize only at the end)")
         if not self.curation.enabled and self.curation.trim_to_success:

@@ -18,6 +18,7 @@ A process killed without any handler (SIGKILL, a power cut) loses at most the ep
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 
@@ -105,7 +106,7 @@ def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: st
         reward_cfg = rewards.RewardConfig.from_record(teacher.config["reward"])
     except (KeyError, TypeError) as e:
         raise CollectError(f"teacher config has no usable reward settings: {e}") from None
-    dr = randomization.EVAL_DR
+    dr = dataclasses.replace(randomization.EVAL_DR, joint_calibration_rad=cfg.joint_calibration_rad)
     ds, prov, tally = records.open_dataset(cfg, records.new_provenance(cfg, teacher, object_names, dr))
 
     target, budget = cfg.episodes_per_object, cfg.rollout_budget

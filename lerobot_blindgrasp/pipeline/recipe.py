@@ -63,6 +63,8 @@ def collect(p: presets.Preset, teacher: Path, root: Path, repo_id: str, first_se
            f"--episodes_per_object={d.episodes_per_object}",
            f"--max_rollouts_per_object={d.max_rollouts_per_object}",
            f"--num_envs={d.num_envs}", f"--seed={first_seed}", "--progress=false"]
+    if d.joint_calibration_rad:
+        cmd.append(f"--joint_calibration_rad={d.joint_calibration_rad}")
     if not stochastic:
         cmd.append("--stochastic=false")
     if not curate:

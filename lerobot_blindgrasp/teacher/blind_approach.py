@@ -1,14 +1,32 @@
-"""The blind-approach teacher's actor input: the privileged vector with the object's state hidden until a touch.
+"""The blind-approach teacher's actor input: the privileged vector with what the student cannot know hidden.
 
 The student cannot see where the object stands, nor which object it is, before a fingertip touches it. A teacher
-that steers its approach by those asks its student for actions that depend on what it never observes. The `cpu_bc_blind_approach` teacher's actor therefore reads the observation group
-`privileged_blind`: the privileged vector with the object's pose, velocities and planar distance set to 0 while no
-fingertip load cell reads above `TOUCH_N`. Its critic reads the full vector (asymmetric actor-critic).
-The trigger is the student's own uniaxial reading, so the teacher learns of the object exactly when the student
-could. Stateless: a lost contact hides the object again.
+that steers its approach by those asks its student for actions that depend on what it never observes. A
+blind-approach teacher's actor therefore reads the observation group `privileged_blind`: the privileged vector with
+the object's pose, velocities and planar distance set to 0 until a fingertip load cell has read above `TOUCH_N`. Its
+critic reads the full vector (asymmetric actor-critic). The trigger is the student's own uniaxial reading, so the
+teacher learns of the object when the student could.
+
+Two later teachers hide more (`ActorInput`, stored as "actor_input" in their teacher_config.json):
+- `reveal_delay_steps`: the object appears only once a load cell has read a touch for more than that many
+  consecutive control steps. At 0 (the first blind teacher) it appears at the touch; a lost contact hides it again.
+  A later reveal keeps the teacher's first touching steps independent of which object it is, as the student's are.
+- `fingertips_from_joints`: the fingertip positions and orientations are the forward kinematics of the *measured*
+  joint angles, not the true poses. Under a joint calibration offset the true poses would tell the teacher what
+  the student can never compute; the kinematics of the readings are exactly what it could.
+
+`BlindGroup` computes the group for one batch of envs. It keeps a count of touching steps per env, so one instance
+belongs to one env batch: the rsl-rl adapter and each `TeacherPolicy` own theirs. An episode's start is recognised
+by the privileged previous action being exactly 0 on all 9 joints: the env zeroes it on every reset (and writes each
+action into it one observation late, so an episode's first two observations carry 0), and an action drawn from a
+policy is never exactly 0 on all of them. The fingers start clear of the object, so a count restarted on the second
+observation too loses nothing. That works unchanged in every loop that auto-resets or rebuilds its envs without
+telling the policy (training, demo collection, evaluation); the tests check it against the env's own resets.
 """
 
 from __future__ import annotations
+
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -18,15 +36,31 @@ GROUP = "privileged_blind"  # the observation group (rsl-rl obs_groups) of the m
 HIDDEN = ("object_pos", "object_quat", "object_linvel", "object_angvel", "object_planar_distance")
 TOUCH_N = 2.0  # 4 sigma of the load cells' 0.5 N noise (spec.FORCE_NOISE_STD_N): above it, a touch
 _UNIAXIAL = spec.PRIVILEGED_SLICES["uniaxial_force"]
+_PREVIOUS_ACTION = spec.PRIVILEGED_SLICES["previous_action"]
+_JOINTS = spec.PRIVILEGED_SLICES["joint_pos"]
+_TIP_POS = spec.PRIVILEGED_SLICES["fingertip_pos"]
+_TIP_QUAT = spec.PRIVILEGED_SLICES["fingertip_quat"]
 _HIDDEN_COLUMNS = np.concatenate([np.arange(spec.PRIVILEGED_DIM)[spec.PRIVILEGED_SLICES[n]] for n in HIDDEN])
 
 
-def mask_before_touch(priv: np.ndarray) -> np.ndarray:
-    """(n, PRIVILEGED_DIM) rows with the HIDDEN parts at 0 where no load cell reads above TOUCH_N (a copy)."""
-    priv = np.array(priv, copy=True)
-    blind = (priv[:, _UNIAXIAL] < TOUCH_N).all(axis=1)
-    priv[np.ix_(blind, _HIDDEN_COLUMNS)] = 0.0
-    return priv
+@dataclass(frozen=True)
+class ActorInput:
+    """What a blind-approach teacher's actor is denied beyond the object before a touch (module docstring)."""
+
+    reveal_delay_steps: int = 0  # control steps of touch before the object is revealed (0: at the touch)
+    fingertips_from_joints: bool = False  # fingertip poses from the measured joints' kinematics, not the true ones
+
+    def __post_init__(self):
+        if self.reveal_delay_steps < 0:
+            raise ValueError(f"reveal_delay_steps must be >= 0, got {self.reveal_delay_steps}")
+
+    def as_record(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_record(cls, record: dict | None) -> ActorInput:
+        """From teacher_config.json's "actor_input" (absent in teachers made before it: the first blind teacher)."""
+        return cls(**(record or {}))
 
 
 def reads_blind_group(obs_groups: dict[str, list[str]]) -> bool:
@@ -34,6 +68,76 @@ def reads_blind_group(obs_groups: dict[str, list[str]]) -> bool:
     return any(GROUP in groups for groups in obs_groups.values())
 
 
-def with_blind_group(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """`obs` plus the GROUP entry computed from its "privileged" one."""
-    return {**obs, GROUP: mask_before_touch(obs["privileged"])}
+def first_steps(priv: np.ndarray) -> np.ndarray:
+    """(n,) bool: the rows that are one of an episode's first two observations (previous action exactly 0; module
+    docstring)."""
+    return (priv[:, _PREVIOUS_ACTION] == 0.0).all(axis=1)
+
+
+class MeasuredKinematics:
+    """Fingertip site poses in the world frame, as the env's framepos/framequat sensors give them, computed from the
+    joint angles in a privileged vector (the measured ones) with MuJoCo's own kinematics.
+
+    One MjData stepped through the batch, 20-30 us an env: MuJoCo has no batched kinematics call in Python, and
+    a hand-written numpy chain would be a second model of the finger to keep in sync with the MJCF.
+    """
+
+    def __init__(self):
+        import mujoco
+
+        from lerobot_blindgrasp.sim import gripper, objects
+
+        self._mj = mujoco
+        # Any object will do: only the fingers' kinematic chain is read.
+        obj = objects.object_mjcf(objects.get_object("sphere_small"), gripper.OBJECT_CONTYPE, gripper.OBJECT_CONAFFINITY)
+        self._m = gripper.compile_model(obj)
+        self._d = mujoco.MjData(self._m)
+        self._sites = [mujoco.mj_name2id(self._m, mujoco.mjtObj.mjOBJ_SITE, f"{f}_tipsite") for f in spec.FINGERS]
+        self._bodies = [int(self._m.site_bodyid[s]) for s in self._sites]
+
+    def __call__(self, priv: np.ndarray) -> np.ndarray:
+        """`priv` with its fingertip_pos and fingertip_quat replaced by the kinematics of its joint_pos (a copy)."""
+        out = np.array(priv, copy=True)
+        pos = np.empty((len(priv), len(self._sites), 3))
+        quat = np.empty((len(priv), len(self._sites), 4))
+        for i, q in enumerate(priv[:, _JOINTS]):
+            self._d.qpos[: spec.NUM_JOINTS] = q
+            self._mj.mj_kinematics(self._m, self._d)
+            for k, (s, b) in enumerate(zip(self._sites, self._bodies)):
+                pos[i, k] = self._d.site_xpos[s]
+                # as MuJoCo's framequat sensor computes it (same sign): the body's orientation times the site's own
+                self._mj.mju_mulQuat(quat[i, k], self._d.xquat[b], self._m.site_quat[s])
+        out[:, _TIP_POS] = pos.reshape(len(priv), -1)
+        out[:, _TIP_QUAT] = quat.reshape(len(priv), -1)
+        return out
+
+
+class BlindGroup:
+    """GROUP for one batch of envs under one `ActorInput`: call it on each step's observation dict."""
+
+    def __init__(self, actor_input: ActorInput = ActorInput()):
+        self.actor_input = actor_input
+        self._kinematics = MeasuredKinematics() if actor_input.fingertips_from_joints else None
+        self._touching: np.ndarray | None = None  # consecutive control steps with a touch, per env
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # (privileged in, GROUP out) of the last step
+
+    def mask(self, priv: np.ndarray) -> np.ndarray:
+        """The GROUP rows of one step's privileged rows (advances the per-env touch counts once per step)."""
+        if self._last is not None and np.array_equal(priv, self._last[0]):
+            return self._last[1].copy()  # the same step asked for twice (e.g. mean and sample): count it once
+        if self._touching is None or len(self._touching) != len(priv):
+            self._touching = np.zeros(len(priv), dtype=int)  # a new batch of envs
+        self._touching[first_steps(priv)] = 0
+        touched = (priv[:, _UNIAXIAL] >= TOUCH_N).any(axis=1)
+        self._touching = np.where(touched, self._touching + 1, 0)
+        out = np.array(priv, copy=True)
+        out[np.ix_(self._touching <= self.actor_input.reveal_delay_steps, _HIDDEN_COLUMNS)] = 0.0
+        if self._kinematics is not None:
+            out = self._kinematics(out)
+        self._last = (np.array(priv, copy=True), out)
+        return out.copy()
+
+    def __call__(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """`obs` plus the GROUP entry computed from its "privileged" one."""
+        return {**obs, GROUP: self.mask(obs["privileged"])}
+

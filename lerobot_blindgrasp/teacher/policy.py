@@ -138,7 +138,11 @@ def load_actor_state(ckpt: Path) -> tuple[dict[str, torch.Tensor], int | None]:
 
 
 class TeacherPolicy:
-    """Numpy-in, numpy-out teacher: obs dict (N, ...) -> delta-theta actions (N, 9)."""
+    """Numpy-in, numpy-out teacher: obs dict (N, ...) -> delta-theta actions (N, 9).
+
+    A blind-approach teacher keeps per-env state (touch counts) for the batch it steps: one instance per env batch,
+    called once per control step (a repeated call on the same observation does not advance it).
+    """
 
     def __init__(self, checkpoint: str | Path, device: str = "cpu"):
         self.checkpoint = resolve_checkpoint(checkpoint)
@@ -167,7 +171,11 @@ class TeacherPolicy:
                 f"{self.checkpoint} does not fit its config or this observation layout ({first})"
             ) from None
         self.actor.to(device).eval()
-        self._blind = blind_approach.reads_blind_group({"actor": self.obs_groups["actor"]})
+        # A blind-approach teacher computes its actor's group itself from the env's "privileged" vector, with the
+        # per-env touch counts of the batch it is stepping (blind_approach.BlindGroup).
+        self.actor_input = blind_approach.ActorInput.from_record(self.config.get("actor_input"))
+        self._blind = (blind_approach.BlindGroup(self.actor_input)
+                       if blind_approach.reads_blind_group({"actor": self.obs_groups["actor"]}) else None)
         self.device = device
         weights = self.config.get("weights", {})
         self.iteration = iteration if iteration is not None else int(weights.get("iteration", -1))
@@ -185,8 +193,8 @@ class TeacherPolicy:
 
     @torch.inference_mode()
     def __call__(self, obs: dict[str, np.ndarray], stochastic: bool = False) -> np.ndarray:
-        if self._blind and blind_approach.GROUP not in obs:
-            obs = blind_approach.with_blind_group(obs)  # a blind-approach teacher: the env gives "privileged"
+        if self._blind is not None and blind_approach.GROUP not in obs:
+            obs = self._blind(obs)  # a blind-approach teacher: the env gives "privileged"
         n = next(iter(obs.values())).shape[0]
         td = TensorDict({k: torch.from_numpy(np.asarray(v)).to(self.device) for k, v in obs.items()}, batch_size=[n])
         return self.actor(td, stochastic_output=stochastic).cpu().numpy().astype(np.float64)

@@ -41,12 +41,16 @@ from lerobot_blindgrasp.teacher.policy import CONFIG_NAME, latest_checkpoint, ob
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
 log = logging.getLogger("blindgrasp.teacher")
+# teacher_config.json keys added after runs were made, with the value those runs had
+_DEFAULTS = {"actor_input": blind_approach.ActorInput().as_record(), "joint_calibration_rad": 0.0}
 
 
 def build_env_config(
     preset: presets.TeacherPreset, num_envs: int, seed: int, nthread: int = 0, backend: str = "batch"
 ) -> GraspEnvConfig:
     dr = randomization.PAPER_DR if preset.external_force else randomization.EVAL_DR
+    if preset.joint_calibration_rad:
+        dr = dataclasses.replace(dr, joint_calibration_rad=preset.joint_calibration_rad)
     return GraspEnvConfig(
         num_envs=num_envs,
         seed=seed,
@@ -118,6 +122,8 @@ def train(cfg: TrainTeacherConfig) -> Path:
         "reward": preset.reward.as_record(),
         "external_force": preset.external_force,
         "object_weights": preset.object_weights and list(preset.object_weights),
+        "actor_input": preset.actor_input.as_record(),
+        "joint_calibration_rad": preset.joint_calibration_rad,
         "deviations": list(preset.deviations),
         # Lets a loader refuse this checkpoint once spec.PRIVILEGED_LAYOUT changes.
         "observation_layout": observation_layout(),
@@ -126,8 +132,10 @@ def train(cfg: TrainTeacherConfig) -> Path:
     cfg_path = out / CONFIG_NAME
     if cfg_path.exists():
         old = json.loads(cfg_path.read_text())
-        for key in ("preset", "variant", "num_envs", "runner", "reward", "object_weights"):
-            if old.get(key) != config[key]:
+        for key in ("preset", "variant", "num_envs", "runner", "reward", "object_weights", "actor_input",
+                    "joint_calibration_rad"):
+            # runs made before a key existed had its default
+            if old.get(key, _DEFAULTS.get(key)) != config[key]:
                 raise SystemExit(f"{out} holds a run with a different {key!r}; use another --output_dir")
     elif lead:
         durable.atomic_write_json(cfg_path, config, indent=2)
@@ -142,8 +150,8 @@ def train(cfg: TrainTeacherConfig) -> Path:
         if counter["steps"] % steps_per_it == 0:
             bar.update(1)
 
-    vec = RslRlGraspEnv(env, device=device, on_step=tick,
-                        blind_group=blind_approach.reads_blind_group(preset.runner["obs_groups"]))
+    reads_blind = blind_approach.reads_blind_group(preset.runner["obs_groups"])
+    vec = RslRlGraspEnv(env, device=device, on_step=tick, blind_group=preset.actor_input if reads_blind else None)
     runner = distributed.runner_class(device)(vec, preset.runner_cfg(), log_dir=str(out), device=device)
     runner.alg.update = with_torch_threads(runner.alg.update, update_thread_count(cfg, env))
     runner.save = atomic_save(runner.save)

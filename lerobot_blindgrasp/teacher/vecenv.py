@@ -2,7 +2,7 @@
 
 Observation groups (TensorDict): "policy" = the student's 12-d o_t, "privileged" = the teacher's 92-d vector,
 "privileged_blind" = that vector with the object hidden until a touch (`teacher/blind_approach.py`; computed only
-when `blind_group` is set, i.e. when a preset's obs_groups read it). Presets pick which group the actor and critic read (`obs_groups`). The env auto-resets inside `step`.
+when `blind_group` is given, i.e. when a preset's obs_groups read it, under that preset's `ActorInput`). Presets pick which group the actor and critic read (`obs_groups`). The env auto-resets inside `step`.
 extras["time_outs"] marks truncations (PPO bootstraps them); extras["log"] carries, for the episodes that ended
 this step, each reward term (weighted, per second of episode), success overall and per object, and termination
 reasons. rsl-rl averages these over an iteration and writes them to TensorBoard.
@@ -17,13 +17,13 @@ from tensordict import TensorDict
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv
-from lerobot_blindgrasp.teacher.blind_approach import with_blind_group
+from lerobot_blindgrasp.teacher.blind_approach import ActorInput, BlindGroup
 
 
 class RslRlGraspEnv(VecEnv):
-    def __init__(self, env: BatchedGraspEnv, device: str = "cpu", on_step=None, blind_group: bool = False):
+    def __init__(self, env: BatchedGraspEnv, device: str = "cpu", on_step=None, blind_group: ActorInput | None = None):
         self.env = env
-        self._blind_group = blind_group
+        self._blind_group = None if blind_group is None else BlindGroup(blind_group)
         self.num_envs = env.num_envs
         self.num_actions = spec.NUM_JOINTS
         self.max_episode_length = env.max_episode_steps
@@ -48,8 +48,8 @@ class RslRlGraspEnv(VecEnv):
         self.env.episode_length[:] = value.cpu().numpy()
 
     def _to_td(self, obs: dict[str, np.ndarray]) -> TensorDict:
-        if self._blind_group:
-            obs = with_blind_group(obs)
+        if self._blind_group is not None:
+            obs = self._blind_group(obs)
         return TensorDict(
             {k: torch.from_numpy(v).to(self.device) for k, v in obs.items()},
             batch_size=[self.num_envs],

@@ -14,6 +14,14 @@ or reset without telling the policy.
     python delayed_reveal.py train OUT_DIR START.pt ITERATIONS DELAY [ARGS]   PPO fine-tune from a blind teacher run
     python delayed_reveal.py collect DELAY <blindgrasp-collect-demos arguments>
 """
+
+# Recorded experiment code: it patches the package's stateless mask of commit 1409010, which the package has since
+# replaced by this very recipe (teacher preset cpu_bc_blind_reveal6 (blind_approach.ActorInput(reveal_delay_steps=6))). Re-run it as recorded from that commit (`git checkout 1409010`).
+from lerobot_blindgrasp.teacher import blind_approach as _pkg  # noqa: E402
+
+if not hasattr(_pkg, "with_blind_group"):
+    raise SystemExit(f"{__file__} ran at commit 1409010; the package now does this: teacher preset cpu_bc_blind_reveal6 (blind_approach.ActorInput(reveal_delay_steps=6))")
+
 import shutil
 import sys
 from pathlib import Path

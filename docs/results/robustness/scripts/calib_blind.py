@@ -12,6 +12,14 @@ works whatever the offset. The object reveal is delayed_reveal.py's (DELAY steps
     python calib_blind.py eval TEACHER CAL DELAY OBJECTS OUT.json          the teacher under +-CAL rad
     python calib_blind.py collect CAL DELAY <blindgrasp-collect-demos arguments>   demos under +-CAL rad
 """
+
+# Recorded experiment code: it patches the package's stateless mask of commit 1409010, which the package has since
+# replaced by this very recipe (teacher preset cpu_bc_calib_blind and blindgrasp-collect-demos --joint_calibration_rad). Re-run it as recorded from that commit (`git checkout 1409010`).
+from lerobot_blindgrasp.teacher import blind_approach as _pkg  # noqa: E402
+
+if not hasattr(_pkg, "with_blind_group"):
+    raise SystemExit(f"{__file__} ran at commit 1409010; the package now does this: teacher preset cpu_bc_calib_blind and blindgrasp-collect-demos --joint_calibration_rad")
+
 import dataclasses
 import sys
 from pathlib import Path
