@@ -107,8 +107,8 @@ def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_pa
     assert path == folder and about["source"] == "shipped" and about["preset"] == b.teacher.settings.name
     assert pipeline._teacher(pipeline.Stage(tmp_path, {}), q, tmp_path, 1, given=None)[0].name == "teacher_cpu_bc"
     cmd, sched = recipe.student_train(b, tmp_path / "demos", "local/x", tmp_path / "student", seed=1)
-    assert (sched.steps, sched.constant_lr_steps) == (800, 400)
-    assert {"--steps=800", "--policy.scheduler_constant_steps=400", "--policy.optimizer_lr=0.0005"} <= set(cmd)
+    assert (sched.steps, sched.constant_lr_steps) == (700, 350)
+    assert {"--steps=700", "--policy.scheduler_constant_steps=350", "--policy.optimizer_lr=0.0005"} <= set(cmd)
     quick_cmd = recipe.student_train(q, tmp_path, "x", tmp_path, 1)[0]
     assert "--num_workers=2" in cmd and "--num_workers=1" in quick_cmd
     assert not any(c.startswith("--policy.optimizer_lr") for c in quick_cmd)
