@@ -92,7 +92,11 @@ PRIVILEGED_LAYOUT: tuple[tuple[str, int], ...] = (
     ("object_planar_distance", 1),  # d_xy, eq. 2
     ("uniaxial_force", NUM_FORCES),  # the student's force reading: noise, then the deadband
     ("fingertip_wrench", 6 * NUM_FORCES),  # force + torque at each tip's load cell, tip frame, with noise
-    ("previous_action", NUM_JOINTS),  # a_{t-1}, delta-theta (rad), after the +-0.3 rad clip
+    # Meant as a_{t-1}, delta-theta (rad), after the +-0.3 rad clip. The env writes each action into it one
+    # observation late (BatchedGraspEnv.step observes before it stores the action), so o_t carries a_{t-2} and an
+    # episode's first two observations carry 0. Every shipped teacher was trained on it so; fixing it means
+    # retraining them.
+    ("previous_action", NUM_JOINTS),
 )
 PRIVILEGED_DIM = sum(n for _, n in PRIVILEGED_LAYOUT)  # 92 (the paper reports 95 without a breakdown)
 

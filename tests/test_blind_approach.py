@@ -123,7 +123,7 @@ def test_blind_preset_continues_the_shipped_teachers_run_with_an_asymmetric_acto
 def test_blind_presets_chain_reveal6_then_calibration_blind():
     r6, cal = presets.get_preset("cpu_bc_blind_reveal6"), presets.get_preset("cpu_bc_calib_blind")
     assert r6.continues == (presets.CPU_BC_BLIND_APPROACH.name, presets.CPU_BC_BLIND_APPROACH.max_iterations)
-    assert cal.continues == (r6.name, r6.max_iterations) and (r6.max_iterations, cal.max_iterations) == (2550, 2700)
+    assert cal.continues == (r6.name, r6.max_iterations) and (r6.max_iterations, cal.max_iterations) == (2550, 2950)
     assert r6.actor_input == blind_approach.ActorInput(reveal_delay_steps=6) and r6.joint_calibration_rad == 0
     assert cal.actor_input == blind_approach.ActorInput(reveal_delay_steps=6, fingertips_from_joints=True)
     assert cal.joint_calibration_rad == 0.05 and presets.CPU_BC_BLIND_APPROACH.actor_input == blind_approach.ActorInput()
