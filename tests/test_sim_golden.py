@@ -86,17 +86,6 @@ def _compute() -> dict:
                                    for i, n in enumerate(EVAL_OBJECTS)}}
 
 
-def _compute_in_a_fresh_process() -> dict:
-    """`compute()` in a new interpreter. In the full suite the same process gave other training digests than alone
-    (every success equal): the last bits of the teacher's matrix products depend on state earlier tests leave in
-    the process (allocations, kernels picked), and the contact-rich training rollout amplifies them."""
-    import subprocess
-
-    out = subprocess.run([sys.executable, __file__, "--print"], check=True, capture_output=True, text=True,
-                         timeout=600, cwd=ROOT)
-    return json.loads(out.stdout.strip().splitlines()[-1])
-
-
 def _cpu() -> str:
     """The CPU model: MuJoCo's floats differ in the last bits between CPU families (the same code gave other
     digests on an AMD EPYC than on the machine of the first record, with every success and `done` equal)."""
@@ -114,7 +103,7 @@ def test_the_shipped_teacher_sees_the_same_simulation_bit_for_bit():
     `python tests/test_sim_golden.py --record-platform` on a machine whose floats differ, only after checking that
     the code is the recorded one); the successes must match on every machine."""
     golden = json.loads(GOLDEN.read_text())
-    got = _compute_in_a_fresh_process()
+    got = compute()
     assert got["evaluation_success"] == golden["evaluation_success"]
     records = [golden, *golden.get("other_platforms", [])]
     misses = []
@@ -150,5 +139,3 @@ elif __name__ == "__main__" and "--record-platform" in sys.argv:
         {"cpu": _cpu(), "evaluation": got["evaluation"], "training": got["training"]})
     atomic_write_text(GOLDEN, json.dumps(golden, indent=1) + "\n")
     print("added", _cpu(), "to", GOLDEN)
-elif __name__ == "__main__" and "--print" in sys.argv:
-    print(json.dumps(compute()))
