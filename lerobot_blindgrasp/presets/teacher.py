@@ -204,7 +204,7 @@ CPU_BC_BLIND_APPROACH = replace(
 # Beyond the paper: the blind-approach teacher with the object revealed only after 6 control steps (0.3 s) of touch.
 # Its student could tell the small capsule from the small sphere only a step after the touch, while the teacher
 # acted on the object at once. 200 PPO iterations from cpu_bc_blind_approach's last (2349): held out 95.3 % over the
-# 18 objects, small capsule 18/20 (docs/results/student_gap.md, "A teacher that reveals the object later").
+# 18 objects, small capsule 18/20 (`blindgrasp-eval-teacher`, 20 start states per object).
 CPU_BC_BLIND_REVEAL6 = replace(
     CPU_BC_BLIND_APPROACH,
     name="cpu_bc_blind_reveal6",
@@ -222,8 +222,8 @@ CPU_BC_BLIND_REVEAL6 = replace(
 # corrections for a calibration offset are ones the blind student can observe and copy. 400 iterations from
 # cpu_bc_blind_reveal6's last (2549). At 150 (2699): 93.3 % nominal, 90.3 % under the offset, training success
 # still rising; at 400 (2949): 96.4 % nominal, 91.1 % under the offset, and its student holds 92.2 % under it on
-# held-out start states where the blind-approach teacher's held 83.1 % (docs/results/robustness.md, "Fifth" and
-# "Sixth side-by-side"). Shipped as models/teacher_cpu_bc_calib.
+# held-out start states where the blind-approach teacher's held 83.1 % (`blindgrasp-robustness`, seed 2000).
+# Shipped as models/teacher_cpu_bc_calib; the teacher's card has the runs.
 CPU_BC_CALIB_BLIND = replace(
     CPU_BC_BLIND_REVEAL6,
     name="cpu_bc_calib_blind",
