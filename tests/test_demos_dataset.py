@@ -248,3 +248,28 @@ def test_demo_diversity_command_line(written, capsys):
     main([f"--datasets=[{root}]"])  # no label: the root names the row; default time 3 s
     out = capsys.readouterr().out
     assert "spread at 3 s" in out and f"| {root} | 6 |" in out
+
+
+def test_merged_demos_stay_mergeable_when_a_source_has_two_episode_files(written, tmp_path):
+    """demo_dataset.aggregate: a resumed collection keeps its episode rows in two meta/episodes files. LeRobot's
+    aggregate_datasets alone then leaves rows naming a file that does not exist, and merging the result again (a
+    DAgger round on targeted demos) fails; after `aggregate` every row names its own file and the re-merge loads."""
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    root, episodes, cuts = written
+    two = tmp_path / "two"
+    shutil.copytree(root, two)
+    ds = demo_dataset.resume(two, "test/sim")  # what a resumed collection does: a second episodes file
+    demo_dataset.write_episode(ds, episodes[0], cuts[0])
+    ds.finalize()
+    assert len(list((two / "meta" / "episodes").glob("chunk-*/file-*.parquet"))) == 2
+    demo_dataset.aggregate(["test/sim", "test/two"], [root, two], "test/merged", tmp_path / "merged")
+    for f in (tmp_path / "merged" / "meta" / "episodes").glob("chunk-*/file-*.parquet"):
+        assert set(pq.read_table(f)["meta/episodes/file_index"].to_pylist()) == {int(f.stem[5:])}
+    demo_dataset.aggregate(["test/merged", "test/sim"], [tmp_path / "merged", root], "test/again", tmp_path / "again")
+    again = LeRobotDataset("test/again", root=tmp_path / "again", video_backend="pyav")
+    assert again.num_episodes == 6 + 7 + 6
+    table = demo_dataset.episode_table(tmp_path / "again")
+    assert table["env_seed"].tolist() == [e.env_seed for e in (*episodes, *episodes, episodes[0], *episodes)]

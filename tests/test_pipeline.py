@@ -29,6 +29,19 @@ def test_smoke_pipeline_runs_every_stage_and_writes_the_report(tmp_path):
     assert f"--seed={spec.EVAL_SEED}" in record["stages"]["teacher_eval"]["command"]
     assert f"--seed={spec.EVAL_SEED}" in record["stages"]["student_eval"]["command"]
     assert "--policy.device=cpu" in record["stages"]["student"]["command"]
+    # The targeted extra demos: their own collection of the one object, merged with the demos by LeRobot, and the
+    # student trained on the merge; DAgger drives only that object.
+    # The tiny teacher curates too few episodes, so the student trains on the uncurated set and its extras.
+    base = "demos_uncurated" if "uncurated" in record["student_dataset"] else "demos"
+    assert "--objects=cylinder_a_medium" in record["stages"][f"{base}_cylinder_a_medium"]["command"]
+    assert f"--dataset.root={out / f'{base}_targeted'}" in record["stages"]["student"]["command"]
+    assert "--objects=cylinder_a_medium" in record["stages"]["dagger_1"]["command"]
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    kept = [json.loads((out / d / "yield_report.json").read_text())["total"]["kept"]
+            for d in (base, f"{base}_cylinder_a_medium")]
+    merged = LeRobotDataset("local/m", root=out / f"{base}_targeted")
+    assert merged.num_episodes == sum(kept) and kept[1] >= 1
     report = (out / "report.md").read_text()
     assert "trained from scratch in this run" in report  # the smoke preset says which teacher it used
     # One row per evaluated object: rate, Wilson interval and counts for teacher and student, and the pairing.

@@ -25,7 +25,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_every_entry_is_complete():
-    assert set(presets.PRESETS) == {"smoke", "quick", "cpu", "paper", "quick_dagger", "cpu_dagger", "quick_blind"}
+    assert set(presets.PRESETS) == {"smoke", "quick", "cpu", "paper", "quick_dagger", "cpu_dagger", "quick_blind",
+                                    "quick_blind_targeted"}
     for name, p in presets.PRESETS.items():
         assert p.name == name
         for part in (p.teacher, p.demos, p.student, p.evaluation):
@@ -39,6 +40,10 @@ def test_every_entry_is_complete():
         assert p.demos.max_rollouts_per_object >= p.demos.episodes_per_object
         assert p.evaluation.episodes_per_object >= (20 if name != "smoke" else 1)  # the evaluation protocol
         assert recipe.objects_of(p.evaluation.task)
+        for obj, _ in p.demos.extra_episodes:
+            assert recipe.objects_of(obj) == (obj,), name
+        if p.dagger is not None:
+            assert recipe.objects_of(p.dagger.objects), name
         assert p.all_deviations and all(isinstance(d, str) and d for d in p.all_deviations), name
 
 
@@ -116,6 +121,43 @@ def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_pa
         presets.StudentStage(size="cpu", batch_size=8, epochs=2, constant_lr_steps=3)
     with pytest.raises(ValueError, match="must be > 0"):
         presets.StudentStage(size="cpu", batch_size=8, steps=2, lr=0.0)
+
+
+def test_the_shipped_students_preset_aims_demos_and_dagger_at_the_small_capsule(tmp_path):
+    """quick_blind_targeted: quick_blind with the 1200-step student, 240 more small-capsule demos from their own
+    start states, and DAgger on the small capsule only; every word of it says beyond the paper."""
+    b, t = presets.PRESETS["quick_blind"], presets.PRESETS["quick_blind_targeted"]
+    assert t.teacher == b.teacher and t.evaluation == b.evaluation
+    assert t.demos == dataclasses.replace(b.demos, extra_episodes=(("capsule_small", 240),))
+    assert t.dagger == presets.DaggerStage(episodes_per_object=80, steps=1200, num_envs=80, objects="capsule_small")
+    words = t.student_recipe
+    assert words.startswith("beyond the paper") and "240 more curated episodes of capsule_small" in words
+    assert "80 student episodes of capsule_small" in words and "approaches blind" in words
+    assert sum(d.startswith("beyond the paper") for d in t.deviations) == 4
+    assert not any(d.startswith("700 steps") for d in t.deviations)
+    cmd = recipe.student_train(t, tmp_path, "x", tmp_path, 1)[0]
+    assert {"--steps=1200", "--policy.scheduler_constant_steps=600", "--policy.optimizer_lr=0.0005"} <= set(cmd)
+    # The extra collection: one object, the collector's default budget, start states of its own.
+    teacher = tmp_path / "teacher"
+    extra = recipe.collect(t, teacher, tmp_path / "e", "x/e", recipe.extra_demo_seed(1, 0), extra=("capsule_small", 240))
+    assert {"--objects=capsule_small", "--episodes_per_object=240", "--max_rollouts_per_object=4800",
+            "--joint_calibration_rad=0.05"} <= set(extra)
+    main = recipe.collect(t, teacher, tmp_path / "d", "x/d", recipe.demo_seed(1))
+    assert not any(c.startswith("--objects") for c in main) and "--episodes_per_object=40" in main
+    starts = [recipe.demo_seed(1), recipe.extra_demo_seed(1, 0), recipe.extra_demo_seed(1, 3),
+              recipe.demo_seed(1) + recipe.DEMO_SEED_BLOCK // 2, recipe.extra_demo_seed(1, 0, curated=False),
+              recipe.extra_demo_seed(1, 3, curated=False), recipe.demo_seed(2)]
+    # Each block holds its whole rollout budget, so no two collections share a start state.
+    assert all(b - a >= 4800 for a, b in zip(starts, starts[1:]))
+    with pytest.raises(ValueError, match="at most 4"):
+        recipe.extra_demo_seed(1, 4)
+    dag = recipe.dagger(t, tmp_path / "s", teacher, tmp_path / "d", tmp_path / "g", 5)
+    assert {"--objects=capsule_small", "--episodes_per_object=80", "--num_envs=80"} <= set(dag)
+    assert "--objects=all" in recipe.dagger(presets.PRESETS["quick_dagger"], tmp_path, teacher, tmp_path, tmp_path, 5)
+    with pytest.raises(ValueError, match="at least one episode"):
+        dataclasses.replace(t.demos, extra_episodes=(("capsule_small", 0),))
+    with pytest.raises(ValueError, match="twice"):
+        dataclasses.replace(t.demos, extra_episodes=(("capsule_small", 1), ("capsule_small", 2)))
 
 
 # The one recorded run that is not resumable: its object allocation was tried under the `cpu` name and not kept

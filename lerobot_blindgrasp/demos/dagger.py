@@ -118,8 +118,6 @@ def relabelled_episodes(act_student, reset_student, teacher, names: list[str], s
 
 
 def run(cfg: DaggerConfig) -> dict:
-    from lerobot.datasets.aggregate import aggregate_datasets
-
     from lerobot_blindgrasp.analysis.student_diagnosis import load_student, student_actor
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
@@ -156,8 +154,8 @@ def run(cfg: DaggerConfig) -> dict:
     finally:
         bar.close()
         ds.finalize()
-    aggregate_datasets([_repo_id(cfg.demos), cfg.repo_id + "_relabelled"], cfg.repo_id,
-                       roots=[cfg.demos, out / "relabelled"], aggr_root=out / "aggregate")
+    demo_dataset.aggregate([_repo_id(cfg.demos), cfg.repo_id + "_relabelled"], [cfg.demos, out / "relabelled"],
+                           cfg.repo_id, out / "aggregate")
     record = {
         "student": str(cfg.student), "teacher": str(teacher.checkpoint), "teacher_sha256": teacher.sha256,
         "demos": str(cfg.demos), "episodes_per_object": cfg.episodes_per_object, "first_env_seed": cfg.seed,

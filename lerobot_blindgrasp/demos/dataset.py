@@ -229,3 +229,32 @@ def episode_table(root: str | Path):
         if flag in out:
             out[flag] = out[flag] > 0.5
     return out.reset_index(drop=True)
+
+
+def aggregate(repo_ids: list[str], roots: list[Path], repo_id: str, dest: Path) -> None:
+    """Merge datasets into `dest` with LeRobot's `aggregate_datasets`, and leave it mergeable again.
+
+    Hand-written around LeRobot 0.6.1: `aggregate_datasets` appends every source's episode rows to the destination's
+    current meta/episodes file but offsets each row's `meta/episodes/{chunk,file}_index` from the source's own. A
+    source with more than one episodes file (the collector writes one per checkpoint) so leaves rows naming a file
+    that does not exist. Training reads every file and does not notice; the next merge of the result (a DAgger
+    round on targeted demos) fails with FileNotFoundError. Each row is set to the file that holds it.
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from lerobot.datasets.aggregate import aggregate_datasets
+
+    from lerobot_blindgrasp import durable
+
+    aggregate_datasets(list(repo_ids), repo_id, roots=[Path(r) for r in roots], aggr_root=Path(dest))
+    for f in sorted(Path(dest, "meta", "episodes").glob("chunk-*/file-*.parquet")):
+        table = pq.read_table(f)  # pyarrow, not pandas: the rest of the schema goes back unchanged
+        where = {"chunk_index": int(f.parent.name.removeprefix("chunk-")), "file_index": int(f.stem.removeprefix("file-"))}
+        if all(set(table[f"meta/episodes/{k}"].to_pylist()) == {v} for k, v in where.items()):
+            continue
+        for k, v in where.items():
+            col = f"meta/episodes/{k}"
+            table = table.set_column(table.schema.get_field_index(col), table.schema.field(col),
+                                     pa.array([v] * table.num_rows, table.schema.field(col).type))
+        with durable.atomic_path(f) as tmp:
+            pq.write_table(table, tmp)

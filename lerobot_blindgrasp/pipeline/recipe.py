@@ -26,6 +26,15 @@ def demo_seed(seed: int) -> int:
     return spec.DEMO_SEED + seed * DEMO_SEED_BLOCK
 
 
+def extra_demo_seed(seed: int, k: int, curated: bool = True) -> int:
+    """First env seed of the k-th (0-based) extra collection of `DemoStage.extra_episodes`, 2^20 env seeds each: the
+    second quarter of the pipeline seed's demo block, or its fourth for the uncurated fallback's extras (the
+    fallback itself starts at the block's half)."""
+    if not 0 <= k < 4:
+        raise ValueError(f"at most 4 objects get extra episodes, not {k + 1}")
+    return demo_seed(seed) + (1 if curated else 3) * DEMO_SEED_BLOCK // 4 + k * (DEMO_SEED_BLOCK // 16)
+
+
 def objects_of(task: str) -> tuple[str, ...]:
     from lerobot_blindgrasp.sim import objects
 
@@ -57,12 +66,20 @@ def teacher_eval(p: presets.Preset, teacher_dir: Path, dest: Path, eval_seed: in
 
 
 def collect(p: presets.Preset, teacher: Path, root: Path, repo_id: str, first_seed: int, *, curate: bool = True,
-            stochastic: bool = True) -> list[str]:
+            stochastic: bool = True, extra: tuple[str, int] | None = None) -> list[str]:
+    """blindgrasp-collect-demos of the preset's demos, or (`extra` = (object, episodes)) of one of its
+    `extra_episodes` collections, with the collector's default rollout budget (20 x the episodes)."""
+    from lerobot_blindgrasp.demos.config import DEFAULT_ROLLOUT_BUDGET_FACTOR
+
     d = p.demos
+    episodes, budget = d.episodes_per_object, d.max_rollouts_per_object
+    if extra is not None:
+        episodes, budget = extra[1], DEFAULT_ROLLOUT_BUDGET_FACTOR * extra[1]
     cmd = ["blindgrasp-collect-demos", f"--teacher={teacher}", f"--output_dir={root}", f"--repo_id={repo_id}",
-           f"--episodes_per_object={d.episodes_per_object}",
-           f"--max_rollouts_per_object={d.max_rollouts_per_object}",
+           f"--episodes_per_object={episodes}", f"--max_rollouts_per_object={budget}",
            f"--num_envs={d.num_envs}", f"--seed={first_seed}", "--progress=false"]
+    if extra is not None:
+        cmd.append(f"--objects={extra[0]}")
     if d.joint_calibration_rad:
         cmd.append(f"--joint_calibration_rad={d.joint_calibration_rad}")
     if not stochastic:
@@ -104,8 +121,9 @@ def dagger(p: presets.Preset, student_ckpt: Path, teacher: Path, demos: Path, ou
            device: str | None = None) -> list[str]:
     d = p.dagger
     return ["blindgrasp-dagger", f"--student={student_ckpt}", f"--teacher={teacher}", f"--demos={demos}",
-            f"--output_dir={out}", f"--episodes_per_object={d.episodes_per_object}", f"--num_envs={d.num_envs}",
-            f"--seed={first_seed}", f"--device={device or p.student.device}", "--progress=false"]
+            f"--output_dir={out}", f"--episodes_per_object={d.episodes_per_object}", f"--objects={d.objects}",
+            f"--num_envs={d.num_envs}", f"--seed={first_seed}", f"--device={device or p.student.device}",
+            "--progress=false"]
 
 
 def student_finetune(p: presets.Preset, init: Path, dataset: Path, repo_id: str, out: Path, seed: int,

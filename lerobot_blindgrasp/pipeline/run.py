@@ -1,6 +1,7 @@
 """`blindgrasp-pipeline --preset={quick_blind,quick,cpu,paper,smoke}`: the whole method, end to end, ending in a report.
 
     blindgrasp-pipeline                    # README command 1 (quick_blind, beyond the paper): ~10 min on 2 cores
+    blindgrasp-pipeline --preset=quick_blind_targeted   # the shipped student's recipe (beyond the paper), ~17 min
     blindgrasp-pipeline --preset=quick     # the paper's student recipe on the default shipped teacher, ~13 min
     blindgrasp-pipeline --preset=cpu       # trains its own teacher from scratch: hours on 2 cores
     blindgrasp-pipeline --preset=paper --device=cuda    # the paper's Tables III-IV: a GPU machine
@@ -13,9 +14,13 @@ config like LeRobot's scripts (`--help`, `--config_path`).
 Stages, each a real CLI run as a subprocess (its command and log are kept in <out>/logs/):
 1. the teacher: a shipped teacher (`quick_blind`, `quick`), a given `--teacher`, or trained from scratch
    (`blindgrasp-train-teacher`, presets `cpu`, `paper`, `smoke`);
-2. curated demos (`blindgrasp-collect-demos`) as a LeRobotDataset;
+2. curated demos (`blindgrasp-collect-demos`) as a LeRobotDataset; a preset with `extra_episodes` (beyond the
+   paper) collects more of the objects it names, each on its own start states, and merges them in with LeRobot's
+   `aggregate_datasets`;
 3. the student (`lerobot-train --policy.type=blindgrasp_transformer`; an epoch-sized preset such as `paper` gets
    its step count and LR schedule from the collected dataset's frames, `presets.student`);
+   With a DAgger stage (beyond the paper), `blindgrasp-dagger` then relabels the student's own episodes with the
+   teacher's mean action and `lerobot-train` fine-tunes it on the aggregate, for each round;
 4. the student in sim (`lerobot-eval --env.type=blindgrasp`) and the teacher on the *same* start states
    (`blindgrasp-eval-teacher --seed` = lerobot-eval's `--seed`; see spec.eval_env_seed);
 5. `report.md` with PNG plots: which teacher, teacher vs student success per object with 95 % Wilson intervals
@@ -191,6 +196,11 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     if _kept(train_set) == 0:
         raise SystemExit(f"[pipeline] error: the demo dataset {train_set} has no episodes, so there is nothing to "
                          "train the student on; use a better teacher (--teacher) or more rollouts")
+    if preset.demos.extra_episodes:
+        curated = train_set == demos
+        train_set, repo = _targeted_demos(stage, preset, teacher_dir, out, train_set, repo, seed, curated)
+        record["student_dataset"] += ", with " + ", ".join(
+            f"{n} more episodes of {name}" for name, n in preset.demos.extra_episodes)
 
     student = out / "student"
     ckpt = recipe.checkpoint(student)
@@ -302,8 +312,8 @@ def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: presets.Preset, e
 
 
 def _collect(stage: Stage, preset: presets.Preset, teacher: Path, root: Path, repo_id: str, first_seed: int,
-             curate: bool) -> Path:
-    name = "demos" if curate else "demos_uncurated"
+             curate: bool, extra: tuple[str, int] | None = None) -> Path:
+    name = root.name if extra else "demos" if curate else "demos_uncurated"
     if stage.done(name, legacy=recipe.demos_collected(root)):
         stage.skip(name, "collected")
         return root
@@ -311,8 +321,45 @@ def _collect(stage: Stage, preset: presets.Preset, teacher: Path, root: Path, re
 
     # An empty curated set is handled by the caller (uncurated fallback). A collection cut short is resumed
     # (recipe.collect adds --resume=true; the collector repairs a crashed folder first).
-    stage.run(name, recipe.collect(preset, teacher, root, repo_id, first_seed, curate=curate), ok=(0, EXIT_EMPTY))
+    stage.run(name, recipe.collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra),
+              ok=(0, EXIT_EMPTY))
     return root
+
+
+def _targeted_demos(stage: Stage, preset: presets.Preset, teacher: Path, out: Path, demos: Path, repo: str,
+                    seed: int, curated: bool) -> tuple[Path, str]:
+    """Beyond the paper: the preset's extra episodes of the objects it names (one collection each, curated or not
+    as the set the student trains on), merged with that set by LeRobot's `aggregate_datasets`. Returns the merged
+    dataset and its repo id."""
+    roots, repos = [demos], [repo]
+    for k, (name, n) in enumerate(preset.demos.extra_episodes):
+        root, extra_repo = out / f"{demos.name}_{name}", f"{repo}_{name}"
+        _collect(stage, preset, teacher, root, extra_repo, recipe.extra_demo_seed(seed, k, curated),
+                 curate=curated, extra=(name, n))
+        if _kept(root):  # an object the teacher never solved adds nothing (its yield report says so)
+            roots.append(root)
+            repos.append(extra_repo)
+    name = f"{demos.name}_targeted"
+    merged, merged_repo = out / name, f"{repo}_targeted"
+    if stage.done(name, legacy=False):
+        stage.skip(name, "merged")
+        return merged, merged_repo
+    from lerobot_blindgrasp.demos.dataset import aggregate
+
+    # Merged beside the destination, then renamed: a kill mid-merge leaves no folder that looks finished.
+    tmp = out / f".{name}{durable.TEMP_MARK}merge"
+    shutil.rmtree(tmp, ignore_errors=True)
+    t = time.time()
+    aggregate(repos, roots, merged_repo, tmp)
+    durable.fsync_tree(tmp)
+    shutil.rmtree(merged, ignore_errors=True)
+    os.replace(tmp, merged)
+    durable.fsync_dir(out)
+    stage.record["stages"][name] = {"command": f"aggregate_datasets({repos})", "wall_s": time.time() - t,
+                                    "roots": [str(r) for r in roots]}
+    stage.complete(name)
+    print(f"[pipeline] {name}: merged {len(roots)} datasets into {merged}", flush=True)
+    return merged, merged_repo
 
 
 def _kept(root: Path) -> int:

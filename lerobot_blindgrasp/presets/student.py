@@ -75,12 +75,14 @@ class StudentStage:
 class DaggerStage:
     """DAgger-style relabelling, beyond the paper (`blindgrasp-dagger`): `rounds` times, the latest student drives
     `episodes_per_object` episodes per object, the teacher's mean action labels every state it visits, and the
-    student is fine-tuned from its own weights for `steps` on everything aggregated so far."""
+    student is fine-tuned from its own weights for `steps` on everything aggregated so far. `objects` aims it at the
+    objects the student trails on."""
 
     episodes_per_object: int
     steps: int
     rounds: int = 1
     num_envs: int = 360
+    objects: str = "all"  # whose episodes the student drives: "all", "medium" or a comma list of catalogue names
 
     def __post_init__(self):
         if min(self.episodes_per_object, self.steps, self.rounds, self.num_envs) < 1:
