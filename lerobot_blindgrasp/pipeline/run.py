@@ -340,7 +340,7 @@ def _targeted_demos(stage: Stage, preset: presets.Preset, teacher: Path, out: Pa
             roots.append(root)
             repos.append(extra_repo)
     name = f"{demos.name}_targeted"
-    merged, merged_repo = out / name, f"{repo}_targeted"
+    merged, merged_repo = out / name, f"{repo}_merged"
     if stage.done(name, legacy=False):
         stage.skip(name, "merged")
         return merged, merged_repo
