@@ -168,7 +168,7 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     # --- demo yield
     lines += ["## Demonstrations", ""]
     extra = [name for name, _ in ((record.get("preset") or {}).get("demos") or {}).get("extra_episodes", ())]
-    sets = [(label, sub) for label, sub in (("curated", "demos"), ("uncurated", "demos_uncurated"))]
+    sets = [("curated", "demos"), ("uncurated", "demos_uncurated")]
     sets += [(f"{label}, extra episodes of {name}", f"{sub}_{name}") for label, sub in sets for name in extra]
     for label, sub in sets:
         path = out / sub / "yield_report.json"

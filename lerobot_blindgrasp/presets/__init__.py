@@ -307,14 +307,14 @@ PRESETS["quick_blind"] = replace(
 
 # The shipped student's recipe (models/student_cpu), beyond the paper: quick_blind at the full 1200-step student
 # stage, aimed at the object its student trails on. On 100 held-out small-capsule start states (evaluation seed
-# 2000) the teacher lifted 79 %, the 1200-step student 41 %; 7x that object's demos 61 %; DAgger on it after them
-# 77 % (paired with the teacher: 8 vs 6 discordant), with all 18 objects at 95.8 % on seed 1000.
+# 2000) the teacher lifts 79 %, the 1200-step student 41-49 %; with 7x that object's demos 61-65 %; with DAgger on it
+# after them 68-77 % (three runs of this recipe), all 18 objects at 95.6-95.8 % on seed 1000.
 _TARGETED = (("capsule_small", 240),)  # object, extra curated episodes (7x its 40 in the main set)
 PRESETS["quick_blind_targeted"] = replace(
     PRESETS["quick_blind"],
     name="quick_blind_targeted",
     demos=replace(PRESETS["quick_blind"].demos, extra_episodes=_TARGETED),
-    # 1200 steps at batch 128 (2.2 passes over the 18 objects' demos) at lr 5e-4, constant for 600
+    # 1200 steps at batch 128 (1.6 passes over the merged demos) at lr 5e-4, constant for 600
     student=replace(PRESETS["quick_blind"].student, steps=1200, constant_lr_steps=600),
     # The fine-tuning inherits the student's own settings (lr 5e-4, constant for 600 of its 1200 steps).
     dagger=DaggerStage(episodes_per_object=80, steps=1200, num_envs=80, objects="capsule_small"),
