@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from emulators.fixtures import as_q, rig, robot, settle  # noqa: F401  (fixtures)
-from emulators.glove import GloveEmulator, free_udp_port
+from lerobot_blindgrasp.hardware.emulators.glove import GloveEmulator, free_udp_port
 from emulators.harness import Operator, cli_env
 from emulators.rig import LATENCY_TIMER_MS
 
@@ -285,7 +285,7 @@ def _glove_calibration(fpath: Path, open_pose: dict, fist_pose: dict) -> None:
 
 
 def test_degenerate_glove_calibration_file_is_refused(tmp_path, monkeypatch):
-    from emulators.glove import OPEN
+    from lerobot_blindgrasp.hardware.emulators.glove import OPEN
 
     _no_prompt(monkeypatch)
     cfg = ManusGloveConfig(id="op", port=free_udp_port(), calibration_dir=tmp_path)
@@ -303,7 +303,7 @@ def test_degenerate_glove_calibration_file_is_refused(tmp_path, monkeypatch):
 # --- 7. streams: restarts and hostile input ------------------------------------------------------------------------
 @pytest.fixture
 def glove_teleop(tmp_path, monkeypatch):
-    from emulators.glove import FIST, OPEN
+    from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN
 
     _no_prompt(monkeypatch)
     port = free_udp_port()
@@ -330,7 +330,7 @@ HOSTILE = [
 
 
 def _message(seq, value, side="right") -> bytes:
-    from emulators.glove import OPEN
+    from lerobot_blindgrasp.hardware.emulators.glove import OPEN
 
     ergo = dict(OPEN)
     ergo["IndexMCPStretch"] = value

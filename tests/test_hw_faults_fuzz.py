@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from dynamixel_sdk import COMM_SUCCESS, PortHandler
 from dynamixel_sdk import robotis_def as dx
-from emulators.dynamixel import make_packet
+from lerobot_blindgrasp.hardware.emulators.dynamixel import make_packet
 from emulators.fixtures import as_q, rig, robot  # noqa: F401  (fixtures)
-from emulators.glove import FIST, OPEN
+from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 

@@ -18,7 +18,7 @@ import draccus
 import numpy as np
 import pytest
 from emulators.fixtures import as_q, rig, robot, settle  # noqa: F401  (fixtures)
-from emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
+from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot.robots.config import RobotConfig
 from lerobot.teleoperators.config import TeleoperatorConfig
 

@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from emulators.force_sensor import ForceSensorEmulator
+from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulator
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force

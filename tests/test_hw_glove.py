@@ -8,7 +8,7 @@ from pathlib import Path
 import draccus
 import numpy as np
 import pytest
-from emulators.glove import GloveEmulator, free_udp_port
+from lerobot_blindgrasp.hardware.emulators.glove import GloveEmulator, free_udp_port
 from lerobot.teleoperators.config import TeleoperatorConfig
 
 from lerobot_blindgrasp import spec

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from dynamixel_sdk import COMM_RX_CORRUPT, COMM_RX_TIMEOUT, COMM_SUCCESS, PacketHandler, PortHandler
 from dynamixel_sdk import protocol2_packet_handler as p2
-from emulators.dynamixel import (
+from lerobot_blindgrasp.hardware.emulators.dynamixel import (
     CONTROL_TABLE,
     HW_OVERLOAD,
     XM430_W350_MODEL,

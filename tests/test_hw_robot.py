@@ -13,7 +13,7 @@ from pathlib import Path
 import draccus
 import numpy as np
 import pytest
-from emulators.dynamixel import HW_OVERHEATING, HW_OVERLOAD
+from lerobot_blindgrasp.hardware.emulators.dynamixel import HW_OVERHEATING, HW_OVERLOAD
 from emulators.fixtures import as_q, rig, robot, settle  # noqa: F401  (fixtures)
 from emulators.rig import MOUNT_SIGN
 from lerobot.datasets.pipeline_features import aggregate_pipeline_dataset_features, create_initial_features

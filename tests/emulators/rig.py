@@ -12,8 +12,8 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 
-from .dynamixel import DynamixelBusEmulator
-from .force_sensor import ForceSensorEmulator
+from lerobot_blindgrasp.hardware.emulators.dynamixel import DynamixelBusEmulator
+from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulator
 
 TICKS_PER_RAD = 4096 / (2 * math.pi)
 # Shaft ticks at q = 0 and mounting sign per joint (spec.JOINT_NAMES order).

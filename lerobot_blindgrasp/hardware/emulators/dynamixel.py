@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from dynamixel_sdk import protocol2_packet_handler as p2
 from dynamixel_sdk import robotis_def as dx
 
-from .pty_device import PtyDevice
+from lerobot_blindgrasp.hardware.emulators.pty_device import PtyDevice
 
 # name: (address, size, signed, writable-access) ; access "ro" | "eeprom" | "ram"
 CONTROL_TABLE: dict[str, tuple[int, int, bool, str]] = {

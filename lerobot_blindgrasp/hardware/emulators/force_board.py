@@ -16,7 +16,7 @@ import numpy as np
 
 from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import encode_frame
 
-from .pty_device import PtyDevice
+from lerobot_blindgrasp.hardware.emulators.pty_device import PtyDevice
 
 
 class ForceSensorEmulator(PtyDevice):
