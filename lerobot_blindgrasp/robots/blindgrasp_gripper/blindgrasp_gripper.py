@@ -49,7 +49,7 @@ from lerobot_blindgrasp.hardware.xm430 import (
 )
 
 from . import calibration as calib
-from . import servo_state, signals
+from . import connect_checks, latency_timer, servo_state, signals
 from .bus import PortLostError, RetryingDynamixelBus
 from .calibration import rad_to_ticks, ticks_to_rad
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
@@ -164,6 +164,9 @@ class BlindgraspGripper(Robot):
     def connect(self, calibrate: bool = True) -> None:
         if self.calibration_error is not None and calibrate:
             raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
+        if calibrate:
+            connect_checks.refuse_unattended_calibration(self)  # no file and nobody to answer the prompts
+        latency_timer.ensure_low_latency(self.config.port, self.config.force_sensor.port)  # USB adapters at 1 ms
         with self._safety("connecting"):
             self.expected = {}
             self.gate.forget()

@@ -1,0 +1,99 @@
+"""The USB-serial adapter's latency timer: 1 ms, or a warning that says how to get it.
+
+An FTDI chip (the U2D2 is an FT232H, USB 0403:6014; an original Arduino Nano an FT232RL, 0403:6001) holds received
+bytes for up to `latency_timer` ms before it hands a short packet to the host. The Linux default is 16 ms. Every
+Dynamixel status reply is a short packet, so each sync read then waits up to 16 ms for its answer, and a 20 Hz control
+period makes at least three of them (positions, the servo state block, and the handshake's re-reads): up to half of
+the 50 ms budget spent waiting. ROBOTIS tells every U2D2 user to set it to 1 ms; the udev rule shipped in
+`robot_configs/udev/99-blindgrasp.rules` does so at every plug-in.
+
+The kernel's ftdi_sio driver exposes it as `/sys/bus/usb-serial/devices/<ttyUSBn>/latency_timer` (writable by root
+only). Other adapters have no such file: a CH340 (ch341 driver) has no timer to set, a CDC-ACM board (`ttyACM*`) is
+not a usb-serial device, and an emulator's pseudo-terminal has no sysfs entry at all. For those, nothing is said.
+
+`check_latency_timer` is a pure function of the port name and a sysfs root, so it is tested on a fake tree.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+logger = logging.getLogger(__name__)
+
+SYSFS_ROOT = Path("/sys")
+TARGET_MS = 1
+
+
+@dataclass(frozen=True)
+class LatencyTimerCheck:
+    port: str
+    sysfs_file: Path | None  # None: not an adapter with a latency timer (pty, CH340, CDC-ACM): nothing to do
+    before_ms: int | None = None
+    after_ms: int | None = None
+    error: str | None = None  # why it could not be set (permission, read-only sysfs)
+
+    @property
+    def ok(self) -> bool:
+        return self.after_ms is not None and self.after_ms <= TARGET_MS
+
+    @property
+    def fix_command(self) -> str:
+        return f"echo {TARGET_MS} | sudo tee {self.sysfs_file}"
+
+    def warning(self) -> str | None:
+        """The operator's message, or None when there is nothing to say."""
+        if self.sysfs_file is None or self.ok:
+            return None
+        return (
+            f"The USB latency timer of '{self.port}' is {self.before_ms} ms and could not be set to {TARGET_MS} ms "
+            f"({self.error}). Every servo reply then waits up to {self.before_ms} ms in the adapter. Run\n"
+            f"    {self.fix_command}\n"
+            "or install robot_configs/udev/99-blindgrasp.rules, which sets it at every plug-in (docs/bringup.md)."
+        )
+
+
+def sysfs_latency_file(port: str, sysfs_root: Path = SYSFS_ROOT) -> Path | None:
+    """The latency_timer file of the adapter behind `port`, following symlinks (/dev/serial/by-id/..., a udev
+    name such as /dev/blindgrasp_u2d2) to the tty they name; None if that tty has none."""
+    tty = Path(os.path.realpath(port)).name
+    candidate = Path(sysfs_root) / "bus" / "usb-serial" / "devices" / tty / "latency_timer"
+    return candidate if candidate.is_file() else None
+
+
+def check_latency_timer(port: str, sysfs_root: Path = SYSFS_ROOT, target_ms: int = TARGET_MS) -> LatencyTimerCheck:
+    """Read the adapter's latency timer and lower it to `target_ms` where this process may write it."""
+    path = sysfs_latency_file(port, sysfs_root)
+    if path is None:
+        return LatencyTimerCheck(port, None)
+    try:
+        before = int(path.read_text().strip())
+    except (OSError, ValueError) as e:
+        return LatencyTimerCheck(port, path, error=f"unreadable: {e}")
+    if before <= target_ms:
+        return LatencyTimerCheck(port, path, before, before)
+    try:
+        path.write_text(f"{target_ms}\n")
+        after = int(path.read_text().strip())
+    except OSError as e:  # not root (the usual case: the file is root's), or a read-only /sys in a container
+        return LatencyTimerCheck(port, path, before, None, error=e.strerror or str(e))
+    except ValueError as e:
+        return LatencyTimerCheck(port, path, before, None, error=f"unreadable after the write: {e}")
+    if after > target_ms:
+        return LatencyTimerCheck(port, path, before, after, error=f"the driver kept {after} ms")
+    return LatencyTimerCheck(port, path, before, after)
+
+
+def ensure_low_latency(*ports: str, sysfs_root: Path | None = None) -> list[LatencyTimerCheck]:
+    """What connect() calls for each serial port: sets 1 ms where it may, logs what it did or what to run."""
+    results = []
+    for port in ports:
+        result = check_latency_timer(port, SYSFS_ROOT if sysfs_root is None else sysfs_root)
+        if (message := result.warning()) is not None:
+            logger.warning(message)
+        elif result.before_ms is not None and result.before_ms != result.after_ms:
+            logger.info("USB latency timer of '%s': %d ms -> %d ms", port, result.before_ms, result.after_ms)
+        results.append(result)
+    return results

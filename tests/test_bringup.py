@@ -1,0 +1,151 @@
+"""Bring-up checks of the real gripper's connect(): the USB latency timer and a calibration nobody can make.
+
+The latency timer is checked on a fake sysfs tree (`tmp_path`), laid out as the kernel's ftdi_sio driver lays it
+out, and once through the robot's real connect() against the emulated servos and force board.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import logging
+import os
+import re
+from pathlib import Path
+
+import pytest
+from emulators.rig import GripperRig
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.robots.blindgrasp_gripper import latency_timer
+from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
+from lerobot_blindgrasp.robots.blindgrasp_gripper.latency_timer import check_latency_timer, ensure_low_latency
+
+ROOT = Path(__file__).resolve().parents[1]
+READ_ONLY_SYSFS_INT = Path("/sys/devices/system/cpu/kernel_max")  # 0444 and no store op: root cannot write it
+
+
+def fake_ftdi(tmp_path: Path, tty: str = "ttyUSB3", ms: int | None = 16) -> tuple[Path, Path]:
+    """A /dev and /sys pair for one adapter; `ms=None` makes a usb-serial device without a timer (CH340)."""
+    sys_dir = tmp_path / "sys" / "bus" / "usb-serial" / "devices" / tty
+    sys_dir.mkdir(parents=True)
+    if ms is not None:
+        (sys_dir / "latency_timer").write_text(f"{ms}\n")
+    dev = tmp_path / "dev"
+    (dev / "serial" / "by-id").mkdir(parents=True)
+    (dev / tty).touch()
+    by_id = dev / "serial" / "by-id" / "usb-FTDI_USB__-__Serial_Converter_FT0ABC12-if00-port0"
+    by_id.symlink_to(Path("..") / ".." / tty)
+    return tmp_path / "sys", by_id
+
+
+def test_a_16_ms_timer_is_set_to_1_ms_through_a_by_id_symlink(tmp_path, caplog):
+    sysfs, port = fake_ftdi(tmp_path)
+    with caplog.at_level(logging.INFO):
+        [result] = ensure_low_latency(str(port), sysfs_root=sysfs)
+    timer = sysfs / "bus/usb-serial/devices/ttyUSB3/latency_timer"
+    assert (result.sysfs_file, result.before_ms, result.after_ms, result.ok) == (timer, 16, 1, True)
+    assert timer.read_text().strip() == "1"
+    assert "16 ms -> 1 ms" in caplog.text and not [r for r in caplog.records if r.levelno >= logging.WARNING]
+
+
+def test_a_timer_already_at_1_ms_is_left_alone(tmp_path):
+    sysfs, port = fake_ftdi(tmp_path, ms=1)
+    timer = sysfs / "bus/usb-serial/devices/ttyUSB3/latency_timer"
+    timer.chmod(0o444)  # a write would fail for a non-root user, and root would change the mtime
+    before = timer.stat().st_mtime_ns
+    result = check_latency_timer(str(port), sysfs)
+    assert (result.before_ms, result.after_ms, result.warning()) == (1, 1, None)
+    assert timer.stat().st_mtime_ns == before
+
+
+def test_an_unwritable_timer_warns_with_the_command_to_run(tmp_path, caplog):
+    sysfs, port = fake_ftdi(tmp_path)
+    timer = sysfs / "bus/usb-serial/devices/ttyUSB3/latency_timer"
+    if os.geteuid() == 0:  # root writes any 0444 file; a sysfs attribute without a store op refuses even root
+        if not READ_ONLY_SYSFS_INT.is_file():
+            pytest.skip(f"needs {READ_ONLY_SYSFS_INT} to stand for a file root cannot write")
+        timer.unlink()
+        timer.symlink_to(READ_ONLY_SYSFS_INT)
+        stands_for = int(READ_ONLY_SYSFS_INT.read_text())
+    else:
+        timer.chmod(0o444)
+        stands_for = 16
+    with caplog.at_level(logging.WARNING):
+        [result] = ensure_low_latency(str(port), sysfs_root=sysfs)
+    assert result.before_ms == stands_for and result.after_ms is None and not result.ok
+    assert f"echo 1 | sudo tee {timer}" in caplog.text
+    assert "99-blindgrasp.rules" in caplog.text and str(port) in caplog.text
+
+
+def test_ptys_ch340_and_acm_ports_are_silent(tmp_path, caplog):
+    sysfs, ch340 = fake_ftdi(tmp_path, tty="ttyUSB0", ms=None)
+    master, slave = os.openpty()
+    try:
+        with caplog.at_level(logging.DEBUG, logger=latency_timer.__name__):
+            results = ensure_low_latency(os.ttyname(slave), str(ch340), "/dev/ttyACM7", sysfs_root=sysfs)
+            results += ensure_low_latency(os.ttyname(slave))  # the real /sys: a pty has no usb-serial entry
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert [r.sysfs_file for r in results] == [None] * 4 and not caplog.records
+
+
+def test_the_udev_rules_name_the_adapters_and_set_the_timer():
+    text = (ROOT / "robot_configs" / "udev" / "99-blindgrasp.rules").read_text()
+    rules = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    token = re.compile(r'^(ACTION|SUBSYSTEM|DRIVERS|ATTRS\{\w+\}|ATTR\{\w+\}|SYMLINK|GROUP|MODE)(==|\+=|=)"[^"]*"$')
+    for rule in rules:  # udev's own syntax: comma-separated KEY op "value"
+        assert all(token.match(t.strip()) for t in rule.split(",")), rule
+    u2d2 = [r for r in rules if 'ATTRS{idVendor}=="0403"' in r and 'ATTRS{idProduct}=="6014"' in r]
+    assert any('SYMLINK+="blindgrasp_u2d2"' in r and 'GROUP="dialout"' in r for r in u2d2)
+    assert any('ATTR{latency_timer}="1"' in r and 'SUBSYSTEM=="usb-serial"' in r for r in u2d2)
+    assert sum('SYMLINK+="blindgrasp_force"' in r for r in rules) >= 2  # the Nano's FTDI and CH340 variants
+
+
+def _connect(rig: GripperRig, calibration_dir: Path, monkeypatch):
+    from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
+
+    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
+    robot = BlindgraspGripper(rig.robot_config(calibration_dir))
+    robot.connect()
+    return robot
+
+
+def test_connect_sets_the_bus_adapters_timer(tmp_path, monkeypatch, caplog):
+    """The emulators sit on ptys; a fake sysfs entry under the pty's name stands for its FTDI adapter."""
+    with GripperRig() as rig:
+        rig.hand_move(spec.HOME_POSE)
+        timer = tmp_path / "sys" / "bus" / "usb-serial" / "devices" / Path(rig.dxl.port).name / "latency_timer"
+        timer.parent.mkdir(parents=True)
+        timer.write_text("16\n")
+        monkeypatch.setattr(latency_timer, "SYSFS_ROOT", tmp_path / "sys")
+        with caplog.at_level(logging.INFO, logger=latency_timer.__name__):
+            robot = _connect(rig, tmp_path / "calibration", monkeypatch)
+        robot.disconnect()
+    assert timer.read_text().strip() == "1"
+    assert f"USB latency timer of '{rig.dxl.port}': 16 ms -> 1 ms" in caplog.text
+
+
+def test_connect_on_the_emulators_says_nothing_about_latency(tmp_path, monkeypatch, caplog):
+    with GripperRig() as rig, caplog.at_level(logging.DEBUG, logger=latency_timer.__name__):
+        rig.hand_move(spec.HOME_POSE)
+        _connect(rig, tmp_path / "calibration", monkeypatch).disconnect()
+    assert not caplog.records
+
+
+def test_no_calibration_and_no_operator_is_refused_before_a_byte_is_sent(tmp_path, monkeypatch):
+    from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
+
+    calibration_dir = tmp_path / "calibration"
+    calibration_dir.mkdir()
+    (calibration_dir / "lab_gripper.json").write_text("{}")  # another id's file: the usual cause
+    monkeypatch.setattr("sys.stdin", io.StringIO(""))  # a pipe or /dev/null, as under nohup or a scheduler
+    with GripperRig() as rig:
+        robot = BlindgraspGripper(dataclasses.replace(rig.robot_config(calibration_dir), id="eval_gripper"))
+        with pytest.raises(CalibrationFileError) as err:
+            robot.connect()
+        assert not rig.dxl.instruction_counts and not robot.is_connected
+    message = str(err.value)
+    assert "'eval_gripper'" in message and str(calibration_dir / "eval_gripper.json") in message
+    assert "lab_gripper" in message and "--robot.id" in message and "lerobot-calibrate" in message
