@@ -9,6 +9,7 @@ the ones in the fault table of docs/hardware.md.
 from __future__ import annotations
 
 import json
+import logging
 import signal
 import socket
 import sys
@@ -34,7 +35,7 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
 )
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
-from lerobot_blindgrasp.teleoperators.manus_glove.stream import PROTO
+from lerobot_blindgrasp.teleoperators.manus_glove.protocol import PROTO
 
 LOOP = Path(__file__).parent / "emulators" / "robot_loop.py"
 WATCHDOG_S = 0.200  # BlindgraspGripperConfig.bus_watchdog_ms
@@ -295,8 +296,8 @@ def test_degenerate_glove_calibration_file_is_refused(tmp_path, monkeypatch):
     with pytest.raises(GloveCalibrationError, match="changed by less than"):
         t.connect()
     assert not t.is_connected
-    _glove_calibration(tmp_path / "op.json", {k: v for k, v in OPEN.items() if k != "IndexSpread"}, OPEN)
-    with pytest.raises(GloveCalibrationError, match=r"open pose lacks \['IndexSpread'\]"):
+    _glove_calibration(tmp_path / "op.json", {k: v for k, v in OPEN.items() if k != "IndexMCPSpread"}, OPEN)
+    with pytest.raises(GloveCalibrationError, match=r"open pose lacks \['IndexMCPSpread'\]"):
         ManusGlove(cfg).connect()
 
 
@@ -324,17 +325,19 @@ def _proximal(teleop, glove, closure: float) -> float:
 
 HOSTILE = [
     b"", b"\xff\xfe", b"[]", b"null", b"1e999", b"[" * 100_000,  # not a message; deep nesting
-    b'{"proto": "blindgrasp-glove/1", "seq": 1, "ergonomics": {"IndexSpread": NaN}}',
-    b'{"proto": "blindgrasp-glove/1", "seq": 1, "ergonomics": [1, 2]}',
+    b'{"proto": "blindgrasp-glove/2", "session": "s", "seq": 1, "sent": 0, "side": "right", '
+    b'"ergonomics": {"IndexMCPSpread": NaN}}',
+    b'{"proto": "blindgrasp-glove/2", "session": "s", "seq": 1, "sent": 0, "side": "right", "ergonomics": [1, 2]}',
 ]
 
 
-def _message(seq, value, side="right") -> bytes:
+def _message(seq, value, side="right", session="hostile", sent=0.0) -> bytes:
     from lerobot_blindgrasp.hardware.emulators.glove import OPEN
 
     ergo = dict(OPEN)
     ergo["IndexMCPStretch"] = value
-    return json.dumps({"proto": PROTO, "seq": seq, "side": side, "ergonomics": ergo}).encode()
+    msg = {"proto": PROTO, "session": session, "seq": seq, "sent": sent, "side": side, "ergonomics": ergo}
+    return json.dumps(msg).encode()
 
 
 def test_glove_receiver_survives_any_datagram(glove_teleop):
@@ -349,6 +352,10 @@ def test_glove_receiver_survives_any_datagram(glove_teleop):
         _message(2**40, 5.0),
         _message(1.5, 5.0),
         _message(10**6, 5.0, side={"x": 1}),
+        _message(10**6, 5.0, session=""),
+        _message(10**6, 5.0, session=["a"]),
+        _message(10**6, 5.0, sent="now"),
+        _message(10**6, 5.0, sent=True),
     ]
     before = teleop.receiver.rejected
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -362,19 +369,21 @@ def test_glove_receiver_survives_any_datagram(glove_teleop):
     assert _proximal(teleop, glove, 1.0) == pytest.approx(teleop.config.closed_pose[1], abs=1e-9)
 
 
-def test_glove_bridge_restart_resets_the_counter(glove_teleop):
+def test_glove_bridge_restart_resets_the_counter(glove_teleop, caplog):
     teleop, glove = glove_teleop
-    glove.seq = 50_000
+    glove.sender.seq = 50_000
     assert _proximal(teleop, glove, 0.0) == pytest.approx(teleop.config.open_pose[1], abs=1e-9)
-    glove.seq = 0  # the bridge restarted
-    assert _proximal(teleop, glove, 1.0) == pytest.approx(teleop.config.closed_pose[1], abs=1e-9)
+    with caplog.at_level(logging.WARNING):
+        glove.restart()  # the bridge restarted: a new session, counting from 1
+        assert _proximal(teleop, glove, 1.0) == pytest.approx(teleop.config.closed_pose[1], abs=1e-9)
+    assert teleop.receiver.restarts == 1 and "Glove bridge restarted" in caplog.text
 
 
 def test_reconnecting_to_a_running_bridge(glove_teleop):
     teleop, glove = glove_teleop
     assert _proximal(teleop, glove, 1.0) == pytest.approx(teleop.config.closed_pose[1], abs=1e-9)
     teleop.disconnect()
-    glove.seq = 3  # and it restarted meanwhile
+    glove.restart()  # and it restarted meanwhile
     teleop.connect()
     assert _proximal(teleop, glove, 0.0) == pytest.approx(teleop.config.open_pose[1], abs=1e-9)
 

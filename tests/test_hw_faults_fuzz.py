@@ -33,7 +33,7 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.plausibility import Implausibl
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
 from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
-from lerobot_blindgrasp.teleoperators.manus_glove.stream import MAX_ABS_DEG, decode, encode
+from lerobot_blindgrasp.teleoperators.manus_glove.protocol import MAX_ABS_DEG, PROTO, decode, encode
 
 FAST = settings(max_examples=100, deadline=None)
 INT32 = st.integers(-(2**31), 2**31 - 1)
@@ -198,8 +198,8 @@ json_values = st.recursive(
 scalars = st.one_of(st.floats(), st.integers(), st.booleans(), st.none(), st.text(max_size=3), st.just([1.0]))
 
 
-def _datagram(seq, side, values) -> bytes:
-    msg = {"proto": "blindgrasp-glove/1", "seq": seq, "side": side, "ergonomics": values}
+def _datagram(seq, side, values, session="fuzz", sent=0.0) -> bytes:
+    msg = {"proto": PROTO, "session": session, "seq": seq, "sent": sent, "side": side, "ergonomics": values}
     return json.dumps(msg, allow_nan=True).encode()
 
 
@@ -208,7 +208,9 @@ datagrams = st.one_of(
     json_values.map(lambda v: json.dumps(v).encode()),
     st.builds(_datagram, st.one_of(INT32, json_values), st.sampled_from(["left", "right", 3, None]),
               st.fixed_dictionaries({k: scalars for k in REQUIRED_KEYS})),
-    st.builds(lambda s, cut: encode(s, OPEN)[:cut], st.integers(0, 2**32 - 1), st.integers(0, 400)),
+    st.builds(lambda s, cut: encode("fuzz", s, 1.0, OPEN)[:cut], st.integers(0, 2**32 - 1), st.integers(0, 400)),
+    st.builds(_datagram, st.integers(0, 2**32), st.just("left"), st.just(OPEN), json_values | st.text(max_size=70),
+              json_values | st.floats()),  # session and sender clock, any JSON
     st.builds(_datagram, st.integers(0, 2**32), st.just("right"),  # valid shape, values up to and past the range
               st.fixed_dictionaries({k: st.floats(-400, 400) | st.integers(-400, 400) for k in REQUIRED_KEYS})),
 )  # fmt: skip
@@ -218,11 +220,12 @@ datagrams = st.one_of(
 @given(datagram=datagrams)
 def test_the_glove_decoder_accepts_only_sane_messages(datagram):
     try:
-        seq, side, values = decode(datagram, REQUIRED_KEYS)
+        d = decode(datagram, REQUIRED_KEYS)
     except ValueError:
         return
-    assert 0 <= seq < 2**32 and side in ("left", "right") and set(values) == REQUIRED_KEYS
-    assert all(type(v) is float and math.isfinite(v) and abs(v) <= MAX_ABS_DEG for v in values.values())
+    assert 0 <= d.seq < 2**32 and d.side in ("left", "right") and set(d.ergonomics) == REQUIRED_KEYS
+    assert type(d.sent) is float and math.isfinite(d.sent) and isinstance(d.session, str) and 0 < len(d.session) <= 64
+    assert all(type(v) is float and math.isfinite(v) and abs(v) <= MAX_ABS_DEG for v in d.ergonomics.values())
 
 
 # --- calibration files ---------------------------------------------------------------------------------------------

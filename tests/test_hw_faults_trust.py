@@ -302,7 +302,7 @@ def test_truncated_or_corrupt_glove_calibration_is_refused(tmp_path, monkeypatch
     _glove_files(tmp_path)
     good = (tmp_path / "op.json").read_text()
     cfg = ManusGloveConfig(id="op", port=free_udp_port(), calibration_dir=tmp_path)
-    as_bool = json.dumps({"open": OPEN, "fist": {**FIST, "IndexSpread": True}}).encode()
+    as_bool = json.dumps({"open": OPEN, "fist": {**FIST, "IndexMCPSpread": True}}).encode()
     for name, text in [*_file_variants(good, (True, "12", None, [1])), ("a bool for a number", as_bool)]:
         (tmp_path / "op.json").write_bytes(text)
         with pytest.raises(GloveCalibrationError, match=r"invalid.*Run lerobot-calibrate --teleop.type=manus_glove"):

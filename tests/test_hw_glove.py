@@ -16,7 +16,7 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, Blin
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost
 from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
-from lerobot_blindgrasp.teleoperators.manus_glove.stream import decode, encode
+from lerobot_blindgrasp.teleoperators.manus_glove.protocol import decode, encode
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -55,14 +55,20 @@ def _action(teleop, glove, closure: float) -> np.ndarray:
 
 def test_protocol_round_trip_and_rejections():
     ergo = {k: float(i) for i, k in enumerate(sorted(REQUIRED_KEYS))}
-    seq, side, values = decode(encode(7, ergo, "left"), REQUIRED_KEYS)
-    assert (seq, side, values) == (7, "left", ergo)
+    d = decode(encode("s1", 7, 12.5, ergo, "left"), REQUIRED_KEYS)
+    assert (d.session, d.seq, d.sent, d.side, d.ergonomics) == ("s1", 7, 12.5, "left", ergo)
+    old_proto = b'{"proto": "blindgrasp-glove/1", "seq": 1, "t": 1.0, "side": "right", "ergonomics": {}}'
     for bad, why in [
         (b"\xff\xfe garbage", "not JSON"),
-        (b'{"proto": "other/1", "seq": 1}', "not a blindgrasp-glove/1"),
-        (encode(1, {k: 0.0 for k in sorted(REQUIRED_KEYS)[1:]}), "lacks"),
-        (encode(1, {**ergo, "IndexSpread": float("nan")}), "non-finite"),
-        (encode(1, {**ergo, "IndexSpread": 400.0}), "out of range"),
+        (b'{"proto": "other/1", "seq": 1}', "not a blindgrasp-glove/2"),
+        (old_proto, "update the bridge"),
+        (encode("s", 1, 0.0, {k: 0.0 for k in sorted(REQUIRED_KEYS)[1:]}), "lacks"),
+        (encode("s", 1, 0.0, {**ergo, "IndexMCPSpread": float("nan")}), "non-finite"),
+        (encode("s", 1, 0.0, {**ergo, "IndexMCPSpread": 400.0}), "out of range"),
+        (encode("s", 1, float("inf"), ergo), "sent"),
+        (encode("no spaces!", 1, 0.0, ergo), "session"),
+        (encode("s", 1, 0.0, {**ergo, "LeftFingerIndexMCPStretch": 3.0}, "right"), "left-hand channel"),
+        (encode("s", 1, 0.0, {**ergo, "IndexSpread": 99.0}), "two different values for IndexMCPSpread"),
     ]:
         with pytest.raises(ValueError, match=why):
             decode(bad, REQUIRED_KEYS)
@@ -142,6 +148,6 @@ def _expected_flex(teleop, closure):
 
 def test_connect_without_a_bridge_is_a_clear_error(tmp_path):
     t = ManusGlove(ManusGloveConfig(id="x", port=free_udp_port(), calibration_dir=tmp_path, connect_timeout_s=0.3))
-    with pytest.raises(ConnectionError, match="is the SDK bridge running"):
+    with pytest.raises(ConnectionError, match="no datagram arrived: is the bridge running"):
         t.connect()
     assert not t.is_connected

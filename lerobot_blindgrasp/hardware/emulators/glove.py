@@ -1,8 +1,17 @@
-"""The glove SDK bridge, emulated: UDP datagrams of `teleoperators/manus_glove/stream.py` at `rate_hz`.
+"""The glove bridge, emulated: datagrams of `teleoperators/manus_glove/protocol.py` at `rate_hz`, sent by the
+bridge's own `GloveSender` (session id, sequence number, send time on its monotonic clock).
 
-The hand is one operator's: per ergonomics channel an open-hand and a fist value (deg), blended by `closure`
-(0 open .. 1 fist), or by `closure_fn(t)` for scripted motions. Faults: `paused` (bridge or glove gone),
-`garbage_every` (a malformed datagram every n frames), `reorder` (send each frame after its successor).
+The hand is one operator's: per ergonomics channel (names.py) an open-hand and a fist value (deg), blended by
+`closure` (0 open .. 1 fist), or by `closure_fn(t)` for scripted motions. `keys` picks the names it sends:
+"sdk" (the SDK enum names without side, the receiver's channels), "ros2" (the MANUS ROS 2 publisher's strings).
+
+Faults:
+- `paused`: the bridge or the glove is gone (nothing is sent).
+- `stalled`: the network holds everything (datagrams are built and stamped, then queued); clearing it delivers
+  the backlog in one burst before the live stream, as a switch or Wi-Fi link does after a pause.
+- `garbage_every`: a malformed datagram every n frames. `reorder`: each frame is sent after its successor.
+- `delay_next(n)`: the next datagram arrives n frames late. `duplicate_next(n)`: it arrives again n frames later.
+- `restart()`: the bridge restarts (new session, counter from 1), from the same source address.
 """
 
 from __future__ import annotations
@@ -11,15 +20,18 @@ import socket
 import threading
 import time
 
-from lerobot_blindgrasp.teleoperators.manus_glove.stream import encode
+from lerobot_blindgrasp.teleoperators.manus_glove import names
+from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender
 
-FINGERS = ("Thumb", "Index", "Middle", "Ring", "Pinky")
-# This operator's hand (deg): open hand and fist. Spread barely changes; flexion changes a lot.
-OPEN = {**{f"{f}Spread": 2.0 for f in FINGERS[1:]}, "ThumbMCPSpread": 25.0}
-FIST = {**{f"{f}Spread": -3.0 for f in FINGERS[1:]}, "ThumbMCPSpread": 15.0}
-for _f in FINGERS:
-    OPEN.update({f"{_f}MCPStretch": 5.0, f"{_f}PIPStretch": 3.0, f"{_f}DIPStretch": 2.0})
-    FIST.update({f"{_f}MCPStretch": 85.0, f"{_f}PIPStretch": 95.0, f"{_f}DIPStretch": 60.0})
+# This operator's hand (deg), by channel: open hand and fist. Spread barely changes; flexion changes a lot.
+OPEN: dict[str, float] = {}
+FIST: dict[str, float] = {}
+for _c in names.CHANNELS:
+    if _c.motion == "MCPSpread":
+        OPEN[_c.name], FIST[_c.name] = (25.0, 15.0) if _c.finger == "Thumb" else (2.0, -3.0)
+    else:
+        OPEN[_c.name] = {"MCPStretch": 5.0, "PIPStretch": 3.0, "DIPStretch": 2.0}[_c.motion]
+        FIST[_c.name] = {"MCPStretch": 85.0, "PIPStretch": 95.0, "DIPStretch": 60.0}[_c.motion]
 FIST.update({"ThumbMCPStretch": 45.0, "ThumbPIPStretch": 50.0, "ThumbDIPStretch": 40.0})
 
 
@@ -30,34 +42,55 @@ def free_udp_port() -> int:
 
 
 class GloveEmulator:
-    def __init__(self, port: int, *, host: str = "127.0.0.1", rate_hz: float = 90.0, side: str = "right"):
+    def __init__(self, port: int, *, host: str = "127.0.0.1", rate_hz: float = 90.0, side: str = "right",
+                 keys: str = "sdk"):  # fmt: skip
         self.addr = (host, port)
         self.period = 1.0 / rate_hz
-        self.side = side
+        self.keys = keys
         self.closure = 0.0
         self.closure_fn = None  # t (s since start) -> closure
-        self.spread_offset_deg = 0.0  # added to every Spread channel
+        self.spread_offset_deg = 0.0  # added to every spread channel
         self.paused = False
+        self.stalled = False
         self.garbage_every = 0
         self.reorder = False
-        self.seq = 0
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._sock.bind((host, 0))  # a fixed source address from the start, like a bridge's
+        self.sender = GloveSender(host, port, side, source_host=host)  # a fixed source address, like a bridge's
+        self._later: list[tuple[int, bytes]] = []  # (frames to wait, datagram)
+        self._delay_next: list[tuple[int, bool]] = []  # (n, keep the original on time)
+        self._backlog: list[bytes] = []
+        self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="glove-emulator", daemon=True)
         self._t0 = time.monotonic()
 
     @property
     def source(self) -> tuple[str, int]:
-        """The address its datagrams come from (bound by the first send)."""
-        return self._sock.getsockname()
+        """The address its datagrams come from."""
+        return self.sender.source
+
+    @property
+    def seq(self) -> int:
+        return self.sender.seq
 
     def pose(self, closure: float) -> dict[str, float]:
-        out = {k: OPEN[k] + closure * (FIST[k] - OPEN[k]) for k in OPEN}
-        for k in out:
-            if k.endswith("Spread"):
-                out[k] += self.spread_offset_deg
+        out = {}
+        for c in names.CHANNELS:
+            v = OPEN[c.name] + closure * (FIST[c.name] - OPEN[c.name])
+            out[c.ros2 if self.keys == "ros2" else c.name] = v + (self.spread_offset_deg if c.motion == "MCPSpread"
+                                                                   else 0.0)  # fmt: skip
         return out
+
+    def delay_next(self, frames: int) -> None:
+        with self._lock:
+            self._delay_next.append((frames, False))
+
+    def duplicate_next(self, frames: int) -> None:
+        with self._lock:
+            self._delay_next.append((frames, True))
+
+    def restart(self) -> None:
+        with self._lock:
+            self.sender.restart()
 
     def start(self) -> GloveEmulator:
         self._thread.start()
@@ -66,7 +99,7 @@ class GloveEmulator:
     def stop(self) -> None:
         self._stop.set()
         self._thread.join(timeout=1.0)
-        self._sock.close()
+        self.sender.close()
 
     def __enter__(self):
         return self.start()
@@ -80,16 +113,34 @@ class GloveEmulator:
             if self.paused:
                 continue
             closure = self.closure_fn(time.monotonic() - self._t0) if self.closure_fn else self.closure
-            self.seq += 1
-            datagram = encode(self.seq, self.pose(closure), self.side)
-            if self.garbage_every and self.seq % self.garbage_every == 0:
-                self._sock.sendto(b'{"proto": "blindgrasp-glove/1", "seq": ', self.addr)
+            with self._lock:
+                datagram = self.sender.pack(self.pose(closure))
+                out = self._network(datagram)
             if self.reorder:
-                if held is not None:
-                    self._sock.sendto(datagram, self.addr)
-                    self._sock.sendto(held, self.addr)
-                    held = None
+                if held is None:
+                    held, out = out, []
                 else:
-                    held = datagram
-                continue
-            self._sock.sendto(datagram, self.addr)
+                    out, held = out + held, None
+            for d in out:
+                self.sender.send_raw(d)
+
+    def _network(self, datagram: bytes) -> list[bytes]:
+        """What leaves the network now, given this frame's datagram."""
+        out = []
+        if self.garbage_every and self.sender.seq % self.garbage_every == 0:
+            out.append(b'{"proto": "blindgrasp-glove/2", "seq": ')
+        if self._delay_next:
+            frames, duplicate = self._delay_next.pop(0)
+            self._later.append((frames, datagram))
+            if duplicate:
+                out.append(datagram)
+        else:
+            out.append(datagram)
+        self._later = [(n - 1, d) for n, d in self._later]
+        out += [d for n, d in self._later if n <= 0]
+        self._later = [(n, d) for n, d in self._later if n > 0]
+        if self.stalled:
+            self._backlog += out
+            return []
+        out, self._backlog = self._backlog + out, []
+        return out

@@ -1,4 +1,5 @@
-"""Configuration of the glove teleoperator (`--teleop.type=manus_glove`); see `stream.py` for the wire format."""
+"""Configuration of the glove teleoperator (`--teleop.type=manus_glove`); the wire format is in `protocol.py`, the
+bridge in `bridge.py`, the setup in docs/glove.md."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from .retarget import DEFAULT_CLOSED_POSE, DEFAULT_OPEN_POSE
 @TeleoperatorConfig.register_subclass("manus_glove")
 @dataclass
 class ManusGloveConfig(TeleoperatorConfig):
-    # Where the SDK bridge sends its UDP datagrams.
+    # The address this receiver listens on. 127.0.0.1: a bridge on this machine only. A bridge on another machine:
+    # this machine's address on that network (or 0.0.0.0, all interfaces), best with `sender` pinned.
     host: str = "127.0.0.1"
     port: int = 50120
     side: str = "right"
@@ -23,6 +25,9 @@ class ManusGloveConfig(TeleoperatorConfig):
     frozen_frames: int = 0
     # First datagram must arrive within this time at connect.
     connect_timeout_s: float = 2.0
+    # A datagram that was queued on the way longer than this (by the bridge's clock, beyond the fastest delivery
+    # seen) is dropped: after a network pause the backlog is not replayed. At most hold_timeout_s.
+    max_latency_s: float = 0.1
     # Newest datagram older than this: the target freezes at its last value, so the gripper stops moving.
     hold_timeout_s: float = 0.15
     # Older than this: get_action raises, which ends lerobot-record, whose cleanup turns the gripper torque off.
@@ -43,6 +48,8 @@ class ManusGloveConfig(TeleoperatorConfig):
             raise ValueError("open_pose and closed_pose need 9 values, spread_gain 3")
         if not 0 < self.hold_timeout_s < self.disconnect_timeout_s:
             raise ValueError("need 0 < hold_timeout_s < disconnect_timeout_s")
+        if not 0 < self.max_latency_s <= self.hold_timeout_s:
+            raise ValueError("need 0 < max_latency_s <= hold_timeout_s")
         if not 0 < self.port < 65536 or not self.connect_timeout_s > 0 or not self.calibration_s > 0:
             raise ValueError("need 0 < port < 65536, connect_timeout_s > 0 and calibration_s > 0")
         if self.frozen_frames < 0 or self.frozen_frames == 1:

@@ -22,6 +22,7 @@ from lerobot.utils.errors import DeviceNotConnectedError
 from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import read_raw as read_json
 
+from . import names
 from . import retarget as rt
 from .config_manus_glove import ManusGloveConfig
 from .stream import GloveReceiver
@@ -86,6 +87,13 @@ def calibration_problems(open_pose: dict, fist_pose: dict, min_flex_range_deg: f
     return out
 
 
+def _by_channel(cal: GloveCalibration, side: str) -> tuple[GloveCalibration, list[str]]:
+    """The calibration keyed by channel name (names.py), whichever accepted name the file used (files written before
+    the names table keyed the spreads by the ROS 2 strings, e.g. IndexSpread)."""
+    (open_pose, p1), (fist_pose, p2) = names.canonical(cal.open, side), names.canonical(cal.fist, side)
+    return GloveCalibration(open=open_pose, fist=fist_pose), p1 + p2
+
+
 class ManusGlove(Teleoperator):
     config_class = ManusGloveConfig
     name = "manus_glove"
@@ -97,7 +105,8 @@ class ManusGlove(Teleoperator):
         if not isinstance(self.calibration, GloveCalibration):
             self.calibration: GloveCalibration | None = None
         self.receiver = GloveReceiver(config.host, config.port, config.side, rt.REQUIRED_KEYS, config.hold_timeout_s,
-                                      sender=config.sender_address(), frozen_frames=config.frozen_frames)  # fmt: skip
+                                      sender=config.sender_address(), frozen_frames=config.frozen_frames,
+                                      max_latency_s=config.max_latency_s)  # fmt: skip
         self._last_target: np.ndarray | None = None
         self._holding = False
 
@@ -126,7 +135,8 @@ class ManusGlove(Teleoperator):
             if not bad:
                 with open(fpath) as f, draccus.config_type("json"):
                     cal = draccus.load(GloveCalibration, f)
-                bad = calibration_problems(cal.open, cal.fist, self.config.min_flex_range_deg)
+                cal, bad = _by_channel(cal, self.config.side)
+                bad = bad or calibration_problems(cal.open, cal.fist, self.config.min_flex_range_deg)
         except Exception as e:  # unreadable: empty, truncated, not JSON, not UTF-8
             bad = [f"unreadable ({type(e).__name__}: {e})"]
         if bad:
@@ -154,8 +164,7 @@ class ManusGlove(Teleoperator):
             self.receiver.close()
             raise ConnectionError(
                 f"No glove data on udp://{self.config.host}:{self.config.port} for the {self.config.side} hand "
-                f"within {self.config.connect_timeout_s:.1f} s ({self.receiver.rejected} datagrams rejected): "
-                "is the SDK bridge running?"
+                f"within {self.config.connect_timeout_s:.1f} s: {self.receiver.diagnosis()}."
             )
         if not self.is_calibrated and calibrate:
             self.calibrate()
@@ -197,8 +206,8 @@ class ManusGlove(Teleoperator):
         frame, age = self.receiver.latest()
         if age > self.config.disconnect_timeout_s:
             raise GloveStreamLost(
-                f"Glove stream lost: no datagram for {age:.2f} s (limit {self.config.disconnect_timeout_s} s). "
-                "Stopping teleoperation; the robot's cleanup turns its torque off."
+                f"Glove stream lost: no usable datagram for {age:.2f} s (limit {self.config.disconnect_timeout_s} s; "
+                f"{self.receiver.diagnosis()}). Stopping teleoperation; the robot's cleanup turns its torque off."
             )
         if age > self.config.hold_timeout_s and self._last_target is not None:
             if not self._holding:

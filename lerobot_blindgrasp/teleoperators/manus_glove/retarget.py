@@ -12,12 +12,13 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 
-# Gripper joint (spec.JOINT_NAMES order) -> (kind, glove ergonomics channels averaged).
+# Gripper joint (spec.JOINT_NAMES order) -> (kind, glove ergonomics channels averaged), by the channel names of
+# names.py (the MANUS SDK's ErgonomicsDataType names without side).
 CHANNELS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("spread", ("IndexSpread",)),
+    ("spread", ("IndexMCPSpread",)),
     ("flex", ("IndexMCPStretch",)),
     ("flex", ("IndexPIPStretch", "IndexDIPStretch")),
-    ("spread", ("MiddleSpread",)),
+    ("spread", ("MiddleMCPSpread",)),
     ("flex", ("MiddleMCPStretch",)),
     ("flex", ("MiddlePIPStretch", "MiddleDIPStretch")),
     ("spread", ("ThumbMCPSpread",)),

@@ -1,125 +1,89 @@
-"""The glove's local network stream: one UDP datagram per glove frame, UTF-8 JSON.
+"""The glove receiver: the newest pose for one hand from the bridge's UDP datagrams (`protocol.py`), ordered and
+aged by the bridge's own sequence and clock, not by arrival.
 
-A small bridge next to the vendor's SDK (MANUS Core SDK, or its ROS 2 `manus_data_publisher`) sends, for one hand:
+Order. Within a bridge session only a datagram with a higher `seq` than the newest one used is kept. A datagram
+that was reordered on the way, delayed, or duplicated arrives with a lower or equal `seq` and is dropped
+(`late`), however long after: the pose never steps back. A new `session` is a restarted bridge (its `seq` starts
+again at 1): it is followed at once, with a warning, and the earlier session's datagrams are dropped from then on
+(`retired`).
 
-    {"proto": "blindgrasp-glove/1", "seq": 1234, "t": 1732412345.123, "side": "right",
-     "ergonomics": {"ThumbMCPSpread": 12.1, "ThumbMCPStretch": 20.4, ..., "PinkyDIPStretch": 3.0}}
+Age. The bridge stamps `sent` on its monotonic clock. For each datagram, arrival - sent is the one-way delay plus
+the (unknown, constant) offset between the two clocks. Its minimum over the stream estimates that offset with the
+fastest delivery seen; the estimate may rise by `OFFSET_LEAK` s per s so that a clock rate difference between
+the two machines (crystals: tens of ppm) never accumulates. A datagram's delay beyond that minimum is how long it
+was queued on the way. One queued longer than `max_latency_s` is dropped (`stale`): after a network pause, the
+backlog that arrives in a burst is never replayed. A kept pose's age is the larger of its age by the bridge's
+clock (now - sent, mapped to this host) and the time since it arrived, so neither clock alone can make a pose
+look fresher than it is.
 
-- `ergonomics`: the SDK's ergonomics data, keyed by its type names (ThumbMCPSpread, ThumbMCPStretch,
-  ThumbPIPStretch, ThumbDIPStretch, then {Index,Middle,Ring,Pinky}{Spread,MCPStretch,PIPStretch,DIPStretch}),
-  in degrees as the SDK reports them. Only the keys the retargeting uses are required.
-- `seq`: uint32 counter of the bridge; a datagram a few counts older than the newest one, arriving right after it,
-  was reordered on the way and is ignored. A larger step back is a restarted bridge (its counter starts again at
-  0) and is accepted.
-- `t`: sender wall time (s), informational; staleness is judged on the receiver's clock.
-- `side`: "left" | "right"; datagrams for the other hand are ignored (two gloves may share a port).
+One glove per teleoperator: the receiver binds to one sender, the configured `sender` address or else the first
+that sends a valid datagram for its hand, and drops every other sender's datagrams (`foreign`, warned once per
+address). Changing the sender (a bridge on another machine or port) takes a reconnect.
 
-One glove per teleoperator: the receiver binds to one sender, the configured `sender` address or else the first that
-sends a valid datagram for its hand, and drops every other sender's datagrams (counted in `foreign`, warned once
-per address). A second bridge, or anyone else on the port, cannot take over the teleoperation. Changing the sender
-(a bridge restarted on a new source port, another machine) takes a reconnect, which binds afresh.
-
-UDP fits a 60-120 Hz pose stream: the newest datagram wins, a lost one is replaced 10 ms later, and the sender
-needs no connection state. The default destination is 127.0.0.1:50120 (same machine as the bridge).
+Rejected datagrams are counted with their last reason, and one that lacks channels the retargeting needs is
+warned about once per missing set, naming them; `diagnosis()` says all of it in one line for the operator.
 """
 
 from __future__ import annotations
 
-import json
 import logging
-import math
 import socket
 import time
+from collections import deque
 from dataclasses import dataclass
 
 from lerobot_blindgrasp.hardware.streams import LatestFrameStream
 
+from .protocol import DatagramError, GloveDatagram, decode
+
 logger = logging.getLogger(__name__)
 
-PROTO = "blindgrasp-glove/1"
-MAX_ABS_DEG = 360.0
-# UDP on one host or a LAN reorders by a few datagrams within milliseconds; anything else going backwards is a
-# restarted bridge.
-REORDER_WINDOW = 16
-REORDER_MAX_S = 0.1
+# Upward drift allowed to the clock-offset estimate (s per s): 1000 ppm, over ten times a quartz clock's rate error.
+OFFSET_LEAK = 1e-3
+RETIRED_SESSIONS = 16  # earlier session ids remembered, to drop their late datagrams
 
 
 @dataclass(frozen=True)
 class GloveFrame:
+    session: str
     seq: int
     side: str
     ergonomics: dict[str, float]
-    received: float  # receiver monotonic time
-
-
-def encode(seq: int, ergonomics: dict[str, float], side: str = "right", t: float | None = None) -> bytes:
-    stamp = time.time() if t is None else t
-    msg = {"proto": PROTO, "seq": seq, "t": stamp, "side": side, "ergonomics": ergonomics}
-    return json.dumps(msg).encode()
-
-
-def _number(value) -> float:
-    # JSON also yields bools, strings, lists, NaN, Infinity and integers too large for a float.
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"not a number: {value!r:.40}")
-    try:
-        out = float(value)
-    except OverflowError as e:
-        raise ValueError("number too large") from e
-    if not math.isfinite(out):
-        raise ValueError(f"non-finite number {out}")
-    return out
-
-
-def decode(datagram: bytes, required: set[str]) -> tuple[int, str, dict[str, float]]:
-    """Raises ValueError on anything that is not a complete, sane message of this protocol."""
-    try:
-        msg = json.loads(datagram.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError, RecursionError) as e:
-        raise ValueError(f"not JSON: {e}") from e
-    if not isinstance(msg, dict) or msg.get("proto") != PROTO:
-        raise ValueError("not a blindgrasp-glove/1 message")
-    ergo = msg.get("ergonomics")
-    if not isinstance(ergo, dict) or not required <= ergo.keys():
-        raise ValueError(f"ergonomics lacks {sorted(required - set(ergo if isinstance(ergo, dict) else {}))}")
-    values = {k: _number(ergo[k]) for k in required}
-    if any(abs(v) > MAX_ABS_DEG for v in values.values()):
-        raise ValueError("ergonomics value out of range")
-    seq = msg.get("seq")
-    if isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq < 2**32:
-        raise ValueError(f"seq {seq!r:.40} is not a uint32")
-    side = msg.get("side", "right")
-    if side not in ("left", "right"):
-        raise ValueError(f"side {side!r:.40}")
-    return seq, side, values
+    received: float  # this host's monotonic clock
+    sent_local: float  # the bridge's send time mapped to this host's monotonic clock (<= received)
 
 
 class GloveReceiver(LatestFrameStream[GloveFrame]):
-    """Background UDP listener keeping the newest valid frame for one hand (`LatestFrameStream`). Staleness is the
+    """Background UDP listener keeping the newest valid pose for one hand (`LatestFrameStream`). Staleness is the
     teleoperator's call (hold the target, then stop), so `stale_timeout_s` is its hold timeout."""
 
     name = "Glove"
     lost_hint = "socket closed"
 
-    def __init__(
-        self,
-        host: str,
-        port: int,
-        side: str,
-        required: set[str],
-        stale_timeout_s: float = 0.15,
-        *,
-        sender: tuple[str, int] | None = None,
-        frozen_frames: int = 0,
-    ):
+    def __init__(self, host: str, port: int, side: str, required: set[str], stale_timeout_s: float = 0.15, *,
+                 sender: tuple[str, int] | None = None, frozen_frames: int = 0,
+                 max_latency_s: float = 0.1):  # fmt: skip
         super().__init__(f"udp://{host}:{port}", stale_timeout_s, frozen_frames)
         self.host, self.port, self.side, self.required = host, port, side, required
         self.sender = sender  # the configured sender, or None: bind to the first valid one
+        self.max_latency_s = max_latency_s
         self.bound: tuple[str, int] | None = None
-        self.rejected = 0
-        self.foreign = 0  # valid datagrams from another sender than the bound one, dropped
-        self._warned: set[tuple[str, int]] = set()
         self._sock: socket.socket | None = None
+        self._reset()
+
+    def _reset(self) -> None:
+        self.received = self.rejected = self.foreign = self.other_side = 0
+        self.late = self.stale = self.retired = self.restarts = 0
+        self.last_reject: str | None = None
+        self._warned_senders: set[tuple[str, int]] = set()
+        self._warned_missing: set[frozenset[str]] = set()
+        self.session: str | None = None
+        self._retired: deque[str] = deque(maxlen=RETIRED_SESSIONS)
+        self._seq = 0
+        self._sent = float("-inf")
+        self._offset: float | None = None  # arrival - sent, minimum so far (leaking upwards)
+        self._offset_at = 0.0
+        self._stale_run, self._stale_max = 0, 0.0
 
     @property
     def is_open(self) -> bool:
@@ -140,53 +104,132 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             raise ConnectionError(f"Cannot listen for the glove on udp://{self.host}:{self.port}: {e}") from e
         sock.settimeout(0.05)
         self._sock = sock
-        self.bound = self.sender  # each connection binds afresh
-        self._warned.clear()
-
-    def _receive(self) -> list[GloveFrame]:
-        try:
-            datagram, addr = self._sock.recvfrom(65536)
-        except TimeoutError:
-            return []
-        try:
-            seq, side, ergo = decode(datagram, self.required)
-        except Exception as e:  # whatever arrives, the listener must keep listening
-            self.rejected += 1
-            logger.debug("glove datagram rejected: %s", e)
-            return []
-        if side != self.side:
-            return []
-        addr = (addr[0], addr[1])
-        if self.bound is None:
-            self.bound = addr
-            logger.info("Glove receiver bound to the bridge at %s:%d.", *addr)
-        elif addr != self.bound:
-            self.foreign += 1
-            if addr not in self._warned:
-                self._warned.add(addr)
-                logger.warning(
-                    "Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. Another bridge or "
-                    "sender on the port? Reconnect to change the sender.", *addr, *self.bound
-                )
-            return []
-        return [GloveFrame(seq, side, ergo, time.monotonic())]
+        self._reset()  # each connection binds afresh, to any session
+        self.bound = self.sender
 
     def _close(self) -> None:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
 
+    # --- receive thread -------------------------------------------------------------------------------------
+    def _receive(self) -> list[GloveFrame]:
+        try:
+            datagram, addr = self._sock.recvfrom(65536)
+        except TimeoutError:
+            return []
+        arrival = time.monotonic()
+        self.received += 1
+        try:
+            d = decode(datagram, self.required)
+        except Exception as e:  # whatever arrives, the listener must keep listening
+            self._reject(e, addr)
+            return []
+        if d.side != self.side:
+            self.other_side += 1
+            return []
+        if not self._from_bound_sender((addr[0], addr[1])):
+            return []
+        frame = self._order_and_age(d, arrival)
+        return [] if frame is None else [frame]
+
+    def _reject(self, e: Exception, addr) -> None:
+        self.rejected += 1
+        self.last_reject = str(e)[:200]
+        missing = e.missing if isinstance(e, DatagramError) else frozenset()
+        if missing and missing not in self._warned_missing:
+            self._warned_missing.add(missing)
+            logger.warning(
+                "Glove datagrams from %s:%d lack the channels %s that the retargeting needs, so they are dropped. "
+                "Both the MANUS SDK's names and the ROS 2 publisher's are accepted (docs/glove.md); a publisher "
+                "that skips a channel (some copies drop IndexMCPSpread) needs the fix in docs/glove.md.",
+                addr[0], addr[1], sorted(missing),
+            )  # fmt: skip
+        else:
+            logger.debug("glove datagram rejected: %s", e)
+
+    def _from_bound_sender(self, addr: tuple[str, int]) -> bool:
+        if self.bound is None:
+            self.bound = addr
+            logger.info("Glove receiver bound to the bridge at %s:%d.", *addr)
+        elif addr != self.bound:
+            self.foreign += 1
+            if addr not in self._warned_senders:
+                self._warned_senders.add(addr)
+                logger.warning(
+                    "Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. Another bridge or "
+                    "sender on the port? Reconnect to change the sender.", *addr, *self.bound
+                )
+            return False
+        return True
+
+    def _order_and_age(self, d: GloveDatagram, arrival: float) -> GloveFrame | None:
+        if d.session != self.session:
+            if d.session in self._retired:
+                self.retired += 1
+                return None
+            self._new_session(d.session)
+        if d.seq <= self._seq or d.sent < self._sent:
+            self.late += 1  # reordered, delayed or duplicated: older than the pose already used
+            return None
+        sample = arrival - d.sent
+        leaked = sample if self._offset is None else self._offset + OFFSET_LEAK * (arrival - self._offset_at)
+        self._offset, self._offset_at = min(leaked, sample), arrival
+        queued = sample - self._offset
+        # The sequence moves on even for a stale datagram: anything older than it is older still.
+        self._seq, self._sent = d.seq, d.sent
+        if queued > self.max_latency_s:
+            self.stale += 1
+            self._stale_run += 1
+            self._stale_max = max(self._stale_max, queued)
+            return None
+        if self._stale_run:
+            logger.warning(
+                "Dropped %d glove datagrams that arrived up to %.0f ms late by the bridge's clock (limit %.0f ms): "
+                "a network pause, whose backlog is not replayed. Following live data again.",
+                self._stale_run, self._stale_max * 1e3, self.max_latency_s * 1e3,
+            )  # fmt: skip
+            self._stale_run, self._stale_max = 0, 0.0
+        return GloveFrame(d.session, d.seq, d.side, d.ergonomics, arrival, d.sent + self._offset)
+
+    def _new_session(self, session: str) -> None:
+        if self.session is not None:
+            self.restarts += 1
+            self._retired.append(self.session)
+            logger.warning(
+                "Glove bridge restarted (session %s -> %s, its counter starts again): following the new session; "
+                "late datagrams of the old one are dropped.", self.session, session
+            )
+        self.session, self._seq, self._sent, self._offset = session, 0, float("-inf"), None
+
+    # --- readers --------------------------------------------------------------------------------------------
+    def latest(self) -> tuple[GloveFrame, float]:
+        """(newest pose, its age in s): the larger of its age by the bridge's clock and since its arrival."""
+        frame, arrival_age = super().latest()
+        return frame, max(arrival_age, time.monotonic() - frame.sent_local)
+
+    def diagnosis(self) -> str:
+        """What arrived and why it was not used, for the operator."""
+        if not self.received:
+            return ("no datagram arrived: is the bridge running (blindgrasp-glove-bridge, docs/glove.md) and "
+                    f"sending to {self.host}:{self.port}? A bridge on another machine needs --teleop.host and an "
+                    "open firewall port")  # fmt: skip
+        parts = [f"{self.received} datagrams arrived, {self.frames} used"]
+        if self.rejected:
+            parts.append(f"{self.rejected} rejected (last: {self.last_reject})")
+        if self.other_side:
+            other = "left" if self.side == "right" else "right"
+            parts.append(f"{self.other_side} for the {other} hand (this teleoperator is --teleop.side={self.side})")
+        if self.foreign:
+            parts.append(f"{self.foreign} from another sender than the bound {self.bound[0]}:{self.bound[1]}")
+        for count, what in ((self.late, "late or duplicated"), (self.stale, f"queued > {self.max_latency_s} s"),
+                            (self.retired, "from an earlier bridge session")):  # fmt: skip
+            if count:
+                parts.append(f"{count} {what}")
+        return "; ".join(parts)
+
     def _content(self, frame: GloveFrame) -> tuple:
         return (tuple(frame.ergonomics[k] for k in sorted(frame.ergonomics)),)
 
     def _content_names(self) -> list[str]:
         return ["ergonomics"]
-
-    def _keep(self, frame: GloveFrame, now: float) -> bool:
-        last = self._latest
-        if last is not None and frame.seq == last.seq:  # a duplicate datagram
-            self.counter_faults += 1
-            return False
-        # A little older than what we have, just after it: reordered on the way. Further back: a restarted bridge.
-        return not (last is not None and 0 < (last.seq - frame.seq) % 2**32 <= REORDER_WINDOW
-                    and now - last.received < REORDER_MAX_S)  # fmt: skip

@@ -1,0 +1,159 @@
+"""The glove datagram: one UDP datagram per glove frame, UTF-8 JSON, from a bridge next to the MANUS SDK.
+
+    {"proto": "blindgrasp-glove/2", "session": "9f1c2a7d03b4e8aa", "seq": 1234, "sent": 81234.5678,
+     "side": "right", "ergonomics": {"ThumbMCPSpread": 25.0, "IndexMCPSpread": 2.0, "IndexMCPStretch": 5.0, ...}}
+
+- `session`: a random id the bridge draws when it starts (1-64 characters of [0-9A-Za-z_-]). A new id is a
+  restarted bridge; datagrams of an earlier id arriving later are old and dropped.
+- `seq`: the bridge's frame counter in this session, from 1, +1 per datagram (uint32). The receiver keeps only
+  datagrams newer than the newest it has used: a late or duplicated one never steps the pose back.
+- `sent`: the bridge's send time in seconds on its own monotonic clock (e.g. `time.monotonic()`,
+  `std::chrono::steady_clock`), never wall time, which NTP may step. The receiver ages poses by this clock (see
+  `stream.py`); the two machines' clocks need not agree, only tick at the same rate.
+- `side`: "left" | "right"; datagrams for the other hand are ignored (two gloves may share a port).
+- `ergonomics`: MANUS SDK ergonomics values in degrees, keyed by the names of `names.py` (the SDK's enum names,
+  with or without side, or the ROS 2 publisher's strings). Only the channels the retargeting uses are required;
+  others are ignored.
+
+Version 1 (`blindgrasp-glove/1`, no session, wall-clock `t`) is refused with a message saying so: its receiver
+ordered by arrival, which is what version 2 fixes, so accepting it would keep the fault.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import secrets
+import socket
+import time
+from dataclasses import dataclass
+
+from . import names
+
+PROTO = "blindgrasp-glove/2"
+MAX_ABS_DEG = 360.0
+SESSION_RE = re.compile(r"[0-9A-Za-z_-]{1,64}")
+
+
+class DatagramError(ValueError):
+    """A datagram that is not a complete, sane message of this protocol. `missing`: the required channels it
+    lacks, when that is the reason."""
+
+    def __init__(self, reason: str, missing: frozenset[str] = frozenset()):
+        super().__init__(reason)
+        self.missing = missing
+
+
+@dataclass(frozen=True)
+class GloveDatagram:
+    session: str
+    seq: int
+    sent: float  # sender's monotonic clock (s)
+    side: str
+    ergonomics: dict[str, float]  # by channel name (names.py), the required channels only
+
+
+def encode(session: str, seq: int, sent: float, ergonomics: dict[str, float], side: str = "right") -> bytes:
+    msg = {"proto": PROTO, "session": session, "seq": seq, "sent": sent, "side": side, "ergonomics": ergonomics}
+    return json.dumps(msg).encode()
+
+
+def _number(value) -> float:
+    # JSON also yields bools, strings, lists, NaN, Infinity and integers too large for a float.
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DatagramError(f"not a number: {value!r:.40}")
+    try:
+        out = float(value)
+    except OverflowError as e:
+        raise DatagramError("number too large") from e
+    if not math.isfinite(out):
+        raise DatagramError(f"non-finite number {out}")
+    return out
+
+
+def _header(msg: dict) -> tuple[str, int, float, str]:
+    side = msg.get("side")
+    if side not in names.SIDES:
+        raise DatagramError(f"side {side!r:.40} is not 'left' or 'right'")
+    session = msg.get("session")
+    if not isinstance(session, str) or not SESSION_RE.fullmatch(session):
+        raise DatagramError(f"session {session!r:.40} is not 1-64 characters of [0-9A-Za-z_-]")
+    seq = msg.get("seq")
+    if isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq < 2**32:
+        raise DatagramError(f"seq {seq!r:.40} is not a uint32")
+    try:
+        sent = _number(msg.get("sent"))
+    except DatagramError as e:
+        raise DatagramError(f"sent (the bridge's send time): {e}") from None
+    return session, seq, sent, side
+
+
+def decode(datagram: bytes, required: set[str]) -> GloveDatagram:
+    """Raises DatagramError on anything that is not a complete, sane message of this protocol."""
+    try:
+        msg = json.loads(datagram.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError) as e:
+        raise DatagramError(f"not JSON: {e}") from e
+    proto = msg.get("proto") if isinstance(msg, dict) else None
+    if proto == "blindgrasp-glove/1":
+        raise DatagramError("protocol blindgrasp-glove/1 (no session, no sender clock): update the bridge to "
+                            f"{PROTO} (blindgrasp-glove-bridge, docs/glove.md)")  # fmt: skip
+    if proto != PROTO:
+        raise DatagramError(f"not a {PROTO} message")
+    session, seq, sent, side = _header(msg)
+    ergo = msg.get("ergonomics")
+    if not isinstance(ergo, dict):
+        raise DatagramError("ergonomics is not an object")
+    by_channel, problems = names.canonical(ergo, side)
+    if problems:
+        raise DatagramError("; ".join(problems[:3]))
+    missing = frozenset(required - by_channel.keys())
+    if missing:
+        raise DatagramError(f"ergonomics lacks {sorted(missing)}", missing)
+    values = {k: _number(by_channel[k]) for k in required}
+    if any(abs(v) > MAX_ABS_DEG for v in values.values()):
+        raise DatagramError("ergonomics value out of range")
+    return GloveDatagram(session, seq, sent, side, values)
+
+
+class GloveSender:
+    """The bridge's end: numbers, stamps and sends datagrams for one hand. A fixed `source_port` keeps the
+    bridge's address across restarts, so a receiver bound to it (`--teleop.sender`) accepts the restarted bridge."""
+
+    def __init__(self, host: str, port: int, side: str = "right", *, source_host: str = "",
+                 source_port: int = 0, session: str | None = None):  # fmt: skip
+        if side not in names.SIDES:
+            raise ValueError(f"side must be 'left' or 'right', not {side!r}")
+        self.addr = (host, port)
+        self.side = side
+        self.session = session or secrets.token_hex(8)
+        self.seq = 0
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._sock.bind((source_host, source_port))
+        except OSError as e:
+            self._sock.close()
+            raise ConnectionError(f"Cannot send from udp port {source_port}: {e} (another bridge running?)") from e
+
+    @property
+    def source(self) -> tuple[str, int]:
+        return self._sock.getsockname()
+
+    def pack(self, ergonomics: dict[str, float], sent: float | None = None) -> bytes:
+        """The next datagram of this session (numbered and stamped now), not sent yet."""
+        self.seq += 1
+        return encode(self.session, self.seq, time.monotonic() if sent is None else sent, ergonomics, self.side)
+
+    def send_raw(self, datagram: bytes) -> None:
+        self._sock.sendto(datagram, self.addr)
+
+    def send(self, ergonomics: dict[str, float]) -> None:
+        self.send_raw(self.pack(ergonomics))
+
+    def restart(self) -> None:
+        """What a restarted bridge looks like: a new session, counting from 1 again."""
+        self.session, self.seq = secrets.token_hex(8), 0
+
+    def close(self) -> None:
+        self._sock.close()
