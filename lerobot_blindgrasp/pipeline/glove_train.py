@@ -1,0 +1,199 @@
+"""`blindgrasp-train-glove`: a student on glove recordings, alone or merged with sim demos, by a named preset.
+
+    blindgrasp-train-glove --preset=glove --glove=[data/glove_s1,data/glove_s2] --output_dir=outputs/glove
+    blindgrasp-train-glove --preset=sim_plus_glove --glove=[data/glove_s1] --sim_demos=runs/demos \\
+        --output_dir=outputs/sim_plus_glove
+
+The presets are `lerobot_blindgrasp/presets/glove.py`. What runs, in order, each step with LeRobot's own tools:
+1. every source is checked for the shared schema (`spec.dataset_features()`, robot type, 20 fps), so a wrong
+   folder is named before anything is written;
+2. sim demos (`sim_plus_glove*`): their `episode.*` metadata features are removed (`dataset_tools.remove_feature`,
+   what `lerobot-edit-dataset --operation.type remove_feature` runs) into `<output_dir>/sim_schema`;
+3. two or more sources are merged (`aggregate_datasets`, what `lerobot-edit-dataset --operation.type merge` runs,
+   through `demos.dataset.aggregate`, which keeps the result mergeable) into `<output_dir>/dataset`;
+4. `lerobot-train --policy.type=blindgrasp_transformer` with the preset's size and schedule into
+   `<output_dir>/student`.
+Each dataset is written to a temporary folder and renamed when complete, so a re-run after a crash reuses what is
+finished and redoes the rest. `--dry_run=true` prints the plan and the lerobot-train command and runs nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.presets import student as student_presets
+from lerobot_blindgrasp.presets.glove import GlovePreset, get
+
+ROBOT_TYPE = "blindgrasp_gripper"  # = demos.dataset.ROBOT_TYPE and the robot's LeRobot name
+
+
+@dataclass
+class GloveTrainConfig:
+    # lerobot-record dataset folders (each session's --dataset.root), merged in this order
+    glove: list[Path] = field(default_factory=list)
+    # where the merged dataset and the student go
+    output_dir: Path | None = None
+    # a key of lerobot_blindgrasp.presets.glove.GLOVE_PRESETS: glove, sim_plus_glove (and *_smoke for CI)
+    preset: str = "glove"
+    # a blindgrasp-collect-demos folder; required by the sim_plus_glove presets, refused by the others
+    sim_demos: Path | None = None
+    # repo id of the merged dataset (a local name; nothing is pushed)
+    repo_id: str = "local/blindgrasp_glove_train"
+    seed: int = 1000
+    # lerobot-train --policy.device; None: the preset's (cpu)
+    device: str | None = None
+    # print what would run, run nothing
+    dry_run: bool = False
+
+    def __post_init__(self):
+        p = get(self.preset)
+        if not self.glove:
+            raise ValueError("--glove needs at least one lerobot-record dataset folder, e.g. --glove=[data/glove]")
+        if self.output_dir is None:
+            raise ValueError("--output_dir is required")
+        if p.sim_demos and self.sim_demos is None:
+            raise ValueError(f"preset {p.name!r} merges sim demos: give --sim_demos=<blindgrasp-collect-demos folder>")
+        if not p.sim_demos and self.sim_demos is not None:
+            raise ValueError(f"preset {p.name!r} trains on glove recordings only; drop --sim_demos or pick "
+                             "--preset=sim_plus_glove")
+
+
+def schema_problems(root: Path, extra_ok: tuple[str, ...] = ()) -> list[str]:
+    """Why `root` cannot join a merge with the shared schema ([] if it can), from its meta/info.json."""
+    info_path = Path(root) / "meta" / "info.json"
+    if not info_path.is_file():
+        return [f"{root} is not a LeRobotDataset folder (no meta/info.json)"]
+    info = json.loads(info_path.read_text())
+    problems = []
+    for key, ft in spec.dataset_features().items():
+        have = info["features"].get(key)
+        if have is None or list(have["shape"]) != list(ft["shape"]) or list(have["names"]) != ft["names"]:
+            problems.append(f"{key} is not the shared {ft['shape'][0]}-d {key} of spec.dataset_features()")
+    extra = [k for k, ft in info["features"].items() if k.startswith(("observation.", "action")) and
+             k not in spec.dataset_features() and k not in extra_ok]  # fmt: skip
+    if extra:
+        problems.append(f"extra policy features {extra} (cameras?) that the other sources lack")
+    if info.get("robot_type") != ROBOT_TYPE:
+        problems.append(f"robot_type {info.get('robot_type')!r}, not {ROBOT_TYPE!r}")
+    if info.get("fps") != spec.CONTROL_HZ:
+        problems.append(f"fps {info.get('fps')}, not {spec.CONTROL_HZ}")
+    return [f"{root}: {p}" for p in problems]
+
+
+def _complete(root: Path) -> bool:
+    return (root / "meta" / "info.json").is_file()
+
+
+def _fresh_tmp(dest: Path) -> Path:
+    tmp = dest.with_name(dest.name + ".partial")
+    if tmp.exists():
+        print(f"[glove-train] setting aside an unfinished {tmp} from an earlier run")
+        shutil.rmtree(tmp)
+    return tmp
+
+
+def sim_without_metadata(sim_root: Path, dest: Path) -> Path:
+    """The sim demos without their `episode.*` features (LeRobot's remove_feature), written once."""
+    from lerobot.datasets import LeRobotDataset
+    from lerobot.datasets.dataset_tools import remove_feature
+
+    from lerobot_blindgrasp.demos.dataset import METADATA_FEATURE_NAMES
+
+    if _complete(dest):
+        return dest
+    ds = LeRobotDataset(f"local/{Path(sim_root).name}", root=sim_root)
+    names = [n for n in METADATA_FEATURE_NAMES if n in ds.meta.features]
+    if not names:
+        return Path(sim_root)  # already in the shared schema
+    tmp = _fresh_tmp(dest)
+    remove_feature(ds, names, output_dir=tmp, repo_id=f"local/{dest.name}")
+    tmp.rename(dest)
+    return dest
+
+
+def merged(sources: list[Path], dest: Path, repo_id: str) -> Path:
+    """One dataset of all `sources` (LeRobot's aggregate_datasets); the source itself if there is one."""
+    from lerobot_blindgrasp.demos.dataset import aggregate
+
+    if len(sources) == 1:
+        return sources[0]
+    if _complete(dest):
+        return dest
+    tmp = _fresh_tmp(dest)
+    aggregate([f"local/{p.name}_{k}" for k, p in enumerate(sources)], sources, repo_id, tmp)
+    tmp.rename(dest)
+    return dest
+
+
+def train_command(p: GlovePreset, dataset: Path, repo_id: str, out: Path, seed: int,
+                  device: str | None = None) -> list[str]:
+    s = p.student
+    frames = student_presets.dataset_frames(dataset) if _complete(dataset) else None
+    sched = student_presets.schedule(s, frames)
+    exe = Path(sys.executable).parent / "lerobot-train"
+    cmd = [str(exe) if exe.exists() else "lerobot-train", "--policy.type=blindgrasp_transformer",
+           f"--policy.size={s.size}", f"--dataset.repo_id={repo_id}", f"--dataset.root={dataset}",
+           f"--output_dir={out}", f"--steps={sched.steps}", f"--batch_size={s.batch_size}"]
+    if sched.constant_lr_steps is not None:
+        cmd.append(f"--policy.scheduler_constant_steps={sched.constant_lr_steps}")
+    if s.lr is not None:
+        cmd.append(f"--policy.optimizer_lr={s.lr}")
+    return cmd + s.policy_flags + [
+        f"--save_freq={sched.steps}", f"--log_freq={max(1, sched.steps // 50)}", "--policy.push_to_hub=false",
+        f"--policy.device={device or s.device}", f"--num_workers={s.num_workers}", "--wandb.enable=false",
+        f"--seed={seed}"]  # fmt: skip
+
+
+def run(cfg: GloveTrainConfig) -> Path:
+    """Merge and train; returns the student's checkpoint folder (`.../pretrained_model`)."""
+    p = get(cfg.preset)
+    out = Path(cfg.output_dir)
+    problems = [q for g in cfg.glove for q in schema_problems(g)]
+    if cfg.sim_demos is not None:
+        from lerobot_blindgrasp.demos.dataset import METADATA_FEATURE_NAMES
+
+        problems += schema_problems(cfg.sim_demos, extra_ok=METADATA_FEATURE_NAMES)
+    if problems:
+        raise SystemExit("error: cannot merge:\n  " + "\n  ".join(problems))
+    student = out / "student"
+    if student.exists() and not cfg.dry_run:
+        raise SystemExit(f"error: {student} exists; to go on training use LeRobot's --resume=true "
+                         f"--config_path={student}/checkpoints/last/pretrained_model/train_config.json, or pick "
+                         "another --output_dir")  # fmt: skip
+    sources = [Path(g) for g in cfg.glove] * (p.glove_copies if p.sim_demos else 1)
+    plan = [f"glove recordings: {', '.join(map(str, cfg.glove))}" + (f" (x{p.glove_copies})" if p.glove_copies > 1
+                                                                          else "")]  # fmt: skip
+    if cfg.sim_demos is not None:
+        plan.append(f"sim demos: {cfg.sim_demos} without episode.* -> {out / 'sim_schema'}")
+    if cfg.dry_run:
+        many = len(sources) + (cfg.sim_demos is not None) > 1
+        dataset = out / "dataset" if many else Path(cfg.glove[0])
+        print("\n".join([*plan, f"merge -> {dataset}" if many else f"train on {dataset}",
+                         shlex.join(train_command(p, dataset, cfg.repo_id, student, cfg.seed, cfg.device))]))
+        return student
+    out.mkdir(parents=True, exist_ok=True)
+    if cfg.sim_demos is not None:
+        sources.insert(0, sim_without_metadata(Path(cfg.sim_demos), out / "sim_schema"))
+    dataset = merged(sources, out / "dataset", cfg.repo_id)
+    cmd = train_command(p, dataset, cfg.repo_id, student, cfg.seed, cfg.device)
+    print("\n".join([*plan, f"[glove-train] {shlex.join(cmd)}"]), flush=True)
+    if (rc := subprocess.run(cmd).returncode) != 0:
+        raise SystemExit(f"error: lerobot-train failed (exit {rc})")
+    steps = student_presets.schedule(p.student, student_presets.dataset_frames(dataset)).steps
+    return student / "checkpoints" / f"{steps:06d}" / "pretrained_model"
+
+
+def main(argv: list[str] | None = None) -> None:
+    print(run(parse_config(GloveTrainConfig, argv)))
+
+
+if __name__ == "__main__":
+    main()
