@@ -14,6 +14,13 @@ Liveness is judged by content, not only by arrival: a device can keep sending wh
   on the frames no longer count as fresh, so the stream goes stale by age with the reason in the message. 0 turns
   the check off for devices whose values may legitimately repeat.
 
+Stale and slow are told apart. Stale: no fresh frame for `stale_timeout_s` (silence, or only re-sent, replayed or
+frozen frames). Slow: fresh frames keep coming, but fewer per second than `min_rate_hz` (0: not checked), e.g. a
+force board whose ADCs convert at 10/s instead of 80/s; the control loop would then see the same sample for
+several periods without any frame being old enough to be stale. The rate is estimated from the arrival intervals of
+the last `RATE_WINDOW` frames without their longest quarter: a host or USB stall is one long interval followed by a
+burst, and must not read as a slow device, while a slow device has every interval long.
+
 Subclasses say how to open, receive and close (`_open`, `_receive`, `_close`), and may filter frames (`_keep`).
 Hand-written because neither LeRobot nor pyserial offers this; LeRobot's cameras do the same inside
 `OpenCVCamera.async_read`, which is specific to frames from OpenCV.
@@ -24,11 +31,15 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from typing import Generic, TypeVar
 
 logger = logging.getLogger(__name__)
 
 F = TypeVar("F")
+
+RATE_WINDOW = 16  # arrival intervals the rate estimate looks at (at most)
+RATE_MIN_INTERVALS = 4  # and at least, before any rate is judged
 
 
 class StreamError(ConnectionError):
@@ -40,10 +51,12 @@ class LatestFrameStream(Generic[F]):
     error_type: type[ConnectionError] = StreamError
     lost_hint = "unplugged?"  # the likely cause of a failed device, for the operator
 
-    def __init__(self, source: str, stale_timeout_s: float, frozen_frames: int = 0):
+    def __init__(self, source: str, stale_timeout_s: float, frozen_frames: int = 0, min_rate_hz: float = 0.0):
         self.source = source  # port or address, for messages
         self.stale_timeout_s = stale_timeout_s
         self.frozen_frames = frozen_frames
+        self.min_rate_hz = min_rate_hz
+        self._arrivals: deque[float] = deque(maxlen=RATE_WINDOW + 1)  # host arrival times of the newest frames
         self.frames = 0  # frames kept since the stream started
         self.counter_faults = 0  # frames dropped because their counter repeated or ran backwards
         self._latest: F | None = None
@@ -106,6 +119,7 @@ class LatestFrameStream(Generic[F]):
             # A frame from an earlier session must neither count as fresh nor shadow a restarted sender's counter.
             self._latest, self._error = None, None
             self._runs, self._previous_content = [], ()
+            self._arrivals.clear()
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name=f"{self.name}-stream", daemon=True)
         self._thread.start()
@@ -137,6 +151,7 @@ class LatestFrameStream(Generic[F]):
                             self._latest_t = now
                         self._latest = f
                         self.frames += 1
+                        self._arrivals.append(now)
                 self._cond.notify_all()
 
     # --- readers ------------------------------------------------------------------------------------------------
@@ -162,15 +177,36 @@ class LatestFrameStream(Generic[F]):
             raise self.error_type(f"No {self.name.lower()} frame received on '{self.source}'.")
         return frame, time.monotonic() - t
 
+    def rate_hz(self) -> float | None:
+        """Frames per second the device sends, from the newest arrivals (longest quarter of the intervals left
+        out); None until `RATE_MIN_INTERVALS` intervals were seen."""
+        with self._cond:
+            times = list(self._arrivals)
+        intervals = sorted(b - a for a, b in zip(times, times[1:]))
+        if len(intervals) < RATE_MIN_INTERVALS:
+            return None
+        kept = intervals[: len(intervals) - len(intervals) // 4]
+        mean = sum(kept) / len(kept)
+        return float("inf") if mean <= 0 else 1.0 / mean
+
     def fresh(self) -> F:
-        """The newest frame if it is at most `stale_timeout_s` old; raises `error_type` otherwise."""
+        """The newest frame if it is at most `stale_timeout_s` old and the stream is not slow; raises `error_type`
+        otherwise, saying which of the two it is."""
         frame, age = self.latest()
         if age > self.stale_timeout_s:
             raise self.error_type(
                 f"{self.name} data is stale: newest frame is {age * 1e3:.0f} ms old "
                 f"(limit {self.stale_timeout_s * 1e3:.0f} ms{self._stale_detail()})."
             )
+        if self.min_rate_hz and (rate := self.rate_hz()) is not None and rate < self.min_rate_hz:
+            raise self.error_type(
+                f"{self.name} stream is slow: fresh frames arrive at {rate:.1f}/s, below the {self.min_rate_hz:g}/s "
+                f"the control loop needs{self._slow_detail()}."
+            )
         return frame
+
+    def _slow_detail(self) -> str:
+        return ""
 
     def _stale_detail(self) -> str:
         out = ""

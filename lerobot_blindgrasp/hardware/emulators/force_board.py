@@ -1,10 +1,15 @@
 """The fingertip load-cell microcontroller, emulated on a pseudo-terminal.
 
 It streams the frame format of `lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor` at `rate_hz`, with raw
-counts = offset + force / scale (+ noise), and can misbehave the ways a USB serial sensor does: dropped frames,
+counts = offset + gain x force / scale (+ noise), saturating at 24 bits, and can misbehave the ways a USB serial sensor does: dropped frames,
 garbage bytes between frames, frames with a bad CRC, a stalled stream, channel-fault status bits, a different
 channel count (firmware/config mismatch), an unplugged cable (`unplug`), and dead data that still arrives: the last
 frame re-sent, a counter running backwards, a channel frozen at one value.
+
+It follows the board's rule (`docs/force_board.md`): one frame per fresh sample, under the next SEQ, and nothing in
+between; STATUS bits mean faults only: a channel at the ADC's full scale sets its bit, as the firmware does, and
+`status` adds injected faults. 80 frames/s by default, the rate of the shipped HX711 board
+(`lerobot_blindgrasp/hardware/force_board/`, which itself runs in simavr for the tests that need the firmware).
 """
 
 from __future__ import annotations
@@ -19,23 +24,30 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import encode_fra
 from lerobot_blindgrasp.hardware.emulators.pty_device import PtyDevice
 
 
+ADC_FULL_SCALE = 1 << 23  # 24-bit signed counts (HX711-class ADC), sign-extended into the frame's int32
+
+
 class ForceSensorEmulator(PtyDevice):
     tick_s = 0.005
     def __init__(
         self,
         *,
-        rate_hz: float = 100.0,
+        rate_hz: float = 80.0,
         scale_n_per_count=(2.5e-5, 2.5e-5, 2.5e-5),
         offset_counts=(81_000, -52_000, 12_000),
         noise_counts: float = 300.0,
         force_fn=None,
         seed: int = 0,
+        gain: float = 1.0,
     ):
         super().__init__()
         self.period = 1.0 / rate_hz
         self.scale = np.asarray(scale_n_per_count, dtype=np.float64)
         self.offset = np.asarray(offset_counts, dtype=np.float64)
         self.noise = noise_counts
+        # The cell's true sensitivity over the one the host is configured with (`scale_n_per_count`): a cell that
+        # was never weighed reads gain x the force.
+        self.gain = float(gain)
         self.forces_n = np.zeros(3)  # used when force_fn is None
         self.force_fn = force_fn  # () -> forces (N) per channel, e.g. a contact model on the servo emulator
         self.rng = random.Random(seed)
@@ -58,7 +70,7 @@ class ForceSensorEmulator(PtyDevice):
         self.sent = 0
 
     def counts_for(self, forces) -> np.ndarray:
-        return self.offset + np.asarray(forces, dtype=np.float64) / self.scale
+        return self.offset + self.gain * np.asarray(forces, dtype=np.float64) / self.scale
 
     def _tick(self) -> None:
         now = time.monotonic()
@@ -76,12 +88,14 @@ class ForceSensorEmulator(PtyDevice):
             return
         forces = self.force_fn() if self.force_fn is not None else self.forces_n
         counts = self.counts_for(forces) + np.array([self.rng.gauss(0.0, self.noise) for _ in range(3)])
-        counts = (np.round(counts).astype(np.int64).tolist() + [0] * self.channels)[: self.channels]
+        counts = np.clip(np.round(counts), -ADC_FULL_SCALE, ADC_FULL_SCALE - 1)  # a 24-bit ADC saturates
+        saturated = sum(1 << c for c, v in enumerate(counts) if abs(v + 0.5) >= ADC_FULL_SCALE - 0.5)
+        counts = (counts.astype(np.int64).tolist() + [0] * self.channels)[: self.channels]
         for c in self.frozen_channels:
             if c < len(self._last_counts):
                 counts[c] = self._last_counts[c]
         self._last_counts = counts
-        frame = encode_frame(seq, counts, self.status)
+        frame = encode_frame(seq, counts, self.status | saturated & ((1 << self.channels) - 1))
         if self.corrupt_next > 0:
             self.corrupt_next -= 1
             frame = frame[:-1] + bytes([frame[-1] ^ 0xFF])

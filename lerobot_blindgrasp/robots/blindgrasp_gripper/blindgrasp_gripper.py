@@ -49,6 +49,7 @@ from lerobot_blindgrasp.hardware.xm430 import (
 )
 
 from . import calibration as calib
+from . import force_calibration
 from . import connect_checks, latency_timer, servo_state, signals
 from .bus import PortLostError, RetryingDynamixelBus
 from .calibration import rad_to_ticks, ticks_to_rad
@@ -126,6 +127,7 @@ class BlindgraspGripper(Robot):
             stale_timeout_s=fs.stale_timeout_s,
             connect_timeout_s=fs.connect_timeout_s,
             frozen_frames=fs.frozen_frames,
+            min_rate_hz=fs.min_rate_hz,
             tare_max_std_n=fs.tare_max_std_n,
             tare_max_shift_n=fs.tare_max_shift_n,
             negative_fault_n=fs.negative_fault_n,
@@ -171,6 +173,7 @@ class BlindgraspGripper(Robot):
             self.expected = {}
             self.gate.forget()
             # Both ports are taken (exclusively) before the first byte goes out: a second owner is refused here.
+            force_calibration.apply(self.force, self.calibration_dir, self.id)  # <id>.force.json, if measured
             self.force.open()
             self.bus.connect()  # pings all nine, with retries
             self._register_atexit()

@@ -27,20 +27,25 @@ DYNAMIXEL_BAUDRATES = (9600, 57_600, 115_200, 1_000_000, 2_000_000, 3_000_000, 4
 
 @dataclass
 class ForceSensorConfig:
-    """The fingertip load-cell microcontroller (wire protocol in `force_sensor.py` and `docs/hardware.md`)."""
+    """The fingertip load-cell microcontroller (wire protocol in `force_sensor.py` and `docs/force_board.md`)."""
 
     port: str = "/dev/ttyACM0"
     baudrate: int = 115_200
     # N per raw count, one per channel in `spec.FORCE_SENSOR_NAMES` order; the sign makes a push on the pad
-    # positive. Placeholder for an HX711 (gain 128) on a 5 kg, 1 mV/V cell: measure yours with a known weight.
+    # positive. Placeholder for an HX711 (gain 128) on a 5 kg, 1 mV/V cell: `blindgrasp-calibrate-force` measures
+    # yours with a known weight, and its file (next to the servo calibration) replaces these at connect.
     scale_n_per_count: list[float] = field(default_factory=lambda: [2.5e-5, 2.5e-5, 2.5e-5])
     # Which stream channel feeds ff_tip, mf_tip, th_tip (wiring can differ from the firmware's order).
     channel_map: list[int] = field(default_factory=lambda: [0, 1, 2])
-    # Tare window at connect (fingers must touch nothing). The firmware streams at ~100 Hz.
+    # Tare window at connect (fingers must touch nothing). The HX711 board streams at ~80 frames/s.
     tare_s: float = 0.5
     # A reading older than this is stale: the gripper stops (3 control periods at 20 Hz).
     stale_timeout_s: float = 0.15
-    connect_timeout_s: float = 1.0
+    # Fewer fresh frames per second than this is a slow stream (stop): 2 samples per 20 Hz control period.
+    min_rate_hz: float = 40.0
+    # First frame after the port opens. Opening it resets an Arduino Nano (DTR): its bootloader waits ~1 s, then
+    # the HX711s settle (~0.1 s at 80/s).
+    connect_timeout_s: float = 3.0
     # A tip force above this stops the gripper (torque off): protects the load cells and the object.
     overload_n: float = 40.0
     # Liveness by content: a channel whose raw counts repeat bit for bit for this many frames in a row is frozen
@@ -149,6 +154,8 @@ class BlindgraspGripperConfig(RobotConfig):
                     "tare_max_shift_n", "negative_fault_n")  # fmt: skip
         if bad := [n for n in positive if not getattr(fs, n) > 0]:
             raise ValueError(f"force_sensor.{bad} must be > 0")
+        if not fs.min_rate_hz >= 0:
+            raise ValueError("force_sensor.min_rate_hz must be >= 0 (0: the rate is not checked)")
         if fs.frozen_frames < 0 or fs.frozen_frames == 1:
             raise ValueError("force_sensor.frozen_frames must be 0 (off) or >= 2")
         if len(set(fs.channel_map)) != spec.NUM_FORCES or not all(0 <= c < 8 for c in fs.channel_map):

@@ -1,14 +1,21 @@
 """Fingertip force sensors: a microcontroller streams raw load-cell counts over a serial port.
 
-Wire protocol (microcontroller -> host only, little-endian; full description in `docs/hardware.md`):
+The board that ships is three HX711 on an Arduino Nano (`lerobot_blindgrasp/hardware/force_board/`, parts, wiring
+and flashing in `docs/force_board.md`). Wire protocol (microcontroller -> host only, little-endian):
 
     offset size  field
     0      2     SYNC    0xA5 0x5A
     2      1     LEN     bytes from SEQ to STATUS = 2 + 4 * N + 1 (15 for N = 3 channels)
     3      2     SEQ     uint16 frame counter, +1 per frame, wraps at 65535
     5      4*N   COUNTS  int32 raw ADC counts per channel (24-bit ADCs sign-extended), ff, mf, th order
-    5+4N   1     STATUS  bit i set: channel i not ready or saturated
+    5+4N   1     STATUS  bit i set: channel i has a fault (its ADC stopped converting, or it is saturated)
     6+4N   2     CRC     CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection) over LEN..STATUS
+
+Between conversions nothing is sent: a frame carries a fresh sample of every channel under a new SEQ, or no frame
+goes out. "No new sample yet" is therefore never a frame and never a STATUS bit, and any STATUS bit is a real fault
+that stops the gripper. The HX711 board sends ~80 frames/s; the host needs `min_rate_hz` (40/s by default, two
+fresh samples per 20 Hz control period) and calls a stream that sends fewer fresh frames "slow", apart from
+"stale" (no fresh frame for `stale_timeout_s`).
 
 CRC-16/CCITT-FALSE of b"123456789" is 0x29B1 (check value for firmware authors). The host resynchronises on the
 next SYNC after any bad length or CRC, so garbage bytes on the line cost frames, never wrong values. SEQ gaps count
@@ -47,6 +54,7 @@ from .ports import open_exclusive
 
 SYNC = b"\xa5\x5a"
 MAX_CHANNELS = 8
+ADC_RAILS = (0x7FFFFF, -0x800000)  # a 24-bit ADC's full scale: a channel there is saturated, not measuring
 
 
 def crc16_ccitt_false(data: bytes) -> int:
@@ -132,11 +140,12 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         stale_timeout_s: float = 0.15,
         connect_timeout_s: float = 1.0,
         frozen_frames: int = 0,
+        min_rate_hz: float = 0.0,
         tare_max_std_n: float = float("inf"),
         tare_max_shift_n: float = float("inf"),
         negative_fault_n: float = float("inf"),
     ):
-        super().__init__(port, stale_timeout_s, frozen_frames)
+        super().__init__(port, stale_timeout_s, frozen_frames, min_rate_hz)
         self.tare_max_std_n = tare_max_std_n
         self.tare_max_shift_n = tare_max_shift_n
         self.negative_fault_n = negative_fault_n
@@ -215,6 +224,27 @@ class ForceSensorReader(LatestFrameStream[Frame]):
     def _stale_detail(self) -> str:
         return f"{super()._stale_detail()}; {self.dropped_frames} frames dropped so far"
 
+    def _slow_detail(self) -> str:
+        return (" (an HX711 with its RATE pin low converts at 10/s: tie RATE to VCC for 80/s, docs/force_board.md; "
+                f"{self.dropped_frames} frames dropped so far)")  # fmt: skip
+
+    def fault_message(self, frame: Frame) -> str:
+        """Which fingertip channels flag a fault, and the likely cause of each (saturated when its counts sit at
+        the ADC's full scale, else its ADC stopped converting)."""
+        causes = []
+        names = dict(zip(self.channel_map, spec.FORCE_SENSOR_NAMES))
+        for c in range(len(frame.counts)):
+            name = names.get(c, "an unmapped channel")
+            if frame.status >> c & 1:
+                if frame.counts[c] in ADC_RAILS:
+                    causes.append(f"{name} (channel {c}) is saturated at {frame.counts[c]} counts: overload, or a "
+                                  "broken load-cell wire")  # fmt: skip
+                else:
+                    causes.append(f"{name} (channel {c}) stopped converting: its HX711 is unpowered, or a DOUT or "
+                                  "PD_SCK wire is loose")  # fmt: skip
+        causes = causes or ["its bits name channels the frame does not carry (a firmware bug)"]
+        return f"Force sensor reports a fault (status {frame.status:#04x}): {'; '.join(causes)}."
+
     def _channels(self, frame: Frame) -> np.ndarray:
         if max(self.channel_map) >= len(frame.counts):
             raise ForceStreamError(
@@ -234,7 +264,7 @@ class ForceSensorReader(LatestFrameStream[Frame]):
                 raise ForceStreamError(f"Force-sensor stream stopped during tare ({len(samples)} frames).")
             frame = self.fresh()  # a frozen or re-sent stream cannot be tared
             if frame.status:
-                raise ForceStreamError(f"Force sensor channel fault during tare (status {frame.status}).")
+                raise ForceStreamError(f"During the tare: {self.fault_message(frame)}")
             samples.append(self._channels(frame))
         samples = np.asarray(samples)
         offset = samples.mean(axis=0)
@@ -257,8 +287,7 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         frame = self.fresh()
         counts = self._channels(frame)
         if frame.status:
-            bad = [spec.FORCE_SENSOR_NAMES[i] for i, c in enumerate(self.channel_map) if frame.status >> c & 1]
-            raise ForceStreamError(f"Force sensor reports a fault on {bad} (status {frame.status:#04x}).")
+            raise ForceStreamError(self.fault_message(frame))
         newtons = force.counts_to_newtons(counts, self.offset, self.scale)
         pulling = [f"{n} {f:+.2f} N" for n, f in zip(spec.FORCE_SENSOR_NAMES, newtons) if f < -self.negative_fault_n]
         if pulling:

@@ -1,0 +1,114 @@
+"""Build the force board's firmware (avr-gcc, through its Makefile) and its simavr harness (the host C compiler).
+
+    python -m lerobot_blindgrasp.hardware.force_board.build --out_dir=build/force_board
+    make -C build/force_board -f <printed Makefile> flash PORT=/dev/ttyUSB0       (or avrdude, docs/force_board.md)
+
+The sources ship inside the package (package data), so this works from a wheel as well as from a checkout; the
+build writes only into `out_dir`. What each step needs, as Debian/Ubuntu packages, is `missing_packages`'s answer.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+from lerobot_blindgrasp.cli import parse_config
+
+logger = logging.getLogger(__name__)
+
+HERE = Path(__file__).resolve().parent
+FIRMWARE_DIR = HERE / "firmware"
+SIMAVR_DIR = HERE / "simavr"
+SIMAVR_INCLUDE = Path("/usr/include/simavr")
+
+# What each build needs: (Debian package, how to tell it is installed).
+FIRMWARE_NEEDS = (
+    ("make", lambda: shutil.which("make")),
+    ("gcc-avr", lambda: shutil.which("avr-gcc") and shutil.which("avr-objcopy")),
+    ("avr-libc", lambda: Path("/usr/lib/avr/include/avr/io.h").exists()),
+)
+SIMULATOR_NEEDS = (
+    ("gcc", lambda: shutil.which("cc")),
+    ("libsimavr-dev", lambda: (SIMAVR_INCLUDE / "sim_avr.h").exists()),
+)
+DEBIAN_PACKAGES = ("gcc-avr", "avr-libc", "simavr", "libsimavr-dev")
+
+
+class BuildError(RuntimeError):
+    """A build step failed or its toolchain is missing; the message names the Debian packages or the compiler's
+    own words."""
+
+
+def missing_packages(simulator: bool = True) -> list[str]:
+    """The Debian packages that are missing for the firmware build (and the simulator's, when `simulator`)."""
+    needs = FIRMWARE_NEEDS + (SIMULATOR_NEEDS if simulator else ())
+    return [package for package, present in needs if not present()]
+
+
+def _require(needs) -> None:
+    missing = [package for package, present in needs if not present()]
+    if missing:
+        raise BuildError(
+            f"missing build tools: apt-get install {' '.join(missing)} (Debian/Ubuntu package names)"
+        )
+
+
+def _run(cmd: list[str], what: str) -> None:
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode:
+        raise BuildError(f"{what} failed ({' '.join(cmd)}):\n{done.stdout}{done.stderr}")
+
+
+def build_firmware(out_dir, baud: int = 115_200) -> Path:
+    """Compile the firmware into `out_dir` with its own Makefile; returns the Intel HEX image to flash (the ELF
+    lies next to it)."""
+    _require(FIRMWARE_NEEDS)
+    out = Path(out_dir).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    makefile = FIRMWARE_DIR / "Makefile"
+    _run(["make", "--no-print-directory", "-s", "-C", str(out), "-f", str(makefile), f"OUT={out}", f"BAUD={baud}"],
+         "firmware build")  # fmt: skip
+    hex_path = out / "force_board.hex"
+    if not hex_path.exists():
+        raise BuildError(f"the firmware build made no {hex_path}")
+    return hex_path
+
+
+def build_simulator(out_dir) -> Path:
+    """Compile the simavr harness (`simavr/hx711_sim.c`, linked with libsimavr) into `out_dir`; returns the
+    executable."""
+    _require(SIMULATOR_NEEDS)
+    out = Path(out_dir).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    exe = out / "hx711_sim"
+    src = SIMAVR_DIR / "hx711_sim.c"
+    _run(["cc", "-O2", "-Wall", "-Wextra", "-Werror", f"-I{SIMAVR_INCLUDE}", "-o", str(exe), str(src),
+          "-lsimavr", "-lutil"], "simavr harness build")  # fmt: skip
+    return exe
+
+
+@dataclass
+class BuildConfig:
+    # Where the HEX/ELF (and, with --simulator=true, the simavr harness) go.
+    out_dir: Path = Path("build/force_board")
+    # UART baud rate; the robot's --robot.force_sensor.baudrate must match (default 115 200 on both sides).
+    baud: int = 115_200
+    simulator: bool = False
+
+
+def main(argv: list[str] | None = None) -> None:
+    cfg = parse_config(BuildConfig, argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    hex_path = build_firmware(cfg.out_dir, cfg.baud)
+    print(f"firmware: {hex_path}")
+    print(f"flash it: avrdude -p m328p -c arduino -P /dev/ttyUSB0 -b 115200 -U flash:w:{hex_path}:i")
+    print("  (a Nano with the old bootloader takes -b 57600)")
+    if cfg.simulator:
+        print(f"simulator: {build_simulator(cfg.out_dir)} {hex_path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,110 @@
+"""The force board in simavr, as a device on a pseudo-terminal: `SimulatedForceBoard(...).port` is opened by the
+real reader exactly like the board's USB serial port.
+
+The firmware runs unchanged (its HEX image, the one a user flashes) on an emulated ATmega328P; three emulated HX711
+chips sit on its pins (`simavr/hx711_sim.c`). What the load cells feel is set in counts (`set_counts`) or newtons
+(`set_forces`, through a scale and an offset as a real cell and bridge give them); faults are `kill_cell` (a chip
+stops converting) and `revive_cell`. Built on first use into `build_dir` (a temporary folder by default).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import tempfile
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from .build import build_firmware, build_simulator
+
+
+class SimulatedForceBoard:
+    def __init__(
+        self,
+        *,
+        scale_n_per_count=(2.5e-5, 2.5e-5, 2.5e-5),
+        offset_counts=(81_000, -52_000, 12_000),
+        noise_counts: int = 200,
+        sps: float = 80.0,
+        build_dir=None,
+        start_timeout_s: float = 10.0,
+    ):
+        self.scale = np.asarray(scale_n_per_count, dtype=np.float64)
+        self.offset = np.asarray(offset_counts, dtype=np.float64)
+        self.noise_counts = int(noise_counts)
+        self.sps = sps
+        self._tmp = None if build_dir else tempfile.TemporaryDirectory(prefix="force-board-")
+        self.build_dir = Path(build_dir or self._tmp.name)
+        self.start_timeout_s = start_timeout_s
+        self.port = ""
+        self.log = ""  # the harness's report (stderr) once stopped
+        self._proc: subprocess.Popen | None = None
+        self._lock = threading.Lock()
+
+    def start(self) -> SimulatedForceBoard:
+        hex_path = build_firmware(self.build_dir)
+        exe = build_simulator(self.build_dir)
+        self._proc = subprocess.Popen(
+            [str(exe), str(hex_path), str(self.sps)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        line = self._first_line()
+        if not line.startswith("pty "):
+            err = self._proc.stderr.read() if self._proc.poll() is not None else ""
+            self.stop()
+            raise RuntimeError(f"the simavr force board did not start: {line!r} {err}")
+        self.port = line.split(maxsplit=1)[1].strip()
+        self._send(f"noise {self.noise_counts}")
+        self.set_forces(np.zeros(3))
+        return self
+
+    def _first_line(self) -> str:
+        out: list[str] = []
+        reader = threading.Thread(target=lambda: out.append(self._proc.stdout.readline()), daemon=True)
+        reader.start()
+        reader.join(self.start_timeout_s)
+        return out[0] if out else ""
+
+    def _send(self, line: str) -> None:
+        with self._lock:
+            if self._proc is None or self._proc.poll() is not None:
+                raise RuntimeError("the simavr force board is not running")
+            self._proc.stdin.write(line + "\n")
+            self._proc.stdin.flush()
+
+    def counts_for(self, forces_n) -> np.ndarray:
+        return self.offset + np.asarray(forces_n, dtype=np.float64) / self.scale
+
+    def set_counts(self, counts) -> None:
+        """The raw counts each cell's bridge produces (channel A, gain 128), before the chip's noise."""
+        self._send("counts " + " ".join(str(int(round(c))) for c in counts))
+
+    def set_forces(self, forces_n) -> None:
+        self.set_counts(self.counts_for(forces_n))
+
+    def kill_cell(self, index: int) -> None:
+        self._send(f"dead {index}")
+
+    def revive_cell(self, index: int) -> None:
+        self._send(f"alive {index}")
+
+    def stop(self) -> None:
+        proc, self._proc = self._proc, None
+        if proc is not None:
+            try:
+                proc.stdin.write("quit\n")
+                proc.stdin.flush()
+                _, self.log = proc.communicate(timeout=5)
+            except (OSError, ValueError, subprocess.TimeoutExpired):
+                proc.kill()
+                _, self.log = proc.communicate()
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+    def __enter__(self) -> SimulatedForceBoard:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
