@@ -7,9 +7,10 @@
   restarted bridge; datagrams of an earlier id arriving later are old and dropped.
 - `seq`: the bridge's frame counter in this session, from 1, +1 per datagram (uint32). The receiver keeps only
   datagrams newer than the newest it has used: a late or duplicated one never steps the pose back.
-- `sent`: the bridge's send time in seconds on its own monotonic clock (e.g. `time.monotonic()`,
-  `std::chrono::steady_clock`), never wall time, which NTP may step. The receiver ages poses by this clock (see
-  `stream.py`); the two machines' clocks need not agree, only tick at the same rate.
+- `sent`: the bridge's send time in seconds on its machine's system-wide monotonic clock (`time.monotonic()`,
+  `std::chrono::steady_clock`, CLOCK_MONOTONIC): never wall time, which NTP may step, nor a counter of the bridge
+  process, which a restart would set back. The receiver ages poses by this clock (see `stream.py`); the two
+  machines' clocks need not agree, only tick at about the same rate.
 - `side`: "left" | "right"; datagrams for the other hand are ignored (two gloves may share a port).
 - `ergonomics`: MANUS SDK ergonomics values in degrees, keyed by the names of `names.py` (the SDK's enum names,
   with or without side, or the ROS 2 publisher's strings). Only the channels the retargeting uses are required;

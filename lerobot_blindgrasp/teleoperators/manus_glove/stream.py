@@ -5,7 +5,10 @@ Order. Within a bridge session only a datagram with a higher `seq` than the newe
 that was reordered on the way, delayed, or duplicated arrives with a lower or equal `seq` and is dropped
 (`late`), however long after: the pose never steps back. A new `session` is a restarted bridge (its `seq` starts
 again at 1): it is followed at once, with a warning, and the earlier session's datagrams are dropped from then on
-(`retired`).
+(`retired`). The receiver is bound to one source address, so to one machine, whose monotonic clock a restarted
+bridge shares: a new session must also be later by that clock than the newest pose used, or it is a late datagram
+of an older session this receiver never saw, and is dropped too (`retired`; after a reboot of the bridge's
+machine, whose clock starts again, the stream goes stale and the teleoperator stops: reconnect).
 
 Age. The bridge stamps `sent` on its monotonic clock. For each datagram, arrival - sent is the one-way delay plus
 the (unknown, constant) offset between the two clocks. Its minimum over the stream estimates that offset with the
@@ -77,6 +80,7 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
         self.last_reject: str | None = None
         self._warned_senders: set[tuple[str, int]] = set()
         self._warned_missing: set[frozenset[str]] = set()
+        self._warned_behind: set[str] = set()
         self.session: str | None = None
         self._retired: deque[str] = deque(maxlen=RETIRED_SESSIONS)
         self._seq = 0
@@ -165,8 +169,9 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
 
     def _order_and_age(self, d: GloveDatagram, arrival: float) -> GloveFrame | None:
         if d.session != self.session:
-            if d.session in self._retired:
+            if d.session in self._retired or d.sent <= self._sent:
                 self.retired += 1
+                self._warn_behind(d)
                 return None
             self._new_session(d.session)
         if d.seq <= self._seq or d.sent < self._sent:
@@ -192,6 +197,17 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             self._stale_run, self._stale_max = 0, 0.0
         return GloveFrame(d.session, d.seq, d.side, d.ergonomics, arrival, d.sent + self._offset)
 
+    def _warn_behind(self, d: GloveDatagram) -> None:
+        if d.session in self._retired or d.session in self._warned_behind:
+            return
+        self._warned_behind.add(d.session)
+        logger.warning(
+            "Dropping glove datagrams of bridge session %s: they were sent %.3f s before the newest pose used (by "
+            "the bridge's clock), so they are late ones of an older bridge. If the bridge's machine rebooted, or "
+            "its `sent` is not the system's monotonic clock, reconnect the teleoperator.", d.session,
+            self._sent - d.sent,
+        )  # fmt: skip
+
     def _new_session(self, session: str) -> None:
         if self.session is not None:
             self.restarts += 1
@@ -200,7 +216,8 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
                 "Glove bridge restarted (session %s -> %s, its counter starts again): following the new session; "
                 "late datagrams of the old one are dropped.", self.session, session
             )
-        self.session, self._seq, self._sent, self._offset = session, 0, float("-inf"), None
+        # self._sent stays: the restarted bridge's clock is the same machine's, and it must move on from there.
+        self.session, self._seq, self._offset = session, 0, None
 
     # --- readers --------------------------------------------------------------------------------------------
     def latest(self) -> tuple[GloveFrame, float]:
@@ -223,7 +240,7 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
         if self.foreign:
             parts.append(f"{self.foreign} from another sender than the bound {self.bound[0]}:{self.bound[1]}")
         for count, what in ((self.late, "late or duplicated"), (self.stale, f"queued > {self.max_latency_s} s"),
-                            (self.retired, "from an earlier bridge session")):  # fmt: skip
+                            (self.retired, "from an older bridge session")):  # fmt: skip
             if count:
                 parts.append(f"{count} {what}")
         return "; ".join(parts)
