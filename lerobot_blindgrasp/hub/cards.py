@@ -23,6 +23,7 @@ import jinja2
 from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, report
+from lerobot_blindgrasp.hub import project
 from lerobot_blindgrasp.sim import objects, randomization
 
 TEMPLATE_PACKAGE, TEMPLATE_DIR = "lerobot_blindgrasp.hub", "card_templates"
@@ -73,7 +74,8 @@ def render_body(kind: str, context: dict) -> str:
 def _versions() -> dict:
     from lerobot_blindgrasp import __version__
 
-    return {"plugin_version": __version__, "lerobot_version": importlib.metadata.version("lerobot")}
+    return {"plugin_version": __version__, "lerobot_version": importlib.metadata.version("lerobot"),
+            "code_line": project.code_line()}
 
 
 def _randomization_rows(dr: dict) -> list[tuple[str, str]]:

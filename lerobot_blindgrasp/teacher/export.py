@@ -20,6 +20,7 @@ from pathlib import Path
 
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.hub import project
 from lerobot_blindgrasp.teacher import policy
 
 CARD_NAME = "README.md"
@@ -108,6 +109,7 @@ Use it (`pip install {PACKAGE}`):
     blindgrasp-collect-demos --teacher=THIS_FOLDER --output_dir=runs/demos --repo_id=you/blindgrasp_demos
 
 Made by: `{config.get('command', '?')}` (env seeds from {config.get('seed')}, {config.get('num_envs')} envs).
+{project.code_line()}
 """
 
 

@@ -10,8 +10,8 @@
 The actor is rebuilt with rsl-rl's own `MLPModel` from the config and run deterministically (mean) or
 stochastically (sampled from its Gaussian), which demo collection needs; the JIT/ONNX exports only carry the mean.
 
-`default_teacher()` is the teacher every command uses when none is given: `models/<SHIPPED_TEACHER>` at the
-repository root, or the folder in $BLINDGRASP_TEACHER.
+`default_teacher()` is the teacher every command uses when none is given: `models/<SHIPPED_TEACHER>` (the
+repository's folder, or the wheel's copy of it), or the folder in $BLINDGRASP_TEACHER.
 """
 
 from __future__ import annotations
@@ -44,9 +44,10 @@ class TeacherError(FileNotFoundError):
 
 
 def models_dir() -> Path:
-    """<repo root>/models. models/ sits beside the package in the repository: an editable install (the README's)
-    finds it; a wheel or sdist install does not ship it, so `default_teacher` then asks for a path."""
-    return Path(__file__).resolve().parents[2] / "models"
+    """The shipped models: the wheel's copy (package data, `lerobot_blindgrasp.shipped`), else <repo root>/models."""
+    from lerobot_blindgrasp import shipped
+
+    return shipped.folder("models")
 
 
 def default_teacher(folder: str | None = None) -> Path:
@@ -57,8 +58,8 @@ def default_teacher(folder: str | None = None) -> Path:
     d = models_dir() / (folder or SHIPPED_TEACHER)
     if not (d / WEIGHTS_NAME).is_file():
         raise TeacherError(
-            f"the shipped teacher is not at {d} (it lives in the repository's models/ folder, which only an "
-            f"editable install can see); pass a teacher folder explicitly or set {TEACHER_ENV_VAR}"
+            f"the shipped teacher is not at {d} (a wheel ships it as package data; reinstall "
+            f"lerobot_policy_blindgrasp); pass a teacher folder explicitly or set {TEACHER_ENV_VAR}"
         )
     return d
 

@@ -36,6 +36,7 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 from torch import Tensor, nn
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hub import project
 
 from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
 from .processor_blindgrasp_transformer import Q_NOW, normalized_delta_to_target
@@ -59,6 +60,8 @@ Then, for example, evaluate it in the blindgrasp simulation:
 ```bash
 lerobot-eval --policy.path={{repo_id}} --env.type=blindgrasp --env.task=all --eval.n_episodes=20
 ```
+
+{{code_line}}
 
 """
 
@@ -240,7 +243,7 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         lines = card.text.split("\n")
         # After the card's title line, so the install step is the first thing a reader sees.
         at = next((i + 1 for i, line in enumerate(lines) if line.startswith("# ")), 0)
-        lines[at:at] = CARD_INSTALL.format(repo_id=repo_id).split("\n")
+        lines[at:at] = CARD_INSTALL.format(repo_id=repo_id, code_line=project.code_line()).split("\n")
         card.text = "\n".join(lines)
         return card
 

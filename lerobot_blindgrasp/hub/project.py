@@ -1,0 +1,67 @@
+"""Where the code and the package live, and the Hub repos the shipped artifacts go to: each said in one place.
+
+- The code's and the package's addresses are `[project.urls]` in pyproject.toml, read here from the installed
+  distribution's metadata (a wheel and an editable install carry the same `Project-URL` lines). The README and
+  every card (the student's `generate_model_card`, the teacher's export card, both dataset cards and the shipped
+  models' cards at `blindgrasp-publish`) name them through this module.
+- The project has no public home yet, so those URLs are placeholders under `example.invalid` (a domain reserved
+  never to resolve). `require_public_urls()` refuses a push while any of them still is one.
+- `HUB_REPOS`: the Hub repo names of the shipped teacher, student and demo dataset (`blindgrasp-publish`).
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+
+DIST = "lerobot_policy_blindgrasp"  # LeRobot's plugin discovery imports the module named like the distribution
+PLACEHOLDER_HOST = "example.invalid"
+INSTALL = f"pip install {DIST}"
+# The Hub repo names, under the namespace given to `blindgrasp-publish --namespace=`: folder under models/ (or
+# "demos" for the dataset) -> (repo type, repo name).
+HUB_REPOS = {
+    "teacher_cpu_bc": ("model", "blindgrasp-teacher-cpu-bc"),
+    "teacher_cpu_bc_calib": ("model", "blindgrasp-teacher-cpu-bc-calib"),
+    "student_cpu": ("model", "blindgrasp-student-cpu"),
+    "demos": ("dataset", "blindgrasp-demos-sim"),
+}
+
+
+class PlaceholderURLError(RuntimeError):
+    """A card would go out naming a code location that does not exist."""
+
+
+def urls() -> dict[str, str]:
+    """`[project.urls]` of the installed distribution: label -> URL."""
+    try:
+        lines = importlib.metadata.metadata(DIST).get_all("Project-URL") or []
+    except importlib.metadata.PackageNotFoundError:
+        return {}
+    return dict(tuple(s.strip() for s in line.split(",", 1)) for line in lines if "," in line)
+
+
+def source_url() -> str:
+    """Where the code lives (`[project.urls] Source`); '' if the installed metadata names none."""
+    return urls().get("Source", "")
+
+
+def is_placeholder(url: str) -> bool:
+    return not url or PLACEHOLDER_HOST in url
+
+
+def require_public_urls() -> dict[str, str]:
+    """The project URLs, or PlaceholderURLError while they are missing or still placeholders."""
+    found = urls()
+    bad = [label for label in ("Homepage", "Source") if is_placeholder(found.get(label, ""))]
+    if bad:
+        raise PlaceholderURLError(
+            f"[project.urls] {', '.join(bad)} in pyproject.toml: placeholder or missing "
+            f"({found.get(bad[0]) or 'nothing'}); set the project's real public address there and reinstall "
+            "(pip install -e .) before pushing a card that names it"
+        )
+    return found
+
+
+def code_line() -> str:
+    """One markdown line for a card: where the code, its issues and its guides are."""
+    src = source_url() or "(no [project.urls] Source in the installed metadata)"
+    return f"Code, guides and issues: {src} (package `{DIST}`, importable as `lerobot_blindgrasp`)."
