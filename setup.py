@@ -9,7 +9,10 @@ as package data in pyproject.toml). An explicit package list and a mapping canno
 
 from setuptools import find_packages, setup
 
-SHIPPED = {"lerobot_blindgrasp.shipped.models": "models", "lerobot_blindgrasp.shipped.robot_configs": "robot_configs"}
+SHIPPED = {
+    "lerobot_blindgrasp.shipped.models": "models",
+    "lerobot_blindgrasp.shipped.robot_configs": "robot_configs",
+}
 
 setup(
     packages=find_packages(include=["lerobot_blindgrasp", "lerobot_blindgrasp.*", "lerobot_policy_blindgrasp"])

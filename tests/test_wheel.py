@@ -85,7 +85,8 @@ def test_sdist_and_wheel_pass_twine_check_and_carry_the_shipped_files(built):
     assert proc.returncode == 0 and proc.stdout.count("PASSED") == 2, proc.stdout + proc.stderr
     names = set(zipfile.ZipFile(wheel).namelist())
     for top in ("models", "robot_configs"):
-        files = [p.relative_to(ROOT) for p in (ROOT / top).rglob("*") if p.is_file() and "__pycache__" not in p.parts]
+        files = [p.relative_to(ROOT) for p in (ROOT / top).rglob("*")
+                 if p.is_file() and "__pycache__" not in p.parts]
         assert files, top
         missing = [str(f) for f in files if f"lerobot_blindgrasp/shipped/{f.as_posix()}" not in names]
         assert not missing, f"not in the wheel: {missing}"

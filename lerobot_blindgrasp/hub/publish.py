@@ -35,15 +35,16 @@ def _install_block(name: str, repo_id: str) -> str:
         use = (f"hf download {repo_id} --local-dir {name}\n"
                f"blindgrasp-eval-teacher --teacher={name} --episodes=20")  # fmt: skip
     else:
-        use = (f"lerobot-eval --policy.path={repo_id} --env.type=blindgrasp --env.task=all --eval.n_episodes=20 \\\n"
-               "  --eval.batch_size=20 --eval.use_async_envs=false --policy.device=cpu --seed=1000")  # fmt: skip
+        use = (f"lerobot-eval --policy.path={repo_id} --env.type=blindgrasp --env.task=all \\\n"
+               "  --eval.n_episodes=20"
+               " --eval.batch_size=20 --eval.use_async_envs=false --policy.device=cpu --seed=1000")  # fmt: skip
     return (f"\n## Install and use\n\n```bash\n{project.INSTALL}   # LeRobot plugin: the policy, env, robot and "
             f"glove types\n{use}\n```\n\nThis model also ships inside the package: "
             f"`blindgrasp-path --name={name}` prints its installed folder.\n\n{project.code_line()}\n")
 
 
 def render_model_card(folder: Path, repo_id: str) -> str:
-    """The folder's README.md with the install block after its title, and its local path replaced by the repo id."""
+    """The folder's README.md with the install block after its title and its local path replaced by the repo id."""
     name = folder.name
     text = (folder / "README.md").read_text(encoding="utf-8").replace(f"--policy.path=models/{name}",
                                                                        f"--policy.path={repo_id}")  # fmt: skip
@@ -91,7 +92,7 @@ class PublishConfig:
     """
 
     namespace: str | None = None  # Hub user or organization the repos go under (names: hub/project.py HUB_REPOS)
-    demos: Path | None = None  # a demo dataset folder (blindgrasp-collect-demos output) to push as the demo dataset
+    demos: Path | None = None  # the demo dataset folder to push (blindgrasp-collect-demos output)
     private: bool = False  # create the repos as private
     dry_run: bool = False  # check and stage everything, then stop before the network
     staging_dir: Path | None = None  # where the model cards are rendered (default: a temporary folder)
@@ -149,7 +150,7 @@ def main(argv=None) -> None:
         raise SystemExit(2) from None
     except push._network_errors() as e:
         print(f"error: upload to the Hub failed ({type(e).__name__}: {e}); check the network and `hf auth login`, "
-              "then run the same command again (uploads of unchanged files are skipped)", file=sys.stderr)  # fmt: skip
+              "then run the same command again (unchanged files are not sent again)", file=sys.stderr)  # fmt: skip
         raise SystemExit(1) from None
     for name, url in urls.items():
         print(f"pushed {name}: {url}")

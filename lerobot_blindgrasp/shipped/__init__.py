@@ -38,20 +38,21 @@ def folder(kind: str) -> Path:
     # A checkout: pyproject.toml marks the root, so a stray site-packages/models of another project is never taken.
     if (_SOURCE_TREE / "pyproject.toml").is_file() and (_SOURCE_TREE / kind).is_dir():
         return _SOURCE_TREE / kind
-    raise ShippedError(f"no shipped {kind} next to {__file__} nor in a source tree; reinstall lerobot_policy_blindgrasp")
+    raise ShippedError(f"no shipped {kind} next to {__file__} nor in a source tree; "
+                       "reinstall lerobot_policy_blindgrasp")
 
 
 def names() -> dict[str, list[str]]:
     """Every shipped model folder and robot config, by kind."""
     out = {"models": [], "robot_configs": []}
-    with_models = folder("models")
-    out["models"] = sorted(p.name for p in with_models.iterdir() if p.is_dir() and not p.name.startswith((".", "_")))
+    models = folder("models")
+    out["models"] = sorted(p.name for p in models.iterdir() if p.is_dir() and not p.name.startswith((".", "_")))
     out["robot_configs"] = sorted(p.stem for p in folder("robot_configs").glob("*.yaml"))
     return out
 
 
 def path(name: str) -> Path:
-    """A shipped model folder (`student_cpu`) or robot config (`blindgrasp_gripper` or `blindgrasp_gripper.yaml`)."""
+    """A shipped model folder (`student_cpu`) or robot config (`blindgrasp_gripper`, `.yaml` optional)."""
     model = folder("models") / name
     if model.is_dir():
         return model
@@ -75,7 +76,7 @@ class ShippedPathConfig:
         blindgrasp-path            # lists every name
     """
 
-    name: str | None = None  # a model folder (student_cpu, teacher_cpu_bc, ...) or a robot config (blindgrasp_gripper)
+    name: str | None = None  # a model folder (student_cpu, teacher_cpu_bc) or a robot config (blindgrasp_gripper)
 
 
 def main(argv=None) -> None:
