@@ -240,8 +240,8 @@ class ForceSensorReader(LatestFrameStream[Frame]):
                     causes.append(f"{name} (channel {c}) is saturated at {frame.counts[c]} counts: overload, or a "
                                   "broken load-cell wire")  # fmt: skip
                 else:
-                    causes.append(f"{name} (channel {c}) stopped converting: its HX711 is unpowered, or a DOUT or "
-                                  "PD_SCK wire is loose")  # fmt: skip
+                    causes.append(f"{name} (channel {c}) stopped converting: its HX711 is unpowered, a DOUT or "
+                                  "PD_SCK wire is loose, or its RATE pin is low (10 instead of 80 samples/s)")  # fmt: skip
         causes = causes or ["its bits name channels the frame does not carry (a firmware bug)"]
         return f"Force sensor reports a fault (status {frame.status:#04x}): {'; '.join(causes)}."
 

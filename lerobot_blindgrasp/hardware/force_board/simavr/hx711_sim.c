@@ -10,7 +10,7 @@
  * PD_SCK high for more than 60 us powers the chip down, and it settles again after PD_SCK returns low.
  *
  * Commands on stdin, one per line (what the load cells feel, and faults):
- *   counts C0 C1 C2     the channel-A counts at gain 128 each cell produces (clamped to the 24-bit range)
+ *   counts C0 C1 C2     the channel-A counts at gain 128 each cell produces (the ADC clamps them to 24 bits)
  *   noise N             uniform noise of +-N counts on every conversion (a real bridge never repeats exactly)
  *   dead I / alive I    chip I stops converting (DOUT stays high: unpowered chip, broken wire) / recovers
  *   quit
@@ -50,7 +50,7 @@ typedef struct {
     int index;
     avr_t *avr;
     avr_irq_t *dout;
-    int32_t input;          /* counts the bridge produces now (channel A, gain 128) */
+    int64_t input;          /* counts the bridge produces now (channel A, gain 128), before the ADC's clamp */
     uint32_t data;          /* the conversion being shifted out, 24 bits */
     int ready, pulses, dead, sck_high;
     int gain_pulses;        /* pulse count of the last read: the gain of the next conversion */
@@ -86,7 +86,7 @@ static avr_cycle_count_t convert(avr_t *avr, avr_cycle_count_t when, void *param
     c->pulses = 0;
     c->ready = 0;
     if (!c->dead) {
-        int64_t v = (int64_t)c->input + noise();
+        int64_t v = c->input + noise();
         if (c->gain_pulses == 26)
             v = noise(); /* channel B: nothing is wired to it */
         else if (c->gain_pulses == 27)
@@ -138,7 +138,7 @@ static int command(const char *line) {
     int i;
     long a, b, c;
     if (sscanf(line, "counts %ld %ld %ld", &a, &b, &c) == 3) {
-        chips[0].input = clamp24(a), chips[1].input = clamp24(b), chips[2].input = clamp24(c);
+        chips[0].input = a, chips[1].input = b, chips[2].input = c;
     } else if (sscanf(line, "noise %ld", &a) == 1) {
         noise_counts = a < 0 ? 0 : (int32_t)a;
     } else if (sscanf(line, "dead %d", &i) == 1 && i >= 0 && i < N_CHIPS) {

@@ -1,0 +1,145 @@
+"""The force board's firmware, compiled here with Debian's AVR toolchain and run in simavr with emulated HX711 chips
+on its pins (`lerobot_blindgrasp/hardware/force_board/`), read through the project's real `ForceSensorReader` on
+the pseudo-terminal its UART is wired to. Skipped, naming the Debian packages, where the toolchain is missing
+(`scripts/test.sh` installs them when it runs as root with apt-get, as in CI)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from lerobot_blindgrasp.hardware.force_board import build
+from lerobot_blindgrasp.hardware.force_board.sim import SimulatedForceBoard
+from lerobot_blindgrasp.robots.blindgrasp_gripper import force_calibration as fc
+from lerobot_blindgrasp.robots.blindgrasp_gripper.calibrate_force import CalibrateForceConfig, calibrate
+from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import (
+    BlindgraspGripperConfig,
+    ForceSensorConfig,
+)
+from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader, ForceStreamError
+
+if missing := build.missing_packages():
+    pytest.skip(f"force-board firmware tests need: apt-get install {' '.join(missing)}", allow_module_level=True)
+
+# A cell per finger as a lab's would come out: two bridges wired one way, one the other (a push reads fewer counts).
+SCALE = (3.1e-5, -2.2e-5, 2.7e-5)
+OFFSET = (81_000, -52_000, 12_000)
+
+
+@pytest.fixture(scope="module")
+def build_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("force_board")
+    build.build_firmware(out)
+    build.build_simulator(out)
+    return out
+
+
+def _board(build_dir, **kw) -> SimulatedForceBoard:
+    return SimulatedForceBoard(scale_n_per_count=SCALE, offset_counts=OFFSET, build_dir=build_dir, **kw).start()
+
+
+def _reader(port: str, scale=SCALE) -> ForceSensorReader:
+    """The reader as the robot builds it, with the robot config's defaults (stale, frozen, rate and connect)."""
+    fs = ForceSensorConfig(port=port)
+    return ForceSensorReader(port, fs.baudrate, list(scale), stale_timeout_s=fs.stale_timeout_s,
+                             connect_timeout_s=fs.connect_timeout_s, frozen_frames=fs.frozen_frames,
+                             min_rate_hz=fs.min_rate_hz)  # fmt: skip
+
+
+def _flash_bytes(hex_path) -> int:
+    """Bytes of program in an Intel HEX image (data records only)."""
+    lines = hex_path.read_text().split()
+    return sum(int(line[1:3], 16) for line in lines if line[7:9] == "00")
+
+
+def test_the_firmware_builds_and_fits_a_nano_with_its_bootloader(build_dir):
+    size = _flash_bytes(build_dir / "force_board.hex")
+    assert 500 < size < 30_720  # 32 KiB flash less the 2 KiB bootloader
+
+
+def test_the_real_reader_reads_the_forces_the_cells_were_given(build_dir):
+    board = _board(build_dir)
+    reader = _reader(board.port)
+    try:
+        reader.connect()
+        reader.tare(0.3)
+        t0, seq0 = time.monotonic(), reader.latest()[0].seq
+        for forces in ([2.0, 0.0, 5.0], [0.5, 7.5, 1.25], [12.0, 3.0, 0.0]):
+            board.set_forces(forces)
+            assert reader.wait_frames(4, 1.0)  # past any conversion made before the change
+            # One count is <= 31 uN; +-200 counts of noise and the tare's mean leave < 0.02 N.
+            np.testing.assert_allclose(reader.read(), forces, atol=0.02)
+        rate = ((reader.latest()[0].seq - seq0) % 65536) / (time.monotonic() - t0)
+        assert 50 < rate < 100, rate  # 80 conversions/s per chip; simavr paced to the wall clock
+        assert reader.rate_hz() > 40 and reader.dropped_frames == 0 and reader.counter_faults == 0
+        assert reader.parser.crc_errors == 0
+    finally:
+        reader.disconnect()
+        board.stop()
+    assert "0 reads not of 25 pulses, 0 power-downs" in board.log, board.log  # gain 128, never powered down
+
+
+def test_a_dead_or_saturated_cell_is_a_named_fault_and_the_stream_goes_on(build_dir):
+    board = _board(build_dir)
+    reader = _reader(board.port)
+    try:
+        reader.connect()
+        reader.tare(0.2)
+        board.kill_cell(1)
+        time.sleep(0.3)
+        with pytest.raises(ForceStreamError, match=r"mf_tip \(channel 1\) stopped converting"):
+            reader.read()
+        board.revive_cell(1)
+        assert reader.wait_frames(5, 1.0)
+        np.testing.assert_allclose(reader.read(), 0.0, atol=0.02)
+        board.set_counts([0x7FFFFF + 5000, -52_000, 12_000])  # far beyond the ADC's range
+        time.sleep(0.2)
+        with pytest.raises(ForceStreamError, match=r"ff_tip \(channel 0\) is saturated at 8388607"):
+            reader.read()
+    finally:
+        reader.disconnect()
+        board.stop()
+
+
+def test_a_board_whose_rate_pin_is_low_is_named(build_dir):
+    """Tied low, RATE makes an HX711 convert 10 times a second. Every frame is fresh and none is old enough to be
+    stale, but they are too few (a sample, then a not-converting fault 50 ms later): the host says "slow", not
+    "stale", and names the RATE pin."""
+    board = _board(build_dir, sps=10)
+    reader = _reader(board.port)
+    try:
+        reader.connect()
+        time.sleep(0.6)  # enough intervals for a rate
+        slow = r"stream is slow: fresh frames arrive at [12]\d\.\d/s, below the 40/s.*RATE pin low"
+        with pytest.raises(ForceStreamError, match=slow):
+            reader.read()
+    finally:
+        reader.disconnect()
+        board.stop()
+
+
+def test_force_calibration_on_the_simulated_board(build_dir, tmp_path, monkeypatch):
+    """`blindgrasp-calibrate-force`'s procedure on the firmware: the operator's weight on each pad in turn gives
+    back the cells' own scales (signs included) and zeros."""
+    board = _board(build_dir)
+    weight_n = 0.5 * fc.STANDARD_GRAVITY
+    loads = [[0, 0, 0], [weight_n, 0, 0], [0, weight_n, 0], [0, 0, weight_n], [0, 0, 0]]
+    prompts = []
+
+    def operator(prompt: str = "") -> str:
+        board.set_forces(loads[len(prompts)])
+        prompts.append(prompt)
+        return ""
+
+    monkeypatch.setattr("builtins.input", operator)
+    robot = BlindgraspGripperConfig(id="lab", calibration_dir=tmp_path, force_sensor=ForceSensorConfig(port=board.port))
+    try:
+        cal = calibrate(CalibrateForceConfig(robot=robot, mass_kg=0.5, settle_s=0.2, window_s=0.4))
+    finally:
+        board.stop()
+    assert len(prompts) == 5 and "ff_tip" in prompts[1] and "th_tip" in prompts[3]
+    np.testing.assert_allclose(cal.scales(), SCALE, rtol=3e-3)
+    np.testing.assert_allclose(cal.offsets(), OFFSET, atol=60)
+    assert fc.load(tmp_path / "lab.force.json").scales() == cal.scales()
