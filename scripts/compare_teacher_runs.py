@@ -1,4 +1,4 @@
-"""Overlay the TensorBoard curves of several teacher runs (for docs/results/teacher_cpu.md).
+"""Overlay the TensorBoard curves of several teacher runs (for docs/research/teacher_cpu.md).
 
     .venv/bin/python scripts/compare_teacher_runs.py --output=OUT.png --runs=[LABEL=RUN_DIR,...]
 

@@ -43,7 +43,7 @@ def test_no_training_state_or_event_files_are_tracked():
 def test_shipped_and_recorded_teachers_are_exported_actors_that_load():
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 
-    folders = [*(ROOT / "models").glob("teacher_*"), *(ROOT / "docs" / "results" / "checkpoints").glob("*_*")]
+    folders = [*(ROOT / "models").glob("teacher_*"), *(ROOT / "docs" / "research" / "checkpoints").glob("*_*")]
     assert len(folders) >= 2
     for folder in folders:
         assert {p.suffix for p in folder.glob("*.*")} <= {".safetensors", ".json", ".md"}, folder

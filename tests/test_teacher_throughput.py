@@ -12,7 +12,7 @@ import pytest
 from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig, allocate_objects
 
-# Harder objects (small, capsules) weighted up, as tried in docs/results/teacher_cpu_v2.md.
+# Harder objects (small, capsules) weighted up, as tried in docs/research/teacher_cpu_v2.md.
 HARD_FIRST = tuple(
     {"large": 0.5, "medium": 1.0, "small": 1.5}[objects.get_object(n).size_label]
     * (1.5 if objects.get_object(n).mjcf_type == "capsule" else 1.0)
