@@ -149,3 +149,32 @@ def test_no_calibration_and_no_operator_is_refused_before_a_byte_is_sent(tmp_pat
     message = str(err.value)
     assert "'eval_gripper'" in message and str(calibration_dir / "eval_gripper.json") in message
     assert "lab_gripper" in message and "--robot.id" in message and "lerobot-calibrate" in message
+
+
+def test_the_bringup_geometry_table_is_the_sims():
+    from lerobot_blindgrasp.sim import gripper, objects
+
+    text = (ROOT / "docs" / "bringup.md").read_text()
+    rows = re.findall(r"^\| [^|]+ \| ([\d.]+) mm \| `(\w+)` \|$", text, flags=re.M)
+    assert {name for _, name in rows} >= {"PLATE_HEIGHT", "BASE_RADIUS", "LINK_J10_J11", "LINK_J11_J12",
+                                          "LINK_J12_TIPSITE", "TIP_CAPSULE_RADIUS"}  # fmt: skip
+    for value, name in rows:
+        assert float(value) == pytest.approx(1000 * getattr(gripper, name)), name
+    [tip] = re.findall(r"^\| straight finger: tip end above the table \| ([\d.]+) mm \|", text, flags=re.M)
+    reach = gripper.TIP_CAPSULE_END + gripper.TIP_CAPSULE_RADIUS
+    straight = gripper.PLATE_HEIGHT - gripper.PLATE_TO_J10 - gripper.LINK_J10_J11 - gripper.LINK_J11_J12 - reach
+    assert float(tip) == pytest.approx(1000 * straight)
+    for geometry, dims in objects.TABLE_I_CM.items():
+        label = geometry.replace("_a", " A").replace("_b", " B")
+        [row] = re.findall(rf"^\| {label} [^|]*\|([^|]+)\|([^|]+)\|([^|]+)\|", text, flags=re.M)
+        for k, cell in enumerate(row):
+            numbers = [float(x) for x in re.findall(r"[\d.]+", cell)]
+            assert numbers == [v[k] for v in dims.values()], (geometry, cell)
+
+
+def test_the_power_sizing_is_nine_stall_currents():
+    from lerobot_blindgrasp.hardware import xm430
+
+    text = (ROOT / "docs" / "bringup.md").read_text()
+    total = 9 * xm430.STALL_CURRENT_A
+    assert f"9 x {xm430.STALL_CURRENT_A} A = {total:.1f} A ({total * xm430.RECOMMENDED_VOLTAGE_V:.0f} W)" in text
