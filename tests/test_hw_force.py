@@ -7,6 +7,7 @@ itself. Named test_hw_* because the emulator is timing-sensitive (see docs/hardw
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -15,7 +16,7 @@ from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulato
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader
+from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader, ForceStreamError
 from lerobot_blindgrasp.sim import randomization, sensors
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 
@@ -82,3 +83,35 @@ def test_the_sim_observation_goes_through_the_sensor_pipeline():
         obs, *_, info = env.step(np.zeros((4, spec.NUM_JOINTS)))
         clean = info["uniaxial_force"].astype(np.float32)
         np.testing.assert_array_equal(obs["policy"][:, spec.STATE_FORCE_SLICE], clean)
+
+
+def test_a_slow_stream_is_told_from_a_stale_one():
+    """Slow: fresh frames, none old enough to be stale, but fewer per second than the control loop needs. Stale:
+    no fresh frame for `stale_timeout_s`. Each error says which, and the stream recovers from a slow spell."""
+    emu = ForceSensorEmulator(rate_hz=15.0).start()
+    reader = ForceSensorReader(emu.port, 115_200, emu.scale.tolist(), stale_timeout_s=0.15, min_rate_hz=40.0)
+    try:
+        reader.connect()
+        time.sleep(0.6)  # 9 frames: enough intervals for a rate
+        with pytest.raises(ForceStreamError, match=r"stream is slow: fresh frames arrive at 1\d\.\d/s, below the 40/s"):
+            reader.read()
+        emu.period = 1.0 / 80.0  # the HX711 board's rate
+        time.sleep(0.5)
+        assert reader.rate_hz() > 40.0
+        reader.read()
+        emu.paused = True
+        time.sleep(0.3)
+        with pytest.raises(ForceStreamError, match=r"stale: newest frame is \d+ ms old \(limit 150 ms"):
+            reader.read()
+    finally:
+        reader.disconnect()
+        emu.stop()
+
+
+def test_a_channel_at_the_adc_rail_is_flagged_saturated(sensor):
+    """The emulator follows the board's rule: a channel at the 24-bit full scale sets its STATUS bit."""
+    emu, reader = sensor
+    emu.forces_n = np.array([0.0, 0.0, 400.0])  # 400 N / 25 uN = 16 M counts, beyond +2^23
+    assert reader.wait_frames(3, 1.0)
+    with pytest.raises(ForceStreamError, match=r"th_tip \(channel 2\) is saturated at 8388607 counts"):
+        reader.read()
