@@ -4,6 +4,7 @@ then the teleoperator against the emulated bridge over UDP, with the network fau
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import threading
@@ -116,7 +117,9 @@ def test_fuzz_orderings_never_step_back_nor_use_a_stale_pose(events, pause_start
             kept.append((sent, session, seq))
             assert delay - fastest[session] <= max_latency + OFFSET_LEAK * (at - first_at[session]) + 1e-9
             assert f.sent_local <= at + 1e-9  # a pose is never younger than its arrival
-    assert [k[0] for k in kept] == sorted({k[0] for k in kept})  # strictly later each time: no step back, no repeat
+    assert [k[0] for k in kept] == sorted(
+        {k[0] for k in kept}
+    )  # strictly later each time: no step back, no repeat
     assert [k[1] for k in kept] == sorted(k[1] for k in kept)  # a restarted bridge is never left for an older one
     if events and pause_s == 0 and all(d < max_latency for _, d, _ in events):
         assert kept  # a calm network delivers
@@ -167,7 +170,7 @@ def test_delayed_and_duplicated_datagrams_never_step_the_action_back(rig):
     seen = _watch(teleop, 1.6)
     th.join()
     assert teleop.receiver.late >= 10  # the faults did reach the receiver
-    assert all(b >= a - 1e-9 for a, b in zip(seen, seen[1:])), "the action stepped back to an older hand pose"
+    assert all(b >= a - 1e-9 for a, b in itertools.pairwise(seen)), "the action stepped back to an older hand pose"
     assert seen[-1] > 0.9
 
 
@@ -184,8 +187,9 @@ def test_after_a_network_pause_the_action_holds_then_follows_live_data(rig, capl
         glove.stalled = False  # the backlog arrives in one burst, then the live stream
         after = _watch(teleop, 0.3)
     assert all(c == pytest.approx(0.0, abs=1e-9) for c in during)  # held at the last live pose
-    assert all(c == pytest.approx(0.0, abs=1e-9) or c == pytest.approx(1.0, abs=1e-9) for c in after), \
+    assert all(c == pytest.approx(0.0, abs=1e-9) or c == pytest.approx(1.0, abs=1e-9) for c in after), (
         "a pose from the pause was replayed"
+    )
     assert after[-1] == pytest.approx(1.0, abs=1e-9)
     assert teleop.receiver.stale >= 30 and "whose backlog is not replayed" in caplog.text
 

@@ -8,15 +8,15 @@ from pathlib import Path
 import draccus
 import numpy as np
 import pytest
-from lerobot_blindgrasp.hardware.emulators.glove import GloveEmulator, free_udp_port
 from lerobot.teleoperators.config import TeleoperatorConfig
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware.emulators.glove import GloveEmulator, free_udp_port
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost
-from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import decode, encode
+from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
 
 ROOT = Path(__file__).resolve().parents[1]
 

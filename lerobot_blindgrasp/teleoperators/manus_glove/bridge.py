@@ -123,8 +123,10 @@ class GloveBridge:
         return True
 
     def status(self) -> str:
-        return (f"forwarded {self.forwarded} {self.cfg.side}-hand messages to {self.cfg.host}:{self.cfg.port} "
-                f"(session {self.sender.session}); skipped {self.other_hand} of the other hand, {self.bad} bad")
+        return (
+            f"forwarded {self.forwarded} {self.cfg.side}-hand messages to {self.cfg.host}:{self.cfg.port} "
+            f"(session {self.sender.session}); skipped {self.other_hand} of the other hand, {self.bad} bad"
+        )
 
 
 def _import_ros():

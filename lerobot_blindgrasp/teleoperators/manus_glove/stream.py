@@ -162,7 +162,9 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
                 self._warned_senders.add(addr)
                 logger.warning(
                     "Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. Another bridge or "
-                    "sender on the port? Reconnect to change the sender.", *addr, *self.bound
+                    "sender on the port? Reconnect to change the sender.",
+                    *addr,
+                    *self.bound,
                 )
             return False
         return True
@@ -214,7 +216,9 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             self._retired.append(self.session)
             logger.warning(
                 "Glove bridge restarted (session %s -> %s, its counter starts again): following the new session; "
-                "late datagrams of the old one are dropped.", self.session, session
+                "late datagrams of the old one are dropped.",
+                self.session,
+                session,
             )
         # self._sent stays: the restarted bridge's clock is the same machine's, and it must move on from there.
         self.session, self._seq, self._offset = session, 0, None
@@ -236,7 +240,9 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             parts.append(f"{self.rejected} rejected (last: {self.last_reject})")
         if self.other_side:
             other = "left" if self.side == "right" else "right"
-            parts.append(f"{self.other_side} for the {other} hand (this teleoperator is --teleop.side={self.side})")
+            parts.append(
+                f"{self.other_side} for the {other} hand (this teleoperator is --teleop.side={self.side})"
+            )
         if self.foreign:
             parts.append(f"{self.foreign} from another sender than the bound {self.bound[0]}:{self.bound[1]}")
         for count, what in ((self.late, "late or duplicated"), (self.stale, f"queued > {self.max_latency_s} s"),
