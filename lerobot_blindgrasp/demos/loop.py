@@ -18,11 +18,14 @@ A process killed without any handler (SIGKILL, a power cut) loses at most the ep
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import logging
+import sys
 import time
 from collections.abc import Callable
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.cli import GracefulStop
 from lerobot_blindgrasp.demos import checkpoint as checkpoint_mod
 from lerobot_blindgrasp.demos import curation as curation_mod
@@ -33,6 +36,8 @@ from lerobot_blindgrasp.demos.records import CollectStats
 from lerobot_blindgrasp.demos.rollout import Episode, run_episodes
 from lerobot_blindgrasp.hub import REPO_ID_PATTERN
 from lerobot_blindgrasp.sim import randomization
+
+logger = logging.getLogger(__name__)
 
 # Rebuild the env for the remaining objects once this fraction of envs holds finished objects. A rebuild drops the
 # running episodes of the other envs (half an episode each on average) and costs ~1 s; waiting wastes this fraction
@@ -180,12 +185,48 @@ def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: st
         bar.close()
         if not bars_were_off:
             datasets.enable_progress_bars()
-        saved.ds.finalize()  # closes the parquet writers: every saved episode is readable from here on
+        first = sys.exc_info()[1]  # the error that ended the run, if any: a cleanup failure must not mask it
+        with _cleanup("finalizing the dataset", first):
+            _finalize_or_abandon(saved.ds)  # closes the parquet writers: every saved episode is readable after it
         stats.wall_s = time.perf_counter() - t_wall
         stats.cpu_s = time.process_time() - t_cpu
         stats.checkpoints, stats.checkpoint_s = saved.count, saved.seconds
-        records.finish_run(cfg, prov, run, tally, stats)
+        with _cleanup("recording the run", first):
+            records.finish_run(cfg, prov, run, tally, stats)
     return stats
+
+
+@contextlib.contextmanager
+def _cleanup(what: str, first: BaseException | None):
+    """A cleanup step: with an error already ending the run, its own failure (a full disk fails the footer write
+    too) is logged in one line and the first error goes on; without one, its failure is the error."""
+    try:
+        yield
+    except Exception as e:
+        if first is None:
+            raise
+        logger.error("%s also failed (%s); the first error stands.", what.capitalize(), durable.describe(e))
+
+
+def _finalize_or_abandon(ds) -> None:
+    """LeRobot's finalize; if it fails, its writers are abandoned: their garbage-collection safety net would
+    retry the write at interpreter shutdown, where pyarrow aborts the process (exit 134) instead of raising. The
+    files left without a footer are what `--resume` / `blindgrasp-repair-dataset` set aside."""
+    try:
+        ds.finalize()
+    except BaseException:
+        for part in (ds.writer, ds.meta):
+            if part is None:
+                continue
+            with contextlib.suppress(Exception):
+                writer = getattr(part, "_pq_writer", None)
+                if writer is not None:
+                    writer.is_open = False  # pyarrow's __del__ would try the footer write again
+                part._pq_writer = None
+                getattr(part, "_metadata_buffer", []).clear()
+            part._finalized = True
+        ds._is_finalized = True
+        raise
 
 
 def _build_env(cfg: CollectConfig, object_names: list[str], seed: int, dr, reward_cfg):

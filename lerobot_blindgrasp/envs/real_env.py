@@ -90,9 +90,22 @@ class BlindGraspRealEnvConfig(EnvConfig):
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
         from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
+    def check_policy(self) -> None:
+        """lerobot-eval makes the envs before it loads the policy, and its make_policy would overwrite the
+        checkpoint's output features with ours: the checkpoint's own files are checked here, before anything loads
+        or moves (`policy_check.py`). The robot checks again at connect."""
+        from lerobot.configs import parser
+
+        from lerobot_blindgrasp.robots.blindgrasp_gripper import policy_check
+
+        path = parser.get_path_arg("policy")
+        if path and (where := policy_check.local_checkpoint(path)) is not None:
+            policy_check.check(where, policy_check.gripper_contract(self.robot.type, self.fps, "--env.fps"))
+
 
         if n_envs != 1 or use_async_envs:
             logger.warning("One physical gripper: evaluating with one synchronous env (asked n_envs=%s).", n_envs)
+        self.check_policy()
         session = GripperSession(self.trial_settings())
         out = {}
         for name in self.objects:

@@ -163,6 +163,8 @@ class RealGraspEnv(gym.Env):
         self._schedule.start()
         return obs, {"is_success": False}
 
+        if hasattr(self.robot, "check_health_before_start"):  # a servo near a limit must not start a trial
+            self.robot.check_health_before_start()
     def step(self, action):
         action = np.asarray(action, dtype=np.float64).reshape(spec.ACTION_DIM)
         self.robot.send_action(dict(zip(spec.ACTION_NAMES, action.tolist(), strict=True)))

@@ -47,3 +47,41 @@ def torque_at_current_nm(amps: float) -> float:
 def decode_hardware_error(bits: int) -> str:
     names = [name for bit, name in HARDWARE_ERROR_BITS.items() if bits & bit]
     return ", ".join(names) or f"bits {bits:#04x}"
+
+
+# --- health items and their limits (XM430-W350 e-Manual: control table, "Specifications") ---------------------------
+# The datasheet's own numbers; every health level below is derived from them here, and nowhere else.
+TEMPERATURE_UNIT_C = 1.0  # Present_Temperature(146), Temperature_Limit(31): 1 degC per unit
+TEMPERATURE_LIMIT_DEFAULT_C = 80  # Temperature_Limit(31) factory value; range 0..100
+VOLTAGE_UNIT_V = 0.1  # Present_Input_Voltage(144), Max/Min_Voltage_Limit(32/34): 0.1 V per unit
+MAX_VOLTAGE_LIMIT_DEFAULT_V = 16.0  # Max_Voltage_Limit(32) factory value (160); range 9.5..16.0 V
+MIN_VOLTAGE_LIMIT_DEFAULT_V = 9.5  # Min_Voltage_Limit(34) factory value (95)
+RATED_VOLTAGE_V = (10.0, 14.8)  # operating voltage range of the XM430-W350 (recommended 12.0 V)
+RECOMMENDED_VOLTAGE_V = 12.0
+SHUTDOWN_DEFAULT = 0x34  # Shutdown(63): overheating | electrical shock | overload turn the torque off
+# Hardware_Error_Status bits that the firmware also sets in Shutdown's sense (bit 0x01 input voltage is flagged but,
+# with the factory Shutdown 0x34, does NOT turn the torque off: a sagging supply runs on until the MCU browns out).
+
+# What the host does before the firmware does (ROS 2 diagnostics' OK / WARN / ERROR): margins below the limits.
+TEMPERATURE_WARN_MARGIN_C = 15.0  # WARN at 65 degC with the default limit
+TEMPERATURE_START_MARGIN_C = 8.0  # a trial or episode does not start at >= 72 degC
+TEMPERATURE_STOP_MARGIN_C = 3.0  # named stop, torque off, at >= 77 degC (the firmware's own shutdown is 80)
+TEMPERATURE_TREND_HORIZON_S = 30.0  # stop when the trend reaches the stop level within this horizon
+VOLTAGE_WARN_LOW_V = 11.0  # under load, below this the servo no longer has its 12 V torque
+VOLTAGE_START_LOW_V = 10.8  # no trial below this at rest: the load will sag it under the rating
+VOLTAGE_STOP_LOW_V = RATED_VOLTAGE_V[0]  # below the rating for VOLTAGE_STOP_HOLD_S: named stop
+VOLTAGE_HIGH_V = RATED_VOLTAGE_V[1]  # above the rating: refused / stopped
+VOLTAGE_STOP_HOLD_S = 0.5
+STALL_FRACTION = 0.95  # |Present_Current| >= this x the current limit is "at the limit"
+STALL_WARN_S = 2.0  # at the limit this long: WARN
+# At the limit this long: named stop. ROBOTIS does not publish the overload error's time constant; this keeps a held
+# grasp (the trial needs >= 1 s of hold) and stops a finger stalled against something for most of a trial.
+STALL_STOP_S = 6.0
+
+
+def current_units_to_amps(units: int) -> float:
+    return units * CURRENT_UNIT_A
+
+
+def voltage_v(units: int) -> float:
+    return units * VOLTAGE_UNIT_V

@@ -50,7 +50,7 @@ from lerobot_blindgrasp.hardware.xm430 import (
 
 from . import calibration as calib
 from . import force_calibration
-from . import connect_checks, latency_timer, servo_state, signals
+from . import connect_checks, health, latency_timer, policy_check, servo_state, signals
 from .bus import PortLostError, RetryingDynamixelBus
 from .calibration import rad_to_ticks, ticks_to_rad
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
@@ -60,6 +60,7 @@ from .errors import (
     ForceTareError,
     GripperBusError,
     GripperHardwareError,
+    GripperHealthError,
     GripperPortBusyError,
     GripperReadingError,
     GripperSafetyStop,
@@ -69,7 +70,7 @@ from .errors import (
 from .force_sensor import ForceSensorReader, ForceStreamError
 from .plausibility import ImplausibleReadingError, PositionGate
 from .ports import PortInUseError
-from .timing import LoopOverrunError, PeriodMonitor
+from .timing import LoopOverrunError, PeriodMonitor, SampleSpacing
 
 logger = logging.getLogger(__name__)
 
@@ -139,6 +140,9 @@ class BlindgraspGripper(Robot):
         )
         self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
         self.lower = np.asarray(config.joint_lower, dtype=np.float64)
+        self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no short step after a stalled observation
+        self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
+        self._health_countdown = 0
         self.upper = np.asarray(config.joint_upper, dtype=np.float64)
         self._atexit = None
         # Vision-free by design; lerobot-record and lerobot-rollout still read `robot.cameras`.
@@ -170,6 +174,7 @@ class BlindgraspGripper(Robot):
             connect_checks.refuse_unattended_calibration(self)  # no file and nobody to answer the prompts
         latency_timer.ensure_low_latency(self.config.port, self.config.force_sensor.port)  # USB adapters at 1 ms
         with self._safety("connecting"):
+        policy_check.check_cli_policy(self)  # a policy on this process's command line must fit, before any port
             self.expected = {}
             self.gate.forget()
             # Both ports are taken (exclusively) before the first byte goes out: a second owner is refused here.
@@ -180,6 +185,7 @@ class BlindgraspGripper(Robot):
             signals.install(self)
             self._check_servo_state()
             if self.calibration and not self.bus.is_calibrated:
+            self._check_health_limits()  # before any torque: a hot servo or a weak supply refuses the start
                 logger.info("Writing the calibration file %s to the servos.", self.calibration_fpath)
                 self.bus.write_calibration(self.calibration)
                 self.gate.forget()  # the readings change frame
@@ -196,6 +202,7 @@ class BlindgraspGripper(Robot):
                 logger.warning(warning)
         self.timing.restart()
         logger.info("%s connected (force tare %s counts).", self, np.round(self.force.offset).tolist())
+        self.spacing.restart()
 
     def configure(self) -> None:
         mode = OperatingMode[self.config.operating_mode].value
@@ -351,11 +358,15 @@ class BlindgraspGripper(Robot):
     @check_if_not_connected
     def get_observation(self) -> dict[str, float]:
         with self._safety("reading the gripper state"):
+        self.spacing.before_read()
             self.timing.tick()
+            started = time.monotonic()
             self._check_servo_state()  # first: a reset servo is named as such, not as an odd position
             q = self._read_q()
+            self._health_every_n()
             forces = self.force.read()
             over = np.abs(forces) > self.config.force_sensor.overload_n
+            self.spacing.after_read(started, time.monotonic())
             if over.any():
                 tips = {spec.FORCE_SENSOR_NAMES[i]: round(float(forces[i]), 2) for i in np.flatnonzero(over)}
                 limit = self.config.force_sensor.overload_n
@@ -372,8 +383,10 @@ class BlindgraspGripper(Robot):
         The step bound comes last so it holds from the first step whatever the start pose: a joint that starts
         outside its limits is brought back at <= max_relative_target per call, never in one jump."""
         missing = [k for k in spec.ACTION_NAMES if k not in action]
-        if missing:
-            raise KeyError(f"Action lacks {missing}; expected keys {list(spec.ACTION_NAMES)}")
+        unknown = [k for k in action if k not in spec.ACTION_NAMES]
+        if missing or unknown:  # an extra key is a policy or teleop trained for other joints: nothing is sent
+            raise KeyError(f"Action lacks {missing} and has unknown keys {unknown}; expected exactly "
+                           f"{list(spec.ACTION_NAMES)}. Nothing was sent.")
         target = np.array([float(action[k]) for k in spec.ACTION_NAMES])
         if not np.all(np.isfinite(target)):
             raise ValueError(f"Non-finite joint target {target.tolist()}; nothing was sent.")
@@ -424,6 +437,37 @@ class BlindgraspGripper(Robot):
             self._rearm_watchdog(report.watchdog_tripped)
 
     def _rearm_watchdog(self, joints: list[str]) -> None:
+    def _check_health_limits(self) -> None:
+        """At connect: the servos' own limits (EEPROM), then the start check (`health.py`)."""
+        self.health.reset()
+        for note in self.health.set_limits(self.bus.read_block(*health.LIMITS_BLOCK, health.LIMITS_READ)):
+            logger.warning("%s", note)
+        self._check_health(start=True)
+
+    def _health_every_n(self) -> None:
+        self._health_countdown -= 1
+        if self._health_countdown <= 0:
+            self._health_countdown = self.config.health_every_n
+            self._check_health()
+
+    def _check_health(self, *, start: bool = False) -> None:
+        """One sync read of the health block; ERROR stops (torque off by the latch), and at a start anything too
+        close to its limit refuses it."""
+        block = self.bus.read_block(*health.BLOCK, health.READ)
+        found = self.health.assess(block, self.expected.get("Goal_Current"), time.monotonic())
+        errors = [str(d) for d in found if d.level == health.ERROR]
+        if errors:
+            raise GripperHealthError(f"Servo health: {'; '.join(errors)}. Stopped before the firmware's own "
+                                     "shutdown would drop the object.")  # fmt: skip
+        if start and (close := self.health.start_problems(block)):
+            raise GripperHealthError(f"Refused to start: {'; '.join(close)}.")
+
+    @check_if_not_connected
+    def check_health_before_start(self) -> None:
+        """Before a trial or an episode: refuse (torque off, named error) when a servo is too close to a limit."""
+        with self._safety("checking servo health before a start"):
+            self._check_health(start=True)
+
         """The servos' bus watchdog stopped them because this process sent nothing for `bus_watchdog_ms` (a slow
         save between episodes, an operator prompt). The host is evidently alive again: clear the error (goal
         registers are read-only until then), hold the pose the servos stopped in, and arm the watchdog again."""

@@ -111,6 +111,9 @@ class BlindgraspGripperConfig(RobotConfig):
     calibration_min_motion_rad: float = 0.15
     disable_torque_on_disconnect: bool = True
     force_sensor: ForceSensorConfig = field(default_factory=ForceSensorConfig)
+    # Servo health (`health.py`): the health block (temperature, input voltage, current) is read every this many
+    # control periods; its levels are the datasheet's (`hardware/xm430.py`).
+    health_every_n: int = 4
 
     def __post_init__(self):
         super().__post_init__()
@@ -139,6 +142,8 @@ class BlindgraspGripperConfig(RobotConfig):
             raise ValueError("bus_watchdog_ms must be a multiple of 20 in [0, 2540] (0 disables the watchdog)")
         if not 1 <= self.latency_timer_ms <= 500:
             raise ValueError("latency_timer_ms must be in [1, 500]")
+        if not 1 <= self.health_every_n <= 100:
+            raise ValueError("health_every_n must be in [1, 100] control periods")
         if not 0 < self.max_relative_target <= spec.ACTION_BOUND_RAD:
             raise ValueError(f"max_relative_target must be in (0, {spec.ACTION_BOUND_RAD}] rad")
         if self.operating_mode not in ("CURRENT_POSITION", "POSITION"):

@@ -44,3 +44,13 @@ class GripperTimingError(GripperSafetyStop):
 class ForceTareError(ValueError):
     """A tare refused because a fingertip pad is loaded (beyond the at-rest envelope); the previous zero is kept.
     Not a safety stop by itself: a re-tare between trials leaves the gripper holding its pose."""
+
+
+class GripperHealthError(GripperSafetyStop):
+    """A servo's health item (temperature, input voltage, current against its limit) reached its ERROR level, or was
+    too close to its limit to start a trial or episode (`health.py`): stopped before the firmware's own shutdown."""
+
+
+class PolicyMismatchError(ValueError):
+    """The policy checkpoint was trained for another robot (feature names, shapes or order, robot type, fps, action
+    meaning): refused before any servo takes torque (`policy_check.py`)."""

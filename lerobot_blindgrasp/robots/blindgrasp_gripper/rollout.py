@@ -30,6 +30,7 @@ from lerobot.utils.process import ProcessSignalHandler
 from lerobot.utils.utils import init_logging
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.robots.blindgrasp_gripper import policy_check
 
 logger = logging.getLogger(__name__)
 
@@ -60,6 +61,11 @@ def rollout(cfg: RolloutConfig) -> None:
     init_logging()
     if cfg.display_data:
         logger.warning("--display_data is not supported here; run without it.")
+    if cfg.policy is not None and cfg.policy.pretrained_path and cfg.robot is not None:
+        # Before build_rollout_context loads the policy (its size errors never say "action") and connects the robot.
+        where = policy_check.local_checkpoint(str(cfg.policy.pretrained_path))
+        if where is not None:
+            policy_check.check(where, policy_check.gripper_contract(cfg.robot.type, cfg.fps, "--fps"))
     signal_handler = ProcessSignalHandler(use_threads=True, display_pid=False)
     ctx = build_rollout_context(
         cfg, signal_handler.shutdown_event, robot_observation_processor=make_robot_observation_processor()

@@ -104,3 +104,40 @@ class Schedule:
         else:
             self.rebased += 1
             self._next = now + self.period_s
+
+
+class SampleSpacing:
+    """No short step after a stall, whoever's loop it is.
+
+    LeRobot's loops (lerobot-record, lerobot-rollout) and the eval trial sleep `period - (time since the loop's
+    start)`; after an observation stalled by a slow bus, the loop goes straight on, and the next observation's
+    data is read 3-10 ms after the stalled one's, which the policy and the dataset take for one whole period. So the
+    robot spaces its own samples: after an observation whose reads took more than half a period, the next one reads
+    no earlier than `period x (1 - slack)` after the slow one ended, and so on while calls keep coming early. A
+    waiting observation shifts the caller's next start by the same amount, so the waits shrink by `slack` periods per
+    step and the caller's own pacing takes over again within a few steps. Normal steps never wait."""
+
+    def __init__(self, period_s: float, slack: float = 0.1):
+        self.period_s = period_s
+        self.gap_s = period_s * (1.0 - slack)
+        self.waits = 0  # observations that were held back (for tests and logs)
+        self._last_end: float | None = None
+        self._recovering = False
+
+    def restart(self) -> None:
+        self._last_end, self._recovering = None, False
+
+    def before_read(self) -> None:
+        if not self._recovering or self._last_end is None:
+            return
+        delay = self._last_end + self.gap_s - time.monotonic()
+        if delay > 0:
+            self.waits += 1
+            time.sleep(delay)
+        else:
+            self._recovering = False  # the caller's own pacing is back
+
+    def after_read(self, started: float, ended: float) -> None:
+        if ended - started > 0.5 * self.period_s:
+            self._recovering = True
+        self._last_end = ended

@@ -1,0 +1,180 @@
+"""Servo health as ROS 2 diagnostics report it: OK / WARN / ERROR per joint and item, before the firmware acts.
+
+The XM430 firmware protects itself late: it drops the torque (and the object) at Temperature_Limit, after an
+overload held for an unpublished time, and it never drops it for a sagging supply (Shutdown 0x34 leaves the voltage
+bit out) until the MCU browns out. The host reads the health items and acts first:
+
+| item (address, unit) | WARN | refuse a start | ERROR: named stop, torque off |
+|---|---|---|---|
+| Present_Temperature (146, 1 degC) | >= limit - 15 | >= limit - 8 | >= limit - 3, or rising to the limit within 30 s |
+| Present_Input_Voltage (144, 0.1 V) | < 11.0 V | < 10.8 V or > 14.8 V | < 10.0 V (rating) for 0.5 s, or > 14.8 V |
+| Present_Current (126, 2.69 mA) vs the current limit | at >= 95 % for 2 s | - | at >= 95 % for 6 s (a stall) |
+
+"limit" is each servo's own Temperature_Limit(31), read at connect with the rest of its EEPROM limits; every
+number above is a constant of `hardware/xm430.py`, the one place they are stated.
+
+Bus budget at 1 Mbps (10 bits per byte): the health block Present_Current(126)..Present_Temperature(146) is 21
+bytes, one sync read = a 23-byte instruction + 9 replies of 11 + 21 bytes = 311 bytes = 3.1 ms of wire time, plus
+one USB round trip. The per-period traffic is already ~7 ms (state block 4.8 ms, positions 1.6 ms, goals 0.6 ms), so
+the health read runs every `health_every_n` periods (4: 5 Hz, +0.8 ms per period on average): temperature moves in
+seconds, a stall is judged over seconds, and a sag is judged over 0.5 s.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from lerobot_blindgrasp.hardware import xm430
+
+logger = logging.getLogger(__name__)
+
+OK, WARN, ERROR = 0, 1, 2  # diagnostic_msgs/DiagnosticStatus levels
+LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
+
+BLOCK = ("Present_Current", "Present_Temperature")  # first and last register of the health read (21 bytes)
+READ = ("Present_Current", "Present_Input_Voltage", "Present_Temperature")
+LIMITS_BLOCK = ("Temperature_Limit", "Shutdown")  # EEPROM 31..63, read once at connect
+LIMITS_READ = ("Temperature_Limit", "Max_Voltage_Limit", "Min_Voltage_Limit", "Current_Limit", "Shutdown")
+
+
+@dataclass(frozen=True)
+class Diagnostic:
+    level: int
+    joint: str
+    item: str
+    value: float
+    message: str
+
+    def __str__(self) -> str:
+        return f"{LEVEL_NAMES[self.level]} {self.joint} {self.item}: {self.message}"
+
+
+class ServoHealth:
+    """Judges the health block of every servo, keeping what a trend needs (temperature history, how long a servo
+    has been at its current limit or below the voltage rating)."""
+
+    def __init__(self, joints: list[str]):
+        self.joints = list(joints)
+        self.temperature_limit_c = dict.fromkeys(self.joints, float(xm430.TEMPERATURE_LIMIT_DEFAULT_C))
+        self._history = {j: deque(maxlen=64) for j in self.joints}  # (t, degC)
+        self._stall_since: dict[str, float] = {}
+        self._sag_since: dict[str, float] = {}
+        self._reported: dict[tuple[str, str], int] = {}
+        self.latest: list[Diagnostic] = []
+
+    def reset(self) -> None:
+        for h in self._history.values():
+            h.clear()
+        self._stall_since.clear()
+        self._sag_since.clear()
+
+    def set_limits(self, eeprom: dict[str, dict[str, int]]) -> list[str]:
+        """The servos' own limits (LIMITS_READ per joint); returns warnings about settings that weaken the firmware's
+        own protection."""
+        notes = []
+        for j, regs in eeprom.items():
+            self.temperature_limit_c[j] = regs["Temperature_Limit"] * xm430.TEMPERATURE_UNIT_C
+            missing = xm430.SHUTDOWN_DEFAULT & ~regs["Shutdown"]
+            if missing:
+                notes.append(f"{j}: Shutdown(63) = {regs['Shutdown']:#04x} lacks {xm430.decode_hardware_error(missing)}"
+                             f" (factory {xm430.SHUTDOWN_DEFAULT:#04x}): the firmware will not stop that servo itself")
+        return notes
+
+    # --- the three items ---------------------------------------------------------------------------------------
+    def _temperature(self, j: str, t: float, now: float) -> Diagnostic:
+        limit = self.temperature_limit_c[j]
+        hist = self._history[j]
+        hist.append((now, t))
+        stop = limit - xm430.TEMPERATURE_STOP_MARGIN_C
+        text = f"{t:.0f} degC (Temperature_Limit {limit:.0f}, stop at {stop:.0f})"
+        if t >= stop:
+            return Diagnostic(ERROR, j, "temperature", t, f"{text}: too hot")
+        slope = _slope(hist)
+        if t >= limit - xm430.TEMPERATURE_WARN_MARGIN_C and slope > 0:
+            eta = (limit - t) / slope
+            if eta < xm430.TEMPERATURE_TREND_HORIZON_S:
+                return Diagnostic(ERROR, j, "temperature", t, f"{text}: rising {slope * 60:.0f} degC/min, at the "
+                                  f"limit in {eta:.0f} s (over-temperature trend)")  # fmt: skip
+        if t >= limit - xm430.TEMPERATURE_WARN_MARGIN_C:
+            return Diagnostic(WARN, j, "temperature", t, f"{text}: nearing the limit")
+        return Diagnostic(OK, j, "temperature", t, text)
+
+    def _voltage(self, j: str, v: float, now: float) -> Diagnostic:
+        text = f"{v:.1f} V (rated {xm430.RATED_VOLTAGE_V[0]:.1f}-{xm430.RATED_VOLTAGE_V[1]:.1f} V)"
+        if v > xm430.VOLTAGE_HIGH_V:
+            return Diagnostic(ERROR, j, "input voltage", v, f"{text}: over the rating")
+        if v < xm430.VOLTAGE_STOP_LOW_V:
+            since = self._sag_since.setdefault(j, now)
+            if now - since >= xm430.VOLTAGE_STOP_HOLD_S:
+                return Diagnostic(ERROR, j, "input voltage", v, f"{text}: below the rating for {now - since:.1f} s "
+                                  "(supply sagging under load)")  # fmt: skip
+        else:
+            self._sag_since.pop(j, None)
+        if v < xm430.VOLTAGE_WARN_LOW_V:
+            return Diagnostic(WARN, j, "input voltage", v, f"{text}: low")
+        return Diagnostic(OK, j, "input voltage", v, text)
+
+    def _current(self, j: str, units: int, limit_units: int | None, now: float) -> Diagnostic:
+        amps = xm430.current_units_to_amps(abs(units))
+        if not limit_units:
+            return Diagnostic(OK, j, "current", amps, f"{amps:.2f} A (torque off)")
+        limit = xm430.current_units_to_amps(limit_units)
+        text = f"{amps:.2f} A (limit {limit:.2f} A)"
+        if abs(units) < xm430.STALL_FRACTION * limit_units:
+            self._stall_since.pop(j, None)
+            return Diagnostic(OK, j, "current", amps, text)
+        held = now - self._stall_since.setdefault(j, now)
+        if held >= xm430.STALL_STOP_S:
+            return Diagnostic(ERROR, j, "current", amps, f"{text}: at the current limit for {held:.1f} s (stalled)")
+        if held >= xm430.STALL_WARN_S:
+            return Diagnostic(WARN, j, "current", amps, f"{text}: at the current limit for {held:.1f} s")
+        return Diagnostic(OK, j, "current", amps, text)
+
+    # --- judging -------------------------------------------------------------------------------------------------
+    def assess(self, block: dict[str, dict[str, int]], limit_units: int | None, now: float) -> list[Diagnostic]:
+        """Every item of every joint; warnings are logged when an item's level changes (not every read)."""
+        out = []
+        for j in self.joints:
+            regs = block[j]
+            out.append(self._temperature(j, regs["Present_Temperature"] * xm430.TEMPERATURE_UNIT_C, now))
+            out.append(self._voltage(j, xm430.voltage_v(regs["Present_Input_Voltage"]), now))
+            out.append(self._current(j, _signed16(regs["Present_Current"]), limit_units, now))
+        for d in out:
+            key = (d.joint, d.item)
+            if d.level != self._reported.get(key, OK) and d.level >= WARN:
+                logger.warning("Servo health %s", d)
+            self._reported[key] = d.level
+        self.latest = out
+        return out
+
+    def start_problems(self, block: dict[str, dict[str, int]]) -> list[str]:
+        """What is too close to a limit to start a trial or an episode (the servos at rest)."""
+        bad = []
+        for j in self.joints:
+            t = block[j]["Present_Temperature"] * xm430.TEMPERATURE_UNIT_C
+            limit = self.temperature_limit_c[j]
+            if t >= limit - xm430.TEMPERATURE_START_MARGIN_C:
+                bad.append(f"{j} temperature {t:.0f} degC (start needs < {limit - xm430.TEMPERATURE_START_MARGIN_C:.0f}"
+                           f", Temperature_Limit {limit:.0f}): let it cool")
+            v = xm430.voltage_v(block[j]["Present_Input_Voltage"])
+            if not xm430.VOLTAGE_START_LOW_V <= v <= xm430.VOLTAGE_HIGH_V:
+                bad.append(f"{j} input voltage {v:.1f} V (start needs {xm430.VOLTAGE_START_LOW_V:.1f}-"
+                           f"{xm430.VOLTAGE_HIGH_V:.1f} V at rest): check the supply")
+        return bad
+
+
+def _signed16(value: int) -> int:
+    """Present_Current is a signed 2-byte register; LeRobot's raw reads return it unsigned."""
+    return value - 0x10000 if value >= 0x8000 else value
+
+
+def _slope(history: deque) -> float:
+    """Least-squares degC/s over the history (>= 3 s of it), 0 when too short: readings come in whole degrees."""
+    if len(history) < 5 or history[-1][0] - history[0][0] < 3.0:
+        return 0.0
+    t, y = np.array(history, dtype=np.float64).T
+    return float(np.polyfit(t - t[0], y, 1)[0])
