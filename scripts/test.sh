@@ -4,6 +4,18 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$ROOT/scripts/bootstrap.sh"
 cd "$ROOT"
+# The force board's firmware tests (tests/test_force_board_sim.py) compile it and run it in simavr. As root with
+# apt-get (CI) the Debian packages are installed when missing; elsewhere those tests skip, and this says which.
+FIRMWARE_PACKAGES="gcc-avr avr-libc simavr libsimavr-dev make gcc"
+if ! { command -v avr-gcc && command -v make && command -v cc && [ -e /usr/include/simavr/sim_avr.h ]; } >/dev/null; then
+  if [ "$(id -u)" -eq 0 ] && command -v apt-get >/dev/null; then
+    echo "installing the force-board firmware toolchain: $FIRMWARE_PACKAGES"
+    { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $FIRMWARE_PACKAGES; } >/dev/null 2>&1 \
+      || echo "warning: could not install $FIRMWARE_PACKAGES; the force-board firmware tests will skip" >&2
+  else
+    echo "note: apt-get install $FIRMWARE_PACKAGES enables the force-board firmware tests (they skip without)" >&2
+  fi
+fi
 set +e
 # Idle OpenMP threads sleep instead of spinning (libgomp reads this once, when torch loads): the suite runs torch in
 # its own process and in the lerobot-train / lerobot-eval subprocesses it starts, and on 2 cores spinning threads
