@@ -178,3 +178,20 @@ def test_the_power_sizing_is_nine_stall_currents():
     text = (ROOT / "docs" / "bringup.md").read_text()
     total = 9 * xm430.STALL_CURRENT_A
     assert f"9 x {xm430.STALL_CURRENT_A} A = {total:.1f} A ({total * xm430.RECOMMENDED_VOLTAGE_V:.0f} W)" in text
+
+
+def test_real_report_answers_a_bare_path_and_takes_the_run_folder(tmp_path, capsys):
+    from lerobot_blindgrasp.envs import real_report
+
+    recorded = ROOT / "tests" / "data" / "real_eval_info.json"
+    with pytest.raises(SystemExit, match=re.escape(f"real_report --eval_info={recorded}")):
+        real_report.main([str(recorded)])  # the form the docs used to show
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "eval_info.json").write_text(recorded.read_text())
+    real_report.main([f"--eval_info={run}"])
+    table = capsys.readouterr().out
+    assert "| cylinder_a_medium | 2 | 0 | 0.0 % | 0-66 % |" in table and "| **overall** | 4 |" in table
+    (run / "eval_info.json").write_text('{"overall": {}}')
+    with pytest.raises(SystemExit, match="no per_task list"):
+        real_report.main([f"--eval_info={run}"])

@@ -44,7 +44,7 @@ PREFIXES = {"sudo", "nohup", "nice", "env", "time"}
 
 
 def doc_files() -> list[Path]:
-    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), ROOT / "robot_configs" / "README.md"]
 
 
 @dataclass(frozen=True)

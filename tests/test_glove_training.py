@@ -141,7 +141,8 @@ def test_sim_demos_plus_glove_merge_and_train(recording, sim_demos, tmp_path, mo
     assert set(merged.meta.tasks.index) == {TASK} | set(sim.meta.tasks.index)
     assert not [k for k in merged.meta.features if k.startswith("episode.")]  # the sim metadata was removed
     # The last frames are the glove recording's, unchanged by the merge.
-    np.testing.assert_array_equal(merged[len(merged) - 1][spec.STATE_KEY].numpy(), glove[len(glove) - 1][spec.STATE_KEY].numpy())
+    last_merged, last_glove = merged[len(merged) - 1], glove[len(glove) - 1]
+    np.testing.assert_array_equal(last_merged[spec.STATE_KEY].numpy(), last_glove[spec.STATE_KEY].numpy())
     _loads_as_a_policy(checkpoint)
     assert "lerobot-train --policy.type=blindgrasp_transformer --policy.size=quick" in capsys.readouterr().out
 

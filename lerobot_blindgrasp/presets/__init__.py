@@ -15,6 +15,9 @@ here); the student stages name one, and the policy never imports this registry.
 - `paper` is exactly Tables III and IV; its only deviations are where the paper measured on the real robot.
 - `cpu` is the largest that is useful on a 2-core machine (hours); `quick` is the paper's student recipe on the
   shipped teacher (minutes); `smoke` checks the plumbing in CI (seconds per stage).
+- Students on glove recordings of the real gripper (`glove`, and `sim_plus_glove` with sim demos) are the glove
+  presets, `presets/glove.py` (`GLOVE_PRESETS`, run by `blindgrasp-train-glove`): they take recorded data, not a
+  teacher, so they are not `Preset`s.
 - Beyond the paper, each named so: `quick_blind` (the README's main job: the calibration-blind teacher's demos),
   `quick_blind_targeted` (the shipped student's recipe: quick_blind plus extra demos and DAgger on the small
   capsule), `quick_dagger` and `cpu_dagger`.
