@@ -1,11 +1,15 @@
 """`blindgrasp_transformer`: the paper's transformer student as a LeRobot policy (config, model, processors).
 
-Importing this package registers `--policy.type=blindgrasp_transformer` and its processor steps.
+Importing this package registers `--policy.type=blindgrasp_transformer` and its processor steps, and installs the
+student's data path (`window_cache`: LeRobotDataset windows of low-dimensional datasets from an in-memory cache).
 """
 
 from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
 from .modeling_blindgrasp_transformer import BlindgraspTransformerPolicy
 from .processor_blindgrasp_transformer import make_blindgrasp_transformer_pre_post_processors
+from .window_cache import install as _install_window_cache
+
+_install_window_cache()
 
 __all__ = [
     "BlindgraspTransformerConfig",

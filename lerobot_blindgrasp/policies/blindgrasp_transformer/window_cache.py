@@ -1,0 +1,165 @@
+"""The student's data path: LeRobotDataset windows served from an in-memory low-dimensional cache.
+
+lerobot-train reads each training sample through `LeRobotDataset.__getitem__`, whose reader (LeRobot's private
+`DatasetReader`) indexes the `datasets` table once for the frame and once per windowed key; each such access
+deep-copies the table's Features and converts every value through Python lists, so a 30-frame window of 12 floats
+costs milliseconds, longer than the student's update. The student's frames are tiny (low-dimensional columns only),
+so, like robomimic's `SequenceDataset` with `hdf5_cache_mode="low_dim"`, this module keeps every column as one torch
+tensor per process and slices the window from it: the same keys, dtypes, shapes and values as LeRobot's reader,
+padding flags included (`tests/test_student_data_path.py` compares them).
+
+LeRobot has no hook for a dataset reader, so `install()` (run when the plugin is imported, which `lerobot-train`
+does before it builds the dataset) wraps `DatasetReader.try_load` / `load_and_activate`: a reader that has just
+loaded a dataset the cache can serve exactly becomes a `LowDimWindowReader`. No LeRobot file changes. Served: only
+readers asked for delta-timestamp windows (training), over datasets with no cameras, no language columns and no
+index remapping, whose columns are all integers, floats or booleans (scalars or fixed-length vectors); anything else
+keeps LeRobot's path. The reader's class travels with the dataset into lerobot-train's spawned loader processes, and
+each process builds its cache on its first sample (loader workers persist, so once per run). `BLINDGRASP_LOW_DIM_CACHE=0`
+turns it off (LeRobot's path), e.g. to time the two side by side.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+
+import numpy as np
+import pyarrow as pa
+import torch
+from lerobot.datasets.dataset_reader import DatasetReader
+
+ENV_SWITCH = "BLINDGRASP_LOW_DIM_CACHE"
+_CACHE_ATTR = "_low_dim_cache"
+
+
+def _column_dtype(arrow_type: pa.DataType) -> torch.dtype | None:
+    """The dtype LeRobot's `torch.tensor(python value)` yields for a column of this type; None: not servable."""
+    while pa.types.is_fixed_size_list(arrow_type) or pa.types.is_list(arrow_type):
+        arrow_type = arrow_type.value_type
+    if pa.types.is_boolean(arrow_type):
+        return torch.bool
+    if pa.types.is_integer(arrow_type):
+        return torch.int64  # Python int -> int64
+    if pa.types.is_floating(arrow_type):
+        return torch.get_default_dtype()  # Python float -> the default dtype (float32)
+    return None
+
+
+def _to_numpy(name: str, column: pa.ChunkedArray) -> np.ndarray:
+    """A column as one (rows,) or (rows, length) array; vectors must have one length."""
+    array = column.combine_chunks() if column.num_chunks != 1 else column.chunk(0)
+    if array.null_count:
+        raise ValueError(f"column {name!r} has nulls: the low-dim cache cannot serve it")
+    if not (pa.types.is_fixed_size_list(array.type) or pa.types.is_list(array.type)):
+        return np.array(array.to_numpy(zero_copy_only=False))  # a copy: the cache owns its memory
+    lengths = np.unique(array.value_lengths().to_numpy(zero_copy_only=False)) if len(array) else np.array([0])
+    if len(lengths) != 1 or array.flatten().null_count:
+        raise ValueError(f"column {name!r} is not one fixed-length vector per frame: the low-dim cache cannot serve it")
+    flat = _to_numpy(name, pa.chunked_array([array.flatten()]))
+    return flat.reshape(len(array), int(lengths[0]), *flat.shape[1:])
+
+
+def servable(reader: DatasetReader) -> bool:
+    """Whether the cache reproduces this reader's items exactly (else LeRobot's path stays)."""
+    meta, hf = reader._meta, reader.hf_dataset
+    if reader.delta_indices is None or hf is None or len(hf) == 0 or hf._indices is not None:
+        return False
+    if meta.camera_keys or meta.video_keys or meta.depth_keys or reader._image_transforms is not None:
+        return False
+    if getattr(meta, "has_language_columns", False):
+        return False
+    schema = hf.data.schema
+    if any(_column_dtype(f.type) is None for f in schema) or "task_index" not in schema.names:
+        return False
+    return all(key in schema.names for key in reader.delta_indices)
+
+
+class LowDimCache:
+    """Every column of one reader's table as a torch tensor, plus what LeRobot's `get_item` looks up per frame."""
+
+    def __init__(self, reader: DatasetReader):
+        table = reader.hf_dataset.data.table
+        self.columns: dict[str, torch.Tensor] = {}
+        for name, field in zip(table.schema.names, table.schema, strict=True):
+            column = table.column(name)
+            self.columns[name] = torch.from_numpy(_to_numpy(name, column)).to(_column_dtype(field.type))
+        episodes = reader._meta.episodes
+        self.ep_from = torch.as_tensor(np.asarray(episodes["dataset_from_index"]), dtype=torch.int64)
+        self.ep_to = torch.as_tensor(np.asarray(episodes["dataset_to_index"]), dtype=torch.int64)
+        self.deltas = {key: torch.as_tensor(d, dtype=torch.int64) for key, d in reader.delta_indices.items()}
+        self.abs_to_rel = None  # None: LeRobot uses the absolute index as the row (no episode filter)
+        if reader._absolute_to_relative_idx is not None:
+            index = self.columns["index"]
+            self.abs_to_rel = torch.full((int(index.max()) + 1,), -1, dtype=torch.int64)
+            self.abs_to_rel[index] = torch.arange(len(index))
+        self.tasks = list(reader._meta.tasks.index)
+
+    def rows(self, absolute: torch.Tensor) -> torch.Tensor:
+        if self.abs_to_rel is None:
+            return absolute
+        rel = self.abs_to_rel[absolute]
+        if bool((rel < 0).any()):
+            raise KeyError(f"frames {absolute[rel < 0].tolist()} are not in the selected episodes")
+        return rel
+
+    def item(self, idx: int) -> dict:
+        """What LeRobot's `DatasetReader.get_item(idx)` returns for a low-dim dataset, in the same key order."""
+        item = {name: col[idx].clone() for name, col in self.columns.items()}
+        ep_idx, abs_idx = int(item["episode_index"]), int(item["index"])
+        start, end = int(self.ep_from[ep_idx]), int(self.ep_to[ep_idx])
+        padding, windows = {}, {}
+        for key, delta in self.deltas.items():
+            wanted = abs_idx + delta
+            padding[f"{key}_is_pad"] = (wanted < start) | (wanted >= end)
+            windows[key] = self.columns[key][self.rows(wanted.clamp(start, end - 1))]
+        item = {**item, **padding}
+        item.update(windows)
+        item["task"] = self.tasks[int(item["task_index"])]
+        return item
+
+
+class LowDimWindowReader(DatasetReader):
+    """LeRobot's reader, with `get_item` served from a per-process `LowDimCache` (see the module docstring)."""
+
+    def get_item(self, idx) -> dict:
+        cache = self.__dict__.get(_CACHE_ATTR)
+        if cache is None:
+            cache = self.__dict__[_CACHE_ATTR] = LowDimCache(self)
+        return cache.item(int(idx))
+
+    def get_item_reference(self, idx) -> dict:
+        """LeRobot's own path, for side-by-side checks and timing."""
+        return DatasetReader.get_item(self, idx)
+
+    def __getstate__(self) -> dict:
+        # Each loader process builds its own cache from the (memory-mapped) table instead of receiving a copy.
+        state = dict(self.__dict__)
+        state.pop(_CACHE_ATTR, None)
+        return state
+
+
+def _upgrade_after(load):
+    @functools.wraps(load)
+    def wrapper(self, *args, **kwargs):
+        result = load(self, *args, **kwargs)
+        if type(self) is DatasetReader and self.hf_dataset is not None and servable(self):
+            self.__class__ = LowDimWindowReader
+            logging.info("blindgrasp: %s windows served from an in-memory low-dim cache", self.root)
+        elif type(self) is LowDimWindowReader:
+            self.__dict__.pop(_CACHE_ATTR, None)  # reloaded: rebuild from the new table
+        return result
+
+    wrapper._blindgrasp_low_dim = True
+    return wrapper
+
+
+def install() -> bool:
+    """Serve servable LeRobot readers from the cache from now on in this process; False if switched off."""
+    if os.environ.get(ENV_SWITCH, "1") == "0":
+        return False
+    for name in ("try_load", "load_and_activate"):
+        method = getattr(DatasetReader, name)
+        if not getattr(method, "_blindgrasp_low_dim", False):
+            setattr(DatasetReader, name, _upgrade_after(method))
+    return True
