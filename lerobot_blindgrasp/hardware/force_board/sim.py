@@ -12,6 +12,8 @@ from __future__ import annotations
 import subprocess
 import tempfile
 import threading
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -108,3 +110,46 @@ class SimulatedForceBoard:
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+
+@dataclass
+class SimConfig:
+    # Run the firmware in simavr for this long and report what the real reader received (frames/s, forces).
+    seconds: float = 5.0
+    # Conversion rate of the emulated HX711s: 80 (RATE high) or 10 (RATE low).
+    sps: float = 80.0
+    # Force on each pad while it runs (N), ff, mf, th.
+    forces_n: list[float] = field(default_factory=lambda: [1.0, 2.0, 3.0])
+
+
+def main(argv: list[str] | None = None) -> None:
+    """`python -m lerobot_blindgrasp.hardware.force_board.sim`: the board without hardware, read by the robot's
+    reader with the robot config's defaults."""
+    from lerobot_blindgrasp.cli import parse_config
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import ForceSensorConfig
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader
+
+    cfg = parse_config(SimConfig, argv)
+    with SimulatedForceBoard(sps=cfg.sps) as board:
+        fs = ForceSensorConfig(port=board.port)
+        reader = ForceSensorReader(board.port, fs.baudrate, board.scale.tolist(), stale_timeout_s=fs.stale_timeout_s,
+                                   connect_timeout_s=fs.connect_timeout_s, frozen_frames=fs.frozen_frames,
+                                   min_rate_hz=fs.min_rate_hz)  # fmt: skip
+        reader.connect()
+        try:
+            reader.tare(0.5)
+            board.set_forces(cfg.forces_n)
+            time.sleep(0.3)
+            frames0, t1 = reader.frames, time.monotonic()
+            time.sleep(cfg.seconds)
+            rate = (reader.frames - frames0) / (time.monotonic() - t1)
+            print(f"port {board.port}: {rate:.1f} frames/s, {reader.dropped_frames} dropped, "
+                  f"{reader.parser.crc_errors} CRC errors, stream rate estimate {reader.rate_hz():.0f}/s")
+            print(f"forces given {cfg.forces_n} N, read {np.round(reader.read(), 3).tolist()} N")
+        finally:
+            reader.disconnect()
+    print(board.log.strip())
+
+
+if __name__ == "__main__":
+    main()
