@@ -158,7 +158,9 @@ def test_the_other_hand_and_an_old_bridge_are_named_at_connect(tmp_path):
             left.send(OPEN)
             s.sendto(json.dumps({"proto": "blindgrasp-glove/1", "seq": 1, "t": time.time(), "side": "right",
                                  "ergonomics": OPEN}).encode(), ("127.0.0.1", port))  # fmt: skip
-            time.sleep(0.2)
+            deadline = time.monotonic() + 5.0
+            while teleop.receiver.received < 2 and time.monotonic() < deadline:
+                time.sleep(0.01)
             why = teleop.receiver.diagnosis()
         finally:
             teleop.receiver.close()
