@@ -139,11 +139,11 @@ class BlindgraspGripper(Robot):
             rereads=config.plausibility_rereads,
         )
         self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
-        self.lower = np.asarray(config.joint_lower, dtype=np.float64)
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no short step after a stalled observation
         self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
         self._health_countdown = 0
         self.upper = np.asarray(config.joint_upper, dtype=np.float64)
+        self.lower = np.asarray(config.joint_lower, dtype=np.float64)
         self._atexit = None
         # Vision-free by design; lerobot-record and lerobot-rollout still read `robot.cameras`.
         self.cameras: dict = {}
@@ -169,12 +169,12 @@ class BlindgraspGripper(Robot):
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
         if self.calibration_error is not None and calibrate:
+        policy_check.check_cli_policy(self)  # a policy named on the command line must fit, before any port opens
             raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
         if calibrate:
             connect_checks.refuse_unattended_calibration(self)  # no file and nobody to answer the prompts
         latency_timer.ensure_low_latency(self.config.port, self.config.force_sensor.port)  # USB adapters at 1 ms
         with self._safety("connecting"):
-        policy_check.check_cli_policy(self)  # a policy on this process's command line must fit, before any port
             self.expected = {}
             self.gate.forget()
             # Both ports are taken (exclusively) before the first byte goes out: a second owner is refused here.
@@ -184,9 +184,9 @@ class BlindgraspGripper(Robot):
             self._register_atexit()
             signals.install(self)
             self._check_servo_state()
-            if self.calibration and not self.bus.is_calibrated:
             self._check_health_limits()  # before any torque: a hot servo or a weak supply refuses the start
                 logger.info("Writing the calibration file %s to the servos.", self.calibration_fpath)
+            if self.calibration and not self.bus.is_calibrated:
                 self.bus.write_calibration(self.calibration)
                 self.gate.forget()  # the readings change frame
             if not self.bus.is_calibrated:
@@ -201,9 +201,9 @@ class BlindgraspGripper(Robot):
             if warning := force_bias_warning(self.force.read()):  # at rest, holding the start pose
                 logger.warning(warning)
         self.timing.restart()
-        logger.info("%s connected (force tare %s counts).", self, np.round(self.force.offset).tolist())
         self.spacing.restart()
 
+        logger.info("%s connected (force tare %s counts).", self, np.round(self.force.offset).tolist())
     def configure(self) -> None:
         mode = OperatingMode[self.config.operating_mode].value
         current = amps_to_current_units(self.config.current_limit_a)
@@ -357,17 +357,17 @@ class BlindgraspGripper(Robot):
     # --- control loop --------------------------------------------------------------------------------------------
     @check_if_not_connected
     def get_observation(self) -> dict[str, float]:
-        with self._safety("reading the gripper state"):
         self.spacing.before_read()
-            self.timing.tick()
+        with self._safety("reading the gripper state"):
             started = time.monotonic()
             self._check_servo_state()  # first: a reset servo is named as such, not as an odd position
-            q = self._read_q()
+            self.timing.tick()
             self._health_every_n()
             forces = self.force.read()
-            over = np.abs(forces) > self.config.force_sensor.overload_n
+            q = self._read_q()
             self.spacing.after_read(started, time.monotonic())
             if over.any():
+            over = np.abs(forces) > self.config.force_sensor.overload_n
                 tips = {spec.FORCE_SENSOR_NAMES[i]: round(float(forces[i]), 2) for i in np.flatnonzero(over)}
                 limit = self.config.force_sensor.overload_n
                 raise ForceOverloadError(f"Fingertip force overload {tips} N > {limit} N")
@@ -436,7 +436,6 @@ class BlindgraspGripper(Robot):
         if report.watchdog_tripped:
             self._rearm_watchdog(report.watchdog_tripped)
 
-    def _rearm_watchdog(self, joints: list[str]) -> None:
     def _check_health_limits(self) -> None:
         """At connect: the servos' own limits (EEPROM), then the start check (`health.py`)."""
         self.health.reset()
@@ -469,6 +468,7 @@ class BlindgraspGripper(Robot):
             self._check_health(start=True)
 
         """The servos' bus watchdog stopped them because this process sent nothing for `bus_watchdog_ms` (a slow
+    def _rearm_watchdog(self, joints: list[str]) -> None:
         save between episodes, an operator prompt). The host is evidently alive again: clear the error (goal
         registers are read-only until then), hold the pose the servos stopped in, and arm the watchdog again."""
         logger.warning("Bus watchdog stopped %s after more than %d ms without bus traffic; re-arming it.",
