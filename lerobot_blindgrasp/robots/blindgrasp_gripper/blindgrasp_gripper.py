@@ -136,14 +136,15 @@ class BlindgraspGripper(Robot):
         self.gate = PositionGate(
             speed_ticks_s=config.max_joint_speed_rad_s / RAD_PER_TICK,
             margin_ticks=config.plausibility_margin_rad / RAD_PER_TICK,
+            backdrive_ticks=config.plausibility_backdrive_rad / RAD_PER_TICK,
             rereads=config.plausibility_rereads,
         )
         self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no short step after a stalled observation
         self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
         self._health_countdown = 0
-        self.upper = np.asarray(config.joint_upper, dtype=np.float64)
         self.lower = np.asarray(config.joint_lower, dtype=np.float64)
+        self.upper = np.asarray(config.joint_upper, dtype=np.float64)
         self._atexit = None
         # Vision-free by design; lerobot-record and lerobot-rollout still read `robot.cameras`.
         self.cameras: dict = {}
@@ -168,8 +169,8 @@ class BlindgraspGripper(Robot):
     # --- connection ----------------------------------------------------------------------------------------------
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
-        if self.calibration_error is not None and calibrate:
         policy_check.check_cli_policy(self)  # a policy named on the command line must fit, before any port opens
+        if self.calibration_error is not None and calibrate:
             raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
         if calibrate:
             connect_checks.refuse_unattended_calibration(self)  # no file and nobody to answer the prompts
@@ -185,8 +186,8 @@ class BlindgraspGripper(Robot):
             signals.install(self)
             self._check_servo_state()
             self._check_health_limits()  # before any torque: a hot servo or a weak supply refuses the start
-                logger.info("Writing the calibration file %s to the servos.", self.calibration_fpath)
             if self.calibration and not self.bus.is_calibrated:
+                logger.info("Writing the calibration file %s to the servos.", self.calibration_fpath)
                 self.bus.write_calibration(self.calibration)
                 self.gate.forget()  # the readings change frame
             if not self.bus.is_calibrated:
@@ -202,8 +203,8 @@ class BlindgraspGripper(Robot):
                 logger.warning(warning)
         self.timing.restart()
         self.spacing.restart()
-
         logger.info("%s connected (force tare %s counts).", self, np.round(self.force.offset).tolist())
+
     def configure(self) -> None:
         mode = OperatingMode[self.config.operating_mode].value
         current = amps_to_current_units(self.config.current_limit_a)
@@ -360,14 +361,14 @@ class BlindgraspGripper(Robot):
         self.spacing.before_read()
         with self._safety("reading the gripper state"):
             started = time.monotonic()
-            self._check_servo_state()  # first: a reset servo is named as such, not as an odd position
             self.timing.tick()
+            self._check_servo_state()  # first: a reset servo is named as such, not as an odd position
             self._health_every_n()
-            forces = self.force.read()
             q = self._read_q()
+            forces = self.force.read()
             self.spacing.after_read(started, time.monotonic())
-            if over.any():
             over = np.abs(forces) > self.config.force_sensor.overload_n
+            if over.any():
                 tips = {spec.FORCE_SENSOR_NAMES[i]: round(float(forces[i]), 2) for i in np.flatnonzero(over)}
                 limit = self.config.force_sensor.overload_n
                 raise ForceOverloadError(f"Fingertip force overload {tips} N > {limit} N")
@@ -467,8 +468,8 @@ class BlindgraspGripper(Robot):
         with self._safety("checking servo health before a start"):
             self._check_health(start=True)
 
-        """The servos' bus watchdog stopped them because this process sent nothing for `bus_watchdog_ms` (a slow
     def _rearm_watchdog(self, joints: list[str]) -> None:
+        """The servos' bus watchdog stopped them because this process sent nothing for `bus_watchdog_ms` (a slow
         save between episodes, an operator prompt). The host is evidently alive again: clear the error (goal
         registers are read-only until then), hold the pose the servos stopped in, and arm the watchdog again."""
         logger.warning("Bus watchdog stopped %s after more than %d ms without bus traffic; re-arming it.",
