@@ -167,3 +167,44 @@ def test_the_other_hand_and_an_old_bridge_are_named_at_connect(tmp_path):
             left.close()
     assert "1 for the left hand (this teleoperator is --teleop.side=right)" in why
     assert "update the bridge" in why
+
+
+def test_a_zero_spread_gain_makes_that_spread_optional(tmp_path, monkeypatch):
+    """The way around a publisher that drops IndexMCPSpread: the first finger's abduction stays at the open pose."""
+    without = {k: v for k, v in OPEN.items() if k != "IndexMCPSpread"}
+    assert rt.required_keys([0.0, 1.0, 1.0]) == rt.REQUIRED_KEYS - {"IndexMCPSpread"}
+    port = free_udp_port()
+    sender = GloveSender("127.0.0.1", port, "right")
+    pose = {"now": without}
+
+    def operator(prompt: str = "") -> str:  # the operator makes the pose the prompt asks for, then ENTER
+        pose["now"] = (
+            without if "OPEN HAND" in prompt else {k: v for k, v in FIST.items() if k != "IndexMCPSpread"}
+        )
+        time.sleep(0.05)
+        return ""
+
+    monkeypatch.setattr("builtins.input", operator)
+    stop = threading.Event()
+
+    def send():
+        while not stop.wait(0.01):
+            sender.send(pose["now"])
+
+    th = threading.Thread(target=send)
+    th.start()
+    teleop = ManusGlove(ManusGloveConfig(id="nospread", port=port, calibration_dir=tmp_path, calibration_s=0.2,
+                                         spread_gain=[0.0, 1.0, 1.0]))  # fmt: skip
+    try:
+        teleop.connect()  # calibrates: open hand, then fist
+        assert teleop.receiver.wait_frames(3, 2.0)
+        a = teleop.get_action()
+        assert a["ff_j10.pos"] == teleop.config.open_pose[0] and a["ff_j11.pos"] == pytest.approx(
+            teleop.config.closed_pose[1], abs=1e-9)  # fmt: skip
+        saved = json.loads((tmp_path / "nospread.json").read_text())
+        assert "IndexMCPSpread" not in saved["open"] and "MiddleMCPSpread" in saved["open"]
+    finally:
+        stop.set()
+        th.join()
+        teleop.disconnect()
+        sender.close()

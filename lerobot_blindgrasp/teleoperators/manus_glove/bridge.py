@@ -116,8 +116,9 @@ class GloveBridge:
         missing = frozenset(REQUIRED_KEYS - ergonomics.keys())
         if missing and missing not in self._warned:
             self._warned.add(missing)
-            logger.warning("The %s glove's messages lack %s (types not understood: %s): the receiver will refuse "
-                           "them. See docs/glove.md, 'Names'.", side, sorted(missing), sorted(set(unknown)))  # fmt: skip
+            logger.warning("The %s glove's messages lack %s (types not understood: %s): the receiver refuses them "
+                           "unless that finger's --teleop.spread_gain is 0. See docs/glove.md, 'Names'.", side,
+                           sorted(missing), sorted(set(unknown)))  # fmt: skip
         self.sender.send(ergonomics)
         self.forwarded += 1
         return True

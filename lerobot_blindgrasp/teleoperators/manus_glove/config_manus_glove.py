@@ -39,6 +39,7 @@ class ManusGloveConfig(TeleoperatorConfig):
     open_pose: list[float] = field(default_factory=lambda: list(DEFAULT_OPEN_POSE))
     closed_pose: list[float] = field(default_factory=lambda: list(DEFAULT_CLOSED_POSE))
     # Abduction gain (rad of J*0 per rad of finger spread), per finger (ff, mf, th); the sign picks the direction.
+    # 0: that finger's abduction stays at open_pose and its spread channel is not required (docs/glove.md).
     spread_gain: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0])
 
     def __post_init__(self):

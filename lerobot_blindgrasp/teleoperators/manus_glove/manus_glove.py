@@ -64,11 +64,12 @@ def calibration_schema_problems(raw: object) -> list[str]:
     return out
 
 
-def calibration_problems(open_pose: dict, fist_pose: dict, min_flex_range_deg: float) -> list[str]:
+def calibration_problems(open_pose: dict, fist_pose: dict, min_flex_range_deg: float,
+                         required: set[str] = rt.REQUIRED_KEYS) -> list[str]:  # fmt: skip
     """The rules of `ManusGlove.calibrate()`, also applied to a loaded file: every channel the retargeting uses,
     finite values, and open hand and fist distinct by `min_flex_range_deg` on every flexion joint (equal poses would
     divide by zero in the retargeting)."""
-    keys = sorted(rt.REQUIRED_KEYS)
+    keys = sorted(required)
     out = []
     for name, pose in (("open", open_pose), ("fist", fist_pose)):
         missing = [k for k in keys if k not in pose]
@@ -79,7 +80,7 @@ def calibration_problems(open_pose: dict, fist_pose: dict, min_flex_range_deg: f
             out.append(f"{name} pose has non-finite {bad}")
     if out:
         return out
-    open_f, fist_f = rt.glove_features(open_pose), rt.glove_features(fist_pose)
+    open_f, fist_f = rt.glove_features(open_pose, required), rt.glove_features(fist_pose, required)
     weak = [j for j, flex, o, f in zip(spec.JOINT_NAMES, rt.IS_FLEX, open_f, fist_f, strict=True)
             if flex and abs(f - o) < min_flex_range_deg]  # fmt: skip
     if weak:
@@ -100,11 +101,12 @@ class ManusGlove(Teleoperator):
 
     def __init__(self, config: ManusGloveConfig):
         self.config = config
+        self.required = rt.required_keys(config.spread_gain)  # the channels the retargeting reads
         self.calibration_error: GloveCalibrationError | None = None
         super().__init__(config)  # loads the calibration file through our _load_calibration, if there is one
         if not isinstance(self.calibration, GloveCalibration):
             self.calibration: GloveCalibration | None = None
-        self.receiver = GloveReceiver(config.host, config.port, config.side, rt.REQUIRED_KEYS, config.hold_timeout_s,
+        self.receiver = GloveReceiver(config.host, config.port, config.side, self.required, config.hold_timeout_s,
                                       sender=config.sender_address(), frozen_frames=config.frozen_frames,
                                       max_latency_s=config.max_latency_s)  # fmt: skip
         self._last_target: np.ndarray | None = None
@@ -136,7 +138,9 @@ class ManusGlove(Teleoperator):
                 with open(fpath) as f, draccus.config_type("json"):
                     cal = draccus.load(GloveCalibration, f)
                 cal, bad = _by_channel(cal, self.config.side)
-                bad = bad or calibration_problems(cal.open, cal.fist, self.config.min_flex_range_deg)
+                bad = bad or calibration_problems(
+                    cal.open, cal.fist, self.config.min_flex_range_deg, self.required
+                )
         except Exception as e:  # unreadable: empty, truncated, not JSON, not UTF-8
             bad = [f"unreadable ({type(e).__name__}: {e})"]
         if bad:
@@ -182,7 +186,7 @@ class ManusGlove(Teleoperator):
             if not self.receiver.wait_frames(1, self.config.hold_timeout_s * 4):
                 raise ConnectionError("The glove stream stopped during calibration.")
             samples.append(self.receiver.latest()[0].ergonomics)
-        return {k: float(np.mean([s[k] for s in samples])) for k in sorted(rt.REQUIRED_KEYS)}
+        return {k: float(np.mean([s[k] for s in samples])) for k in sorted(self.required)}
 
     @check_if_not_connected
     def calibrate(self) -> None:
@@ -190,7 +194,7 @@ class ManusGlove(Teleoperator):
         open_pose = self._average(self.config.calibration_s)
         input("FIST: close the hand fully, thumb over the fingers; hold it and press ENTER: ")
         fist_pose = self._average(self.config.calibration_s)
-        bad = calibration_problems(open_pose, fist_pose, self.config.min_flex_range_deg)
+        bad = calibration_problems(open_pose, fist_pose, self.config.min_flex_range_deg, self.required)
         if bad:
             raise GloveCalibrationError(f"Glove calibration refused: {'; '.join(bad)}. Check the glove fit and "
                                         "calibrate again.")  # fmt: skip
@@ -217,11 +221,10 @@ class ManusGlove(Teleoperator):
         else:
             self._holding = False
             c = self.calibration
-            keys = sorted(rt.REQUIRED_KEYS)
             target = rt.retarget(
-                rt.glove_features(frame.ergonomics),
-                rt.glove_features({k: c.open[k] for k in keys}),
-                rt.glove_features({k: c.fist[k] for k in keys}),
+                rt.glove_features(frame.ergonomics, self.required),
+                rt.glove_features(c.open, self.required),
+                rt.glove_features(c.fist, self.required),
                 np.asarray(self.config.open_pose),
                 np.asarray(self.config.closed_pose),
                 np.asarray(self.config.spread_gain),

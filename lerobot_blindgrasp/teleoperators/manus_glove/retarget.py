@@ -29,9 +29,17 @@ REQUIRED_KEYS: set[str] = {k for _, keys in CHANNELS for k in keys}
 IS_FLEX = np.array([kind == "flex" for kind, _ in CHANNELS])
 
 
-def glove_features(ergonomics: dict[str, float]) -> np.ndarray:
-    """One value (deg) per gripper joint."""
-    return np.array([np.mean([ergonomics[k] for k in keys]) for _, keys in CHANNELS])
+def required_keys(spread_gain) -> set[str]:
+    """The channels the retargeting reads with these spread gains (ff, mf, th). A finger whose spread gain is 0 keeps
+    its abduction at the open pose, so its spread channel is not read: the way around a publisher that drops it."""
+    gains = np.repeat(np.asarray(spread_gain, dtype=np.float64), 3)
+    return {k for (kind, keys), g in zip(CHANNELS, gains, strict=True) if kind == "flex" or g != 0 for k in keys}
+
+
+def glove_features(ergonomics: dict[str, float], required: set[str] = REQUIRED_KEYS) -> np.ndarray:
+    """One value (deg) per gripper joint. A channel outside `required` (a spread with gain 0) is not used and reads
+    0; a required one that is missing raises KeyError."""
+    return np.array([np.mean([ergonomics[k] if k in required else 0.0 for k in keys]) for _, keys in CHANNELS])
 
 
 def retarget(

@@ -146,7 +146,8 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             logger.warning(
                 "Glove datagrams from %s:%d lack the channels %s that the retargeting needs, so they are dropped. "
                 "Both the MANUS SDK's names and the ROS 2 publisher's are accepted (docs/glove.md); a publisher "
-                "that skips a channel (some copies drop IndexMCPSpread) needs the fix in docs/glove.md.",
+                "that skips a channel (some copies drop IndexMCPSpread) needs the fix in docs/glove.md, or, for a "
+                "spread, --teleop.spread_gain 0 for that finger.",
                 addr[0], addr[1], sorted(missing),
             )  # fmt: skip
         else:
