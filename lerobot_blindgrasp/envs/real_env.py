@@ -88,8 +88,6 @@ class BlindGraspRealEnvConfig(EnvConfig):
             trial_log=self.trial_log,
         )
 
-    def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
-        from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
     def check_policy(self) -> None:
         """lerobot-eval makes the envs before it loads the policy, and its make_policy would overwrite the
         checkpoint's output features with ours: the checkpoint's own files are checked here, before anything loads
@@ -102,10 +100,12 @@ class BlindGraspRealEnvConfig(EnvConfig):
         if path and (where := policy_check.local_checkpoint(path)) is not None:
             policy_check.check(where, policy_check.gripper_contract(self.robot.type, self.fps, "--env.fps"))
 
+    def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
+        from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 
+        self.check_policy()
         if n_envs != 1 or use_async_envs:
             logger.warning("One physical gripper: evaluating with one synchronous env (asked n_envs=%s).", n_envs)
-        self.check_policy()
         session = GripperSession(self.trial_settings())
         out = {}
         for name in self.objects:

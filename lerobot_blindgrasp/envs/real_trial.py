@@ -156,6 +156,8 @@ class RealGraspEnv(gym.Env):
             time.sleep(self.cfg.unattended_reset_s)
         if self.cfg.tare_each_trial and hasattr(self.robot, "tare_forces"):
             self.robot.tare_forces()
+        if hasattr(self.robot, "check_health_before_start"):  # a servo near a limit must not start a trial
+            self.robot.check_health_before_start()
         if self.cfg.success_mode == "operator":
             print("Running (10 s): press 's' once the object is held off the table for 1 s, 'f' to abort.")
         self._overruns_at_start = self._overruns()
@@ -163,8 +165,6 @@ class RealGraspEnv(gym.Env):
         self._schedule.start()
         return obs, {"is_success": False}
 
-        if hasattr(self.robot, "check_health_before_start"):  # a servo near a limit must not start a trial
-            self.robot.check_health_before_start()
     def step(self, action):
         action = np.asarray(action, dtype=np.float64).reshape(spec.ACTION_DIM)
         self.robot.send_action(dict(zip(spec.ACTION_NAMES, action.tolist(), strict=True)))

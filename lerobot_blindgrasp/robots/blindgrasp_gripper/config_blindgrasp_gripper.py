@@ -107,13 +107,13 @@ class BlindgraspGripperConfig(RobotConfig):
     # 0 disables the stop (still counted and warned).
     loop_hz: float = spec.CONTROL_HZ
     max_overrun_s: float = 2.0
+    # Servo health (`health.py`): the health block (temperature, input voltage, current) is read every this many
+    # control periods; its levels are the datasheet's (`hardware/xm430.py`).
+    health_every_n: int = 4
     # Calibration: a joint must move at least this far (rad) in the "positive" pose to read its direction.
     calibration_min_motion_rad: float = 0.15
     disable_torque_on_disconnect: bool = True
     force_sensor: ForceSensorConfig = field(default_factory=ForceSensorConfig)
-    # Servo health (`health.py`): the health block (temperature, input voltage, current) is read every this many
-    # control periods; its levels are the datasheet's (`hardware/xm430.py`).
-    health_every_n: int = 4
 
     def __post_init__(self):
         super().__post_init__()
@@ -136,14 +136,14 @@ class BlindgraspGripperConfig(RobotConfig):
             raise ValueError("port and force_sensor.port must name the serial devices")
         if not (self.max_joint_speed_rad_s > 0 and self.plausibility_margin_rad > 0 and self.plausibility_rereads > 0):
             raise ValueError("need max_joint_speed_rad_s > 0, plausibility_margin_rad > 0, plausibility_rereads >= 1")
+        if not 1 <= self.health_every_n <= 100:
+            raise ValueError("health_every_n must be in [1, 100] control periods")
         if not (self.loop_hz > 0 and self.max_overrun_s >= 0):
             raise ValueError("need loop_hz > 0 and max_overrun_s >= 0")
         if self.bus_watchdog_ms % 20 or not 0 <= self.bus_watchdog_ms <= 127 * 20:
             raise ValueError("bus_watchdog_ms must be a multiple of 20 in [0, 2540] (0 disables the watchdog)")
         if not 1 <= self.latency_timer_ms <= 500:
             raise ValueError("latency_timer_ms must be in [1, 500]")
-        if not 1 <= self.health_every_n <= 100:
-            raise ValueError("health_every_n must be in [1, 100] control periods")
         if not 0 < self.max_relative_target <= spec.ACTION_BOUND_RAD:
             raise ValueError(f"max_relative_target must be in (0, {spec.ACTION_BOUND_RAD}] rad")
         if self.operating_mode not in ("CURRENT_POSITION", "POSITION"):
