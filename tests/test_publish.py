@@ -37,6 +37,12 @@ def test_the_placeholder_url_refuses_the_push(demos, tmp_path, capsys):
     assert "[project.urls]" in err and "placeholder" in err
     assert not (tmp_path / "stage").exists()  # refused before anything was staged
 
+    # A dry run previews the cards, placeholder and all, and says that an upload would refuse.
+    publish.main(["--namespace=you", f"--demos={demos}", f"--staging_dir={tmp_path / 'stage'}", "--dry_run=true"])
+    captured = capsys.readouterr()
+    assert "an upload refuses" in captured.err and "dry run: nothing uploaded" in captured.out
+    assert project.PLACEHOLDER_HOST in (tmp_path / "stage" / "student_cpu" / "README.md").read_text()
+
 
 def test_publish_stages_every_card_then_stops_at_the_network(demos, tmp_path, monkeypatch, capsys):
     import huggingface_hub.constants

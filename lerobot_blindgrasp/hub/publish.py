@@ -114,8 +114,14 @@ def repo_ids(namespace: str) -> dict[str, tuple[str, str]]:
 
 
 def publish(cfg: PublishConfig) -> dict[str, str]:
-    """Check, stage, then (unless a dry run) upload. Returns name -> Hub URL (empty for a dry run)."""
-    project.require_public_urls()
+    """Check, stage, then (unless a dry run) upload. Returns name -> Hub URL (empty for a dry run). A dry run may
+    preview cards that still name the placeholder URL; an upload may not."""
+    try:
+        project.require_public_urls()
+    except project.PlaceholderURLError as e:
+        if not cfg.dry_run:
+            raise
+        print(f"warning: {e}; a dry run stages the cards anyway, an upload refuses", file=sys.stderr)
     ids = repo_ids(cfg.namespace)
     staging = Path(cfg.staging_dir or tempfile.mkdtemp(prefix="blindgrasp_publish_"))
     staged = {name: stage_model(name, rid, staging) for name, (kind, rid) in ids.items() if kind == "model"}
