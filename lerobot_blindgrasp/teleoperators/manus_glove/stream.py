@@ -75,6 +75,7 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
         self._reset()
 
     def _reset(self) -> None:
+        self._frames_at_open = self.frames  # the base class counts kept frames over all connections
         self.received = self.rejected = self.foreign = self.other_side = 0
         self.late = self.stale = self.retired = self.restarts = 0
         self.last_reject: str | None = None
@@ -236,7 +237,7 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             return ("no datagram arrived: is the bridge running (blindgrasp-glove-bridge, docs/glove.md) and "
                     f"sending to {self.host}:{self.port}? A bridge on another machine needs --teleop.host and an "
                     "open firewall port")  # fmt: skip
-        parts = [f"{self.received} datagrams arrived, {self.frames} used"]
+        parts = [f"{self.received} datagrams arrived, {self.frames - self._frames_at_open} used"]
         if self.rejected:
             parts.append(f"{self.rejected} rejected (last: {self.last_reject})")
         if self.other_side:
