@@ -455,11 +455,11 @@ class BlindgraspGripper(Robot):
         block = self.bus.read_block(*health.BLOCK, health.READ)
         found = self.health.assess(block, self.expected.get("Goal_Current"), time.monotonic())
         errors = [str(d) for d in found if d.level == health.ERROR]
+        if start and (close := self.health.start_problems(block) + errors):
+            raise GripperHealthError(f"Refused to start: {'; '.join(close)}.")
         if errors:
             raise GripperHealthError(f"Servo health: {'; '.join(errors)}. Stopped before the firmware's own "
                                      "shutdown would drop the object.")  # fmt: skip
-        if start and (close := self.health.start_problems(block)):
-            raise GripperHealthError(f"Refused to start: {'; '.join(close)}.")
 
     @check_if_not_connected
     def check_health_before_start(self) -> None:
