@@ -8,6 +8,7 @@ Skipped outside a git checkout (an sdist or wheel has no tracked-file list).
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -51,3 +52,68 @@ def test_shipped_and_recorded_teachers_are_exported_actors_that_load():
         assert teacher.checkpoint.name == "teacher.safetensors"
         if folder.parent.name == "checkpoints":  # <run>_<iteration>: the folder says which checkpoint it is
             assert folder.name.endswith(f"_{teacher.iteration}"), folder
+
+
+# The product face: a README a newcomer reads in five minutes, links that resolve, one place for the code's URL.
+README = ROOT / "README.md"
+MAX_README_LINES = 150
+
+
+def _project_urls() -> dict[str, str]:
+    import tomllib
+
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["urls"]
+
+
+def test_the_readme_is_a_short_product_page():
+    text = README.read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= MAX_README_LINES, f"README.md has {len(text.splitlines())} lines"
+    # The two commands, with the exact invocation .ci/run and the guides use.
+    assert "bash scripts/main.sh" in text and "bash scripts/test.sh" in text
+    assert "exec bash scripts/test.sh" in (ROOT / ".ci" / "run").read_text()
+    for section in ("## Install", "## Headline numbers", "## The shipped student in one command",
+                    "## The real gripper in five commands", "## Training your own", "## Documentation",
+                    "## Layout", "CITATION.cff"):  # fmt: skip
+        assert section in text, section
+    assert "docs/bringup.md" in text and "docs/results.md" in text
+    image = re.search(r"!\[[^\]]*\]\(([^)]+\.png)\)", text)
+    assert image and (ROOT / image.group(1)).is_file()
+    assert _project_urls()["Source"] in text  # the README names the code's location from [project.urls]
+
+
+def _links(doc: Path) -> list[str]:
+    return [m.group(1).split("#")[0] for m in re.finditer(r"\]\(([^)\s]+)\)", doc.read_text(encoding="utf-8"))
+            if not re.match(r"^([a-z]+:|#)", m.group(1))]  # fmt: skip
+
+
+def test_every_relative_link_in_the_readme_guides_records_and_cards_resolves():
+    docs = [README, ROOT / "CHANGELOG.md", *(ROOT / "docs").glob("*.md"), *(ROOT / "docs" / "research").glob("*.md"),
+            *(ROOT / "models").glob("*/README.md")]  # fmt: skip
+    broken = [f"{d.relative_to(ROOT)} -> {link}" for d in docs if d.is_file() for link in _links(d)
+              if not (d.parent / link).exists()]  # fmt: skip
+    assert not broken, broken
+
+
+def test_the_research_record_is_marked_as_history_and_current_results_are_apart():
+    index = (ROOT / "docs" / "research" / "index.md").read_text(encoding="utf-8")
+    assert "history" in index.splitlines()[0].lower() and "../results.md" in index
+    listed = set(_links(ROOT / "docs" / "research" / "index.md"))
+    pages = {p.name for p in (ROOT / "docs" / "research").glob("*.md")} - {"index.md"}
+    assert pages <= listed, f"research pages missing from its index: {sorted(pages - listed)}"
+    assert not list((ROOT / "docs" / "results").glob("teacher_cpu*.md"))  # the dated pages left docs/results/
+    assert (ROOT / "docs" / "results.md").is_file()
+
+
+def test_citation_and_changelog_name_the_paper_release_and_code():
+    import yaml
+
+    from lerobot_blindgrasp import __version__
+    from lerobot_blindgrasp.hub import cards
+
+    cff = yaml.safe_load((ROOT / "CITATION.cff").read_text(encoding="utf-8"))
+    assert cff["cff-version"] == "1.2.0" and cff["version"] == __version__ and cff["authors"]
+    assert cff["repository-code"] == _project_urls()["Source"]
+    paper = cff["preferred-citation"]
+    assert paper["title"] in " ".join(cards.PAPER.split())
+    assert [a["family-names"] for a in paper["authors"]] == ["Lee", "Choi", "Kim", "Nam", "Jeong"]
+    assert f"## [{__version__}]" in (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
