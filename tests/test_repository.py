@@ -87,8 +87,8 @@ def _links(doc: Path) -> list[str]:
 
 
 def test_every_relative_link_in_the_readme_guides_records_and_cards_resolves():
-    docs = [README, ROOT / "CHANGELOG.md", *(ROOT / "docs").glob("*.md"), *(ROOT / "docs" / "research").glob("*.md"),
-            *(ROOT / "models").glob("*/README.md")]  # fmt: skip
+    docs = [README, ROOT / "CHANGELOG.md", *(ROOT / "docs").glob("*.md"),
+            *(ROOT / "docs" / "research").glob("*.md"), *(ROOT / "models").glob("*/README.md")]  # fmt: skip
     broken = [f"{d.relative_to(ROOT)} -> {link}" for d in docs if d.is_file() for link in _links(d)
               if not (d.parent / link).exists()]  # fmt: skip
     assert not broken, broken
