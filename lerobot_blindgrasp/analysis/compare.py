@@ -34,6 +34,9 @@ def load_successes(path: str | Path, mode: str | None = None) -> dict[str, list[
         raise FileNotFoundError(f"no eval_info.json (lerobot-eval) or eval.json (blindgrasp-eval-teacher) at {text}")
     data = json.loads(p.read_text())
     if "per_task" in data:
+        real = [e for e in data["per_task"] if e.get("task_group") in objects.CATALOGUE]
+        if real:  # --env.type=blindgrasp_real: one task group per object, named after it (every task_id is 0)
+            return {e["task_group"]: [bool(x) for x in e["metrics"]["successes"]] for e in real}
         return student_successes(data)
     modes = data["modes"]
     mode = mode or "deterministic"

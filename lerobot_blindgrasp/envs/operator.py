@@ -1,32 +1,30 @@
 """The operator's keys during a real-gripper evaluation: ENTER starts a trial, s/y or f/n decides it.
 
-Key presses come from LeRobot's own listener (pynput, or the controlling terminal when headless), into a queue.
+Two sources, one interface (a queue of keys):
+- `OperatorKeys`: a person; key presses come from LeRobot's own listener (pynput, or the controlling terminal when
+  headless). Its verdicts are recorded as decided by "operator".
+- `SocketOperator`: an unattended operator on a Unix socket, e.g. the physics twin (`blindgrasp-twin`), which
+  places the object the trial names and judges the trial by its own rule; its verdicts are recorded under the
+  name it gives (`judge`). Protocol: `lerobot_blindgrasp/twin/operator_server.py`.
 """
 
 from __future__ import annotations
 
+import json
 import queue
+import socket
+import threading
 import time
 
 SUCCESS_KEYS = frozenset({"s", "y"})
 FAILURE_KEYS = frozenset({"f", "n"})
 
 
-class OperatorKeys:
-    """Key presses as a queue; `listener_factory` has the signature of LeRobot's `create_key_listener` (default)."""
+class _KeyQueue:
+    judge = "operator"  # who decides the trials (the trial log's decided_by)
 
-    HELP = "ENTER=start trial, s/y=success, f/n=failure"
-
-    def __init__(self, listener_factory=None):
-        if listener_factory is None:
-            from lerobot.utils.keyboard_input import create_key_listener as listener_factory
-
+    def __init__(self):
         self.queue: queue.Queue[str] = queue.Queue()
-        self.listener = listener_factory(self.queue.put, controls_help=self.HELP)
-
-    @property
-    def available(self) -> bool:
-        return self.listener is not None
 
     def clear(self) -> None:
         while not self.queue.empty():
@@ -51,6 +49,99 @@ class OperatorKeys:
             if key in keys:
                 return key
 
+
+class OperatorKeys(_KeyQueue):
+    """Key presses as a queue; `listener_factory` has the signature of LeRobot's `create_key_listener` (default)."""
+
+    HELP = "ENTER=start trial, s/y=success, f/n=failure"
+
+    def __init__(self, listener_factory=None):
+        super().__init__()
+        if listener_factory is None:
+            from lerobot.utils.keyboard_input import create_key_listener as listener_factory
+
+        self.listener = listener_factory(self.queue.put, controls_help=self.HELP)
+
+    @property
+    def available(self) -> bool:
+        return self.listener is not None
+
     def stop(self) -> None:
         if self.listener is not None:
             self.listener.stop()
+
+
+class SocketOperator(_KeyQueue):
+    """The operator at the other end of a Unix socket. Each trial is announced (`announce_trial`) with its object
+    and evaluation seed; the operator answers ENTER once the object is placed, and one outcome key. Keys carry
+    their trial's token, so a late key of a finished trial is dropped, never counted for the next one."""
+
+    def __init__(self, path: str, connect_timeout_s: float = 10.0):
+        super().__init__()
+        self.path = path
+        deadline = time.monotonic() + connect_timeout_s
+        while True:
+            try:
+                self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+                self._sock.connect(path)
+                break
+            except OSError as e:
+                self._sock.close()
+                if time.monotonic() > deadline:
+                    raise ConnectionError(f"No operator listening on {path} ({e}): is blindgrasp-twin running?") from e
+                time.sleep(0.2)
+        self._lines = self._sock.makefile("rb")
+        self.judge = str(json.loads(self._lines.readline())["judge"])
+        self._token = 0
+        self._asked = False
+        self.last_placement: dict | None = None
+        self._reader = threading.Thread(target=self._read, name="socket-operator", daemon=True)
+        self._reader.start()
+
+    available = True
+
+    def _send(self, msg: dict) -> None:
+        self._sock.sendall((json.dumps(msg) + "\n").encode())
+
+    def _read(self) -> None:
+        try:
+            for line in self._lines:
+                msg = json.loads(line)
+                if msg.get("token") == self._token and "key" in msg:
+                    if "placement" in msg:
+                        self.last_placement = msg["placement"]
+                    self.queue.put(msg["key"])
+        except (OSError, ValueError):
+            pass
+        self.queue.put("operator-gone")
+
+    def announce_trial(self, object_name: str, trial: int, seed: int | None) -> None:
+        self._token += 1
+        self._asked = False
+        self._send({"op": "place", "object": object_name, "seed": trial - 1 if seed is None else int(seed),
+                    "token": self._token})
+
+    def wait_for(self, keys: set[str], timeout_s: float | None = None) -> str | None:
+        if keys & (SUCCESS_KEYS | FAILURE_KEYS) and not self._asked and self.queue.empty():
+            self._asked = True  # the time limit: the operator answers from its verdict so far
+            self._send({"op": "ask", "token": self._token})
+        key = super().wait_for(keys | {"operator-gone"}, timeout_s)
+        if key == "operator-gone":
+            raise ConnectionError(f"The operator on {self.path} went away.")
+        return key
+
+    def clear(self) -> None:
+        super().clear()
+        if self._token:
+            self._send({"op": "end", "token": self._token})
+
+    def stop(self) -> None:
+        try:
+            self._sock.close()
+        except OSError:
+            pass
+
+
+def make_operator(socket_path: str | None) -> _KeyQueue:
+    """The keyboard, or the operator listening on `socket_path`."""
+    return OperatorKeys() if socket_path is None else SocketOperator(socket_path)

@@ -61,6 +61,8 @@ class BlindGraspRealEnvConfig(EnvConfig):
     tare_each_trial: bool = True
     # Optional JSON-lines log of every trial (object, index, success, who decided, peak forces).
     trial_log: str | None = None
+    # An unattended operator's Unix socket (e.g. blindgrasp-twin's): it places the objects and presses the keys.
+    operator_socket: str | None = None
     features: dict[str, PolicyFeature] = field(default_factory=spaces.env_features)
     features_map: dict[str, str] = field(default_factory=spaces.env_features_map)
 
@@ -85,7 +87,7 @@ class BlindGraspRealEnvConfig(EnvConfig):
             hold_force_n=self.hold_force_n, min_contacts=self.min_contacts,
             home_tolerance_rad=self.home_tolerance_rad, home_timeout_s=self.home_timeout_s,
             unattended_reset_s=self.unattended_reset_s, tare_each_trial=self.tare_each_trial,
-            trial_log=self.trial_log,
+            trial_log=self.trial_log, operator_socket=self.operator_socket,
         )
 
     def check_policy(self) -> None:

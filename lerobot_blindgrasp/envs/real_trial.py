@@ -28,7 +28,7 @@ import gymnasium as gym
 import numpy as np
 
 from lerobot_blindgrasp import durable, spaces, spec
-from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys
+from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
 from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import Schedule
 from lerobot_blindgrasp.sim import objects
 
@@ -50,6 +50,7 @@ class TrialSettings:
     unattended_reset_s: float
     tare_each_trial: bool
     trial_log: str | None
+    operator_socket: str | None = None  # None: the keyboard; else an unattended operator there (envs/operator.py)
 
 
 def task_string(name: str) -> str:
@@ -74,7 +75,7 @@ class GripperSession:
 
     def ensure_connected(self) -> None:
         if self.keys is None:
-            self.keys = OperatorKeys()
+            self.keys = make_operator(self.cfg.operator_socket)
         if self.cfg.success_mode == "operator" and not self.keys.available:
             raise RuntimeError(
                 "success_mode=operator needs keyboard input (a display for pynput, or run lerobot-eval in a "
@@ -112,6 +113,10 @@ class RealGraspEnv(gym.Env):
         self._peak = np.zeros(spec.NUM_FORCES)
         self._schedule = Schedule(spec.CONTROL_DT)
         self._overruns_at_start = self._overruns()
+        # Where each period goes: the write (send_action), the read (_observe) and, between a step's return and the
+        # next call, the caller's policy (lerobot-eval: processors + select_action); logged per trial.
+        self._step_s: dict[str, list[float]] = {"read": [], "policy": [], "write": []}
+        self._returned_at: float | None = None
 
     def _overruns(self) -> int:
         timing = getattr(self.session.robot, "timing", None)
@@ -148,6 +153,9 @@ class RealGraspEnv(gym.Env):
         keys = self.session.keys
         k = self.session.trials.get(self.object_name, 0) + 1
         self.session.trials[self.object_name] = k
+        self._seed = seed  # lerobot-eval's evaluation index: the start state an unattended operator places
+        if hasattr(keys, "announce_trial"):  # an unattended operator places the object this trial names
+            keys.announce_trial(self.object_name, k, seed)
         if keys.available:  # an ENTER pressed while the gripper was homing counts: the operator is ready
             print(f"\n[{self.object_name}] trial {k}: place the object at the claw centre, hands clear, ENTER.")
             keys.wait_for({"enter"})
@@ -163,13 +171,20 @@ class RealGraspEnv(gym.Env):
         self._overruns_at_start = self._overruns()
         obs = self._observe()
         self._schedule.start()
+        self._returned_at = time.perf_counter()
         return obs, {"is_success": False}
 
     def step(self, action):
         action = np.asarray(action, dtype=np.float64).reshape(spec.ACTION_DIM)
+        t_in = time.perf_counter()
+        if self._returned_at is not None:
+            self._step_s["policy"].append(t_in - self._returned_at)
         self.robot.send_action(dict(zip(spec.ACTION_NAMES, action.tolist(), strict=True)))
+        self._step_s["write"].append(time.perf_counter() - t_in)
         self._schedule.wait()
+        t_read = time.perf_counter()
         obs = self._observe()
+        self._step_s["read"].append(time.perf_counter() - t_read)
         self._t += 1
         forces = self._obs[spec.STATE_FORCE_SLICE]
         self._peak = np.maximum(self._peak, forces)
@@ -177,7 +192,7 @@ class RealGraspEnv(gym.Env):
             self._judge(forces)
         truncated = self._t >= self._max_episode_steps and self._decided is None
         if truncated and self.cfg.success_mode == "operator":
-            self._decided = (self._ask_outcome(), "operator")
+            self._decided = (self._ask_outcome(), self.session.keys.judge)
             truncated = False
         elif truncated:
             self._decided = (False, "force criterion")
@@ -186,13 +201,14 @@ class RealGraspEnv(gym.Env):
         if terminated or truncated:
             self._log_trial(success)
             self.session.keys.clear()  # keys pressed during this trial must not decide the next one
+        self._returned_at = time.perf_counter()
         return obs, float(success), terminated, truncated, {"is_success": success}
 
     def _judge(self, forces: np.ndarray) -> None:
         if self.cfg.success_mode == "operator":
             while (key := self.session.keys.poll()) is not None:
                 if key in SUCCESS_KEYS | FAILURE_KEYS:
-                    self._decided = (key in SUCCESS_KEYS, "operator")
+                    self._decided = (key in SUCCESS_KEYS, self.session.keys.judge)
                     return
             return
         contacts = int((forces > self.cfg.hold_force_n).sum())
@@ -213,12 +229,15 @@ class RealGraspEnv(gym.Env):
             record = {
                 "object": self.object_name,
                 "trial": self.session.trials[self.object_name],
+                "seed": getattr(self, "_seed", None),
                 "success": success,
                 "decided_by": who,
                 "steps": self._t,
                 "peak_force_n": [round(float(f), 3) for f in self._peak],
                 "loop_overruns": self._overruns() - self._overruns_at_start,
                 "late_steps_rebased": self._schedule.rebased,
+                "step_ms": {k: [round(1e3 * float(np.percentile(v, p)), 2) for p in (50, 99, 100)] if v else []
+                            for k, v in self._step_s.items()},  # p50, p99, max
             }
             durable.atomic_append_text(self.cfg.trial_log, json.dumps(record) + "\n")  # a kill leaves no half line
 

@@ -6,8 +6,10 @@ it is physically possible:
 - inside the encoder's range: a calibrated single-turn reading is 0..4095 ticks (q in [-pi, pi));
 - reachable from the trusted estimate: no servo moves faster than its no-load speed, so between the trusted reading
   at time t0 and a new one at t1 every joint moved at most `speed * (t1 - t0) + margin`;
-- with the torque on, between the estimate and the goal: a position-controlled servo only moves toward its goal
-  (the gearbox is not back-driven by a grasp), so a reading beyond both, by more than the margin, is not motion;
+- with the torque on, between the estimate and the goal: a position-controlled servo moves toward its goal, or is
+  pushed back from it by a load no further than its P loop yields at the torque limit (`backdrive_ticks`: a grasp
+  squeezed by another finger does push a finger open; the physics twin showed it), so a reading beyond both, by
+  more than the margin and that compliance, is not motion;
 - or, when there is no trusted estimate yet (just connected, torque off so a hand may move the fingers), confirmed
   by an immediate second reading that agrees with it within the same bound.
 Anything else is read again (`rereads` times); a reading that never passes is `ImplausibleReadingError` and the robot
@@ -34,6 +36,7 @@ class ImplausibleReadingError(RuntimeError):
 class PositionGate:
     speed_ticks_s: float  # the fastest a joint can move on its own (the servo's no-load speed)
     margin_ticks: float  # encoder noise, backlash and timestamp jitter
+    backdrive_ticks: float = 0.0  # how far a load can push a torqued servo back past the goal band
     rereads: int = 2
     lo: int = 0  # the encoder's range, calibrated ticks
     hi: int = TICKS_PER_REV - 1
@@ -59,7 +62,8 @@ class PositionGate:
         if out:
             return f"moved farther than possible in {dt * 1e3:.0f} ms (<= {bound:.0f} ticks): " + ", ".join(out)
         if goal is not None:
-            low, high = np.minimum(ref, goal) - self.margin_ticks, np.maximum(ref, goal) + self.margin_ticks
+            slack = self.margin_ticks + self.backdrive_ticks
+            low, high = np.minimum(ref, goal) - slack, np.maximum(ref, goal) + slack
             out = [f"{n} {int(t)} (estimate {int(r)}, goal {int(g)})"
                    for n, t, r, g, a, b in zip(names, ticks, ref, goal, low, high) if not a <= t <= b]  # fmt: skip
             if out:

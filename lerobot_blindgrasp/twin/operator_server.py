@@ -1,0 +1,135 @@
+"""The twin's side of the operator socket: it places each trial's object and presses the operator's keys.
+
+JSON lines over a Unix socket (the host's side is `envs/operator.py:SocketOperator`):
+
+    host -> twin   {"op": "place", "object": NAME, "seed": S, "token": N}   the host homed; trial N wants NAME
+                   {"op": "ask", "token": N}                                 the time limit: was it a success?
+                   {"op": "end", "token": N}                                 the trial is over
+                   {"op": "hand", "q": [9 rad] | null}                       hold the joints there by hand / let go
+                   {"op": "status"}                                          the twin's timing and counters
+    twin -> host   {"judge": TEXT}                                           once, on connect
+                   {"key": "enter" | "s" | "f" | "y" | "n", "token": N}      the operator's keys for trial N
+                   {"ok": true, ...}                                          replies to hand / status
+
+At most one outcome key goes out per trial (the verdict is latched), and each carries its trial's token, so a key
+of a finished trial can never decide the next one.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import socket
+import threading
+
+from lerobot_blindgrasp import durable, spec
+
+logger = logging.getLogger(__name__)
+
+JUDGE = (f"twin (the sim's rule: lifted >= {spec.SUCCESS_LIFT_M * 100:.1f} cm for {spec.SUCCESS_HOLD_S:g} s, "
+         "judged in the twin's physics)")
+
+
+class OperatorServer:
+    def __init__(self, path: str, twin, trial_log: str | None = None):
+        self.path, self.twin, self.trial_log = path, twin, trial_log
+        if os.path.exists(path):
+            os.unlink(path)  # a socket file left by a killed twin
+        self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self._sock.bind(path)
+        self._sock.listen(4)
+        self._lock = threading.Lock()
+        self._active: tuple[socket.socket, int, dict] | None = None  # (connection, token, placement)
+        self._verdicts: dict[int, tuple[bool, str]] = {}  # physics trial -> (success, reason)
+        self._stop = threading.Event()
+        twin.physics.on_verdict = self._on_verdict
+
+    def start(self) -> OperatorServer:
+        threading.Thread(target=self._accept, name="twin-operator", daemon=True).start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        try:
+            self._sock.close()
+        finally:
+            if os.path.exists(self.path):
+                os.unlink(self.path)
+
+    def _accept(self) -> None:
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._sock.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._serve, args=(conn,), name="twin-operator-client", daemon=True).start()
+
+    @staticmethod
+    def _send(conn: socket.socket, msg: dict) -> None:
+        try:
+            conn.sendall((json.dumps(msg) + "\n").encode())
+        except OSError:
+            pass  # the host went away; its next connection starts afresh
+
+    def _serve(self, conn: socket.socket) -> None:
+        self._send(conn, {"judge": JUDGE})
+        with conn, conn.makefile("rb") as lines:
+            for line in lines:
+                try:
+                    msg = json.loads(line)
+                    reply = self._handle(conn, msg)
+                except (ValueError, KeyError, TypeError) as e:
+                    reply = {"ok": False, "error": f"{type(e).__name__}: {e}"}
+                if reply is not None:
+                    self._send(conn, reply)
+
+    def _handle(self, conn: socket.socket, msg: dict) -> dict | None:
+        op = msg["op"]
+        if op == "place":
+            placement = self.twin.physics.place(msg["object"], int(msg["seed"]))
+            with self._lock:
+                self._active = (conn, int(msg["token"]), placement)
+            return {"key": "enter", "token": int(msg["token"]), "placement": placement}
+        if op == "ask":
+            return self._answer(int(msg["token"]))
+        if op == "end":
+            self._finish(int(msg["token"]))
+            return None
+        if op == "hand":
+            self.twin.physics.hold_by_hand(msg["q"])
+            return {"ok": True}
+        if op == "status":
+            return {"ok": True, **self.twin.status()}
+        raise ValueError(f"unknown op {op!r}")
+
+    def _on_verdict(self, verdict) -> None:
+        with self._lock:
+            self._verdicts[verdict.trial] = (verdict.success, verdict.reason)
+            active = self._active
+        if active is not None and active[2]["trial"] == verdict.trial:
+            self._send(active[0], {"key": "s" if verdict.success else "f", "token": active[1]})
+
+    def _answer(self, token: int) -> dict:
+        with self._lock:
+            trial = self._active[2]["trial"] if self._active and self._active[1] == token else None
+            if trial is not None and trial not in self._verdicts:
+                success = self.twin.physics.verdict_now()
+                self._verdicts[trial] = (success, "time limit")
+                self.twin.physics.end_trial()
+            success = self._verdicts.get(trial, (False, ""))[0]
+        return {"key": "y" if success else "n", "token": token}
+
+    def _finish(self, token: int) -> None:
+        with self._lock:
+            active, self._active = self._active, None
+        self.twin.physics.end_trial()
+        if active is None or active[1] != token:
+            return
+        placement = active[2]
+        success, reason = self._verdicts.get(placement["trial"], (False, "host ended the trial first"))
+        record = {**placement, "success": success, "reason": reason, "judge": "twin",
+                  "peak_lift_m": round(self.twin.physics.peak_lift, 4)}
+        logger.info("trial %s: %s (%s)", placement["trial"], "SUCCESS" if success else "failure", reason)
+        if self.trial_log:
+            durable.atomic_append_text(self.trial_log, json.dumps(record) + "\n")
