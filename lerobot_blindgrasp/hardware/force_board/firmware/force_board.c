@@ -61,6 +61,11 @@ static uint16_t millis(void) {
     return t;
 }
 
+static uint16_t add_saturating(uint16_t a, uint16_t b) {
+    uint16_t sum = a + b;
+    return sum < a ? 0xFFFF : sum;
+}
+
 static void timer_init(void) {
     TCCR1A = 0;
     TCCR1B = _BV(WGM12) | _BV(CS11) | _BV(CS10); /* CTC, clk/64: 250 kHz */
@@ -156,10 +161,10 @@ int main(void) {
         last_tick = now;
         if (now >= BOOT_GRACE_MS)
             booted = 1;
-        since_frame = since_frame + dt < since_frame ? 0xFFFF : since_frame + dt;
+        since_frame = add_saturating(since_frame, dt);
         uint8_t late = 0, saturated = 0;
         for (uint8_t i = 0; i < N_CELLS; i++) {
-            age_ms[i] = age_ms[i] + dt < age_ms[i] ? 0xFFFF : age_ms[i] + dt;
+            age_ms[i] = add_saturating(age_ms[i], dt);
             if (!(DOUT_PIN & DOUT_MASK[i]) && hx711_read(i, &counts[i])) {
                 fresh |= _BV(i);
                 age_ms[i] = 0;
