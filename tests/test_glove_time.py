@@ -7,6 +7,7 @@ from __future__ import annotations
 import itertools
 import json
 import logging
+import sys
 import threading
 import time
 
@@ -18,7 +19,7 @@ from hypothesis import strategies as st
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
-from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveDatagram
+from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveDatagram, GloveSender
 from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
 from lerobot_blindgrasp.teleoperators.manus_glove.stream import OFFSET_LEAK, GloveReceiver
 
@@ -123,6 +124,30 @@ def test_fuzz_orderings_never_step_back_nor_use_a_stale_pose(events, pause_start
     assert [k[1] for k in kept] == sorted(k[1] for k in kept)  # a restarted bridge is never left for an older one
     if events and pause_s == 0 and all(d < max_latency for _, d, _ in events):
         assert kept  # a calm network delivers
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="kernel arrival stamps (SO_TIMESTAMPNS) are Linux's")
+def test_a_busy_host_is_not_taken_for_a_network_pause():
+    """Datagrams that waited in the socket buffer while this process was busy were not queued on the network: they
+    are kept (by the kernel's arrival stamps), and their age still counts the wait."""
+    port = free_udp_port()
+    r = GloveReceiver("127.0.0.1", port, "right", REQUIRED_KEYS, max_latency_s=0.1)
+    r._open()  # no receive thread: this process "does not get to read" for a while
+    sender = GloveSender("127.0.0.1", port, "right")
+    try:
+        for _ in range(3):  # read as they come: the clock offset is known
+            sender.send(ERGO)
+            assert len(r._receive()) == 1
+        for _ in range(5):
+            sender.send(ERGO)
+            time.sleep(0.01)
+        time.sleep(0.3)
+        frames = [f for _ in range(5) for f in r._receive()]
+        assert [f.seq for f in frames] == [4, 5, 6, 7, 8] and r.stale == 0
+        assert time.monotonic() - frames[-1].sent_local >= 0.3  # its age counts the time it waited here
+    finally:
+        r._close()
+        sender.close()
 
 
 # --- the teleoperator against the emulated bridge ------------------------------------------------------------------

@@ -14,7 +14,9 @@ Age. The bridge stamps `sent` on its monotonic clock. For each datagram, arrival
 the (unknown, constant) offset between the two clocks. Its minimum over the stream estimates that offset with the
 fastest delivery seen; the estimate may rise by `OFFSET_LEAK` s per s so that a clock rate difference between
 the two machines (crystals: tens of ppm) never accumulates. A datagram's delay beyond that minimum is how long it
-was queued on the way. One queued longer than `max_latency_s` is dropped (`stale`): after a network pause, the
+was queued on the way ("arrival" is when the kernel received it, on Linux: a datagram that waits in the socket
+buffer while this process is not scheduled was not queued on the network, though it ages all the same). One queued
+longer than `max_latency_s` is dropped (`stale`): after a network pause, the
 backlog that arrives in a burst is never replayed. A kept pose's age is the larger of its age by the bridge's
 clock (now - sent, mapped to this host) and the time since it arrived, so neither clock alone can make a pose
 look fresher than it is.
@@ -31,6 +33,8 @@ from __future__ import annotations
 
 import logging
 import socket
+import struct
+import sys
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -41,6 +45,11 @@ from .protocol import DatagramError, GloveDatagram, decode
 
 logger = logging.getLogger(__name__)
 
+# Linux's SO_TIMESTAMPNS (asm-generic/socket.h; Python's socket module does not name it): the kernel stamps each
+# datagram as it arrives, so the time it then waits in the socket buffer while this process is not scheduled (a
+# loaded CPU) is not taken for queueing on the network. Elsewhere, arrival is when the datagram is read.
+_SO_TIMESTAMPNS = 35
+_TIMESPEC = struct.Struct("@ll")
 # Upward drift allowed to the clock-offset estimate (s per s): 1000 ppm, over ten times a quartz clock's rate error.
 OFFSET_LEAK = 1e-3
 RETIRED_SESSIONS = 16  # earlier session ids remembered, to drop their late datagrams
@@ -72,6 +81,7 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
         self.max_latency_s = max_latency_s
         self.bound: tuple[str, int] | None = None
         self._sock: socket.socket | None = None
+        self._stamped = False  # the kernel stamps arrivals (SO_TIMESTAMPNS)
         self._reset()
 
     def _reset(self) -> None:
@@ -108,6 +118,13 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             sock.close()
             raise ConnectionError(f"Cannot listen for the glove on udp://{self.host}:{self.port}: {e}") from e
         sock.settimeout(0.05)
+        self._stamped = False
+        if sys.platform == "linux":
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+                self._stamped = True
+            except OSError:
+                pass
         self._sock = sock
         self._reset()  # each connection binds afresh, to any session
         self.bound = self.sender
@@ -118,12 +135,25 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             self._sock = None
 
     # --- receive thread -------------------------------------------------------------------------------------
+    def _read(self) -> tuple[bytes, tuple, float]:
+        """(datagram, source address, arrival on this host's monotonic clock)."""
+        if not self._stamped:
+            datagram, addr = self._sock.recvfrom(65536)
+            return datagram, addr, time.monotonic()
+        datagram, ancillary, _, addr = self._sock.recvmsg(65536, socket.CMSG_SPACE(_TIMESPEC.size))
+        mono, wall = time.monotonic(), time.time()
+        for level, kind, raw in ancillary:
+            if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= _TIMESPEC.size:
+                sec, nsec = _TIMESPEC.unpack(raw[: _TIMESPEC.size])
+                waited = wall - (sec + nsec * 1e-9)  # both on the wall clock; bounded in case it was stepped
+                return datagram, addr, mono - min(max(waited, 0.0), 5.0)
+        return datagram, addr, mono
+
     def _receive(self) -> list[GloveFrame]:
         try:
-            datagram, addr = self._sock.recvfrom(65536)
+            datagram, addr, arrival = self._read()
         except TimeoutError:
             return []
-        arrival = time.monotonic()
         self.received += 1
         try:
             d = decode(datagram, self.required)
