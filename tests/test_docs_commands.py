@@ -193,8 +193,11 @@ def run_in_process(argv: list[str], monkeypatch, stop_at_parse: bool):
     if stop_at_parse:
         monkeypatch.setattr(draccus, "parse", recording_parse)
         monkeypatch.setattr(draccus.argparsing, "parse", recording_parse)
-    if argv[0] == "python":
-        prog, run = argv[2], (lambda: runpy.run_module(argv[2], run_name="__main__", alter_sys=True))
+    if argv[0] == "python":  # `python -m X`: X.main() reads sys.argv, as under runpy
+        module = importlib.import_module(argv[2])
+        prog = argv[2]
+        run = module.main if hasattr(module, "main") else (
+            lambda: runpy.run_module(argv[2], run_name="__main__", alter_sys=True))  # fmt: skip
     else:
         [ep] = [e for e in importlib.metadata.entry_points(group="console_scripts") if e.name == argv[0]]
         prog, run = argv[0], ep.load()
@@ -268,3 +271,15 @@ def test_lerobot_find_port_runs_to_its_question(offline, monkeypatch):
     with contextlib.redirect_stdout(buf), pytest.raises(OSError, match="Could not detect the port"):
         lerobot_find_port.main()
     assert "Remove the USB cable from your MotorsBus" in buf.getvalue()
+
+
+def test_glove_training_reads_a_folder_the_docs_record_into(parsed):
+    """`blindgrasp-train-glove --glove=[...]` names folders a documented lerobot-record writes (--dataset.root)."""
+    from lerobot_blindgrasp.pipeline.glove_train import GloveTrainConfig
+
+    recorded = {Path(cfg.dataset.root) for cfg, _, _ in parsed.values()
+                if type(cfg).__name__ == "RecordConfig" and cfg.dataset.root is not None}  # fmt: skip
+    for cmd, (cfg, _, _) in parsed.items():
+        if isinstance(cfg, GloveTrainConfig):
+            unknown = [str(g) for g in cfg.glove if Path(g) not in recorded]
+            assert not unknown, f"{cmd}: no documented lerobot-record writes {unknown} (--dataset.root)"
