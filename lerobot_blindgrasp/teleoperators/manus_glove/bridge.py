@@ -172,7 +172,8 @@ def run(cfg: GloveBridgeConfig) -> None:
     finally:
         logger.info("%s, in %.0f s.", bridge.status(), time.monotonic() - t0)
         node.destroy_node()
-        rclpy.try_shutdown()
+        if rclpy.ok():  # Ctrl-C may have shut the context down already (Humble has no module-level try_shutdown)
+            rclpy.shutdown()
         bridge.sender.close()
 
 
