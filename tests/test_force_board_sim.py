@@ -134,7 +134,9 @@ def test_force_calibration_on_the_simulated_board(build_dir, tmp_path, monkeypat
         return ""
 
     monkeypatch.setattr("builtins.input", operator)
-    robot = BlindgraspGripperConfig(id="lab", calibration_dir=tmp_path, force_sensor=ForceSensorConfig(port=board.port))
+    robot = BlindgraspGripperConfig(
+        id="lab", calibration_dir=tmp_path, force_sensor=ForceSensorConfig(port=board.port)
+    )
     try:
         cal = calibrate(CalibrateForceConfig(robot=robot, mass_kg=0.5, settle_s=0.2, window_s=0.4))
     finally:

@@ -102,7 +102,9 @@ def test_the_robot_refuses_a_calibration_made_with_another_channel_map(tmp_path,
         fc.save(cal, tmp_path / "rig.force.json")
         monkeypatch.setattr("builtins.input", rig.calibration_inputs())
         robot = BlindgraspGripper(rig.robot_config(tmp_path))
-        with pytest.raises(fc.ForceCalibrationError, match=r"measured with channel_map \[1, 0, 2\].*has \[0, 1, 2\]"):
+        with pytest.raises(
+            fc.ForceCalibrationError, match=r"measured with channel_map \[1, 0, 2\].*has \[0, 1, 2\]"
+        ):
             robot.connect()
         assert not robot.is_connected
         (tmp_path / "rig.force.json").write_text('{"format": "blindgrasp-force-calibration", "version": 1}')
@@ -118,8 +120,16 @@ def _window(mean, std=(100.0, 100.0, 100.0)) -> fc.Window:
     "loaded, after, why",
     [
         ([[1000, 0, 0], [0, 2e5, 0], [0, 0, 2e5]], [0, 0, 0], r"No channel responded to the weight on ff_tip"),
-        ([[2e5, 0, 5e4], [0, 2e5, 0], [0, 0, 2e5]], [0, 0, 0], r"on ff_tip moved channel 0 .* also channel 2 \(th_tip"),
-        ([[2e5, 0, 0], [0, 2e5, 0], [0, 0, 2e5]], [0, 0, 3e4], r"th_tip did not come back to its zero .*: \+0\.74 N"),
+        (
+            [[2e5, 0, 5e4], [0, 2e5, 0], [0, 0, 2e5]],
+            [0, 0, 0],
+            r"on ff_tip moved channel 0 .* also channel 2 \(th_tip",
+        ),
+        (
+            [[2e5, 0, 0], [0, 2e5, 0], [0, 0, 2e5]],
+            [0, 0, 3e4],
+            r"th_tip did not come back to its zero .*: \+0\.74 N",
+        ),
     ],
 )
 def test_the_fit_refuses_what_it_cannot_trust(loaded, after, why):

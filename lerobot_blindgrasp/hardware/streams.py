@@ -28,6 +28,7 @@ Hand-written because neither LeRobot nor pyserial offers this; LeRobot's cameras
 
 from __future__ import annotations
 
+import itertools
 import logging
 import threading
 import time
@@ -182,7 +183,7 @@ class LatestFrameStream(Generic[F]):
         out); None until `RATE_MIN_INTERVALS` intervals were seen."""
         with self._cond:
             times = list(self._arrivals)
-        intervals = sorted(b - a for a, b in zip(times, times[1:]))
+        intervals = sorted(b - a for a, b in itertools.pairwise(times))
         if len(intervals) < RATE_MIN_INTERVALS:
             return None
         kept = intervals[: len(intervals) - len(intervals) // 4]

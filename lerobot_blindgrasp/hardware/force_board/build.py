@@ -51,13 +51,11 @@ def missing_packages(simulator: bool = True) -> list[str]:
 def _require(needs) -> None:
     missing = [package for package, present in needs if not present()]
     if missing:
-        raise BuildError(
-            f"missing build tools: apt-get install {' '.join(missing)} (Debian/Ubuntu package names)"
-        )
+        raise BuildError(f"missing build tools: apt-get install {' '.join(missing)} (Debian/Ubuntu package names)")
 
 
 def _run(cmd: list[str], what: str) -> None:
-    done = subprocess.run(cmd, capture_output=True, text=True)
+    done = subprocess.run(cmd, check=False, capture_output=True, text=True)
     if done.returncode:
         raise BuildError(f"{what} failed ({' '.join(cmd)}):\n{done.stdout}{done.stderr}")
 

@@ -143,8 +143,10 @@ def main(argv: list[str] | None = None) -> None:
             frames0, t1 = reader.frames, time.monotonic()
             time.sleep(cfg.seconds)
             rate = (reader.frames - frames0) / (time.monotonic() - t1)
-            print(f"port {board.port}: {rate:.1f} frames/s, {reader.dropped_frames} dropped, "
-                  f"{reader.parser.crc_errors} CRC errors, stream rate estimate {reader.rate_hz():.0f}/s")
+            print(
+                f"port {board.port}: {rate:.1f} frames/s, {reader.dropped_frames} dropped, "
+                f"{reader.parser.crc_errors} CRC errors, stream rate estimate {reader.rate_hz():.0f}/s"
+            )
             print(f"forces given {cfg.forces_n} N, read {np.round(reader.read(), 3).tolist()} N")
         finally:
             reader.disconnect()

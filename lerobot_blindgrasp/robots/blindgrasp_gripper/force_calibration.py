@@ -176,7 +176,9 @@ def load(path) -> ForceCalibration:
         if raw.get("format") != FORMAT or raw.get("version") != VERSION:
             raise ValueError(f"not a {FORMAT} file of version {VERSION}")
         fingers = {n: FingerCalibration(**raw["fingers"][n]) for n in spec.FORCE_SENSOR_NAMES}
-        cal = ForceCalibration(float(raw["mass_kg"]), float(raw["g"]), [int(c) for c in raw["channel_map"]], fingers)
+        cal = ForceCalibration(
+            float(raw["mass_kg"]), float(raw["g"]), [int(c) for c in raw["channel_map"]], fingers
+        )
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
         raise ForceCalibrationError(
             f"Force calibration file {path} is unusable ({type(e).__name__}: {e}). Run blindgrasp-calibrate-force "
@@ -185,7 +187,9 @@ def load(path) -> ForceCalibration:
     bad = [n for n, f in cal.fingers.items() if not (math.isfinite(f.scale_n_per_count) and f.scale_n_per_count)]
     bad += [n for n, f in cal.fingers.items() if f.channel != cal.channel_map[spec.FORCE_SENSOR_NAMES.index(n)]]
     if bad:
-        raise ForceCalibrationError(f"Force calibration file {path} has unusable entries for {bad}: calibrate again.")
+        raise ForceCalibrationError(
+            f"Force calibration file {path} has unusable entries for {bad}: calibrate again."
+        )
     return cal
 
 
