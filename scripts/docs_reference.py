@@ -3,7 +3,7 @@ every `python -m` tool of the package, and every preset of `lerobot_blindgrasp/p
 drift: tests/test_docs_reference.py regenerates it and compares.
 
     python scripts/docs_reference.py            # rewrite docs/reference.md between its markers
-    python scripts/docs_reference.py --check    # exit 1 if it is out of date
+    python scripts/docs_reference.py --check=true    # exit 1 if it is out of date
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import importlib.util
 import re
 import sys
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -151,22 +152,29 @@ def rendered(current: str) -> str:
     return head + generated() + rest.split(END, 1)[1]
 
 
-def main(argv: list[str]) -> int:
+@dataclass
+class DocsReferenceConfig:
+    """Regenerate the command and preset tables of docs/reference.md (between its markers)."""
+
+    check: bool = False  # only check: exit 1 if docs/reference.md is out of date, write nothing
+
+
+def main(argv: list[str] | None = None) -> None:
+    from lerobot_blindgrasp import durable
+    from lerobot_blindgrasp.cli import parse_config
+
+    cfg = parse_config(DocsReferenceConfig, argv)
     current = DOC.read_text(encoding="utf-8")
     new = rendered(current)
-    if "--check" in argv:
+    if cfg.check:
         if new != current:
             print(f"{DOC} is out of date: run python scripts/docs_reference.py", file=sys.stderr)
-            return 1
-        return 0
-    tmp = DOC.with_suffix(".md.tmp")
-    tmp.write_text(new, encoding="utf-8")
-    tmp.replace(DOC)  # same folder, atomic
+            raise SystemExit(1)
+        return
+    durable.atomic_write_text(DOC, new)
     print(f"wrote {DOC}")
-    return 0
 
 
 if __name__ == "__main__":
     sys.path.insert(0, str(ROOT))
-    importlib.import_module("lerobot_blindgrasp")
-    raise SystemExit(main(sys.argv[1:]))
+    main()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import sys
 import tomllib
 from pathlib import Path
 
@@ -15,6 +16,7 @@ DOC = ROOT / "docs" / "reference.md"
 def _generator():
     spec = importlib.util.spec_from_file_location("docs_reference", ROOT / "scripts" / "docs_reference.py")
     module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault(spec.name, module)  # its dataclass resolves its module through sys.modules
     spec.loader.exec_module(module)
     return module
 
