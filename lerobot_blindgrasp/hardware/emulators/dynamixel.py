@@ -8,7 +8,7 @@ What it implements (ROBOTIS e-Manual, "DYNAMIXEL Protocol 2.0" and the XM430-W35
   checks, Status Return Level, and the bus baud rate (a servo answers only when the port's termios speed matches
   its Baud_Rate register, like a real bus at the wrong speed);
 - Homing_Offset and Drive_Mode (reverse) as the firmware applies them: Present = sign * shaft + Homing_Offset;
-- first-order servo dynamics: the shaft slews toward the goal at the no-load speed (46 rpm) or Profile_Velocity,
+- first-order servo dynamics (or any `ShaftDynamics` plugged in, e.g. the physics twin's MuJoCo joint): the shaft slews toward the goal at the no-load speed (46 rpm) or Profile_Velocity,
   Present_Current follows the position error times the P gain and saturates at Goal_Current/Current_Limit in
   current-based position mode; an optional rigid obstacle per servo (`obstacle`) stalls the shaft.
 
@@ -20,8 +20,9 @@ Fault injection (what the tests use): a missing ID, dropped status packets (time
 wrong positions with a valid CRC (`position_glitch`), stray late status packets (`stray_replies`), slow replies
 (`reply_delay_s`),
 hardware-error status bits (the firmware then drops torque per the Shutdown register and raises the alert bit),
-a servo reset (brown-out: RAM back to factory values, torque off, no error bit) and, from `PtyDevice`, an unplugged
-USB adapter.
+a servo reset (brown-out: RAM back to factory values, torque off, no error bit), from `PtyDevice`, an unplugged
+USB adapter, and (`servo_health.py`, one model per servo and one `supply` per bus) a hot servo, a heating servo, a
+weak or sagging supply and the firmware's overheating, voltage and overload errors.
 """
 
 from __future__ import annotations
@@ -30,11 +31,13 @@ import math
 import termios
 import time
 from dataclasses import dataclass, field
+from typing import Protocol
 
 from dynamixel_sdk import protocol2_packet_handler as p2
 from dynamixel_sdk import robotis_def as dx
 
 from lerobot_blindgrasp.hardware.emulators.pty_device import PtyDevice
+from lerobot_blindgrasp.hardware.emulators.servo_health import ServoHealthModel, Supply
 
 # name: (address, size, signed, writable-access) ; access "ro" | "eeprom" | "ram"
 CONTROL_TABLE: dict[str, tuple[int, int, bool, str]] = {
@@ -154,6 +157,14 @@ def make_packet(dxl_id: int, instruction: int, params: bytes = b"", *, bad_crc: 
     return pkt + bytes([crc & 0xFF, crc >> 8])
 
 
+class ShaftDynamics(Protocol):
+    """A shaft model plugged into `EmulatedServo.dynamics`: it reads the servo's registers (goal, torque, mode,
+    limits) as it likes, and over `dt` sets `servo.shaft` (ticks, before Drive_Mode/Homing_Offset) and
+    `servo.velocity` (shaft ticks/s); it returns Present_Current in register units, in the servo's own frame."""
+
+    def advance(self, servo: EmulatedServo, dt: float) -> float: ...
+
+
 @dataclass
 class EmulatedServo:
     id: int
@@ -164,6 +175,11 @@ class EmulatedServo:
     obstacle: tuple[float, int] | None = None
     last_instruction: float = 0.0  # monotonic time of the last instruction packet addressed to this servo
     watchdog_tripped_at: float | None = None  # when its bus watchdog last stopped it
+    # What moves the shaft: None is the first-order model below; the physics twin plugs in MuJoCo
+    # (`ShaftDynamics`). The registers, the protocol and the faults stay this emulator's either way.
+    dynamics: ShaftDynamics | None = None
+    # Temperature, input voltage and the firmware's shutdowns for them (`servo_health.py`); faults injected there.
+    health: ServoHealthModel = field(default_factory=ServoHealthModel)
 
     def __post_init__(self) -> None:
         for name, value in _DEFAULTS.items():
@@ -201,6 +217,20 @@ class EmulatedServo:
             self.watchdog_tripped_at = now
 
     def step(self, dt: float) -> None:
+        current = self._first_order(dt) if self.dynamics is None else self.dynamics.advance(self, dt)
+        self._publish(current)
+        self.health.step(self, dt)
+
+    def _publish(self, current: float) -> None:
+        """Present_* registers from the shaft state, as the firmware reports them (Drive_Mode, Homing_Offset)."""
+        self.set("Present_Current", int(current))
+        rpm = self.velocity * self.direction / 4096 * 60.0
+        self.set("Present_Velocity", int(rpm / VELOCITY_UNIT_RPM))
+        self.set("Present_Position", self.present_position())
+        self.set("Moving", int(abs(self.velocity) > 1.0))
+
+    def _first_order(self, dt: float) -> float:
+        """Slew the shaft toward the goal over dt; returns Present_Current (units, servo frame)."""
         mode = self.get("Operating_Mode")
         torque = self.get("Torque_Enable") == 1
         target = self.position_for(self.get("Goal_Position")) if torque and mode in (3, 4, 5) else self.shaft
@@ -225,12 +255,7 @@ class EmulatedServo:
         if mode == 5:
             limit = min(limit, abs(self.get("Goal_Current")))
         residual = (target - self.shaft) * self.direction
-        current = max(-limit, min(limit, residual * self.get("Position_P_Gain") / 128.0)) if torque else 0.0
-        self.set("Present_Current", int(current))
-        rpm = self.velocity * self.direction / 4096 * 60.0
-        self.set("Present_Velocity", int(rpm / VELOCITY_UNIT_RPM))
-        self.set("Present_Position", self.present_position())
-        self.set("Moving", int(abs(self.velocity) > 1.0))
+        return max(-limit, min(limit, residual * self.get("Position_P_Gain") / 128.0)) if torque else 0.0
 
     def reboot(self) -> None:
         """Power-cycle semantics: RAM back to defaults (torque off, errors cleared), EEPROM kept."""
@@ -259,6 +284,9 @@ class DynamixelBusEmulator(PtyDevice):
             servo.set("Baud_Rate", BAUD_REGISTER[baudrate])
             servo.reboot()
             self.servos[i] = servo
+        self.supply = Supply()  # one supply for the bus (`servo_health.py`): fault injection sags it
+        for servo in self.servos.values():
+            servo.health.supply = self.supply
         self._buf = bytearray()
         self._pending_ids: list[EmulatedServo] = []
         self._last = time.monotonic()

@@ -136,6 +136,7 @@ class BlindgraspGripper(Robot):
         self.gate = PositionGate(
             speed_ticks_s=config.max_joint_speed_rad_s / RAD_PER_TICK,
             margin_ticks=config.plausibility_margin_rad / RAD_PER_TICK,
+            backdrive_ticks=config.plausibility_backdrive_rad / RAD_PER_TICK,
             rereads=config.plausibility_rereads,
         )
         self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")

@@ -101,6 +101,10 @@ class BlindgraspGripperConfig(RobotConfig):
     max_joint_speed_rad_s: float = NO_LOAD_SPEED_RAD_S
     plausibility_margin_rad: float = 0.1
     plausibility_rereads: int = 2
+    # With the torque on, a load may push a joint back past its goal by as much as the position loop yields at the
+    # torque limit: stall torque / kp = 4.1 / 15 = 0.27 rad for an XM430 at P gain 800 (the sim's servo model).
+    # A softer loop (a lower position_p_gain, or the physics twin's Table II draws down to kp x 0.3) yields more.
+    plausibility_backdrive_rad: float = 0.3
     # The control loop's rate (lerobot-record --dataset.fps, rollout --fps): get_observation measures its period.
     # Overruns are counted and warned; overruns back to back for max_overrun_s (and >= 10 periods) stop the gripper
     # (GripperTimingError).
@@ -134,6 +138,8 @@ class BlindgraspGripperConfig(RobotConfig):
             raise ValueError(f"baudrate {self.baudrate} is not a Dynamixel rate {DYNAMIXEL_BAUDRATES}")
         if not self.port or not self.force_sensor.port:
             raise ValueError("port and force_sensor.port must name the serial devices")
+        if self.plausibility_backdrive_rad < 0:
+            raise ValueError("plausibility_backdrive_rad must be >= 0")
         if not (self.max_joint_speed_rad_s > 0 and self.plausibility_margin_rad > 0 and self.plausibility_rereads > 0):
             raise ValueError("need max_joint_speed_rad_s > 0, plausibility_margin_rad > 0, plausibility_rereads >= 1")
         if not 1 <= self.health_every_n <= 100:

@@ -112,10 +112,12 @@ class SampleSpacing:
     LeRobot's loops (lerobot-record, lerobot-rollout) and the eval trial sleep `period - (time since the loop's
     start)`; after an observation stalled by a slow bus, the loop goes straight on, and the next observation's
     data is read 3-10 ms after the stalled one's, which the policy and the dataset take for one whole period. So the
-    robot spaces its own samples: after an observation whose reads took more than half a period, the next one reads
-    no earlier than `period x (1 - slack)` after the slow one ended, and so on while calls keep coming early. A
-    waiting observation shifts the caller's next start by the same amount, so the waits shrink by `slack` periods per
-    step and the caller's own pacing takes over again within a few steps. Normal steps never wait."""
+    robot spaces its own samples: after an observation whose reads took more than half a period, the next one's
+    reads end no earlier than `period x (1 - slack)` after the slow one's (they start that long after it, less the
+    shortest recent read), and so on while calls keep coming early. A waiting observation shifts the caller's next
+    start by the same amount, so the waits shrink by `slack` periods per step and the caller's own pacing takes over
+    again within a few steps. Normal steps never wait, and a loop whose reads are all slow (a loaded host) is not
+    slowed further: its shortest read is slow too."""
 
     def __init__(self, period_s: float, slack: float = 0.1):
         self.period_s = period_s
@@ -123,6 +125,7 @@ class SampleSpacing:
         self.waits = 0  # observations that were held back (for tests and logs)
         self._last_end: float | None = None
         self._recovering = False
+        self._reads: deque = deque(maxlen=20)  # recent read durations (s)
 
     def restart(self) -> None:
         self._last_end, self._recovering = None, False
@@ -130,7 +133,7 @@ class SampleSpacing:
     def before_read(self) -> None:
         if not self._recovering or self._last_end is None:
             return
-        delay = self._last_end + self.gap_s - time.monotonic()
+        delay = self._last_end + self.gap_s - min(self._reads, default=0.0) - time.monotonic()
         if delay > 0:
             self.waits += 1
             time.sleep(delay)
@@ -138,6 +141,7 @@ class SampleSpacing:
             self._recovering = False  # the caller's own pacing is back
 
     def after_read(self, started: float, ended: float) -> None:
+        self._reads.append(ended - started)
         if ended - started > 0.5 * self.period_s:
             self._recovering = True
         self._last_end = ended
