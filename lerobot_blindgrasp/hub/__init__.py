@@ -1,7 +1,9 @@
-"""Sharing datasets on the Hugging Face Hub: dataset cards and `blindgrasp-push-dataset`.
+"""Sharing on the Hugging Face Hub: dataset cards and `blindgrasp-push-dataset` (`cards.py`, `push.py`), where the
+code lives and the Hub repo names (`project.py`, read from `[project.urls]`), and `blindgrasp-publish`, which
+pushes the shipped models and a demo dataset with their cards (`publish.py`).
 
-Serves the sim teacher demos (`blindgrasp-collect-demos`) and glove teleoperation datasets (`lerobot-record`)
-alike, which is why it sits beside `demos/` rather than inside it.
+Dataset cards serve the sim teacher demos (`blindgrasp-collect-demos`) and glove teleoperation datasets
+(`lerobot-record`) alike, which is why this sits beside `demos/` rather than inside it.
 """
 
 import re
