@@ -83,6 +83,8 @@ def build_simulator(out_dir) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     exe = out / "hx711_sim"
     src = SIMAVR_DIR / "hx711_sim.c"
+    if exe.exists() and exe.stat().st_mtime >= src.stat().st_mtime:
+        return exe  # built already (make decides the same for the firmware)
     _run(["cc", "-O2", "-Wall", "-Wextra", "-Werror", f"-I{SIMAVR_INCLUDE}", "-o", str(exe), str(src),
           "-lsimavr", "-lutil"], "simavr harness build")  # fmt: skip
     return exe

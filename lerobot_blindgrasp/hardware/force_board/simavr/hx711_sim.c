@@ -41,7 +41,6 @@
 #define N_CHIPS 3
 #define F_CPU 16000000UL
 #define POWER_DOWN_US 60
-#define SETTLE_US 50000 /* output settling time at 80 samples/s (400 ms at 10/s) */
 static const int DOUT_PIN[N_CHIPS] = {2, 3, 4};  /* PORTD: Nano D2, D3, D4 */
 static const int SCK_PIN[N_CHIPS] = {0, 1, 2};   /* PORTB: Nano D8, D9, D10 */
 static const double SKEW[N_CHIPS] = {0.0, 0.004, -0.003}; /* independent RC oscillators */
@@ -62,6 +61,7 @@ static hx711_t chips[N_CHIPS];
 static int32_t noise_counts;
 static uint32_t rng = 2463534242u;
 static int pty_master = -1;
+static uint32_t settle_us = 50000; /* output settling time: 50 ms at 80 samples/s, 400 ms at 10/s */
 
 static int32_t noise(void) {
     rng ^= rng << 13;
@@ -121,7 +121,7 @@ static void sck_changed(struct avr_irq_t *irq, uint32_t value, void *param) {
             c->gain_pulses = 25;
             avr_raise_irq(c->dout, 1);
             avr_cycle_timer_cancel(c->avr, convert, c);
-            avr_cycle_timer_register_usec(c->avr, SETTLE_US, convert, c);
+            avr_cycle_timer_register_usec(c->avr, settle_us, convert, c);
         }
     }
 }
@@ -211,6 +211,8 @@ int main(int argc, char **argv) {
         return 2;
     }
     double sps = argc > 2 ? atof(argv[2]) : 80.0;
+    if (sps < 40)
+        settle_us = 400000;
     uint32_t size = 0, start = 0;
     uint8_t *code = read_ihex_file(argv[1], &size, &start);
     avr_t *avr = avr_make_mcu_by_name("atmega328p");
@@ -237,7 +239,7 @@ int main(int argc, char **argv) {
         c->dout = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), DOUT_PIN[i]);
         avr_raise_irq(c->dout, 1);
         avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), SCK_PIN[i]), sck_changed, c);
-        avr_cycle_timer_register_usec(avr, SETTLE_US + 1000 * i, convert, c);
+        avr_cycle_timer_register_usec(avr, settle_us + 1000 * i, convert, c);
     }
     double t0 = now_s();
     avr_cycle_count_t next_check = 0;
