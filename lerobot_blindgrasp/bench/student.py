@@ -1,19 +1,25 @@
 """`blindgrasp-bench --bench.type=student`: what one lerobot-train sample of the student costs, against its
-compute floor.
+compute floor, with each of LeRobot's data paths side by side.
 
     blindgrasp-bench --bench.type=student --bench.dataset_root=outputs/pipeline_quick_blind/demos --bench.size=cpu \\
         --bench.batch_size=128 --bench.json=true
 
-Three figures, each per training sample, measured in this process on one torch thread:
-- **load**: LeRobotDataset `__getitem__` with the policy's 30-frame observation window (what each lerobot-train
-  data-loader worker does per sample), on the given dataset;
-- **update**: forward, backward and AdamW step of the policy on a batch of such windows (what the training process
-  does per sample);
-- **floor**: the model's training FLOPs per sample (3 x the forward's: forward + backward) at this machine's
-  measured GEMM rate for the model's own matrix shapes.
-The stage's throughput on `cores` cores, with `num_workers` loader processes beside one training thread, is bounded
-by the slower of the two pipelines: samples/s <= min(workers / load, 1 / update); the floor shows how far the update
-is from pure arithmetic. `--train_steps=N` also runs the real `lerobot-train` for N steps and reports its samples/s.
+Per training sample, measured in this process on one torch thread, one after another in one run (the machine may
+be shared: compare the ratios within a run):
+- **load**, each data path on the given dataset with the policy's 30-frame observation window: `lerobot` (LeRobot's
+  own `DatasetReader.get_item`, what lerobot-train did before the student's data path), `cache` (the plugin's
+  in-memory low-dim cache, `policies/blindgrasp_transformer/window_cache.py`, what lerobot-train does now),
+  `streaming` (`--dataset.streaming=true`: StreamingLeRobotDataset's iterator); `lerobot_row` / `lerobot_window`
+  split LeRobot's into its frame read and its window read;
+- **loader**: samples/s through torch's DataLoader as lerobot-train builds it (spawned persistent workers,
+  `prefetch_factor`), per path and worker count, after the first batch;
+- **update**: forward, backward, gradient clipping and AdamW step on a batch of windows (what the training process
+  does per sample), with LeRobot's AdamW and the `foreach` / `fused` variants; `--bench.profile=true` also splits
+  forward + backward by operator (matrix products, attention, the rest) and counts the operators;
+- **floor**: the model's training FLOPs per sample (3 x the forward's) at this machine's GEMM rate for the model's
+  own matrix shapes.
+`--train_steps=N` also runs the real `lerobot-train` for N steps on each of the two map-style paths
+(BLINDGRASP_LOW_DIM_CACHE=0 and 1) and reports its samples/s.
 """
 
 from __future__ import annotations
@@ -23,31 +29,36 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import torch
-import torch.nn.functional as F  # noqa: N812
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.bench import BenchConfig
 from lerobot_blindgrasp.bench.policy import flops_per_step, make_policy
+from lerobot_blindgrasp.bench.student_parts import format_table, gemm_gflops, update_parts
+from lerobot_blindgrasp.policies.blindgrasp_transformer.window_cache import ENV_SWITCH
 from lerobot_blindgrasp.presets.student import SIZES
 
 
 @BenchConfig.register_subclass("student")
 @dataclass
 class BenchStudentConfig(BenchConfig):
-    """Per-sample cost of student training: data loading, the update, and the model's FLOP floor."""
+    """Per-sample cost of student training: each data path, the update's parts, and the model's FLOP floor."""
 
     dataset_root: Path | None = None  # a blindgrasp LeRobotDataset (required: the loader's cost depends on it)
     size: str = "cpu"  # student size (presets.student.SIZES)
     batch_size: int = 128
-    load_samples: int = 400  # random samples read for the load figure
+    load_samples: int = 400  # random samples read per path for the load figures
     update_steps: int = 10  # timed optimizer steps (after 2 warm-up steps)
     num_workers: int = 1  # loader processes beside the training thread, for the bound
-    train_steps: int = 0  # >0: also time the real lerobot-train for this many steps (adds its start-up)
+    loader_workers: list[int] = field(default_factory=lambda: [0, 2])  # DataLoader worker counts to time
+    loader_batches: int = 4  # timed batches per DataLoader row (after the first); 0 skips the loader rows
+    prefetch_factor: int = 4  # lerobot-train's default
+    profile: bool = False  # also split forward + backward by operator (torch.profiler)
+    train_steps: int = 0  # >0: also time the real lerobot-train for this many steps, on both map-style paths
     seed: int = 0
 
     def __post_init__(self):
@@ -55,64 +66,79 @@ class BenchStudentConfig(BenchConfig):
             raise ValueError(f"--bench.size must be one of {sorted(SIZES)}, got {self.size!r}")
         if self.dataset_root is None or not (Path(self.dataset_root) / "meta" / "info.json").is_file():
             raise ValueError(f"--bench.dataset_root must be a LeRobotDataset folder, got {self.dataset_root}")
+        if min(self.loader_workers, default=0) < 0 or self.prefetch_factor < 1:
+            raise ValueError("--bench.loader_workers must be >= 0 and --bench.prefetch_factor >= 1")
 
 
-def load_ms(root: Path, n_obs_steps: int, samples: int, seed: int) -> float:
-    """ms per sample of LeRobotDataset.__getitem__ with the student's observation window."""
+def _delta(n_obs_steps: int) -> dict:
+    return {spec.STATE_KEY: [i / spec.CONTROL_HZ for i in range(1 - n_obs_steps, 1)]}
+
+
+def _per_sample_ms(read, indices) -> float:
+    read(int(indices[0]))  # opens the files, builds a cache
+    t = time.perf_counter()
+    for i in indices:
+        read(int(i))
+    return (time.perf_counter() - t) / len(indices) * 1e3
+
+
+def load_ms(root: Path, n_obs_steps: int, samples: int, seed: int) -> dict[str, float]:
+    """ms per sample of each data path with the student's observation window, on the same random frames."""
+    from lerobot.datasets.dataset_reader import DatasetReader
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    delta = {spec.STATE_KEY: [i / spec.CONTROL_HZ for i in range(1 - n_obs_steps, 1)]}
-    ds = LeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=delta)
+    ds = LeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps))
+    reader = ds.reader
     idx = np.random.default_rng(seed).integers(0, len(ds), samples)
-    ds[int(idx[0])]  # opens the files
+    out = {"lerobot": _per_sample_ms(lambda i: DatasetReader.get_item(reader, i), idx),
+           "cache": _per_sample_ms(lambda i: ds[i], idx)}
+    col = reader.hf_dataset[spec.STATE_KEY]
+    out["lerobot_row"] = _per_sample_ms(lambda i: reader.hf_dataset[i], idx)
+    out["lerobot_window"] = _per_sample_ms(lambda i: col[list(range(max(0, i - n_obs_steps + 1), i + 1))], idx)
+    out["streaming"] = streaming_ms(root, n_obs_steps, samples, seed)
+    return out
+
+
+def streaming_ms(root: Path, n_obs_steps: int, samples: int, seed: int) -> float:
+    """ms per sample of `--dataset.streaming=true`'s dataset (StreamingLeRobotDataset), after its first sample."""
+    from lerobot.datasets.streaming_dataset import StreamingLeRobotDataset
+
+    ds = StreamingLeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps),
+                                 max_num_shards=1, seed=seed)
+    it = iter(ds)
+    next(it)
     t = time.perf_counter()
-    for i in idx:
-        ds[int(i)]
+    for _ in range(samples):
+        next(it)
     return (time.perf_counter() - t) / samples * 1e3
 
 
-def update_ms(size: str, batch_size: int, steps: int, seed: int) -> float:
-    """ms per sample of forward + backward + AdamW step on random normalized windows."""
-    torch.manual_seed(seed)
-    policy = make_policy(size).train()
-    opt = policy.config.get_optimizer_preset().build(policy.parameters())
-    t_ctx = policy.config.n_obs_steps
-    batch = {spec.STATE_KEY: torch.randn(batch_size, t_ctx, spec.STATE_DIM),
-             f"{spec.STATE_KEY}_is_pad": torch.zeros(batch_size, t_ctx, dtype=torch.bool),
-             spec.ACTION_KEY: torch.rand(batch_size, spec.ACTION_DIM) * 2 - 1}
+def loader_samples_per_s(root: Path, n_obs_steps: int, cfg: BenchStudentConfig) -> list[dict]:
+    """samples/s through torch's DataLoader as lerobot-train builds it, per data path and worker count."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    def step():
-        loss, _ = policy.forward(batch)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-
-    for _ in range(2):
-        step()
-    t = time.perf_counter()
-    for _ in range(steps):
-        step()
-    return (time.perf_counter() - t) / (steps * batch_size) * 1e3
-
-
-def gemm_gflops(size: str, batch_size: int, repeats: int = 20) -> float:
-    """GFLOP/s of this machine's matrix products at the model's training shapes (batch x 30 tokens rows)."""
-    policy = make_policy(size)
-    d, t = policy.config.embed_dim, policy.config.n_obs_steps
-    rows = batch_size * t
-    shapes = [(rows, d, 3 * d), (rows, d, d), (rows, d, 4 * d), (rows, 4 * d, d)]
-    mats = [(torch.randn(m, k), torch.randn(n, k)) for m, k, n in shapes]
-    flops = sum(2 * m * k * n for m, k, n in shapes)
-    for a, w in mats:
-        F.linear(a, w)
-    t0 = time.perf_counter()
-    for _ in range(repeats):
-        for a, w in mats:
-            F.linear(a, w)
-    return flops * repeats / (time.perf_counter() - t0) / 1e9
+    rows = []
+    for path, switch in (("lerobot", "0"), ("cache", "1")):
+        os.environ[ENV_SWITCH] = switch  # the spawned workers read it at their plugin import
+        ds = LeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps))
+        for workers in cfg.loader_workers:
+            extra = {"multiprocessing_context": "spawn", "persistent_workers": True,
+                     "prefetch_factor": cfg.prefetch_factor} if workers else {}
+            loader = torch.utils.data.DataLoader(ds, batch_size=cfg.batch_size, shuffle=True, num_workers=workers,
+                                                 generator=torch.Generator().manual_seed(cfg.seed), **extra)
+            it = iter(loader)
+            next(it)  # worker start-up and the first batch
+            t = time.perf_counter()
+            for _ in range(cfg.loader_batches):
+                next(it)
+            rate = cfg.loader_batches * cfg.batch_size / (time.perf_counter() - t)
+            rows.append({"path": path, "num_workers": workers, "samples_per_s": rate})
+            del it, loader
+    os.environ.pop(ENV_SWITCH, None)
+    return rows
 
 
-def lerobot_train_samples_per_s(cfg: BenchStudentConfig) -> dict:
+def lerobot_train_samples_per_s(cfg: BenchStudentConfig, cache: bool) -> dict:
     """Run the real lerobot-train for cfg.train_steps steps; samples/s from its wall clock (start-up included)."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [str(Path(sys.executable).parent / "lerobot-train"), "--policy.type=blindgrasp_transformer",
@@ -120,46 +146,37 @@ def lerobot_train_samples_per_s(cfg: BenchStudentConfig) -> dict:
                f"--output_dir={tmp}/out", f"--steps={cfg.train_steps}", f"--batch_size={cfg.batch_size}",
                f"--save_freq={cfg.train_steps}", "--policy.push_to_hub=false", "--policy.device=cpu",
                f"--num_workers={cfg.num_workers}", "--wandb.enable=false", f"--seed={cfg.seed}"]
-        env = {**os.environ, "OMP_NUM_THREADS": "1", "HF_HUB_OFFLINE": "1"}
+        env = {**os.environ, "OMP_NUM_THREADS": "1", "HF_HUB_OFFLINE": "1", ENV_SWITCH: "1" if cache else "0"}
         t = time.perf_counter()
         subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         wall = time.perf_counter() - t
-    return {"steps": cfg.train_steps, "wall_s": wall, "samples_per_s": cfg.train_steps * cfg.batch_size / wall}
+    return {"path": "cache" if cache else "lerobot", "steps": cfg.train_steps, "wall_s": wall,
+            "samples_per_s": cfg.train_steps * cfg.batch_size / wall}
 
 
 def run(cfg: BenchStudentConfig) -> dict:
     torch.set_num_threads(1)
     policy = make_policy(cfg.size)
+    n_obs = policy.config.n_obs_steps
     train_flops = 3 * flops_per_step(policy.config, last_token_only=True)
-    load = load_ms(Path(cfg.dataset_root), policy.config.n_obs_steps, cfg.load_samples, cfg.seed)
-    update = update_ms(cfg.size, cfg.batch_size, cfg.update_steps, cfg.seed)
+    load = load_ms(Path(cfg.dataset_root), n_obs, cfg.load_samples, cfg.seed)
+    update = update_parts(cfg.size, cfg.batch_size, cfg.update_steps, cfg.seed, cfg.profile)
     gflops = gemm_gflops(cfg.size, cfg.batch_size)
     floor = train_flops / (gflops * 1e9) * 1e3
-    bound = min(cfg.num_workers / load, 1 / update) * 1e3
+    per_sample = update["lerobot_adamw"]["total"]
     result = {
         "size": cfg.size, "batch_size": cfg.batch_size, "num_workers": cfg.num_workers,
         "load_ms_per_sample": load, "update_ms_per_sample": update,
+        "load_over_update": {k: v / per_sample for k, v in load.items()},
         "train_flops_per_sample": train_flops, "gemm_gflops": gflops, "floor_ms_per_sample": floor,
-        "update_over_floor": update / floor, "bound_samples_per_s": bound,
-        "limited_by": "loading" if load / cfg.num_workers > update else "update",
+        "update_over_floor": per_sample / floor,
+        "bound_samples_per_s": {p: min(max(cfg.num_workers, 1) / load[p], 1 / per_sample) * 1e3
+                                for p in ("lerobot", "cache", "streaming")},
     }
+    if cfg.loader_batches:
+        result["loader"] = loader_samples_per_s(Path(cfg.dataset_root), n_obs, cfg)
     if cfg.train_steps:
-        result["lerobot_train"] = lerobot_train_samples_per_s(cfg)
+        result["lerobot_train"] = [lerobot_train_samples_per_s(cfg, cache) for cache in (False, True)]
     if not cfg.json:
         print(format_table(result))
     return result
-
-
-def format_table(r: dict) -> str:
-    lines = [
-        f"student {r['size']}, batch {r['batch_size']}, one torch thread, {r['num_workers']} loader process(es)",
-        f"  load (LeRobotDataset, 30-frame window): {r['load_ms_per_sample']:.2f} ms/sample",
-        f"  update (fwd + bwd + AdamW):             {r['update_ms_per_sample']:.3f} ms/sample",
-        f"  floor ({r['train_flops_per_sample'] / 1e6:.1f} MFLOP at {r['gemm_gflops']:.1f} GFLOP/s):"
-        f"     {r['floor_ms_per_sample']:.3f} ms/sample (update = {r['update_over_floor']:.1f} x floor)",
-        f"  bound: {r['bound_samples_per_s']:.0f} samples/s, limited by {r['limited_by']}",
-    ]
-    if "lerobot_train" in r:
-        lt = r["lerobot_train"]
-        lines.append(f"  lerobot-train: {lt['steps']} steps in {lt['wall_s']:.1f} s = {lt['samples_per_s']:.0f} samples/s")
-    return "\n".join(lines)

@@ -15,7 +15,7 @@ readers asked for delta-timestamp windows (training), over datasets with no came
 index remapping, whose columns are all integers, floats or booleans (scalars or fixed-length vectors); anything else
 keeps LeRobot's path. The reader's class travels with the dataset into lerobot-train's spawned loader processes, and
 each process builds its cache on its first sample (loader workers persist, so once per run). `BLINDGRASP_LOW_DIM_CACHE=0`
-turns it off (LeRobot's path), e.g. to time the two side by side.
+in the environment when a dataset is loaded keeps LeRobot's path for it, e.g. to time the two side by side.
 """
 
 from __future__ import annotations
@@ -139,11 +139,16 @@ class LowDimWindowReader(DatasetReader):
         return state
 
 
+def enabled() -> bool:
+    """The switch, read at each dataset load (so a process can time both paths, and its spawned workers follow)."""
+    return os.environ.get(ENV_SWITCH, "1") != "0"
+
+
 def _upgrade_after(load):
     @functools.wraps(load)
     def wrapper(self, *args, **kwargs):
         result = load(self, *args, **kwargs)
-        if type(self) is DatasetReader and self.hf_dataset is not None and servable(self):
+        if type(self) is DatasetReader and self.hf_dataset is not None and enabled() and servable(self):
             self.__class__ = LowDimWindowReader
             logging.info("blindgrasp: %s windows served from an in-memory low-dim cache", self.root)
         elif type(self) is LowDimWindowReader:
@@ -154,12 +159,9 @@ def _upgrade_after(load):
     return wrapper
 
 
-def install() -> bool:
-    """Serve servable LeRobot readers from the cache from now on in this process; False if switched off."""
-    if os.environ.get(ENV_SWITCH, "1") == "0":
-        return False
+def install() -> None:
+    """From now on in this process, servable LeRobot readers loaded while `enabled()` are served from the cache."""
     for name in ("try_load", "load_and_activate"):
         method = getattr(DatasetReader, name)
         if not getattr(method, "_blindgrasp_low_dim", False):
             setattr(DatasetReader, name, _upgrade_after(method))
-    return True

@@ -1,0 +1,137 @@
+"""The student bench's update figures: the update split into its parts, three AdamW implementations, an operator
+profile, and this machine's GEMM rate at the model's shapes (`blindgrasp-bench --bench.type=student`)."""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+
+import torch
+import torch.nn.functional as F  # noqa: N812
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.bench.policy import make_policy
+
+PARTS = ("forward", "backward", "clip", "step", "zero_grad")
+# torch.optim.AdamW as LeRobot's AdamWConfig builds it (for-loop on CPU tensors), and its two other implementations.
+ADAMW = {"lerobot_adamw": {}, "foreach_adamw": {"foreach": True}, "fused_adamw": {"fused": True}}
+
+
+def _batch(batch_size: int, t_ctx: int) -> dict:
+    return {spec.STATE_KEY: torch.randn(batch_size, t_ctx, spec.STATE_DIM),
+            f"{spec.STATE_KEY}_is_pad": torch.zeros(batch_size, t_ctx, dtype=torch.bool),
+            spec.ACTION_KEY: torch.rand(batch_size, spec.ACTION_DIM) * 2 - 1}
+
+
+def _timed_steps(policy, opt, batch: dict, steps: int, clip: float) -> dict[str, float]:
+    """Seconds per part, summed over `steps` steps of lerobot-train's update_policy order."""
+    spent = defaultdict(float)
+    params = list(policy.parameters())
+    for _ in range(steps):
+        marks = [time.perf_counter()]
+        loss, _ = policy.forward(batch)
+        marks.append(time.perf_counter())
+        loss.backward()
+        marks.append(time.perf_counter())
+        torch.nn.utils.clip_grad_norm_(params, clip)
+        marks.append(time.perf_counter())
+        opt.step()
+        marks.append(time.perf_counter())
+        opt.zero_grad()
+        marks.append(time.perf_counter())
+        for part, a, b in zip(PARTS, marks, marks[1:], strict=False):
+            spent[part] += b - a
+    return spent
+
+
+def update_parts(size: str, batch_size: int, steps: int, seed: int, profile: bool) -> dict:
+    """ms per sample of each part of forward + backward + clip + AdamW step, per AdamW implementation."""
+    out = {}
+    for name, kwargs in ADAMW.items():
+        torch.manual_seed(seed)
+        policy = make_policy(size).train()
+        preset = policy.config.get_optimizer_preset()
+        opt = torch.optim.AdamW(policy.parameters(), lr=preset.lr, betas=preset.betas, eps=preset.eps,
+                                weight_decay=preset.weight_decay, **kwargs)
+        batch = _batch(batch_size, policy.config.n_obs_steps)
+        _timed_steps(policy, opt, batch, 2, preset.grad_clip_norm)  # warm-up
+        spent = _timed_steps(policy, opt, batch, steps, preset.grad_clip_norm)
+        parts = {p: spent[p] / (steps * batch_size) * 1e3 for p in PARTS}
+        out[name] = {**parts, "total": sum(parts.values())}
+        if profile and name == "lerobot_adamw":
+            out["profile"] = operator_profile(policy, batch)
+    return out
+
+
+def _category(op: str) -> str:
+    if any(k in op for k in ("scaled_dot_product", "flash_attention", "efficient_attention", "softmax")):
+        return "attention"
+    if op in ("aten::mm", "aten::addmm", "aten::bmm", "aten::matmul", "aten::linear"):
+        return "matmul"
+    return "other"
+
+
+def operator_profile(policy, batch: dict, steps: int = 3) -> dict:
+    """Forward + backward self CPU time per sample by operator kind, the operator count, and the cost of one
+    dispatch of an empty-sized operator (what `count` operators cost before any arithmetic)."""
+    from torch.profiler import ProfilerActivity, profile
+
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        for _ in range(steps):
+            loss, _ = policy.forward(batch)
+            loss.backward()
+            policy.zero_grad()
+    n = steps * len(batch[spec.ACTION_KEY])
+    by_kind, count = defaultdict(float), 0
+    for evt in prof.key_averages():
+        if evt.key.startswith("aten::") or "Backward" in evt.key:
+            by_kind[_category(evt.key)] += evt.self_cpu_time_total / 1e3 / n
+            count += evt.count if evt.key.startswith("aten::") else 0
+    x = torch.zeros(1)
+    t = time.perf_counter()
+    for _ in range(2000):
+        torch.add(x, x)
+    dispatch_us = (time.perf_counter() - t) / 2000 * 1e6
+    return {**{f"{k}_ms": v for k, v in by_kind.items()}, "aten_ops_per_step": count // steps,
+            "dispatch_us_per_op": dispatch_us}
+
+
+def gemm_gflops(size: str, batch_size: int, repeats: int = 20) -> float:
+    """GFLOP/s of this machine's matrix products at the model's training shapes (batch x 30 tokens rows)."""
+    policy = make_policy(size)
+    d, t = policy.config.embed_dim, policy.config.n_obs_steps
+    rows = batch_size * t
+    shapes = [(rows, d, 3 * d), (rows, d, d), (rows, d, 4 * d), (rows, 4 * d, d)]
+    mats = [(torch.randn(m, k), torch.randn(n, k)) for m, k, n in shapes]
+    flops = sum(2 * m * k * n for m, k, n in shapes)
+    for a, w in mats:
+        F.linear(a, w)
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        for a, w in mats:
+            F.linear(a, w)
+    return flops * repeats / (time.perf_counter() - t0) / 1e9
+
+
+def format_table(r: dict) -> str:
+    load, upd = r["load_ms_per_sample"], r["update_ms_per_sample"]
+    lines = [f"student {r['size']}, batch {r['batch_size']}, one torch thread (per sample; ratios within this run)"]
+    for path in ("lerobot", "lerobot_row", "lerobot_window", "streaming", "cache"):
+        lines.append(f"  load {path:15s} {load[path]:8.3f} ms  = {r['load_over_update'][path]:6.2f} x update")
+    for name in ADAMW:
+        u = upd[name]
+        lines.append(f"  update, {name:14s} {u['total']:.3f} ms  (" + ", ".join(f"{p} {u[p]:.3f}" for p in PARTS) + ")")
+    if "profile" in upd:
+        p = upd["profile"]
+        lines.append("  fwd+bwd by operator: " + ", ".join(f"{k[:-3]} {v:.3f} ms" for k, v in p.items() if k.endswith("_ms"))
+                     + f"; {p['aten_ops_per_step']} aten ops/step at {p['dispatch_us_per_op']:.1f} us each")
+    lines.append(f"  floor ({r['train_flops_per_sample'] / 1e6:.1f} MFLOP at {r['gemm_gflops']:.1f} GFLOP/s): "
+                 f"{r['floor_ms_per_sample']:.3f} ms (update = {r['update_over_floor']:.2f} x floor)")
+    lines.append("  bound, samples/s with " + f"{r['num_workers']} loader process(es): "
+                 + ", ".join(f"{k} {v:.0f}" for k, v in r["bound_samples_per_s"].items()))
+    for row in r.get("loader", []):
+        lines.append(f"  DataLoader {row['path']:8s} num_workers={row['num_workers']}: {row['samples_per_s']:.0f} samples/s")
+    for lt in r.get("lerobot_train", []):
+        lines.append(f"  lerobot-train {lt['path']:8s}: {lt['steps']} steps in {lt['wall_s']:.1f} s = "
+                     f"{lt['samples_per_s']:.0f} samples/s")
+    return "\n".join(lines)

@@ -1,0 +1,106 @@
+"""The student's data path (`window_cache`): lerobot-train's samples from the low-dim cache are LeRobot's own.
+
+Each test compares against LeRobot's `DatasetReader.get_item` on the same dataset and indices: every key (the
+`observation.state_is_pad` flags included), its order, dtype, shape and value, per sample and as a collated batch,
+also through a spawned loader process as lerobot-train runs its workers.
+"""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+import torch
+from lerobot.datasets import LeRobotDataset
+from lerobot.datasets.dataset_reader import DatasetReader
+from lerobot.utils.constants import ACTION, OBS_STATE
+from torch.utils.data import DataLoader, default_collate
+
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.policies.blindgrasp_transformer import BlindgraspTransformerConfig
+from lerobot_blindgrasp.policies.blindgrasp_transformer.window_cache import LowDimWindowReader
+
+EPISODE_LENGTHS = (12, 36, 40)  # one shorter than the 30-step window, so some windows are padded at both ends
+TASKS = ("grasp the sphere", "grasp the box")
+
+
+@pytest.fixture(scope="module")
+def dataset_root(tmp_path_factory):
+    root = tmp_path_factory.mktemp("data_path") / "ds"
+    features = {**spec.dataset_features(), "episode.seed": {"dtype": "int64", "shape": (2,), "names": None}}
+    ds = LeRobotDataset.create("local/data_path", fps=spec.CONTROL_HZ, features=features, root=root,
+                               use_videos=False)
+    rng = np.random.default_rng(0)
+    for e, length in enumerate(EPISODE_LENGTHS):
+        for _ in range(length):
+            ds.add_frame({OBS_STATE: rng.normal(size=spec.STATE_DIM).astype(np.float32),
+                          ACTION: rng.normal(size=spec.ACTION_DIM).astype(np.float32),
+                          "episode.seed": np.array([e, 7], dtype=np.int64), "task": TASKS[e % 2]})
+        ds.save_episode()
+    ds.finalize()
+    return root
+
+
+def windowed(root, **kwargs) -> LeRobotDataset:
+    """The dataset as lerobot-train builds it for the student: the policy's 30-step observation window."""
+    deltas = BlindgraspTransformerConfig(size="quick").observation_delta_indices
+    return LeRobotDataset("local/data_path", root=root,
+                          delta_timestamps={OBS_STATE: [d / spec.CONTROL_HZ for d in deltas]}, **kwargs)
+
+
+def assert_same_item(new: dict, ref: dict) -> None:
+    assert list(new) == list(ref)
+    for key, value in ref.items():
+        if isinstance(value, torch.Tensor):
+            assert new[key].dtype == value.dtype and new[key].shape == value.shape, key
+            assert torch.equal(new[key], value), key
+        else:
+            assert new[key] == value, key
+
+
+def test_every_sample_is_lerobots_own(dataset_root):
+    ds = windowed(dataset_root)
+    assert isinstance(ds.reader, LowDimWindowReader)
+    pads = 0
+    for i in range(len(ds)):
+        new, ref = ds[i], DatasetReader.get_item(ds.reader, i)
+        assert_same_item(new, ref)
+        pads += int(ref[f"{OBS_STATE}_is_pad"].any())
+    assert pads > 30  # the windows near each episode's start are padded: the flags were compared, not just zeros
+    sample = ds[5]
+    assert sample[OBS_STATE].shape == (30, spec.STATE_DIM) and sample["task"] == TASKS[0]
+
+
+def test_an_episode_subset_maps_its_frames_as_lerobot_does(dataset_root):
+    ds = windowed(dataset_root, episodes=[1, 2])
+    assert isinstance(ds.reader, LowDimWindowReader) and len(ds) == sum(EPISODE_LENGTHS[1:])
+    for i in range(len(ds)):
+        assert_same_item(ds[i], DatasetReader.get_item(ds.reader, i))
+
+
+def test_a_sample_is_a_copy_not_a_view_of_the_cache(dataset_root):
+    ds = windowed(dataset_root)
+    first = ds[40]
+    first[OBS_STATE].zero_()
+    first[ACTION].zero_()
+    assert_same_item(ds[40], DatasetReader.get_item(ds.reader, 40))
+
+
+def test_reads_without_a_window_keep_lerobots_reader(dataset_root):
+    plain = LeRobotDataset("local/data_path", root=dataset_root)
+    assert type(plain.reader) is DatasetReader
+
+
+def test_a_batch_through_a_spawned_loader_process_equals_lerobots(dataset_root):
+    """lerobot-train's loader: spawned worker processes, each building its own cache after unpickling."""
+    ds = windowed(dataset_root)
+    ds[0]  # builds the cache here; pickling must drop it
+    assert "_low_dim_cache" in ds.reader.__dict__
+    assert "_low_dim_cache" not in pickle.loads(pickle.dumps(ds.reader)).__dict__
+    indices = [0, 3, 11, 12, 13, 41, 47, 87]
+    loader = DataLoader(torch.utils.data.Subset(ds, indices), batch_size=len(indices), num_workers=1,
+                        multiprocessing_context="spawn")
+    batch = next(iter(loader))
+    ref = default_collate([DatasetReader.get_item(ds.reader, i) for i in indices])
+    assert_same_item(batch, ref)
