@@ -144,3 +144,17 @@ def test_a_restarted_bridge_keeps_its_address():
         assert b.source == ("127.0.0.1", port) and b.session != a.session
     finally:
         b.close()
+
+
+def test_a_network_error_does_not_stop_the_bridge(caplog):
+    """sendto fails while the link is down (here: broadcast without SO_BROADCAST, which the kernel refuses); the
+    callback must not raise into the ROS executor, and says so once."""
+    bridge = GloveBridge(GloveBridgeConfig(source_port=0))
+    bridge.sender.addr = ("255.255.255.255", 50120)
+    try:
+        assert not bridge.forward(_publisher_message("Right", OPEN))
+        assert not bridge.forward(_publisher_message("Right", OPEN))
+    finally:
+        bridge.sender.close()
+    assert bridge.send_errors == 2 and bridge.forwarded == 0 and "2 not sent" in bridge.status()
+    assert sum("Cannot send to 255.255.255.255:50120" in r.getMessage() for r in caplog.records) == 1

@@ -99,7 +99,7 @@ class GloveBridge:
     def __init__(self, cfg: GloveBridgeConfig, sender: GloveSender | None = None):
         self.cfg = cfg
         self.sender = sender or GloveSender(cfg.host, cfg.port, cfg.side, source_port=cfg.source_port)
-        self.forwarded = self.other_hand = self.bad = 0
+        self.forwarded = self.other_hand = self.bad = self.send_errors = 0
         self._warned: set[frozenset[str]] = set()
 
     def forward(self, msg) -> bool:
@@ -119,14 +119,21 @@ class GloveBridge:
             logger.warning("The %s glove's messages lack %s (types not understood: %s): the receiver refuses them "
                            "unless that finger's --teleop.spread_gain is 0. See docs/glove.md, 'Names'.", side,
                            sorted(missing), sorted(set(unknown)))  # fmt: skip
-        self.sender.send(ergonomics)
+        try:
+            self.sender.send(ergonomics)
+        except OSError as e:  # no route to the receiver yet (link down, wrong --host): keep going, say it once
+            self.send_errors += 1
+            if self.send_errors == 1:
+                logger.warning("Cannot send to %s:%d: %s (check --host and the network)", *self.sender.addr, e)
+            return False
         self.forwarded += 1
         return True
 
     def status(self) -> str:
         return (
             f"forwarded {self.forwarded} {self.cfg.side}-hand messages to {self.cfg.host}:{self.cfg.port} "
-            f"(session {self.sender.session}); skipped {self.other_hand} of the other hand, {self.bad} bad"
+            f"(session {self.sender.session}); skipped {self.other_hand} of the other hand, {self.bad} bad, "
+            f"{self.send_errors} not sent"
         )
 
 
