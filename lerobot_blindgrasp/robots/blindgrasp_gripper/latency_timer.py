@@ -47,9 +47,10 @@ class LatencyTimerCheck:
         """The operator's message, or None when there is nothing to say."""
         if self.sysfs_file is None or self.ok:
             return None
+        now = "could not be read" if self.before_ms is None else f"is {self.before_ms} ms"
         return (
-            f"The USB latency timer of '{self.port}' is {self.before_ms} ms and could not be set to {TARGET_MS} ms "
-            f"({self.error}). Every servo reply then waits up to {self.before_ms} ms in the adapter. Run\n"
+            f"The USB latency timer of '{self.port}' {now} and could not be set to {TARGET_MS} ms "
+            f"({self.error}). Every reply then waits up to that long (16 ms by default) in the adapter. Run\n"
             f"    {self.fix_command}\n"
             "or install robot_configs/udev/99-blindgrasp.rules, which sets it at every plug-in (docs/bringup.md)."
         )
