@@ -5,7 +5,8 @@
   every card (the student's `generate_model_card`, the teacher's export card, both dataset cards and the shipped
   models' cards at `blindgrasp-publish`) name them through this module.
 - The project has no public home yet, so those URLs are placeholders under `example.invalid` (a domain reserved
-  never to resolve). `require_public_urls()` refuses a push while any of them still is one.
+  never to resolve). `require_public_urls()` refuses `blindgrasp-publish` while any of them still is one, and
+  `code_line()` never writes one into a card.
 - `HUB_REPOS`: the Hub repo names of the shipped teacher, student and demo dataset (`blindgrasp-publish`).
 """
 
@@ -62,6 +63,10 @@ def require_public_urls() -> dict[str, str]:
 
 
 def code_line() -> str:
-    """One markdown line for a card: where the code, its issues and its guides are."""
-    src = source_url() or "(no [project.urls] Source in the installed metadata)"
+    """One markdown line for a card: where the code, its issues and its guides are. A placeholder is never written
+    into a card (a user's own dataset or student card included): the line then says the location is not set."""
+    src = source_url()
+    if is_placeholder(src):
+        return (f"Code: the `{DIST}` package (importable as `lerobot_blindgrasp`); its public source location is "
+                "not set yet.")  # fmt: skip
     return f"Code, guides and issues: {src} (package `{DIST}`, importable as `lerobot_blindgrasp`)."
