@@ -76,7 +76,8 @@ def test_presets_are_consistent():
     assert pipeline.PRESETS["paper"].student.device == "cuda"
 
 
-def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_states_and_sim(tmp_path):
+def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_states_sim_and_cpu(tmp_path, monkeypatch):
+    from lerobot_blindgrasp import platform_id
     from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
@@ -86,11 +87,24 @@ def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_state
     objs = recipe.objects_of(preset.evaluation.task)
     rec = {"checkpoint_sha256": TeacherPolicy(teacher).sha256, "sim_fingerprint": sim_fingerprint(),
            "seed": spec.EVAL_SEED, "episodes_per_object": preset.evaluation.episodes_per_object, "objects": list(objs),
-           "modes": {"deterministic": {}}}  # fmt: skip
+           "modes": {"deterministic": {}}, "platform": platform_id.platform()}  # fmt: skip
     (teacher / "eval").mkdir()
     for change, reused in (({}, True), ({"seed": spec.EVAL_SEED + 1}, False), ({"sim_fingerprint": "other"}, False),
-                           ({"episodes_per_object": 5}, False), ({"checkpoint_sha256": "x"}, False)):  # fmt: skip
+                           ({"episodes_per_object": 5}, False), ({"checkpoint_sha256": "x"}, False),
+                           ({"platform": None}, False)):  # fmt: skip
         (teacher / "eval" / "eval.json").write_text(json.dumps({**rec, **change}))
         dest = tmp_path / f"dest{len(list(tmp_path.iterdir()))}"
         assert pipeline._reuse_teacher_eval(teacher, dest, preset, spec.EVAL_SEED, objs) is reused, change
         assert (dest / "eval.json").is_file() is reused
+    # Recorded on another CPU family (played by another model name): re-run, and the report will say why.
+    (teacher / "eval" / "eval.json").write_text(json.dumps(rec))
+    monkeypatch.setenv(platform_id.CPU_MODEL_ENV, "Newcomer CPU 9000")
+    note: dict = {}
+    assert not pipeline._reuse_teacher_eval(teacher, tmp_path / "other_cpu", preset, spec.EVAL_SEED, objs, note=note)
+    assert not (tmp_path / "other_cpu").exists()
+    assert repr(rec["platform"]["cpu"]) in note["eval_rerun_because"] and "Newcomer CPU 9000" in note["eval_rerun_because"]
+    from lerobot_blindgrasp.pipeline.report import _teacher_lines
+
+    lines = _teacher_lines({"teacher": {"source": "shipped", "path": str(teacher), "file": "teacher.safetensors",
+                                        "iteration": 1, "sha256": "0" * 64, **note}})
+    assert any("evaluated in this run, on this machine" in line and "Newcomer CPU 9000" in line for line in lines)

@@ -28,7 +28,9 @@ def test_the_shipped_student_is_a_complete_pretrained_model_with_a_card():
 def test_lerobot_eval_runs_the_shipped_student(tmp_path):
     # Start state 1001 of the large cylinder B: the student lifted it in the recorded 20-episode eval (card) and
     # alone. (Start state 1000, also lifted in the recorded batch of 20, fails at batch size 1 or 2: the batch
-    # changes the transformer's float rounding, and a contact-rich rollout amplifies it.)
+    # changes the transformer's float rounding, and a contact-rich rollout amplifies it.) Only the success is
+    # compared, not a float: the episode's summed reward drifts between CPU families while its success holds
+    # (docs/results/cpu_portability.md, under stand-ins for other families).
     cmd = [sys.executable, "-m", "lerobot.scripts.lerobot_eval", f"--policy.path={STUDENT}", "--env.type=blindgrasp",
            "--env.task=cylinder_b_large", "--eval.n_episodes=1", "--eval.batch_size=1", "--policy.device=cpu",
            "--eval.use_async_envs=false", "--env.render_stride=50", f"--output_dir={tmp_path / 'eval'}", "--seed=1001"]

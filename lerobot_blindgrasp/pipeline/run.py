@@ -174,7 +174,7 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     teacher_eval = out / "teacher_eval"
     if stage.done("teacher_eval", legacy=(teacher_eval / "eval.json").exists()):
         stage.skip("teacher_eval", "done")
-    elif _reuse_teacher_eval(teacher_dir, teacher_eval, preset, eval_seed, eval_objects):
+    elif _reuse_teacher_eval(teacher_dir, teacher_eval, preset, eval_seed, eval_objects, note=record["teacher"]):
         stage.skip("teacher_eval", f"the same start states were evaluated for this teacher in {teacher_dir / 'eval'}")
         record["teacher"]["eval_reused_from"] = str(teacher_dir / "eval")
         stage.complete("teacher_eval")
@@ -283,10 +283,13 @@ def _teacher(stage: Stage, preset: presets.Preset, out: Path, seed: int, given: 
 
 
 def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: presets.Preset, eval_seed: int,
-                        eval_objects: tuple[str, ...]) -> bool:
+                        eval_objects: tuple[str, ...], note: dict | None = None) -> bool:
     """A shipped teacher may carry its eval (`<folder>/eval/eval.json`). Rollouts are functions of (teacher, start
-    states, torch seed, sim code), so an eval of the same weights on the same start states under the same sim
-    sources is the paired eval; reuse it rather than spend minutes recomputing it."""
+    states, torch seed, sim code, float platform), so an eval of the same weights on the same start states under
+    the same sim sources, made on this CPU family, is the paired eval; reuse it rather than spend minutes
+    recomputing it. One from another family (its floats drift, and a contact-rich episode can end otherwise) is
+    re-run here: `note["eval_rerun_because"]` then says why, for the report."""
+    from lerobot_blindgrasp import platform_id
     from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 
@@ -302,6 +305,15 @@ def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: presets.Preset, e
         and prev.get("objects") == list(eval_objects)
         and set(preset.evaluation.teacher_modes) <= set(prev.get("modes", {}))
     )
+    here = platform_id.platform()
+    if same and not platform_id.same(prev.get("platform"), here):
+        why = (f"the carried eval {src} was recorded on {platform_id.describe(prev.get('platform'))}, and this "
+               f"machine is {platform_id.describe(here)}")
+        print(f"[pipeline] {why}: re-running the teacher's eval here, so that teacher and student are paired on "
+              "one machine's floats", flush=True)
+        if note is not None:
+            note["eval_rerun_because"] = why
+        return False
     if same:  # copied beside dest, then renamed: a kill mid-copy leaves no eval.json that looks finished
         tmp = dest.with_name(f".{dest.name}{durable.TEMP_MARK}copy")
         shutil.rmtree(tmp, ignore_errors=True)

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_blindgrasp import durable, spec
+from lerobot_blindgrasp import durable, platform_id, spec
 from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import objects, rewards
@@ -159,6 +159,7 @@ def evaluate_teacher(
     results["checkpoint"] = str(teacher.checkpoint)
     results["checkpoint_sha256"] = teacher.sha256
     results["sim_fingerprint"] = sim_fingerprint()
+    results["platform"] = platform_id.platform()  # floats drift between CPU families: where these were made
     results["iteration"] = teacher.iteration
     return results
 
