@@ -185,9 +185,18 @@ def _with_existing_policy(argv: tuple[str, ...]) -> list[str]:
 def run_in_process(argv: list[str], monkeypatch, stop_at_parse: bool):
     """Run the command's entry point in this process; returns (config or None, exit code, output)."""
     orig = draccus.argparsing.parse
+    depth = [0]
 
     def recording_parse(*args, **kwargs):
-        cfg = orig(*args, **kwargs)
+        # Only the command's own config stops the run: building it may parse others (lerobot-eval's and the
+        # rollout's __post_init__ read the policy's config from --policy.path through draccus.parse).
+        depth[0] += 1
+        try:
+            cfg = orig(*args, **kwargs)
+        finally:
+            depth[0] -= 1
+        if depth[0]:
+            return cfg
         raise _Parsed(cfg)
 
     if stop_at_parse:
@@ -225,8 +234,11 @@ def test_the_docs_have_commands_to_check():
 
 @pytest.mark.parametrize("cmd", [c for c in ALL if c.argv[0] != "lerobot-find-port"], ids=str)
 def test_each_command_parses_with_its_flags(cmd, parsed):
+    from lerobot.configs.policies import PreTrainedConfig
+
     cfg, code, out = parsed[cmd]
     assert cfg is not None, f"{cmd}\nexit {code} before its config was built:\n{out[-3000:]}"
+    assert not isinstance(cfg, PreTrainedConfig), f"{cmd}: stopped at the policy's config, not the command's"
 
 
 @pytest.mark.parametrize("program", sorted({c.program for c in ALL} - {"lerobot-find-port"}))
