@@ -26,7 +26,7 @@ def _connect(rig, tmp_path, monkeypatch) -> BlindgraspGripper:
 
 
 def _block(temp=35, volts=12.0, current=0) -> dict:
-    return {"ff_j10": {"Present_Temperature": temp, "Present_Input_Voltage": int(round(volts * 10)),
+    return {"ff_j10": {"Present_Temperature": temp, "Present_Input_Voltage": round(volts * 10),
                        "Present_Current": current & 0xFFFF}}  # fmt: skip
 
 
@@ -43,7 +43,9 @@ def test_the_margins_follow_the_servos_own_temperature_limit(rig, tmp_path, monk
     """Temperature_Limit lowered to 70 degC in EEPROM: the firmware stops at 70, so 63 degC must not start."""
     rig.servo("ff_j12").set("Temperature_Limit", 70)
     rig.servo("ff_j12").health.temperature_c = 63.0
-    with pytest.raises(GripperHealthError, match=r"ff_j12 temperature 63 degC \(start needs < 62, Temperature_Limit 70"):
+    with pytest.raises(
+        GripperHealthError, match=r"ff_j12 temperature 63 degC \(start needs < 62, Temperature_Limit 70"
+    ):
         _connect(rig, tmp_path, monkeypatch)
     assert not rig.dxl.any_torque()
 
@@ -89,8 +91,9 @@ def test_normalizer_stats_fitted_on_another_state_are_refused(tmp_path):
     pre["steps"][-1]["config"]["features"]["observation.state"]["shape"] = [10]
     (ckpt / "policy_preprocessor.json").write_text(json.dumps(pre))
     bad, _ = policy_check.problems(ckpt, ROBOT)
-    assert bad == [f"'observation.state' shape (10,) in {ckpt / 'policy_preprocessor.json'} (normalizer), the "
-                   "robot has (12,)"]
+    assert bad == [
+        f"'observation.state' shape (10,) in {ckpt / 'policy_preprocessor.json'} (normalizer), the robot has (12,)"
+    ]
 
 
 def test_a_truncated_checkpoint_config_is_refused_before_anything_moves(tmp_path):

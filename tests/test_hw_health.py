@@ -121,7 +121,9 @@ def test_a_stall_at_the_current_limit_stops_before_the_firmware_overload(rig, ro
     for servo in rig.dxl.servos.values():
         servo.health.overload_s = 3.0
     target = _squeeze(rig, robot)
-    with pytest.raises(GripperHealthError, match=r"current: 2\.\d\d A \(limit 2\.30 A\): at the current limit for"):
+    with pytest.raises(
+        GripperHealthError, match=r"current: 2\.\d\d A \(limit 2\.30 A\): at the current limit for"
+    ):
         _hold(robot, 100, target)
     assert _stopped(rig, robot)
     assert not any(s.get("Hardware_Error_Status") for s in rig.dxl.servos.values())  # before the firmware's stop

@@ -32,7 +32,9 @@ def _info(root: Path, *, robot_type=ROBOT_TYPE, fps=20, state=spec.STATE_NAMES, 
         "action": {"dtype": "float32", "shape": [len(action)], "names": list(action)},
     }
     (root / "meta").mkdir(parents=True, exist_ok=True)
-    (root / "meta" / "info.json").write_text(json.dumps({"robot_type": robot_type, "fps": fps, "features": features}))
+    (root / "meta" / "info.json").write_text(
+        json.dumps({"robot_type": robot_type, "fps": fps, "features": features})
+    )
 
 
 def _checkpoint(tmp_path: Path, *, action_dim: int = spec.ACTION_DIM, dataset: dict | None = None) -> Path:
@@ -69,8 +71,10 @@ def test_another_hands_checkpoint_is_refused_naming_names_type_and_file(tmp_path
 def test_a_state_in_another_order_is_refused(tmp_path):
     swapped = (spec.STATE_NAMES[1], spec.STATE_NAMES[0], *spec.STATE_NAMES[2:])
     bad, _ = policy_check.problems(_checkpoint(tmp_path, dataset={"state": swapped}), ROBOT)
-    assert bad == [f"'observation.state' names {list(swapped)} in {tmp_path / 'data/meta/info.json'}, the robot's "
-                   f"are {list(spec.STATE_NAMES)} (names and order)"]
+    info = tmp_path / "data/meta/info.json"
+    assert bad == [
+        f"'observation.state' names {list(swapped)} in {info}, the robot's are {list(spec.STATE_NAMES)} (names and order)"
+    ]
 
 
 def test_a_checkpoint_trained_at_another_rate_is_refused(tmp_path):
@@ -80,8 +84,9 @@ def test_a_checkpoint_trained_at_another_rate_is_refused(tmp_path):
 
 def test_the_wrong_action_size_says_action(tmp_path):
     bad, _ = policy_check.problems(_checkpoint(tmp_path, action_dim=8), ROBOT)
-    assert bad == [f"'action' shape (8,) in {tmp_path / 'pretrained_model/config.json'} (output_features), the "
-                   "robot has (9,)"]
+    assert bad == [
+        f"'action' shape (8,) in {tmp_path / 'pretrained_model/config.json'} (output_features), the robot has (9,)"
+    ]
 
 
 def test_relative_actions_sent_to_a_target_robot_are_refused(tmp_path):
@@ -121,11 +126,21 @@ def test_a_mismatch_on_the_command_line_is_refused_before_the_ports_open(rig, tm
 
 def test_lerobot_eval_refuses_a_mismatching_checkpoint_before_any_torque(rig, tmp_path):
     ckpt = _checkpoint(tmp_path, action_dim=8)
-    cmd = [str(BIN / "lerobot-eval"), f"--policy.path={ckpt}", "--env.type=blindgrasp_real",
-           "--env.robot.type=blindgrasp_gripper",
-           f"--env.robot.port={rig.dxl.port}", f"--env.robot.force_sensor.port={rig.force.port}",
-           "--env.robot.id=rig", "--env.task=foam_brick", "--env.success_mode=force", "--eval.n_episodes=1",
-           "--eval.batch_size=1", "--eval.use_async_envs=false", f"--output_dir={tmp_path / 'eval'}"]
+    cmd = [
+        str(BIN / "lerobot-eval"),
+        f"--policy.path={ckpt}",
+        "--env.type=blindgrasp_real",
+        "--env.robot.type=blindgrasp_gripper",
+        f"--env.robot.port={rig.dxl.port}",
+        f"--env.robot.force_sensor.port={rig.force.port}",
+        "--env.robot.id=rig",
+        "--env.task=foam_brick",
+        "--env.success_mode=force",
+        "--eval.n_episodes=1",
+        "--eval.batch_size=1",
+        "--eval.use_async_envs=false",
+        f"--output_dir={tmp_path / 'eval'}",
+    ]
     out = subprocess.run(cmd, env=cli_env(tmp_path), capture_output=True, text=True, timeout=180)
     assert out.returncode != 0
     assert "'action' shape (8,)" in out.stdout + out.stderr and "size mismatch" not in out.stdout + out.stderr

@@ -53,16 +53,20 @@ class ServoHealthModel:
             settle = self.ambient_c + self.thermal_tau_s * (self.heating_c_per_s_per_a2 * amps**2
                                                             + self.extra_heating_c_per_s)  # fmt: skip
             self.temperature_c = settle + (self.temperature_c - settle) * math.exp(-dt / self.thermal_tau_s)
-        servo.set("Present_Temperature", max(0, min(255, int(round(self.temperature_c)))))
+        servo.set("Present_Temperature", max(0, min(255, round(self.temperature_c))))
         volts = self.supply.voltage()
-        servo.set("Present_Input_Voltage", max(0, min(65535, int(round(volts * 10)))))
+        servo.set("Present_Input_Voltage", max(0, min(65535, round(volts * 10))))
         self._firmware(servo, dt)
 
     def _firmware(self, servo, dt: float) -> None:
         bits = 0
         if servo.get("Present_Temperature") >= servo.get("Temperature_Limit"):
             bits |= HW_OVERHEATING
-        if not servo.get("Min_Voltage_Limit") <= servo.get("Present_Input_Voltage") <= servo.get("Max_Voltage_Limit"):
+        if (
+            not servo.get("Min_Voltage_Limit")
+            <= servo.get("Present_Input_Voltage")
+            <= servo.get("Max_Voltage_Limit")
+        ):
             bits |= HW_INPUT_VOLTAGE
         limit = servo.get("Current_Limit")
         if servo.get("Operating_Mode") == 5:

@@ -80,8 +80,10 @@ class ServoHealth:
             self.temperature_limit_c[j] = regs["Temperature_Limit"] * xm430.TEMPERATURE_UNIT_C
             missing = xm430.SHUTDOWN_DEFAULT & ~regs["Shutdown"]
             if missing:
-                notes.append(f"{j}: Shutdown(63) = {regs['Shutdown']:#04x} lacks {xm430.decode_hardware_error(missing)}"
-                             f" (factory {xm430.SHUTDOWN_DEFAULT:#04x}): the firmware will not stop that servo itself")
+                notes.append(
+                    f"{j}: Shutdown(63) = {regs['Shutdown']:#04x} lacks {xm430.decode_hardware_error(missing)}"
+                    f" (factory {xm430.SHUTDOWN_DEFAULT:#04x}): the firmware will not stop that servo itself"
+                )
         return notes
 
     # --- the three items ---------------------------------------------------------------------------------------
@@ -129,7 +131,9 @@ class ServoHealth:
             return Diagnostic(OK, j, "current", amps, text)
         held = now - self._stall_since.setdefault(j, now)
         if held >= xm430.STALL_STOP_S:
-            return Diagnostic(ERROR, j, "current", amps, f"{text}: at the current limit for {held:.1f} s (stalled)")
+            return Diagnostic(
+                ERROR, j, "current", amps, f"{text}: at the current limit for {held:.1f} s (stalled)"
+            )
         if held >= xm430.STALL_WARN_S:
             return Diagnostic(WARN, j, "current", amps, f"{text}: at the current limit for {held:.1f} s")
         return Diagnostic(OK, j, "current", amps, text)
@@ -158,12 +162,16 @@ class ServoHealth:
             t = block[j]["Present_Temperature"] * xm430.TEMPERATURE_UNIT_C
             limit = self.temperature_limit_c[j]
             if t >= limit - xm430.TEMPERATURE_START_MARGIN_C:
-                bad.append(f"{j} temperature {t:.0f} degC (start needs < {limit - xm430.TEMPERATURE_START_MARGIN_C:.0f}"
-                           f", Temperature_Limit {limit:.0f}): let it cool")
+                bad.append(
+                    f"{j} temperature {t:.0f} degC (start needs < {limit - xm430.TEMPERATURE_START_MARGIN_C:.0f}"
+                    f", Temperature_Limit {limit:.0f}): let it cool"
+                )
             v = xm430.voltage_v(block[j]["Present_Input_Voltage"])
             if not xm430.VOLTAGE_START_LOW_V <= v <= xm430.VOLTAGE_HIGH_V:
-                bad.append(f"{j} input voltage {v:.1f} V (start needs {xm430.VOLTAGE_START_LOW_V:.1f}-"
-                           f"{xm430.VOLTAGE_HIGH_V:.1f} V at rest): check the supply")
+                bad.append(
+                    f"{j} input voltage {v:.1f} V (start needs {xm430.VOLTAGE_START_LOW_V:.1f}-"
+                    f"{xm430.VOLTAGE_HIGH_V:.1f} V at rest): check the supply"
+                )
         return bad
 
 

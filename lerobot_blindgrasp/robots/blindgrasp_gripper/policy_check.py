@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -61,8 +60,9 @@ def _dataset_info(train: dict | None, where: Path) -> tuple[dict | None, str]:
     if ds.get("root"):
         candidates.append(Path(ds["root"]))
     if ds.get("repo_id"):
-        home = Path(os.environ.get("HF_LEROBOT_HOME", Path.home() / ".cache/huggingface/lerobot"))
-        candidates.append(home / ds["repo_id"])
+        from lerobot.utils.constants import HF_LEROBOT_HOME  # where LeRobot itself looks, env vars included
+
+        candidates.append(Path(HF_LEROBOT_HOME) / ds["repo_id"])
     for root in candidates:
         info = _load(root / "meta" / "info.json")
         if info is not None:
@@ -106,9 +106,13 @@ def _meaning_problems(where: Path) -> list[str]:
     pre = _step_names(_load(where / "policy_preprocessor.json"))
     post = _step_names(_load(where / "policy_postprocessor.json"))
     if "relative_actions_processor" in pre and "absolute_actions_processor" not in post:
-        return [f"'action' meaning: {where / 'policy_preprocessor.json'} makes actions relative and "
+        return [
+            (
+                f"'action' meaning: {where / 'policy_preprocessor.json'} makes actions relative and "
                 f"{where / 'policy_postprocessor.json'} never makes them absolute again; the robot takes absolute "
-                "joint targets (rad)"]  # fmt: skip
+                "joint targets (rad)"
+            )
+        ]
     return []
 
 
@@ -161,7 +165,9 @@ def check(path: str | Path, robot: RobotContract) -> None:
             "(no servo took torque)."
         )
     for note in unverified:
-        logger.warning("Policy at %s: could not verify %s; checked the shapes and action meaning only.", path, note)
+        logger.warning(
+            "Policy at %s: could not verify %s; checked the shapes and action meaning only.", path, note
+        )
     _checked.add(key)
 
 
@@ -191,5 +197,7 @@ def check_cli_policy(robot) -> None:
             fps, source = float(value), f"--{flag}"
     check(where, gripper_contract(robot.name, fps, source))
     if fps != float(robot.config.loop_hz):
-        raise PolicyMismatchError(f"{source}={fps:g} but the robot's loop_hz is {robot.config.loop_hz:g}: set "
-                                  "--robot.loop_hz to the loop's rate (it measures the loop against it).")
+        raise PolicyMismatchError(
+            f"{source}={fps:g} but the robot's loop_hz is {robot.config.loop_hz:g}: set "
+            "--robot.loop_hz to the loop's rate (it measures the loop against it)."
+        )

@@ -111,13 +111,12 @@ class SampleSpacing:
 
     LeRobot's loops (lerobot-record, lerobot-rollout) and the eval trial sleep `period - (time since the loop's
     start)`; after an observation stalled by a slow bus, the loop goes straight on, and the next observation's
-    data is read 3-10 ms after the stalled one's, which the policy and the dataset take for one whole period. So the
-    robot spaces its own samples: after an observation whose reads took more than half a period, the next one's
-    reads end no earlier than `period x (1 - slack)` after the slow one's (they start that long after it, less the
-    shortest recent read), and so on while calls keep coming early. A waiting observation shifts the caller's next
-    start by the same amount, so the waits shrink by `slack` periods per step and the caller's own pacing takes over
-    again within a few steps. Normal steps never wait, and a loop whose reads are all slow (a loaded host) is not
-    slowed further: its shortest read is slow too."""
+    data is read 3-10 ms after the stalled one's, which the policy and the dataset take for one whole period.
+    So the robot spaces its own samples: after an observation whose reads took longer than a period (a stall),
+    the next one's reads end no earlier than `period x (1 - slack)` after the slow one's (they start that long
+    after it, less the shortest recent read), and so on while calls keep coming early. A waiting observation
+    shifts the caller's next start by the same amount, so the waits shrink by `slack` periods per step and the
+    caller's own pacing takes over again within a few steps. Normal steps never wait."""
 
     def __init__(self, period_s: float, slack: float = 0.1):
         self.period_s = period_s
@@ -142,6 +141,6 @@ class SampleSpacing:
 
     def after_read(self, started: float, ended: float) -> None:
         self._reads.append(ended - started)
-        if ended - started > 0.5 * self.period_s:
+        if ended - started > self.period_s:
             self._recovering = True
         self._last_end = ended
