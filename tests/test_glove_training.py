@@ -2,12 +2,15 @@
 `blindgrasp-train-glove` at smoke size on it alone (`glove_smoke`) and merged with a tiny sim demo set
 (`sim_plus_glove_smoke`), each ending in a real lerobot-train checkpoint that LeRobot loads back.
 
-The gripper and the glove are calibrated in-process (the real robot and teleoperator classes with a scripted
-operator; lerobot-calibrate itself is covered by test_hw_cli.py), into the calibration folder the CLIs read.
+lerobot-record and lerobot-teleoperate run as docs/bringup.md writes them, with the emulators' ports and a
+test-sized session appended. The gripper and the glove are calibrated in-process (the real robot and teleoperator
+classes with a scripted operator; lerobot-calibrate itself is covered by test_hw_cli.py), into the calibration
+folder the CLIs read.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import time
 from pathlib import Path
@@ -25,22 +28,29 @@ from lerobot_blindgrasp.presets.glove import GLOVE_PRESETS
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
-REPO_ID = "local/blindgrasp_glove_session1"
+BRINGUP = ROOT / "docs" / "bringup.md"
+REPO_ID = "local/blindgrasp_glove"  # docs/bringup.md's
 TASK = "grasp and lift the medium cylinder a"
+GRIPPER_ID, OPERATOR_ID = "lab_gripper", "alice"  # the ids the guide calibrates and records with
 
 
-def _robot_args(rig: GripperRig) -> list[str]:
-    return [f"--robot=include {ROOT / 'robot_configs' / 'blindgrasp_gripper.yaml'}", "--robot.id=rig",
-            f"--robot.port={rig.dxl.port}", f"--robot.force_sensor.port={rig.force.port}",
+def _as_documented(program: str) -> list[str]:
+    """The guide's own command line (docs/bringup.md), to be run from the repository root."""
+    from test_docs_commands import commands_of
+
+    [cmd] = [c for c in commands_of(BRINGUP) if c.argv[0] == program]
+    assert f"--robot.id={GRIPPER_ID}" in cmd.argv and f"--teleop.id={OPERATOR_ID}" in cmd.argv, cmd
+    return [str(BIN / program), *cmd.argv[1:]]
+
+
+def _emulator_args(rig: GripperRig, port: int) -> list[str]:
+    """What a documented command needs to run on the emulators (later flags win in draccus)."""
+    return [f"--robot.port={rig.dxl.port}", f"--robot.force_sensor.port={rig.force.port}",
             "--robot.force_sensor.tare_s=0.2", f"--robot.latency_timer_ms={LATENCY_TIMER_MS}",
             # The timing and staleness stops are tested in test_hw_faults*.py; here a loaded CI host that starves
             # the emulators' threads for a few hundred ms must not end the recording (overruns are still warned).
-            "--robot.max_overrun_s=0", "--robot.force_sensor.stale_timeout_s=2.0"]
-
-
-def _teleop_args(port: int) -> list[str]:
-    return [f"--teleop=include {ROOT / 'robot_configs' / 'manus_glove.yaml'}", f"--teleop.port={port}",
-            "--teleop.id=op", "--teleop.disconnect_timeout_s=5.0"]
+            "--robot.max_overrun_s=0", "--robot.force_sensor.stale_timeout_s=2.0",
+            f"--teleop.port={port}", "--teleop.disconnect_timeout_s=5.0"]
 
 
 def _calibrate(home: Path, glove: GloveEmulator, monkeypatch) -> None:
@@ -51,7 +61,7 @@ def _calibrate(home: Path, glove: GloveEmulator, monkeypatch) -> None:
         rig.hand_move(spec.HOME_POSE)
         monkeypatch.setattr("builtins.input", rig.calibration_inputs())
         cfg = rig.robot_config(home / "calibration" / "robots" / "blindgrasp_gripper")
-        robot = BlindgraspGripper(cfg)
+        robot = BlindgraspGripper(dataclasses.replace(cfg, id=GRIPPER_ID))
         robot.connect()
         robot.disconnect()
 
@@ -61,7 +71,7 @@ def _calibrate(home: Path, glove: GloveEmulator, monkeypatch) -> None:
         return ""
 
     monkeypatch.setattr("builtins.input", operator)
-    teleop = ManusGlove(ManusGloveConfig(id="op", port=glove.addr[1], calibration_s=0.2,
+    teleop = ManusGlove(ManusGloveConfig(id=OPERATOR_ID, port=glove.addr[1], calibration_s=0.2,
                                          calibration_dir=home / "calibration" / "teleoperators" / "manus_glove"))
     teleop.connect()
     teleop.disconnect()
@@ -69,22 +79,22 @@ def _calibrate(home: Path, glove: GloveEmulator, monkeypatch) -> None:
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory) -> tuple[Path, dict, int]:
-    """Two 2 s glove episodes recorded by lerobot-record on a fresh rig (the calibration file is written back)."""
+    """docs/bringup.md's lerobot-record on a fresh rig (the calibration file is written back), cut to two 2 s
+    episodes into a temporary folder."""
     home = tmp_path_factory.mktemp("glove_station")
     env = cli_env(home)
     port = free_udp_port()
     with pytest.MonkeyPatch.context() as mp, GloveEmulator(port) as glove:
         _calibrate(home, glove, mp)
-    root = home / "glove_session1"
+    root = home / "blindgrasp_glove"
     with GripperRig() as rig, GloveEmulator(port) as glove:
         rig.hand_move(spec.HOME_POSE)
         rig.place_object()
         glove.closure_fn = lambda t: 0.5 - 0.5 * np.cos(2.5 * t)
-        cmd = [str(BIN / "lerobot-record"), *_robot_args(rig), *_teleop_args(port), f"--dataset.repo_id={REPO_ID}",
-               f"--dataset.root={root}", f"--dataset.single_task={TASK}", "--dataset.fps=20",
+        cmd = [*_as_documented("lerobot-record"), *_emulator_args(rig, port), f"--dataset.root={root}",
                "--dataset.episode_time_s=2", "--dataset.reset_time_s=0.5", "--dataset.num_episodes=2",
-               "--dataset.video=false", "--dataset.push_to_hub=false", "--play_sounds=false"]  # fmt: skip
-        res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
+               "--play_sounds=false"]  # fmt: skip
+        res = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=240)
         assert res.returncode == 0, res.stderr[-4000:]
     return root, env, port
 
@@ -166,14 +176,13 @@ def test_a_folder_of_another_schema_is_named_before_anything_is_written(recordin
 
 
 def test_lerobot_teleoperate_drives_the_gripper_from_the_glove(recording):
-    """docs/bringup.md's first step with the glove, whole, on the station the recording used."""
+    """docs/bringup.md's lerobot-teleoperate, whole (for 2 s), on the station the recording used."""
     _, env, port = recording
     with GripperRig() as rig, GloveEmulator(port) as glove:
         rig.hand_move(spec.HOME_POSE)
         glove.closure_fn = lambda t: 0.5 - 0.5 * np.cos(2.5 * t)
-        cmd = [str(BIN / "lerobot-teleoperate"), *_robot_args(rig), *_teleop_args(port), "--fps=20",
-               "--teleop_time_s=2"]  # fmt: skip
-        res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
+        cmd = [*_as_documented("lerobot-teleoperate"), *_emulator_args(rig, port), "--teleop_time_s=2"]
+        res = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=240)
         assert res.returncode == 0, res.stderr[-4000:]
         assert rig.dxl.instruction_counts.get(0x83, 0) >= 10  # goal sync writes at up to 20 Hz for 2 s
         assert not rig.dxl.any_torque()
