@@ -1,4 +1,5 @@
-"""Which float platform this process runs on: what decides the last bits of the simulation's and the teacher's floats.
+"""Which float platform this process runs on: what decides the last bits of the simulation's and the teacher's
+floats.
 
 MuJoCo's physics (through the C library's math functions) and the teacher's matrix products (through MKL and
 oneDNN kernels) pick their code paths by CPU instruction set, so the same code on another CPU family gives other
@@ -28,10 +29,12 @@ CPU_MODEL_ENV = "BLINDGRASP_CPU_MODEL"
 # Instruction sets that some math library dispatches on (glibc's libm, MKL, oneDNN, NumPy's SIMD loops); the
 # others in /proc/cpuinfo (virtualisation, security, power) move no float.
 FLOAT_ISA = ("sse4_1", "sse4_2", "avx", "avx2", "fma", "f16c", "avx512f", "avx512dq", "avx512cd", "avx512bw",
-             "avx512vl", "avx512_vnni", "avx512_bf16", "avx512_fp16", "amx_tile", "amx_bf16", "asimd", "sve", "sve2")
+             "avx512vl", "avx512_vnni", "avx512_bf16", "avx512_fp16", "amx_tile", "amx_bf16", "asimd", "sve",
+             "sve2")
 # Environment variables that select another code path in those libraries.
-FLOAT_ENV = ("MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS", "MKL_DEBUG_CPU_TYPE", "ATEN_CPU_CAPABILITY", "ONEDNN_MAX_CPU_ISA",
-             "DNNL_MAX_CPU_ISA", "OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES", "GLIBC_TUNABLES")
+FLOAT_ENV = ("MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS", "MKL_DEBUG_CPU_TYPE", "ATEN_CPU_CAPABILITY",
+             "ONEDNN_MAX_CPU_ISA", "DNNL_MAX_CPU_ISA", "OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES",
+             "GLIBC_TUNABLES")
 VERSIONED = ("mujoco", "torch", "numpy")
 
 

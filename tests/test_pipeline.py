@@ -76,7 +76,8 @@ def test_presets_are_consistent():
     assert pipeline.PRESETS["paper"].student.device == "cuda"
 
 
-def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_states_sim_and_cpu(tmp_path, monkeypatch):
+def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_states_sim_and_cpu(tmp_path,
+                                                                                               monkeypatch):
     from lerobot_blindgrasp import platform_id
     from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
@@ -100,9 +101,9 @@ def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_state
     (teacher / "eval" / "eval.json").write_text(json.dumps(rec))
     monkeypatch.setenv(platform_id.CPU_MODEL_ENV, "Newcomer CPU 9000")
     note: dict = {}
-    assert not pipeline._reuse_teacher_eval(teacher, tmp_path / "other_cpu", preset, spec.EVAL_SEED, objs, note=note)
-    assert not (tmp_path / "other_cpu").exists()
-    assert repr(rec["platform"]["cpu"]) in note["eval_rerun_because"] and "Newcomer CPU 9000" in note["eval_rerun_because"]
+    assert not pipeline._reuse_teacher_eval(teacher, tmp_path / "cpu", preset, spec.EVAL_SEED, objs, note=note)
+    why = note["eval_rerun_because"]
+    assert not (tmp_path / "cpu").exists() and repr(rec["platform"]["cpu"]) in why and "Newcomer CPU 9000" in why
     from lerobot_blindgrasp.pipeline.report import _teacher_lines
 
     lines = _teacher_lines({"teacher": {"source": "shipped", "path": str(teacher), "file": "teacher.safetensors",

@@ -24,7 +24,7 @@ def test_the_cpu_model_can_be_played_and_float_paths_count_as_another_platform(m
     newcomer = platform_id.platform()
     assert newcomer["cpu"] == "Newcomer CPU 9000" and not platform_id.same(here, newcomer)
     monkeypatch.delenv(platform_id.CPU_MODEL_ENV)
-    monkeypatch.setenv("MKL_CBWR", "SSE4_2")  # the teacher's products on another code path: another family's floats
+    monkeypatch.setenv("MKL_CBWR", "SSE4_2")  # the teacher's products on another code path: other floats
     other = platform_id.platform()
     assert other["env"] == {"MKL_CBWR": "SSE4_2"} and not platform_id.same(here, other)
     assert "MKL_CBWR=SSE4_2" in platform_id.describe(other)
