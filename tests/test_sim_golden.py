@@ -89,6 +89,19 @@ def test_a_flipped_success_fails_everywhere(golden, runs, where):
     assert any(p.startswith("evaluation: success differ") for p in problems), problems
 
 
+def test_float_noise_fails_only_where_this_platform_is_recorded(golden, runs):
+    """One ulp more on the last step's lift of one env, past the tolerant horizon, as another family's noise: on
+    this machine (recorded) the bit-for-bit check names it; as a newcomer it passes."""
+    noisy = {s: dict(run) for s, run in runs.items()}
+    lift = noisy["evaluation"]["lift"].copy()
+    lift[-1, 0] = np.nextafter(lift[-1, 0], np.inf)
+    noisy["evaluation"]["lift"] = lift
+    if any(platform_id.same(p.get("platform"), platform_id.platform()) for p in golden["platforms"]):
+        problems = g.compare(golden, noisy, platform_id.platform())
+        assert len(problems) == 1 and "no longer bit-identical: ['evaluation/lift']" in problems[0], problems
+    assert g.compare(golden, noisy, {**platform_id.platform(), "cpu": NEWCOMER}) == []
+
+
 @pytest.fixture(scope="module")
 def nudged():
     """The evaluation setting with the task weight one ulp larger (np.nextafter): every step's physics is the same,
@@ -114,7 +127,7 @@ def test_this_module_passes_on_a_machine_no_record_has_seen_and_still_catches_re
     r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", __file__], env=env,
                        capture_output=True, text=True, timeout=600, cwd=ROOT)
     assert r.returncode == 0, r.stdout[-4000:] + r.stderr[-2000:]
-    assert "6 passed, 1 skipped" in r.stdout, r.stdout[-2000:]
+    assert "7 passed, 1 skipped" in r.stdout, r.stdout[-2000:]
     # and its floats are another family's: not one recorded platform's digests does it reproduce
     assert json.loads((tmp_path / "matching.json").read_text()) == []
 
