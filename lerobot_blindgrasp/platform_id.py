@@ -92,9 +92,19 @@ def same(a: dict | None, b: dict | None) -> bool:
     return all(a.get(k) == b.get(k) for k in ("cpu", "isa", "env", "versions"))
 
 
+def _widest_vectors(flags: list[str]) -> str:
+    """The widest SIMD the math libraries can use: what tells apart two CPUs that report one model name."""
+    for flag, name in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"), ("sve", "SVE"), ("asimd", "NEON")):
+        if flag in flags:
+            return name
+    return "no AVX"
+
+
 def describe(p: dict | None) -> str:
     if not p:
         return "an unrecorded machine"
     extra = [f"{k}={v}" for k, v in sorted((p.get("env") or {}).items())]
     soft = ", ".join(f"{k} {v}" for k, v in sorted((p.get("versions") or {}).items()))
-    return f"{p.get('cpu')!r}" + (f" with {' '.join(extra)}" if extra else "") + (f" ({soft})" if soft else "")
+    isa_note = f" [{_widest_vectors(p['isa'])}]" if p.get("isa") is not None else ""
+    return (f"{p.get('cpu')!r}{isa_note}" + (f" with {' '.join(extra)}" if extra else "")
+            + (f" ({soft})" if soft else ""))

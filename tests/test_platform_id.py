@@ -28,6 +28,11 @@ def test_the_cpu_model_can_be_played_and_float_paths_count_as_another_platform(m
     other = platform_id.platform()
     assert other["env"] == {"MKL_CBWR": "SSE4_2"} and not platform_id.same(here, other)
     assert "MKL_CBWR=SSE4_2" in platform_id.describe(other)
+    # Two CPUs that report one model name (two EPYC generations) still read apart, by their widest vectors.
+    narrower = {**here, "isa": [f for f in here["isa"] if not f.startswith("avx512")] or ["avx2"]}
+    assert not platform_id.same(here, narrower)
+    if "avx512f" in here["isa"]:
+        assert "[AVX-512]" in platform_id.describe(here) and "[AVX2]" in platform_id.describe(narrower)
     assert not platform_id.same(None, here) and platform_id.describe(None) == "an unrecorded machine"
 
 
