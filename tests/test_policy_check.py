@@ -145,3 +145,18 @@ def test_lerobot_eval_refuses_a_mismatching_checkpoint_before_any_torque(rig, tm
     assert out.returncode != 0
     assert "'action' shape (8,)" in out.stdout + out.stderr and "size mismatch" not in out.stdout + out.stderr
     assert rig.dxl.instruction_counts == {} and not rig.dxl.any_torque()  # not one packet reached the servos
+
+
+def test_blindgrasp_rollout_refuses_a_policy_trained_at_another_rate_before_any_torque(rig, tmp_path):
+    """blindgrasp-rollout: checked before LeRobot's rollout context loads the policy or connects the robot."""
+    ckpt = _checkpoint(tmp_path, dataset={"fps": 10})
+    cmd = [
+        str(BIN / "python"), "-m", "lerobot_blindgrasp.robots.blindgrasp_gripper.rollout", "--strategy.type=base",
+        f"--policy.path={ckpt}", "--policy.device=cpu", "--device=cpu", "--robot.type=blindgrasp_gripper",
+        f"--robot.port={rig.dxl.port}", "--robot.id=rig", f"--robot.force_sensor.port={rig.force.port}",
+        "--fps=20", "--duration=1", "--task=grasp", "--play_sounds=false",
+    ]  # fmt: skip
+    out = subprocess.run(cmd, env=cli_env(tmp_path), capture_output=True, text=True, timeout=180)
+    assert out.returncode != 0
+    assert f"fps 10 in {tmp_path / 'data/meta/info.json'}, the loop runs at 20 (--fps)" in out.stdout + out.stderr
+    assert rig.dxl.instruction_counts == {} and not rig.dxl.any_torque()
