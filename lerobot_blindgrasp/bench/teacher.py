@@ -48,6 +48,8 @@ class BenchTeacherConfig(BenchConfig):
     # A training checkpoint (model_<it>.pt) of this preset to time instead of an untrained policy: a policy that
     # grasps keeps its fingers in contact, which makes physics dearer, so collection takes longer than at iteration 0.
     checkpoint: Path | None = None
+    # After the timed iterations, one more whose PPO update runs under cProfile: its time split into rsl-rl's parts.
+    profile_update: bool = False
 
     def __post_init__(self):
         presets.get_preset(self.preset)  # unknown preset: a clear error before anything heavy
@@ -129,13 +131,21 @@ def run(cfg: BenchTeacherConfig) -> dict:
         return out
 
     runner.alg.update = timed_update
+    profiled: dict = {}
+    if cfg.profile_update:
+        runner.alg.update = _profiled(timed_update, profiled)
     runner.learn(1, init_at_random_ep_len=True)  # warm-up: allocations, first normalizer stats
     update_times.clear()
     update_cpu.clear()
+    profiled.clear()
+    runner.alg.update = timed_update
     t, c = time.perf_counter(), time.process_time()
     runner.learn(cfg.iterations)
     wall = time.perf_counter() - t
     cpu = time.process_time() - c
+    if cfg.profile_update:
+        runner.alg.update = _profiled(inner_update, profiled)
+        runner.learn(1)
     update = float(np.sum(update_times))
     collect = wall - update
     raw = _raw_control_steps_per_s(env, steps_per_it * 2)
@@ -166,6 +176,8 @@ def run(cfg: BenchTeacherConfig) -> dict:
         # Peak resident memory of this process (env models + rollout storage + nets), for sizing bigger runs.
         "max_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
     }
+    if profiled:
+        result["update_parts"] = profiled
     if not cfg.json:
         print(
             f"blindgrasp-bench teacher: preset {preset.name}, {num_envs} envs, {cfg.backend} backend on {device}, "
@@ -183,4 +195,40 @@ def run(cfg: BenchTeacherConfig) -> dict:
             f"{result['update_over_collect']:.2f} | {loop:,.0f} | {raw:,.0f} | {result['loop_over_raw']:.2f} "
             f"| {result['collect_cores_busy']:.1f} / {result['update_cores_busy']:.1f} | {result['max_rss_gb']:.2f} |"
         )
+        if profiled:
+            print("PPO update (cProfile, one iteration): " + ", ".join(
+                f"{k} {v:.0%}" for k, v in profiled.items() if k != "total_s") + f" of {profiled['total_s']:.2f} s")
     return result
+
+
+# rsl-rl's PPO.update by part: (file path fragment, function name) whose cumulative time is that part's. Nested
+# matches (decorator wrappers around the same call) count once: the largest.
+UPDATE_PARTS = {
+    "forward": ("torch/nn/modules/module.py", "_wrapped_call_impl"),  # actor + critic (and normalizer) forward
+    "backward": ("torch/autograd/__init__.py", "backward"),
+    "optimizer_step": ("torch/optim/", "step"),
+    "clip_grad_norm": ("torch/nn/utils/clip_grad.py", "clip_grad_norm_"),
+    "minibatch_generator": ("rsl_rl/storage/", "mini_batch_generator"),
+    "log_prob_entropy_kl": ("rsl_rl/", "get_kl_divergence"),
+}
+
+
+def _profiled(update, into: dict):
+    """`update` run under cProfile; its parts' shares of the update's time go into `into`."""
+    import cProfile
+    import pstats
+
+    def wrapper():
+        prof = cProfile.Profile()
+        t = time.perf_counter()
+        out = prof.runcall(update)
+        total = time.perf_counter() - t
+        stats = pstats.Stats(prof).stats  # (file, line, name) -> (calls, primitive calls, tottime, cumtime, ...)
+        for part, (where, name) in UPDATE_PARTS.items():
+            times = [v[3] for (f, _, n), v in stats.items() if n == name and where in f.replace("\\", "/")]
+            into[part] = max(times, default=0.0) / total
+        into["rest"] = max(0.0, 1 - sum(into[p] for p in UPDATE_PARTS))
+        into["total_s"] = total
+        return out
+
+    return wrapper
