@@ -36,7 +36,7 @@ class LoadCellConfig:
     # stop the gripper every few seconds.
     noise_counts: float = 300.0
     gain: float = 1.0
-    rate_hz: float = 100.0
+    rate_hz: float = 80.0  # the force board firmware's rate (one frame per fresh sample)
 
 
 @dataclass

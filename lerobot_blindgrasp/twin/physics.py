@@ -118,8 +118,14 @@ class TwinPhysics:
         return placement
 
     def end_trial(self) -> None:
+        """The trial is over: the operator takes the object out of the gripper (off the workspace), as between real
+        trials, so that the gripper homes unobstructed and the next placement starts clean."""
         with self.lock:
             self.judging = False
+            d = self.data
+            d.qpos[observations.OBJECT_POS] = [PARK_XY[0], PARK_XY[1], self.rest_height]
+            d.qvel[observations.OBJECT_LINVEL.start : observations.OBJECT_ANGVEL.stop] = 0.0
+            mujoco.mj_forward(self.model, d)
 
     # --- stepping ---------------------------------------------------------------------------------------------
     def substep(self) -> None:

@@ -68,6 +68,20 @@ def twin_status(run: Path) -> dict | None:
     return json.loads(lines[-1].split(" ", 3)[-1]) if lines else None
 
 
+STOP_CAUSES = (  # (what the error says, the cause), first match wins
+    ("overload", "fingertip force over overload_n"),
+    ("stale", "force data stale (> stale_timeout_s)"),
+    ("stream stopped", "force data stale (> stale_timeout_s)"),
+    ("There is no status packet", "bus reply timeout"),
+    ("start pose", "did not reach the start pose"),
+    ("implausible", "position gate"),
+)
+
+
+def stop_cause(error: str) -> str:
+    return next((cause for text, cause in STOP_CAUSES if text in error), error[:80])
+
+
 def table(results: dict[str, dict[int, tuple[bool, str]]]) -> str:
     rows = ["| object | trials | successes | stopped by the real stack |", "|---|---:|---:|---:|"]
     n = s = st = 0
@@ -92,7 +106,7 @@ def main(argv: list[str] | None = None) -> None:
     print(table(results))
     stops = defaultdict(int)
     for s in read_jsonl(cfg.run / "stops.jsonl"):
-        stops[s["error"].split(":")[0]] += 1
+        stops[stop_cause(s["error"])] += 1
     print("\nstops by cause:", json.dumps(dict(stops)))
     print("\nreal loop step timing:", json.dumps(timing(cfg.run), indent=1))
     print("\ntwin status:", json.dumps(twin_status(cfg.run), indent=1))

@@ -1,6 +1,6 @@
 #!/bin/bash
 # The shipped student through the whole real stack on the physics twin: 18 objects x 10 trials, seeds 1000..1009.
-#   docs/results/twin/measure.sh OUT        (from the repository root; about an hour on a shared 2-core machine)
+#   [OVERLOAD_N=80] docs/results/twin/measure.sh OUT     (from the repository root; about an hour on a shared 2-core machine)
 # One lerobot-eval per object. When the real stack's safety latch stops a trial (force overload, stale force data,
 # ...), that trial is a failure (stops.jsonl, with the error) and lerobot-eval is started again at the next seed.
 # Re-running the script continues where it stopped. Then: python -m lerobot_blindgrasp.twin.report --run=OUT
@@ -8,6 +8,7 @@
 # nothing else; the machine this ran on was shared with other jobs (uptime.log).
 set -u
 OUT=${1:?output folder}
+OVERLOAD_N=${OVERLOAD_N:-40}  # the robot's force_sensor.overload_n (its default: 40 N); see docs/results/twin.md
 mkdir -p "$OUT/real"
 export HF_HUB_OFFLINE=1 MUJOCO_GL=egl OMP_NUM_THREADS=1
 BIN=$(pwd)/.venv/bin
@@ -39,7 +40,8 @@ for OBJ in $OBJECTS; do
     timeout 900 nice -n -10 "$BIN/lerobot-eval" --policy.path=models/student_cpu --policy.device=cpu \
       --env.type=blindgrasp_real --env.task="$OBJ" --env.robot.type=blindgrasp_gripper --env.robot.id=twin \
       --env.robot.calibration_dir="$OUT/calibration" --env.robot.port="$DXL" --env.robot.force_sensor.port="$FRC" \
-      --env.robot.latency_timer_ms=60 --env.robot.max_overrun_s=0 --env.operator_socket="$OUT/twin.sock" \
+      --env.robot.latency_timer_ms=60 --env.robot.max_overrun_s=0 --env.robot.force_sensor.overload_n=$OVERLOAD_N \
+      --env.operator_socket="$OUT/twin.sock" \
       --env.trial_log="$OUT/real_trials.jsonl" --eval.n_episodes=$((10 - DONE)) --eval.batch_size=1 \
       --eval.use_async_envs=false --seed=$SEED --output_dir="$RUN" > "$RUN.log" 2>&1
     echo "$(date -u +%H:%M:%S) $OBJ from seed $SEED rc=$?" >> "$OUT/runs.log"
