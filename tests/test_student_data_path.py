@@ -104,3 +104,28 @@ def test_a_batch_through_a_spawned_loader_process_equals_lerobots(dataset_root):
     batch = next(iter(loader))
     ref = default_collate([DatasetReader.get_item(ds.reader, i) for i in indices])
     assert_same_item(batch, ref)
+
+
+def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
+    from lerobot_blindgrasp.bench import student
+    from lerobot_blindgrasp.bench.student_parts import PARTS
+
+    torch.manual_seed(0)
+    r = student.run(student.BenchStudentConfig(dataset_root=dataset_root, size="quick", batch_size=8,
+                                               load_samples=20, update_steps=2, loader_workers=[0],
+                                               loader_batches=1, profile=True, json=True))
+    load, update = r["load_ms_per_sample"], r["update_ms_per_sample"]
+    assert set(load) == {"lerobot", "lerobot_row", "lerobot_window", "streaming", "cache"}
+    assert min(load.values()) > 0
+    assert load["cache"] < load["lerobot"] / 3  # tens of microseconds against milliseconds, even on a loaded machine
+    for name in ("lerobot_adamw", "foreach_adamw", "fused_adamw"):
+        assert update[name]["total"] == pytest.approx(sum(update[name][p] for p in PARTS))
+    per_sample = update["lerobot_adamw"]["total"]
+    assert r["load_over_update"]["cache"] == pytest.approx(load["cache"] / per_sample)
+    assert r["bound_samples_per_s"]["cache"] == pytest.approx(min(1 / load["cache"], 1 / per_sample) * 1e3)
+    assert r["update_over_floor"] == pytest.approx(per_sample / r["floor_ms_per_sample"])
+    assert update["profile"]["matmul_ms"] > 0 and update["profile"]["aten_ops_per_step"] > 100
+    assert [(row["path"], row["num_workers"]) for row in r["loader"]] == [("lerobot", 0), ("cache", 0)]
+    assert all(row["samples_per_s"] > 0 for row in r["loader"])
+    with pytest.raises(ValueError, match="dataset_root"):
+        student.BenchStudentConfig(dataset_root=None)

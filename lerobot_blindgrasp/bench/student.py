@@ -121,7 +121,7 @@ def loader_samples_per_s(root: Path, n_obs_steps: int, cfg: BenchStudentConfig) 
     state: timed after the first batch and the `workers x prefetch_factor` batches the workers had queued by then."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    rows = []
+    rows, before = [], os.environ.get(ENV_SWITCH)
     for path, switch in (("lerobot", "0"), ("cache", "1")):
         os.environ[ENV_SWITCH] = switch  # the spawned workers read it at their plugin import
         ds = LeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps))
@@ -139,7 +139,10 @@ def loader_samples_per_s(root: Path, n_obs_steps: int, cfg: BenchStudentConfig) 
             rate = cfg.loader_batches * cfg.batch_size / (time.perf_counter() - t)
             rows.append({"path": path, "num_workers": workers, "samples_per_s": rate})
             del it, loader
-    os.environ.pop(ENV_SWITCH, None)
+    if before is None:
+        os.environ.pop(ENV_SWITCH, None)
+    else:
+        os.environ[ENV_SWITCH] = before
     return rows
 
 
