@@ -118,9 +118,10 @@ def test_per_object_success_table():
         {"task_group": "wine_glass", "task_id": 0, "metrics": {"successes": [True] * 10}},
     ]}  # fmt: skip
     table = success_table(info).splitlines()
-    assert table[2] == "| cylinder_a_medium | 10 | 9 | 90.0 % |"
-    assert table[3] == "| wine_glass | 10 | 10 | 100.0 % |"
-    assert table[4] == "| **overall** | 20 | 19 | 95.0 % |"
+    assert table[0].endswith("| 95 % interval |")  # Wilson, as every recorded rate
+    assert table[2] == "| cylinder_a_medium | 10 | 9 | 90.0 % | 60-98 % |"
+    assert table[3] == "| wine_glass | 10 | 10 | 100.0 % | 72-100 % |"
+    assert table[4] == "| **overall** | 20 | 19 | 95.0 % | 76-99 % |"
 
 
 def test_config_rejects_a_different_control_rate():
