@@ -16,7 +16,8 @@ round), the same rule for all, so the ratios within a run hold:
   `prefetch_factor`), per path and worker count, in steady state (total time over the timed batches);
 - **update**: forward, backward, gradient clipping and AdamW step on a batch of windows (what the training process
   does per sample), with LeRobot's AdamW and the `foreach` / `fused` variants; `--bench.profile=true` also splits
-  forward + backward by operator (matrix products, attention, the rest) and counts the operators;
+  forward + backward by operator (matrix products, attention, the rest) and counts the operators, and
+  `--bench.compile=true` times `torch.compile` of the model against eager, one step of each in turn;
 - **floor**: the model's training FLOPs per sample (3 x the forward's) at this machine's GEMM rate for the model's
   own matrix shapes.
 `--train_steps=N` also runs the real `lerobot-train` for N steps on each of the two map-style paths
@@ -39,7 +40,7 @@ import torch
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.bench import BenchConfig
 from lerobot_blindgrasp.bench.policy import flops_per_step, make_policy
-from lerobot_blindgrasp.bench.student_parts import format_table, gemm_gflops, update_parts
+from lerobot_blindgrasp.bench.student_parts import compiled_vs_eager, format_table, gemm_gflops, update_parts
 from lerobot_blindgrasp.policies.blindgrasp_transformer.window_cache import ENV_SWITCH
 from lerobot_blindgrasp.presets.student import SIZES
 
@@ -59,6 +60,7 @@ class BenchStudentConfig(BenchConfig):
     loader_batches: int = 4  # timed batches per DataLoader row (after the first); 0 skips the loader rows
     prefetch_factor: int = 4  # lerobot-train's default
     profile: bool = False  # also split forward + backward by operator (torch.profiler)
+    compile: bool = False  # also time torch.compile of the model against eager (minutes of compiling on a CPU)
     train_steps: int = 0  # >0: also time the real lerobot-train for this many steps, on both map-style paths
     seed: int = 0
 
@@ -181,6 +183,8 @@ def run(cfg: BenchStudentConfig) -> dict:
         "bound_samples_per_s": {p: min(max(cfg.num_workers, 1) / load[p], 1 / per_sample) * 1e3
                                 for p in ("lerobot", "cache", "streaming")},
     }
+    if cfg.compile:
+        result["compile"] = compiled_vs_eager(cfg.size, cfg.batch_size, max(cfg.update_steps, 3), cfg.seed)
     if cfg.loader_batches:
         result["loader"] = loader_samples_per_s(Path(cfg.dataset_root), n_obs, cfg)
     if cfg.train_steps:

@@ -1,5 +1,6 @@
 """The student bench's update figures: the update split into its parts, three AdamW implementations, an operator
-profile, and this machine's GEMM rate at the model's shapes (`blindgrasp-bench --bench.type=student`)."""
+profile, `torch.compile` against eager, and this machine's GEMM rate at the model's shapes
+(`blindgrasp-bench --bench.type=student`)."""
 
 from __future__ import annotations
 
@@ -46,15 +47,40 @@ def _timed_steps(policy, opt, batch: dict, steps: int, clip: float) -> dict[str,
     return best
 
 
+def _trainable(size: str, seed: int, **adamw):
+    torch.manual_seed(seed)
+    policy = make_policy(size).train()
+    preset = policy.config.get_optimizer_preset()
+    opt = torch.optim.AdamW(policy.parameters(), lr=preset.lr, betas=preset.betas, eps=preset.eps,
+                            weight_decay=preset.weight_decay, **adamw)
+    return policy, opt, preset.grad_clip_norm
+
+
+def compiled_vs_eager(size: str, batch_size: int, steps: int, seed: int) -> dict:
+    """`torch.compile` of the model against eager, one step of each in turn (fastest of `steps`), plus the
+    compile time (the first two compiled steps)."""
+    eager, opt_e, clip = _trainable(size, seed)
+    compiled, opt_c, _ = _trainable(size, seed)
+    compiled.model = torch.compile(compiled.model)
+    batch = _batch(batch_size, eager.config.n_obs_steps)
+    t = time.perf_counter()
+    _timed_steps(compiled, opt_c, batch, 2, clip)
+    compile_s = time.perf_counter() - t
+    _timed_steps(eager, opt_e, batch, 2, clip)
+    best = {"eager": float("inf"), "compiled": float("inf")}
+    for _ in range(steps):
+        for name, policy, opt in (("eager", eager, opt_e), ("compiled", compiled, opt_c)):
+            best[name] = min(best[name], sum(_timed_steps(policy, opt, batch, 1, clip).values()))
+    ms = {f"{k}_ms": v / batch_size * 1e3 for k, v in best.items()}
+    return {**ms, "compiled_over_eager": best["compiled"] / best["eager"], "compile_s": compile_s}
+
+
 def update_parts(size: str, batch_size: int, steps: int, seed: int, profile: bool) -> dict:
     """ms per sample of each part of forward + backward + clip + AdamW step, per AdamW implementation."""
     out = {}
     for name, kwargs in ADAMW.items():
-        torch.manual_seed(seed)
-        policy = make_policy(size).train()
+        policy, opt, _ = _trainable(size, seed, **kwargs)
         preset = policy.config.get_optimizer_preset()
-        opt = torch.optim.AdamW(policy.parameters(), lr=preset.lr, betas=preset.betas, eps=preset.eps,
-                                weight_decay=preset.weight_decay, **kwargs)
         batch = _batch(batch_size, policy.config.n_obs_steps)
         _timed_steps(policy, opt, batch, 2, preset.grad_clip_norm)  # warm-up
         spent = _timed_steps(policy, opt, batch, steps, preset.grad_clip_norm)
@@ -129,6 +155,10 @@ def format_table(r: dict) -> str:
         p = upd["profile"]
         lines.append("  fwd+bwd by operator: " + ", ".join(f"{k[:-3]} {v:.3f} ms" for k, v in p.items() if k.endswith("_ms"))
                      + f"; {p['aten_ops_per_step']} aten ops/step at {p['dispatch_us_per_op']:.1f} us each")
+    if "compile" in r:
+        c = r["compile"]
+        lines.append(f"  torch.compile: {c['compiled_ms']:.3f} ms against eager {c['eager_ms']:.3f} ms "
+                     f"(x {c['compiled_over_eager']:.2f}), after {c['compile_s']:.0f} s of compiling")
     lines.append(f"  floor ({r['train_flops_per_sample'] / 1e6:.1f} MFLOP at {r['gemm_gflops']:.1f} GFLOP/s): "
                  f"{r['floor_ms_per_sample']:.3f} ms (update = {r['update_over_floor']:.2f} x floor)")
     lines.append("  bound, samples/s with " + f"{r['num_workers']} loader process(es): "
