@@ -27,6 +27,9 @@ from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.hardware.emulators.dynamixel import HW_OVERLOAD
 from lerobot_blindgrasp.hardware.xm430 import WATCHDOG_TRIPPED
 
+sys.path.insert(0, str(Path(__file__).parent))
+from twin_grasp_host import LATENCY_TIMER_MS  # noqa: E402
+
 pytestmark = pytest.mark.slow
 
 HOST = Path(__file__).parent / "twin_grasp_host.py"
@@ -46,7 +49,8 @@ def station(tmp_path_factory):
     with Twin(TwinConfig(socket=str(tmp / "twin.sock"))) as twin:
         durable.atomic_write_json(tmp / "ports.json", twin.ports())
         res = subprocess.run([str(BIN / "blindgrasp-twin-calibrate"), f"--ports_json={tmp / 'ports.json'}",
-                              "--robot_id=twin", f"--calibration_dir={tmp}"], env=cli_env(tmp),
+                              "--robot_id=twin", f"--calibration_dir={tmp}",
+                              f"--latency_timer_ms={LATENCY_TIMER_MS}"], env=cli_env(tmp),
                              capture_output=True, text=True, timeout=240)  # fmt: skip
         assert res.returncode == 0, res.stdout[-3000:]
         yield twin, tmp
@@ -104,7 +108,8 @@ def test_overload_shutdown_of_one_servo_stops_the_gripper(station):
     after = peak_force(twin, 0.5)
     settled = settled_force(twin)
     stop = host.stopped_with()
-    print(f"\noverload: torque off on all 9 servos {dt * 1e3:.0f} ms after the fault; grasp peak {host.peak:.1f} N, "
+    print(f"\noverload: torque off on all 9 servos {dt * 1e3:.0f} ms after the fault; grasp peak "
+          f"{host.peak:.1f} N, "
           f"after the stop {after:.1f} N, settled {settled:.1f} N; {stop[:160]}")
     assert stop.startswith("STOPPED GripperHardwareError") and "overload" in stop
     assert dt <= STOP_BOUND_S

@@ -13,15 +13,22 @@ import time
 from pathlib import Path
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig, ForceSensorConfig
+from lerobot_blindgrasp.robots.blindgrasp_gripper import (
+    BlindgraspGripper,
+    BlindgraspGripperConfig,
+    ForceSensorConfig,
+)
 
+# Reply timeout = 2 x this + 2 ms: the twin shares a loaded CI machine's CPU with the host (tests only).
+LATENCY_TIMER_MS = 150
 # Proximal joints well past the contact with a 4 cm sphere at the claw centre (about -0.2 rad): the servos squeeze.
 CLOSE = dict(zip(spec.ACTION_NAMES, [0.0, -0.45, 0.0] * 3, strict=True))
 
 
 def robot_config(ports: dict, calibration_dir: Path) -> BlindgraspGripperConfig:
     return BlindgraspGripperConfig(
-        id="twin", port=ports["dynamixel_port"], calibration_dir=Path(calibration_dir), latency_timer_ms=60,
+        id="twin", port=ports["dynamixel_port"], calibration_dir=Path(calibration_dir),
+        latency_timer_ms=LATENCY_TIMER_MS,
         max_overrun_s=0, force_sensor=ForceSensorConfig(port=ports["force_port"], tare_s=0.2),
     )
 

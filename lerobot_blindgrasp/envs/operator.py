@@ -51,7 +51,8 @@ class _KeyQueue:
 
 
 class OperatorKeys(_KeyQueue):
-    """Key presses as a queue; `listener_factory` has the signature of LeRobot's `create_key_listener` (default)."""
+    """Key presses as a queue; `listener_factory` has the signature of LeRobot's `create_key_listener`
+    (the default)."""
 
     HELP = "ENTER=start trial, s/y=success, f/n=failure"
 
@@ -88,7 +89,8 @@ class SocketOperator(_KeyQueue):
             except OSError as e:
                 self._sock.close()
                 if time.monotonic() > deadline:
-                    raise ConnectionError(f"No operator listening on {path} ({e}): is blindgrasp-twin running?") from e
+                    msg = f"No operator listening on {path} ({e}): is blindgrasp-twin running?"
+                    raise ConnectionError(msg) from e
                 time.sleep(0.2)
         self._lines = self._sock.makefile("rb")
         self.judge = str(json.loads(self._lines.readline())["judge"])

@@ -45,7 +45,7 @@ class TwinConfig:
     socket: str = "/tmp/blindgrasp-twin.sock"  # the operator socket (Unix domain)
     trial_log: str | None = None  # JSON lines: each trial's placement, physics draw and the twin's verdict
     baudrate: int = 1_000_000  # the servos' Baud_Rate register: the host must open the bus at this rate
-    park_object: str = "cylinder_a_medium"  # the object on the table before the first placement (off the workspace)
+    park_object: str = "cylinder_a_medium"  # on the table, off the workspace, until the first placement
     noise_seed: int = 0
     # The physics falling behind the clock by more than this skips ahead (counted in the status as behind_s).
     max_lag_s: float = 0.05

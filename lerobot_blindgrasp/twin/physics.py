@@ -170,7 +170,8 @@ class TwinPhysics:
         self._held = termination.held_steps(self._held, lift)
         if termination.is_success(self._held)[0]:
             self.judging = False
-            return Verdict(self.trial, True, f"lifted >= {spec.SUCCESS_LIFT_M * 100:.1f} cm for {spec.SUCCESS_HOLD_S} s")
+            rule = f"lifted >= {spec.SUCCESS_LIFT_M * 100:.1f} cm for {spec.SUCCESS_HOLD_S} s"
+            return Verdict(self.trial, True, rule)
         d_xy = np.linalg.norm(self.data.qpos[observations.OBJECT_POS][:2])
         if termination.out_of_workspace(np.array([d_xy]))[0]:
             self.judging = False

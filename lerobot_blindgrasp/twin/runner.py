@@ -51,7 +51,8 @@ class Twin:
         lc = cfg.load_cell
         self.force = ForceSensorEmulator(
             rate_hz=lc.rate_hz, scale_n_per_count=lc.scale_n_per_count, offset_counts=lc.offset_counts,
-            noise_counts=lc.noise_counts, gain=lc.gain, seed=cfg.noise_seed, force_fn=lambda: self.physics.tip_force_n,
+            noise_counts=lc.noise_counts, gain=lc.gain, seed=cfg.noise_seed,
+            force_fn=lambda: self.physics.tip_force_n,
         )
         self.server = OperatorServer(cfg.socket, self, trial_log=cfg.trial_log)
         self._stop = threading.Event()

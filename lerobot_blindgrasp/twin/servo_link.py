@@ -16,7 +16,8 @@ from lerobot_blindgrasp.twin import mount
 DEFAULT_P_GAIN = 800  # XM430 factory Position_P_Gain: what the sim's nominal kp models
 POSITION_MODES = (3, 4, 5)  # position, extended position, current-based position
 CURRENT_POSITION = 5
-_UNITS_PER_NM = xm430.STALL_CURRENT_A / xm430.STALL_TORQUE_NM / xm430.CURRENT_UNIT_A  # torque ~ current, stall line
+# Torque ~ current on the stall line: register units per N m.
+_UNITS_PER_NM = xm430.STALL_CURRENT_A / xm430.STALL_TORQUE_NM / xm430.CURRENT_UNIT_A
 
 
 class SimShaft:
