@@ -150,11 +150,13 @@ def format_table(r: dict) -> str:
         lines.append(f"  load {path:15s} {load[path]:8.3f} ms  = {r['load_over_update'][path]:6.2f} x update")
     for name in ADAMW:
         u = upd[name]
-        lines.append(f"  update, {name:14s} {u['total']:.3f} ms  (" + ", ".join(f"{p} {u[p]:.3f}" for p in PARTS) + ")")
+        parts = ", ".join(f"{p} {u[p]:.3f}" for p in PARTS)
+        lines.append(f"  update, {name:14s} {u['total']:.3f} ms  ({parts})")
     if "profile" in upd:
         p = upd["profile"]
-        lines.append("  fwd+bwd by operator: " + ", ".join(f"{k[:-3]} {v:.3f} ms" for k, v in p.items() if k.endswith("_ms"))
-                     + f"; {p['aten_ops_per_step']} aten ops/step at {p['dispatch_us_per_op']:.1f} us each")
+        kinds = ", ".join(f"{k[:-3]} {v:.3f} ms" for k, v in p.items() if k.endswith("_ms"))
+        lines.append(f"  fwd+bwd by operator: {kinds}; {p['aten_ops_per_step']} aten ops/step at "
+                     f"{p['dispatch_us_per_op']:.1f} us each")
     if "compile" in r:
         c = r["compile"]
         lines.append(f"  torch.compile: {c['compiled_ms']:.3f} ms against eager {c['eager_ms']:.3f} ms "
@@ -164,7 +166,8 @@ def format_table(r: dict) -> str:
     lines.append("  bound, samples/s with " + f"{r['num_workers']} loader process(es): "
                  + ", ".join(f"{k} {v:.0f}" for k, v in r["bound_samples_per_s"].items()))
     for row in r.get("loader", []):
-        lines.append(f"  DataLoader {row['path']:8s} num_workers={row['num_workers']}: {row['samples_per_s']:.0f} samples/s")
+        lines.append(f"  DataLoader {row['path']:8s} num_workers={row['num_workers']}: "
+                     f"{row['samples_per_s']:.0f} samples/s")
     for lt in r.get("lerobot_train", []):
         lines.append(f"  lerobot-train {lt['path']:8s}: {lt['steps']} steps in {lt['wall_s']:.1f} s = "
                      f"{lt['samples_per_s']:.0f} samples/s")

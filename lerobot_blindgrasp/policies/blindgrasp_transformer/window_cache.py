@@ -4,18 +4,19 @@ lerobot-train reads each training sample through `LeRobotDataset.__getitem__`, w
 `DatasetReader`) indexes the `datasets` table once for the frame and once per windowed key; each such access
 deep-copies the table's Features and converts every value through Python lists, so a 30-frame window of 12 floats
 costs milliseconds, longer than the student's update. The student's frames are tiny (low-dimensional columns only),
-so, like robomimic's `SequenceDataset` with `hdf5_cache_mode="low_dim"`, this module keeps every column as one torch
-tensor per process and slices the window from it: the same keys, dtypes, shapes and values as LeRobot's reader,
-padding flags included (`tests/test_student_data_path.py` compares them).
+so, like robomimic's `SequenceDataset` with `hdf5_cache_mode="low_dim"`, this module keeps every column as one
+torch tensor per process and slices the window from it: the same keys, dtypes, shapes and values as LeRobot's
+reader, padding flags included (`tests/test_student_data_path.py` compares them).
 
 LeRobot has no hook for a dataset reader, so `install()` (run when the plugin is imported, which `lerobot-train`
 does before it builds the dataset) wraps `DatasetReader.try_load` / `load_and_activate`: a reader that has just
 loaded a dataset the cache can serve exactly becomes a `LowDimWindowReader`. No LeRobot file changes. Served: only
 readers asked for delta-timestamp windows (training), over datasets with no cameras, no language columns and no
-index remapping, whose columns are all integers, floats or booleans (scalars or fixed-length vectors); anything else
-keeps LeRobot's path. The reader's class travels with the dataset into lerobot-train's spawned loader processes, and
-each process builds its cache on its first sample (loader workers persist, so once per run). `BLINDGRASP_LOW_DIM_CACHE=0`
-in the environment when a dataset is loaded keeps LeRobot's path for it, e.g. to time the two side by side.
+index remapping, whose columns are all integers, floats or booleans (scalars or fixed-length vectors); anything
+else keeps LeRobot's path. The reader's class travels with the dataset into lerobot-train's spawned loader
+processes, and each process builds its cache on its first sample (loader workers persist, so once per run).
+`BLINDGRASP_LOW_DIM_CACHE=0` in the environment when a dataset is loaded keeps LeRobot's path for it, e.g. to time
+the two side by side.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import torch
 from lerobot.datasets.dataset_reader import DatasetReader
 
 ENV_SWITCH = "BLINDGRASP_LOW_DIM_CACHE"
+logger = logging.getLogger(__name__)
 _CACHE_ATTR = "_low_dim_cache"
 
 
@@ -55,7 +57,8 @@ def _to_numpy(name: str, column: pa.ChunkedArray) -> np.ndarray:
         return np.array(array.to_numpy(zero_copy_only=False))  # a copy: the cache owns its memory
     lengths = np.unique(array.value_lengths().to_numpy(zero_copy_only=False)) if len(array) else np.array([0])
     if len(lengths) != 1 or array.flatten().null_count:
-        raise ValueError(f"column {name!r} is not one fixed-length vector per frame: the low-dim cache cannot serve it")
+        raise ValueError(f"column {name!r} is not one fixed-length vector per frame: the low-dim cache cannot "
+                         "serve it")
     flat = _to_numpy(name, pa.chunked_array([array.flatten()]))
     return flat.reshape(len(array), int(lengths[0]), *flat.shape[1:])
 
@@ -70,7 +73,9 @@ def servable(reader: DatasetReader) -> bool:
     if getattr(meta, "has_language_columns", False):
         return False
     schema = hf.data.schema
-    if any(_column_dtype(f.type) is None for f in schema) or "task_index" not in schema.names:
+    if any(_column_dtype(f.type) is None for f in schema) or getattr(meta, "tasks", None) is None:
+        return False
+    if not {"index", "episode_index", "task_index"} <= set(schema.names):
         return False
     return all(key in schema.names for key in reader.delta_indices)
 
@@ -150,7 +155,7 @@ def _upgrade_after(load):
         result = load(self, *args, **kwargs)
         if type(self) is DatasetReader and self.hf_dataset is not None and enabled() and servable(self):
             self.__class__ = LowDimWindowReader
-            logging.info("blindgrasp: %s windows served from an in-memory low-dim cache", self.root)
+            logger.info("blindgrasp: %s windows served from an in-memory low-dim cache", self.root)
         elif type(self) is LowDimWindowReader:
             self.__dict__.pop(_CACHE_ATTR, None)  # reloaded: rebuild from the new table
         return result
