@@ -83,6 +83,12 @@ class OperatorServer:
                     reply = {"ok": False, "error": f"{type(e).__name__}: {e}"}
                 if reply is not None:
                     self._send(conn, reply)
+        # The host went away (it finished, or its safety latch stopped it mid-trial): the operator takes the object
+        # out of the claw, so that the next session does not start with it there.
+        with self._lock:
+            token = self._active[1] if self._active is not None and self._active[0] is conn else None
+        if token is not None:
+            self._finish(token)
 
     def _handle(self, conn: socket.socket, msg: dict) -> dict | None:
         op = msg["op"]
