@@ -264,9 +264,10 @@ def test_servo_hardware_error_stops_everything(rig, robot, bits, text):
 
 
 def test_fingertip_overload_stops(rig, robot):
-    rig.force.forces_n = np.array([0.0, 55.0, 0.0])
+    limit = robot.config.force_sensor.overload_n
+    rig.force.forces_n = np.array([0.0, limit + 15.0, 0.0])
     time.sleep(0.05)
-    with pytest.raises(ForceOverloadError, match=r"mf_tip.*> 40.0 N.*Torque is off"):
+    with pytest.raises(ForceOverloadError, match=rf"mf_tip.*> {limit:.1f} N.*Torque is off"):
         robot.get_observation()
     _assert_stopped(rig, robot)
 

@@ -31,7 +31,7 @@ class LoadCellConfig:
 
     scale_n_per_count: list[float] = field(default_factory=lambda: [2.5e-5, 2.5e-5, 2.5e-5])
     offset_counts: list[float] = field(default_factory=lambda: [81_000.0, -52_000.0, 12_000.0])
-    # ADC noise (counts, 1 sigma): 300 counts = 7.5 mN at the default scale, an HX711 on a 5 kg cell. The sim's
+    # ADC noise (counts, 1 sigma): 300 counts = 7.5 mN at the default scale, an HX711's noise on a 1 mV/V cell. The sim's
     # 0.5 N is a training randomization, not a sensor: at 0.5 N the host's "below -1 N is a fault" check would
     # stop the gripper every few seconds.
     noise_counts: float = 300.0

@@ -1,6 +1,6 @@
 #!/bin/bash
 # The shipped student through the whole real stack on the physics twin: 18 objects x 10 trials, seeds 1000..1009.
-#   [OVERLOAD_N=80] docs/results/twin/measure.sh OUT     (from the repository root; about an hour on a shared 2-core machine)
+#   [OVERLOAD_N=40] docs/results/twin/measure.sh OUT     (from the repository root; about an hour on a shared 2-core machine)
 # One lerobot-eval per object. When the real stack's safety latch stops a trial (force overload, stale force data,
 # ...), that trial is a failure (stops.jsonl, with the error) and lerobot-eval is started again at the next seed.
 # Re-running the script continues where it stopped. Then: python -m lerobot_blindgrasp.twin.report --run=OUT
@@ -8,7 +8,7 @@
 # nothing else; the machine this ran on was shared with other jobs (uptime.log).
 set -u
 OUT=${1:?output folder}
-OVERLOAD_N=${OVERLOAD_N:-40}  # the robot's force_sensor.overload_n (its default: 40 N); see docs/results/twin.md
+OVERLOAD_N=${OVERLOAD_N:-80}  # the robot's force_sensor.overload_n (its default since this record: 80 N); see docs/results/twin.md
 mkdir -p "$OUT/real"
 export HF_HUB_OFFLINE=1 MUJOCO_GL=egl OMP_NUM_THREADS=1
 BIN=$(pwd)/.venv/bin

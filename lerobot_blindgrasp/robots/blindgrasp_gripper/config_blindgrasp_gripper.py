@@ -32,7 +32,7 @@ class ForceSensorConfig:
     port: str = "/dev/ttyACM0"
     baudrate: int = 115_200
     # N per raw count, one per channel in `spec.FORCE_SENSOR_NAMES` order; the sign makes a push on the pad
-    # positive. Placeholder for an HX711 (gain 128) on a 5 kg, 1 mV/V cell: `blindgrasp-calibrate-force` measures
+    # positive. Placeholder of the order of an HX711 (gain 128) on a 5-10 kg, 1 mV/V cell: `blindgrasp-calibrate-force` measures
     # yours with a known weight, and its file (next to the servo calibration) replaces these at connect.
     scale_n_per_count: list[float] = field(default_factory=lambda: [2.5e-5, 2.5e-5, 2.5e-5])
     # Which stream channel feeds ff_tip, mf_tip, th_tip (wiring can differ from the firmware's order).
@@ -46,8 +46,11 @@ class ForceSensorConfig:
     # First frame after the port opens. Opening it resets an Arduino Nano (DTR): its bootloader waits ~1 s, then
     # the HX711s settle (~0.1 s at 80/s).
     connect_timeout_s: float = 3.0
-    # A tip force above this stops the gripper (torque off): protects the load cells and the object.
-    overload_n: float = 40.0
+    # A tip force above this stops the gripper (torque off): protects the load cells and the object. It sits
+    # below the 98 N rating of the 10 kg cells the force board specifies and above what a grasp needs: the thumb
+    # opposes two fingers, so its cell carries up to twice one finger's force, and one XM430 at stall pushes its
+    # fingertip with 4.1 N m / 0.076 m = 54 N (docs/force_board.md, "Load cell range").
+    overload_n: float = 80.0
     # Liveness by content: a channel whose raw counts repeat bit for bit for this many frames in a row is frozen
     # (a load cell's ADC noise never does that), and the stream is stale. 0 disables the check.
     frozen_frames: int = 10
