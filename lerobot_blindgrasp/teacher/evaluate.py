@@ -66,18 +66,38 @@ class EvalTeacherConfig:
 NOT_IN_EPISODES = ("scripted.py", "demo.py")
 
 
-def sim_fingerprint() -> str:
-    """sha256 of the sources that decide an episode's outcome (sim/ but NOT_IN_EPISODES, and spec.py): an eval
-    recorded under another fingerprint ran other physics, so it is not reused as the paired eval of a new run."""
+def sim_fingerprint(root: Path | None = None) -> str:
+    """sha256 of the code that decides an episode's outcome (sim/ but NOT_IN_EPISODES, and spec.py): an eval
+    recorded under another fingerprint ran other physics, so it is not reused as the paired eval of a new run.
+
+    It hashes each module's syntax tree without docstrings, so that comments, docstrings and formatting, which
+    change no episode, leave it as it is."""
+    import ast
     import hashlib
 
-    root = Path(__file__).resolve().parents[1]
+    root = root or Path(__file__).resolve().parents[1]  # the package folder
     h = hashlib.sha256()
     sources = [p for p in (root / "sim").rglob("*.py") if p.relative_to(root / "sim").as_posix() not in NOT_IN_EPISODES]
     for path in sorted([*sources, root / "spec.py"]):
         h.update(path.relative_to(root).as_posix().encode())
-        h.update(path.read_bytes())
+        h.update(ast.dump(_without_docstrings(ast.parse(path.read_bytes()))).encode())
     return h.hexdigest()
+
+
+def _without_docstrings(tree):
+    import ast
+
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (
+            isinstance(body, list)
+            and body
+            and isinstance(body[0], ast.Expr)
+            and isinstance(body[0].value, ast.Constant)
+            and isinstance(body[0].value.value, str)
+        ):
+            node.body = body[1:] or [ast.Pass()]
+    return tree
 
 
 def _run_object(teacher: TeacherPolicy, name: str, episodes: int, seed: int, mode: str, reward_cfg) -> tuple:
