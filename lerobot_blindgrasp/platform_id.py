@@ -28,13 +28,39 @@ CPU_MODEL_ENV = "BLINDGRASP_CPU_MODEL"
 
 # Instruction sets that some math library dispatches on (glibc's libm, MKL, oneDNN, NumPy's SIMD loops); the
 # others in /proc/cpuinfo (virtualisation, security, power) move no float.
-FLOAT_ISA = ("sse4_1", "sse4_2", "avx", "avx2", "fma", "f16c", "avx512f", "avx512dq", "avx512cd", "avx512bw",
-             "avx512vl", "avx512_vnni", "avx512_bf16", "avx512_fp16", "amx_tile", "amx_bf16", "asimd", "sve",
-             "sve2")
+FLOAT_ISA = (
+    "sse4_1",
+    "sse4_2",
+    "avx",
+    "avx2",
+    "fma",
+    "f16c",
+    "avx512f",
+    "avx512dq",
+    "avx512cd",
+    "avx512bw",
+    "avx512vl",
+    "avx512_vnni",
+    "avx512_bf16",
+    "avx512_fp16",
+    "amx_tile",
+    "amx_bf16",
+    "asimd",
+    "sve",
+    "sve2",
+)
 # Environment variables that select another code path in those libraries.
-FLOAT_ENV = ("MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS", "MKL_DEBUG_CPU_TYPE", "ATEN_CPU_CAPABILITY",
-             "ONEDNN_MAX_CPU_ISA", "DNNL_MAX_CPU_ISA", "OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES",
-             "GLIBC_TUNABLES")
+FLOAT_ENV = (
+    "MKL_CBWR",
+    "MKL_ENABLE_INSTRUCTIONS",
+    "MKL_DEBUG_CPU_TYPE",
+    "ATEN_CPU_CAPABILITY",
+    "ONEDNN_MAX_CPU_ISA",
+    "DNNL_MAX_CPU_ISA",
+    "OPENBLAS_CORETYPE",
+    "NPY_DISABLE_CPU_FEATURES",
+    "GLIBC_TUNABLES",
+)
 VERSIONED = ("mujoco", "torch", "numpy")
 
 
@@ -94,7 +120,13 @@ def same(a: dict | None, b: dict | None) -> bool:
 
 def _widest_vectors(flags: list[str]) -> str:
     """The widest SIMD the math libraries can use: what tells apart two CPUs that report one model name."""
-    for flag, name in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"), ("sve", "SVE"), ("asimd", "NEON")):
+    for flag, name in (
+        ("avx512f", "AVX-512"),
+        ("avx2", "AVX2"),
+        ("avx", "AVX"),
+        ("sve", "SVE"),
+        ("asimd", "NEON"),
+    ):
         if flag in flags:
             return name
     return "no AVX"
@@ -106,5 +138,8 @@ def describe(p: dict | None) -> str:
     extra = [f"{k}={v}" for k, v in sorted((p.get("env") or {}).items())]
     soft = ", ".join(f"{k} {v}" for k, v in sorted((p.get("versions") or {}).items()))
     isa_note = f" [{_widest_vectors(p['isa'])}]" if p.get("isa") is not None else ""
-    return (f"{p.get('cpu')!r}{isa_note}" + (f" with {' '.join(extra)}" if extra else "")
-            + (f" ({soft})" if soft else ""))
+    return (
+        f"{p.get('cpu')!r}{isa_note}"
+        + (f" with {' '.join(extra)}" if extra else "")
+        + (f" ({soft})" if soft else "")
+    )

@@ -37,7 +37,9 @@ def observation_space() -> gym.spaces.Dict:
 def action_space() -> gym.spaces.Box:
     """Absolute joint targets within the joint limits. A target beyond them is not refused: the sim and the robot
     clip it, as they clip every step to +-0.3 rad."""
-    return gym.spaces.Box(spec.JOINT_LOWER.astype(np.float32), spec.JOINT_UPPER.astype(np.float32), dtype=np.float32)
+    return gym.spaces.Box(
+        spec.JOINT_LOWER.astype(np.float32), spec.JOINT_UPPER.astype(np.float32), dtype=np.float32
+    )
 
 
 def observation(state: np.ndarray) -> dict[str, np.ndarray]:

@@ -70,7 +70,9 @@ def main(argv: list[str] | None = None) -> None:
     args = parse_config(SweepConfig, argv)
     rows = [(label, run_setting(args.envs, *s)) for label, *s in SETTINGS]
     base = rows[0][1]["ms_per_step"]
-    print(f"| setting ({args.envs} envs, 1 thread) | success | median final lift (cm) | max lift (cm) | step cost |")
+    print(
+        f"| setting ({args.envs} envs, 1 thread) | success | median final lift (cm) | max lift (cm) | step cost |"
+    )
     print("|---|---:|---:|---:|---:|")
     for label, r in rows:
         print(

@@ -38,8 +38,9 @@ MAX_TOLERANCE = 0.01  # of the quantity's scale: the horizon ends where the tole
 TRAINING_SUCCESS_SLACK = 3  # successful training episodes (of 36) that may differ: pushes make it the most chaotic
 
 
-def rollouts(nudge: str | None = None, settings: tuple[str, ...] = SETTINGS,
-             threads: int = 1) -> dict[str, dict[str, np.ndarray]]:
+def rollouts(
+    nudge: str | None = None, settings: tuple[str, ...] = SETTINGS, threads: int = 1
+) -> dict[str, dict[str, np.ndarray]]:
     """Per-step arrays of both settings, on one torch thread (a matrix product's rounding depends on how many
     threads split it, and earlier tests in the same process may have changed the count; `threads` other than 1
     is a stand-in for another family). `nudge` names a reward term whose weight moves by one ulp: the deliberate
@@ -62,11 +63,21 @@ def _env(setting: str, reward: rewards.RewardConfig) -> BatchedGraspEnv:
     if setting == "evaluation":  # one batch, each env on the start state blindgrasp-eval-teacher gives it
         seeds = tuple(start_seed(spec.EVAL_SEED + k, name) for name in EVAL_OBJECTS for k in range(EPISODES))
         names = tuple(name for name in EVAL_OBJECTS for _ in range(EPISODES))
-        return BatchedGraspEnv(GraspEnvConfig(num_envs=len(seeds), objects=names, env_seeds=seeds,
-                                              dr=randomization.EVAL_DR, reward=reward, autoreset=False, nthread=1))
+        return BatchedGraspEnv(
+            GraspEnvConfig(
+                num_envs=len(seeds),
+                objects=names,
+                env_seeds=seeds,
+                dr=randomization.EVAL_DR,
+                reward=reward,
+                autoreset=False,
+                nthread=1,
+            )
+        )
     # training: Table II with pushes, 18 objects, autoreset across two short episodes
-    return BatchedGraspEnv(GraspEnvConfig(num_envs=18, seed=7, dr=randomization.PAPER_DR, reward=reward,
-                                          episode_s=4.0, nthread=1))
+    return BatchedGraspEnv(
+        GraspEnvConfig(num_envs=18, seed=7, dr=randomization.PAPER_DR, reward=reward, episode_s=4.0, nthread=1)
+    )
 
 
 def _run(env: BatchedGraspEnv, teacher: TeacherPolicy) -> dict[str, np.ndarray]:
@@ -75,10 +86,16 @@ def _run(env: BatchedGraspEnv, teacher: TeacherPolicy) -> dict[str, np.ndarray]:
     chunks: dict[str, list[np.ndarray]] = {"policy": [obs["policy"]], "privileged": [obs["privileged"]]}
     for _ in range(steps):
         obs, reward, terminated, truncated, info = env.step(teacher(obs, stochastic=False))
-        for key, value in (("policy", obs["policy"]), ("privileged", obs["privileged"]), ("reward", reward),
-                           ("joint_target", info["joint_target"]), ("lift", info["lift"]),
-                           ("done", terminated | truncated), ("success", info["success"]),
-                           ("failed", info["physics_failed"])):
+        for key, value in (
+            ("policy", obs["policy"]),
+            ("privileged", obs["privileged"]),
+            ("reward", reward),
+            ("joint_target", info["joint_target"]),
+            ("lift", info["lift"]),
+            ("done", terminated | truncated),
+            ("success", info["success"]),
+            ("failed", info["physics_failed"]),
+        ):
             chunks.setdefault(key, []).append(np.asarray(value))
         for name, term in info["terms"].items():
             chunks.setdefault(f"term/{name}", []).append(term)
@@ -88,8 +105,11 @@ def _run(env: BatchedGraspEnv, teacher: TeacherPolicy) -> dict[str, np.ndarray]:
 
 def digests(run: Mapping[str, np.ndarray]) -> dict[str, str]:
     """sha256 of each quantity's float64 bytes, as the first records made them (their digests stay comparable)."""
-    return {k: hashlib.sha256(np.ascontiguousarray(v, dtype=np.float64).tobytes()).hexdigest()
-            for k, v in sorted(run.items()) if k != "failed"}
+    return {
+        k: hashlib.sha256(np.ascontiguousarray(v, dtype=np.float64).tobytes()).hexdigest()
+        for k, v in sorted(run.items())
+        if k != "failed"
+    }
 
 
 def _signs(name: str, dim: int) -> np.ndarray:
@@ -114,9 +134,11 @@ def exact(run: Mapping[str, np.ndarray], setting: str) -> dict:
     evaluation's per-episode successes; training successes as a count (they drift, see TRAINING_SUCCESS_SLACK)."""
     done, success = run["done"], run["success"]
     latched = success & ~np.vstack([np.zeros_like(success[:1]), success[:-1]])
-    out = {"shapes": {k: list(v.shape) for k, v in sorted(run.items())},
-           "done_steps": [np.flatnonzero(done[:, i]).tolist() for i in range(done.shape[1])],
-           "physics_failures": int(run["failed"].sum())}
+    out = {
+        "shapes": {k: list(v.shape) for k, v in sorted(run.items())},
+        "done_steps": [np.flatnonzero(done[:, i]).tolist() for i in range(done.shape[1])],
+        "physics_failures": int(run["failed"].sum()),
+    }
     if setting == "evaluation":
         out["success"] = [bool(s) for s in success[-1]]
     else:
@@ -128,14 +150,21 @@ def _round(a: np.ndarray) -> list:
     return np.vectorize(lambda x: float(f"{x:.13g}"))(a).tolist() if a.size else []
 
 
-def summary(runs: Mapping[str, Mapping[str, np.ndarray]], tolerance: Mapping[str, Mapping[str, list]],
-            reward: Mapping[str, float]) -> dict:
+def summary(
+    runs: Mapping[str, Mapping[str, np.ndarray]],
+    tolerance: Mapping[str, Mapping[str, list]],
+    reward: Mapping[str, float],
+) -> dict:
     """The record: exact quantities, the first steps' floats with their tolerances, the reward weights."""
     out: dict = {"reward_weights": dict(reward), "margin": MARGIN, "settings": {}}
     for s, run in runs.items():
         horizon = len(next(iter(tolerance[s].values())))
-        out["settings"][s] = {"exact": exact(run, s), "horizon": horizon, "tolerance": tolerance[s],
-                              "floats": {k: _round(v[:horizon]) for k, v in floats(run).items()}}
+        out["settings"][s] = {
+            "exact": exact(run, s),
+            "horizon": horizon,
+            "tolerance": tolerance[s],
+            "floats": {k: _round(v[:horizon]) for k, v in floats(run).items()},
+        }
     return out
 
 
@@ -182,8 +211,10 @@ def compare(record: Mapping, runs: Mapping[str, Mapping[str, np.ndarray]], here:
                 problems.append(f"{s}: {key} differ: {got[key]} (recorded {want})")
         bad = _reward_identity(run, weights)
         if bad:
-            problems.append(f"{s}: the reward is not eq. 1 of the terms under the recorded weights at {bad} "
-                            f"steps x envs (a reward weight or eq. 1 changed)")
+            problems.append(
+                f"{s}: the reward is not eq. 1 of the terms under the recorded weights at {bad} "
+                f"steps x envs (a reward weight or eq. 1 changed)"
+            )
         problems += _compare_floats(s, rec, floats(run))
     problems += _compare_digests(record, runs, here)
     return problems
@@ -202,8 +233,9 @@ def _compare_floats(s: str, rec: Mapping, got: Mapping[str, np.ndarray]) -> list
         if over.any():
             t = int(np.flatnonzero(over.reshape(h, -1).any(axis=1))[0])
             dev = float(np.abs(got[k][t] - want[t]).max())
-            out.append(f"{s}: {k} leaves its tolerance at index {t}: off by {dev:.3g}, "
-                       f"tolerance {tol[t].max():.3g}")
+            out.append(
+                f"{s}: {k} leaves its tolerance at index {t}: off by {dev:.3g}, tolerance {tol[t].max():.3g}"
+            )
     return out
 
 
@@ -214,14 +246,26 @@ def _compare_digests(record: Mapping, runs: Mapping, here: dict) -> list[str]:
         return []  # an unrecorded family (or a partial run): the tolerant checks above are the whole check
     if any(all(got[s] == p["digests"][s] for s in SETTINGS) for p in ours):
         return []
-    changed = sorted({f"{s}/{k}" for p in ours for s in SETTINGS for k in p["digests"][s]
-                      if got[s].get(k) != p["digests"][s][k]})
-    return [f"on {platform_id.describe(here)}, a recorded platform, these quantities are no longer bit-identical: "
-            f"{changed}"]
+    changed = sorted(
+        {
+            f"{s}/{k}"
+            for p in ours
+            for s in SETTINGS
+            for k in p["digests"][s]
+            if got[s].get(k) != p["digests"][s][k]
+        }
+    )
+    return [
+        f"on {platform_id.describe(here)}, a recorded platform, these quantities are no longer bit-identical: "
+        f"{changed}"
+    ]
 
 
 def matching_platforms(record: Mapping, runs: Mapping) -> list[str]:
     """The recorded platforms (with or without a full platform record) whose digests `runs` reproduces."""
     got = {s: digests(run) for s, run in runs.items()}
-    return [platform_id.describe(p.get("platform")) if p.get("platform") else repr(p.get("cpu"))
-            for p in record.get("platforms", []) if all(got[s] == p["digests"][s] for s in SETTINGS)]
+    return [
+        platform_id.describe(p.get("platform")) if p.get("platform") else repr(p.get("cpu"))
+        for p in record.get("platforms", [])
+        if all(got[s] == p["digests"][s] for s in SETTINGS)
+    ]

@@ -48,8 +48,11 @@ def test_shipped_blind_teacher_acts_the_same_wherever_the_object_is_until_it_tou
     assert teacher.obs_groups["actor"] == [blind_approach.GROUP]
     assert teacher.config["preset"] == presets.CPU_BC_CALIB_BLIND.name
     assert teacher.actor_input == presets.CPU_BC_CALIB_BLIND.actor_input
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=4, objects=("capsule_small",), seed=spec.DEMO_SEED,
-                                         dr=randomization.EVAL_DR, nthread=1))
+    env = BatchedGraspEnv(
+        GraspEnvConfig(
+            num_envs=4, objects=("capsule_small",), seed=spec.DEMO_SEED, dr=randomization.EVAL_DR, nthread=1
+        )
+    )
     obs = env.reset()
     env.close()
     assert (obs["privileged"][:, UNI] < blind_approach.TOUCH_N).all()
@@ -59,6 +62,7 @@ def test_shipped_blind_teacher_acts_the_same_wherever_the_object_is_until_it_tou
     again = {**obs, "privileged": moved}
     np.testing.assert_array_equal(teacher(obs), teacher(again))
     assert np.abs(plain(obs) - plain(again)).max() > 1e-3  # the shipped teacher steers by it
+
     # Revealed after more than reveal_delay_steps consecutive touching steps (one fresh teacher per trajectory:
     # the touch counts are per env batch).
     def after_touching(priv: np.ndarray, steps: int) -> np.ndarray:
@@ -79,8 +83,9 @@ def test_the_blind_group_flows_from_the_env_through_ppo_to_the_loaded_teacher(tm
     assert blind_approach.GROUP not in RslRlGraspEnv(env).get_observations().keys()  # only when a model reads it
     actor_input = blind_approach.ActorInput(reveal_delay_steps=2, fingertips_from_joints=True)
     obs = RslRlGraspEnv(env, blind_group=actor_input).get_observations()
-    np.testing.assert_array_equal(obs[blind_approach.GROUP].numpy(),
-                                  blind_approach.BlindGroup(actor_input).mask(obs["privileged"].numpy()))
+    np.testing.assert_array_equal(
+        obs[blind_approach.GROUP].numpy(), blind_approach.BlindGroup(actor_input).mask(obs["privileged"].numpy())
+    )
     env.close()
     # A one-iteration run of a small preset whose actor reads the blind group; the run records its actor input,
     # the loaded teacher applies it by itself, and a resume under another actor input is refused.
@@ -88,18 +93,27 @@ def test_the_blind_group_flows_from_the_env_through_ppo_to_the_loaded_teacher(tm
 
     runner = presets.QUICK.runner_cfg()
     runner["obs_groups"] = presets.CPU_BC_BLIND_APPROACH.runner["obs_groups"]
-    quick_blind = replace(presets.QUICK, name="quick_blind", runner=runner, actor_input=actor_input,
-                          joint_calibration_rad=0.05)
+    quick_blind = replace(
+        presets.QUICK, name="quick_blind", runner=runner, actor_input=actor_input, joint_calibration_rad=0.05
+    )
     monkeypatch.setitem(presets.PRESETS, "quick_blind", quick_blind)
     assert train.build_env_config(quick_blind, 18, 0).dr.joint_calibration_rad == 0.05
-    train.train(train.TrainTeacherConfig(output_dir=tmp_path, preset="quick_blind", iterations=1, num_envs=18,
-                                         threads=1, export=False))
+    train.train(
+        train.TrainTeacherConfig(
+            output_dir=tmp_path, preset="quick_blind", iterations=1, num_envs=18, threads=1, export=False
+        )
+    )
     teacher = TeacherPolicy(tmp_path)
     assert teacher.actor_input == actor_input and teacher.config["joint_calibration_rad"] == 0.05
-    monkeypatch.setitem(presets.PRESETS, "quick_blind", replace(quick_blind, actor_input=blind_approach.ActorInput()))
+    monkeypatch.setitem(
+        presets.PRESETS, "quick_blind", replace(quick_blind, actor_input=blind_approach.ActorInput())
+    )
     with pytest.raises(SystemExit, match="actor_input"):
-        train.train(train.TrainTeacherConfig(output_dir=tmp_path, preset="quick_blind", iterations=2, num_envs=18,
-                                             threads=1, export=False))
+        train.train(
+            train.TrainTeacherConfig(
+                output_dir=tmp_path, preset="quick_blind", iterations=2, num_envs=18, threads=1, export=False
+            )
+        )
     priv = np.random.default_rng(1).normal(size=(3, spec.PRIVILEGED_DIM)).astype(np.float32)
     priv[:, UNI] = 0.0
     moved = priv.copy()
@@ -123,10 +137,16 @@ def test_blind_preset_continues_the_shipped_teachers_run_with_an_asymmetric_acto
 def test_blind_presets_chain_reveal6_then_calibration_blind():
     r6, cal = presets.get_preset("cpu_bc_blind_reveal6"), presets.get_preset("cpu_bc_calib_blind")
     assert r6.continues == (presets.CPU_BC_BLIND_APPROACH.name, presets.CPU_BC_BLIND_APPROACH.max_iterations)
-    assert cal.continues == (r6.name, r6.max_iterations) and (r6.max_iterations, cal.max_iterations) == (2550, 2950)
+    assert cal.continues == (r6.name, r6.max_iterations) and (r6.max_iterations, cal.max_iterations) == (
+        2550,
+        2950,
+    )
     assert r6.actor_input == blind_approach.ActorInput(reveal_delay_steps=6) and r6.joint_calibration_rad == 0
     assert cal.actor_input == blind_approach.ActorInput(reveal_delay_steps=6, fingertips_from_joints=True)
-    assert cal.joint_calibration_rad == 0.05 and presets.CPU_BC_BLIND_APPROACH.actor_input == blind_approach.ActorInput()
+    assert (
+        cal.joint_calibration_rad == 0.05
+        and presets.CPU_BC_BLIND_APPROACH.actor_input == blind_approach.ActorInput()
+    )
     assert cal.deviations[:-1] == r6.deviations and "measured joint" in cal.deviations[-1]
     with pytest.raises(ValueError, match="reveal_delay_steps"):
         blind_approach.ActorInput(reveal_delay_steps=-1)
@@ -192,4 +212,6 @@ def test_measured_kinematics_are_the_fingertip_sensors_without_an_offset_and_the
             assert gap < 2e-4, gap  # the sensors' poses, to a fraction of a millimetre
             np.testing.assert_allclose(quat, priv[:, S["fingertip_quat"]].reshape(-1, 4), atol=2e-3)
         else:
-            assert gap > 2e-3, gap  # 0.05 rad on three joints moves a tip by millimetres: what the true pose betrays
+            assert gap > 2e-3, (
+                gap
+            )  # 0.05 rad on three joints moves a tip by millimetres: what the true pose betrays

@@ -94,7 +94,9 @@ def test_ptys_ch340_and_acm_ports_are_silent(tmp_path, caplog):
 def test_the_udev_rules_name_the_adapters_and_set_the_timer():
     text = (ROOT / "robot_configs" / "udev" / "99-blindgrasp.rules").read_text()
     rules = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
-    token = re.compile(r'^(ACTION|SUBSYSTEM|DRIVERS|ATTRS\{\w+\}|ATTR\{\w+\}|SYMLINK|GROUP|MODE)(==|\+=|=)"[^"]*"$')
+    token = re.compile(
+        r'^(ACTION|SUBSYSTEM|DRIVERS|ATTRS\{\w+\}|ATTR\{\w+\}|SYMLINK|GROUP|MODE)(==|\+=|=)"[^"]*"$'
+    )
     for rule in rules:  # udev's own syntax: comma-separated KEY op "value"
         assert all(token.match(t.strip()) for t in rule.split(",")), rule
     u2d2 = [r for r in rules if 'ATTRS{idVendor}=="0403"' in r and 'ATTRS{idProduct}=="6014"' in r]

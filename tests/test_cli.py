@@ -46,12 +46,15 @@ def test_bad_input_is_one_clear_line():
         parse_config(TrainTeacherConfig, ["--preset=quick"])
 
 
-@pytest.mark.parametrize("argv", [
-    ["--preset", "quick", "--output-dir", "runs/t"],  # dashes
-    ["--preset=quick", "--output_dir=runs/t", "--no-export"],  # argparse's bare --no-X
-    ["--preset=quick", "--output_dir=runs/t", "--export"],  # a boolean takes its value
-    ["runs/t", "--preset=quick"],  # positional
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--preset", "quick", "--output-dir", "runs/t"],  # dashes
+        ["--preset=quick", "--output_dir=runs/t", "--no-export"],  # argparse's bare --no-X
+        ["--preset=quick", "--output_dir=runs/t", "--export"],  # a boolean takes its value
+        ["runs/t", "--preset=quick"],  # positional
+    ],
+)
 def test_other_spellings_are_refused(argv, capsys):
     with pytest.raises(SystemExit):
         parse_config(TrainTeacherConfig, argv)
@@ -89,8 +92,9 @@ def test_the_benchmark_is_picked_by_its_type():
     from lerobot_blindgrasp.bench import BenchCommand
     from lerobot_blindgrasp.bench.sim import BenchSimConfig
 
-    cfg = parse_config(BenchCommand, ["--bench.type=sim", "--bench.num_envs=36", "--bench.threads=[1,2]",
-                                      "--bench.json=true"]).bench
+    cfg = parse_config(
+        BenchCommand, ["--bench.type=sim", "--bench.num_envs=36", "--bench.threads=[1,2]", "--bench.json=true"]
+    ).bench
     assert isinstance(cfg, BenchSimConfig) and (cfg.num_envs, cfg.threads, cfg.json) == (36, [1, 2], True)
     with pytest.raises(SystemExit):
         parse_config(BenchCommand, ["sim", "--num_envs=36"])
@@ -104,8 +108,11 @@ def test_the_pipelines_command_lines_parse_with_each_commands_config(tmp_path):
     from lerobot_blindgrasp.pipeline import recipe
     from lerobot_blindgrasp.teacher.evaluate import EvalTeacherConfig
 
-    configs = {"blindgrasp-train-teacher": TrainTeacherConfig, "blindgrasp-eval-teacher": EvalTeacherConfig,
-               "blindgrasp-collect-demos": CollectConfig}
+    configs = {
+        "blindgrasp-train-teacher": TrainTeacherConfig,
+        "blindgrasp-eval-teacher": EvalTeacherConfig,
+        "blindgrasp-collect-demos": CollectConfig,
+    }
     seen = set()
     for stage in ("teachers", "teacher_evals", "demos"):
         for cmd in recipe.table_v(presets.get("smoke"), tmp_path, stage):

@@ -10,8 +10,10 @@ from lerobot_blindgrasp.sim import objects
 
 def _lerobot_eval(path, per_object):
     names = list(objects.CATALOGUE)
-    tasks = [{"task_group": "blindgrasp", "task_id": names.index(o), "metrics": {"successes": s}}
-             for o, s in per_object.items()]
+    tasks = [
+        {"task_group": "blindgrasp", "task_id": names.index(o), "metrics": {"successes": s}}
+        for o, s in per_object.items()
+    ]
     path.mkdir(parents=True)
     (path / "eval_info.json").write_text(json.dumps({"per_task": tasks}))
 
@@ -23,12 +25,22 @@ def _teacher_eval(path, per_object, mode="deterministic"):
 
 
 def test_a_student_and_a_teacher_eval_are_paired_episode_by_episode(tmp_path, capsys):
-    _teacher_eval(tmp_path / "t", {"sphere_small": [True, True, False, False], "cuboid_a_large": [True] * 4,
-                                   "everyday_mug": [True] * 4})
-    _lerobot_eval(tmp_path / "s", {"sphere_small": [True, False, True, True], "cuboid_a_large": [True] * 4,
-                                   "everyday_mug": [True] * 4})
-    compare.main([f"--a={tmp_path / 't'}", f"--b={tmp_path / 's' / 'eval_info.json'}", "--a_label=teacher",
-                  "--b_label=student"])
+    _teacher_eval(
+        tmp_path / "t",
+        {"sphere_small": [True, True, False, False], "cuboid_a_large": [True] * 4, "everyday_mug": [True] * 4},
+    )
+    _lerobot_eval(
+        tmp_path / "s",
+        {"sphere_small": [True, False, True, True], "cuboid_a_large": [True] * 4, "everyday_mug": [True] * 4},
+    )
+    compare.main(
+        [
+            f"--a={tmp_path / 't'}",
+            f"--b={tmp_path / 's' / 'eval_info.json'}",
+            "--a_label=teacher",
+            "--b_label=student",
+        ]
+    )
     md = capsys.readouterr().out
     # The student alone solved start states 3 and 4 of the small sphere, the teacher alone 2.
     # Rows in the paper's object order, then the everyday objects (held-out evaluations pair too).

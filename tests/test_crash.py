@@ -29,8 +29,12 @@ from lerobot_blindgrasp.demos import repair
 
 SEED = 29  # every kill instant is drawn from this
 ROOT = Path(__file__).resolve().parents[1]
-ENV = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}", "HF_HUB_OFFLINE": "1",
-       "OMP_NUM_THREADS": "1"}
+ENV = {
+    **os.environ,
+    "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+    "HF_HUB_OFFLINE": "1",
+    "OMP_NUM_THREADS": "1",
+}
 
 
 def _sha(path: Path) -> str:
@@ -90,13 +94,15 @@ def test_sigkill_during_atomic_writes_leaves_the_old_or_the_new_file(tmp_path):
     target = tmp_path / "big.bin"
     versions = {bytes([i]) * (256 << 10) for i in (1, 2)}
     # durable.py by its path: it needs only the standard library, and a start without torch keeps each cycle short.
-    code = ("import importlib.util as u\n"
-            f"s = u.spec_from_file_location('durable', {str(ROOT / 'lerobot_blindgrasp' / 'durable.py')!r})\n"
-            "durable = u.module_from_spec(s); s.loader.exec_module(durable)\n"
-            f"p = {str(target)!r}; i = 0\n"
-            "while True:\n"
-            "    durable.atomic_write_bytes(p, bytes([1 + i % 2]) * (256 << 10)); i += 1\n"
-            "    print(i, flush=True)\n")
+    code = (
+        "import importlib.util as u\n"
+        f"s = u.spec_from_file_location('durable', {str(ROOT / 'lerobot_blindgrasp' / 'durable.py')!r})\n"
+        "durable = u.module_from_spec(s); s.loader.exec_module(durable)\n"
+        f"p = {str(target)!r}; i = 0\n"
+        "while True:\n"
+        "    durable.atomic_write_bytes(p, bytes([1 + i % 2]) * (256 << 10)); i += 1\n"
+        "    print(i, flush=True)\n"
+    )
     rng = random.Random(SEED)
     for k in range(6):
         log = tmp_path / f"w{k}.log"
@@ -114,16 +120,18 @@ def test_a_full_disk_keeps_the_old_file_and_says_so(tmp_path):
     durable.atomic_write_json(p, {"old": True})
     torch.save({"w": torch.zeros(4)}, ckpt)
     before = _sha(p), _sha(ckpt)
-    code = ("import torch\nfrom lerobot_blindgrasp import durable\nLIMIT\n"
-            "try:\n"
-            f"    durable.atomic_write_text({str(p)!r}, 'x' * 200000)\n"
-            "except durable.WriteError as e:\n"
-            "    print('TEXT', e.errno, e)\n"
-            "try:\n"
-            f"    with durable.atomic_path({str(ckpt)!r}) as tmp:\n"
-            "        torch.save({'w': torch.zeros(100000)}, tmp)\n"
-            "except durable.WriteError as e:\n"
-            "    print('TORCH', e.errno, e)\n")
+    code = (
+        "import torch\nfrom lerobot_blindgrasp import durable\nLIMIT\n"
+        "try:\n"
+        f"    durable.atomic_write_text({str(p)!r}, 'x' * 200000)\n"
+        "except durable.WriteError as e:\n"
+        "    print('TEXT', e.errno, e)\n"
+        "try:\n"
+        f"    with durable.atomic_path({str(ckpt)!r}) as tmp:\n"
+        "        torch.save({'w': torch.zeros(100000)}, tmp)\n"
+        "except durable.WriteError as e:\n"
+        "    print('TORCH', e.errno, e)\n"
+    )
     out = _python(code, limit=100_000)
     assert out.returncode == 0, out.stderr[-3000:]
     lines = dict(line.split(" ", 1) for line in out.stdout.splitlines())
@@ -178,8 +186,17 @@ except Exception as e:
 @pytest.mark.slow
 def test_teacher_killed_at_random_instants_resumes_from_the_newest_readable_checkpoint(tmp_path):
     out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.teacher.train", "--preset=quick", f"--output_dir={out}",
-           "--iterations=3", "--num_envs=18", "--threads=1", "--export=false"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "lerobot_blindgrasp.teacher.train",
+        "--preset=quick",
+        f"--output_dir={out}",
+        "--iterations=3",
+        "--num_envs=18",
+        "--threads=1",
+        "--export=false",
+    ]
     rng = random.Random(SEED)
     _kill_when(cmd, tmp_path / "t0.log", lambda _: (out / "model_0.pt").exists(), rng.uniform(0.0, 1.5))
     kept = {p.name: _sha(p) for p in out.glob("model_*.pt")}
@@ -202,8 +219,19 @@ def test_teacher_killed_at_random_instants_resumes_from_the_newest_readable_chec
 @pytest.fixture(scope="module")
 def teacher(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("teacher") / "quick"
-    _run([sys.executable, "-m", "lerobot_blindgrasp.teacher.train", "--preset=quick", f"--output_dir={out}",
-          "--iterations=1", "--num_envs=18", "--threads=1", "--export=false"])
+    _run(
+        [
+            sys.executable,
+            "-m",
+            "lerobot_blindgrasp.teacher.train",
+            "--preset=quick",
+            f"--output_dir={out}",
+            "--iterations=1",
+            "--num_envs=18",
+            "--threads=1",
+            "--export=false",
+        ]
+    )
     return out
 
 
@@ -216,15 +244,25 @@ def test_demo_collection_killed_at_random_instants_loses_at_most_one_batch_and_r
 
     root = tmp_path / "demos"
     n_envs, per_object = 3, 5
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.demos.collect", f"--teacher={teacher}",
-           f"--output_dir={root}",
-           "--repo_id=test/crash", f"--episodes_per_object={per_object}", f"--num_envs={n_envs}",
-           "--objects=cylinder_a_medium,cuboid_a_medium", "--curation.enabled=false", "--progress=false",
-           "--threads=1", f"--seed={spec.DEMO_SEED + 29}"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "lerobot_blindgrasp.demos.collect",
+        f"--teacher={teacher}",
+        f"--output_dir={root}",
+        "--repo_id=test/crash",
+        f"--episodes_per_object={per_object}",
+        f"--num_envs={n_envs}",
+        "--objects=cylinder_a_medium,cuboid_a_medium",
+        "--curation.enabled=false",
+        "--progress=false",
+        "--threads=1",
+        f"--seed={spec.DEMO_SEED + 29}",
+    ]
     rng = random.Random(SEED + 1)
     durable_before, logs, unfinished = 0, [], []
     for k in range(2):
-        ready = (lambda t, n=durable_before: len(DURABLE.findall(t)) > 0 and int(DURABLE.findall(t)[-1]) > n)
+        ready = lambda t, n=durable_before: len(DURABLE.findall(t)) > 0 and int(DURABLE.findall(t)[-1]) > n
         again = cmd + (["--resume=true"] if k else [])
         log = _kill_when(again, tmp_path / f"d{k}.log", ready, rng.uniform(0, 0.5))
         logs.append(log)
@@ -232,8 +270,11 @@ def test_demo_collection_killed_at_random_instants_loses_at_most_one_batch_and_r
         info, found, plan = repair.inspect(root)
         # Nothing finished is lost beyond the bound: every checkpointed episode is in the verified prefix.
         assert found.kept_episodes >= durable_now >= durable_before
-        intact = {p: _sha(p) for p in root.glob("data/*/*.parquet") if p not in plan["remove"]
-                  and p not in plan["rewrite"]}
+        intact = {
+            p: _sha(p)
+            for p in root.glob("data/*/*.parquet")
+            if p not in plan["remove"] and p not in plan["rewrite"]
+        }
         unfinished.append(bool(plan["remove"] or plan["rewrite"]))
         durable_before = found.kept_episodes
     done = _run(cmd + ["--resume=true"])

@@ -180,10 +180,14 @@ def test_bad_inputs_are_refused_and_touch_nothing(teacher, tiny, tmp_path, capsy
         ([f"--teacher={tmp_path}", f"--output_dir={fresh}"], "no model_<iteration>.pt"),
         ([f"--teacher={teacher}", f"--output_dir={out}"], "already exists"),
         ([f"--teacher={teacher}", f"--output_dir={fresh}", "--resume=true"], "does not exist"),
-        ([f"--teacher={teacher}", f"--output_dir={out}", "--resume=true", "--stochastic=false"],
-         "different curation"),
-        ([f"--teacher={teacher}", f"--output_dir={out}", "--resume=true", "--curation.enabled=false"],
-         "different stochastic"),
+        (
+            [f"--teacher={teacher}", f"--output_dir={out}", "--resume=true", "--stochastic=false"],
+            "different curation",
+        ),
+        (
+            [f"--teacher={teacher}", f"--output_dir={out}", "--resume=true", "--curation.enabled=false"],
+            "different stochastic",
+        ),
         # Seed 0 is a teacher-training env seed: demos from it would overlap training start states.
         ([f"--teacher={teacher}", f"--output_dir={fresh}", "--seed=0"], "outside the demos range"),
         ([f"--teacher={student_like}", f"--output_dir={fresh}"], "not a blindgrasp teacher"),
@@ -288,8 +292,9 @@ def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     old_seeds = set(demo_dataset.episode_table(out).env_seed)
 
     # --resume appends until every object has 2 episodes, with env seeds no earlier run used.
-    stats = loop.collect(config(teacher, out, repo_id="test/sig", episodes_per_object=2, seed=spec.DEMO_SEED + 11,
-                                         resume=True))
+    stats = loop.collect(
+        config(teacher, out, repo_id="test/sig", episodes_per_object=2, seed=spec.DEMO_SEED + 11, resume=True)
+    )
     assert stats.stop_reason == "done" and stats.kept >= 1
     ds2 = LeRobotDataset("test/sig", root=out, video_backend="pyav")
     assert ds2.num_episodes == ds.num_episodes + stats.kept
@@ -355,9 +360,17 @@ def test_an_empty_curated_collection_is_a_one_line_error(teacher, tmp_path, caps
     that LeRobot later fails to load with an unrelated Hub error."""
     out = tmp_path / "empty"
     with pytest.raises(SystemExit) as exc:
-        collect.main([f"--teacher={teacher}", f"--output_dir={out}", "--repo_id=test/empty",
-                      f"--num_envs={N_ENVS}", "--episodes_per_object=1", "--max_rollouts_per_object=1",
-                      "--progress=false"])
+        collect.main(
+            [
+                f"--teacher={teacher}",
+                f"--output_dir={out}",
+                "--repo_id=test/empty",
+                f"--num_envs={N_ENVS}",
+                "--episodes_per_object=1",
+                "--max_rollouts_per_object=1",
+                "--progress=false",
+            ]
+        )
     assert exc.value.code == collect.EXIT_EMPTY
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
     assert len(err) == 1 and "is empty" in err[0] and "--curation.enabled=false" in err[0]

@@ -268,7 +268,9 @@ def test_merged_demos_stay_mergeable_when_a_source_has_two_episode_files(written
     demo_dataset.aggregate(["test/sim", "test/two"], [root, two], "test/merged", tmp_path / "merged")
     for f in (tmp_path / "merged" / "meta" / "episodes").glob("chunk-*/file-*.parquet"):
         assert set(pq.read_table(f)["meta/episodes/file_index"].to_pylist()) == {int(f.stem[5:])}
-    demo_dataset.aggregate(["test/merged", "test/sim"], [tmp_path / "merged", root], "test/again", tmp_path / "again")
+    demo_dataset.aggregate(
+        ["test/merged", "test/sim"], [tmp_path / "merged", root], "test/again", tmp_path / "again"
+    )
     again = LeRobotDataset("test/again", root=tmp_path / "again", video_backend="pyav")
     assert again.num_episodes == 6 + 7 + 6
     table = demo_dataset.episode_table(tmp_path / "again")

@@ -141,16 +141,24 @@ def sandbox(tmp_path_factory):
     return box
 
 
-OFFLINE_ENV = {"HF_HUB_OFFLINE": "1", "HF_DATASETS_OFFLINE": "1", "OMP_WAIT_POLICY": "PASSIVE",
-               "WANDB_MODE": "disabled"}  # OMP_WAIT_POLICY set: no command restarts itself (sleeping_openmp_threads)
+OFFLINE_ENV = {
+    "HF_HUB_OFFLINE": "1",
+    "HF_DATASETS_OFFLINE": "1",
+    "OMP_WAIT_POLICY": "PASSIVE",
+    "WANDB_MODE": "disabled",
+}  # OMP_WAIT_POLICY set: no command restarts itself (sleeping_openmp_threads)
 
 
 @contextlib.contextmanager
 def offline_in(box: Path, home: Path):
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(box)
-        env = {**OFFLINE_ENV, "HF_HOME": str(home / "hf"), "HF_LEROBOT_HOME": str(home / "hf" / "lerobot"),
-               "HF_LEROBOT_CALIBRATION": str(home / "calibration")}
+        env = {
+            **OFFLINE_ENV,
+            "HF_HOME": str(home / "hf"),
+            "HF_LEROBOT_HOME": str(home / "hf" / "lerobot"),
+            "HF_LEROBOT_CALIBRATION": str(home / "calibration"),
+        }
         for k, v in env.items():
             mp.setenv(k, v)
         yield mp
@@ -211,7 +219,7 @@ def run_in_process(argv: list[str], monkeypatch, stop_at_parse: bool):
     else:
         [ep] = [e for e in importlib.metadata.entry_points(group="console_scripts") if e.name == argv[0]]
         prog, run = argv[0], ep.load()
-    monkeypatch.setattr(sys, "argv", [prog, *argv[3 if argv[0] == "python" else 1:]])
+    monkeypatch.setattr(sys, "argv", [prog, *argv[3 if argv[0] == "python" else 1 :]])
     buf = io.StringIO()
     cfg, code = None, 0
     with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):

@@ -48,4 +48,3 @@ def test_every_command_names_the_config_class_it_parses():
         owner = importlib.import_module(module) if "." not in cls else None
         if owner is not None:
             assert hasattr(owner, cls), (name, cls)
-

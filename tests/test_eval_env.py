@@ -340,7 +340,9 @@ def test_sim_and_real_env_configs_share_one_definition_of_features_and_spaces():
 def test_only_the_first_render_episodes_get_the_full_video_rate():
     cfg = BlindGraspEnvConfig(task="cuboid_a_medium", render_stride=4, render_episodes=2)
     assert [cfg.env_kwargs(i)["render_stride"] for i in range(4)] == [4, 4, 20, 20]
-    assert BlindGraspEnvConfig(task="cuboid_a_medium").env_kwargs(9)["render_stride"] == 1  # LeRobot's default: all
+    assert (
+        BlindGraspEnvConfig(task="cuboid_a_medium").env_kwargs(9)["render_stride"] == 1
+    )  # LeRobot's default: all
     vec = cfg.create_envs(n_envs=3)["blindgrasp"]
     envs = next(iter(vec.values())).envs
     assert [e.unwrapped.render_stride for e in envs] == [4, 4, 20]

@@ -45,12 +45,18 @@ def _as_documented(program: str) -> list[str]:
 
 def _emulator_args(rig: GripperRig, port: int) -> list[str]:
     """What a documented command needs to run on the emulators (later flags win in draccus)."""
-    return [f"--robot.port={rig.dxl.port}", f"--robot.force_sensor.port={rig.force.port}",
-            "--robot.force_sensor.tare_s=0.2", f"--robot.latency_timer_ms={LATENCY_TIMER_MS}",
-            # The timing and staleness stops are tested in test_hw_faults*.py; here a loaded CI host that starves
-            # the emulators' threads for a few hundred ms must not end the recording (overruns are still warned).
-            "--robot.max_overrun_s=0", "--robot.force_sensor.stale_timeout_s=2.0",
-            f"--teleop.port={port}", "--teleop.disconnect_timeout_s=5.0"]
+    return [
+        f"--robot.port={rig.dxl.port}",
+        f"--robot.force_sensor.port={rig.force.port}",
+        "--robot.force_sensor.tare_s=0.2",
+        f"--robot.latency_timer_ms={LATENCY_TIMER_MS}",
+        # The timing and staleness stops are tested in test_hw_faults*.py; here a loaded CI host that starves
+        # the emulators' threads for a few hundred ms must not end the recording (overruns are still warned).
+        "--robot.max_overrun_s=0",
+        "--robot.force_sensor.stale_timeout_s=2.0",
+        f"--teleop.port={port}",
+        "--teleop.disconnect_timeout_s=5.0",
+    ]
 
 
 def _calibrate(home: Path, glove: GloveEmulator, monkeypatch) -> None:
@@ -71,8 +77,14 @@ def _calibrate(home: Path, glove: GloveEmulator, monkeypatch) -> None:
         return ""
 
     monkeypatch.setattr("builtins.input", operator)
-    teleop = ManusGlove(ManusGloveConfig(id=OPERATOR_ID, port=glove.addr[1], calibration_s=0.2,
-                                         calibration_dir=home / "calibration" / "teleoperators" / "manus_glove"))
+    teleop = ManusGlove(
+        ManusGloveConfig(
+            id=OPERATOR_ID,
+            port=glove.addr[1],
+            calibration_s=0.2,
+            calibration_dir=home / "calibration" / "teleoperators" / "manus_glove",
+        )
+    )
     teleop.connect()
     teleop.disconnect()
 

@@ -30,23 +30,30 @@ def _video(path: Path, n: int, value_of_frame) -> Path:
 
 
 def _task(tid: int, successes: list[bool], videos: list[Path]) -> dict:
-    return {"task_group": "blindgrasp", "task_id": tid,
-            "metrics": {"successes": successes, "video_paths": [str(v) for v in videos]}}
+    return {
+        "task_group": "blindgrasp",
+        "task_id": tid,
+        "metrics": {"successes": successes, "video_paths": [str(v) for v in videos]},
+    }
 
 
 def test_strip_picks_a_successful_medium_episode_per_shape(tmp_path):
     names = list(objects.CATALOGUE)
     tid = {n: i for i, n in enumerate(names)}
     mk = lambda name, k: _video(tmp_path / name / f"eval_episode_{k}.mp4", 10, lambda f: 20 * f)  # noqa: E731
-    info = {"per_task": [
-        # cylinder: large and medium succeed; the medium one is preferred
-        _task(tid["cylinder_a_large"], [True], [mk("cylinder_a_large", 0)]),
-        _task(tid["cylinder_b_medium"], [False, True], [mk("cylinder_b_medium", 0), mk("cylinder_b_medium", 1)]),
-        # sphere: only the small one succeeds, so it is shown
-        _task(tid["sphere_small"], [True], [mk("sphere_small", 0)]),
-        # capsule: the success is an unrendered episode (no video) -> no capsule row
-        _task(tid["capsule_medium"], [False, True], [mk("capsule_medium", 0)]),
-    ]}
+    info = {
+        "per_task": [
+            # cylinder: large and medium succeed; the medium one is preferred
+            _task(tid["cylinder_a_large"], [True], [mk("cylinder_a_large", 0)]),
+            _task(
+                tid["cylinder_b_medium"], [False, True], [mk("cylinder_b_medium", 0), mk("cylinder_b_medium", 1)]
+            ),
+            # sphere: only the small one succeeds, so it is shown
+            _task(tid["sphere_small"], [True], [mk("sphere_small", 0)]),
+            # capsule: the success is an unrendered episode (no video) -> no capsule row
+            _task(tid["capsule_medium"], [False, True], [mk("capsule_medium", 0)]),
+        ]
+    }
     assert object_for_task_id(tid["sphere_small"]) == "sphere_small"
     vids = successful_videos(info)
     assert set(vids) == {"cylinder_a_large", "cylinder_b_medium", "sphere_small"}

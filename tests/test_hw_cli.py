@@ -33,7 +33,7 @@ REPO_ID = "local/blindgrasp_glove_demo"
 
 def _robot_args(rig: GripperRig, prefix: str = "--robot") -> list[str]:
     return [
-        f'{prefix}=include {ROBOT_FILE}',
+        f"{prefix}=include {ROBOT_FILE}",
         f"{prefix}.port={rig.dxl.port}",
         f"{prefix}.id=rig",
         f"{prefix}.force_sensor.port={rig.force.port}",
@@ -164,8 +164,9 @@ def test_ctrl_c_during_recording_turns_the_torque_off(station, tmp_path):
         rig.hand_move(spec.HOME_POSE)
         glove.closure = 0.5
         cmd = _record_cmd(rig, glove, tmp_path / "ds", episodes=1, episode_s=60)
-        proc = subprocess.Popen(as_from_a_terminal(cmd), env=station.env, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(
+            as_from_a_terminal(cmd), env=station.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+        )
         _wait_for_torque(rig, proc)
         time.sleep(1.0)  # recording
         proc.send_signal(signal.SIGINT)
@@ -178,8 +179,9 @@ def test_glove_loss_during_recording_stops_with_torque_off(station, tmp_path):
         rig.hand_move(spec.HOME_POSE)
         glove.closure = 0.3
         cmd = _record_cmd(rig, glove, tmp_path / "ds", episodes=1, episode_s=60)
-        proc = subprocess.Popen(as_from_a_terminal(cmd), env=station.env, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(
+            as_from_a_terminal(cmd), env=station.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+        )
         _wait_for_torque(rig, proc)
         time.sleep(0.5)
         glove.paused = True  # the SDK bridge dies
@@ -270,7 +272,12 @@ def test_lerobot_eval_on_the_real_env_reports_per_object_success(station, checkp
     assert [(t["object"], t["trial"]) for t in trials] == [
         ("cylinder_a_medium", 1), ("cylinder_a_medium", 2), ("wine_glass", 1), ("wine_glass", 2)
     ]  # fmt: skip
-    report = [str(BIN / "python"), "-m", "lerobot_blindgrasp.envs.real_report", f"--eval_info={out / 'eval_info.json'}"]
+    report = [
+        str(BIN / "python"),
+        "-m",
+        "lerobot_blindgrasp.envs.real_report",
+        f"--eval_info={out / 'eval_info.json'}",
+    ]
     table = subprocess.run(report, env=station.env, capture_output=True, text=True, check=True).stdout
     assert "| cylinder_a_medium | 2 |" in table and "| **overall** | 4 |" in table
 

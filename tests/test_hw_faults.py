@@ -107,7 +107,9 @@ def test_killed_host_is_stopped_by_the_servo_watchdog(rig, robot, tmp_path):
 def test_servo_reset_is_caught_on_the_next_call(rig, robot):
     robot.get_observation()
     rig.dxl.reset_servo(21)  # brown-out: torque off, RAM defaults, no error bit
-    with pytest.raises(GripperStateError, match=r"mf_j21 \(ID 21\): Torque_Enable 0 \(set 1\).*reset.*Torque is off"):
+    with pytest.raises(
+        GripperStateError, match=r"mf_j21 \(ID 21\): Torque_Enable 0 \(set 1\).*reset.*Torque is off"
+    ):
         robot.get_observation()
     _assert_stopped(rig, robot)
 
@@ -324,7 +326,12 @@ def _proximal(teleop, glove, closure: float) -> float:
 
 
 HOSTILE = [
-    b"", b"\xff\xfe", b"[]", b"null", b"1e999", b"[" * 100_000,  # not a message; deep nesting
+    b"",
+    b"\xff\xfe",
+    b"[]",
+    b"null",
+    b"1e999",
+    b"[" * 100_000,  # not a message; deep nesting
     b'{"proto": "blindgrasp-glove/2", "session": "s", "seq": 1, "sent": 0, "side": "right", '
     b'"ergonomics": {"IndexMCPSpread": NaN}}',
     b'{"proto": "blindgrasp-glove/2", "session": "s", "seq": 1, "sent": 0, "side": "right", "ergonomics": [1, 2]}',

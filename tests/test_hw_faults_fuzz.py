@@ -158,7 +158,9 @@ def test_no_goal_is_computed_from_an_implausible_reading(rig, robot, joint, offs
 
 
 # --- force frames ------------------------------------------------------------------------------------------------
-frames = st.builds(encode_frame, st.integers(0, 65535), st.lists(INT32, min_size=1, max_size=8), st.integers(0, 255))
+frames = st.builds(
+    encode_frame, st.integers(0, 65535), st.lists(INT32, min_size=1, max_size=8), st.integers(0, 255)
+)
 
 
 @FAST
@@ -224,7 +226,9 @@ def test_the_glove_decoder_accepts_only_sane_messages(datagram):
     except ValueError:
         return
     assert 0 <= d.seq < 2**32 and d.side in ("left", "right") and set(d.ergonomics) == REQUIRED_KEYS
-    assert type(d.sent) is float and math.isfinite(d.sent) and isinstance(d.session, str) and 0 < len(d.session) <= 64
+    assert (
+        type(d.sent) is float and math.isfinite(d.sent) and isinstance(d.session, str) and 0 < len(d.session) <= 64
+    )
     assert all(type(v) is float and math.isfinite(v) and abs(v) <= MAX_ABS_DEG for v in d.ergonomics.values())
 
 
@@ -242,8 +246,11 @@ def _mutations(good: bytes):
         st.integers(0, len(good) - 1).map(lambda n: good[:n]),  # truncated anywhere
         st.binary(max_size=80),
         json_values.map(lambda v: json.dumps(v).encode()),
-        st.builds(lambda n, junk: good[:n] + junk + good[n:], st.integers(0, len(good)), st.binary(min_size=1,
-                  max_size=8)),  # fmt: skip
+        st.builds(
+            lambda n, junk: good[:n] + junk + good[n:],
+            st.integers(0, len(good)),
+            st.binary(min_size=1, max_size=8),
+        ),  # fmt: skip
         st.builds(lambda k, v: _replace(raw, k, v), keys, json_values | st.integers(-(2**70), 2**70)),
     )
 

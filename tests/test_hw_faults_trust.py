@@ -236,7 +236,9 @@ def test_one_glove_per_teleoperator(tmp_path, monkeypatch, caplog):
                     time.sleep(0.02)
             assert teleop.receiver.foreign > 5
             assert caplog.text.count("Dropping glove datagrams from") == 1  # warned once per sender
-            first.paused = True  # the bound bridge goes away: no takeover, the target holds, then the stream is lost
+            first.paused = (
+                True  # the bound bridge goes away: no takeover, the target holds, then the stream is lost
+            )
             time.sleep(cfg.hold_timeout_s + 0.05)
             assert teleop.get_action()["ff_j11.pos"] == pytest.approx(cfg.open_pose[1], abs=1e-9)
             teleop.disconnect()  # changing the sender takes a reconnect
@@ -291,7 +293,9 @@ def test_truncated_or_corrupt_gripper_calibration_is_refused(rig, robot, monkeyp
     for name, text in _file_variants(good):
         robot.calibration_fpath.write_bytes(text)
         r = BlindgraspGripper(rig.robot_config(robot.calibration_dir))
-        with pytest.raises(CalibrationFileError, match=r"invalid.*Run lerobot-calibrate --robot.type=blindgrasp_grip"):
+        with pytest.raises(
+            CalibrationFileError, match=r"invalid.*Run lerobot-calibrate --robot.type=blindgrasp_grip"
+        ):
             r.connect()
         assert not r.is_connected, name
     assert not rig.dxl.any_torque()
@@ -305,13 +309,18 @@ def test_truncated_or_corrupt_glove_calibration_is_refused(tmp_path, monkeypatch
     as_bool = json.dumps({"open": OPEN, "fist": {**FIST, "IndexMCPSpread": True}}).encode()
     for name, text in [*_file_variants(good, (True, "12", None, [1])), ("a bool for a number", as_bool)]:
         (tmp_path / "op.json").write_bytes(text)
-        with pytest.raises(GloveCalibrationError, match=r"invalid.*Run lerobot-calibrate --teleop.type=manus_glove"):
+        with pytest.raises(
+            GloveCalibrationError, match=r"invalid.*Run lerobot-calibrate --teleop.type=manus_glove"
+        ):
             ManusGlove(cfg).connect()
 
 
 @pytest.mark.parametrize(
     "cut,why",
-    [("baudrate: 1000000", "baudrate 100 is not a Dynamixel rate"), ("  tare_s: 0.5", r"force_sensor.\['tare_s'\]")],
+    [
+        ("baudrate: 1000000", "baudrate 100 is not a Dynamixel rate"),
+        ("  tare_s: 0.5", r"force_sensor.\['tare_s'\]"),
+    ],
 )
 def test_a_corrupt_robot_config_is_refused(tmp_path, cut, why):
     text = (Path(__file__).resolve().parents[1] / "robot_configs" / "blindgrasp_gripper.yaml").read_text()

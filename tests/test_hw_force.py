@@ -93,7 +93,9 @@ def test_a_slow_stream_is_told_from_a_stale_one():
     try:
         reader.connect()
         time.sleep(0.6)  # 9 frames: enough intervals for a rate
-        with pytest.raises(ForceStreamError, match=r"stream is slow: fresh frames arrive at 1\d\.\d/s, below the 40/s"):
+        with pytest.raises(
+            ForceStreamError, match=r"stream is slow: fresh frames arrive at 1\d\.\d/s, below the 40/s"
+        ):
             reader.read()
         emu.period = 1.0 / 80.0  # the HX711 board's rate
         time.sleep(0.5)

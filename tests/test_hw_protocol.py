@@ -65,7 +65,10 @@ def test_ping_read_write_and_broadcast_ping(bus):
 
 def test_control_table_rules(bus):
     emu, port, ph = bus
-    assert ph.write2ByteTxRx(port, 10, ADDR["Present_Position"], 5) == (COMM_SUCCESS, p2.ERRNUM_ACCESS)  # read-only
+    assert ph.write2ByteTxRx(port, 10, ADDR["Present_Position"], 5) == (
+        COMM_SUCCESS,
+        p2.ERRNUM_ACCESS,
+    )  # read-only
     assert ph.write1ByteTxRx(port, 10, ADDR["Operating_Mode"], 2) == (COMM_SUCCESS, p2.ERRNUM_DATA_RANGE)
     assert ph.write1ByteTxRx(port, 10, ADDR["Torque_Enable"], 1) == (COMM_SUCCESS, 0)
     # EEPROM is locked while the torque is on.
@@ -104,7 +107,11 @@ def test_faults_look_like_real_ones(bus):
     # Hardware error: torque drops, every status packet carries the alert bit, torque stays off until a reboot.
     assert ph.write1ByteTxRx(port, 11, ADDR["Torque_Enable"], 1) == (COMM_SUCCESS, 0)
     emu.set_hardware_error(11, HW_OVERLOAD)
-    assert ph.read1ByteTxRx(port, 11, ADDR["Hardware_Error_Status"]) == (HW_OVERLOAD, COMM_SUCCESS, p2.ERRBIT_ALERT)
+    assert ph.read1ByteTxRx(port, 11, ADDR["Hardware_Error_Status"]) == (
+        HW_OVERLOAD,
+        COMM_SUCCESS,
+        p2.ERRBIT_ALERT,
+    )
     assert not emu.torque_enabled(11)
     ph.write1ByteTxRx(port, 11, ADDR["Torque_Enable"], 1)
     assert not emu.torque_enabled(11)
@@ -142,7 +149,7 @@ def test_setup_motors_gives_factory_servos_their_ids_and_baud(tmp_path, monkeypa
 def test_force_frames_resync_after_garbage_and_bad_crcs():
     assert crc16_ccitt_false(b"123456789") == 0x29B1
     rng = np.random.default_rng(0)
-    frames = [encode_frame(k, rng.integers(-2**23, 2**23, 3).tolist(), k % 2) for k in range(50)]
+    frames = [encode_frame(k, rng.integers(-(2**23), 2**23, 3).tolist(), k % 2) for k in range(50)]
     bad = bytearray(frames[10])
     bad[7] ^= 0x01  # one flipped bit in a count
     stream = b"".join(frames[:10]) + bytes(bad) + b"\xa5\x5a\x99junk\xa5" + b"".join(frames[11:])

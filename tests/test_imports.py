@@ -16,13 +16,25 @@ import pytest
 HEAVY = ("mujoco", "rsl_rl")
 # Parts of the package that registering the plugin types needs none of (the real trial is imported when its envs
 # are made; the robot needs no analysis code, the policy no preset registry).
-UNNEEDED = ("lerobot_blindgrasp.analysis", "lerobot_blindgrasp.presets", "lerobot_blindgrasp.robustness",
-            "lerobot_blindgrasp.teacher", "lerobot_blindgrasp.pipeline", "lerobot_blindgrasp.envs.real_trial")
+UNNEEDED = (
+    "lerobot_blindgrasp.analysis",
+    "lerobot_blindgrasp.presets",
+    "lerobot_blindgrasp.robustness",
+    "lerobot_blindgrasp.teacher",
+    "lerobot_blindgrasp.pipeline",
+    "lerobot_blindgrasp.envs.real_trial",
+)
 
 
 def _fresh(code: str, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", code], env=env or dict(os.environ), capture_output=True, text=True,
-                          check=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        env=env or dict(os.environ),
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=300,
+    )
 
 
 def test_plugin_discovery_imports_neither_mujoco_nor_rsl_rl_and_sets_nothing():
@@ -46,8 +58,13 @@ def test_plugin_discovery_imports_neither_mujoco_nor_rsl_rl_and_sets_nothing():
         f"                  'unneeded': [m for m in sys.modules if m.startswith({UNNEEDED!r})]}}))\n"
     )
     out = json.loads(_fresh(code, env).stdout.strip().splitlines()[-1])
-    assert out == {"loaded": True, "heavy": [], "unneeded": [], "omp_wait_policy": None,
-                   "types": ["BlindgraspTransformerConfig", "BlindGraspEnvConfig", "BlindgraspGripperConfig"]}
+    assert out == {
+        "loaded": True,
+        "heavy": [],
+        "unneeded": [],
+        "omp_wait_policy": None,
+        "types": ["BlindgraspTransformerConfig", "BlindGraspEnvConfig", "BlindgraspGripperConfig"],
+    }
 
 
 @pytest.mark.parametrize("user_setting", [None, "ACTIVE"])
@@ -57,11 +74,13 @@ def test_a_training_command_starts_over_with_sleeping_openmp_threads_unless_the_
     env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
     if user_setting:
         env["OMP_WAIT_POLICY"] = user_setting
-    code = ("print('start', flush=True)\n"
-            "import os, torch\n"
-            "from lerobot_blindgrasp.cli import sleeping_openmp_threads\n"
-            "sleeping_openmp_threads(restart=True)\n"
-            "print('policy', os.environ['OMP_WAIT_POLICY'])\n")
+    code = (
+        "print('start', flush=True)\n"
+        "import os, torch\n"
+        "from lerobot_blindgrasp.cli import sleeping_openmp_threads\n"
+        "sleeping_openmp_threads(restart=True)\n"
+        "print('policy', os.environ['OMP_WAIT_POLICY'])\n"
+    )
     lines = _fresh(code, env).stdout.split("\n")
     starts = 1 if user_setting else 2
     assert [ln for ln in lines if ln] == ["start"] * starts + [f"policy {user_setting or 'PASSIVE'}"]
@@ -69,12 +88,14 @@ def test_a_training_command_starts_over_with_sleeping_openmp_threads_unless_the_
 
 def test_called_from_python_the_setting_only_reaches_the_processes_it_starts():
     env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
-    code = ("print('start', flush=True)\n"
-            "import os, subprocess, sys, torch\n"
-            "from lerobot_blindgrasp.cli import sleeping_openmp_threads\n"
-            "sleeping_openmp_threads(restart=False)\n"
-            "child = \"import os; print('child', os.environ['OMP_WAIT_POLICY'])\"\n"
-            "print(subprocess.run([sys.executable, '-c', child], capture_output=True, text=True).stdout.strip())\n")
+    code = (
+        "print('start', flush=True)\n"
+        "import os, subprocess, sys, torch\n"
+        "from lerobot_blindgrasp.cli import sleeping_openmp_threads\n"
+        "sleeping_openmp_threads(restart=False)\n"
+        "child = \"import os; print('child', os.environ['OMP_WAIT_POLICY'])\"\n"
+        "print(subprocess.run([sys.executable, '-c', child], capture_output=True, text=True).stdout.strip())\n"
+    )
     assert _fresh(code, env).stdout.split() == ["start", "child", "PASSIVE"]
 
 
@@ -107,7 +128,12 @@ def test_the_sim_fingerprint_follows_code_not_comments_or_formatting(tmp_path):
     assert sim_fingerprint(tmp_path) == sim_fingerprint()
     spec_py = tmp_path / "spec.py"
     text = spec_py.read_text()
-    spec_py.write_text("# a comment\n" + text.replace('"""The shared', '"""Reworded: the shared').replace("CONTROL_HZ = 20", "CONTROL_HZ = (\n    20\n)"))
+    spec_py.write_text(
+        "# a comment\n"
+        + text.replace('"""The shared', '"""Reworded: the shared').replace(
+            "CONTROL_HZ = 20", "CONTROL_HZ = (\n    20\n)"
+        )
+    )
     assert sim_fingerprint(tmp_path) == sim_fingerprint()
     spec_py.write_text(text.replace("FORCE_THRESHOLD_N = 0.1", "FORCE_THRESHOLD_N = 0.11"))
     assert sim_fingerprint(tmp_path) != sim_fingerprint()

@@ -38,8 +38,10 @@ def test_smoke_pipeline_runs_every_stage_and_writes_the_report(tmp_path):
     assert "--objects=cylinder_a_medium" in record["stages"]["dagger_1"]["command"]
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    kept = [json.loads((out / d / "yield_report.json").read_text())["total"]["kept"]
-            for d in (base, f"{base}_cylinder_a_medium")]
+    kept = [
+        json.loads((out / d / "yield_report.json").read_text())["total"]["kept"]
+        for d in (base, f"{base}_cylinder_a_medium")
+    ]
     merged = LeRobotDataset("local/m", root=out / f"{base}_targeted")
     assert merged.num_episodes == sum(kept) and kept[1] >= 1
     report = (out / "report.md").read_text()
@@ -76,8 +78,9 @@ def test_presets_are_consistent():
     assert pipeline.PRESETS["paper"].student.device == "cuda"
 
 
-def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_states_sim_and_cpu(tmp_path,
-                                                                                               monkeypatch):
+def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_states_sim_and_cpu(
+    tmp_path, monkeypatch
+):
     from lerobot_blindgrasp import platform_id
     from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
@@ -106,6 +109,16 @@ def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_state
     assert not (tmp_path / "cpu").exists() and repr(rec["platform"]["cpu"]) in why and "Newcomer CPU 9000" in why
     from lerobot_blindgrasp.pipeline.report import _teacher_lines
 
-    lines = _teacher_lines({"teacher": {"source": "shipped", "path": str(teacher), "file": "teacher.safetensors",
-                                        "iteration": 1, "sha256": "0" * 64, **note}})
+    lines = _teacher_lines(
+        {
+            "teacher": {
+                "source": "shipped",
+                "path": str(teacher),
+                "file": "teacher.safetensors",
+                "iteration": 1,
+                "sha256": "0" * 64,
+                **note,
+            }
+        }
+    )
     assert any("evaluated in this run, on this machine" in line and "Newcomer CPU 9000" in line for line in lines)

@@ -38,8 +38,9 @@ def test_the_cpu_model_can_be_played_and_float_paths_count_as_another_platform(m
 
 def test_a_teacher_eval_records_the_platform_it_ran_on(monkeypatch):
     monkeypatch.setenv(platform_id.CPU_MODEL_ENV, "Newcomer CPU 9000")
-    res = evaluate.evaluate_teacher(TeacherPolicy(default_teacher()), ("cuboid_b_large",), 1,
-                                    modes=("deterministic",), progress=False)
+    res = evaluate.evaluate_teacher(
+        TeacherPolicy(default_teacher()), ("cuboid_b_large",), 1, modes=("deterministic",), progress=False
+    )
     assert res["platform"] == platform_id.platform() and res["platform"]["cpu"] == "Newcomer CPU 9000"
 
 

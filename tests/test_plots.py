@@ -6,8 +6,13 @@ from lerobot_blindgrasp.analysis import plots
 def test_bar_chart_legend_is_above_the_axes_and_below_the_title(tmp_path, monkeypatch):
     figs, close = [], plots.plt.close
     monkeypatch.setattr(plots.plt, "close", figs.append)  # keep the figure to measure it
-    labels = ["Student (Proposed)", "Student w/o Stochastic Teacher", "Student w/o Curation", "Student w/o r_i",
-              "RL w/ o_t"]
+    labels = [
+        "Student (Proposed)",
+        "Student w/o Stochastic Teacher",
+        "Student w/o Curation",
+        "Student w/o r_i",
+        "RL w/ o_t",
+    ]
     for n_objects in (18, 3):  # the widest chart (Table V) and the narrowest one
         names = [f"object_{k}" for k in range(n_objects)]
         plots.bar_chart(tmp_path / "c.png", names, {label: [100.0] * n_objects for label in labels}, "t", "y")

@@ -13,7 +13,15 @@ from lerobot_blindgrasp.bench import main
 def test_policy_bench_json(capsys):
     previous = torch.get_num_threads()
     try:
-        main(["--bench.type=policy", "--bench.size=quick", "--bench.steps=35", "--bench.rounds=1", "--bench.json=true"])
+        main(
+            [
+                "--bench.type=policy",
+                "--bench.size=quick",
+                "--bench.steps=35",
+                "--bench.rounds=1",
+                "--bench.json=true",
+            ]
+        )
     finally:
         torch.set_num_threads(previous)  # the bench pins torch to one thread, as it measures
     result = json.loads(capsys.readouterr().out)

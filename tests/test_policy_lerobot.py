@@ -174,7 +174,7 @@ def test_rolling_context_equals_lerobot_training_windows(dataset_root):
 # and upload_folder (the last call, which validates and commits on the Hub) copies the files it would send,
 # filtered by the same allow/ignore patterns, to a folder. HF_HUB_OFFLINE=1 stays set, so any other network call
 # fails the test.
-HUB_CAPTURE = r'''
+HUB_CAPTURE = r"""
 import os, shutil, sys
 from pathlib import Path
 import yaml
@@ -206,7 +206,7 @@ if __name__ == "__main__":
     from lerobot.scripts.lerobot_train import main
     sys.argv[0] = "lerobot-train"
     main()
-'''
+"""
 
 
 @pytest.mark.slow

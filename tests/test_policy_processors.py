@@ -118,8 +118,9 @@ def test_training_deltas_beyond_the_bound_are_clipped_and_actions_are_bounded_on
     assert normalized.min() == -1.0 and normalized.max() == 1.0  # training targets fit the model's tanh
     # Nothing after the model adds a bound of its own: the model's output mapping is the policy's one bound, the
     # env's or the robot's +-0.3 rad step clip the next one.
-    torch.testing.assert_close(normalized_delta_to_target(torch.full((1, 9), 7.0), q), q + 7.0 * BOUND, atol=1e-5,
-                               rtol=0)
+    torch.testing.assert_close(
+        normalized_delta_to_target(torch.full((1, 9), 7.0), q), q + 7.0 * BOUND, atol=1e-5, rtol=0
+    )
     torch.testing.assert_close(post(torch.full((1, 9), 7.0)), torch.full((1, 9), 7.0))
 
 
@@ -141,8 +142,9 @@ def test_the_policy_acts_only_on_preprocessed_observations():
 
 def test_interleaved_policies_share_nothing():
     """No state outside the objects: two policies' pre -> act calls interleaved give each its own targets."""
-    (pre_a, post_a), (pre_b, post_b) = (make_blindgrasp_transformer_pre_post_processors(make_config(), make_stats())
-                                        for _ in range(2))
+    (pre_a, post_a), (pre_b, post_b) = (
+        make_blindgrasp_transformer_pre_post_processors(make_config(), make_stats()) for _ in range(2)
+    )
     policy_a, policy_b = (BlindgraspTransformerPolicy(make_config()).eval() for _ in range(2))
     obs_a, obs_b = random_state(1, seed=4), random_state(1, seed=5)
     batch_a, batch_b = pre_a({OBS_STATE: obs_a}), pre_b({OBS_STATE: obs_b})

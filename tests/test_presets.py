@@ -25,15 +25,31 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_every_entry_is_complete():
-    assert set(presets.PRESETS) == {"smoke", "quick", "cpu", "paper", "quick_dagger", "cpu_dagger", "quick_blind",
-                                    "quick_blind_targeted"}
+    assert set(presets.PRESETS) == {
+        "smoke",
+        "quick",
+        "cpu",
+        "paper",
+        "quick_dagger",
+        "cpu_dagger",
+        "quick_blind",
+        "quick_blind_targeted",
+    }
     for name, p in presets.PRESETS.items():
         assert p.name == name
         for part in (p.teacher, p.demos, p.student, p.evaluation):
             for f in dataclasses.fields(part):
                 value = getattr(part, f.name)
-                optional = f.name in ("iterations", "num_envs", "steps", "epochs", "constant_lr_epochs",
-                                      "constant_lr_steps", "lr", "shipped_folder")
+                optional = f.name in (
+                    "iterations",
+                    "num_envs",
+                    "steps",
+                    "epochs",
+                    "constant_lr_epochs",
+                    "constant_lr_steps",
+                    "lr",
+                    "shipped_folder",
+                )
                 assert value is not None or optional, (name, f.name)
         assert p.teacher.settings is teacher_presets.PRESETS[p.teacher.settings.name]
         assert p.student.size in presets.SIZES
@@ -66,8 +82,12 @@ def test_paper_is_tables_iii_and_iv():
     p = presets.PRESETS["paper"]
     assert p.teacher.settings is teacher_presets.PAPER and p.teacher.settings.deviations == ()
     assert not p.teacher.shipped and p.teacher.iterations is None and p.teacher.num_envs is None
-    assert presets.SIZES["paper"] == {"n_layers": 6, "embed_dim": 512, "n_heads": 8,
-                                      "head_hidden_dims": [1024, 1024]}
+    assert presets.SIZES["paper"] == {
+        "n_layers": 6,
+        "embed_dim": 512,
+        "n_heads": 8,
+        "head_hidden_dims": [1024, 1024],
+    }
     s = p.student
     assert (s.size, s.batch_size, s.epochs, s.constant_lr_epochs, s.steps) == ("paper", 256, 2000, 100, None)
     # Table V is on the six medium (in-distribution) shapes.
@@ -76,14 +96,22 @@ def test_paper_is_tables_iii_and_iv():
 
 def test_quick_and_cpu_pipeline_numbers_are_unchanged():
     q, c = presets.PRESETS["quick"], presets.PRESETS["cpu"]
-    assert (q.demos.episodes_per_object, q.demos.max_rollouts_per_object, q.demos.num_envs,
-            q.demos.min_curated_episodes) == (40, 400, 720, 18)
+    assert (
+        q.demos.episodes_per_object,
+        q.demos.max_rollouts_per_object,
+        q.demos.num_envs,
+        q.demos.min_curated_episodes,
+    ) == (40, 400, 720, 18)
     assert (q.student.size, q.student.steps, q.student.batch_size) == ("cpu", 1200, 128)
     assert (q.student.threads, q.student.num_workers) == (1, 1)  # one loader process next to one torch thread
     assert (q.evaluation.episodes_per_object, q.evaluation.teacher_modes) == (20, ("deterministic",))
     # 100 demos per object: ~8 passes of the cpu student over them (docs/research/student_cpu.md, 2026-11-30)
-    assert (c.demos.episodes_per_object, c.demos.max_rollouts_per_object, c.demos.num_envs,
-            c.demos.min_curated_episodes) == (100, 1000, 720, 90)
+    assert (
+        c.demos.episodes_per_object,
+        c.demos.max_rollouts_per_object,
+        c.demos.num_envs,
+        c.demos.min_curated_episodes,
+    ) == (100, 1000, 720, 90)
     assert (c.student.steps, c.student.batch_size) == (5000, 256)
 
 
@@ -102,7 +130,9 @@ def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_pa
     assert b.student_recipe.startswith("beyond the paper") and "approaches blind" in b.student_recipe
     assert "reading off by +-0.05 rad" in b.student_recipe
     assert q.student_recipe.startswith("the paper's")
-    assert any("teacher_cpu_bc_calib" in d for d in b.deviations) and not any("1200 steps" in d for d in b.deviations)
+    assert any("teacher_cpu_bc_calib" in d for d in b.deviations) and not any(
+        "1200 steps" in d for d in b.deviations
+    )
     # only the teacher, the demos' calibration offset (the teacher's training one) and the student stage differ
     assert b.demos == dataclasses.replace(q.demos, joint_calibration_rad=0.05) and b.evaluation == q.evaluation
     assert "--joint_calibration_rad=0.05" in recipe.collect(b, folder, tmp_path / "d", "x/y", 1)
@@ -129,7 +159,9 @@ def test_the_shipped_students_preset_aims_demos_and_dagger_at_the_small_capsule(
     b, t = presets.PRESETS["quick_blind"], presets.PRESETS["quick_blind_targeted"]
     assert t.teacher == b.teacher and t.evaluation == b.evaluation
     assert t.demos == dataclasses.replace(b.demos, extra_episodes=(("capsule_small", 240),))
-    assert t.dagger == presets.DaggerStage(episodes_per_object=80, steps=1200, num_envs=80, objects="capsule_small")
+    assert t.dagger == presets.DaggerStage(
+        episodes_per_object=80, steps=1200, num_envs=80, objects="capsule_small"
+    )
     words = t.student_recipe
     assert words.startswith("beyond the paper") and "240 more curated episodes of capsule_small" in words
     assert "80 student episodes of capsule_small" in words and "approaches blind" in words
@@ -139,21 +171,35 @@ def test_the_shipped_students_preset_aims_demos_and_dagger_at_the_small_capsule(
     assert {"--steps=1200", "--policy.scheduler_constant_steps=600", "--policy.optimizer_lr=0.0005"} <= set(cmd)
     # The extra collection: one object, the collector's default budget, start states of its own.
     teacher = tmp_path / "teacher"
-    extra = recipe.collect(t, teacher, tmp_path / "e", "x/e", recipe.extra_demo_seed(1, 0), extra=("capsule_small", 240))
-    assert {"--objects=capsule_small", "--episodes_per_object=240", "--max_rollouts_per_object=4800",
-            "--joint_calibration_rad=0.05"} <= set(extra)
+    extra = recipe.collect(
+        t, teacher, tmp_path / "e", "x/e", recipe.extra_demo_seed(1, 0), extra=("capsule_small", 240)
+    )
+    assert {
+        "--objects=capsule_small",
+        "--episodes_per_object=240",
+        "--max_rollouts_per_object=4800",
+        "--joint_calibration_rad=0.05",
+    } <= set(extra)
     main = recipe.collect(t, teacher, tmp_path / "d", "x/d", recipe.demo_seed(1))
     assert not any(c.startswith("--objects") for c in main) and "--episodes_per_object=40" in main
-    starts = [recipe.demo_seed(1), recipe.extra_demo_seed(1, 0), recipe.extra_demo_seed(1, 3),
-              recipe.demo_seed(1) + recipe.DEMO_SEED_BLOCK // 2, recipe.extra_demo_seed(1, 0, curated=False),
-              recipe.extra_demo_seed(1, 3, curated=False), recipe.demo_seed(2)]
+    starts = [
+        recipe.demo_seed(1),
+        recipe.extra_demo_seed(1, 0),
+        recipe.extra_demo_seed(1, 3),
+        recipe.demo_seed(1) + recipe.DEMO_SEED_BLOCK // 2,
+        recipe.extra_demo_seed(1, 0, curated=False),
+        recipe.extra_demo_seed(1, 3, curated=False),
+        recipe.demo_seed(2),
+    ]
     # Each block holds its whole rollout budget, so no two collections share a start state.
     assert all(b - a >= 4800 for a, b in zip(starts, starts[1:]))
     with pytest.raises(ValueError, match="at most 4"):
         recipe.extra_demo_seed(1, 4)
     dag = recipe.dagger(t, tmp_path / "s", teacher, tmp_path / "d", tmp_path / "g", 5)
     assert {"--objects=capsule_small", "--episodes_per_object=80", "--num_envs=80"} <= set(dag)
-    assert "--objects=all" in recipe.dagger(presets.PRESETS["quick_dagger"], tmp_path, teacher, tmp_path, tmp_path, 5)
+    assert "--objects=all" in recipe.dagger(
+        presets.PRESETS["quick_dagger"], tmp_path, teacher, tmp_path, tmp_path, 5
+    )
     with pytest.raises(ValueError, match="at least one episode"):
         dataclasses.replace(t.demos, extra_episodes=(("capsule_small", 0),))
     with pytest.raises(ValueError, match="twice"):
@@ -177,8 +223,12 @@ def test_the_shipped_teachers_record_matches_its_preset():
 
 def test_table_v_rows_and_the_no_r_i_teacher():
     assert [a.label for a in presets.TABLE_V.values()] == [
-        "Student (Proposed)", "Student w/o Stochastic Teacher", "Student w/o Curation", "Student w/o r_i",
-        "RL w/ o_t"]
+        "Student (Proposed)",
+        "Student w/o Stochastic Teacher",
+        "Student w/o Curation",
+        "Student w/o r_i",
+        "RL w/ o_t",
+    ]
     rows = presets.TABLE_V
     assert not rows["wo_stochastic_teacher"].stochastic_demos and rows["wo_stochastic_teacher"].curated_demos
     assert not rows["wo_curation"].curated_demos and not rows["wo_r_i"].curated_demos  # paper: no selection
@@ -190,6 +240,7 @@ def test_table_v_rows_and_the_no_r_i_teacher():
     assert no_ri.reward.weight("reach") == teacher_presets.CPU.reward.weight("reach")
     assert no_ri.reward.weight("task") == 1.0
     assert teacher_presets.CPU.reward.weight("touch") > 0  # the preset itself is untouched
+
 
 def test_paper_student_steps_come_from_the_collected_frames(tmp_path):
     stage = presets.PRESETS["paper"].student
@@ -216,7 +267,9 @@ def test_paper_student_steps_come_from_the_collected_frames(tmp_path):
 
 def test_pipeline_config_spellings():
     new = parse_config(pipeline.PipelineConfig, ["--preset=smoke", "--output_dir=o", "--eval_seed=1001"])
-    spaced = parse_config(pipeline.PipelineConfig, ["--preset", "smoke", "--output_dir", "o", "--eval_seed", "1001"])
+    spaced = parse_config(
+        pipeline.PipelineConfig, ["--preset", "smoke", "--output_dir", "o", "--eval_seed", "1001"]
+    )
     assert new == spaced and new.output_dir == Path("o") and new.eval_seed == 1001
     assert parse_config(pipeline.PipelineConfig, []).output_dir == Path("outputs/pipeline_quick_blind")
     with pytest.raises(SystemExit, match="unknown preset"):
@@ -268,12 +321,15 @@ def test_quick_table_v_teacher_ablations_are_the_recorded_ones(tmp_path):
     shipped = json.loads((policy.models_dir() / policy.SHIPPED_TEACHER / policy.CONFIG_NAME).read_text())
     iterations = shipped["weights"]["iteration"] + 1  # model_<it>.pt holds iterations 0..it
     assert presets.SHIPPED_TEACHER_ITERATIONS == iterations
-    assert presets.SHIPPED_TEACHER_PRESET.name == shipped["preset"] == presets.PRESETS["quick"].teacher.settings.name
+    assert (
+        presets.SHIPPED_TEACHER_PRESET.name == shipped["preset"] == presets.PRESETS["quick"].teacher.settings.name
+    )
     teachers = recipe.table_v(presets.PRESETS["quick"], tmp_path, "teachers")
     assert len(teachers) == 2  # the proposed rows use the shipped teacher itself
     assert [c[1:] for c in teachers] == [
         ["--preset=cpu", f"--output_dir={tmp_path / name}", "--seed=1", "--iterations=1398", flag]
-        for name, flag in (("teacher_no_ri", "--no_incentive=true"), ("rl_with_ot", "--student_obs=true"))]
+        for name, flag in (("teacher_no_ri", "--no_incentive=true"), ("rl_with_ot", "--student_obs=true"))
+    ]
     # The recorded table's teacher ablations (exported actors) were made exactly so.
     recorded = ROOT / "docs" / "research" / "checkpoints"
     for row, name in (("wo_r_i", "table_v_wo_r_i_1397"), ("rl_w_o_t", "table_v_rl_w_o_t_1397")):
@@ -281,15 +337,21 @@ def test_quick_table_v_teacher_ablations_are_the_recorded_ones(tmp_path):
         variant = presets.TEACHERS[presets.TABLE_V[row].teacher]
         stage = presets.PRESETS["quick"].teacher_stage(variant)
         assert (run["preset"], run["variant"], run["weights"]["iteration"] + 1, run["seed"]) == (
-            stage.settings.name, dataclasses.asdict(variant), stage.iterations, 1)
+            stage.settings.name,
+            dataclasses.asdict(variant),
+            stage.iterations,
+            1,
+        )
         assert run["runner"] == variant.apply(stage.settings).runner_cfg()
 
 
 def test_no_teacher_ablation_clones_scripted_grasps_and_every_row_names_its_teacher():
     assert ablations.has_scripted_cloning(presets.SHIPPED_TEACHER_PRESET)  # staged: both stages clone
     assert ablations.has_scripted_cloning(presets.teacher.CPU_BC_JOINT)
-    assert not any(ablations.has_scripted_cloning(t) for t in (presets.teacher.CPU, presets.teacher.PAPER,
-                                                                presets.teacher.QUICK))
+    assert not any(
+        ablations.has_scripted_cloning(t)
+        for t in (presets.teacher.CPU, presets.teacher.PAPER, presets.teacher.QUICK)
+    )
     assert ablations.cloning_start(presets.SHIPPED_TEACHER_PRESET) == 1398  # cpu_bc_joint's cloning begins
     assert ablations.cloning_start(presets.teacher.CPU) is None
     for p in presets.PRESETS.values():
@@ -309,8 +371,9 @@ def test_no_teacher_ablation_clones_scripted_grasps_and_every_row_names_its_teac
     with pytest.raises(ValueError, match="clones scripted grasps"):
         dataclasses.replace(presets.PRESETS["cpu"], ablation_teacher=None)
     with pytest.raises(ValueError, match="clones scripted grasps"):
-        dataclasses.replace(presets.PRESETS["paper"],
-                            ablation_teacher=presets.TeacherStage(settings=presets.teacher.CPU_BC_JOINT))
+        dataclasses.replace(
+            presets.PRESETS["paper"], ablation_teacher=presets.TeacherStage(settings=presets.teacher.CPU_BC_JOINT)
+        )
 
 
 def test_the_shipped_teachers_carried_evals_are_of_the_current_sim():

@@ -81,8 +81,9 @@ def test_publish_uploads_each_staged_folder_to_its_repo(demos, tmp_path, monkeyp
 
     monkeypatch.setattr(project, "urls", lambda: {"Homepage": REAL, "Source": REAL})
     sent = {}
-    monkeypatch.setattr(HfApi, "create_repo",
-                        lambda self, repo_id, **kw: RepoUrl(f"https://huggingface.co/{repo_id}"))
+    monkeypatch.setattr(
+        HfApi, "create_repo", lambda self, repo_id, **kw: RepoUrl(f"https://huggingface.co/{repo_id}")
+    )
     monkeypatch.setattr(HfApi, "upload_folder", lambda self, *, repo_id, folder_path, **kw: sent.update(
         {repo_id: sorted(p.name for p in Path(folder_path).iterdir())}))  # fmt: skip
     monkeypatch.setattr(publish.push, "push", lambda ds, kwargs, private=None: sent.update(

@@ -37,8 +37,11 @@ def test_the_tracked_tree_stays_small():
 
 
 def test_no_training_state_or_event_files_are_tracked():
-    bad = [p.relative_to(ROOT) for p in _tracked()
-           if p.suffix in TRAINING_STATE or p.name.startswith("events.out.tfevents")]
+    bad = [
+        p.relative_to(ROOT)
+        for p in _tracked()
+        if p.suffix in TRAINING_STATE or p.name.startswith("events.out.tfevents")
+    ]
     assert not bad, f"export these (blindgrasp-export-teacher) or keep them out of the tree: {bad}"
 
 

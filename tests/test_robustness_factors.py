@@ -15,7 +15,9 @@ from lerobot_blindgrasp.sim.env import HOLD_PUSH_AFTER_STEPS, BatchedGraspEnv, G
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
 # The paper's sensor noise but no start-state randomization: the scripted pinch needs a centred object.
-QUIET = replace(randomization.NO_DR, joint_noise_rad=spec.JOINT_NOISE_STD_RAD, force_noise_n=spec.FORCE_NOISE_STD_N)
+QUIET = replace(
+    randomization.NO_DR, joint_noise_rad=spec.JOINT_NOISE_STD_RAD, force_noise_n=spec.FORCE_NOISE_STD_N
+)
 
 
 def _env(dr, obj="cylinder_a_medium", seed=7):

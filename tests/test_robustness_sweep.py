@@ -20,8 +20,15 @@ REPO = Path(__file__).resolve().parents[1]
 def test_smoke_sweep_end_to_end_then_a_rerun_skips_every_point(tmp_path):
     out = tmp_path / "rob"
     env = {**os.environ, "PYTHONPATH": str(REPO), "MUJOCO_GL": "egl", "HF_HUB_OFFLINE": "1"}
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.robustness.sweep", "--preset=smoke", f"--output_dir={out}",
-           "--threads=1", "--progress=false"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "lerobot_blindgrasp.robustness.sweep",
+        "--preset=smoke",
+        f"--output_dir={out}",
+        "--threads=1",
+        "--progress=false",
+    ]
     r = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "## Robustness envelope" in r.stdout
@@ -47,7 +54,9 @@ def test_smoke_sweep_end_to_end_then_a_rerun_skips_every_point(tmp_path):
 
 
 def _factor(rates_student, nominal, teacher=None, name="f"):
-    pts = [{"label": f"m{i}", "in_training": i == nominal, "student": [k, 100]} for i, k in enumerate(rates_student)]
+    pts = [
+        {"label": f"m{i}", "in_training": i == nominal, "student": [k, 100]} for i, k in enumerate(rates_student)
+    ]
     for p, k in zip(pts, teacher or [], strict=False):
         p["teacher"] = [k, 100]
     return {"name": name, "title": name, "unit": "", "nominal": nominal, "train_range": None, "points": pts}
@@ -61,10 +70,16 @@ def test_envelope_grows_from_nominal_and_stops_at_the_first_failure():
     assert envelope.describe(f, criterion="rate") == "m1 (fails at m0) to m2 (fails at m3)"
     # passing out to both ends: the edges name the smallest and the largest point tested
     assert envelope.describe(_factor([95, 95, 95], nominal=1), criterion="rate") == (
-        "m0 (smallest tested) to m2 (largest tested)")
+        "m0 (smallest tested) to m2 (largest tested)"
+    )
     assert envelope.envelope(_factor([80, 99], 0)["points"], 0, criterion="rate") == (None, None)
-    summary = {"objects": ["a"] * 18, "episodes_per_object": 10, "seed": 1000, "command": "x",
-               "factors": [_factor([95, 80, 60], 0, [99, 99, 99], "gain"), _factor([95, 94, 50], 0, name="lag")]}
+    summary = {
+        "objects": ["a"] * 18,
+        "episodes_per_object": 10,
+        "seed": 1000,
+        "command": "x",
+        "factors": [_factor([95, 80, 60], 0, [99, 99, 99], "gain"), _factor([95, 94, 50], 0, name="lag")],
+    }
     text = envelope.card_section(summary)
     assert "| gain | m0 |" in text and "gain at m1" in text
     assert envelope.first_to_break(summary)[0][:2] == ("gain", "m1")  # one step out, before lag's two

@@ -19,9 +19,16 @@ CFG = rewards.PAPER_REWARD
 # --- reward terms against hand-computed values --------------------------------------------------------------------
 def _step(n: int, **given) -> rewards.StepQuantities:
     """Step quantities for n envs: zeros except what a test gives."""
-    zeros = {"lift": np.zeros(n), "d_xy": np.zeros(n), "uniaxial_force": np.zeros((n, 3)), "q": np.zeros((n, 9)),
-             "action": np.zeros((n, 9)), "prev_action": np.zeros((n, 9)), "tip_object_distance": np.zeros((n, 3)),
-             "tip_object_force": np.zeros((n, 3))}
+    zeros = {
+        "lift": np.zeros(n),
+        "d_xy": np.zeros(n),
+        "uniaxial_force": np.zeros((n, 3)),
+        "q": np.zeros((n, 9)),
+        "action": np.zeros((n, 9)),
+        "prev_action": np.zeros((n, 9)),
+        "tip_object_distance": np.zeros((n, 3)),
+        "tip_object_force": np.zeros((n, 3)),
+    }
     return rewards.StepQuantities(**{**zeros, **given})
 
 

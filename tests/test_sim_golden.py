@@ -47,10 +47,16 @@ NEWCOMER = "Newcomer CPU 9000 (no record holds it)"
 # NumPy's SIMD loops without AVX-512: reproduces the recorded AMD EPYC family's digests on this AVX-512 machine
 NUMPY_NO_AVX512 = "AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL AVX512_SPR"
 # Other families' code paths on this machine (docs/results/cpu_portability.md says what each moves).
-STAND_INS = ({"MKL_CBWR": "COMPATIBLE"}, {"MKL_CBWR": "SSE4_2"}, {"ATEN_CPU_CAPABILITY": "default"},
-             {"ATEN_CPU_CAPABILITY": "avx2"}, {"NPY_DISABLE_CPU_FEATURES": NUMPY_NO_AVX512},
-             {"GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F"}, {"OPENBLAS_CORETYPE": "Haswell"},
-             {"GOLDEN_TORCH_THREADS": "2"})
+STAND_INS = (
+    {"MKL_CBWR": "COMPATIBLE"},
+    {"MKL_CBWR": "SSE4_2"},
+    {"ATEN_CPU_CAPABILITY": "default"},
+    {"ATEN_CPU_CAPABILITY": "avx2"},
+    {"NPY_DISABLE_CPU_FEATURES": NUMPY_NO_AVX512},
+    {"GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F"},
+    {"OPENBLAS_CORETYPE": "Haswell"},
+    {"GOLDEN_TORCH_THREADS": "2"},
+)
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +82,7 @@ def test_the_golden_successes_are_the_shipped_teachers_recorded_evaluation(golde
     flags = golden["settings"]["evaluation"]["exact"]["success"]
     assert recorded["seed"] == spec.EVAL_SEED and set(objects.CATALOGUE) >= set(g.EVAL_OBJECTS)
     for i, name in enumerate(g.EVAL_OBJECTS):
-        assert flags[i * g.EPISODES:(i + 1) * g.EPISODES] == per_object[name]["successes"][:g.EPISODES], name
+        assert flags[i * g.EPISODES : (i + 1) * g.EPISODES] == per_object[name]["successes"][: g.EPISODES], name
 
 
 @pytest.mark.parametrize("where", ["this machine", "a machine no record has seen"])
@@ -122,10 +128,21 @@ def test_this_module_passes_on_a_machine_no_record_has_seen_and_still_catches_re
     the teacher's matrix products and torch's kernels on other code paths (MKL_CBWR=SSE4_2 as the issue's
     recipe, a no-op on this AMD machine, plus ATEN_CPU_CAPABILITY=default, which moves floats on any x86 CPU).
     Its tests include the two real changes above, which must still fail there."""
-    env = {**os.environ, platform_id.CPU_MODEL_ENV: NEWCOMER, "MKL_CBWR": "SSE4_2",
-           "ATEN_CPU_CAPABILITY": "default", "GOLDEN_REPORT": str(tmp_path / "matching.json")}
-    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", __file__], env=env,
-                       capture_output=True, text=True, timeout=600, cwd=ROOT)
+    env = {
+        **os.environ,
+        platform_id.CPU_MODEL_ENV: NEWCOMER,
+        "MKL_CBWR": "SSE4_2",
+        "ATEN_CPU_CAPABILITY": "default",
+        "GOLDEN_REPORT": str(tmp_path / "matching.json"),
+    }
+    r = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", __file__],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
+    )
     assert r.returncode == 0, r.stdout[-4000:] + r.stderr[-2000:]
     assert "7 passed, 1 skipped" in r.stdout, r.stdout[-2000:]
     # and its floats are another family's: not one recorded platform's digests does it reproduce
@@ -189,8 +206,10 @@ def record(folder: Path) -> dict:
     tol = {s: g.tolerances(base[s], [run[s] for _, run in stand_ins]) for s in g.SETTINGS}
     weights = TeacherPolicy(default_teacher()).config["reward"]
     out = g.summary(base, tol, weights)
-    out["stand_ins"] = [{"env": extra, "successful_training_episodes": g.exact(run["training"], "training")[
-        "successful_episodes"]} for extra, run in stand_ins]
+    out["stand_ins"] = [
+        {"env": extra, "successful_training_episodes": g.exact(run["training"], "training")["successful_episodes"]}
+        for extra, run in stand_ins
+    ]
     mine = {s: g.digests(base[s]) for s in g.SETTINGS}
     out["platforms"] = [{"platform": platform_id.platform(), "digests": mine}]
     return out
@@ -204,7 +223,8 @@ elif __name__ == "__main__" and "--record" in sys.argv:
     old = json.loads(GOLDEN.read_text()) if GOLDEN.exists() else {}
     kept = old.get("platforms") or [  # the first format: digests of the first record, then one per CPU name
         {"cpu": p.get("cpu", "first record"), "digests": {s: p[s] for s in g.SETTINGS}}
-        for p in ([old, *old.get("other_platforms", [])] if old else [])]
+        for p in ([old, *old.get("other_platforms", [])] if old else [])
+    ]
     with tempfile.TemporaryDirectory() as tmp:
         new = record(Path(tmp))
     mine = new["platforms"][0]["digests"]
@@ -217,14 +237,19 @@ elif __name__ == "__main__" and "--spread" in sys.argv:
 
     with tempfile.TemporaryDirectory() as tmp:
         base = g.rollouts()
-        print("this machine:", platform_id.describe(platform_id.platform()), "; training successes",
-              g.exact(base["training"], "training")["successful_episodes"])
+        print(
+            "this machine:",
+            platform_id.describe(platform_id.platform()),
+            "; training successes",
+            g.exact(base["training"], "training")["successful_episodes"],
+        )
         spread(base, _stand_in_runs(Path(tmp)), json.loads(GOLDEN.read_text()))
 elif __name__ == "__main__" and "--record-platform" in sys.argv:
     golden, runs = json.loads(GOLDEN.read_text()), g.rollouts()
     problems = g.compare(golden, runs, platform_id.platform())
     assert not problems, "not the recorded simulation, so not a new platform's floats:\n" + "\n".join(problems)
-    golden["platforms"].append({"platform": platform_id.platform(),
-                                "digests": {s: g.digests(runs[s]) for s in g.SETTINGS}})
+    golden["platforms"].append(
+        {"platform": platform_id.platform(), "digests": {s: g.digests(runs[s]) for s in g.SETTINGS}}
+    )
     atomic_write_text(GOLDEN, json.dumps(golden, indent=1) + "\n")
     print("added", platform_id.describe(platform_id.platform()), "to", GOLDEN)

@@ -22,7 +22,9 @@ def pinched():
     the final state so that it and MjData describe the same instant (a step's sensors are read before its last
     integration)."""
     env = BatchedGraspEnv(
-        GraspEnvConfig(num_envs=N, objects=("cylinder_a_medium",), dr=randomization.NO_DR, autoreset=False, nthread=1)
+        GraspEnvConfig(
+            num_envs=N, objects=("cylinder_a_medium",), dr=randomization.NO_DR, autoreset=False, nthread=1
+        )
     )
     env.reset()
     run_pinch_lift(env, 40)
@@ -81,7 +83,9 @@ def test_each_named_slice_is_the_sim_state_it_names(pinched):
         np.testing.assert_allclose(part["joint_pos"], [d.joint(j).qpos[0] for j in spec.JOINT_NAMES], atol=atol)
         np.testing.assert_allclose(part["joint_vel"], [d.joint(j).qvel[0] for j in spec.JOINT_NAMES], atol=1e-4)
         tips = [d.site(f"{f}_tipsite") for f in spec.FINGERS]
-        np.testing.assert_allclose(part["fingertip_pos"], np.concatenate([t.xpos - centre for t in tips]), atol=atol)
+        np.testing.assert_allclose(
+            part["fingertip_pos"], np.concatenate([t.xpos - centre for t in tips]), atol=atol
+        )
         for k, t in enumerate(tips):
             q = np.zeros(4)
             mujoco.mju_mat2Quat(q, t.xmat)
@@ -116,5 +120,9 @@ def test_the_student_observation_is_the_named_joint_and_force_readings(pinched):
     env, priv, _ = pinched
     obs = env._observe()
     named = spec.PRIVILEGED_SLICES
-    np.testing.assert_array_equal(obs["policy"][:, spec.STATE_JOINT_SLICE], obs["privileged"][:, named["joint_pos"]])
-    np.testing.assert_array_equal(obs["policy"][:, spec.STATE_FORCE_SLICE], obs["privileged"][:, named["uniaxial_force"]])
+    np.testing.assert_array_equal(
+        obs["policy"][:, spec.STATE_JOINT_SLICE], obs["privileged"][:, named["joint_pos"]]
+    )
+    np.testing.assert_array_equal(
+        obs["policy"][:, spec.STATE_FORCE_SLICE], obs["privileged"][:, named["uniaxial_force"]]
+    )

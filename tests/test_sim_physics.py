@@ -114,8 +114,14 @@ def test_uniaxial_sensor_reads_a_known_load_in_newtons():
     from lerobot_blindgrasp.sim import observations
 
     raw, _ = observations.observe(
-        d.qpos[None], d.qvel[None], sd, si, np.zeros(1), np.zeros((1, 9)),
-        np.zeros((1, observations.NOISE_DIM)), randomization.NO_DR,
+        d.qpos[None],
+        d.qvel[None],
+        sd,
+        si,
+        np.zeros(1),
+        np.zeros((1, 9)),
+        np.zeros((1, observations.NOISE_DIM)),
+        randomization.NO_DR,
     )
     assert raw["tip_object_force"][0, 0] == pytest.approx(mass * 9.81, rel=0.03)
     assert raw["tip_object_downward"][0, 0] == pytest.approx(1.0, abs=0.02)

@@ -114,9 +114,17 @@ def test_collect_demos_on_warp_writes_the_same_start_states(tmp_path):
     for backend in ("batch", "warp"):
         out = tmp_path / backend
         cfg = CollectConfig(
-            output_dir=out, repo_id="test/warp_demos", episodes_per_object=1, objects=names, num_envs=4,
-            seed=spec.DEMO_SEED + 7, curation=curation.NO_CURATION, stochastic=False, progress=False,
-            backend=backend, threads=1,
+            output_dir=out,
+            repo_id="test/warp_demos",
+            episodes_per_object=1,
+            objects=names,
+            num_envs=4,
+            seed=spec.DEMO_SEED + 7,
+            curation=curation.NO_CURATION,
+            stochastic=False,
+            progress=False,
+            backend=backend,
+            threads=1,
         )
         stats = loop.collect(cfg)
         assert stats.kept == 4 and stats.stop_reason == "done"

@@ -29,14 +29,20 @@ TASKS = ("grasp the sphere", "grasp the box")
 def dataset_root(tmp_path_factory):
     root = tmp_path_factory.mktemp("data_path") / "ds"
     features = {**spec.dataset_features(), "episode.seed": {"dtype": "int64", "shape": (2,), "names": None}}
-    ds = LeRobotDataset.create("local/data_path", fps=spec.CONTROL_HZ, features=features, root=root,
-                               use_videos=False)
+    ds = LeRobotDataset.create(
+        "local/data_path", fps=spec.CONTROL_HZ, features=features, root=root, use_videos=False
+    )
     rng = np.random.default_rng(0)
     for e, length in enumerate(EPISODE_LENGTHS):
         for _ in range(length):
-            ds.add_frame({OBS_STATE: rng.normal(size=spec.STATE_DIM).astype(np.float32),
-                          ACTION: rng.normal(size=spec.ACTION_DIM).astype(np.float32),
-                          "episode.seed": np.array([e, 7], dtype=np.int64), "task": TASKS[e % 2]})
+            ds.add_frame(
+                {
+                    OBS_STATE: rng.normal(size=spec.STATE_DIM).astype(np.float32),
+                    ACTION: rng.normal(size=spec.ACTION_DIM).astype(np.float32),
+                    "episode.seed": np.array([e, 7], dtype=np.int64),
+                    "task": TASKS[e % 2],
+                }
+            )
         ds.save_episode()
     ds.finalize()
     return root
@@ -45,8 +51,9 @@ def dataset_root(tmp_path_factory):
 def windowed(root, **kwargs) -> LeRobotDataset:
     """The dataset as lerobot-train builds it for the student: the policy's 30-step observation window."""
     deltas = BlindgraspTransformerConfig(size="quick").observation_delta_indices
-    return LeRobotDataset("local/data_path", root=root,
-                          delta_timestamps={OBS_STATE: [d / spec.CONTROL_HZ for d in deltas]}, **kwargs)
+    return LeRobotDataset(
+        "local/data_path", root=root, delta_timestamps={OBS_STATE: [d / spec.CONTROL_HZ for d in deltas]}, **kwargs
+    )
 
 
 def assert_same_item(new: dict, ref: dict) -> None:
@@ -99,8 +106,12 @@ def test_a_batch_through_a_spawned_loader_process_equals_lerobots(dataset_root):
     assert "_low_dim_cache" in ds.reader.__dict__
     assert "_low_dim_cache" not in pickle.loads(pickle.dumps(ds.reader)).__dict__
     indices = [0, 3, 11, 12, 13, 41, 47, 87]
-    loader = DataLoader(torch.utils.data.Subset(ds, indices), batch_size=len(indices), num_workers=1,
-                        multiprocessing_context="spawn")
+    loader = DataLoader(
+        torch.utils.data.Subset(ds, indices),
+        batch_size=len(indices),
+        num_workers=1,
+        multiprocessing_context="spawn",
+    )
     batch = next(iter(loader))
     ref = default_collate([DatasetReader.get_item(ds.reader, i) for i in indices])
     assert_same_item(batch, ref)
@@ -111,13 +122,25 @@ def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
     from lerobot_blindgrasp.bench.student_parts import PARTS
 
     torch.manual_seed(0)
-    r = student.run(student.BenchStudentConfig(dataset_root=dataset_root, size="quick", batch_size=8,
-                                               load_samples=20, update_steps=2, loader_workers=[0],
-                                               loader_batches=1, profile=True, json=True))
+    r = student.run(
+        student.BenchStudentConfig(
+            dataset_root=dataset_root,
+            size="quick",
+            batch_size=8,
+            load_samples=20,
+            update_steps=2,
+            loader_workers=[0],
+            loader_batches=1,
+            profile=True,
+            json=True,
+        )
+    )
     load, update = r["load_ms_per_sample"], r["update_ms_per_sample"]
     assert set(load) == {"lerobot", "lerobot_row", "lerobot_window", "streaming", "cache"}
     assert min(load.values()) > 0
-    assert load["cache"] < load["lerobot"] / 3  # tens of microseconds against milliseconds, even on a loaded machine
+    assert (
+        load["cache"] < load["lerobot"] / 3
+    )  # tens of microseconds against milliseconds, even on a loaded machine
     for name in ("lerobot_adamw", "foreach_adamw", "fused_adamw"):
         assert update[name]["total"] == pytest.approx(sum(update[name][p] for p in PARTS))
     per_sample = update["lerobot_adamw"]["total"]

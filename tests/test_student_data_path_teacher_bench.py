@@ -10,8 +10,9 @@ import pytest
 def test_the_ppo_update_is_split_into_rsl_rls_parts(capsys):
     from lerobot_blindgrasp.bench.teacher import UPDATE_PARTS, BenchTeacherConfig, run
 
-    r = run(BenchTeacherConfig(preset="quick", num_envs=18, iterations=1, threads=1, profile_update=True,
-                               json=True))
+    r = run(
+        BenchTeacherConfig(preset="quick", num_envs=18, iterations=1, threads=1, profile_update=True, json=True)
+    )
     parts = r["update_parts"]
     assert set(parts) == {*UPDATE_PARTS, "rest", "total_s"} and parts["total_s"] > 0
     shares = [parts[p] for p in (*UPDATE_PARTS, "rest")]

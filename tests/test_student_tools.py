@@ -29,20 +29,32 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 def demos(tmp_path_factory) -> Path:
     """Two whole uncurated episodes per object from the shipped teacher."""
     out = tmp_path_factory.mktemp("demos") / "demos"
-    loop.collect(CollectConfig(output_dir=out, repo_id="test/demos", objects=OBJECTS, episodes_per_object=2,
-                               num_envs=4, seed=spec.DEMO_SEED + 11, curation=curation.NO_CURATION,
-                               progress=False))
+    loop.collect(
+        CollectConfig(
+            output_dir=out,
+            repo_id="test/demos",
+            objects=OBJECTS,
+            episodes_per_object=2,
+            num_envs=4,
+            seed=spec.DEMO_SEED + 11,
+            curation=curation.NO_CURATION,
+            progress=False,
+        )
+    )
     return out
 
 
 def test_windows_are_the_windows_lerobot_train_loads(demos):
-    ds = LeRobotDataset("test/demos", root=demos, delta_timestamps={
-        spec.STATE_KEY: [i / spec.CONTROL_HZ for i in range(-29, 1)]})
+    ds = LeRobotDataset(
+        "test/demos", root=demos, delta_timestamps={spec.STATE_KEY: [i / spec.CONTROL_HZ for i in range(-29, 1)]}
+    )
     episodes = diag.episodes_by_object(demos)
     state, action = episodes["capsule_small"][0]
     win, pad = diag.windows(state, 30)
     capsule = list(ds.meta.tasks.index).index(objects.get_object("capsule_small").task)
-    first = int(np.flatnonzero(np.asarray(ds.hf_dataset.with_format("numpy")["task_index"]).reshape(-1) == capsule)[0])
+    first = int(
+        np.flatnonzero(np.asarray(ds.hf_dataset.with_format("numpy")["task_index"]).reshape(-1) == capsule)[0]
+    )
     for t in (0, 5, 29, 40, len(state) - 1):
         item = ds[first + t]
         np.testing.assert_array_equal(item[spec.STATE_KEY].numpy(), win[t])
@@ -51,8 +63,14 @@ def test_windows_are_the_windows_lerobot_train_loads(demos):
 
 
 def _trace(lift, force, down=0.0, success=False, left=False, n=40):
-    return {"lift": np.array([lift]), "touch_force": np.array([force]), "downward": np.full((1, n, 3), down),
-            "success": np.array([success]), "left": np.array([left]), "length": np.array([n])}
+    return {
+        "lift": np.array([lift]),
+        "touch_force": np.array([force]),
+        "downward": np.full((1, n, 3), down),
+        "success": np.array([success]),
+        "left": np.array([left]),
+        "length": np.array([n]),
+    }
 
 
 def test_each_failure_kind_follows_from_ground_truth():
@@ -86,8 +104,9 @@ def test_dagger_labels_are_the_targets_the_env_commands_for_the_teachers_action(
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
     teacher = TeacherPolicy(default_teacher())
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=2, objects=("sphere_small",), seed=spec.DEMO_SEED + 5,
-                                         dr=EVAL_DR, autoreset=False))
+    env = BatchedGraspEnv(
+        GraspEnvConfig(num_envs=2, objects=("sphere_small",), seed=spec.DEMO_SEED + 5, dr=EVAL_DR, autoreset=False)
+    )
     obs = env.reset()
     for _ in range(15):
         q = env.joint_positions()
@@ -101,9 +120,18 @@ def test_dagger_labels_are_the_targets_the_env_commands_for_the_teachers_action(
 def test_dagger_and_diagnosis_end_to_end(demos, tmp_path):
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     out = tmp_path / "dagger"
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.demos.dagger", f"--student={STUDENT}", f"--demos={demos}",
-           f"--output_dir={out}", "--episodes_per_object=1", f"--objects={OBJECTS}", "--num_envs=2",
-           "--progress=false"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "lerobot_blindgrasp.demos.dagger",
+        f"--student={STUDENT}",
+        f"--demos={demos}",
+        f"--output_dir={out}",
+        "--episodes_per_object=1",
+        f"--objects={OBJECTS}",
+        "--num_envs=2",
+        "--progress=false",
+    ]
     subprocess.run(cmd, check=True, capture_output=True, env=env, timeout=600)
     record = json.loads((out / dagger.DONE).read_text())
     relabelled = LeRobotDataset("x/relabelled", root=out / "relabelled")
@@ -121,16 +149,47 @@ def test_dagger_and_diagnosis_end_to_end(demos, tmp_path):
 
     # The diagnosis: its closed loop is lerobot-eval's (same successes on the same start states and batch).
     ev = tmp_path / "eval"
-    subprocess.run([sys.executable, "-m", "lerobot.scripts.lerobot_eval", f"--policy.path={STUDENT}",
-                    "--env.type=blindgrasp", "--env.task=capsule_small", "--eval.n_episodes=2",
-                    "--eval.batch_size=2", "--policy.device=cpu", "--eval.use_async_envs=false",
-                    "--env.render_episodes=0", f"--output_dir={ev}", "--seed=1000"],
-                   check=True, capture_output=True, env=env, timeout=600)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "lerobot.scripts.lerobot_eval",
+            f"--policy.path={STUDENT}",
+            "--env.type=blindgrasp",
+            "--env.task=capsule_small",
+            "--eval.n_episodes=2",
+            "--eval.batch_size=2",
+            "--policy.device=cpu",
+            "--eval.use_async_envs=false",
+            "--env.render_episodes=0",
+            f"--output_dir={ev}",
+            "--seed=1000",
+        ],
+        check=True,
+        capture_output=True,
+        env=env,
+        timeout=600,
+    )
     diag_out = tmp_path / "diag"
-    subprocess.run([sys.executable, "-m", "lerobot_blindgrasp.analysis.student_diagnosis", f"--student={STUDENT}",
-                    f"--demos={demos}", f"--held_out={out / 'relabelled'}", "--objects=capsule_small",
-                    "--episodes=2", f"--student_eval={ev}", f"--output_dir={diag_out}", "--progress=false"],
-                   check=True, capture_output=True, env=env, timeout=600)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "lerobot_blindgrasp.analysis.student_diagnosis",
+            f"--student={STUDENT}",
+            f"--demos={demos}",
+            f"--held_out={out / 'relabelled'}",
+            "--objects=capsule_small",
+            "--episodes=2",
+            f"--student_eval={ev}",
+            f"--output_dir={diag_out}",
+            "--progress=false",
+        ],
+        check=True,
+        capture_output=True,
+        env=env,
+        timeout=600,
+    )
     result = json.loads((diag_out / "diagnosis.json").read_text())
     assert result["matches_lerobot_eval"]["all"]
     row = result["objects"]["capsule_small"]

@@ -56,9 +56,18 @@ def test_presets_paper_is_table_iii_exactly():
     assert (alg["num_learning_epochs"], alg["num_mini_batches"], alg["learning_rate"]) == (5, 6, 1e-3)
     assert (alg["schedule"], alg["desired_kl"], alg["entropy_coef"]) == ("adaptive", 0.01, 0.003)
     assert (alg["value_loss_coef"], alg["clip_param"], alg["gamma"], alg["lam"], alg["max_grad_norm"]) == (
-        1.0, 0.2, 0.99, 0.95, 1.0
+        1.0,
+        0.2,
+        0.99,
+        0.95,
+        1.0,
     )
-    assert p.reward.weight("reach") == 0.0 and p.reward.weights == {**rewards.PAPER_WEIGHTS, "reach": 0.0, "touch": 0.0} and p.deviations == () and p.external_force
+    assert (
+        p.reward.weight("reach") == 0.0
+        and p.reward.weights == {**rewards.PAPER_WEIGHTS, "reach": 0.0, "touch": 0.0}
+        and p.deviations == ()
+        and p.external_force
+    )
     assert presets.CPU.deviations and presets.CPU.reward.weight("reach") > 0
 
 
@@ -72,8 +81,21 @@ def test_variants():
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("teacher") / "run"
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.teacher.train", "--preset", "quick", "--output_dir", str(out),
-           "--iterations", "3", "--num_envs", "36", "--threads", "1"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "lerobot_blindgrasp.teacher.train",
+        "--preset",
+        "quick",
+        "--output_dir",
+        str(out),
+        "--iterations",
+        "3",
+        "--num_envs",
+        "36",
+        "--threads",
+        "1",
+    ]
     subprocess.run(cmd, check=True, capture_output=True, timeout=300)
     return out, cmd
 
@@ -118,8 +140,22 @@ def test_sigterm_saves_a_checkpoint_and_a_summary(tmp_path):
     import time
 
     out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.teacher.train", "--preset", "quick", "--output_dir", str(out),
-           "--iterations", "500", "--num_envs", "18", "--threads", "1", "--export=false"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "lerobot_blindgrasp.teacher.train",
+        "--preset",
+        "quick",
+        "--output_dir",
+        str(out),
+        "--iterations",
+        "500",
+        "--num_envs",
+        "18",
+        "--threads",
+        "1",
+        "--export=false",
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 240
     while not (out / "model_0.pt").exists() and time.time() < deadline:

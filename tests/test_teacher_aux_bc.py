@@ -34,12 +34,16 @@ def test_support_distance_is_the_surface_seen_from_each_side():
 def test_side_grasp_script_lifts_the_small_capsule_from_the_paper_start_pose_under_randomization():
     """The premise of `cpu_bc`: from the paper's start pose, with the object anywhere in its Table II offset, joint
     offsets, friction, mass and gain draws, the script lifts the object the teacher only ever pressed down."""
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=8, objects=("capsule_small", "sphere_small"), seed=1 << 32,
-                                         nthread=1, autoreset=False))
+    env = BatchedGraspEnv(
+        GraspEnvConfig(
+            num_envs=8, objects=("capsule_small", "sphere_small"), seed=1 << 32, nthread=1, autoreset=False
+        )
+    )
     env.reset()
     assert np.abs(env.object_position()[:, :2]).max() > 0.005  # the objects really are off-centre
-    script = scripted.SideGraspScript(env.joint_positions(), env.object_position(),
-                                      [objects.get_object(n) for n in env.object_names])
+    script = scripted.SideGraspScript(
+        env.joint_positions(), env.object_position(), [objects.get_object(n) for n in env.object_names]
+    )
     success = np.zeros(env.num_envs, dtype=bool)
     for _ in range(120):
         q = env.joint_positions()
@@ -50,8 +54,9 @@ def test_side_grasp_script_lifts_the_small_capsule_from_the_paper_start_pose_und
 
 
 def test_scripted_demos_keep_only_successful_episodes_and_refuse_bad_settings():
-    cfg = scripted_demos.ScriptedDemos(objects=("capsule_small", "cuboid_a_large"), episodes_per_object=2,
-                                       steps_per_episode=10)
+    cfg = scripted_demos.ScriptedDemos(
+        objects=("capsule_small", "cuboid_a_large"), episodes_per_object=2, steps_per_episode=10
+    )
     data = scripted_demos.collect(cfg)
     # The script cannot lift the large cuboid (measured 0/4): only capsule episodes become demonstrations.
     assert data["success"]["cuboid_a_large"] == 0.0 and data["success"]["capsule_small"] > 0
@@ -77,11 +82,14 @@ def test_cpu_bc_joint_is_cpu_plus_the_cloning_algorithm_only():
     rest = {k: v for k, v in alg.items() if k not in ("class_name", "scripted_demos")}
     assert rest == {k: v for k, v in cpu.runner_cfg()["algorithm"].items() if k != "class_name"}
     assert {k: v for k, v in bc.runner_cfg().items() if k != "algorithm"} == {
-        k: v for k, v in cpu.runner_cfg().items() if k != "algorithm"}
+        k: v for k, v in cpu.runner_cfg().items() if k != "algorithm"
+    }
     assert bc.reward == cpu.reward and bc.external_force == cpu.external_force
-    assert scripted_demos.ScriptedDemos(**{**alg["scripted_demos"], "objects": tuple(alg["scripted_demos"]["objects"])
-                                           }) == scripted_demos.ScriptedDemos(
-        pushes=cpu.external_force, start_iteration=1398, decay_iterations=300, coef=0.1)
+    assert scripted_demos.ScriptedDemos(
+        **{**alg["scripted_demos"], "objects": tuple(alg["scripted_demos"]["objects"])}
+    ) == scripted_demos.ScriptedDemos(
+        pushes=cpu.external_force, start_iteration=1398, decay_iterations=300, coef=0.1
+    )
     assert bc.deviations[: len(cpu.deviations)] == cpu.deviations and len(bc.deviations) == len(cpu.deviations) + 1
 
 
@@ -94,23 +102,38 @@ def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, m
     from lerobot_blindgrasp.teacher import train
 
     full = 3.0
-    demos = scripted_demos.ScriptedDemos(objects=("capsule_small",), episodes_per_object=3, decay_iterations=3,
-                                         batch_size=256, coef=full)
-    short = replace(teacher_presets.get_preset("cpu_bc_joint"), max_iterations=3,
-                    runner=demos.runner_cfg(teacher_presets.CPU.runner))
+    demos = scripted_demos.ScriptedDemos(
+        objects=("capsule_small",), episodes_per_object=3, decay_iterations=3, batch_size=256, coef=full
+    )
+    short = replace(
+        teacher_presets.get_preset("cpu_bc_joint"),
+        max_iterations=3,
+        runner=demos.runner_cfg(teacher_presets.CPU.runner),
+    )
     monkeypatch.setitem(teacher_presets.PRESETS, "cpu_bc_joint", short)
     out = tmp_path / "bc"
     previous = signal.getsignal(signal.SIGTERM)  # the trainer installs its own SIGTERM handler
     try:
         for its in (2, 3):
-            train.train(train.TrainTeacherConfig(output_dir=out, preset="cpu_bc_joint", iterations=its, num_envs=18,
-                                                 threads=1, export=False, student_obs=student_obs))
+            train.train(
+                train.TrainTeacherConfig(
+                    output_dir=out,
+                    preset="cpu_bc_joint",
+                    iterations=its,
+                    num_envs=18,
+                    threads=1,
+                    export=False,
+                    student_obs=student_obs,
+                )
+            )
     finally:
         signal.signal(signal.SIGTERM, previous)
     s = _scalars(out)
     weights = [s["Loss/bc_weight"][i] for i in range(3)]  # iterations 0, 1 and (resumed) 2
     assert weights == pytest.approx([full, full * 2 / 3, full / 3])
-    if student_obs:  # o_t does not show where the object is, which the script's actions depend on: no fit to expect
+    if (
+        student_obs
+    ):  # o_t does not show where the object is, which the script's actions depend on: no fit to expect
         assert all(0 < s["Loss/bc"][i] < 10 for i in range(3))
     else:
         assert s["Loss/bc"][1] < s["Loss/bc"][0]
@@ -132,16 +155,20 @@ def test_a_staged_preset_trains_the_stage_it_continues_first(tmp_path, monkeypat
     second = replace(teacher_presets.QUICK, name="quick_second", continues=("quick", 2))
     monkeypatch.setitem(teacher_presets.PRESETS, "quick_second", second)
     out = tmp_path / "staged"
-    cfg = train.TrainTeacherConfig(output_dir=out, preset="quick_second", iterations=4, num_envs=18, threads=1,
-                                   export=False)
+    cfg = train.TrainTeacherConfig(
+        output_dir=out, preset="quick_second", iterations=4, num_envs=18, threads=1, export=False
+    )
     previous = signal.getsignal(signal.SIGTERM)
     try:
         assert train.train(cfg) == out / "model_3.pt"
         first = json.loads((out / "stages" / "quick" / "train_summary.json").read_text())
         assert first["iterations"] == 2 and not first["interrupted"]
-        assert torch.equal(torch.load(out / "model_1.pt", weights_only=False)["actor_state_dict"]["mlp.0.weight"],
-                           torch.load(out / "stages" / "quick" / "model_1.pt",
-                                      weights_only=False)["actor_state_dict"]["mlp.0.weight"])
+        assert torch.equal(
+            torch.load(out / "model_1.pt", weights_only=False)["actor_state_dict"]["mlp.0.weight"],
+            torch.load(out / "stages" / "quick" / "model_1.pt", weights_only=False)["actor_state_dict"][
+                "mlp.0.weight"
+            ],
+        )
         assert json.loads((out / "teacher_config.json").read_text())["preset"] == "quick_second"
         stamp = (out / "stages" / "quick" / "model_1.pt").stat().st_mtime_ns
         train.train(cfg)  # done: resumes at its last checkpoint, does not retrain the first stage

@@ -72,7 +72,9 @@ def test_torchrun_two_cpu_processes_split_envs_and_sync_gradients(tmp_path):
         str(driver), "--preset=quick_staged", f"--output_dir={out}", "--iterations=2", "--num_envs=36", "--threads=1",
         "--export=false",
     ]  # fmt: skip
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=480)  # ~15 s of training; the rest is two cold imports (3 min on a loaded 2-core box)
+    proc = subprocess.run(
+        cmd, capture_output=True, text=True, timeout=480
+    )  # ~15 s of training; the rest is two cold imports (3 min on a loaded 2-core box)
     assert proc.returncode == 0, proc.stderr[-3000:]
     r0, r1 = (json.loads((out / f"rank{r}.json").read_text()) for r in (0, 1))
     assert r0["distributed"] and r1["distributed"] and r0["backend"] == "gloo" and r0["world_size"] == 2

@@ -105,7 +105,9 @@ def test_clear_one_line_errors(run_dir, tmp_path, monkeypatch):
     student = tmp_path / "pretrained_model"
     student.mkdir()
     (student / "config.json").write_text(json.dumps({"type": "blindgrasp_transformer"}))
-    with pytest.raises(TeacherError, match="LeRobot `blindgrasp_transformer` policy, not a blindgrasp teacher") as e:
+    with pytest.raises(
+        TeacherError, match="LeRobot `blindgrasp_transformer` policy, not a blindgrasp teacher"
+    ) as e:
         TeacherPolicy(student)
     cases.append(e)
     cfg = json.loads((run_dir / policy.CONFIG_NAME).read_text())
@@ -130,12 +132,16 @@ def test_clear_one_line_errors(run_dir, tmp_path, monkeypatch):
 
 
 def test_eval_teacher_defaults_to_the_shipped_teacher_and_its_seeds(tmp_path, capsys):
-    evaluate.main(["--episodes=2", "--objects=cuboid_b_large", "--modes=deterministic", f"--output_dir={tmp_path}"])
+    evaluate.main(
+        ["--episodes=2", "--objects=cuboid_b_large", "--modes=deterministic", f"--output_dir={tmp_path}"]
+    )
     res = json.loads((tmp_path / "eval.json").read_text())
     assert res["checkpoint"] == str(policy.default_teacher() / policy.WEIGHTS_NAME)
     assert res["seed"] == spec.EVAL_SEED
     row = res["modes"]["deterministic"]["per_object"]["cuboid_b_large"]
-    assert row["first_env_seed"] == spec.eval_env_seed(spec.EVAL_SEED, list(objects.CATALOGUE).index("cuboid_b_large"))
+    assert row["first_env_seed"] == spec.eval_env_seed(
+        spec.EVAL_SEED, list(objects.CATALOGUE).index("cuboid_b_large")
+    )
     assert "[95 % CI]" in capsys.readouterr().out
 
 
@@ -161,7 +167,9 @@ def test_teacher_push_sends_weights_config_and_card(monkeypatch, tmp_path):
     from huggingface_hub.hf_api import RepoUrl
 
     sent = {}
-    monkeypatch.setattr(HfApi, "create_repo", lambda self, repo_id, **kw: RepoUrl(f"https://huggingface.co/{repo_id}"))
+    monkeypatch.setattr(
+        HfApi, "create_repo", lambda self, repo_id, **kw: RepoUrl(f"https://huggingface.co/{repo_id}")
+    )
 
     def upload_folder(self, *, repo_id, folder_path, allow_patterns=None, **kw):  # the network call
         from huggingface_hub.utils import filter_repo_objects

@@ -50,10 +50,22 @@ def test_env_uses_the_weighted_allocation_and_rejects_bad_weights():
 @pytest.mark.slow
 def test_bench_teacher_reports_collection_update_and_raw_physics():
     out = subprocess.run(
-        [sys.executable, "-c", "from lerobot_blindgrasp.bench import main; main()", "--bench.type=teacher",
-         "--bench.preset=quick", "--bench.num_envs=18", "--bench.iterations=1", "--bench.threads=1",
-         "--bench.update_threads=2", "--bench.json=true"],
-        capture_output=True, text=True, timeout=300, check=True,
+        [
+            sys.executable,
+            "-c",
+            "from lerobot_blindgrasp.bench import main; main()",
+            "--bench.type=teacher",
+            "--bench.preset=quick",
+            "--bench.num_envs=18",
+            "--bench.iterations=1",
+            "--bench.threads=1",
+            "--bench.update_threads=2",
+            "--bench.json=true",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
     ).stdout
     r = json.loads(out)  # stdout holds only the JSON (rsl-rl's model printout goes to stderr)
     assert r["num_envs"] == 18 and r["hidden_dims"] == [128, 64]
@@ -73,8 +85,11 @@ def test_bench_teacher_times_a_trained_checkpoint_and_refuses_another_presets(tm
 
     previous = signal.getsignal(signal.SIGTERM)
     try:
-        ckpt = train.train(train.TrainTeacherConfig(output_dir=tmp_path / "run", preset="quick", iterations=1,
-                                                    num_envs=18, threads=1, export=False))
+        ckpt = train.train(
+            train.TrainTeacherConfig(
+                output_dir=tmp_path / "run", preset="quick", iterations=1, num_envs=18, threads=1, export=False
+            )
+        )
     finally:
         signal.signal(signal.SIGTERM, previous)
     r = run(BenchTeacherConfig(preset="quick", num_envs=18, iterations=1, threads=1, checkpoint=ckpt, json=True))
@@ -201,8 +216,14 @@ def test_progress_command_line_takes_the_figure_and_the_runs_as_named_flags(tmp_
     _timed_run(tmp_path, iterations=4)
     out = tmp_path / "figs" / "q.png"
     out.parent.mkdir()
-    main([f"--output={out}", f"--runs=[run={tmp_path}]", "--until=2",
-          "--metrics=[Perf/learning_time,Perf/collection_time]"])
+    main(
+        [
+            f"--output={out}",
+            f"--runs=[run={tmp_path}]",
+            "--until=2",
+            "--metrics=[Perf/learning_time,Perf/collection_time]",
+        ]
+    )
     assert json.loads(capsys.readouterr().out)["last"]["run"]["iteration"] == 2
     assert out.stat().st_size > 1000 and (out.parent / "q_metrics.png").stat().st_size > 1000
     with pytest.raises(SystemExit, match="give the runs"):
@@ -227,17 +248,28 @@ def test_held_out_evals_are_marked_on_the_run_that_holds_their_checkpoint(tmp_pa
         out = tmp_path / f"eval_{run}"
         out.mkdir()
         per_object = {  # success rates: `det` on one object, 0 on the others; objects weigh equally
-            mode: {"per_object": {o: {"success_rate": rate if k == 0 else 0.0}
-                                  for k, o in enumerate(objects.PAPER_OBJECTS)}}
+            mode: {
+                "per_object": {
+                    o: {"success_rate": rate if k == 0 else 0.0} for k, o in enumerate(objects.PAPER_OBJECTS)
+                }
+            }
             for mode, rate in (("deterministic", det), ("stochastic", stoch))
         }
-        (out / "eval.json").write_text(json.dumps({
-            "iteration": iteration, "checkpoint_sha256": file_sha256(runs[run] / "model_3.pt"), "modes": per_object,
-        }))
+        (out / "eval.json").write_text(
+            json.dumps(
+                {
+                    "iteration": iteration,
+                    "checkpoint_sha256": file_sha256(runs[run] / "model_3.pt"),
+                    "modes": per_object,
+                }
+            )
+        )
         return out
 
     fig = tmp_path / "p.png"
-    main([f"--output={fig}", f"--runs=[A={runs['a']},B={runs['b']}]", f"--held_out=[{eval_of('b', 3, 0.9, 0.45)}]"])
+    main(
+        [f"--output={fig}", f"--runs=[A={runs['a']},B={runs['b']}]", f"--held_out=[{eval_of('b', 3, 0.9, 0.45)}]"]
+    )
     held = json.loads(capsys.readouterr().out)["held_out"]
     assert list(held) == ["B"] and held["B"][0]["iteration"] == 3
     assert held["B"][0]["success_all18"] == pytest.approx({"deterministic": 0.05, "stochastic": 0.025})

@@ -108,9 +108,11 @@ def test_overload_shutdown_of_one_servo_stops_the_gripper(station):
     after = peak_force(twin, 0.5)
     settled = settled_force(twin)
     stop = host.stopped_with()
-    print(f"\noverload: torque off on all 9 servos {dt * 1e3:.0f} ms after the fault; grasp peak "
-          f"{host.peak:.1f} N, "
-          f"after the stop {after:.1f} N, settled {settled:.1f} N; {stop[:160]}")
+    print(
+        f"\noverload: torque off on all 9 servos {dt * 1e3:.0f} ms after the fault; grasp peak "
+        f"{host.peak:.1f} N, "
+        f"after the stop {after:.1f} N, settled {settled:.1f} N; {stop[:160]}"
+    )
     assert stop.startswith("STOPPED GripperHardwareError") and "overload" in stop
     assert dt <= STOP_BOUND_S
     assert host.peak < CRUSH_N and after < CRUSH_N and settled <= host.peak + 1.0
@@ -129,8 +131,10 @@ def test_force_stream_stopping_stops_the_gripper(station):
     finally:
         twin.force.paused = False
     stop = host.stopped_with()
-    print(f"\nforce stream stopped: torque off {dt * 1e3:.0f} ms later; grasp peak {host.peak:.1f} N, "
-          f"after {after:.1f} N, settled {settled:.1f} N; {stop[:160]}")
+    print(
+        f"\nforce stream stopped: torque off {dt * 1e3:.0f} ms later; grasp peak {host.peak:.1f} N, "
+        f"after {after:.1f} N, settled {settled:.1f} N; {stop[:160]}"
+    )
     assert stop.startswith("STOPPED ForceSensorError") and "stale" in stop
     assert 0.15 <= dt <= 0.15 + STOP_BOUND_S  # stale_timeout_s, then within the call
     assert host.peak < CRUSH_N and after < CRUSH_N and settled <= host.peak + 1.0
@@ -149,8 +153,10 @@ def test_killed_host_leaves_the_servos_stopped_by_their_watchdog(station):
     goals = [s.get("Goal_Position") for s in twin.servos]
     after = peak_force(twin, 0.5)
     settled = settled_force(twin)
-    print(f"\nhost killed: every servo stopped by its watchdog {dt * 1e3:.0f} ms after the kill; grasp peak "
-          f"{host.peak:.1f} N, after {after:.1f} N, settled {settled:.1f} N")
+    print(
+        f"\nhost killed: every servo stopped by its watchdog {dt * 1e3:.0f} ms after the kill; grasp peak "
+        f"{host.peak:.1f} N, after {after:.1f} N, settled {settled:.1f} N"
+    )
     assert dt <= WATCHDOG_S + 0.15  # 200 ms after the last packet, which went out before the kill
     assert [s.get("Goal_Position") for s in twin.servos] == goals  # held where they stopped
     assert twin.bus.any_torque()  # documented: the watchdog holds with the torque on, capped by the current limit

@@ -85,8 +85,9 @@ def test_sdist_and_wheel_pass_twine_check_and_carry_the_shipped_files(built):
     assert proc.returncode == 0 and proc.stdout.count("PASSED") == 2, proc.stdout + proc.stderr
     names = set(zipfile.ZipFile(wheel).namelist())
     for top in ("models", "robot_configs"):
-        files = [p.relative_to(ROOT) for p in (ROOT / top).rglob("*")
-                 if p.is_file() and "__pycache__" not in p.parts]
+        files = [
+            p.relative_to(ROOT) for p in (ROOT / top).rglob("*") if p.is_file() and "__pycache__" not in p.parts
+        ]
         assert files, top
         missing = [str(f) for f in files if f"lerobot_blindgrasp/shipped/{f.as_posix()}" not in names]
         assert not missing, f"not in the wheel: {missing}"
@@ -139,8 +140,20 @@ def test_the_wheel_works_outside_the_source_tree(built, tmp_path):
 
     # The shipped student through plain lerobot-eval (start state 1001 of the large cylinder B: lifted in its
     # recorded eval and alone, tests/test_shipped_student.py).
-    run(str(py), "-m", "lerobot.scripts.lerobot_eval", f"--policy.path={info['student']}", "--env.type=blindgrasp",
-        "--env.task=cylinder_b_large", "--eval.n_episodes=1", "--eval.batch_size=1", "--policy.device=cpu",
-        "--eval.use_async_envs=false", "--env.render_stride=50", f"--output_dir={work / 'eval'}", "--seed=1001")
+    run(
+        str(py),
+        "-m",
+        "lerobot.scripts.lerobot_eval",
+        f"--policy.path={info['student']}",
+        "--env.type=blindgrasp",
+        "--env.task=cylinder_b_large",
+        "--eval.n_episodes=1",
+        "--eval.batch_size=1",
+        "--policy.device=cpu",
+        "--eval.use_async_envs=false",
+        "--env.render_stride=50",
+        f"--output_dir={work / 'eval'}",
+        "--seed=1001",
+    )
     result = json.loads((work / "eval" / "eval_info.json").read_text())
     assert result["per_task"][0]["metrics"]["successes"] == [True]

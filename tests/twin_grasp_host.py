@@ -27,9 +27,12 @@ CLOSE = dict(zip(spec.ACTION_NAMES, [0.0, -0.45, 0.0] * 3, strict=True))
 
 def robot_config(ports: dict, calibration_dir: Path) -> BlindgraspGripperConfig:
     return BlindgraspGripperConfig(
-        id="twin", port=ports["dynamixel_port"], calibration_dir=Path(calibration_dir),
+        id="twin",
+        port=ports["dynamixel_port"],
+        calibration_dir=Path(calibration_dir),
         latency_timer_ms=LATENCY_TIMER_MS,
-        max_overrun_s=0, force_sensor=ForceSensorConfig(port=ports["force_port"], tare_s=0.2),
+        max_overrun_s=0,
+        force_sensor=ForceSensorConfig(port=ports["force_port"], tare_s=0.2),
     )
 
 

@@ -31,7 +31,9 @@ def load_successes(path: str | Path, mode: str | None = None) -> dict[str, list[
     if p.is_dir():
         p = p / "eval_info.json" if (p / "eval_info.json").exists() else p / "eval.json"
     if not p.is_file():
-        raise FileNotFoundError(f"no eval_info.json (lerobot-eval) or eval.json (blindgrasp-eval-teacher) at {text}")
+        raise FileNotFoundError(
+            f"no eval_info.json (lerobot-eval) or eval.json (blindgrasp-eval-teacher) at {text}"
+        )
     data = json.loads(p.read_text())
     if "per_task" in data:
         real = [e for e in data["per_task"] if e.get("task_group") in objects.CATALOGUE]
@@ -56,13 +58,18 @@ def compare(a: dict[str, list[bool]], b: dict[str, list[bool]], label_a: str = "
     lines = [f"| object | {label_a} | {label_b} | only {label_a} | only {label_b} |", "|---|---:|---:|---:|---:|"]
     for o in names:
         p = rates.paired_counts(a[o], b[o])
-        lines.append(f"| {o} | {rates.format_rate(*rates.count(a[o]))} | {rates.format_rate(*rates.count(b[o]))} "
-                     f"| {p['a_only']} | {p['b_only']} |")
+        lines.append(
+            f"| {o} | {rates.format_rate(*rates.count(a[o]))} | {rates.format_rate(*rates.count(b[o]))} "
+            f"| {p['a_only']} | {p['b_only']} |"
+        )
     p = rates.paired_difference(a, b, names)
     ra, rb = (rates.format_rate(p[k], p["n"], digits=1) for k in ("a_successes", "b_successes"))
     lines.append(f"| **all {len(names)}** | **{ra}** | **{rb}** | **{p['a_only']}** | **{p['b_only']}** |")
-    lines += ["", f"{label_b} minus {label_a}: {p['diff_pp']:+.1f} percentage points over {p['n']} paired "
-              f"episodes; exact McNemar p = {p['p']:.2g}."]
+    lines += [
+        "",
+        f"{label_b} minus {label_a}: {p['diff_pp']:+.1f} percentage points over {p['n']} paired "
+        f"episodes; exact McNemar p = {p['p']:.2g}.",
+    ]
     return "\n".join(lines)
 
 

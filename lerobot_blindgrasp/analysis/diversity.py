@@ -38,7 +38,9 @@ def diversity(root: str | Path, at_s: float = 3.0) -> dict:
     episode = np.asarray(cols["episode_index"])
     frame = np.asarray(cols["frame_index"])
     task = np.asarray(cols["task_index"])
-    names = {int(i): object_from_task(t) for t, i in zip(ds.meta.tasks.index, ds.meta.tasks["task_index"], strict=True)}
+    names = {
+        int(i): object_from_task(t) for t, i in zip(ds.meta.tasks.index, ds.meta.tasks["task_index"], strict=True)
+    }
     at_frame = round(at_s * info["fps"])
     per_object = {}
     for t in np.unique(task):
@@ -73,13 +75,17 @@ def main(argv: list[str] | None = None) -> None:
     args = cfg.datasets
     if not args:
         raise SystemExit("error: give the demo sets: --datasets=[LABEL=DATASET_ROOT,...]")
-    lines = [f"| dataset | episodes | grasp-pose spread at {cfg.at_s:g} s (rad) | command jitter (rad/step) |",
-             "|---|---:|---:|---:|"]
+    lines = [
+        f"| dataset | episodes | grasp-pose spread at {cfg.at_s:g} s (rad) | command jitter (rad/step) |",
+        "|---|---:|---:|---:|",
+    ]
     for arg in args:
         label, _, root = arg.rpartition("=")
         d = diversity(root, cfg.at_s)
-        lines.append(f"| {label or root} | {d['episodes']} | {d['grasp_pose_spread_rad']:.3f} | "
-                     f"{d['command_jitter_rad']:.3f} |")
+        lines.append(
+            f"| {label or root} | {d['episodes']} | {d['grasp_pose_spread_rad']:.3f} | "
+            f"{d['command_jitter_rad']:.3f} |"
+        )
     print("\n".join(lines))
 
 

@@ -37,7 +37,7 @@ def plot_curves(path: Path, curves: dict, title: str) -> None:
     cols = min(4, len(curves))
     rows = -(-len(curves) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.0 * rows), squeeze=False)
-    for ax in axes.flat[len(curves):]:
+    for ax in axes.flat[len(curves) :]:
         ax.set_visible(False)
     for ax, (tag, (xs, ys)) in zip(axes.flat, curves.items()):
         ax.plot(xs, ys)

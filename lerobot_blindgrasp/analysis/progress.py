@@ -64,8 +64,9 @@ def _smooth(y: np.ndarray, window: int) -> np.ndarray:
     return out
 
 
-def progress(run_dir: Path | tuple[Path, ...], window: int = SMOOTHING,
-             until: int | None = None) -> dict[str, list[float]]:
+def progress(
+    run_dir: Path | tuple[Path, ...], window: int = SMOOTHING, until: int | None = None
+) -> dict[str, list[float]]:
     """Per iteration (up to `until`, if given): env steps, training hours, and smoothed success (all 18 objects,
     6 medium). A tuple of run directories is one history continued from one directory into the next: each
     directory up to the next one's first iteration, wall clock accumulated, smoothed across the seams."""
@@ -125,8 +126,10 @@ def held_out_points(runs: dict[str, Path | tuple[Path, ...]], eval_dirs: list[Pa
         label = owner.get(data.get("checkpoint_sha256"))
         if label is None:
             raise SystemExit(f"{eval_dir} evaluated {data.get('checkpoint')}, which none of the runs holds")
-        rates = {mode: float(np.mean([r["success_rate"] for r in m["per_object"].values()]))
-                 for mode, m in data["modes"].items()}
+        rates = {
+            mode: float(np.mean([r["success_rate"] for r in m["per_object"].values()]))
+            for mode, m in data["modes"].items()
+        }
         points.setdefault(label, []).append({"iteration": int(data["iteration"]), "success_all18": rates})
     return points
 
@@ -140,8 +143,13 @@ def _at_iteration(curve: dict[str, list[float]], iteration: int) -> tuple[float,
     return curve["env_steps"][k], curve["wall_h"][k]
 
 
-def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: str = "Teacher training progress",
-                  until: int | None = None, held_out: dict[str, list[dict]] | None = None) -> dict:
+def plot_progress(
+    runs: dict[str, Path | tuple[Path, ...]],
+    path: Path,
+    title: str = "Teacher training progress",
+    until: int | None = None,
+    held_out: dict[str, list[dict]] | None = None,
+) -> dict:
     """One figure, success against env steps (left) and training wall clock (right), one colour per run;
     solid: all 18 objects, dashed: the 6 medium ones; `held_out` (from `held_out_points`) as markers."""
     import matplotlib
@@ -169,8 +177,15 @@ def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: s
                 for ax, x in ((axes[0], at[0] / 1e6), (axes[1], at[1])):
                     ax.plot([x], [y], "o", mec=colour, mfc=fill, ms=6, zorder=3)
                     if mode == "deterministic":
-                        ax.annotate(f"{y:.1f}", (x, y), textcoords="offset points", xytext=(-4, 6), ha="right",
-                                    fontsize=7, color=colour)
+                        ax.annotate(
+                            f"{y:.1f}",
+                            (x, y),
+                            textcoords="offset points",
+                            xytext=(-4, 6),
+                            ha="right",
+                            fontsize=7,
+                            color=colour,
+                        )
     for ax, xlabel in zip(axes, ("env steps (M)", "training wall clock (h)")):
         ax.set_xlabel(xlabel)
         ax.set_ylim(0, 100)
@@ -185,8 +200,9 @@ def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: s
             labels.append(text)
     # Below the axes: the curves rise into every corner of the plot.
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
-    fig.suptitle(f"{title}\n(lines: training success, stochastic, trailing mean over {SMOOTHING} iterations)",
-                 fontsize=10)
+    fig.suptitle(
+        f"{title}\n(lines: training success, stochastic, trailing mean over {SMOOTHING} iterations)", fontsize=10
+    )
     fig.tight_layout(rect=(0, 0.045 * ((len(labels) + 1) // 2), 1, 1))
     with durable.atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110)
@@ -194,8 +210,13 @@ def plot_progress(runs: dict[str, Path | tuple[Path, ...]], path: Path, title: s
     return curves
 
 
-def plot_metrics(runs: dict[str, Path | tuple[Path, ...]], tags: list[str], path: Path, until: int | None = None,
-                 window: int = SMOOTHING) -> None:
+def plot_metrics(
+    runs: dict[str, Path | tuple[Path, ...]],
+    tags: list[str],
+    path: Path,
+    until: int | None = None,
+    window: int = SMOOTHING,
+) -> None:
     """One panel per TensorBoard scalar, every run against env steps (trailing mean over `window` iterations); a
     chained run's later directories win where iterations repeat."""
     import matplotlib

@@ -68,8 +68,12 @@ def paired_counts(a: Iterable, b: Iterable) -> dict[str, int]:
     if len(a) != len(b):
         raise ValueError(f"paired episodes need equal counts, got {len(a)} and {len(b)}")
     pairs = list(zip(a, b, strict=True))
-    return {"both": sum(x and y for x, y in pairs), "a_only": sum(x and not y for x, y in pairs),
-            "b_only": sum(y and not x for x, y in pairs), "neither": sum(not x and not y for x, y in pairs)}
+    return {
+        "both": sum(x and y for x, y in pairs),
+        "a_only": sum(x and not y for x, y in pairs),
+        "b_only": sum(y and not x for x, y in pairs),
+        "neither": sum(not x and not y for x, y in pairs),
+    }
 
 
 def paired_difference(a: Mapping[str, Sequence], b: Mapping[str, Sequence], keys: Iterable[str]) -> dict:
@@ -81,5 +85,11 @@ def paired_difference(a: Mapping[str, Sequence], b: Mapping[str, Sequence], keys
     pa = [bool(x) for k in keys for x in a.get(k, [])]
     pb = [bool(x) for k in keys for x in b.get(k, [])]
     p = paired_counts(pa, pb)
-    return {**p, "n": len(pa), "a_successes": sum(pa), "b_successes": sum(pb),
-            "diff_pp": 100 * (sum(pb) - sum(pa)) / max(1, len(pa)), "p": mcnemar_exact_p(p["a_only"], p["b_only"])}
+    return {
+        **p,
+        "n": len(pa),
+        "a_successes": sum(pa),
+        "b_successes": sum(pb),
+        "diff_pp": 100 * (sum(pb) - sum(pa)) / max(1, len(pa)),
+        "p": mcnemar_exact_p(p["a_only"], p["b_only"]),
+    }

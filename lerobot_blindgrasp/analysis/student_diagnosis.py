@@ -37,8 +37,15 @@ from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.durable import atomic_path, atomic_write_json, atomic_write_text
 from lerobot_blindgrasp.sim import objects
 
-KINDS = ("success", "never touches", "presses from above", "touches, never lifts", "knocked out of reach",
-         "slips while lifting", "drops during the hold")
+KINDS = (
+    "success",
+    "never touches",
+    "presses from above",
+    "touches, never lifts",
+    "knocked out of reach",
+    "slips while lifting",
+    "drops during the hold",
+)
 TOUCH_N = 0.5  # a tip on the object with more than this net force is touching it (noise-free, N)
 LIFTED_M = 0.005  # the object rose this much: a lift began
 PRESSING_DOWN = 0.5  # mean -F_z/|F| of the touching tips above this: pressing into the table, not squeezing
@@ -55,7 +62,9 @@ class DiagnoseConfig:
     episodes: int = 20  # closed-loop episodes per object
     seed: int = spec.EVAL_SEED  # first evaluation index (lerobot-eval's --seed)
     student_eval: Path | None = None  # a lerobot-eval output folder of the same student and seed: checked against
-    teacher: Path | None = None  # the demos' teacher, for the label-noise floor of the loss; default: the shipped one
+    teacher: Path | None = (
+        None  # the demos' teacher, for the label-noise floor of the loss; default: the shipped one
+    )
     output_dir: Path = Path("outputs/student_diagnosis")
     window: int = 10  # drift: demo frames within +-window steps of the same time are the reference
     run: int = 3  # drift: this many outside steps in a row
@@ -82,8 +91,9 @@ def load_student(path: Path, device: str = "cpu"):
         SensorAugmentStep,
     )
 
-    pre, post = make_pre_post_processors(policy.config, pretrained_path=str(path),
-                                         preprocessor_overrides={"device_processor": {"device": device}})
+    pre, post = make_pre_post_processors(
+        policy.config, pretrained_path=str(path), preprocessor_overrides={"device_processor": {"device": device}}
+    )
     for step in pre.steps:  # the fit is measured on the sensors as recorded, not on training-time errors
         if isinstance(step, SensorAugmentStep):
             step.enabled = False
@@ -131,8 +141,15 @@ def closed_loop(act_targets, object_name: str, episodes: int, seed: int, reset=N
     from lerobot_blindgrasp.sim.gym_env import start_seed
     from lerobot_blindgrasp.sim.randomization import EVAL_DR
 
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=episodes, objects=(object_name,),
-                                         seed=start_seed(seed, object_name), dr=EVAL_DR, autoreset=False))
+    env = BatchedGraspEnv(
+        GraspEnvConfig(
+            num_envs=episodes,
+            objects=(object_name,),
+            seed=start_seed(seed, object_name),
+            dr=EVAL_DR,
+            autoreset=False,
+        )
+    )
     if reset is not None:
         reset()
     horizon = env.max_episode_steps
@@ -214,9 +231,13 @@ def imitation_loss(policy, pre, episodes: list[tuple[np.ndarray, np.ndarray]], b
     for state, action in episodes:
         win, pad = windows(state, policy.config.n_obs_steps)
         for s in range(0, len(win), batch):
-            b = pre({spec.STATE_KEY: torch.from_numpy(win[s:s + batch]),
-                     f"{spec.STATE_KEY}_is_pad": torch.from_numpy(pad[s:s + batch]),
-                     spec.ACTION_KEY: torch.from_numpy(action[s:s + batch])})
+            b = pre(
+                {
+                    spec.STATE_KEY: torch.from_numpy(win[s : s + batch]),
+                    f"{spec.STATE_KEY}_is_pad": torch.from_numpy(pad[s : s + batch]),
+                    spec.ACTION_KEY: torch.from_numpy(action[s : s + batch]),
+                }
+            )
             per_sample, _ = policy.forward(b, reduction="none")
             sq += float(per_sample.sum()) * spec.ACTION_DIM
             n += per_sample.numel() * spec.ACTION_DIM
@@ -289,9 +310,15 @@ def diagnose(cfg: DiagnoseConfig) -> dict:
     std = None
     if train:
         std = np.concatenate([s for eps in train.values() for s, _ in eps]).std(0)
-    result: dict = {"student": str(cfg.student), "seed": cfg.seed, "episodes": cfg.episodes,
-                    "demos": str(cfg.demos), "held_out": str(cfg.held_out), "objects": {},
-                    "label_noise_floor": label_noise_floor(cfg.teacher)}
+    result: dict = {
+        "student": str(cfg.student),
+        "seed": cfg.seed,
+        "episodes": cfg.episodes,
+        "demos": str(cfg.demos),
+        "held_out": str(cfg.held_out),
+        "objects": {},
+        "label_noise_floor": label_noise_floor(cfg.teacher),
+    }
     act = student_actor(policy, pre, post)
     for name in tqdm(names, desc="diagnose", disable=not cfg.progress):
         torch.manual_seed(cfg.seed)
@@ -324,8 +351,11 @@ def _drift(trace, train_eps, held_eps, std, cfg) -> dict:
         threshold = float(np.percentile(held_d, 99))
         dist = cov.distance(trace["state"], dims)
         step = first_run_above(dist, threshold, cfg.run, trace["length"])
-        out[space] = {"threshold": threshold, "first_step": [int(s) for s in step],
-                      "median_distance": [float(np.median(d[: int(n)])) for d, n in zip(dist, trace["length"])]}
+        out[space] = {
+            "threshold": threshold,
+            "first_step": [int(s) for s in step],
+            "median_distance": [float(np.median(d[: int(n)])) for d, n in zip(dist, trace["length"])],
+        }
     return out
 
 
@@ -338,9 +368,11 @@ def _check_against_eval(result: dict, eval_dir: Path) -> dict:
 
 
 def markdown(result: dict) -> str:
-    lines = ["| object | success | " + " | ".join(KINDS[1:]) + " | train loss | held-out loss | held-out rms (rad) "
-             "| drift joints (failed / succeeded) | drift forces (failed / succeeded) |",
-             "|---|---:|" + "---:|" * (len(KINDS) - 1) + "---:|---:|---:|---:|---:|"]
+    lines = [
+        "| object | success | " + " | ".join(KINDS[1:]) + " | train loss | held-out loss | held-out rms (rad) "
+        "| drift joints (failed / succeeded) | drift forces (failed / succeeded) |",
+        "|---|---:|" + "---:|" * (len(KINDS) - 1) + "---:|---:|---:|---:|---:|",
+    ]
     for name, r in result["objects"].items():
         cells = [rates.format_rate(*rates.count(r["successes"]))]
         cells += [str(r["kind_counts"].get(k, 0)) for k in KINDS[1:]]
@@ -352,10 +384,13 @@ def markdown(result: dict) -> str:
             d = r.get("drift", {}).get(space)
             cells.append(_drift_cell(d, r["successes"]) if d else "-")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    lines += ["", "Drift: episodes that leave the demos' coverage / all, and the median step at which they do (20 "
-              "steps = 1 s). Loss: MSE of delta/0.3 (the training loss); rms: its open-loop error in rad. "
-              f"Label-noise floor of the loss (the stochastic teacher's own variance): "
-              f"{result['label_noise_floor']:.4f}."]
+    lines += [
+        "",
+        "Drift: episodes that leave the demos' coverage / all, and the median step at which they do (20 "
+        "steps = 1 s). Loss: MSE of delta/0.3 (the training loss); rms: its open-loop error in rad. "
+        f"Label-noise floor of the loss (the stochastic teacher's own variance): "
+        f"{result['label_noise_floor']:.4f}.",
+    ]
     if "matches_lerobot_eval" in result:
         lines.append(f"Closed-loop successes equal lerobot-eval's: {result['matches_lerobot_eval']['all']}.")
     return "\n".join(lines) + "\n"
@@ -391,8 +426,12 @@ def plot(result: dict, path: Path) -> None:
     fitted = [n for n in names if "held_out" in result["objects"][n].get("fit", {})]
     x = np.arange(len(fitted))
     for i, split in enumerate(("train", "held_out")):
-        ax1.bar(x + (i - 0.5) * 0.4, [result["objects"][n]["fit"][split]["mse"] for n in fitted], 0.4,
-                label=split.replace("_", "-"))
+        ax1.bar(
+            x + (i - 0.5) * 0.4,
+            [result["objects"][n]["fit"][split]["mse"] for n in fitted],
+            0.4,
+            label=split.replace("_", "-"),
+        )
     ax1.set_xticks(x, [n.replace("_", " ") for n in fitted], rotation=60, ha="right", fontsize=8)
     ax1.axhline(result["label_noise_floor"], color="k", ls="--", lw=1, label="label-noise floor")
     ax1.set_ylabel("imitation loss (MSE of delta / 0.3)")

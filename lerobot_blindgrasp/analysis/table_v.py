@@ -74,9 +74,13 @@ def paired_with_proposed(done: dict[str, dict[str, list[bool]]], names: list[str
     one of the two solved, the difference in success, and the exact McNemar p-value of that difference."""
     if "proposed" not in done:
         return []
-    lines = ["", "Paired with the proposed student, all objects pooled, episode by episode on the same start states:",
-             "", "| row | success difference | only proposed solved | only this row solved | exact McNemar p |",
-             "|---|---:|---:|---:|---:|"]
+    lines = [
+        "",
+        "Paired with the proposed student, all objects pooled, episode by episode on the same start states:",
+        "",
+        "| row | success difference | only proposed solved | only this row solved | exact McNemar p |",
+        "|---|---:|---:|---:|---:|",
+    ]
     for n, r in done.items():
         if n == "proposed":
             continue
@@ -86,8 +90,9 @@ def paired_with_proposed(done: dict[str, dict[str, list[bool]]], names: list[str
             n_row, n_base = (sum(len(x.get(o, [])) for o in names) for x in (r, done["proposed"]))
             lines.append(f"| {TABLE_V[n].label} | not paired: {n_row} episodes vs {n_base} | | | |")
             continue
-        lines.append(f"| {TABLE_V[n].label} | {p['diff_pp']:+.1f} pp | {p['a_only']} | {p['b_only']} | "
-                     f"{p['p']:.2g} |")
+        lines.append(
+            f"| {TABLE_V[n].label} | {p['diff_pp']:+.1f} pp | {p['a_only']} | {p['b_only']} | {p['p']:.2g} |"
+        )
     return lines
 
 
@@ -97,25 +102,38 @@ def write_table_v(out: Path) -> Path:
     results = {name: row_successes(out, name) for name in TABLE_V}
     done = {n: r for n, r in results.items() if r}
     names = [o for o in objects.PAPER_OBJECTS if any(o in r for r in done.values())]
-    lines = ["# Table V in simulation", "",
-             f"Rows from `{out}`; every row on the same start states, 95 % Wilson intervals and counts.", "",
-             "| row | teacher | demos |", "|---|---|---|"]
+    lines = [
+        "# Table V in simulation",
+        "",
+        f"Rows from `{out}`; every row on the same start states, 95 % Wilson intervals and counts.",
+        "",
+        "| row | teacher | demos |",
+        "|---|---|---|",
+    ]
     lines += [f"| {TABLE_V[n].label} | {row_teacher(out, n)} | {demo_budget(out, n)} |" for n in TABLE_V]
     # The paper's last column: each object's success averaged over the rows, its difficulty whatever the method.
-    lines += ["", "| object | " + " | ".join(TABLE_V[n].label for n in done) + " | object average |",
-              "|---|" + "---:|" * (len(done) + 1)]
+    lines += [
+        "",
+        "| object | " + " | ".join(TABLE_V[n].label for n in done) + " | object average |",
+        "|---|" + "---:|" * (len(done) + 1),
+    ]
 
     def average(subset: list[str]) -> str:
         rows = [rates.count([x for o in subset for x in done[n].get(o, [])]) for n in done]
         return f"{100 * sum(k / t for k, t in rows if t) / max(1, sum(1 for _, t in rows if t)):.1f} %"
 
     for o in names:
-        lines.append(f"| {o} | " + " | ".join(rates.format_rate(*rates.count(done[n].get(o, []))) for n in done)
-                     + f" | {average([o])} |")
+        lines.append(
+            f"| {o} | "
+            + " | ".join(rates.format_rate(*rates.count(done[n].get(o, []))) for n in done)
+            + f" | {average([o])} |"
+        )
     medium = [o for o in names if o.endswith("_medium")]
     for label, subset in ((f"{len(medium)} medium", medium), (f"all {len(names)}", names)):
-        cells = [rates.format_rate(*rates.count([x for o in subset for x in done[n].get(o, [])]), digits=1)
-                 for n in done]
+        cells = [
+            rates.format_rate(*rates.count([x for o in subset for x in done[n].get(o, [])]), digits=1)
+            for n in done
+        ]
         lines.append(f"| **{label}** | " + " | ".join(f"**{c}**" for c in cells) + f" | {average(subset)} |")
     lines += paired_with_proposed(done, names)
     missing = [TABLE_V[n].label for n in TABLE_V if n not in done]
@@ -123,8 +141,10 @@ def write_table_v(out: Path) -> Path:
         lines += ["", "Not run yet: " + ", ".join(missing) + "."]
     lines += ["", "![Table V](table_v.png)", ""]
     if done:
-        series = {TABLE_V[n].label: [100 * sum(r.get(o, [])) / max(1, len(r.get(o, []))) for o in names]
-                  for n, r in done.items()}
+        series = {
+            TABLE_V[n].label: [100 * sum(r.get(o, [])) / max(1, len(r.get(o, []))) for o in names]
+            for n, r in done.items()
+        }
         bar_chart(out / "table_v.png", names, series, "Table V in simulation: success per object", "success (%)")
     path = out / "table_v.md"
     durable.atomic_write_text(path, "\n".join(lines) + "\n")
@@ -133,7 +153,9 @@ def write_table_v(out: Path) -> Path:
 
 @dataclass
 class TableVConfig:
-    output_dir: Path  # the recipe's folder (`scripts/paper_recipe.sh OUT_DIR`): table_v.md and table_v.png go there
+    output_dir: (
+        Path  # the recipe's folder (`scripts/paper_recipe.sh OUT_DIR`): table_v.md and table_v.png go there
+    )
 
 
 def main(argv: list[str] | None = None) -> None:

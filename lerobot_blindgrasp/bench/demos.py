@@ -164,9 +164,11 @@ def run(cfg: BenchDemosConfig) -> dict:
                 durable_cpu_s=durable_run.cpu_s,
                 durable_curated_demos_per_cpu_minute=durable_run.demos_per_cpu_minute,
                 durable_cpu_throughput_ratio=durable_run.demos_per_cpu_minute / stats.demos_per_cpu_minute
-                if stats.demos_per_cpu_minute else 0.0,
+                if stats.demos_per_cpu_minute
+                else 0.0,
                 durable_throughput_ratio=durable_run.demos_per_minute / stats.demos_per_minute
-                if stats.demos_per_minute else 0.0,
+                if stats.demos_per_minute
+                else 0.0,
                 checkpoint_share_of_wall=durable_run.checkpoint_s / max(durable_run.wall_s, 1e-9),
             )
     finally:

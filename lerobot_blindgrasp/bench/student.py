@@ -83,7 +83,7 @@ def _per_sample_ms(read, indices, block: int = 25) -> float:
     read(int(indices[0]))  # opens the files, builds a cache
     best = float("inf")
     for start in range(0, len(indices), block):
-        chunk = indices[start:start + block]
+        chunk = indices[start : start + block]
         t = time.perf_counter()
         for i in chunk:
             read(int(i))
@@ -99,8 +99,10 @@ def load_ms(root: Path, n_obs_steps: int, samples: int, seed: int) -> dict[str, 
     ds = LeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps))
     reader = ds.reader
     idx = np.random.default_rng(seed).integers(0, len(ds), samples)
-    out = {"lerobot": _per_sample_ms(lambda i: DatasetReader.get_item(reader, i), idx),
-           "cache": _per_sample_ms(lambda i: ds[i], idx)}
+    out = {
+        "lerobot": _per_sample_ms(lambda i: DatasetReader.get_item(reader, i), idx),
+        "cache": _per_sample_ms(lambda i: ds[i], idx),
+    }
     col = reader.hf_dataset[spec.STATE_KEY]
     out["lerobot_row"] = _per_sample_ms(lambda i: reader.hf_dataset[i], idx)
     out["lerobot_window"] = _per_sample_ms(lambda i: col[list(range(max(0, i - n_obs_steps + 1), i + 1))], idx)
@@ -112,8 +114,9 @@ def streaming_ms(root: Path, n_obs_steps: int, samples: int, seed: int) -> float
     """ms per sample of `--dataset.streaming=true`'s dataset (StreamingLeRobotDataset), after its first sample."""
     from lerobot.datasets.streaming_dataset import StreamingLeRobotDataset
 
-    ds = StreamingLeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps),
-                                 max_num_shards=1, seed=seed)
+    ds = StreamingLeRobotDataset(
+        repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps), max_num_shards=1, seed=seed
+    )
     it = iter(ds)
     return _per_sample_ms(lambda _: next(it), np.zeros(samples + 1, dtype=int))
 
@@ -128,10 +131,23 @@ def loader_samples_per_s(root: Path, n_obs_steps: int, cfg: BenchStudentConfig) 
         os.environ[ENV_SWITCH] = switch  # the spawned workers read it at their plugin import
         ds = LeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps))
         for workers in cfg.loader_workers:
-            extra = {"multiprocessing_context": "spawn", "persistent_workers": True,
-                     "prefetch_factor": cfg.prefetch_factor} if workers else {}
-            loader = torch.utils.data.DataLoader(ds, batch_size=cfg.batch_size, shuffle=True, num_workers=workers,
-                                                 generator=torch.Generator().manual_seed(cfg.seed), **extra)
+            extra = (
+                {
+                    "multiprocessing_context": "spawn",
+                    "persistent_workers": True,
+                    "prefetch_factor": cfg.prefetch_factor,
+                }
+                if workers
+                else {}
+            )
+            loader = torch.utils.data.DataLoader(
+                ds,
+                batch_size=cfg.batch_size,
+                shuffle=True,
+                num_workers=workers,
+                generator=torch.Generator().manual_seed(cfg.seed),
+                **extra,
+            )
             it = iter(loader)
             for _ in range(1 + workers * cfg.prefetch_factor):  # start-up, then what the workers had queued
                 next(it)
@@ -151,17 +167,32 @@ def loader_samples_per_s(root: Path, n_obs_steps: int, cfg: BenchStudentConfig) 
 def lerobot_train_samples_per_s(cfg: BenchStudentConfig, cache: bool) -> dict:
     """Run the real lerobot-train for cfg.train_steps steps; samples/s from its wall clock (start-up included)."""
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [str(Path(sys.executable).parent / "lerobot-train"), "--policy.type=blindgrasp_transformer",
-               f"--policy.size={cfg.size}", "--dataset.repo_id=local/bench", f"--dataset.root={cfg.dataset_root}",
-               f"--output_dir={tmp}/out", f"--steps={cfg.train_steps}", f"--batch_size={cfg.batch_size}",
-               f"--save_freq={cfg.train_steps}", "--policy.push_to_hub=false", "--policy.device=cpu",
-               f"--num_workers={cfg.num_workers}", "--wandb.enable=false", f"--seed={cfg.seed}"]
+        cmd = [
+            str(Path(sys.executable).parent / "lerobot-train"),
+            "--policy.type=blindgrasp_transformer",
+            f"--policy.size={cfg.size}",
+            "--dataset.repo_id=local/bench",
+            f"--dataset.root={cfg.dataset_root}",
+            f"--output_dir={tmp}/out",
+            f"--steps={cfg.train_steps}",
+            f"--batch_size={cfg.batch_size}",
+            f"--save_freq={cfg.train_steps}",
+            "--policy.push_to_hub=false",
+            "--policy.device=cpu",
+            f"--num_workers={cfg.num_workers}",
+            "--wandb.enable=false",
+            f"--seed={cfg.seed}",
+        ]
         env = {**os.environ, "OMP_NUM_THREADS": "1", "HF_HUB_OFFLINE": "1", ENV_SWITCH: "1" if cache else "0"}
         t = time.perf_counter()
         subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         wall = time.perf_counter() - t
-    return {"path": "cache" if cache else "lerobot", "steps": cfg.train_steps, "wall_s": wall,
-            "samples_per_s": cfg.train_steps * cfg.batch_size / wall}
+    return {
+        "path": "cache" if cache else "lerobot",
+        "steps": cfg.train_steps,
+        "wall_s": wall,
+        "samples_per_s": cfg.train_steps * cfg.batch_size / wall,
+    }
 
 
 def run(cfg: BenchStudentConfig) -> dict:
@@ -175,13 +206,20 @@ def run(cfg: BenchStudentConfig) -> dict:
     floor = train_flops / (gflops * 1e9) * 1e3
     per_sample = update["lerobot_adamw"]["total"]
     result = {
-        "size": cfg.size, "batch_size": cfg.batch_size, "num_workers": cfg.num_workers,
-        "load_ms_per_sample": load, "update_ms_per_sample": update,
+        "size": cfg.size,
+        "batch_size": cfg.batch_size,
+        "num_workers": cfg.num_workers,
+        "load_ms_per_sample": load,
+        "update_ms_per_sample": update,
         "load_over_update": {k: v / per_sample for k, v in load.items()},
-        "train_flops_per_sample": train_flops, "gemm_gflops": gflops, "floor_ms_per_sample": floor,
+        "train_flops_per_sample": train_flops,
+        "gemm_gflops": gflops,
+        "floor_ms_per_sample": floor,
         "update_over_floor": per_sample / floor,
-        "bound_samples_per_s": {p: min(max(cfg.num_workers, 1) / load[p], 1 / per_sample) * 1e3
-                                for p in ("lerobot", "cache", "streaming")},
+        "bound_samples_per_s": {
+            p: min(max(cfg.num_workers, 1) / load[p], 1 / per_sample) * 1e3
+            for p in ("lerobot", "cache", "streaming")
+        },
     }
     if cfg.compile:
         result["compile"] = compiled_vs_eager(cfg.size, cfg.batch_size, max(cfg.update_steps, 3), cfg.seed)

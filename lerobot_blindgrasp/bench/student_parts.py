@@ -19,9 +19,11 @@ ADAMW = {"lerobot_adamw": {}, "foreach_adamw": {"foreach": True}, "fused_adamw":
 
 
 def _batch(batch_size: int, t_ctx: int) -> dict:
-    return {spec.STATE_KEY: torch.randn(batch_size, t_ctx, spec.STATE_DIM),
-            f"{spec.STATE_KEY}_is_pad": torch.zeros(batch_size, t_ctx, dtype=torch.bool),
-            spec.ACTION_KEY: torch.rand(batch_size, spec.ACTION_DIM) * 2 - 1}
+    return {
+        spec.STATE_KEY: torch.randn(batch_size, t_ctx, spec.STATE_DIM),
+        f"{spec.STATE_KEY}_is_pad": torch.zeros(batch_size, t_ctx, dtype=torch.bool),
+        spec.ACTION_KEY: torch.rand(batch_size, spec.ACTION_DIM) * 2 - 1,
+    }
 
 
 def _timed_steps(policy, opt, batch: dict, steps: int, clip: float) -> dict[str, float]:
@@ -51,8 +53,14 @@ def _trainable(size: str, seed: int, **adamw):
     torch.manual_seed(seed)
     policy = make_policy(size).train()
     preset = policy.config.get_optimizer_preset()
-    opt = torch.optim.AdamW(policy.parameters(), lr=preset.lr, betas=preset.betas, eps=preset.eps,
-                            weight_decay=preset.weight_decay, **adamw)
+    opt = torch.optim.AdamW(
+        policy.parameters(),
+        lr=preset.lr,
+        betas=preset.betas,
+        eps=preset.eps,
+        weight_decay=preset.weight_decay,
+        **adamw,
+    )
     return policy, opt, preset.grad_clip_norm
 
 
@@ -120,8 +128,11 @@ def operator_profile(policy, batch: dict, steps: int = 3) -> dict:
     for _ in range(2000):
         torch.add(x, x)
     dispatch_us = (time.perf_counter() - t) / 2000 * 1e6
-    return {**{f"{k}_ms": v for k, v in by_kind.items()}, "aten_ops_per_step": count // steps,
-            "dispatch_us_per_op": dispatch_us}
+    return {
+        **{f"{k}_ms": v for k, v in by_kind.items()},
+        "aten_ops_per_step": count // steps,
+        "dispatch_us_per_op": dispatch_us,
+    }
 
 
 def gemm_gflops(size: str, batch_size: int, repeats: int = 20) -> float:
@@ -145,7 +156,9 @@ def gemm_gflops(size: str, batch_size: int, repeats: int = 20) -> float:
 
 def format_table(r: dict) -> str:
     load, upd = r["load_ms_per_sample"], r["update_ms_per_sample"]
-    lines = [f"student {r['size']}, batch {r['batch_size']}, one torch thread (per sample; ratios within this run)"]
+    lines = [
+        f"student {r['size']}, batch {r['batch_size']}, one torch thread (per sample; ratios within this run)"
+    ]
     for path in ("lerobot", "lerobot_row", "lerobot_window", "streaming", "cache"):
         lines.append(f"  load {path:15s} {load[path]:8.3f} ms  = {r['load_over_update'][path]:6.2f} x update")
     for name in ADAMW:
@@ -155,20 +168,32 @@ def format_table(r: dict) -> str:
     if "profile" in upd:
         p = upd["profile"]
         kinds = ", ".join(f"{k[:-3]} {v:.3f} ms" for k, v in p.items() if k.endswith("_ms"))
-        lines.append(f"  fwd+bwd by operator: {kinds}; {p['aten_ops_per_step']} aten ops/step at "
-                     f"{p['dispatch_us_per_op']:.1f} us each")
+        lines.append(
+            f"  fwd+bwd by operator: {kinds}; {p['aten_ops_per_step']} aten ops/step at "
+            f"{p['dispatch_us_per_op']:.1f} us each"
+        )
     if "compile" in r:
         c = r["compile"]
-        lines.append(f"  torch.compile: {c['compiled_ms']:.3f} ms against eager {c['eager_ms']:.3f} ms "
-                     f"(x {c['compiled_over_eager']:.2f}), after {c['compile_s']:.0f} s of compiling")
-    lines.append(f"  floor ({r['train_flops_per_sample'] / 1e6:.1f} MFLOP at {r['gemm_gflops']:.1f} GFLOP/s): "
-                 f"{r['floor_ms_per_sample']:.3f} ms (update = {r['update_over_floor']:.2f} x floor)")
-    lines.append("  bound, samples/s with " + f"{r['num_workers']} loader process(es): "
-                 + ", ".join(f"{k} {v:.0f}" for k, v in r["bound_samples_per_s"].items()))
+        lines.append(
+            f"  torch.compile: {c['compiled_ms']:.3f} ms against eager {c['eager_ms']:.3f} ms "
+            f"(x {c['compiled_over_eager']:.2f}), after {c['compile_s']:.0f} s of compiling"
+        )
+    lines.append(
+        f"  floor ({r['train_flops_per_sample'] / 1e6:.1f} MFLOP at {r['gemm_gflops']:.1f} GFLOP/s): "
+        f"{r['floor_ms_per_sample']:.3f} ms (update = {r['update_over_floor']:.2f} x floor)"
+    )
+    lines.append(
+        "  bound, samples/s with "
+        + f"{r['num_workers']} loader process(es): "
+        + ", ".join(f"{k} {v:.0f}" for k, v in r["bound_samples_per_s"].items())
+    )
     for row in r.get("loader", []):
-        lines.append(f"  DataLoader {row['path']:8s} num_workers={row['num_workers']}: "
-                     f"{row['samples_per_s']:.0f} samples/s")
+        lines.append(
+            f"  DataLoader {row['path']:8s} num_workers={row['num_workers']}: {row['samples_per_s']:.0f} samples/s"
+        )
     for lt in r.get("lerobot_train", []):
-        lines.append(f"  lerobot-train {lt['path']:8s}: {lt['steps']} steps in {lt['wall_s']:.1f} s = "
-                     f"{lt['samples_per_s']:.0f} samples/s")
+        lines.append(
+            f"  lerobot-train {lt['path']:8s}: {lt['steps']} steps in {lt['wall_s']:.1f} s = "
+            f"{lt['samples_per_s']:.0f} samples/s"
+        )
     return "\n".join(lines)

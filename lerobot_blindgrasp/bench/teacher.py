@@ -194,8 +194,11 @@ def run(cfg: BenchTeacherConfig) -> dict:
             f"| {result['collect_cores_busy']:.1f} / {result['update_cores_busy']:.1f} | {result['max_rss_gb']:.2f} |"
         )
         if profiled:
-            print("PPO update (cProfile, one iteration): " + ", ".join(
-                f"{k} {v:.0%}" for k, v in profiled.items() if k != "total_s") + f" of {profiled['total_s']:.2f} s")
+            print(
+                "PPO update (cProfile, one iteration): "
+                + ", ".join(f"{k} {v:.0%}" for k, v in profiled.items() if k != "total_s")
+                + f" of {profiled['total_s']:.2f} s"
+            )
     return result
 
 

@@ -37,8 +37,9 @@ class Checkpoints:
     """Holds the open dataset (`.ds`); call `written()` after every saved episode. `on_checkpoint()` runs after
     each finalize, before the reopen: it records the run state that goes with the episodes now on disk."""
 
-    def __init__(self, ds, root, repo_id: str, every_s: float, every_episodes: int,
-                 on_checkpoint: Callable[[int], None]):
+    def __init__(
+        self, ds, root, repo_id: str, every_s: float, every_episodes: int, on_checkpoint: Callable[[int], None]
+    ):
         self.ds, self.root, self.repo_id = ds, root, repo_id
         self.every_s, self.every_episodes = every_s, max(1, every_episodes)
         self.on_checkpoint = on_checkpoint

@@ -27,6 +27,7 @@ from lerobot_blindgrasp.demos.loop import collect
 EXIT_EMPTY = 3  # the collection ran but wrote no episode
 EXIT_WRITE = 4  # a write failed (full disk, quota)
 
+
 def main(argv=None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     logging.getLogger("blindgrasp").setLevel(logging.INFO)  # LeRobot's imports may have configured the root first
@@ -41,8 +42,11 @@ def main(argv=None) -> None:
         print(f"\naborted; the dataset in {cfg.output_dir} is finalized and readable", file=sys.stderr)
         raise SystemExit(130) from None
     except (durable.WriteError, OSError) as e:  # a full disk, a quota: a clean message, not a traceback
-        print(f"error: {e if isinstance(e, durable.WriteError) else durable.describe(e)}. Free space, then run the "
-              f"same command with --resume=true: the episodes written before it are kept.", file=sys.stderr)
+        print(
+            f"error: {e if isinstance(e, durable.WriteError) else durable.describe(e)}. Free space, then run the "
+            f"same command with --resume=true: the episodes written before it are kept.",
+            file=sys.stderr,
+        )
         raise SystemExit(EXIT_WRITE) from None
     tally = report.load_tally(cfg.output_dir)
     print(report.format_table(tally, list(cfg.object_names)))

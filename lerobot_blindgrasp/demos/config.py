@@ -50,7 +50,9 @@ class CollectConfig:
     # physics: batch (mujoco.batch, CPU) or warp (MuJoCo Warp on this process's GPU, else its CPU device;
     # pip install .[gpu]). The same task, draws and curation either way.
     backend: str = "batch"
-    resume: bool = False  # append to an existing output_dir until the targets are met (repairs a crashed one first)
+    resume: bool = (
+        False  # append to an existing output_dir until the targets are met (repairs a crashed one first)
+    )
     # Crash safety: the dataset is finalized and reopened (LeRobot rolls to fresh parquet files) at least every
     # checkpoint_s seconds and every num_envs written episodes, so a kill loses at most that much. 0: only at the
     # end (a kill then loses every episode of the run).
@@ -65,7 +67,9 @@ class CollectConfig:
         self.output_dir = Path(self.output_dir)
         check_backend(self.backend)  # a clear error before the teacher is loaded
         if not 0 <= self.joint_calibration_rad < 0.5:
-            raise ValueError("--joint_calibration_rad is a reading offset in rad, >= 0 and well under a joint's range")
+            raise ValueError(
+                "--joint_calibration_rad is a reading offset in rad, >= 0 and well under a joint's range"
+            )
         if self.checkpoint_s < 0:
             raise ValueError("--checkpoint_s must be >= 0 (0: finalize only at the end)")
         if not self.curation.enabled and self.curation.trim_to_success:

@@ -83,8 +83,11 @@ def relabelled_episodes(act_student, reset_student, teacher, names: list[str], s
     from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
     from lerobot_blindgrasp.sim.randomization import EVAL_DR
 
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=len(names), objects=tuple(dict.fromkeys(names)), seed=seed,
-                                         dr=EVAL_DR, autoreset=False))
+    env = BatchedGraspEnv(
+        GraspEnvConfig(
+            num_envs=len(names), objects=tuple(dict.fromkeys(names)), seed=seed, dr=EVAL_DR, autoreset=False
+        )
+    )
     if list(env.object_names) != list(names):
         raise RuntimeError("object allocation differs from the requested batch")
     n, horizon = env.num_envs, env.max_episode_steps
@@ -110,9 +113,16 @@ def relabelled_episodes(act_student, reset_student, teacher, names: list[str], s
     for i in range(n):
         k = int(ends.length[i])
         yield Episode(
-            object_name=names[i], state=state[i, :k], action=label[i, :k], task_reward=task[i, :k],
-            uniaxial_force=force[i, :k], success=bool(ends.success[i]), left_workspace=bool(ends.left[i]),
-            physics_failed=False, env_seed=seed + i, env_episode=0,
+            object_name=names[i],
+            state=state[i, :k],
+            action=label[i, :k],
+            task_reward=task[i, :k],
+            uniaxial_force=force[i, :k],
+            success=bool(ends.success[i]),
+            left_workspace=bool(ends.left[i]),
+            physics_failed=False,
+            env_seed=seed + i,
+            env_episode=0,
             randomization=np.array([*(draws[i][p] for p in RANDOMIZATION_NAMES[:5]), *start_xy[i]], np.float64),
         )
 
@@ -142,10 +152,16 @@ def run(cfg: DaggerConfig) -> dict:
     bar = tqdm(total=len(todo), desc="dagger", unit="ep", disable=not cfg.progress)
     try:
         for start in range(0, len(todo), cfg.num_envs):
-            batch = todo[start:start + cfg.num_envs]
+            batch = todo[start : start + cfg.num_envs]
             for ep in relabelled_episodes(act, policy.reset, teacher, batch, cfg.seed + start):
-                cut = curation.CurationResult(passed=False, keep=True, keep_steps=ep.length, longest_hold_steps=0,
-                                              force_sum_n=float(ep.uniaxial_force.sum()), criteria_step=-1)
+                cut = curation.CurationResult(
+                    passed=False,
+                    keep=True,
+                    keep_steps=ep.length,
+                    longest_hold_steps=0,
+                    force_sum_n=float(ep.uniaxial_force.sum()),
+                    criteria_step=-1,
+                )
                 stats["frames"] += demo_dataset.write_episode(ds, ep, cut)
                 stats["episodes"] += 1
                 stats["student_successes"] += ep.success
@@ -154,12 +170,21 @@ def run(cfg: DaggerConfig) -> dict:
     finally:
         bar.close()
         ds.finalize()
-    demo_dataset.aggregate([_repo_id(cfg.demos), cfg.repo_id + "_relabelled"], [cfg.demos, out / "relabelled"],
-                           cfg.repo_id, out / "aggregate")
+    demo_dataset.aggregate(
+        [_repo_id(cfg.demos), cfg.repo_id + "_relabelled"],
+        [cfg.demos, out / "relabelled"],
+        cfg.repo_id,
+        out / "aggregate",
+    )
     record = {
-        "student": str(cfg.student), "teacher": str(teacher.checkpoint), "teacher_sha256": teacher.sha256,
-        "demos": str(cfg.demos), "episodes_per_object": cfg.episodes_per_object, "first_env_seed": cfg.seed,
-        "wall_s": time.perf_counter() - t0, **stats,
+        "student": str(cfg.student),
+        "teacher": str(teacher.checkpoint),
+        "teacher_sha256": teacher.sha256,
+        "demos": str(cfg.demos),
+        "episodes_per_object": cfg.episodes_per_object,
+        "first_env_seed": cfg.seed,
+        "wall_s": time.perf_counter() - t0,
+        **stats,
         "student_success_per_object": {k: float(np.mean(v)) for k, v in per_object.items() if v},
         "aggregate": str(out / "aggregate"),
     }
@@ -175,8 +200,10 @@ def _repo_id(root: Path) -> str:
 def main(argv=None) -> None:
     cfg = parse_config(DaggerConfig, argv)
     record = run(cfg)
-    print(f"relabelled {record['episodes']} student episodes ({record['frames']} frames; the student succeeded in "
-          f"{record['student_successes']}) in {record['wall_s']:.0f} s; training set: {record['aggregate']}")
+    print(
+        f"relabelled {record['episodes']} student episodes ({record['frames']} frames; the student succeeded in "
+        f"{record['student_successes']}) in {record['wall_s']:.0f} s; training set: {record['aggregate']}"
+    )
 
 
 if __name__ == "__main__":

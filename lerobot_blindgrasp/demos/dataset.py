@@ -249,12 +249,18 @@ def aggregate(repo_ids: list[str], roots: list[Path], repo_id: str, dest: Path) 
     aggregate_datasets(list(repo_ids), repo_id, roots=[Path(r) for r in roots], aggr_root=Path(dest))
     for f in sorted(Path(dest, "meta", "episodes").glob("chunk-*/file-*.parquet")):
         table = pq.read_table(f)  # pyarrow, not pandas: the rest of the schema goes back unchanged
-        where = {"chunk_index": int(f.parent.name.removeprefix("chunk-")), "file_index": int(f.stem.removeprefix("file-"))}
+        where = {
+            "chunk_index": int(f.parent.name.removeprefix("chunk-")),
+            "file_index": int(f.stem.removeprefix("file-")),
+        }
         if all(set(table[f"meta/episodes/{k}"].to_pylist()) == {v} for k, v in where.items()):
             continue
         for k, v in where.items():
             col = f"meta/episodes/{k}"
-            table = table.set_column(table.schema.get_field_index(col), table.schema.field(col),
-                                     pa.array([v] * table.num_rows, table.schema.field(col).type))
+            table = table.set_column(
+                table.schema.get_field_index(col),
+                table.schema.field(col),
+                pa.array([v] * table.num_rows, table.schema.field(col).type),
+            )
         with durable.atomic_path(f) as tmp:
             pq.write_table(table, tmp)

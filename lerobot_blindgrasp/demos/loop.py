@@ -123,8 +123,9 @@ def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: st
         stats.wall_s, stats.cpu_s = time.perf_counter() - t_wall, time.process_time() - t_cpu
         records.checkpoint_run(cfg, prov, run, tally, stats)
 
-    saved = checkpoint_mod.Checkpoints(ds, cfg.output_dir, cfg.repo_id, cfg.checkpoint_s, cfg.num_envs,
-                                       record_checkpoint)
+    saved = checkpoint_mod.Checkpoints(
+        ds, cfg.output_dir, cfg.repo_id, cfg.checkpoint_s, cfg.num_envs, record_checkpoint
+    )
     torch.manual_seed(prov["next_env_seed"])  # the stochastic teacher's samples
 
     def done(name: str) -> bool:

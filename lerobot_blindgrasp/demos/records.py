@@ -94,8 +94,11 @@ def open_dataset(cfg: CollectConfig, prov_new: dict):
     out = cfg.output_dir
     if not cfg.resume or empty_leftover(out):
         if cfg.resume:  # killed between LeRobot's create and the first collection.json: nothing to keep
-            log.warning("--resume: %s holds no episode and no collection.json (a run killed while starting); "
-                        "starting it afresh", out)
+            log.warning(
+                "--resume: %s holds no episode and no collection.json (a run killed while starting); "
+                "starting it afresh",
+                out,
+            )
             shutil.rmtree(out)
         ds = demo_dataset.create(out, cfg.repo_id)
         provenance.save(out, prov_new)

@@ -147,8 +147,11 @@ def inspect(root: Path) -> tuple[dict, RepairReport, dict]:
     while True:
         row = episodes.get(k)
         if row is None:
-            report.first_problem = "" if k >= report.episodes_claimed and not _beyond(k, episodes, frames) else (
-                f"episode {k} has no readable meta/episodes row")
+            report.first_problem = (
+                ""
+                if k >= report.episodes_claimed and not _beyond(k, episodes, frames)
+                else (f"episode {k} has no readable meta/episodes row")
+            )
             break
         where = (int(row["data/chunk_index"]), int(row["data/file_index"]))
         idx = frames.get(where, {}).get(k)
@@ -161,9 +164,16 @@ def inspect(root: Path) -> tuple[dict, RepairReport, dict]:
             report.first_problem = f"episode {k}'s frames do not match its metadata ({len(idx)} of {length} rows)"
             break
         missing = [
-            vk for vk in video_keys
-            if not (root / video_path.format(video_key=vk, chunk_index=int(row[f"videos/{vk}/chunk_index"]),
-                                             file_index=int(row[f"videos/{vk}/file_index"]))).is_file()
+            vk
+            for vk in video_keys
+            if not (
+                root
+                / video_path.format(
+                    video_key=vk,
+                    chunk_index=int(row[f"videos/{vk}/chunk_index"]),
+                    file_index=int(row[f"videos/{vk}/file_index"]),
+                )
+            ).is_file()
         ]
         if missing:
             report.first_problem = f"episode {k}'s video files are missing ({', '.join(missing)})"
@@ -221,8 +231,12 @@ def repair(root: str | Path, dry_run: bool = False) -> RepairReport:
         _rebuild_tasks(root, meta)
     _write_stats(root, meta, info["features"])
     n_tasks = len(pq.read_table(root / TASKS)) if (root / TASKS).is_file() else 0
-    info.update(total_episodes=k, total_frames=report.kept_frames, total_tasks=n_tasks,
-                splits={"train": f"0:{k}"} if k else {})
+    info.update(
+        total_episodes=k,
+        total_frames=report.kept_frames,
+        total_tasks=n_tasks,
+        splits={"train": f"0:{k}"} if k else {},
+    )
     durable.atomic_write_json(root / INFO, info, indent=4)  # last: LeRobot trusts these counts
     return report
 
@@ -273,7 +287,7 @@ def _write_stats(root: Path, meta, features: dict) -> None:
         for col, value in row.items():
             if not str(col).startswith("stats/"):
                 continue
-            name, stat = str(col)[len("stats/"):].rsplit("/", 1)
+            name, stat = str(col)[len("stats/") :].rsplit("/", 1)
             if name not in features:
                 continue
             arr = np.array(value.tolist() if hasattr(value, "tolist") else value)

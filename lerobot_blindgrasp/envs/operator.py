@@ -120,8 +120,14 @@ class SocketOperator(_KeyQueue):
     def announce_trial(self, object_name: str, trial: int, seed: int | None) -> None:
         self._token += 1
         self._asked = False
-        self._send({"op": "place", "object": object_name, "seed": trial - 1 if seed is None else int(seed),
-                    "token": self._token})
+        self._send(
+            {
+                "op": "place",
+                "object": object_name,
+                "seed": trial - 1 if seed is None else int(seed),
+                "token": self._token,
+            }
+        )
 
     def wait_for(self, keys: set[str], timeout_s: float | None = None) -> str | None:
         if keys & (SUCCESS_KEYS | FAILURE_KEYS) and not self._asked and self.queue.empty():

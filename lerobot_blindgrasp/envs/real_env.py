@@ -32,7 +32,7 @@ logger = logging.getLogger(__name__)
 
 
 def resolve_real_objects(task: str) -> tuple[str, ...]:
-    """"medium" -> the six ID objects (3D-printed medium replicas); otherwise a comma list of any names, since real
+    """ "medium" -> the six ID objects (3D-printed medium replicas); otherwise a comma list of any names, since real
     OOD objects (wine glass, foam brick, ...) have no sim model."""
     if task in ("medium", "all"):
         return objects.MEDIUM_OBJECTS if task == "medium" else objects.PAPER_OBJECTS
@@ -83,11 +83,17 @@ class BlindGraspRealEnvConfig(EnvConfig):
         from lerobot_blindgrasp.envs.real_trial import TrialSettings
 
         return TrialSettings(
-            robot=self.robot, episode_s=self.episode_s, success_mode=self.success_mode,
-            hold_force_n=self.hold_force_n, min_contacts=self.min_contacts,
-            home_tolerance_rad=self.home_tolerance_rad, home_timeout_s=self.home_timeout_s,
-            unattended_reset_s=self.unattended_reset_s, tare_each_trial=self.tare_each_trial,
-            trial_log=self.trial_log, operator_socket=self.operator_socket,
+            robot=self.robot,
+            episode_s=self.episode_s,
+            success_mode=self.success_mode,
+            hold_force_n=self.hold_force_n,
+            min_contacts=self.min_contacts,
+            home_tolerance_rad=self.home_tolerance_rad,
+            home_timeout_s=self.home_timeout_s,
+            unattended_reset_s=self.unattended_reset_s,
+            tare_each_trial=self.tare_each_trial,
+            trial_log=self.trial_log,
+            operator_socket=self.operator_socket,
         )
 
     def check_policy(self) -> None:

@@ -140,8 +140,10 @@ class RealGraspEnv(gym.Env):
             if err <= self.cfg.home_tolerance_rad:
                 return
             if time.monotonic() > deadline:
-                raise RuntimeError(f"The gripper did not reach the start pose within {self.cfg.home_timeout_s} s "
-                                   f"(worst joint error {err:.3f} rad): check for an obstruction.")
+                raise RuntimeError(
+                    f"The gripper did not reach the start pose within {self.cfg.home_timeout_s} s "
+                    f"(worst joint error {err:.3f} rad): check for an obstruction."
+                )
             self.robot.send_action(home)
             time.sleep(spec.CONTROL_DT)
 
@@ -223,8 +225,14 @@ class RealGraspEnv(gym.Env):
 
     def _log_trial(self, success: bool) -> None:
         who = self._decided[1] if self._decided else "time limit"
-        logger.info("[%s] trial %d: %s (%s, %d steps)", self.object_name, self.session.trials[self.object_name],
-                    "SUCCESS" if success else "failure", who, self._t)
+        logger.info(
+            "[%s] trial %d: %s (%s, %d steps)",
+            self.object_name,
+            self.session.trials[self.object_name],
+            "SUCCESS" if success else "failure",
+            who,
+            self._t,
+        )
         if self.cfg.trial_log:
             record = {
                 "object": self.object_name,
@@ -236,8 +244,10 @@ class RealGraspEnv(gym.Env):
                 "peak_force_n": [round(float(f), 3) for f in self._peak],
                 "loop_overruns": self._overruns() - self._overruns_at_start,
                 "late_steps_rebased": self._schedule.rebased,
-                "step_ms": {k: [round(1e3 * float(np.percentile(v, p)), 2) for p in (50, 99, 100)] if v else []
-                            for k, v in self._step_s.items()},  # p50, p99, max
+                "step_ms": {
+                    k: [round(1e3 * float(np.percentile(v, p)), 2) for p in (50, 99, 100)] if v else []
+                    for k, v in self._step_s.items()
+                },  # p50, p99, max
             }
             durable.atomic_append_text(self.cfg.trial_log, json.dumps(record) + "\n")  # a kill leaves no half line
 

@@ -81,5 +81,7 @@ def force_bias_warning(bias_n, tolerance_n: float = FORCE_BIAS_TOLERANCE_N) -> s
     if not bad:
         return None
     read = ", ".join(f"{k} {v:+.2f} N" for k, v in bad.items())
-    return (f"Fingertip force at rest reads {read}, beyond the +-{tolerance_n:g} N bias the shipped student was "
-            "measured to tolerate in simulation; re-tare the sensors (fingers in free air) before running a policy.")
+    return (
+        f"Fingertip force at rest reads {read}, beyond the +-{tolerance_n:g} N bias the shipped student was "
+        "measured to tolerate in simulation; re-tare the sensors (fingers in free air) before running a policy."
+    )

@@ -105,8 +105,10 @@ class LatestFrameStream(Generic[F]):
         if len(content) != len(self._previous_content):
             self._runs = [0] * len(content)
         else:
-            self._runs = [r + 1 if a == b and a is not None else 0  # None: no such channel in this frame
-                          for r, a, b in zip(self._runs, content, self._previous_content)]
+            self._runs = [
+                r + 1 if a == b and a is not None else 0  # None: no such channel in this frame
+                for r, a, b in zip(self._runs, content, self._previous_content)
+            ]
         self._previous_content = content
 
     # --- lifecycle ----------------------------------------------------------------------------------------------
@@ -215,5 +217,7 @@ class LatestFrameStream(Generic[F]):
             out += (f"; {frozen} repeat the same value bit for bit for >= {self.frozen_frames} frames, which the "
                     "sensor noise never does (frozen firmware or ADC)")  # fmt: skip
         if self.counter_faults:
-            out += f"; {self.counter_faults} frames with a repeated or backward counter (re-sent or replayed frames)"
+            out += (
+                f"; {self.counter_faults} frames with a repeated or backward counter (re-sent or replayed frames)"
+            )
         return out

@@ -74,8 +74,11 @@ def render_body(kind: str, context: dict) -> str:
 def _versions() -> dict:
     from lerobot_blindgrasp import __version__
 
-    return {"plugin_version": __version__, "lerobot_version": importlib.metadata.version("lerobot"),
-            "code_line": project.code_line()}
+    return {
+        "plugin_version": __version__,
+        "lerobot_version": importlib.metadata.version("lerobot"),
+        "code_line": project.code_line(),
+    }
 
 
 def _randomization_rows(dr: dict) -> list[tuple[str, str]]:

@@ -38,9 +38,11 @@ def _install_block(name: str, repo_id: str) -> str:
         use = (f"lerobot-eval --policy.path={repo_id} --env.type=blindgrasp --env.task=all \\\n"
                "  --eval.n_episodes=20"
                " --eval.batch_size=20 --eval.use_async_envs=false --policy.device=cpu --seed=1000")  # fmt: skip
-    return (f"\n## Install and use\n\n```bash\n{project.INSTALL}   # LeRobot plugin: the policy, env, robot and "
-            f"glove types\n{use}\n```\n\nThis model also ships inside the package: "
-            f"`blindgrasp-path --name={name}` prints its installed folder.\n\n{project.code_line()}\n")
+    return (
+        f"\n## Install and use\n\n```bash\n{project.INSTALL}   # LeRobot plugin: the policy, env, robot and "
+        f"glove types\n{use}\n```\n\nThis model also ships inside the package: "
+        f"`blindgrasp-path --name={name}` prints its installed folder.\n\n{project.code_line()}\n"
+    )
 
 
 def render_model_card(folder: Path, repo_id: str) -> str:
@@ -88,7 +90,7 @@ def stage_model(name: str, repo_id: str, staging: Path) -> Path:
 class PublishConfig:
     """Push the shipped teachers, the shipped student and a demo dataset to the Hub, each with its card.
 
-        blindgrasp-publish --namespace=you --demos=runs/demos_publish [--dry_run=true]
+    blindgrasp-publish --namespace=you --demos=runs/demos_publish [--dry_run=true]
     """
 
     namespace: str | None = None  # Hub user or organization the repos go under (names: hub/project.py HUB_REPOS)

@@ -89,8 +89,8 @@ def _network_errors() -> tuple[type[BaseException], ...]:
 class PushDatasetConfig:
     """Upload a blindgrasp dataset folder (sim teacher demos or glove teleoperation) to the Hub with its card.
 
-        blindgrasp-push-dataset --root=runs/demos_cpu --repo_id=me/blindgrasp_demos_cpu
-        blindgrasp-push-dataset --root=~/glove_demos --repo_id=me/blindgrasp_glove --kind=glove --operators=[alice]
+    blindgrasp-push-dataset --root=runs/demos_cpu --repo_id=me/blindgrasp_demos_cpu
+    blindgrasp-push-dataset --root=~/glove_demos --repo_id=me/blindgrasp_glove --kind=glove --operators=[alice]
     """
 
     root: Path | None = None  # dataset folder (LeRobotDataset root)

@@ -60,10 +60,14 @@ class GloveTrainConfig:
         if self.output_dir is None:
             raise ValueError("--output_dir is required")
         if p.sim_demos and self.sim_demos is None:
-            raise ValueError(f"preset {p.name!r} merges sim demos: give --sim_demos=<blindgrasp-collect-demos folder>")
+            raise ValueError(
+                f"preset {p.name!r} merges sim demos: give --sim_demos=<blindgrasp-collect-demos folder>"
+            )
         if not p.sim_demos and self.sim_demos is not None:
-            raise ValueError(f"preset {p.name!r} trains on glove recordings only; drop --sim_demos or pick "
-                             "--preset=sim_plus_glove")
+            raise ValueError(
+                f"preset {p.name!r} trains on glove recordings only; drop --sim_demos or pick "
+                "--preset=sim_plus_glove"
+            )
 
 
 def schema_problems(root: Path, extra_ok: tuple[str, ...] = ()) -> list[str]:
@@ -133,15 +137,23 @@ def merged(sources: list[Path], dest: Path, repo_id: str) -> Path:
     return dest
 
 
-def train_command(p: GlovePreset, dataset: Path, repo_id: str, out: Path, seed: int,
-                  device: str | None = None) -> list[str]:
+def train_command(
+    p: GlovePreset, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
+) -> list[str]:
     s = p.student
     frames = student_presets.dataset_frames(dataset) if _complete(dataset) else None
     sched = student_presets.schedule(s, frames)
     exe = Path(sys.executable).parent / "lerobot-train"
-    cmd = [str(exe) if exe.exists() else "lerobot-train", "--policy.type=blindgrasp_transformer",
-           f"--policy.size={s.size}", f"--dataset.repo_id={repo_id}", f"--dataset.root={dataset}",
-           f"--output_dir={out}", f"--steps={sched.steps}", f"--batch_size={s.batch_size}"]
+    cmd = [
+        str(exe) if exe.exists() else "lerobot-train",
+        "--policy.type=blindgrasp_transformer",
+        f"--policy.size={s.size}",
+        f"--dataset.repo_id={repo_id}",
+        f"--dataset.root={dataset}",
+        f"--output_dir={out}",
+        f"--steps={sched.steps}",
+        f"--batch_size={s.batch_size}",
+    ]
     if sched.constant_lr_steps is not None:
         cmd.append(f"--policy.scheduler_constant_steps={sched.constant_lr_steps}")
     if s.lr is not None:
@@ -176,8 +188,15 @@ def run(cfg: GloveTrainConfig) -> Path:
     if cfg.dry_run:
         many = len(sources) + (cfg.sim_demos is not None) > 1
         dataset = out / "dataset" if many else Path(cfg.glove[0])
-        print("\n".join([*plan, f"merge -> {dataset}" if many else f"train on {dataset}",
-                         shlex.join(train_command(p, dataset, cfg.repo_id, student, cfg.seed, cfg.device))]))
+        print(
+            "\n".join(
+                [
+                    *plan,
+                    f"merge -> {dataset}" if many else f"train on {dataset}",
+                    shlex.join(train_command(p, dataset, cfg.repo_id, student, cfg.seed, cfg.device)),
+                ]
+            )
+        )
         return student
     out.mkdir(parents=True, exist_ok=True)
     if cfg.sim_demos is not None:

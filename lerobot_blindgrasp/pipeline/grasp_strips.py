@@ -74,7 +74,9 @@ def read_frames(video: Path, n: int) -> tuple[list[np.ndarray], np.ndarray]:
     return [frames[i] for i in idx], idx
 
 
-def write_grasp_strips(eval_info: dict, out_png: Path, frames_per_row: int = 5, fps: float = spec.CONTROL_HZ) -> Path | None:
+def write_grasp_strips(
+    eval_info: dict, out_png: Path, frames_per_row: int = 5, fps: float = spec.CONTROL_HZ
+) -> Path | None:
     """One PNG: a row of frames per shape. Returns None when no successful episode was rendered."""
     picked = pick_per_class(successful_videos(eval_info))
     if not picked:
@@ -103,4 +105,3 @@ def write_grasp_strips(eval_info: dict, out_png: Path, frames_per_row: int = 5, 
         fig.savefig(tmp, dpi=100)
     plt.close(fig)
     return out_png
-

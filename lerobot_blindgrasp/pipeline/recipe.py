@@ -41,8 +41,9 @@ def objects_of(task: str) -> tuple[str, ...]:
     return objects.resolve_objects(task)
 
 
-def teacher_train(p: presets.Preset, out: Path, seed: int,
-                  variant: presets.Variant = presets.Variant()) -> list[str]:
+def teacher_train(
+    p: presets.Preset, out: Path, seed: int, variant: presets.Variant = presets.Variant()
+) -> list[str]:
     """blindgrasp-train-teacher of the preset's teacher, or of a Table V teacher ablation (`variant`) on the preset's
     ablation teacher."""
     t = p.teacher_stage(variant)
@@ -60,13 +61,28 @@ def teacher_train(p: presets.Preset, out: Path, seed: int,
 
 def teacher_eval(p: presets.Preset, teacher_dir: Path, dest: Path, eval_seed: int) -> list[str]:
     e = p.evaluation
-    return ["blindgrasp-eval-teacher", f"--teacher={teacher_dir}", f"--episodes={e.episodes_per_object}",
-            f"--objects={','.join(objects_of(e.task))}", f"--seed={eval_seed}",
-            f"--modes={','.join(e.teacher_modes)}", f"--output_dir={dest}"]
+    return [
+        "blindgrasp-eval-teacher",
+        f"--teacher={teacher_dir}",
+        f"--episodes={e.episodes_per_object}",
+        f"--objects={','.join(objects_of(e.task))}",
+        f"--seed={eval_seed}",
+        f"--modes={','.join(e.teacher_modes)}",
+        f"--output_dir={dest}",
+    ]
 
 
-def collect(p: presets.Preset, teacher: Path, root: Path, repo_id: str, first_seed: int, *, curate: bool = True,
-            stochastic: bool = True, extra: tuple[str, int] | None = None) -> list[str]:
+def collect(
+    p: presets.Preset,
+    teacher: Path,
+    root: Path,
+    repo_id: str,
+    first_seed: int,
+    *,
+    curate: bool = True,
+    stochastic: bool = True,
+    extra: tuple[str, int] | None = None,
+) -> list[str]:
     """blindgrasp-collect-demos of the preset's demos, or (`extra` = (object, episodes)) of one of its
     `extra_episodes` collections, with the collector's default rollout budget (20 x the episodes)."""
     from lerobot_blindgrasp.demos.config import DEFAULT_ROLLOUT_BUDGET_FACTOR
@@ -75,9 +91,17 @@ def collect(p: presets.Preset, teacher: Path, root: Path, repo_id: str, first_se
     episodes, budget = d.episodes_per_object, d.max_rollouts_per_object
     if extra is not None:
         episodes, budget = extra[1], DEFAULT_ROLLOUT_BUDGET_FACTOR * extra[1]
-    cmd = ["blindgrasp-collect-demos", f"--teacher={teacher}", f"--output_dir={root}", f"--repo_id={repo_id}",
-           f"--episodes_per_object={episodes}", f"--max_rollouts_per_object={budget}",
-           f"--num_envs={d.num_envs}", f"--seed={first_seed}", "--progress=false"]
+    cmd = [
+        "blindgrasp-collect-demos",
+        f"--teacher={teacher}",
+        f"--output_dir={root}",
+        f"--repo_id={repo_id}",
+        f"--episodes_per_object={episodes}",
+        f"--max_rollouts_per_object={budget}",
+        f"--num_envs={d.num_envs}",
+        f"--seed={first_seed}",
+        "--progress=false",
+    ]
     if extra is not None:
         cmd.append(f"--objects={extra[0]}")
     if d.joint_calibration_rad:
@@ -91,22 +115,37 @@ def collect(p: presets.Preset, teacher: Path, root: Path, repo_id: str, first_se
     return cmd
 
 
-def student_train(p: presets.Preset, dataset: Path, repo_id: str, out: Path, seed: int,
-                  device: str | None = None) -> tuple[list[str], presets.Schedule]:
+def student_train(
+    p: presets.Preset, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
+) -> tuple[list[str], presets.Schedule]:
     """lerobot-train of the student; the step count (and LR schedule) follows from the dataset's frames."""
     s = p.student
     frames = presets.dataset_frames(dataset) if (dataset / "meta" / "info.json").exists() else None
     sched = presets.schedule(s, frames)
-    cmd = ["lerobot-train", "--policy.type=blindgrasp_transformer", f"--policy.size={s.size}",
-           f"--dataset.repo_id={repo_id}", f"--dataset.root={dataset}", f"--output_dir={out}",
-           f"--steps={sched.steps}", f"--batch_size={s.batch_size}"]
+    cmd = [
+        "lerobot-train",
+        "--policy.type=blindgrasp_transformer",
+        f"--policy.size={s.size}",
+        f"--dataset.repo_id={repo_id}",
+        f"--dataset.root={dataset}",
+        f"--output_dir={out}",
+        f"--steps={sched.steps}",
+        f"--batch_size={s.batch_size}",
+    ]
     if sched.constant_lr_steps is not None:
         cmd.append(f"--policy.scheduler_constant_steps={sched.constant_lr_steps}")
     if s.lr is not None:
         cmd.append(f"--policy.optimizer_lr={s.lr}")
     cmd += s.policy_flags
-    cmd += [f"--save_freq={sched.steps}", f"--log_freq={max(1, sched.steps // 50)}", "--policy.push_to_hub=false",
-            f"--policy.device={device or s.device}", f"--num_workers={s.num_workers}", "--wandb.enable=false", f"--seed={seed}"]
+    cmd += [
+        f"--save_freq={sched.steps}",
+        f"--log_freq={max(1, sched.steps // 50)}",
+        "--policy.push_to_hub=false",
+        f"--policy.device={device or s.device}",
+        f"--num_workers={s.num_workers}",
+        "--wandb.enable=false",
+        f"--seed={seed}",
+    ]
     return cmd, sched
 
 
@@ -117,36 +156,73 @@ def dagger_seed(seed: int, round_: int) -> int:
     return DAGGER_SEED + (8 * seed + round_) * DEMO_SEED_BLOCK
 
 
-def dagger(p: presets.Preset, student_ckpt: Path, teacher: Path, demos: Path, out: Path, first_seed: int,
-           device: str | None = None) -> list[str]:
+def dagger(
+    p: presets.Preset,
+    student_ckpt: Path,
+    teacher: Path,
+    demos: Path,
+    out: Path,
+    first_seed: int,
+    device: str | None = None,
+) -> list[str]:
     d = p.dagger
-    return ["blindgrasp-dagger", f"--student={student_ckpt}", f"--teacher={teacher}", f"--demos={demos}",
-            f"--output_dir={out}", f"--episodes_per_object={d.episodes_per_object}", f"--objects={d.objects}",
-            f"--num_envs={d.num_envs}", f"--seed={first_seed}", f"--device={device or p.student.device}",
-            "--progress=false"]
+    return [
+        "blindgrasp-dagger",
+        f"--student={student_ckpt}",
+        f"--teacher={teacher}",
+        f"--demos={demos}",
+        f"--output_dir={out}",
+        f"--episodes_per_object={d.episodes_per_object}",
+        f"--objects={d.objects}",
+        f"--num_envs={d.num_envs}",
+        f"--seed={first_seed}",
+        f"--device={device or p.student.device}",
+        "--progress=false",
+    ]
 
 
-def student_finetune(p: presets.Preset, init: Path, dataset: Path, repo_id: str, out: Path, seed: int,
-                     device: str | None = None) -> list[str]:
+def student_finetune(
+    p: presets.Preset, init: Path, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
+) -> list[str]:
     """lerobot-train from a student's weights (DAgger's retraining on the aggregate), `p.dagger.steps` steps."""
     s, steps = p.student, p.dagger.steps
-    return ["lerobot-train", f"--policy.path={init}", f"--dataset.repo_id={repo_id}", f"--dataset.root={dataset}",
-            f"--output_dir={out}", f"--steps={steps}", f"--batch_size={s.batch_size}", f"--save_freq={steps}",
-            f"--log_freq={max(1, steps // 50)}", "--policy.push_to_hub=false",
-            f"--policy.device={device or s.device}", f"--num_workers={s.num_workers}", "--wandb.enable=false",
-            f"--seed={seed}"]
+    return [
+        "lerobot-train",
+        f"--policy.path={init}",
+        f"--dataset.repo_id={repo_id}",
+        f"--dataset.root={dataset}",
+        f"--output_dir={out}",
+        f"--steps={steps}",
+        f"--batch_size={s.batch_size}",
+        f"--save_freq={steps}",
+        f"--log_freq={max(1, steps // 50)}",
+        "--policy.push_to_hub=false",
+        f"--policy.device={device or s.device}",
+        f"--num_workers={s.num_workers}",
+        "--wandb.enable=false",
+        f"--seed={seed}",
+    ]
 
 
-def student_eval(p: presets.Preset, ckpt: Path, dest: Path, eval_seed: int,
-                 device: str | None = None) -> list[str]:
+def student_eval(
+    p: presets.Preset, ckpt: Path, dest: Path, eval_seed: int, device: str | None = None
+) -> list[str]:
     e = p.evaluation
-    return ["lerobot-eval", f"--policy.path={ckpt}", "--env.type=blindgrasp", f"--env.task={e.task}",
-            f"--eval.n_episodes={e.episodes_per_object}", f"--eval.batch_size={e.episodes_per_object}",
-            f"--policy.device={device or p.student.device}",
-            # In-process envs: on a few cores, one worker process per env only adds start-up and contention.
-            f"--eval.use_async_envs={'true' if e.async_envs else 'false'}",
-            f"--env.render_stride={e.render_stride}", f"--env.render_episodes={e.render_episodes}",
-            f"--output_dir={dest}", f"--seed={eval_seed}"]
+    return [
+        "lerobot-eval",
+        f"--policy.path={ckpt}",
+        "--env.type=blindgrasp",
+        f"--env.task={e.task}",
+        f"--eval.n_episodes={e.episodes_per_object}",
+        f"--eval.batch_size={e.episodes_per_object}",
+        f"--policy.device={device or p.student.device}",
+        # In-process envs: on a few cores, one worker process per env only adds start-up and contention.
+        f"--eval.use_async_envs={'true' if e.async_envs else 'false'}",
+        f"--env.render_stride={e.render_stride}",
+        f"--env.render_episodes={e.render_episodes}",
+        f"--output_dir={dest}",
+        f"--seed={eval_seed}",
+    ]
 
 
 def teacher_trained(run: Path) -> bool:
@@ -167,8 +243,14 @@ def checkpoint(student: Path) -> Path:
     return student / "checkpoints" / "last" / "pretrained_model"
 
 
-def table_v(p: presets.Preset, out: Path, stage: str, seed: int = spec.TEACHER_TRAIN_SEED,
-            eval_seed: int = spec.EVAL_SEED, device: str | None = None) -> list[list[str]]:
+def table_v(
+    p: presets.Preset,
+    out: Path,
+    stage: str,
+    seed: int = spec.TEACHER_TRAIN_SEED,
+    eval_seed: int = spec.EVAL_SEED,
+    device: str | None = None,
+) -> list[list[str]]:
     """The commands of one Table V stage not done yet under `out`. Every student row uses the same demo start
     states (one demo seed), so rows differ only in what the paper varies."""
     if stage not in STAGES:
@@ -193,8 +275,17 @@ def table_v(p: presets.Preset, out: Path, stage: str, seed: int = spec.TEACHER_T
         root, student = out / f"demos_{row.name}", out / f"student_{row.name}"
         repo = f"local/blindgrasp_{p.name}_{row.name}"
         if stage == "demos" and not demos_collected(root):
-            cmds.append(collect(p, teacher_dir(row.teacher), root, repo, demo_seed(seed),
-                                curate=row.curated_demos, stochastic=row.stochastic_demos))
+            cmds.append(
+                collect(
+                    p,
+                    teacher_dir(row.teacher),
+                    root,
+                    repo,
+                    demo_seed(seed),
+                    curate=row.curated_demos,
+                    stochastic=row.stochastic_demos,
+                )
+            )
         if stage in ("students", "evals") and demos_empty(root):
             # A row without demos has no student; the script goes on with the other rows and says so.
             cmds.append(["#", f"{row.name}: skipped, {root} kept no episode"])

@@ -58,11 +58,16 @@ def _teacher_lines(record: dict) -> list[str]:
     t = record.get("teacher") or {}
     if not t:
         return []
-    lines = ["## Teacher", "",
-             f"**{t['source']}**: `{t['path']}` (`{t['file']}`, iteration {t['iteration']}, preset "
-             f"`{t.get('preset')}`, sha256 `{t['sha256'][:12]}…`)."]
+    lines = [
+        "## Teacher",
+        "",
+        f"**{t['source']}**: `{t['path']}` (`{t['file']}`, iteration {t['iteration']}, preset "
+        f"`{t.get('preset')}`, sha256 `{t['sha256'][:12]}…`).",
+    ]
     if t.get("eval_reused_from"):
-        lines.append(f"Its success below is its recorded eval on the same start states (`{t['eval_reused_from']}`).")
+        lines.append(
+            f"Its success below is its recorded eval on the same start states (`{t['eval_reused_from']}`)."
+        )
     elif t.get("eval_rerun_because"):
         lines.append(f"Its success below was evaluated in this run, on this machine: {t['eval_rerun_because']}.")
     return lines + [""]
@@ -75,8 +80,13 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     lines = [f"# Blind-grasp pipeline report: preset `{preset}`", ""]
     lines += _teacher_lines(record)
     if record.get("student_recipe"):
-        lines += ["## Student recipe", "", f"**{record['student_recipe']}** (preset `{preset}`); evaluated: "
-                  f"`{record.get('student_checkpoint', '')}`.", ""]
+        lines += [
+            "## Student recipe",
+            "",
+            f"**{record['student_recipe']}** (preset `{preset}`); evaluated: "
+            f"`{record.get('student_checkpoint', '')}`.",
+            "",
+        ]
 
     # --- stages
     lines += ["## Stages", "", "| stage | wall time | command |", "|---|---:|---|"]
@@ -93,8 +103,10 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     names = [n for n in objects.PAPER_OBJECTS if n in stu] + [n for n in stu if n not in objects.PAPER_OBJECTS]
     # The quick preset evaluates the teacher deterministically only: no empty stochastic column then.
     # column title -> (chart legend, successes per object)
-    teacher_cols = {"teacher det.": ("teacher (deterministic)", t_det),
-                    **({"teacher stoch.": ("teacher (stochastic)", t_sto)} if t_sto else {})}
+    teacher_cols = {
+        "teacher det.": ("teacher (deterministic)", t_det),
+        **({"teacher stoch.": ("teacher (stochastic)", t_sto)} if t_sto else {}),
+    }
     series = {
         **{legend: [100 * np.mean(col.get(n) or [0]) for n in names] for legend, col in teacher_cols.values()},
         "student (lerobot-eval)": [100 * np.mean(stu[n] or [0]) for n in names],
@@ -135,21 +147,33 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
             pooled[label] += col.get(n, [])
             cells.append(rates.format_rate(*rates.count(col.get(n, []))))
         pooled_student += stu[n]
-        lines.append(f"| {n} | " + " | ".join(cells) + f" | {rates.format_rate(*rates.count(stu[n]))} | "
-                     f"{paired_cell(t_det.get(n, []), stu[n])} |")
+        lines.append(
+            f"| {n} | " + " | ".join(cells) + f" | {rates.format_rate(*rates.count(stu[n]))} | "
+            f"{paired_cell(t_det.get(n, []), stu[n])} |"
+        )
     cells = [f"**{rates.format_rate(*rates.count(v), digits=1)}**" for v in pooled.values()]
     t_only, s_only = paired_all["a_only"], paired_all["b_only"]
-    lines.append(f"| **all {len(names)}** | " + " | ".join(cells) + " | "
-                 f"**{rates.format_rate(*rates.count(pooled_student), digits=1)}** | "
-                 f"**{paired_all['both']} / {t_only} / {s_only}** |")
+    lines.append(
+        f"| **all {len(names)}** | " + " | ".join(cells) + " | "
+        f"**{rates.format_rate(*rates.count(pooled_student), digits=1)}** | "
+        f"**{paired_all['both']} / {t_only} / {s_only}** |"
+    )
     p_paired = rates.mcnemar_exact_p(t_only, s_only)
-    lines += ["", f"Paired over all objects: the teacher alone solved {t_only} start states, the student alone "
-              f"{s_only}; exact McNemar p = {p_paired:.3g} ({rates.paired_verdict(p_paired)})."]
+    lines += [
+        "",
+        f"Paired over all objects: the teacher alone solved {t_only} start states, the student alone "
+        f"{s_only}; exact McNemar p = {p_paired:.3g} ({rates.paired_verdict(p_paired)}).",
+    ]
     lines.append("")
     strip = write_grasp_strips(eval_info, figs / "grasp_strips.png")
     if strip is not None:
-        lines += ["Successful student grasps, one rendered lerobot-eval episode per shape (frames across the 10 s "
-                  "episode; the videos are in `student_eval/videos/`):", "", "![grasps](figures/grasp_strips.png)", ""]
+        lines += [
+            "Successful student grasps, one rendered lerobot-eval episode per shape (frames across the 10 s "
+            "episode; the videos are in `student_eval/videos/`):",
+            "",
+            "![grasps](figures/grasp_strips.png)",
+            "",
+        ]
 
     # --- learning curves
     lines += ["## Learning curves", ""]
@@ -179,9 +203,13 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
         y = json.loads(path.read_text())
         rows = y["objects"]
         demo_names = [n for n in objects.PAPER_OBJECTS if n in rows] or list(rows)
-        bar_chart(figs / f"yield_{sub}.png", demo_names,
-                   {"yield (%)": [rows.get(n, {}).get("yield", 0) * 100 for n in demo_names]},
-                   f"Demo yield ({label})", "episodes passing curation (%)")
+        bar_chart(
+            figs / f"yield_{sub}.png",
+            demo_names,
+            {"yield (%)": [rows.get(n, {}).get("yield", 0) * 100 for n in demo_names]},
+            f"Demo yield ({label})",
+            "episodes passing curation (%)",
+        )
         tot = y["total"]
         lines += [
             f"**{label}** (`{sub}/`): {tot['kept']} episodes written from {tot['rollouts']} rollouts; "
@@ -193,9 +221,11 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
     lines += [f"The student was trained on the **{record.get('student_dataset', 'curated')}** set.", ""]
     sched = record.get("student_schedule") or {}
     if sched.get("steps_per_epoch"):
-        lines += [f"Student length from its dataset: {sched['total_frames']} frames = {sched['steps_per_epoch']} "
-                  f"steps per epoch, {sched['steps']} steps, LR constant for the first {sched['constant_lr_steps']}.",
-                  ""]
+        lines += [
+            f"Student length from its dataset: {sched['total_frames']} frames = {sched['steps_per_epoch']} "
+            f"steps per epoch, {sched['steps']} steps, LR constant for the first {sched['constant_lr_steps']}.",
+            "",
+        ]
     if record.get("deviations"):
         lines += ["## Deviations from the paper (preset `" + preset + "`)", ""]
         lines += [f"- {d}" for d in record["deviations"]] + [""]

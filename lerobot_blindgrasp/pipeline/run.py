@@ -103,15 +103,26 @@ class Stage:
         print(f"[pipeline] {name}: {shlex.join(cmd)}", flush=True)
         t = time.time()
         with open(log_path, "w") as log:
-            proc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, **(env or {})},
-                                  preexec_fn=_die_with_parent)
+            proc = subprocess.run(
+                cmd,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env={**os.environ, **(env or {})},
+                preexec_fn=_die_with_parent,
+            )
         wall = time.time() - t
-        self.record["stages"][name] = {"command": shlex.join(cmd), "wall_s": wall, "log": str(log_path),
-                                       "returncode": proc.returncode}
+        self.record["stages"][name] = {
+            "command": shlex.join(cmd),
+            "wall_s": wall,
+            "log": str(log_path),
+            "returncode": proc.returncode,
+        }
         if proc.returncode not in ok:
             self._save()
             tail = log_path.read_text().splitlines()[-25:]
-            raise SystemExit(f"[pipeline] {name} failed (exit {proc.returncode}); last lines of {log_path}:\n" + "\n".join(tail))
+            raise SystemExit(
+                f"[pipeline] {name} failed (exit {proc.returncode}); last lines of {log_path}:\n" + "\n".join(tail)
+            )
         self.complete(name)
         print(f"[pipeline] {name} done in {wall:.0f} s", flush=True)
         return proc.returncode
@@ -175,7 +186,9 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     if stage.done("teacher_eval", legacy=(teacher_eval / "eval.json").exists()):
         stage.skip("teacher_eval", "done")
     elif _reuse_teacher_eval(teacher_dir, teacher_eval, preset, eval_seed, eval_objects, note=record["teacher"]):
-        stage.skip("teacher_eval", f"the same start states were evaluated for this teacher in {teacher_dir / 'eval'}")
+        stage.skip(
+            "teacher_eval", f"the same start states were evaluated for this teacher in {teacher_dir / 'eval'}"
+        )
         record["teacher"]["eval_reused_from"] = str(teacher_dir / "eval")
         stage.complete("teacher_eval")
     else:
@@ -187,20 +200,33 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     train_set = demos
     record["student_dataset"] = "curated"
     if kept < preset.demos.min_curated_episodes:
-        print(f"[pipeline] only {kept} curated episodes (< {preset.demos.min_curated_episodes}); also collecting the "
-              "uncurated set and training the student on it", flush=True)
+        print(
+            f"[pipeline] only {kept} curated episodes (< {preset.demos.min_curated_episodes}); also collecting the "
+            "uncurated set and training the student on it",
+            flush=True,
+        )
         repo = f"local/blindgrasp_{preset.name}_uncurated"
-        train_set = _collect(stage, preset, teacher_dir, out / "demos_uncurated", repo,
-                             demo_seed + DEMO_SEED_BLOCK // 2, curate=False)
+        train_set = _collect(
+            stage,
+            preset,
+            teacher_dir,
+            out / "demos_uncurated",
+            repo,
+            demo_seed + DEMO_SEED_BLOCK // 2,
+            curate=False,
+        )
         record["student_dataset"] = "uncurated (too few curated episodes)"
     if _kept(train_set) == 0:
-        raise SystemExit(f"[pipeline] error: the demo dataset {train_set} has no episodes, so there is nothing to "
-                         "train the student on; use a better teacher (--teacher) or more rollouts")
+        raise SystemExit(
+            f"[pipeline] error: the demo dataset {train_set} has no episodes, so there is nothing to "
+            "train the student on; use a better teacher (--teacher) or more rollouts"
+        )
     if preset.demos.extra_episodes:
         curated = train_set == demos
         train_set, repo = _targeted_demos(stage, preset, teacher_dir, out, train_set, repo, seed, curated)
         record["student_dataset"] += ", with " + ", ".join(
-            f"{n} more episodes of {name}" for name, n in preset.demos.extra_episodes)
+            f"{n} more episodes of {name}" for name, n in preset.demos.extra_episodes
+        )
 
     student = out / "student"
     ckpt = recipe.checkpoint(student)
@@ -214,8 +240,17 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
         stage.run("student", cmd, env={**env1, "OMP_NUM_THREADS": str(preset.student.threads)})
     record["student_recipe"] = preset.student_recipe
     if preset.dagger is not None:
-        ckpt = _dagger_rounds(stage, preset, out, teacher_dir, train_set, ckpt, seed, device,
-                              {**env1, "OMP_NUM_THREADS": str(preset.student.threads)})
+        ckpt = _dagger_rounds(
+            stage,
+            preset,
+            out,
+            teacher_dir,
+            train_set,
+            ckpt,
+            seed,
+            device,
+            {**env1, "OMP_NUM_THREADS": str(preset.student.threads)},
+        )
     record["student_checkpoint"] = str(ckpt)
     student_eval = out / "student_eval"
     if stage.done("student_eval", legacy=(student_eval / "eval_info.json").exists()):
@@ -229,8 +264,17 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     return report
 
 
-def _dagger_rounds(stage: Stage, preset: presets.Preset, out: Path, teacher: Path, demos: Path, ckpt: Path,
-                   seed: int, device: str, env: dict) -> Path:
+def _dagger_rounds(
+    stage: Stage,
+    preset: presets.Preset,
+    out: Path,
+    teacher: Path,
+    demos: Path,
+    ckpt: Path,
+    seed: int,
+    device: str,
+    env: dict,
+) -> Path:
     """DAgger rounds (beyond the paper): the latest student drives, the teacher labels, the student is fine-tuned on
     the aggregate. Returns the final student's checkpoint."""
     from lerobot_blindgrasp.demos.dagger import DONE
@@ -240,16 +284,22 @@ def _dagger_rounds(stage: Stage, preset: presets.Preset, out: Path, teacher: Pat
         if stage.done(name, legacy=(relabelled / DONE).is_file()):
             stage.skip(name, "relabelled")
         else:
-            stage.run(name, recipe.dagger(preset, ckpt, teacher, demos, relabelled, recipe.dagger_seed(seed, r),
-                                          device), env=env)
+            stage.run(
+                name,
+                recipe.dagger(preset, ckpt, teacher, demos, relabelled, recipe.dagger_seed(seed, r), device),
+                env=env,
+            )
         demos, repo = relabelled / "aggregate", f"local/blindgrasp_{preset.name}_dagger_{r}"
         if stage.done(f"student_dagger_{r}", legacy=recipe.checkpoint(student).exists()):
             stage.skip(f"student_dagger_{r}", "trained")
         else:
             if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
                 os.replace(student, out / f"student_dagger_{r}_interrupted_{int(time.time())}")
-            stage.run(f"student_dagger_{r}", recipe.student_finetune(preset, ckpt, demos, repo, student, seed, device),
-                      env=env)
+            stage.run(
+                f"student_dagger_{r}",
+                recipe.student_finetune(preset, ckpt, demos, repo, student, seed, device),
+                env=env,
+            )
         ckpt = recipe.checkpoint(student)
     return ckpt
 
@@ -267,8 +317,14 @@ def _teacher(stage: Stage, preset: presets.Preset, out: Path, seed: int, given: 
         shipped = "shipped" if preset.teacher.shipped_folder else "shipped default"
         stage.skip("teacher", f"using {'the given' if given is not None else 'the ' + shipped} teacher {path}")
         source = "given (--teacher)" if given is not None else shipped
-        return path, {"source": source, "path": str(path), "file": t.name, "sha256": t.sha256,
-                      "iteration": t.iteration, "preset": t.config.get("preset")}
+        return path, {
+            "source": source,
+            "path": str(path),
+            "file": t.name,
+            "sha256": t.sha256,
+            "iteration": t.iteration,
+            "preset": t.config.get("preset"),
+        }
     teacher_dir = out / "teacher"
     if stage.done("teacher", legacy=recipe.teacher_trained(teacher_dir)):
         stage.skip("teacher", "trained")
@@ -277,13 +333,24 @@ def _teacher(stage: Stage, preset: presets.Preset, out: Path, seed: int, given: 
         stage.run("teacher", recipe.teacher_train(preset, teacher_dir, seed))
     t = TeacherPolicy(teacher_dir)
     name = preset.teacher.settings.name
-    return teacher_dir, {"source": f"trained from scratch in this run (teacher preset `{name}`)",
-                         "path": str(teacher_dir), "file": t.name, "sha256": t.sha256, "iteration": t.iteration,
-                         "preset": name}
+    return teacher_dir, {
+        "source": f"trained from scratch in this run (teacher preset `{name}`)",
+        "path": str(teacher_dir),
+        "file": t.name,
+        "sha256": t.sha256,
+        "iteration": t.iteration,
+        "preset": name,
+    }
 
 
-def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: presets.Preset, eval_seed: int,
-                        eval_objects: tuple[str, ...], note: dict | None = None) -> bool:
+def _reuse_teacher_eval(
+    teacher_dir: Path,
+    dest: Path,
+    preset: presets.Preset,
+    eval_seed: int,
+    eval_objects: tuple[str, ...],
+    note: dict | None = None,
+) -> bool:
     """A shipped teacher may carry its eval (`<folder>/eval/eval.json`). Rollouts are functions of (teacher, start
     states, torch seed, sim code, float platform), so an eval of the same weights on the same start states under
     the same sim sources, made on this CPU family, is the paired eval; reuse it rather than spend minutes
@@ -307,10 +374,15 @@ def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: presets.Preset, e
     )
     here = platform_id.platform()
     if same and not platform_id.same(prev.get("platform"), here):
-        why = (f"the carried eval {src} was recorded on {platform_id.describe(prev.get('platform'))}, and this "
-               f"machine is {platform_id.describe(here)}")
-        print(f"[pipeline] {why}: re-running the teacher's eval here, so that teacher and student are paired on "
-              "one machine's floats", flush=True)
+        why = (
+            f"the carried eval {src} was recorded on {platform_id.describe(prev.get('platform'))}, and this "
+            f"machine is {platform_id.describe(here)}"
+        )
+        print(
+            f"[pipeline] {why}: re-running the teacher's eval here, so that teacher and student are paired on "
+            "one machine's floats",
+            flush=True,
+        )
         if note is not None:
             note["eval_rerun_because"] = why
         return False
@@ -323,8 +395,16 @@ def _reuse_teacher_eval(teacher_dir: Path, dest: Path, preset: presets.Preset, e
     return same
 
 
-def _collect(stage: Stage, preset: presets.Preset, teacher: Path, root: Path, repo_id: str, first_seed: int,
-             curate: bool, extra: tuple[str, int] | None = None) -> Path:
+def _collect(
+    stage: Stage,
+    preset: presets.Preset,
+    teacher: Path,
+    root: Path,
+    repo_id: str,
+    first_seed: int,
+    curate: bool,
+    extra: tuple[str, int] | None = None,
+) -> Path:
     name = root.name if extra else "demos" if curate else "demos_uncurated"
     if stage.done(name, legacy=recipe.demos_collected(root)):
         stage.skip(name, "collected")
@@ -333,21 +413,40 @@ def _collect(stage: Stage, preset: presets.Preset, teacher: Path, root: Path, re
 
     # An empty curated set is handled by the caller (uncurated fallback). A collection cut short is resumed
     # (recipe.collect adds --resume=true; the collector repairs a crashed folder first).
-    stage.run(name, recipe.collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra),
-              ok=(0, EXIT_EMPTY))
+    stage.run(
+        name,
+        recipe.collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra),
+        ok=(0, EXIT_EMPTY),
+    )
     return root
 
 
-def _targeted_demos(stage: Stage, preset: presets.Preset, teacher: Path, out: Path, demos: Path, repo: str,
-                    seed: int, curated: bool) -> tuple[Path, str]:
+def _targeted_demos(
+    stage: Stage,
+    preset: presets.Preset,
+    teacher: Path,
+    out: Path,
+    demos: Path,
+    repo: str,
+    seed: int,
+    curated: bool,
+) -> tuple[Path, str]:
     """Beyond the paper: the preset's extra episodes of the objects it names (one collection each, curated or not
     as the set the student trains on), merged with that set by LeRobot's `aggregate_datasets`. Returns the merged
     dataset and its repo id."""
     roots, repos = [demos], [repo]
     for k, (name, n) in enumerate(preset.demos.extra_episodes):
         root, extra_repo = out / f"{demos.name}_{name}", f"{repo}_{name}"
-        _collect(stage, preset, teacher, root, extra_repo, recipe.extra_demo_seed(seed, k, curated),
-                 curate=curated, extra=(name, n))
+        _collect(
+            stage,
+            preset,
+            teacher,
+            root,
+            extra_repo,
+            recipe.extra_demo_seed(seed, k, curated),
+            curate=curated,
+            extra=(name, n),
+        )
         if _kept(root):  # an object the teacher never solved adds nothing (its yield report says so)
             roots.append(root)
             repos.append(extra_repo)
@@ -367,8 +466,11 @@ def _targeted_demos(stage: Stage, preset: presets.Preset, teacher: Path, out: Pa
     shutil.rmtree(merged, ignore_errors=True)
     os.replace(tmp, merged)
     durable.fsync_dir(out)
-    stage.record["stages"][name] = {"command": f"aggregate_datasets({repos})", "wall_s": time.time() - t,
-                                    "roots": [str(r) for r in roots]}
+    stage.record["stages"][name] = {
+        "command": f"aggregate_datasets({repos})",
+        "wall_s": time.time() - t,
+        "roots": [str(r) for r in roots],
+    }
     stage.complete(name)
     print(f"[pipeline] {name}: merged {len(roots)} datasets into {merged}", flush=True)
     return merged, merged_repo
@@ -384,8 +486,18 @@ def main(argv=None) -> None:
     cfg = parse_config(PipelineConfig, argv)
     try:
         if cfg.print_commands:
-            print(recipe.shell_lines(recipe.table_v(presets.get(cfg.preset), cfg.output_dir, cfg.print_commands,
-                                                    cfg.seed, cfg.eval_seed, cfg.device)))
+            print(
+                recipe.shell_lines(
+                    recipe.table_v(
+                        presets.get(cfg.preset),
+                        cfg.output_dir,
+                        cfg.print_commands,
+                        cfg.seed,
+                        cfg.eval_seed,
+                        cfg.device,
+                    )
+                )
+            )
             return
         run_pipeline(cfg)
     except ValueError as e:  # seeds outside their ranges, a stage printed before its inputs exist

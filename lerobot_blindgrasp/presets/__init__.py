@@ -33,9 +33,28 @@ from lerobot_blindgrasp.presets.student import SIZES, DaggerStage, Schedule, Stu
 from lerobot_blindgrasp.presets.teacher import TeacherPreset, Variant
 from lerobot_blindgrasp.teacher import blind_approach
 
-__all__ = ["ABLATION_TEACHER", "PRESETS", "SHIPPED_TEACHER_ITERATIONS", "SHIPPED_TEACHER_PRESET", "SIZES",
-           "TABLE_V", "TEACHERS", "Ablation", "DaggerStage", "DemoStage", "EvalStage", "Preset", "Schedule",
-           "StudentStage", "TeacherPreset", "TeacherStage", "Variant", "dataset_frames", "get", "schedule"]
+__all__ = [
+    "ABLATION_TEACHER",
+    "PRESETS",
+    "SHIPPED_TEACHER_ITERATIONS",
+    "SHIPPED_TEACHER_PRESET",
+    "SIZES",
+    "TABLE_V",
+    "TEACHERS",
+    "Ablation",
+    "DaggerStage",
+    "DemoStage",
+    "EvalStage",
+    "Preset",
+    "Schedule",
+    "StudentStage",
+    "TeacherPreset",
+    "TeacherStage",
+    "Variant",
+    "dataset_frames",
+    "get",
+    "schedule",
+]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -105,9 +124,11 @@ class Preset:
     def __post_init__(self):
         t = self.teacher_stage(TEACHERS["rl_with_ot"])
         if t.shipped or ablations.has_scripted_cloning(t.settings):
-            raise ValueError(f"preset {self.name!r}: the Table V teacher ablations would train on "
-                             f"{t.settings.name!r}{' (shipped)' if t.shipped else ''}, which clones scripted grasps "
-                             "or is not trained; give it an ablation_teacher without cloning")
+            raise ValueError(
+                f"preset {self.name!r}: the Table V teacher ablations would train on "
+                f"{t.settings.name!r}{' (shipped)' if t.shipped else ''}, which clones scripted grasps "
+                "or is not trained; give it an ablation_teacher without cloning"
+            )
 
     def teacher_stage(self, variant: Variant = Variant()) -> TeacherStage:
         """The stage that makes a teacher with `variant`'s switches: the preset's own teacher for the plain one,
@@ -130,21 +151,29 @@ class Preset:
         if self.dagger is not None:
             d = self.dagger
             which = "per object" if d.objects == "all" else f"of {d.objects.replace(',', ', ')}"
-            beyond.append(f"{d.rounds} round(s) of DAgger-style relabelling ({d.episodes_per_object} student "
-                          f"episodes {which} labelled by the teacher's mean action, {d.steps} fine-tuning steps "
-                          "on the aggregate)")
+            beyond.append(
+                f"{d.rounds} round(s) of DAgger-style relabelling ({d.episodes_per_object} student "
+                f"episodes {which} labelled by the teacher's mean action, {d.steps} fine-tuning steps "
+                "on the aggregate)"
+            )
         if self.student.policy_flags:
-            beyond.append("training-time sensor errors (" + ", ".join(
-                f.removeprefix("--policy.augment_") for f in self.student.policy_flags) + ")")
+            beyond.append(
+                "training-time sensor errors ("
+                + ", ".join(f.removeprefix("--policy.augment_") for f in self.student.policy_flags)
+                + ")"
+            )
         imitation = "offline imitation of curated stochastic-teacher demos"
         if self.blind_teacher:
-            imitation += (" from a teacher whose actor approaches blind (it sees nothing of the object until a "
-                          "fingertip reads a force, as the student)")
+            imitation += (
+                " from a teacher whose actor approaches blind (it sees nothing of the object until a "
+                "fingertip reads a force, as the student)"
+            )
         if self.demos.joint_calibration_rad:
             imitation += f", rolled out with every joint reading off by +-{self.demos.joint_calibration_rad:g} rad"
         if self.demos.extra_episodes:
-            imitation += ", with " + ", ".join(f"{n} more curated episodes of {name}"
-                                               for name, n in self.demos.extra_episodes)
+            imitation += ", with " + ", ".join(
+                f"{n} more curated episodes of {name}" for name, n in self.demos.extra_episodes
+            )
         if not (self.blind_teacher or self.demos.joint_calibration_rad or self.demos.extra_episodes or beyond):
             return f"the paper's: {imitation}"
         return f"beyond the paper: the paper's {imitation}" + "".join(f"; then {b}" for b in beyond)
@@ -180,10 +209,12 @@ PRESETS: dict[str, Preset] = {
             # 5000 per object for the paper's 89,500 curated demonstrations (18 x ~4972). The paper gives no
             # rollout cap, only that start states the teacher does not solve are dropped; 20 x the target (the
             # collector's default) lets a 5 %-yield object still reach it.
-            demos=DemoStage(episodes_per_object=5000, max_rollouts_per_object=100_000, num_envs=9000,
-                            min_curated_episodes=1000),
-            student=StudentStage(size="paper", batch_size=256, epochs=2000, constant_lr_epochs=100, device="cuda",
-                                 num_workers=4),
+            demos=DemoStage(
+                episodes_per_object=5000, max_rollouts_per_object=100_000, num_envs=9000, min_curated_episodes=1000
+            ),
+            student=StudentStage(
+                size="paper", batch_size=256, epochs=2000, constant_lr_epochs=100, device="cuda", num_workers=4
+            ),
             # Table V is on the six in-distribution objects, the medium training shapes.
             evaluation=EvalStage(episodes_per_object=50, task="medium", async_envs=True),
             deviations=(
@@ -203,8 +234,9 @@ PRESETS: dict[str, Preset] = {
             # the data rather than ~19; collection is minutes, training the hour. Measured on the shipped teacher it
             # gave the same student as the quick recipe (75.6 vs 75.8 % with an earlier teacher): the
             # student follows its teacher.
-            demos=DemoStage(episodes_per_object=100, max_rollouts_per_object=1000, num_envs=720,
-                            min_curated_episodes=90),
+            demos=DemoStage(
+                episodes_per_object=100, max_rollouts_per_object=1000, num_envs=720, min_curated_episodes=90
+            ),
             # lerobot-train reads ~2 ms per 30-frame sample here: 5000 steps at batch 256 is about an hour.
             student=StudentStage(size="cpu", batch_size=256, steps=5_000, threads=1, num_workers=1),
             evaluation=EvalStage(episodes_per_object=20, render_stride=4, render_episodes=2),
@@ -219,15 +251,18 @@ PRESETS: dict[str, Preset] = {
             name="quick",
             # Shipped: the proposed rows train no teacher. The Table V teacher ablations (w/o r_i, RL w/ o_t) train
             # the shipped recipe's PPO-only prefix with their switch flipped.
-            teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET, shipped=True,
-                                 iterations=SHIPPED_TEACHER_ITERATIONS),
+            teacher=TeacherStage(
+                settings=SHIPPED_TEACHER_PRESET, shipped=True, iterations=SHIPPED_TEACHER_ITERATIONS
+            ),
             ablation_teacher=ABLATION_TEACHER,
-            demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720,
-                            min_curated_episodes=18),
+            demos=DemoStage(
+                episodes_per_object=40, max_rollouts_per_object=400, num_envs=720, min_curated_episodes=18
+            ),
             # 1200 steps at batch 128: ~2 passes over the quick demos, ~7 min on 2 idle cores.
             student=StudentStage(size="cpu", batch_size=128, steps=1200, threads=1, num_workers=1),
-            evaluation=EvalStage(episodes_per_object=20, teacher_modes=("deterministic",), render_stride=4,
-                                  render_episodes=2),
+            evaluation=EvalStage(
+                episodes_per_object=20, teacher_modes=("deterministic",), render_stride=4, render_episodes=2
+            ),
             deviations=(
                 "the shipped teacher (models/teacher_cpu_bc, trained with the cpu_bc_capsule teacher settings), no "
                 "teacher training except Table V's teacher ablations (the cpu teacher settings, no cloning)",
@@ -241,8 +276,9 @@ PRESETS: dict[str, Preset] = {
             name="smoke",
             # A tiny teacher trained from scratch, so CI exercises the teacher stage too.
             teacher=TeacherStage(settings=teacher.QUICK, iterations=2, num_envs=36),
-            demos=DemoStage(episodes_per_object=1, max_rollouts_per_object=2, num_envs=36,
-                            min_curated_episodes=18),
+            demos=DemoStage(
+                episodes_per_object=1, max_rollouts_per_object=2, num_envs=36, min_curated_episodes=18
+            ),
             student=StudentStage(size="quick", batch_size=8, steps=4),
             evaluation=EvalStage(episodes_per_object=1, task="cylinder_a_medium"),
             deviations=("plumbing only: every stage runs for seconds; no number from it means anything",),
@@ -251,20 +287,22 @@ PRESETS: dict[str, Preset] = {
 }
 
 
-
-
 def _beyond_the_paper(base: Preset, name: str, note: str, **changes) -> Preset:
     """A named recipe that goes beyond the paper: `base` with `changes`, and `note` added to its deviations."""
     return replace(base, name=name, deviations=(*base.deviations, note), **changes)
 
 
-_DAGGER_NOTE = ("beyond the paper: DAgger-style relabelling after the offline student (the student drives, the "
-                "teacher's mean action labels what it visits, the student is fine-tuned on the aggregate)")
+_DAGGER_NOTE = (
+    "beyond the paper: DAgger-style relabelling after the offline student (the student drives, the "
+    "teacher's mean action labels what it visits, the student is fine-tuned on the aggregate)"
+)
 # The smoke preset runs every stage the main job and the shipped student's recipe run, targeted demos and DAgger
 # included, at plumbing size.
 PRESETS["smoke"] = replace(
-    PRESETS["smoke"], demos=replace(PRESETS["smoke"].demos, extra_episodes=(("cylinder_a_medium", 1),)),
-    dagger=DaggerStage(episodes_per_object=1, steps=2, num_envs=18, objects="cylinder_a_medium"))
+    PRESETS["smoke"],
+    demos=replace(PRESETS["smoke"].demos, extra_episodes=(("cylinder_a_medium", 1),)),
+    dagger=DaggerStage(episodes_per_object=1, steps=2, num_envs=18, objects="cylinder_a_medium"),
+)
 for _base, _dagger in (
     ("quick", DaggerStage(episodes_per_object=10, steps=600)),
     ("cpu", DaggerStage(episodes_per_object=20, steps=2000, rounds=2)),
@@ -280,16 +318,20 @@ for _base, _dagger in (
 SHIPPED_BLIND_TEACHER = "teacher_cpu_bc_calib"
 _QUICK_BLIND_SAYS = {  # the quick deviations this preset changes, by their first words
     "the shipped teacher": f"the shipped calibration-blind teacher (models/{SHIPPED_BLIND_TEACHER}, teacher preset "
-                           f"{teacher.CPU_BC_CALIB_BLIND.name}), no teacher training except Table V's teacher "
-                           "ablations (the cpu teacher settings, no cloning)",
+    f"{teacher.CPU_BC_CALIB_BLIND.name}), no teacher training except Table V's teacher "
+    "ablations (the cpu teacher settings, no cloning)",
     "1200 steps": "700 steps at batch 128 at lr 5e-4 (constant for 350 steps, then linear decay) instead of 2000 "
-                  "epochs at batch 256 at 1e-4: minutes",
+    "epochs at batch 256 at 1e-4: minutes",
 }
 PRESETS["quick_blind"] = replace(
     PRESETS["quick"],
     name="quick_blind",
-    teacher=TeacherStage(settings=teacher.CPU_BC_CALIB_BLIND, shipped=True, shipped_folder=SHIPPED_BLIND_TEACHER,
-                         iterations=teacher.CPU_BC_CALIB_BLIND.max_iterations),
+    teacher=TeacherStage(
+        settings=teacher.CPU_BC_CALIB_BLIND,
+        shipped=True,
+        shipped_folder=SHIPPED_BLIND_TEACHER,
+        iterations=teacher.CPU_BC_CALIB_BLIND.max_iterations,
+    ),
     demos=replace(PRESETS["quick"].demos, joint_calibration_rad=teacher.CPU_BC_CALIB_BLIND.joint_calibration_rad),
     # 700 steps at batch 128 (1.3 passes over the demos) at lr 5e-4, constant for 350 steps then decaying: the
     # stage that fits the 10-minute main job and still lifts >= 90 %. On this teacher's demos, same seed: 600 steps
@@ -298,8 +340,10 @@ PRESETS["quick_blind"] = replace(
     # slows (0.23 -> 0.33 s) on the 2 cores, 0.35 s a step against 0.46 (150-step runs side by side).
     student=replace(PRESETS["quick"].student, steps=700, lr=5e-4, constant_lr_steps=350, num_workers=2),
     deviations=(
-        *(next((new for old, new in _QUICK_BLIND_SAYS.items() if d.startswith(old)), d)
-          for d in PRESETS["quick"].deviations),
+        *(
+            next((new for old, new in _QUICK_BLIND_SAYS.items() if d.startswith(old)), d)
+            for d in PRESETS["quick"].deviations
+        ),
         f"beyond the paper: the demos come from models/{SHIPPED_BLIND_TEACHER}, the shipped teacher fine-tuned "
         f"(teacher presets cpu_bc_blind_approach, cpu_bc_blind_reveal6, cpu_bc_calib_blind) with the object hidden "
         "from its actor until 0.3 s of fingertip touch and its fingertip poses computed from the measured joints",
@@ -322,10 +366,17 @@ PRESETS["quick_blind_targeted"] = replace(
     # The fine-tuning inherits the student's own settings (lr 5e-4, constant for 600 of its 1200 steps).
     dagger=DaggerStage(episodes_per_object=80, steps=1200, num_envs=80, objects="capsule_small"),
     deviations=(
-        *(("1200 steps at batch 128 at lr 5e-4 (constant for 600 steps, then linear decay) instead of 2000 epochs "
-           "at batch 256 at 1e-4: minutes") if d.startswith("700 steps") else d
-          for d in PRESETS["quick_blind"].deviations),
-        "beyond the paper: " + ", ".join(f"{n} more curated episodes of {name}" for name, n in _TARGETED)
+        *(
+            (
+                "1200 steps at batch 128 at lr 5e-4 (constant for 600 steps, then linear decay) instead of 2000 epochs "
+                "at batch 256 at 1e-4: minutes"
+            )
+            if d.startswith("700 steps")
+            else d
+            for d in PRESETS["quick_blind"].deviations
+        ),
+        "beyond the paper: "
+        + ", ".join(f"{n} more curated episodes of {name}" for name, n in _TARGETED)
         + ", collected on their own start states and merged with the demos (the student trailed its teacher there)",
         _DAGGER_NOTE + ", on capsule_small only",
     ),

@@ -62,8 +62,9 @@ def has_scripted_cloning(settings: TeacherPreset) -> bool:
     """Whether training with `settings` clones scripted grasps into the actor at any stage: the PPO algorithm is
     replaced (`runner["algorithm"]["class_name"]`) or carries a scripted-demos entry, here or in a preset it
     continues."""
-    return any(s.runner["algorithm"]["class_name"] != "PPO" or _scripted_demos(s) is not None
-               for s in _stages(settings))
+    return any(
+        s.runner["algorithm"]["class_name"] != "PPO" or _scripted_demos(s) is not None for s in _stages(settings)
+    )
 
 
 def cloning_start(settings: TeacherPreset) -> int | None:
@@ -90,16 +91,33 @@ def teacher_words(preset: str, variant: Variant | dict | None, last_iteration: i
 TABLE_V: dict[str, Ablation] = {
     a.name: a
     for a in (
-        Ablation(name="proposed", label="Student (Proposed)", teacher="teacher",
-                 doc="curated demos of the stochastic teacher, distilled into the student. The teacher is the "
-                 "preset's own: in quick the shipped one (the cpu recipe plus scripted-grasp cloning), in cpu that "
-                 "recipe trained from scratch, in paper Table III's PPO"),
-        Ablation(name="wo_stochastic_teacher", label="Student w/o Stochastic Teacher", teacher="teacher",
-                 stochastic_demos=False, doc="demos from the proposed teacher's mean action, still curated"),
-        Ablation(name="wo_curation", label="Student w/o Curation", teacher="teacher", curated_demos=False,
-                 doc="the proposed teacher's stochastic 100-step episodes kept whole, without any selection"),
         Ablation(
-            name="wo_r_i", label="Student w/o r_i", teacher="teacher_no_ri", curated_demos=False,
+            name="proposed",
+            label="Student (Proposed)",
+            teacher="teacher",
+            doc="curated demos of the stochastic teacher, distilled into the student. The teacher is the "
+            "preset's own: in quick the shipped one (the cpu recipe plus scripted-grasp cloning), in cpu that "
+            "recipe trained from scratch, in paper Table III's PPO",
+        ),
+        Ablation(
+            name="wo_stochastic_teacher",
+            label="Student w/o Stochastic Teacher",
+            teacher="teacher",
+            stochastic_demos=False,
+            doc="demos from the proposed teacher's mean action, still curated",
+        ),
+        Ablation(
+            name="wo_curation",
+            label="Student w/o Curation",
+            teacher="teacher",
+            curated_demos=False,
+            doc="the proposed teacher's stochastic 100-step episodes kept whole, without any selection",
+        ),
+        Ablation(
+            name="wo_r_i",
+            label="Student w/o r_i",
+            teacher="teacher_no_ri",
+            curated_demos=False,
             doc="a teacher trained on the preset's ablation teacher without any term that pays for fingertip "
             "contact: the incentive r_i and, in the cpu/quick presets, touch (it pays for tips pressing on the "
             "object just as r_i pays for tips reading force, so keeping it would leave r_i's signal in). Reach "
@@ -109,8 +127,13 @@ TABLE_V: dict[str, Ablation] = {
             "hand it contact-making grasps. Its demos are kept without selection, as the paper's are "
             "(teacher.CONTACT_REWARD_TERMS)",
         ),
-        Ablation(name="rl_w_o_t", label="RL w/ o_t", teacher="rl_with_ot", student=False,
-                 doc="PPO on the preset's ablation teacher whose actor and critic see only the 12-d student "
-                 "observation, evaluated as it is; no scripted-grasp cloning, whose script reads the object's pose"),
+        Ablation(
+            name="rl_w_o_t",
+            label="RL w/ o_t",
+            teacher="rl_with_ot",
+            student=False,
+            doc="PPO on the preset's ablation teacher whose actor and critic see only the 12-d student "
+            "observation, evaluated as it is; no scripted-grasp cloning, whose script reads the object's pose",
+        ),
     )
 }

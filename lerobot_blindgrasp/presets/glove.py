@@ -50,8 +50,10 @@ GLOVE_PRESETS: dict[str, GlovePreset] = {
             # 300 passes over ~4000 frames at batch 64 is ~19,000 steps; LR constant for the first tenth.
             student=StudentStage(size="cpu", batch_size=64, epochs=300, constant_lr_epochs=30, num_workers=1),
             sim_demos=False,
-            deviations=(f"{_BEYOND}: a student on glove teleoperation of the real gripper",
-                        "300 epochs at batch 64 (Table IV: 2000 at 256, for 89,500 demos): the set is small"),
+            deviations=(
+                f"{_BEYOND}: a student on glove teleoperation of the real gripper",
+                "300 epochs at batch 64 (Table IV: 2000 at 256, for 89,500 demos): the set is small",
+            ),
         ),
         GlovePreset(
             name="sim_plus_glove",
@@ -60,8 +62,10 @@ GLOVE_PRESETS: dict[str, GlovePreset] = {
             student=StudentStage(size="cpu", batch_size=256, steps=5_000, num_workers=1),
             sim_demos=True,
             glove_copies=5,
-            deviations=(f"{_BEYOND}: sim demos merged with glove teleoperation of the real gripper",
-                        "the glove episodes enter the merge 5 times (oversampled)"),
+            deviations=(
+                f"{_BEYOND}: sim demos merged with glove teleoperation of the real gripper",
+                "the glove episodes enter the merge 5 times (oversampled)",
+            ),
         ),
         GlovePreset(
             name="glove_smoke",

@@ -38,7 +38,9 @@ class StudentStage:
     steps: int | None = None  # fixed optimizer steps (small presets: a measured wall-clock budget)
     epochs: int | None = None  # passes over the collected dataset (paper); steps then follow from its frames
     constant_lr_epochs: int | None = None  # LR constant this many epochs, then linear decay (Table IV)
-    constant_lr_steps: int | None = None  # the same for a fixed-step stage: LR constant this many steps, then decay
+    constant_lr_steps: int | None = (
+        None  # the same for a fixed-step stage: LR constant this many steps, then decay
+    )
     lr: float | None = None  # AdamW learning rate; None: the policy's (Table IV's 1e-4)
     threads: int = 1  # OMP threads of lerobot-train (nothing else runs during that stage)
     # lerobot-train's data-loader processes. Reading a 30-frame window costs ~2.8 ms a sample here, longer than the
@@ -107,8 +109,12 @@ def schedule(stage: StudentStage, total_frames: int | None) -> Schedule:
         raise ValueError("an epoch-sized student stage needs the dataset's total_frames (collect the demos first)")
     per_epoch = math.ceil(total_frames / stage.batch_size)
     constant = None if stage.constant_lr_epochs is None else stage.constant_lr_epochs * per_epoch
-    return Schedule(steps=stage.epochs * per_epoch, constant_lr_steps=constant, total_frames=total_frames,
-                    steps_per_epoch=per_epoch)
+    return Schedule(
+        steps=stage.epochs * per_epoch,
+        constant_lr_steps=constant,
+        total_frames=total_frames,
+        steps_per_epoch=per_epoch,
+    )
 
 
 def dataset_frames(root: Path) -> int:

@@ -143,9 +143,9 @@ CPU_BC_JOINT = replace(
     CPU,
     name="cpu_bc_joint",
     max_iterations=1798,
-    runner=ScriptedDemos(pushes=CPU.external_force, start_iteration=1398, decay_iterations=300, coef=0.1).runner_cfg(
-        CPU.runner
-    ),
+    runner=ScriptedDemos(
+        pushes=CPU.external_force, start_iteration=1398, decay_iterations=300, coef=0.1
+    ).runner_cfg(CPU.runner),
     deviations=_CPU_DEVIATIONS
     + (
         "from iteration 1398, the mean-squared error of the actor's mean against scripted side grasps of the small "
@@ -162,8 +162,14 @@ CPU_BC_JOINT = replace(
 # 2099: 97.8 % over the 18 objects, small capsule 90 %, run from scratch by one command in 2.8 h on 2 idle cores:
 # the shipped teacher.
 _CAPSULE_WEIGHTS = tuple(4.0 if name == "capsule_small" else 1.0 for name in objects.PAPER_OBJECTS)
-_CAPSULE_DEMOS = ScriptedDemos(objects=("capsule_small",), episodes_per_object=256, pushes=CPU.external_force,
-                               start_iteration=1746, decay_iterations=300, coef=0.5)
+_CAPSULE_DEMOS = ScriptedDemos(
+    objects=("capsule_small",),
+    episodes_per_object=256,
+    pushes=CPU.external_force,
+    start_iteration=1746,
+    decay_iterations=300,
+    coef=0.5,
+)
 CPU_BC_CAPSULE = replace(
     CPU_BC_JOINT,
     name="cpu_bc_capsule",
@@ -212,9 +218,11 @@ CPU_BC_BLIND_REVEAL6 = replace(
     continues=("cpu_bc_blind_approach", 2350),
     actor_input=ActorInput(reveal_delay_steps=6),
     deviations=CPU_BC_BLIND_APPROACH.deviations
-    + ("from iteration 2350 (resumed from cpu_bc_blind_approach), 200 PPO iterations in which the object is revealed "
-       "only once a load cell has read above 2 N for more than 6 consecutive control steps: the student can tell "
-       "the objects apart only after a touch, not at it",),
+    + (
+        "from iteration 2350 (resumed from cpu_bc_blind_approach), 200 PPO iterations in which the object is revealed "
+        "only once a load cell has read above 2 N for more than 6 consecutive control steps: the student can tell "
+        "the objects apart only after a touch, not at it",
+    ),
 )
 
 # Beyond the paper: the teacher that made models/student_cpu. Its actor reads the fingertip poses as the kinematics
@@ -232,9 +240,11 @@ CPU_BC_CALIB_BLIND = replace(
     actor_input=ActorInput(reveal_delay_steps=6, fingertips_from_joints=True),
     joint_calibration_rad=0.05,
     deviations=CPU_BC_BLIND_REVEAL6.deviations
-    + ("from iteration 2550 (resumed from cpu_bc_blind_reveal6), 400 PPO iterations with the actor's fingertip poses "
-       "computed from the measured joint angles and every joint reading off by +-0.05 rad: a teacher that reads the "
-       "true fingertips corrects a calibration offset by what the student never observes",),
+    + (
+        "from iteration 2550 (resumed from cpu_bc_blind_reveal6), 400 PPO iterations with the actor's fingertip poses "
+        "computed from the measured joint angles and every joint reading off by +-0.05 rad: a teacher that reads the "
+        "true fingertips corrects a calibration offset by what the student never observes",
+    ),
 )
 
 QUICK = TeacherPreset(
@@ -251,8 +261,16 @@ QUICK = TeacherPreset(
 
 PRESETS: dict[str, TeacherPreset] = {
     p.name: p
-    for p in (PAPER, CPU, CPU_BC_JOINT, CPU_BC_CAPSULE, CPU_BC_BLIND_APPROACH, CPU_BC_BLIND_REVEAL6, CPU_BC_CALIB_BLIND,
-              QUICK)
+    for p in (
+        PAPER,
+        CPU,
+        CPU_BC_JOINT,
+        CPU_BC_CAPSULE,
+        CPU_BC_BLIND_APPROACH,
+        CPU_BC_BLIND_REVEAL6,
+        CPU_BC_CALIB_BLIND,
+        QUICK,
+    )
 }
 
 

@@ -26,8 +26,9 @@ def passes(k: int, n: int, criterion: str = "ci", threshold: float = THRESHOLD) 
     raise ValueError(f"unknown criterion {criterion!r}; choose 'rate' or 'ci'")
 
 
-def envelope(points: list[dict], nominal: int, role: str = "student", criterion: str = "ci",
-             threshold: float = THRESHOLD) -> tuple[int | None, int | None]:
+def envelope(
+    points: list[dict], nominal: int, role: str = "student", criterion: str = "ci", threshold: float = THRESHOLD
+) -> tuple[int | None, int | None]:
     """(lowest, highest) index of the contiguous run of passing points around `nominal`; (None, None) when the
     nominal point itself fails or has not been run. `points`: dicts with `<role>` = [successes, episodes]."""
 
@@ -56,7 +57,11 @@ def describe(factor: dict, role: str = "student", criterion: str = "ci") -> str:
     def edge(last: int, nxt: int | None, end: str) -> str:
         if nxt is None:
             return f"{pts[last]['label']} ({end} tested)"
-        return f"{pts[last]['label']} (" + ("fails at " if pts[nxt].get(role) else "not run at ") + f"{pts[nxt]['label']})"
+        return (
+            f"{pts[last]['label']} ("
+            + ("fails at " if pts[nxt].get(role) else "not run at ")
+            + f"{pts[nxt]['label']})"
+        )
 
     low = edge(lo, lo - 1 if lo > 0 else None, "smallest") if nom > 0 else None
     high = edge(hi, hi + 1 if hi + 1 < len(pts) else None, "largest") if nom < len(pts) - 1 else None
@@ -84,12 +89,18 @@ def card_section(summary: dict, threshold: float = THRESHOLD) -> str:
         if f["name"] == "combined":
             continue
         trained = f.get("train_label") or f["points"][f["nominal"]]["label"]
-        lines.append(f"| {f['title']} | {trained} | {describe(f, 'student', 'ci')} | {describe(f, 'student', 'rate')}"
-                     f" | {describe(f, 'teacher', 'rate')} |")
+        lines.append(
+            f"| {f['title']} | {trained} | {describe(f, 'student', 'ci')} | {describe(f, 'student', 'rate')}"
+            f" | {describe(f, 'teacher', 'rate')} |"
+        )
     first = first_to_break(summary)
     if first:
-        lines += ["", f"Broke soonest (student, first magnitude past training whose rate is shown below {pct}): "
-                  + "; ".join(f"{t} at {lab} ({r})" for t, lab, r in first[:3]) + "."]
+        lines += [
+            "",
+            f"Broke soonest (student, first magnitude past training whose rate is shown below {pct}): "
+            + "; ".join(f"{t} at {lab} ({r})" for t, lab, r in first[:3])
+            + ".",
+        ]
     return "\n".join(lines) + "\n"
 
 

@@ -30,7 +30,9 @@ class Point:
     def key(self) -> str:
         """A stable name of the simulated condition (its non-default fields), shared by equal points."""
         dr, base = self.dr(), EVAL_DR
-        parts = [f"{f.name}={getattr(dr, f.name)}" for f in fields(dr) if getattr(dr, f.name) != getattr(base, f.name)]
+        parts = [
+            f"{f.name}={getattr(dr, f.name)}" for f in fields(dr) if getattr(dr, f.name) != getattr(base, f.name)
+        ]
         return ",".join(parts) or "nominal"
 
 
@@ -42,7 +44,9 @@ class Factor:
     group: str  # force sensors, joints, servos, timing, objects, disturbances, combined
     points: tuple[Point, ...]
     nominal: int  # index of the point training covers (the envelope grows from it)
-    train_range: tuple[float, float] | None  # magnitudes training draws from (shaded in the plot); None: nominal only
+    train_range: (
+        tuple[float, float] | None
+    )  # magnitudes training draws from (shaded in the plot); None: nominal only
 
     def in_training(self, p: Point) -> bool:
         lo, hi = self.train_range if self.train_range else (self.points[self.nominal].magnitude,) * 2
@@ -75,46 +79,184 @@ def build_factors(size: str = "default") -> list[Factor]:
     xy = spec.OBJECT_XY_RANGE_M
     f = [
         # the three the shipped student is asked to survive first, then the rest by group
-        _single("obs_latency", "observation latency", "steps", "timing", "obs_latency_steps",
-                [0, 1, 2, 3], ["0", "1 (50 ms)", "2", "3"], 0),
-        _single("force_gain", "force sensor gain error", "x", "force sensors", "force_gain",
-                *_x([0.5, 0.7, 1.0, 1.5, 2.0]), 1.0),
-        _single("joint_calibration", "joint calibration offset (every joint)", "rad", "joints",
-                "joint_calibration_rad", *_plain([0.0, 0.02, 0.05, 0.1, 0.2]), 0.0),
-        _single("force_bias", "force sensor bias (random sign per cell)", "N", "force sensors", "force_bias_n",
-                *_plain([0.0, 1.0, 2.0, 3.0, 5.0], " N"), 0.0),
-        _single("force_noise", "force sensor noise (std)", "N", "force sensors", "force_noise_n",
-                *_plain([0.5, 1.0, 2.0, 4.0], " N"), 0.5),
-        _single("force_dead", "one dead force sensor", "finger", "force sensors", "dead_force_sensor",
-                [-1, 0, 1, 2], ["none", *spec.FINGERS], -1),
-        _single("force_range", "force sensor saturation (range)", "N", "force sensors", "force_range_n",
-                [0.0, 10.0, 5.0, 2.0, 1.0], ["none", "10 N", "5 N", "2 N", "1 N"], 0.0),
-        _single("joint_noise", "encoder noise (std)", "rad", "joints", "joint_noise_rad",
-                *_plain([0.005, 0.02, 0.05, 0.1]), 0.005),
-        _single("backlash", "gearbox backlash", "rad", "joints", "backlash_rad", *_plain([0.0, 0.05, 0.1, 0.2]), 0.0),
-        _single("servo_kp", "servo position gain (x nominal kp)", "x", "servos", "kp_scale",
-                *_x([0.1, 0.2, 1.0, 3.0, 6.0]), 1.0,
-                train_range=EVAL_DR.kp_scale, transform=lambda v: {"kp_scale": (v, v)}),
-        _single("torque_limit", "current (torque) limit (x 4.1 N m)", "x", "servos", "torque_limit_scale",
-                *_x([1.0, 0.5, 0.3, 0.2, 0.1]), 1.0),
-        _single("velocity_limit", "servo velocity limit", "rad/s", "servos", "velocity_limit_rad_s",
-                [0.0, 2.0, 1.0, 0.5, 0.25], ["none", "2", "1", "0.5", "0.25"], 0.0),
-        _single("action_latency", "action latency", "steps", "timing", "action_latency_steps",
-                [0, 1, 2, 3], ["0", "1 (50 ms)", "2", "3"], 0),
-        _single("period_jitter", "control period jitter (command late by U[0, j])", "s", "timing",
-                "period_jitter_s", [0.0, 0.01, 0.025, 0.045], ["0", "10 ms", "25 ms", "45 ms"], 0.0),
-        _single("friction", "tip-object friction", "mu", "objects", "object_friction",
-                *_plain([0.2, 0.35, 0.5, 1.0, 2.0]), 1.0, train_range=EVAL_DR.object_friction,
-                transform=lambda v: {"object_friction": (v, v), "robot_friction": (v, v)}),
-        _single("mass", "object mass (x nominal)", "x", "objects", "object_mass_scale", *_x([1.0, 2.0, 3.0, 4.0]),
-                1.0, train_range=EVAL_DR.object_mass_scale, transform=lambda v: {"object_mass_scale": (v, v)}),
-        _single("size", "object size (x every dimension)", "x", "objects", "object_size_scale",
-                *_x([0.8, 0.9, 1.0, 1.1, 1.2]), 1.0),
-        _single("start_spread", "start-pose spread (joint offset and object xy)", "x", "objects", "joint_offset_rad",
-                *_x([0.5, 1.0, 1.5, 2.0, 2.5]), 1.0,  # x0.5: what a builder gains by placing objects closer
-                transform=lambda v: {"joint_offset_rad": v * pi9, "object_xy_m": v * xy}),
-        _single("hold_push", "push during the hold (50 ms)", "N", "disturbances", "hold_push_n",
-                *_plain([0.0, 2.0, 5.0, 10.0, 20.0], " N"), 0.0),
+        _single(
+            "obs_latency",
+            "observation latency",
+            "steps",
+            "timing",
+            "obs_latency_steps",
+            [0, 1, 2, 3],
+            ["0", "1 (50 ms)", "2", "3"],
+            0,
+        ),
+        _single(
+            "force_gain",
+            "force sensor gain error",
+            "x",
+            "force sensors",
+            "force_gain",
+            *_x([0.5, 0.7, 1.0, 1.5, 2.0]),
+            1.0,
+        ),
+        _single(
+            "joint_calibration",
+            "joint calibration offset (every joint)",
+            "rad",
+            "joints",
+            "joint_calibration_rad",
+            *_plain([0.0, 0.02, 0.05, 0.1, 0.2]),
+            0.0,
+        ),
+        _single(
+            "force_bias",
+            "force sensor bias (random sign per cell)",
+            "N",
+            "force sensors",
+            "force_bias_n",
+            *_plain([0.0, 1.0, 2.0, 3.0, 5.0], " N"),
+            0.0,
+        ),
+        _single(
+            "force_noise",
+            "force sensor noise (std)",
+            "N",
+            "force sensors",
+            "force_noise_n",
+            *_plain([0.5, 1.0, 2.0, 4.0], " N"),
+            0.5,
+        ),
+        _single(
+            "force_dead",
+            "one dead force sensor",
+            "finger",
+            "force sensors",
+            "dead_force_sensor",
+            [-1, 0, 1, 2],
+            ["none", *spec.FINGERS],
+            -1,
+        ),
+        _single(
+            "force_range",
+            "force sensor saturation (range)",
+            "N",
+            "force sensors",
+            "force_range_n",
+            [0.0, 10.0, 5.0, 2.0, 1.0],
+            ["none", "10 N", "5 N", "2 N", "1 N"],
+            0.0,
+        ),
+        _single(
+            "joint_noise",
+            "encoder noise (std)",
+            "rad",
+            "joints",
+            "joint_noise_rad",
+            *_plain([0.005, 0.02, 0.05, 0.1]),
+            0.005,
+        ),
+        _single(
+            "backlash", "gearbox backlash", "rad", "joints", "backlash_rad", *_plain([0.0, 0.05, 0.1, 0.2]), 0.0
+        ),
+        _single(
+            "servo_kp",
+            "servo position gain (x nominal kp)",
+            "x",
+            "servos",
+            "kp_scale",
+            *_x([0.1, 0.2, 1.0, 3.0, 6.0]),
+            1.0,
+            train_range=EVAL_DR.kp_scale,
+            transform=lambda v: {"kp_scale": (v, v)},
+        ),
+        _single(
+            "torque_limit",
+            "current (torque) limit (x 4.1 N m)",
+            "x",
+            "servos",
+            "torque_limit_scale",
+            *_x([1.0, 0.5, 0.3, 0.2, 0.1]),
+            1.0,
+        ),
+        _single(
+            "velocity_limit",
+            "servo velocity limit",
+            "rad/s",
+            "servos",
+            "velocity_limit_rad_s",
+            [0.0, 2.0, 1.0, 0.5, 0.25],
+            ["none", "2", "1", "0.5", "0.25"],
+            0.0,
+        ),
+        _single(
+            "action_latency",
+            "action latency",
+            "steps",
+            "timing",
+            "action_latency_steps",
+            [0, 1, 2, 3],
+            ["0", "1 (50 ms)", "2", "3"],
+            0,
+        ),
+        _single(
+            "period_jitter",
+            "control period jitter (command late by U[0, j])",
+            "s",
+            "timing",
+            "period_jitter_s",
+            [0.0, 0.01, 0.025, 0.045],
+            ["0", "10 ms", "25 ms", "45 ms"],
+            0.0,
+        ),
+        _single(
+            "friction",
+            "tip-object friction",
+            "mu",
+            "objects",
+            "object_friction",
+            *_plain([0.2, 0.35, 0.5, 1.0, 2.0]),
+            1.0,
+            train_range=EVAL_DR.object_friction,
+            transform=lambda v: {"object_friction": (v, v), "robot_friction": (v, v)},
+        ),
+        _single(
+            "mass",
+            "object mass (x nominal)",
+            "x",
+            "objects",
+            "object_mass_scale",
+            *_x([1.0, 2.0, 3.0, 4.0]),
+            1.0,
+            train_range=EVAL_DR.object_mass_scale,
+            transform=lambda v: {"object_mass_scale": (v, v)},
+        ),
+        _single(
+            "size",
+            "object size (x every dimension)",
+            "x",
+            "objects",
+            "object_size_scale",
+            *_x([0.8, 0.9, 1.0, 1.1, 1.2]),
+            1.0,
+        ),
+        _single(
+            "start_spread",
+            "start-pose spread (joint offset and object xy)",
+            "x",
+            "objects",
+            "joint_offset_rad",
+            *_x([0.5, 1.0, 1.5, 2.0, 2.5]),
+            1.0,  # x0.5: what a builder gains by placing objects closer
+            transform=lambda v: {"joint_offset_rad": v * pi9, "object_xy_m": v * xy},
+        ),
+        _single(
+            "hold_push",
+            "push during the hold (50 ms)",
+            "N",
+            "disturbances",
+            "hold_push_n",
+            *_plain([0.0, 2.0, 5.0, 10.0, 20.0], " N"),
+            0.0,
+        ),
         combined_factor(),
     ]
     if size == "smoke":
@@ -129,10 +271,29 @@ def build_factors(size: str = "default") -> list[Factor]:
 COMBINED_LEVELS: tuple[tuple[str, dict], ...] = (
     ("nominal", {}),
     ("hardening goals", {"obs_latency_steps": 1, "force_gain": 0.7, "joint_calibration_rad": 0.05}),
-    ("mild", {"force_gain": 0.8, "force_bias_n": 0.5, "joint_calibration_rad": 0.02, "obs_latency_steps": 1,
-              "backlash_rad": 0.02, "period_jitter_s": 0.01}),
-    ("moderate", {"force_gain": 0.7, "force_bias_n": 1.0, "joint_calibration_rad": 0.05, "obs_latency_steps": 1,
-                  "backlash_rad": 0.05, "period_jitter_s": 0.02, "torque_limit_scale": 0.5}),
+    (
+        "mild",
+        {
+            "force_gain": 0.8,
+            "force_bias_n": 0.5,
+            "joint_calibration_rad": 0.02,
+            "obs_latency_steps": 1,
+            "backlash_rad": 0.02,
+            "period_jitter_s": 0.01,
+        },
+    ),
+    (
+        "moderate",
+        {
+            "force_gain": 0.7,
+            "force_bias_n": 1.0,
+            "joint_calibration_rad": 0.05,
+            "obs_latency_steps": 1,
+            "backlash_rad": 0.05,
+            "period_jitter_s": 0.02,
+            "torque_limit_scale": 0.5,
+        },
+    ),
 )
 
 
@@ -142,9 +303,13 @@ def combined_factor() -> Factor:
 
 
 def describe_combined() -> list[str]:
-    return [f"{lab}: " + (", ".join(f"{k}={v}" for k, v in ov.items()) or "EVAL_DR") for lab, ov in COMBINED_LEVELS]
+    return [
+        f"{lab}: " + (", ".join(f"{k}={v}" for k, v in ov.items()) or "EVAL_DR") for lab, ov in COMBINED_LEVELS
+    ]
 
 
 def is_none_magnitude(f: Factor, p: Point) -> bool:
     """Magnitudes that mean "off" (no saturation, no velocity limit, no dead sensor) read as such, not as 0."""
-    return f.name in ("force_range", "velocity_limit", "force_dead") and (p.magnitude <= 0 or math.isinf(p.magnitude))
+    return f.name in ("force_range", "velocity_limit", "force_dead") and (
+        p.magnitude <= 0 or math.isinf(p.magnitude)
+    )

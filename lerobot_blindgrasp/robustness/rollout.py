@@ -52,7 +52,8 @@ class Student:
         policy = make_policy(cfg=cfg, env_cfg=env_cfg)
         policy.eval()
         pre, post = make_pre_post_processors(
-            policy_cfg=cfg, pretrained_path=cfg.pretrained_path,
+            policy_cfg=cfg,
+            pretrained_path=cfg.pretrained_path,
             preprocessor_overrides={"device_processor": {"device": "cpu"}},
         )
         env_pre, env_post = make_env_pre_post_processors(env_cfg=env_cfg, policy_cfg=cfg)

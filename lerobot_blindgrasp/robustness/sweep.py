@@ -150,8 +150,13 @@ def run(cfg: RobustnessConfig, command: str = "") -> dict:
         bar.set_postfix_str(p.key[:60])
         t0 = time.perf_counter()
         res = run_point(p.dr(), student, teacher, cfg.object_names, cfg.episodes, cfg.seed, nthread=cfg.threads)
-        record = {"key": p.key, "overrides": [[k, v] for k, v in p.overrides], **context,
-                  "wall_s": time.perf_counter() - t0, **res}
+        record = {
+            "key": p.key,
+            "overrides": [[k, v] for k, v in p.overrides],
+            **context,
+            "wall_s": time.perf_counter() - t0,
+            **res,
+        }
         durable.atomic_write_json(out / "points" / f"{pid}.json", record)
         write_summary(cfg, out, context, meta)
         bar.update(1)
@@ -182,16 +187,32 @@ def build_summary(cfg: RobustnessConfig, out: Path, context: dict, meta: dict) -
                 entry["teacher"] = _counts(rec["teacher"])
                 entry["paired"] = rates.paired_counts(
                     [x for o in cfg.object_names for x in rec["teacher"][o]],
-                    [x for o in cfg.object_names for x in rec["student"][o]])
+                    [x for o in cfg.object_names for x in rec["student"][o]],
+                )
                 total_s += rec["wall_s"]
             pts.append(entry)
         tr = f.train_range
-        fs.append({"name": f.name, "title": f.title, "unit": f.unit, "group": f.group, "nominal": f.nominal,
-                   "train_range": list(tr) if tr else None,
-                   "train_label": f"{tr[0]:g} to {tr[1]:g} {f.unit}" if tr else None, "points": pts})
-    return {**meta, "objects": list(cfg.object_names), "episodes_per_object": cfg.episodes,
-            "threshold": envelope.THRESHOLD, "combined_levels": factors.describe_combined(),
-            "points_wall_s": total_s, "factors": fs}
+        fs.append(
+            {
+                "name": f.name,
+                "title": f.title,
+                "unit": f.unit,
+                "group": f.group,
+                "nominal": f.nominal,
+                "train_range": list(tr) if tr else None,
+                "train_label": f"{tr[0]:g} to {tr[1]:g} {f.unit}" if tr else None,
+                "points": pts,
+            }
+        )
+    return {
+        **meta,
+        "objects": list(cfg.object_names),
+        "episodes_per_object": cfg.episodes,
+        "threshold": envelope.THRESHOLD,
+        "combined_levels": factors.describe_combined(),
+        "points_wall_s": total_s,
+        "factors": fs,
+    }
 
 
 def write_summary(cfg, out: Path, context: dict, meta: dict) -> dict:
@@ -221,8 +242,10 @@ def markdown(summary: dict) -> str:
         for p in f["points"]:
             pr = p.get("paired")
             paired = f"{pr['both']} / {pr['b_only']} / {pr['a_only']}" if pr else ""
-            lines.append(f"| {f['title']} | {p['label']} | {'yes' if p['in_training'] else ''} | "
-                         f"{_cell(p.get('student'))} | {_cell(p.get('teacher'))} | {paired} |")
+            lines.append(
+                f"| {f['title']} | {p['label']} | {'yes' if p['in_training'] else ''} | "
+                f"{_cell(p.get('student'))} | {_cell(p.get('teacher'))} | {paired} |"
+            )
     lines += ["", "Combined levels: " + "; ".join(summary["combined_levels"]) + ".", ""]
     return "\n".join(lines)
 
@@ -278,8 +301,10 @@ def main(argv=None) -> None:
         raise SystemExit(f"error: {e}") from None
     out = Path(cfg.output_dir)
     print(envelope.card_section(summary))
-    print(f"wrote {out}/summary.json, summary.md, envelope.md, plots/ ({len(summary['factors'])} factors); "
-          f"points took {summary['points_wall_s'] / 60:.1f} min")
+    print(
+        f"wrote {out}/summary.json, summary.md, envelope.md, plots/ ({len(summary['factors'])} factors); "
+        f"points took {summary['points_wall_s'] / 60:.1f} min"
+    )
 
 
 if __name__ == "__main__":

@@ -38,8 +38,9 @@ def folder(kind: str) -> Path:
     # A checkout: pyproject.toml marks the root, so a stray site-packages/models of another project is never taken.
     if (_SOURCE_TREE / "pyproject.toml").is_file() and (_SOURCE_TREE / kind).is_dir():
         return _SOURCE_TREE / kind
-    raise ShippedError(f"no shipped {kind} next to {__file__} nor in a source tree; "
-                       "reinstall lerobot_policy_blindgrasp")
+    raise ShippedError(
+        f"no shipped {kind} next to {__file__} nor in a source tree; reinstall lerobot_policy_blindgrasp"
+    )
 
 
 def names() -> dict[str, list[str]]:

@@ -72,7 +72,9 @@ class GraspEnvConfig:
     physics: gripper.PhysicsOptions = field(default_factory=gripper.PhysicsOptions)
     nthread: int = 0  # 0: all CPUs
     autoreset: bool = True
-    backend: str = "batch"  # physics: "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp, GPU; needs the gpu extra)
+    backend: str = (
+        "batch"  # physics: "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp, GPU; needs the gpu extra)
+    )
     device: str | None = None  # warp only: "cuda:0", "cpu"; None: this process's GPU (LOCAL_RANK) if any, else CPU
 
     def __post_init__(self):
@@ -198,7 +200,9 @@ class BatchedGraspEnv:
         self._reset_envs(ids)
         obs = self._observe()
         if self.cfg.dr.obs_latency_steps:
-            self._obs_ring = {k: np.repeat(v[None], self.cfg.dr.obs_latency_steps + 1, axis=0) for k, v in obs.items()}
+            self._obs_ring = {
+                k: np.repeat(v[None], self.cfg.dr.obs_latency_steps + 1, axis=0) for k, v in obs.items()
+            }
         return obs
 
     def _reset_envs(self, ids: np.ndarray) -> None:
@@ -377,7 +381,9 @@ class BatchedGraspEnv:
         """The step (n, 9) that makes the servos of all envs (or `ids`) go to absolute `target`s given in the
         joints' measured frame: target - (q + calibration offset). Without an offset, target - q."""
         sel = slice(None) if ids is None else ids
-        return np.asarray(target, dtype=np.float64) - self._measured_frame(self._qpos[sel, observations.JOINTS], sel)
+        return np.asarray(target, dtype=np.float64) - self._measured_frame(
+            self._qpos[sel, observations.JOINTS], sel
+        )
 
     def _delayed(self, obs: dict[str, np.ndarray], done: np.ndarray) -> dict[str, np.ndarray]:
         """Push this step's observation into the ring and return the one from `obs_latency_steps` ago (an episode

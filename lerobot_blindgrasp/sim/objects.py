@@ -77,7 +77,9 @@ def _from_table(geometry: str, k: int) -> ObjectSpec:
     if geometry.startswith("cuboid"):
         return ObjectSpec(name, geometry, SIZES[k], "box", (p["x"] / 2, p["y"] / 2, p["z"] / 2))
     if geometry == "capsule":  # lying along x
-        return ObjectSpec(name, geometry, SIZES[k], "capsule", (p["radius"], p["height"] / 2), (0.0, math.pi / 2, 0.0))
+        return ObjectSpec(
+            name, geometry, SIZES[k], "capsule", (p["radius"], p["height"] / 2), (0.0, math.pi / 2, 0.0)
+        )
     if geometry.startswith("cylinder"):
         return ObjectSpec(name, geometry, SIZES[k], "cylinder", (p["radius"], p["height"] / 2))
     return ObjectSpec(name, geometry, SIZES[k], "sphere", (p["radius"],))

@@ -44,7 +44,9 @@ def check_state_layout(m: mujoco.MjModel) -> None:
     ok &= [int(j.dofadr[0]) for j in hinges] == list(range(spec.NUM_JOINTS))
     ok &= int(free.qposadr[0]) == OBJECT_POS.start and int(free.dofadr[0]) == OBJECT_LINVEL.start
     if not ok or m.nq != OBJECT_QUAT.stop or m.nv != OBJECT_ANGVEL.stop:
-        raise ValueError("the scene's qpos/qvel order is not the nine spec joints followed by the object's free joint")
+        raise ValueError(
+            "the scene's qpos/qvel order is not the nine spec joints followed by the object's free joint"
+        )
 
 
 def _scaled_noise(noise: np.ndarray, dr: randomization.DomainRandomization) -> dict[str, np.ndarray]:

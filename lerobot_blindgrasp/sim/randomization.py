@@ -68,8 +68,17 @@ class DomainRandomization:
     hold_push_n: float = 0.0  # one push of this size (random 3-D direction, 50 ms) 0.5 s into each hold
 
     def __post_init__(self):
-        for name in ("force_range_n", "joint_calibration_rad", "backlash_rad", "velocity_limit_rad_s",
-                     "period_jitter_s", "hold_push_n", "force_bias_n", "joint_noise_rad", "force_noise_n"):
+        for name in (
+            "force_range_n",
+            "joint_calibration_rad",
+            "backlash_rad",
+            "velocity_limit_rad_s",
+            "period_jitter_s",
+            "hold_push_n",
+            "force_bias_n",
+            "joint_noise_rad",
+            "force_noise_n",
+        ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         for name in ("force_gain", "torque_limit_scale", "object_size_scale"):
@@ -108,9 +117,19 @@ NO_DR = DomainRandomization(
 
 # The fields past Table II; a dataset card lists them only where they differ from the default.
 ROBUSTNESS_FIELDS: tuple[str, ...] = (
-    "force_gain", "force_bias_n", "force_range_n", "dead_force_sensor", "joint_calibration_rad", "backlash_rad",
-    "torque_limit_scale", "velocity_limit_rad_s", "obs_latency_steps", "action_latency_steps", "period_jitter_s",
-    "object_size_scale", "hold_push_n",
+    "force_gain",
+    "force_bias_n",
+    "force_range_n",
+    "dead_force_sensor",
+    "joint_calibration_rad",
+    "backlash_rad",
+    "torque_limit_scale",
+    "velocity_limit_rad_s",
+    "obs_latency_steps",
+    "action_latency_steps",
+    "period_jitter_s",
+    "object_size_scale",
+    "hold_push_n",
 )
 
 
@@ -183,7 +202,9 @@ def draw_hold_push(dr: DomainRandomization, seeds: np.ndarray, episode: np.ndarr
     return dr.hold_push_n * g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
 
 
-def draw_jitter_substeps(dr: DomainRandomization, seeds: np.ndarray, counter: np.ndarray, substeps: int) -> np.ndarray:
+def draw_jitter_substeps(
+    dr: DomainRandomization, seeds: np.ndarray, counter: np.ndarray, substeps: int
+) -> np.ndarray:
     """(n,) integer substeps by which this control step's target reaches the servos late: U[0, jitter], quantized
     to the physics timestep (the period lasts 50 ms on average; each command arrives 0..jitter late)."""
     dt = spec.CONTROL_DT / substeps
@@ -191,8 +212,9 @@ def draw_jitter_substeps(dr: DomainRandomization, seeds: np.ndarray, counter: np
     return np.minimum(np.floor(u * (dr.period_jitter_s / dt + 1)), substeps - 1).astype(np.int64)
 
 
-def apply_physics_draw(template: mujoco.MjModel, draw: PhysicsDraw, i: int,
-                       torque_limit_scale: float = 1.0) -> mujoco.MjModel:
+def apply_physics_draw(
+    template: mujoco.MjModel, draw: PhysicsDraw, i: int, torque_limit_scale: float = 1.0
+) -> mujoco.MjModel:
     """A copy of an object's model with env i's Table II draw written into it: the object's and the fingertips'
     friction, the object's mass (and inertia, so its shape's mass distribution stays), the servos' position gain kp
     and damping kv (MuJoCo's position actuator: gain kp, bias -kp q - kv qdot), and the torque limit beyond it."""

@@ -52,8 +52,13 @@ class StepQuantities:
         return num_contacts(self.uniaxial_force, self.contact_threshold_n)
 
 
-PAPER_WEIGHTS: dict[str, float] = {"task": 1.0, "incentive": 0.2, "joint_limit": -500.0, "action": -0.04,
-                                   "action_rate": -0.01}
+PAPER_WEIGHTS: dict[str, float] = {
+    "task": 1.0,
+    "incentive": 0.2,
+    "joint_limit": -500.0,
+    "action": -0.04,
+    "action_rate": -0.01,
+}
 
 
 @dataclass(frozen=True)
@@ -85,15 +90,21 @@ class RewardConfig:
 
     def as_record(self) -> dict:
         """The config as a run records it (teacher_config.json): `w_<term>` for every term, then the parameters."""
-        return {**{f"w_{name}": self.weight(name) for name in TERMS},
-                "reach_scale": self.reach_scale, "target_lift_m": self.target_lift_m,
-                "contact_threshold_n": self.contact_threshold_n, "workspace_radius_m": self.workspace_radius_m}
+        return {
+            **{f"w_{name}": self.weight(name) for name in TERMS},
+            "reach_scale": self.reach_scale,
+            "target_lift_m": self.target_lift_m,
+            "contact_threshold_n": self.contact_threshold_n,
+            "workspace_radius_m": self.workspace_radius_m,
+        }
 
     @classmethod
     def from_record(cls, record: Mapping) -> RewardConfig:
         """The inverse of `as_record` (what a teacher's teacher_config.json holds)."""
         params = {k: v for k, v in record.items() if not k.startswith("w_")}
-        unknown = sorted(set(params) - {"reach_scale", "target_lift_m", "contact_threshold_n", "workspace_radius_m"})
+        unknown = sorted(
+            set(params) - {"reach_scale", "target_lift_m", "contact_threshold_n", "workspace_radius_m"}
+        )
         if unknown:
             raise ValueError(f"unknown reward setting(s) {unknown} in {dict(record)}")
         return cls(weights={k[2:]: float(v) for k, v in record.items() if k.startswith("w_")}, **params)

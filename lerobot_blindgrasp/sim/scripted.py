@@ -33,7 +33,9 @@ def finger_ik(radius, height):
     return np.arctan2(dx, dz) + alpha, t2
 
 
-def pinch_lift_waypoints(object_radius: float, grasp_height: float, lift_m: float = 0.03, squeeze_m: float = 0.004):
+def pinch_lift_waypoints(
+    object_radius: float, grasp_height: float, lift_m: float = 0.03, squeeze_m: float = 0.004
+):
     """Joint waypoints (approach, pinch, lift) for all three fingers, shape (3, 9)."""
     tip_r = gripper.TIP_CAPSULE_RADIUS
     out = []
@@ -78,7 +80,9 @@ class PinchLiftScript(WaypointScript):
         self.t = 0
 
 
-def run_pinch_lift(env, steps: int, object_radius: float = 0.03, grasp_height: float = 0.045, lift_m: float = 0.03):
+def run_pinch_lift(
+    env, steps: int, object_radius: float = 0.03, grasp_height: float = 0.045, lift_m: float = 0.03
+):
     """Drive a reset `BatchedGraspEnv` with the pinch for `steps` control steps. Returns the per-step object lift
     (steps, N), the noise-free uniaxial forces (steps, N, 3) and the last step's info."""
     script = PinchLiftScript(object_radius, grasp_height, lift_m)
@@ -145,12 +149,14 @@ class SideGraspScript(WaypointScript):
         # Squeeze at the object's centre height, or as low as the tip gets (finger_ik straightens the finger).
         grasp_z = np.maximum(object_pos[:, 2:3].repeat(3, axis=1), gripper.TIP_CAPSULE_RADIUS + 0.004)
         xy = object_pos[:, :2]
-        self.waypoints = np.stack([
-            np.asarray(q0, dtype=np.float64),
-            side_pose(xy, surface + self.GAP_M, top + 0.015),
-            side_pose(xy, surface + self.GAP_M, grasp_z),
-            side_pose(xy, surface - self.SQUEEZE_M, grasp_z),
-            side_pose(xy, surface - self.SQUEEZE_M, grasp_z + self.LIFT_M),
-        ])  # (5, n, 9)
+        self.waypoints = np.stack(
+            [
+                np.asarray(q0, dtype=np.float64),
+                side_pose(xy, surface + self.GAP_M, top + 0.015),
+                side_pose(xy, surface + self.GAP_M, grasp_z),
+                side_pose(xy, surface - self.SQUEEZE_M, grasp_z),
+                side_pose(xy, surface - self.SQUEEZE_M, grasp_z + self.LIFT_M),
+            ]
+        )  # (5, n, 9)
         assert self.waypoints.shape[1] == n
         self.t = 0

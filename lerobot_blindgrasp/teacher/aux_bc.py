@@ -47,8 +47,11 @@ class PPOWithScriptedDemos(PPO):
         self.demo_success = data["success"]
         # Both observation groups are kept: the actor reads whichever its obs_groups name (privileged, or o_t for
         # "RL w/ o_t").
-        self.demo_obs = TensorDict({k: torch.from_numpy(v) for k, v in data["obs"].items()},
-                                   batch_size=[len(data["actions"])], device=self.device)
+        self.demo_obs = TensorDict(
+            {k: torch.from_numpy(v) for k, v in data["obs"].items()},
+            batch_size=[len(data["actions"])],
+            device=self.device,
+        )
         self.demo_actions = torch.from_numpy(data["actions"]).to(self.device)
         self.bc_iteration = 0  # updates done; train.py sets it on resume so the decay continues
         self._gen = torch.Generator(device="cpu").manual_seed(self.demo_cfg.seed)

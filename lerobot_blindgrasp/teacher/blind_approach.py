@@ -89,7 +89,9 @@ class MeasuredKinematics:
 
         self._mj = mujoco
         # Any object will do: only the fingers' kinematic chain is read.
-        obj = objects.object_mjcf(objects.get_object("sphere_small"), gripper.OBJECT_CONTYPE, gripper.OBJECT_CONAFFINITY)
+        obj = objects.object_mjcf(
+            objects.get_object("sphere_small"), gripper.OBJECT_CONTYPE, gripper.OBJECT_CONAFFINITY
+        )
         self._m = gripper.compile_model(obj)
         self._d = mujoco.MjData(self._m)
         self._sites = [mujoco.mj_name2id(self._m, mujoco.mjtObj.mjOBJ_SITE, f"{f}_tipsite") for f in spec.FINGERS]
@@ -140,4 +142,3 @@ class BlindGroup:
     def __call__(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """`obs` plus the GROUP entry computed from its "privileged" one."""
         return {**obs, GROUP: self.mask(obs["privileged"])}
-

@@ -67,4 +67,3 @@ def _gloo_runner():
                 )
 
     return _GlooOnPolicyRunner
-

@@ -77,7 +77,9 @@ def sim_fingerprint(root: Path | None = None) -> str:
 
     root = root or Path(__file__).resolve().parents[1]  # the package folder
     h = hashlib.sha256()
-    sources = [p for p in (root / "sim").rglob("*.py") if p.relative_to(root / "sim").as_posix() not in NOT_IN_EPISODES]
+    sources = [
+        p for p in (root / "sim").rglob("*.py") if p.relative_to(root / "sim").as_posix() not in NOT_IN_EPISODES
+    ]
     for path in sorted([*sources, root / "spec.py"]):
         h.update(path.relative_to(root).as_posix().encode())
         h.update(ast.dump(_without_docstrings(ast.parse(path.read_bytes()))).encode())
@@ -174,7 +176,10 @@ def evaluate_teacher(
             "per_object": per_object,
             "overall": _pooled(per_object, object_names),
             "medium_objects": _pooled(per_object, medium) if medium else None,
-            "counts": {"overall": _counts(per_object, object_names), "medium_objects": _counts(per_object, medium)},
+            "counts": {
+                "overall": _counts(per_object, object_names),
+                "medium_objects": _counts(per_object, medium),
+            },
         }
     results["checkpoint"] = str(teacher.checkpoint)
     results["checkpoint_sha256"] = teacher.sha256
@@ -196,22 +201,32 @@ def _pooled(per_object: dict, names) -> float:
 
 def markdown_table(results: dict) -> str:
     modes = list(results["modes"])
-    head = "| object | " + " | ".join(f"{m} success [95 % CI]" for m in modes) + " | " + " | ".join(
-        f"{m} max lift (cm)" for m in modes
-    ) + " |"
+    head = (
+        "| object | "
+        + " | ".join(f"{m} success [95 % CI]" for m in modes)
+        + " | "
+        + " | ".join(f"{m} max lift (cm)" for m in modes)
+        + " |"
+    )
     lines = [head, "|---|" + "---:|" * (2 * len(modes))]
     for o in results["objects"]:
         s = [rates.format_rate(*rates.count(results["modes"][m]["per_object"][o]["successes"])) for m in modes]
         lift = [f"{results['modes'][m]['per_object'][o]['mean_max_lift_cm']:.1f}" for m in modes]
         lines.append(f"| {o} | " + " | ".join(s + lift) + " |")
     n_medium = sum(o.endswith("_medium") for o in results["objects"])
-    for key, label in (("medium_objects", f"{n_medium} medium objects"), ("overall", f"all {len(results['objects'])}")):
+    for key, label in (
+        ("medium_objects", f"{n_medium} medium objects"),
+        ("overall", f"all {len(results['objects'])}"),
+    ):
         counts = [results["modes"][m]["counts"][key] for m in modes]
         if all(c[1] for c in counts):
             cells = " | ".join(f"**{rates.format_rate(*c, digits=1)}**" for c in counts)
             lines.append(f"| **{label}** | " + cells + " |" + " |" * len(modes))
-    lines += ["", f"Teacher `{results['checkpoint']}` (iteration {results['iteration']}); start states: "
-              f"{results['seeds']}; 95 % Wilson intervals."]
+    lines += [
+        "",
+        f"Teacher `{results['checkpoint']}` (iteration {results['iteration']}); start states: "
+        f"{results['seeds']}; 95 % Wilson intervals.",
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -232,7 +247,9 @@ def bar_chart(results: dict, path: Path) -> None:
     ax.set_xticks(x, [n.replace("_", " ") for n in names], rotation=60, ha="right", fontsize=8)
     ax.set_ylabel("success (%)")
     ax.set_ylim(0, 100)
-    ax.set_title(f"Teacher success, {results['episodes_per_object']} episodes per object (iteration {results['iteration']})")
+    ax.set_title(
+        f"Teacher success, {results['episodes_per_object']} episodes per object (iteration {results['iteration']})"
+    )
     ax.legend()
     fig.tight_layout()
     with durable.atomic_path(path) as tmp:

@@ -94,21 +94,21 @@ def card(config: dict) -> str:
 library_name: {PACKAGE}
 tags: [lerobot, robotics, blindgrasp, reinforcement-learning, ppo]
 ---
-# blindgrasp PPO teacher (`{config.get('preset')}` preset, iteration {w['iteration']})
+# blindgrasp PPO teacher (`{config.get("preset")}` preset, iteration {w["iteration"]})
 
-Privileged-observation PPO teacher for three-finger blind grasping (rsl-rl MLP actor, {config['runner']['actor']['hidden_dims']}),
+Privileged-observation PPO teacher for three-finger blind grasping (rsl-rl MLP actor, {config["runner"]["actor"]["hidden_dims"]}),
 used to collect the curated demonstrations the `blindgrasp_transformer` student learns from.
 
 - `teacher.safetensors`: the actor's state dict (MLP, Gaussian std, observation normalizer); no pickle.
-- `teacher_config.json`: preset, reward, PPO settings, observation layout, source checkpoint `{w['source_checkpoint']}`
-  (sha256 `{w['source_sha256']}`).
+- `teacher_config.json`: preset, reward, PPO settings, observation layout, source checkpoint `{w["source_checkpoint"]}`
+  (sha256 `{w["source_sha256"]}`).
 
 Use it (`pip install {PACKAGE}`):
 
     blindgrasp-eval-teacher --teacher=THIS_FOLDER --episodes=20
     blindgrasp-collect-demos --teacher=THIS_FOLDER --output_dir=runs/demos --repo_id=you/blindgrasp_demos
 
-Made by: `{config.get('command', '?')}` (env seeds from {config.get('seed')}, {config.get('num_envs')} envs).
+Made by: `{config.get("command", "?")}` (env seeds from {config.get("seed")}, {config.get("num_envs")} envs).
 {project.code_line()}
 """
 
@@ -120,7 +120,9 @@ def push_teacher(folder: str | Path, repo_id: str, private: bool | None = None) 
     folder = Path(folder)
     policy.TeacherPolicy(folder)  # refuse to upload something that does not load
     if policy.resolve_checkpoint(folder).suffix != ".safetensors":
-        raise policy.TeacherError(f"{folder} holds a training checkpoint; export it first (blindgrasp-export-teacher)")
+        raise policy.TeacherError(
+            f"{folder} holds a training checkpoint; export it first (blindgrasp-export-teacher)"
+        )
     api = HfApi()
     api.create_repo(repo_id, repo_type="model", private=private, exist_ok=True)
     api.upload_folder(

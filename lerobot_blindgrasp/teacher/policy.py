@@ -160,7 +160,11 @@ class TeacherPolicy:
                 f"{self.checkpoint} was trained on another observation layout than spec.PRIVILEGED_LAYOUT; "
                 "retrain or use a teacher from this version"
             )
-        dims = {"policy": spec.STATE_DIM, "privileged": spec.PRIVILEGED_DIM, blind_approach.GROUP: spec.PRIVILEGED_DIM}
+        dims = {
+            "policy": spec.STATE_DIM,
+            "privileged": spec.PRIVILEGED_DIM,
+            blind_approach.GROUP: spec.PRIVILEGED_DIM,
+        }
         dummy = TensorDict({k: torch.zeros(1, d) for k, d in dims.items()}, batch_size=[1])
         self.actor = MLPModel(dummy, self.obs_groups, "actor", spec.NUM_JOINTS, **actor_cfg)
         state, iteration = load_actor_state(self.checkpoint)
@@ -175,8 +179,11 @@ class TeacherPolicy:
         # A blind-approach teacher computes its actor's group itself from the env's "privileged" vector, with the
         # per-env touch counts of the batch it is stepping (blind_approach.BlindGroup).
         self.actor_input = blind_approach.ActorInput.from_record(self.config.get("actor_input"))
-        self._blind = (blind_approach.BlindGroup(self.actor_input)
-                       if blind_approach.reads_blind_group({"actor": self.obs_groups["actor"]}) else None)
+        self._blind = (
+            blind_approach.BlindGroup(self.actor_input)
+            if blind_approach.reads_blind_group({"actor": self.obs_groups["actor"]})
+            else None
+        )
         self.device = device
         weights = self.config.get("weights", {})
         self.iteration = iteration if iteration is not None else int(weights.get("iteration", -1))
@@ -197,5 +204,7 @@ class TeacherPolicy:
         if self._blind is not None and blind_approach.GROUP not in obs:
             obs = self._blind(obs)  # a blind-approach teacher: the env gives "privileged"
         n = next(iter(obs.values())).shape[0]
-        td = TensorDict({k: torch.from_numpy(np.asarray(v)).to(self.device) for k, v in obs.items()}, batch_size=[n])
+        td = TensorDict(
+            {k: torch.from_numpy(np.asarray(v)).to(self.device) for k, v in obs.items()}, batch_size=[n]
+        )
         return self.actor(td, stochastic_output=stochastic).cpu().numpy().astype(np.float64)

@@ -85,11 +85,13 @@ def collect(cfg: ScriptedDemos) -> dict:
 
     n = cfg.episodes_per_object * len(cfg.objects)
     dr = randomization.PAPER_DR if cfg.pushes else randomization.EVAL_DR  # as train.build_env_config chooses
-    env = BatchedGraspEnv(GraspEnvConfig(num_envs=n, objects=cfg.objects, seed=cfg.seed, dr=dr, autoreset=False,
-                                         nthread=1))
+    env = BatchedGraspEnv(
+        GraspEnvConfig(num_envs=n, objects=cfg.objects, seed=cfg.seed, dr=dr, autoreset=False, nthread=1)
+    )
     obs = env.reset()
-    script = scripted.SideGraspScript(env.joint_positions(), env.object_position(),
-                                      [objects.get_object(name) for name in env.object_names])
+    script = scripted.SideGraspScript(
+        env.joint_positions(), env.object_position(), [objects.get_object(name) for name in env.object_names]
+    )
     seen_obs, seen_policy, seen_act = [], [], []
     success = np.zeros(n, dtype=bool)
     for t in range(env.max_episode_steps):
@@ -126,11 +128,17 @@ def main(argv=None) -> None:
     from lerobot_blindgrasp.cli import parse_config
 
     cfg = parse_config(ScriptSuccessConfig, argv)
-    demos = ScriptedDemos(objects=objects.resolve_objects(cfg.objects), episodes_per_object=cfg.episodes_per_object,
-                          steps_per_episode=1, pushes=cfg.pushes)
+    demos = ScriptedDemos(
+        objects=objects.resolve_objects(cfg.objects),
+        episodes_per_object=cfg.episodes_per_object,
+        steps_per_episode=1,
+        pushes=cfg.pushes,
+    )
     rates = collect(demos)["success"]
-    print(f"side-grasp script, {cfg.episodes_per_object} episodes per object from seed {demos.seed}, "
-          f"pushes={cfg.pushes}\n\n| object | success |\n|---|---:|")
+    print(
+        f"side-grasp script, {cfg.episodes_per_object} episodes per object from seed {demos.seed}, "
+        f"pushes={cfg.pushes}\n\n| object | success |\n|---|---:|"
+    )
     for name, rate in rates.items():
         print(f"| {name} | {rate:.0%} ({round(rate * cfg.episodes_per_object)}/{cfg.episodes_per_object}) |")
     print(f"| **all** | **{np.mean(list(rates.values())):.1%}** |")

@@ -71,7 +71,9 @@ class TrainTeacherConfig:
     # first cloning stage), cpu_bc_blind_approach (beyond the paper: it, fine-tuned with the object hidden from
     # the actor until a touch), paper (Table III), cpu, quick
     preset: str = SHIPPED_TEACHER_PRESET.name
-    seed: int = spec.TEACHER_TRAIN_SEED  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
+    seed: int = (
+        spec.TEACHER_TRAIN_SEED
+    )  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
     iterations: int | None = None  # override the preset's max iterations
     num_envs: int | None = None  # override the preset's number of envs
     no_incentive: bool = False  # 'Student w/o r_i' teacher: every contact-paying reward term at 0
@@ -132,8 +134,16 @@ def train(cfg: TrainTeacherConfig) -> Path:
     cfg_path = out / CONFIG_NAME
     if cfg_path.exists():
         old = json.loads(cfg_path.read_text())
-        for key in ("preset", "variant", "num_envs", "runner", "reward", "object_weights", "actor_input",
-                    "joint_calibration_rad"):
+        for key in (
+            "preset",
+            "variant",
+            "num_envs",
+            "runner",
+            "reward",
+            "object_weights",
+            "actor_input",
+            "joint_calibration_rad",
+        ):
             # runs made before a key existed had its default
             if old.get(key, _DEFAULTS.get(key)) != config[key]:
                 raise SystemExit(f"{out} holds a run with a different {key!r}; use another --output_dir")
@@ -239,8 +249,12 @@ def newest_loadable_checkpoint(run_dir: Path) -> Path | None:
             if lead:
                 aside = ckpt.with_name(ckpt.name + ".corrupt")
                 os.replace(ckpt, aside)
-                log.warning("checkpoint %s cannot be read (%s); set aside as %s, resuming from the one before",
-                            ckpt, why, aside.name)
+                log.warning(
+                    "checkpoint %s cannot be read (%s); set aside as %s, resuming from the one before",
+                    ckpt,
+                    why,
+                    aside.name,
+                )
     return None
 
 
@@ -270,8 +284,11 @@ def _train_previous_stage(cfg: TrainTeacherConfig, name: str, iterations: int) -
     """A staged preset starts from another preset's checkpoint (`TeacherPreset.continues`): train that one first,
     with the same seed, envs and variant, in <output_dir>/stages/<name> (which resumes like any run), then start
     this run from its last checkpoint."""
-    final = train(dataclasses.replace(cfg, preset=name, iterations=iterations, export=False,
-                                      output_dir=cfg.output_dir / "stages" / name))
+    final = train(
+        dataclasses.replace(
+            cfg, preset=name, iterations=iterations, export=False, output_dir=cfg.output_dir / "stages" / name
+        )
+    )
     if distributed.world()[1] == 0:  # under torchrun one rank copies; the others must not read a half-written file
         cfg.output_dir.mkdir(parents=True, exist_ok=True)
         with durable.atomic_path(cfg.output_dir / final.name) as tmp:  # a kill mid-copy leaves no half checkpoint

@@ -21,7 +21,9 @@ from lerobot_blindgrasp.teacher.blind_approach import ActorInput, BlindGroup
 
 
 class RslRlGraspEnv(VecEnv):
-    def __init__(self, env: BatchedGraspEnv, device: str = "cpu", on_step=None, blind_group: ActorInput | None = None):
+    def __init__(
+        self, env: BatchedGraspEnv, device: str = "cpu", on_step=None, blind_group: ActorInput | None = None
+    ):
         self.env = env
         self._blind_group = None if blind_group is None else BlindGroup(blind_group)
         self.num_envs = env.num_envs

@@ -47,9 +47,14 @@ class TwinCalibrateConfig:
 
 
 def calibrate_command(cfg: TwinCalibrateConfig, ports: dict) -> list[str]:
-    cmd = [str(BIN / "lerobot-calibrate"), "--robot.type=blindgrasp_gripper", f"--robot.id={cfg.robot_id}",
-           f"--robot.port={ports['dynamixel_port']}", f"--robot.force_sensor.port={ports['force_port']}",
-           f"--robot.latency_timer_ms={cfg.latency_timer_ms}"]
+    cmd = [
+        str(BIN / "lerobot-calibrate"),
+        "--robot.type=blindgrasp_gripper",
+        f"--robot.id={cfg.robot_id}",
+        f"--robot.port={ports['dynamixel_port']}",
+        f"--robot.force_sensor.port={ports['force_port']}",
+        f"--robot.latency_timer_ms={cfg.latency_timer_ms}",
+    ]
     if cfg.calibration_dir is not None:
         cmd.append(f"--robot.calibration_dir={cfg.calibration_dir}")
     return cmd
@@ -58,8 +63,14 @@ def calibrate_command(cfg: TwinCalibrateConfig, ports: dict) -> list[str]:
 def run(cfg: TwinCalibrateConfig) -> int:
     ports = json.loads(cfg.ports_json.read_text())
     sock = ports["operator_socket"]
-    proc = subprocess.Popen(calibrate_command(cfg, ports), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, bufsize=1)
+    proc = subprocess.Popen(
+        calibrate_command(cfg, ports),
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        bufsize=1,
+    )
     deadline = time.monotonic() + cfg.timeout_s
     buf = ""
     try:

@@ -62,8 +62,11 @@ def serve(cfg: TwinConfig, stop: threading.Event) -> dict:
         print(json.dumps(ports), flush=True)
         if cfg.ports_json is not None:
             durable.atomic_write_json(cfg.ports_json, ports, indent=2)
-        print(f"blindgrasp-twin: Dynamixel bus {ports['dynamixel_port']}, force board {ports['force_port']}, "
-              f"operator socket {ports['operator_socket']}. Ctrl-C stops.", flush=True)
+        print(
+            f"blindgrasp-twin: Dynamixel bus {ports['dynamixel_port']}, force board {ports['force_port']}, "
+            f"operator socket {ports['operator_socket']}. Ctrl-C stops.",
+            flush=True,
+        )
         while not stop.wait(cfg.status_every_s or None):
             print("twin status " + json.dumps(twin.status()), flush=True)
         status = twin.status()

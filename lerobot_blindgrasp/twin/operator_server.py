@@ -27,8 +27,10 @@ from lerobot_blindgrasp import durable, spec
 
 logger = logging.getLogger(__name__)
 
-JUDGE = (f"twin (the sim's rule: lifted >= {spec.SUCCESS_LIFT_M * 100:.1f} cm for {spec.SUCCESS_HOLD_S:g} s, "
-         "judged in the twin's physics)")
+JUDGE = (
+    f"twin (the sim's rule: lifted >= {spec.SUCCESS_LIFT_M * 100:.1f} cm for {spec.SUCCESS_HOLD_S:g} s, "
+    "judged in the twin's physics)"
+)
 
 
 class OperatorServer:
@@ -134,8 +136,13 @@ class OperatorServer:
             return
         placement = active[2]
         success, reason = self._verdicts.get(placement["trial"], (False, "host ended the trial first"))
-        record = {**placement, "success": success, "reason": reason, "judge": "twin",
-                  "peak_lift_m": round(self.twin.physics.peak_lift, 4)}
+        record = {
+            **placement,
+            "success": success,
+            "reason": reason,
+            "judge": "twin",
+            "peak_lift_m": round(self.twin.physics.peak_lift, 4),
+        }
         logger.info("trial %s: %s (%s)", placement["trial"], "SUCCESS" if success else "failure", reason)
         if self.trial_log:
             durable.atomic_append_text(self.trial_log, json.dumps(record) + "\n")

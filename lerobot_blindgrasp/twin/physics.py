@@ -52,8 +52,12 @@ class Verdict:
 
 
 class TwinPhysics:
-    def __init__(self, dr: randomization.DomainRandomization = randomization.EVAL_DR,
-                 options: gripper.PhysicsOptions | None = None, park_object: str = "cylinder_a_medium"):
+    def __init__(
+        self,
+        dr: randomization.DomainRandomization = randomization.EVAL_DR,
+        options: gripper.PhysicsOptions | None = None,
+        park_object: str = "cylinder_a_medium",
+    ):
         self.dr = dr
         self.options = options or gripper.PhysicsOptions()
         self.lock = threading.Lock()
@@ -102,15 +106,24 @@ class TwinPhysics:
         self._held = np.zeros(1, dtype=np.int64)
         self.peak_lift = 0.0
         self._publish()
-        return {"object": name, "seed": seed, "env_seed": int(env_seed), "object_xy_m": [float(v) for v in xy],
-                **{k: round(v, 4) for k, v in draw.row(0).items()}}
+        return {
+            "object": name,
+            "seed": seed,
+            "env_seed": int(env_seed),
+            "object_xy_m": [float(v) for v in xy],
+            **{k: round(v, 4) for k, v in draw.row(0).items()},
+        }
 
     def place(self, name: str, seed: int) -> dict:
         """Put `name` on the table where the sim env's start state for (seed, name) has it, and start judging."""
         self._template(name)  # compile outside the lock: the servos keep being simulated meanwhile
         with self.lock:
-            placement = self._load(name, int(seed), self.data.qpos[observations.JOINTS].copy(),
-                                   self.data.qvel[observations.JOINTS].copy())
+            placement = self._load(
+                name,
+                int(seed),
+                self.data.qpos[observations.JOINTS].copy(),
+                self.data.qvel[observations.JOINTS].copy(),
+            )
             self.trial += 1
             self.judging = True
             placement["trial"] = self.trial

@@ -41,9 +41,19 @@ def outcomes(run: Path) -> dict[str, dict[int, tuple[bool, str]]]:
 
 def eval_info(results: dict[str, dict[int, tuple[bool, str]]]) -> dict:
     names = [o for o in objects.CATALOGUE if o in results]
-    return {"per_task": [{"task_group": o, "task_id": 0,
-                          "metrics": {"successes": [results[o][k][0] for k in sorted(results[o])],
-                                      "seeds": sorted(results[o])}} for o in names]}
+    return {
+        "per_task": [
+            {
+                "task_group": o,
+                "task_id": 0,
+                "metrics": {
+                    "successes": [results[o][k][0] for k in sorted(results[o])],
+                    "seeds": sorted(results[o]),
+                },
+            }
+            for o in names
+        ]
+    }
 
 
 def timing(run: Path) -> dict[str, dict[str, float]]:
@@ -54,11 +64,17 @@ def timing(run: Path) -> dict[str, dict[str, float]]:
     for part in ("read", "policy", "write"):
         rows = np.array([t["step_ms"][part] for t in trials if t["step_ms"].get(part)])
         if rows.size:
-            out[part] = {"p50_ms": float(np.median(rows[:, 0])), "p99_ms_median": float(np.median(rows[:, 1])),
-                         "p99_ms_worst": float(rows[:, 1].max())}
+            out[part] = {
+                "p50_ms": float(np.median(rows[:, 0])),
+                "p99_ms_median": float(np.median(rows[:, 1])),
+                "p99_ms_worst": float(rows[:, 1].max()),
+            }
     steps = sum(t["steps"] for t in trials)
-    out["overruns"] = {"periods": steps, "overruns": sum(t["loop_overruns"] for t in trials),
-                       "late_steps_rebased": sum(t["late_steps_rebased"] for t in trials)}
+    out["overruns"] = {
+        "periods": steps,
+        "overruns": sum(t["loop_overruns"] for t in trials),
+        "late_steps_rebased": sum(t["late_steps_rebased"] for t in trials),
+    }
     return out
 
 

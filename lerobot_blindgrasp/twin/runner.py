@@ -33,8 +33,12 @@ def percentiles_ms(values) -> dict[str, float]:
     v = np.asarray(list(values), dtype=np.float64) * 1e3
     if v.size == 0:
         return {"n": 0}
-    return {"n": int(v.size), "p50_ms": round(float(np.percentile(v, 50)), 3),
-            "p99_ms": round(float(np.percentile(v, 99)), 3), "max_ms": round(float(v.max()), 3)}
+    return {
+        "n": int(v.size),
+        "p50_ms": round(float(np.percentile(v, 50)), 3),
+        "p99_ms": round(float(np.percentile(v, 99)), 3),
+        "max_ms": round(float(v.max()), 3),
+    }
 
 
 class Twin:
@@ -43,15 +47,20 @@ class Twin:
         self.cfg = cfg
         self.physics = TwinPhysics(park_object=cfg.park_object)
         self.ids = list(spec.SERVO_IDS)
-        self.bus = DynamixelBusEmulator(self.ids, baudrate=cfg.baudrate,
-                                        initial_shaft=dict(zip(self.ids, mount.shaft_for_q(self.physics.q))))
+        self.bus = DynamixelBusEmulator(
+            self.ids, baudrate=cfg.baudrate, initial_shaft=dict(zip(self.ids, mount.shaft_for_q(self.physics.q)))
+        )
         self.servos = [self.bus.servos[i] for i in self.ids]
         for k, s in enumerate(self.servos):
             s.dynamics = SimShaft(self.physics, k)
         lc = cfg.load_cell
         self.force = ForceSensorEmulator(
-            rate_hz=lc.rate_hz, scale_n_per_count=lc.scale_n_per_count, offset_counts=lc.offset_counts,
-            noise_counts=lc.noise_counts, gain=lc.gain, seed=cfg.noise_seed,
+            rate_hz=lc.rate_hz,
+            scale_n_per_count=lc.scale_n_per_count,
+            offset_counts=lc.offset_counts,
+            noise_counts=lc.noise_counts,
+            gain=lc.gain,
+            seed=cfg.noise_seed,
             force_fn=lambda: self.physics.tip_force_n,
         )
         self.server = OperatorServer(cfg.socket, self, trial_log=cfg.trial_log)
@@ -90,8 +99,12 @@ class Twin:
         self.stop()
 
     def ports(self) -> dict[str, str]:
-        return {"dynamixel_port": self.bus.port, "force_port": self.force.port, "operator_socket": self.cfg.socket,
-                "scale_n_per_count": list(self.cfg.load_cell.scale_n_per_count)}
+        return {
+            "dynamixel_port": self.bus.port,
+            "force_port": self.force.port,
+            "operator_socket": self.cfg.socket,
+            "scale_n_per_count": list(self.cfg.load_cell.scale_n_per_count),
+        }
 
     # --- the real-time loop -----------------------------------------------------------------------------------
     def _run(self) -> None:

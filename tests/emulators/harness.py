@@ -65,7 +65,11 @@ class Operator:
 
     def __init__(self, cmd: list[str], env: dict[str, str]):
         self.proc = subprocess.Popen(
-            as_from_a_terminal(cmd), env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+            as_from_a_terminal(cmd),
+            env=env,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
         )
         self.output = bytearray()
         self._pos = 0

@@ -30,6 +30,7 @@ ADC_FULL_SCALE = 1 << 23  # 24-bit signed counts (HX711-class ADC), sign-extende
 class ForceSensorEmulator(PtyDevice):
     tick_s = 0.005
     MAX_BURST = 8  # frames owed after a scheduling gap that still go out (100 ms at 80 Hz)
+
     def __init__(
         self,
         *,
@@ -60,7 +61,9 @@ class ForceSensorEmulator(PtyDevice):
         self.garbage_prob = 0.0  # probability to emit 1-20 random bytes before a frame
         self.corrupt_next = 0  # send the next n frames with a wrong CRC
         self.status = 0  # channel fault bits
-        self.channels = 3  # channels per frame: firmware built for another number of load cells sends more or fewer
+        self.channels = (
+            3  # channels per frame: firmware built for another number of load cells sends more or fewer
+        )
         # Dead data that still arrives: re-send the last frame bit for bit, step SEQ by this (-1: backwards), hold
         # these channels' counts at their last value (a hung ADC whose last conversion the firmware keeps sending).
         self.resend_last = False

@@ -233,8 +233,9 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         self.model = BlindgraspGPT(config)
         self.reset()
 
-    def generate_model_card(self, dataset_repo_id: str, model_type: str, license, tags, cfg=None,
-                            dataset_meta=None):
+    def generate_model_card(
+        self, dataset_repo_id: str, model_type: str, license, tags, cfg=None, dataset_meta=None
+    ):
         """LeRobot's card, plus the package to install and our tags (the Hub lists models by them)."""
         tags = sorted(set(tags or []) | {PACKAGE, "blindgrasp"})
         card = super().generate_model_card(dataset_repo_id, model_type, license, tags, cfg=cfg,
@@ -297,8 +298,10 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
         """(B, 1, 9) absolute joint targets (rad) from a preprocessed batch (see `predict_normalized_delta`)."""
         if Q_NOW not in batch:
-            raise KeyError(f"blindgrasp_transformer acts on preprocessed observations: '{Q_NOW}' (the raw joint "
-                           "positions the policy's preprocessor adds) is missing")
+            raise KeyError(
+                f"blindgrasp_transformer acts on preprocessed observations: '{Q_NOW}' (the raw joint "
+                "positions the policy's preprocessor adds) is missing"
+            )
         return normalized_delta_to_target(self.predict_normalized_delta(batch), batch[Q_NOW])[:, None]
 
     def _bounded(self, pred: Tensor) -> Tensor:

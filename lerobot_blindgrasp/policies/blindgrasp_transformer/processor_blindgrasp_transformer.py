@@ -134,8 +134,12 @@ class SensorAugmentStep(ProcessorStep):
     enabled: bool = True
 
     def get_config(self) -> dict[str, Any]:
-        return {"force_gain": self.force_gain, "force_bias_n": self.force_bias_n,
-                "joint_offset_rad": self.joint_offset_rad, "enabled": self.enabled}
+        return {
+            "force_gain": self.force_gain,
+            "force_bias_n": self.force_bias_n,
+            "joint_offset_rad": self.joint_offset_rad,
+            "enabled": self.enabled,
+        }
 
     def transform_features(self, features):
         return features
@@ -174,9 +178,17 @@ def make_blindgrasp_transformer_pre_post_processors(
     """The policy's pipeline pair (see the module docstring); LeRobot finds it by name for `lerobot-train`."""
     s = make_default_policy_processor_steps(config, dataset_stats)
     to_delta = TargetToNormalizedDeltaStep(action_bound=spec.ACTION_BOUND_RAD)
-    augment = [] if not config.augmentation_active else [SensorAugmentStep(
-        force_gain=config.augment_force_gain, force_bias_n=config.augment_force_bias_n,
-        joint_offset_rad=config.augment_joint_offset_rad)]
+    augment = (
+        []
+        if not config.augmentation_active
+        else [
+            SensorAugmentStep(
+                force_gain=config.augment_force_gain,
+                force_bias_n=config.augment_force_bias_n,
+                joint_offset_rad=config.augment_joint_offset_rad,
+            )
+        ]
+    )
     return make_policy_processor_pipelines(
         input_steps=[s.rename_observations, s.add_batch_dim, s.to_device, *augment, to_delta, s.normalize],
         output_steps=[s.unnormalize, s.to_cpu],

@@ -57,8 +57,9 @@ def _to_numpy(name: str, column: pa.ChunkedArray) -> np.ndarray:
         return np.array(array.to_numpy(zero_copy_only=False))  # a copy: the cache owns its memory
     lengths = np.unique(array.value_lengths().to_numpy(zero_copy_only=False)) if len(array) else np.array([0])
     if len(lengths) != 1 or array.flatten().null_count:
-        raise ValueError(f"column {name!r} is not one fixed-length vector per frame: the low-dim cache cannot "
-                         "serve it")
+        raise ValueError(
+            f"column {name!r} is not one fixed-length vector per frame: the low-dim cache cannot serve it"
+        )
     flat = _to_numpy(name, pa.chunked_array([array.flatten()]))
     return flat.reshape(len(array), int(lengths[0]), *flat.shape[1:])
 

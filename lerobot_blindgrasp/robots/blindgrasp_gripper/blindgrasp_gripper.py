@@ -386,8 +386,10 @@ class BlindgraspGripper(Robot):
         missing = [k for k in spec.ACTION_NAMES if k not in action]
         unknown = [k for k in action if k not in spec.ACTION_NAMES]
         if missing or unknown:  # an extra key is a policy or teleop trained for other joints: nothing is sent
-            raise KeyError(f"Action lacks {missing} and has unknown keys {unknown}; expected exactly "
-                           f"{list(spec.ACTION_NAMES)}. Nothing was sent.")
+            raise KeyError(
+                f"Action lacks {missing} and has unknown keys {unknown}; expected exactly "
+                f"{list(spec.ACTION_NAMES)}. Nothing was sent."
+            )
         target = np.array([float(action[k]) for k in spec.ACTION_NAMES])
         if not np.all(np.isfinite(target)):
             raise ValueError(f"Non-finite joint target {target.tolist()}; nothing was sent.")
@@ -423,13 +425,17 @@ class BlindgraspGripper(Robot):
         self._last_state_check = time.monotonic()
         bad = {j: v for j, v in report.hardware_error.items() if self._confirm_hardware_error(j)}
         if bad:
-            detail = "; ".join(f"{j} (ID {self.bus.motors[j].id}): {decode_hardware_error(v)}" for j, v in bad.items())
+            detail = "; ".join(
+                f"{j} (ID {self.bus.motors[j].id}): {decode_hardware_error(v)}" for j, v in bad.items()
+            )
             raise GripperHardwareError(
                 f"Servo hardware error: {detail}. The firmware keeps torque off until the servo is rebooted or "
                 "power-cycled; inspect the finger first."
             )
         if report.changed:
-            detail = "; ".join(f"{j} (ID {self.bus.motors[j].id}): {', '.join(c)}" for j, c in report.changed.items())
+            detail = "; ".join(
+                f"{j} (ID {self.bus.motors[j].id}): {', '.join(c)}" for j, c in report.changed.items()
+            )
             raise GripperStateError(
                 f"Servo state changed without a command: {detail}. A servo reset (brown-out, loose power cable) "
                 "drops its torque and restores factory RAM settings; check the supply and cabling, then reconnect."

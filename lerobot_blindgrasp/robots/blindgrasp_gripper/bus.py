@@ -128,7 +128,6 @@ class FlushingPortHandler(PortHandler):
         self.is_open = False
 
 
-
 class LineWatchingPacketHandler(Protocol2PacketHandler):
     """The SDK's protocol-2 packet handler, telling the port when a receive failed so that the next try first waits
     for the abandoned replies to end (see `FlushingPortHandler.clearPort`). Every read path ends here: unicast
@@ -156,6 +155,7 @@ class LineWatchingPacketHandler(Protocol2PacketHandler):
             return [], COMM_RX_CORRUPT, 0
         data = list(rxpacket[PKT_ERROR + 1 : PKT_ERROR + 1 + length])
         return data, result, rxpacket[PKT_ERROR]
+
 
 class RetryingDynamixelBus(DynamixelMotorsBus):
     def __init__(

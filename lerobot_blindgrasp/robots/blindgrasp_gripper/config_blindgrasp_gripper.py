@@ -143,8 +143,12 @@ class BlindgraspGripperConfig(RobotConfig):
             raise ValueError("port and force_sensor.port must name the serial devices")
         if self.plausibility_backdrive_rad < 0:
             raise ValueError("plausibility_backdrive_rad must be >= 0")
-        if not (self.max_joint_speed_rad_s > 0 and self.plausibility_margin_rad > 0 and self.plausibility_rereads > 0):
-            raise ValueError("need max_joint_speed_rad_s > 0, plausibility_margin_rad > 0, plausibility_rereads >= 1")
+        if not (
+            self.max_joint_speed_rad_s > 0 and self.plausibility_margin_rad > 0 and self.plausibility_rereads > 0
+        ):
+            raise ValueError(
+                "need max_joint_speed_rad_s > 0, plausibility_margin_rad > 0, plausibility_rereads >= 1"
+            )
         if not 1 <= self.health_every_n <= 100:
             raise ValueError("health_every_n must be in [1, 100] control periods")
         if not (self.loop_hz > 0 and self.max_overrun_s >= 0):
@@ -163,7 +167,9 @@ class BlindgraspGripperConfig(RobotConfig):
         if len(fs.scale_n_per_count) != spec.NUM_FORCES or len(fs.channel_map) != spec.NUM_FORCES:
             raise ValueError(f"force_sensor needs {spec.NUM_FORCES} scales and channel_map entries")
         if not all(math.isfinite(x) and x != 0 for x in fs.scale_n_per_count):
-            raise ValueError(f"force_sensor.scale_n_per_count must be finite and non-zero, not {fs.scale_n_per_count}")
+            raise ValueError(
+                f"force_sensor.scale_n_per_count must be finite and non-zero, not {fs.scale_n_per_count}"
+            )
         positive = ("tare_s", "stale_timeout_s", "connect_timeout_s", "overload_n", "tare_max_std_n",
                     "tare_max_shift_n", "negative_fault_n")  # fmt: skip
         if bad := [n for n in positive if not getattr(fs, n) > 0]:

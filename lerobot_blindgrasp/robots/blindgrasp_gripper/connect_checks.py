@@ -44,5 +44,5 @@ def refuse_unattended_calibration(robot) -> None:
     raise CalibrationFileError(
         f"No calibration file for robot id '{robot.id}' ({robot.calibration_fpath}), and no operator at this "
         f"terminal to calibrate it now (stdin is not a terminal). Nothing was moved.{hint} To calibrate, run "
-        f"lerobot-calibrate --robot=\"include robot_configs/blindgrasp_gripper.yaml\" --robot.id={robot.id}"
+        f'lerobot-calibrate --robot="include robot_configs/blindgrasp_gripper.yaml" --robot.id={robot.id}'
     )

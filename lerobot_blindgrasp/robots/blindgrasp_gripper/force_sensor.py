@@ -289,7 +289,9 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         if frame.status:
             raise ForceStreamError(self.fault_message(frame))
         newtons = force.counts_to_newtons(counts, self.offset, self.scale)
-        pulling = [f"{n} {f:+.2f} N" for n, f in zip(spec.FORCE_SENSOR_NAMES, newtons) if f < -self.negative_fault_n]
+        pulling = [
+            f"{n} {f:+.2f} N" for n, f in zip(spec.FORCE_SENSOR_NAMES, newtons) if f < -self.negative_fault_n
+        ]
         if pulling:
             raise ForceStreamError(
                 f"Force sensor reads {pulling}, below -{self.negative_fault_n} N: a fingertip load cell only feels "

@@ -18,7 +18,14 @@ from dataclasses import dataclass
 
 from lerobot_blindgrasp.hardware.xm430 import WATCHDOG_TRIPPED
 
-CHECKED = ("Torque_Enable", "Position_P_Gain", "Position_I_Gain", "Position_D_Gain", "Bus_Watchdog", "Goal_Current")
+CHECKED = (
+    "Torque_Enable",
+    "Position_P_Gain",
+    "Position_I_Gain",
+    "Position_D_Gain",
+    "Bus_Watchdog",
+    "Goal_Current",
+)
 BLOCK = ("Torque_Enable", "Goal_Current")  # first and last register of the block read (40 bytes per servo)
 READ = (*CHECKED, "Hardware_Error_Status")
 

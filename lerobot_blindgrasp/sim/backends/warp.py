@@ -37,9 +37,7 @@ try:
     import warp as wp
     from mujoco_warp._src import types as mjw_types  # field specs: which Model fields may be batched per world
 except ImportError as e:  # pragma: no cover - exercised only without the extra
-    raise ImportError(
-        "the warp backend needs MuJoCo Warp: pip install 'lerobot_policy_blindgrasp[gpu]'"
-    ) from e
+    raise ImportError("the warp backend needs MuJoCo Warp: pip install 'lerobot_policy_blindgrasp[gpu]'") from e
 
 # Per-world rows are allowed for Model array fields whose first dimension is "*".
 _WARP_FIELDS = {f.name: f.type for f in dataclasses.fields(mjw_types.Model)}
@@ -240,7 +238,10 @@ class WarpBackend:
     def snapshot(self):
         with wp.ScopedDevice(self.device):
             dev = [
-                {k: wp.clone(getattr(g.data, k)) for k in ("qpos", "qvel", "qacc_warmstart", "ctrl", "xfrc_applied")}
+                {
+                    k: wp.clone(getattr(g.data, k))
+                    for k in ("qpos", "qvel", "qacc_warmstart", "ctrl", "xfrc_applied")
+                }
                 for g in self.groups
             ]
         host = {k: getattr(self, k).copy() for k in ("qpos", "qvel", "ctrl", "xfrc_applied", "sensordata")}
