@@ -21,7 +21,7 @@ import draccus
 T = typing.TypeVar("T")
 
 
-def parse_config(cls: type[T], argv: list[str] | None = None) -> T:
+def parse_config[T](cls: type[T], argv: list[str] | None = None) -> T:
     """Parse a draccus config from argv (default sys.argv[1:]); a bad value is one line, not a traceback."""
     args = list(sys.argv[1:] if argv is None else argv)
     try:

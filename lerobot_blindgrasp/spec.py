@@ -146,7 +146,7 @@ OBJECT_XY_RANGE_M = 0.03
 # than any run needs (a demo collection advances its base by num_envs per env rebuild).
 SEED_RANGE_SIZE = 1 << 40
 SEED_RANGES: dict[str, range] = {
-    "teacher_train": range(0, SEED_RANGE_SIZE),
+    "teacher_train": range(SEED_RANGE_SIZE),
     "demos": range(SEED_RANGE_SIZE, 2 * SEED_RANGE_SIZE),
     "eval": range(2 * SEED_RANGE_SIZE, 3 * SEED_RANGE_SIZE),
 }

@@ -17,6 +17,9 @@ if ! { command -v avr-gcc && command -v make && command -v cc && [ -e /usr/inclu
   fi
 fi
 set +e
+# The project's lint rules and format (pyproject.toml [tool.ruff]; .pre-commit-config.yaml runs the same).
+ruff check . && ruff format --check .
+lint=$?
 # Idle OpenMP threads sleep instead of spinning (libgomp reads this once, when torch loads): the suite runs torch in
 # its own process and in the lerobot-train / lerobot-eval subprocesses it starts, and on 2 cores spinning threads
 # of one process starve the others. The package itself sets nothing on import; a user's own setting wins.
@@ -26,5 +29,9 @@ code=$?
 set -e
 if [ "$code" -eq 5 ]; then
   echo "error: pytest collected no tests (exit 5); the suite must not be empty" >&2
+fi
+if [ "$code" -eq 0 ] && [ "$lint" -ne 0 ]; then
+  echo "error: ruff check / ruff format --check failed (see above); run: ruff check --fix . && ruff format ." >&2
+  code=$lint
 fi
 exit "$code"

@@ -52,7 +52,7 @@ def test_spaces_task_and_episode_length():
     assert np.all(np.abs(q - spec.HOME_POSE) < spec.RESET_JOINT_NOISE_RAD + 0.03)
     # Holding the pose never lifts anything; the episode is truncated after exactly 10 s, not terminated.
     hold = _true_q(env).astype(np.float32)
-    for t in range(1, 1000):
+    for t in range(1, 1000):  # noqa: B007 (t is read after the loop)
         obs, reward, terminated, truncated, info = env.step(hold)
         if terminated or truncated:
             break

@@ -23,7 +23,7 @@ from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveDatagram,
 from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
 from lerobot_blindgrasp.teleoperators.manus_glove.stream import OFFSET_LEAK, GloveReceiver
 
-ERGO = {k: 1.0 for k in REQUIRED_KEYS}
+ERGO = dict.fromkeys(REQUIRED_KEYS, 1.0)
 
 
 def _receiver(max_latency_s: float = 0.1) -> GloveReceiver:

@@ -51,7 +51,7 @@ def test_force_mode_trials_through_the_vector_env(rig, calibrated, tmp_path):
     assert obs["agent_pos"].shape == (1, spec.STATE_DIM) and obs["agent_pos"].dtype == np.float32
     np.testing.assert_allclose(obs["agent_pos"][0, :9], spec.HOME_POSE, atol=cfg.home_tolerance_rad)
     rig.place_object()
-    for t in range(40):
+    for t in range(40):  # noqa: B007 (t is read after the loop)
         obs, reward, term, trunc, info = vec.step(CLOSE)
         if term[0] or trunc[0]:
             break

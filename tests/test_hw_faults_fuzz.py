@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 from dynamixel_sdk import COMM_SUCCESS, PortHandler
 from dynamixel_sdk import robotis_def as dx
-from lerobot_blindgrasp.hardware.emulators.dynamixel import make_packet
 from emulators.fixtures import as_q, rig, robot  # noqa: F401  (fixtures)
-from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware.emulators.dynamixel import make_packet
+from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN
 from lerobot_blindgrasp.hardware.xm430 import NO_LOAD_SPEED_RAD_S, RAD_PER_TICK
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
 from lerobot_blindgrasp.robots.blindgrasp_gripper import calibration as calib
@@ -32,8 +32,8 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import SYNC, Fram
 from lerobot_blindgrasp.robots.blindgrasp_gripper.plausibility import ImplausibleReadingError, PositionGate
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
-from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import MAX_ABS_DEG, PROTO, decode, encode
+from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
 
 FAST = settings(max_examples=100, deadline=None)
 INT32 = st.integers(-(2**31), 2**31 - 1)
@@ -209,7 +209,7 @@ datagrams = st.one_of(
     st.binary(max_size=200),
     json_values.map(lambda v: json.dumps(v).encode()),
     st.builds(_datagram, st.one_of(INT32, json_values), st.sampled_from(["left", "right", 3, None]),
-              st.fixed_dictionaries({k: scalars for k in REQUIRED_KEYS})),
+              st.fixed_dictionaries(dict.fromkeys(REQUIRED_KEYS, scalars))),
     st.builds(lambda s, cut: encode("fuzz", s, 1.0, OPEN)[:cut], st.integers(0, 2**32 - 1), st.integers(0, 400)),
     st.builds(_datagram, st.integers(0, 2**32), st.just("left"), st.just(OPEN), json_values | st.text(max_size=70),
               json_values | st.floats()),  # session and sender clock, any JSON

@@ -18,13 +18,13 @@ import draccus
 import numpy as np
 import pytest
 from emulators.fixtures import as_q, rig, robot, settle  # noqa: F401  (fixtures)
-from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot.robots.config import RobotConfig
 from lerobot.teleoperators.config import TeleoperatorConfig
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
 from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
+from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.hardware.xm430 import RAD_PER_TICK
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
@@ -307,7 +307,7 @@ def test_truncated_or_corrupt_glove_calibration_is_refused(tmp_path, monkeypatch
     good = (tmp_path / "op.json").read_text()
     cfg = ManusGloveConfig(id="op", port=free_udp_port(), calibration_dir=tmp_path)
     as_bool = json.dumps({"open": OPEN, "fist": {**FIST, "IndexMCPSpread": True}}).encode()
-    for name, text in [*_file_variants(good, (True, "12", None, [1])), ("a bool for a number", as_bool)]:
+    for _name, text in [*_file_variants(good, (True, "12", None, [1])), ("a bool for a number", as_bool)]:
         (tmp_path / "op.json").write_bytes(text)
         with pytest.raises(
             GloveCalibrationError, match=r"invalid.*Run lerobot-calibrate --teleop.type=manus_glove"

@@ -12,10 +12,10 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulator
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force
+from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader, ForceStreamError
 from lerobot_blindgrasp.sim import randomization, sensors
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
@@ -65,7 +65,7 @@ def test_the_sim_observation_goes_through_the_sensor_pipeline():
     """In the env: every observed force is exactly 0 or at least 0.1 N in magnitude (the deadband comes last), free
     tips read exactly 0 whenever their noise is small, and with the noise off the observation is the noise-free
     reading the rewards see."""
-    kw = dict(num_envs=4, objects=("cylinder_a_medium",), autoreset=False, nthread=1)
+    kw = {"num_envs": 4, "objects": ("cylinder_a_medium",), "autoreset": False, "nthread": 1}
     env = BatchedGraspEnv(GraspEnvConfig(**kw))
     obs = env.reset()
     seen = [obs["policy"][:, spec.STATE_FORCE_SLICE]]

@@ -62,7 +62,7 @@ def test_protocol_round_trip_and_rejections():
         (b"\xff\xfe garbage", "not JSON"),
         (b'{"proto": "other/1", "seq": 1}', "not a blindgrasp-glove/2"),
         (old_proto, "update the bridge"),
-        (encode("s", 1, 0.0, {k: 0.0 for k in sorted(REQUIRED_KEYS)[1:]}), "lacks"),
+        (encode("s", 1, 0.0, dict.fromkeys(sorted(REQUIRED_KEYS)[1:], 0.0)), "lacks"),
         (encode("s", 1, 0.0, {**ergo, "IndexMCPSpread": float("nan")}), "non-finite"),
         (encode("s", 1, 0.0, {**ergo, "IndexMCPSpread": 400.0}), "out of range"),
         (encode("s", 1, float("inf"), ergo), "sent"),

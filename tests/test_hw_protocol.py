@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 from dynamixel_sdk import COMM_RX_CORRUPT, COMM_RX_TIMEOUT, COMM_SUCCESS, PacketHandler, PortHandler
 from dynamixel_sdk import protocol2_packet_handler as p2
+
+from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware.emulators.dynamixel import (
     CONTROL_TABLE,
     HW_OVERLOAD,
@@ -21,8 +23,6 @@ from lerobot_blindgrasp.hardware.emulators.dynamixel import (
     _unstuff,
     crc16,
 )
-
-from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
 from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import FrameParser, crc16_ccitt_false, encode_frame
 

@@ -13,7 +13,6 @@ from pathlib import Path
 import draccus
 import numpy as np
 import pytest
-from lerobot_blindgrasp.hardware.emulators.dynamixel import HW_OVERHEATING, HW_OVERLOAD
 from emulators.fixtures import as_q, rig, robot, settle  # noqa: F401  (fixtures)
 from emulators.rig import MOUNT_SIGN
 from lerobot.datasets.pipeline_features import aggregate_pipeline_dataset_features, create_initial_features
@@ -22,6 +21,7 @@ from lerobot.robots.config import RobotConfig
 from lerobot.utils.feature_utils import combine_feature_dicts
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware.emulators.dynamixel import HW_OVERHEATING, HW_OVERLOAD
 from lerobot_blindgrasp.hardware.xm430 import (
     CURRENT_UNIT_A,
     RAD_PER_TICK,
@@ -174,7 +174,7 @@ def test_send_action_clips_to_the_step_bound_and_the_joint_limits(rig, robot):
 def test_malformed_actions_send_nothing(rig, robot):
     before = [s.get("Goal_Position") for s in rig.dxl.servos.values()]
     with pytest.raises(KeyError, match="ff_j10.pos"):
-        robot.send_action({k: 0.0 for k in spec.ACTION_NAMES[1:]})
+        robot.send_action(dict.fromkeys(spec.ACTION_NAMES[1:], 0.0))
     with pytest.raises(ValueError, match="Non-finite"):
         robot.send_action({**_zero_action(), "mf_j21.pos": math.nan})
     time.sleep(0.05)  # a sync write has no reply: leave time for one to land if it had been sent

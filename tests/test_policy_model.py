@@ -32,7 +32,7 @@ def make_policy(size: str = "quick", seed: int = 0, **kw) -> BlindgraspTransform
     # robomimic's init (N(0, 0.02), zero positional embedding) makes an untrained model nearly constant. Give every
     # weight a unit-gain scale so that inputs and positions visibly move the output in these tests.
     with torch.no_grad():
-        for name, param in policy.model.named_parameters():
+        for _name, param in policy.model.named_parameters():
             if param.ndim == 2:
                 param.normal_(0.0, param.shape[-1] ** -0.5)
         policy.model.pos_embed.normal_(0.0, 0.5)

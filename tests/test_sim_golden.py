@@ -33,10 +33,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import golden_sim as g
 import numpy as np
 import pytest
 
-import golden_sim as g
 from lerobot_blindgrasp import platform_id, spec
 from lerobot_blindgrasp.durable import atomic_write_text
 from lerobot_blindgrasp.sim import objects

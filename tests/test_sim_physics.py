@@ -181,7 +181,7 @@ def test_contact_directions_tell_a_sideways_lift_from_a_press_from_above():
         env = BatchedGraspEnv(GraspEnvConfig(num_envs=2, objects=(obj,), dr=dr, autoreset=False))
         obs = env.reset()
         script = PinchLiftScript(radius, height, lift)
-        found[obj] = contact_directions(env, obs, lambda o: script(env.joint_positions()), 100, after_steps=40)
+        found[obj] = contact_directions(env, obs, lambda o: script(env.joint_positions()), 100, after_steps=40)  # noqa: B023
     side, above = found["cylinder_a_medium"], found["capsule_small"]
     assert side["success_rate"] == 1.0 and side["contacts"] > 0
     assert abs(side["mean_downward"]) < 0.3 and side["share_pressing_down"] == 0.0

@@ -84,7 +84,7 @@ def test_scripted_grasp_holds_the_same_on_both_backends():
     """Closed loop through contact: the scripted pinch lifts the medium cylinder on both backends, under the
     paper's gain randomization. Warp keeps MuJoCo's noslip iterations, so the hold does not creep there either."""
     dr = replace(NO_PUSH, joint_offset_rad=0.0, object_xy_m=0.0)
-    kw = dict(num_envs=4, seed=5, objects=("cylinder_a_medium",), dr=dr, autoreset=False)
+    kw = {"num_envs": 4, "seed": 5, "objects": ("cylinder_a_medium",), "dr": dr, "autoreset": False}
     runs = {}
     for name, env in zip(("batch", "warp"), _pair(**kw)):
         env.reset()

@@ -150,7 +150,7 @@ def test_progress_curves_sum_training_time_and_weigh_objects_equally(tmp_path):
 
     (tmp_path / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))
     # Two sessions (a resume): the second rewrites iteration 2, as rsl-rl does after loading model_2.pt.
-    for session, its in ((0, range(0, 3)), (1, range(2, 4))):
+    for session, its in ((0, range(3)), (1, range(2, 4))):
         w = SummaryWriter(str(tmp_path), filename_suffix=f".s{session}")
         for it in its:
             w.add_scalar("Perf/collection_time", 3.0, it)
@@ -176,7 +176,7 @@ def test_a_run_continued_in_another_directory_is_one_curve(tmp_path, capsys):
 
     from lerobot_blindgrasp.analysis.progress import main, progress
 
-    for name, its, secs in (("a", range(0, 5), 2.0), ("b", range(3, 6), 10.0)):  # b resumed a's model_2.pt
+    for name, its, secs in (("a", range(5), 2.0), ("b", range(3, 6), 10.0)):  # b resumed a's model_2.pt
         d = tmp_path / name
         d.mkdir()
         (d / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))

@@ -208,7 +208,7 @@ def episodes_by_object(root: Path) -> dict[str, list[tuple[np.ndarray, np.ndarra
     episode = np.asarray(hf["episode_index"]).reshape(-1)
     task_index = np.asarray(hf["task_index"]).reshape(-1)
     by_task = {objects.get_object(o).task: o for o in objects.CATALOGUE}
-    task_names = {i: name for i, name in enumerate(ds.meta.tasks.index)}
+    task_names = dict(enumerate(ds.meta.tasks.index))
     out: dict[str, list] = {}
     for e in np.unique(episode):
         rows = np.flatnonzero(episode == e)

@@ -58,7 +58,7 @@ class Tally:
 
     @classmethod
     def from_json(cls, data: dict) -> Tally:
-        names = {f for f in ObjectTally.__dataclass_fields__}
+        names = set(ObjectTally.__dataclass_fields__)
         rows = data["objects"].items()
         return cls({name: ObjectTally(**{f: v for f, v in row.items() if f in names}) for name, row in rows})
 

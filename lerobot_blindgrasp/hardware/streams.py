@@ -33,7 +33,7 @@ import logging
 import threading
 import time
 from collections import deque
-from typing import Generic, TypeVar
+from typing import TypeVar
 
 logger = logging.getLogger(__name__)
 
@@ -47,7 +47,7 @@ class StreamError(ConnectionError):
     """No fresh valid frame: the device failed, never sent a valid frame, or went quiet."""
 
 
-class LatestFrameStream(Generic[F]):
+class LatestFrameStream[F]:
     name = "stream"  # what the operator reads in error messages ("Force-sensor", "Glove")
     error_type: type[ConnectionError] = StreamError
     lost_hint = "unplugged?"  # the likely cause of a failed device, for the operator

@@ -88,7 +88,7 @@ def write_grasp_strips(
 
     rows = len(picked)
     fig, axes = plt.subplots(rows, frames_per_row, figsize=(2.2 * frames_per_row, 1.75 * rows), squeeze=False)
-    for r, (shape, (name, video)) in enumerate(picked.items()):
+    for r, (_shape, (name, video)) in enumerate(picked.items()):
         frames, idx = read_frames(video, frames_per_row)
         for c, (img, t) in enumerate(zip(frames, idx / fps, strict=True)):
             ax = axes[r][c]

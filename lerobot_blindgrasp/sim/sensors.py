@@ -30,7 +30,7 @@ class SensorIndex:
     cols: dict[str, np.ndarray]
 
     @classmethod
-    def from_model(cls, m: mujoco.MjModel) -> "SensorIndex":
+    def from_model(cls, m: mujoco.MjModel) -> SensorIndex:
         cols = {}
         for kind in PER_TIP:
             rows = []

@@ -11,7 +11,6 @@ import math
 import numpy as np
 
 from lerobot_blindgrasp import spec
-
 from lerobot_blindgrasp.hardware.emulators.dynamixel import DynamixelBusEmulator
 from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulator
 

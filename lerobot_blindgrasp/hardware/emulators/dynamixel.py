@@ -496,7 +496,7 @@ class DynamixelBusEmulator(PtyDevice):
         touched = [(n, spec) for n, spec in CONTROL_TABLE.items() if spec[0] < end and addr < spec[0] + spec[1]]
         if not touched:
             return p2.ERRNUM_ACCESS
-        for name, (a, size, _, access) in touched:
+        for _name, (a, size, _, access) in touched:
             if access == "ro" or a < addr or a + size > end:
                 return p2.ERRNUM_ACCESS  # read-only, or a partial register write
             if access == "eeprom" and servo.get("Torque_Enable"):

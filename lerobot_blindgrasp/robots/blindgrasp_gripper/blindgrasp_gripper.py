@@ -49,8 +49,7 @@ from lerobot_blindgrasp.hardware.xm430 import (
 )
 
 from . import calibration as calib
-from . import force_calibration
-from . import connect_checks, health, latency_timer, policy_check, servo_state, signals
+from . import connect_checks, force_calibration, health, latency_timer, policy_check, servo_state, signals
 from .bus import PortLostError, RetryingDynamixelBus
 from .calibration import rad_to_ticks, ticks_to_rad
 from .config_blindgrasp_gripper import BlindgraspGripperConfig

@@ -74,7 +74,7 @@ class PositionGate:
         """A trusted reading (ticks). `free`: the torque is off, so the joints may be moved by hand faster than the
         servos could: a reading that disagrees with the estimate is then trusted once a second one confirms it."""
         previous: tuple[np.ndarray, float] | None = None
-        for attempt in range(1 + self.rereads):
+        for _attempt in range(1 + self.rereads):
             # The servos sample somewhere inside the transaction: time it from its start, and bound the motion by
             # the end of this one minus the start of the trusted one (the longest the joints could have moved).
             start = time.monotonic()

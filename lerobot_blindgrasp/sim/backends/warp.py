@@ -135,7 +135,7 @@ class WarpBackend:
             raise NotImplementedError(f"model fields differ between worlds but cannot be batched: {unbatchable}")
         batched = [k for k in differ if k in _BATCHABLE]
         nw = len(models)
-        model = mjw.put_model(base, batch_sizes={k: nw for k in batched})
+        model = mjw.put_model(base, batch_sizes=dict.fromkeys(batched, nw))
         model.opt.warn_overflow = int(model.opt.warn_overflow) & ~_NOT_FAILURES  # no print per iteration cap
         for k in batched:
             arr = getattr(model, k)
