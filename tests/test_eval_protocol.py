@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.demos import collect
 from lerobot_blindgrasp.pipeline import run as pipeline
+from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.sim import objects
 
 

@@ -32,9 +32,9 @@ import torch
 from tqdm import tqdm
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.durable import atomic_path, atomic_write_json, atomic_write_text
+from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.sim import objects
 
 KINDS = (
@@ -360,7 +360,7 @@ def _drift(trace, train_eps, held_eps, std, cfg) -> dict:
 
 
 def _check_against_eval(result: dict, eval_dir: Path) -> dict:
-    from lerobot_blindgrasp.analysis.compare import load_successes
+    from lerobot_blindgrasp.results.compare import load_successes
 
     theirs = load_successes(eval_dir)
     same = {o: theirs.get(o, [])[: len(r["successes"])] == r["successes"] for o, r in result["objects"].items()}

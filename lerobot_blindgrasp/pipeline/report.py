@@ -16,26 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_blindgrasp import durable
-from lerobot_blindgrasp.analysis import rates
-from lerobot_blindgrasp.analysis.plots import bar_chart, plot_curves, teacher_curves
-from lerobot_blindgrasp.envs.sim_env import object_for_task_id
 from lerobot_blindgrasp.pipeline.grasp_strips import write_grasp_strips
+from lerobot_blindgrasp.results import rates
+from lerobot_blindgrasp.results.compare import student_successes
+from lerobot_blindgrasp.results.plots import bar_chart, plot_curves, teacher_curves
 from lerobot_blindgrasp.sim import objects
 
 _LOSS_LINE = re.compile(r"step:\s*([\d.]+[KMB]?)\b.*?\bloss:\s*([\d.eE+-]+)")
-
-
-def student_successes(eval_info: dict) -> dict[str, list[bool]]:
-    """Per-object episode successes, in episode (= evaluation index) order, from lerobot-eval's per_task."""
-    return {
-        object_for_task_id(int(e["task_id"])): [bool(x) for x in e["metrics"].get("successes", [])]
-        for e in eval_info.get("per_task", [])
-    }
-
-
-def student_success(eval_info: dict) -> dict[str, float]:
-    """Per-object success rate from lerobot-eval's per_task entries."""
-    return {o: float(np.mean(f)) if f else 0.0 for o, f in student_successes(eval_info).items()}
 
 
 def parse_step(s: str) -> float:

@@ -26,8 +26,8 @@ from pathlib import Path
 from tqdm import tqdm
 
 from lerobot_blindgrasp import durable, spec
-from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.cli import command_line, parse_config
+from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.robustness import envelope, factors
 from lerobot_blindgrasp.sim import objects
 

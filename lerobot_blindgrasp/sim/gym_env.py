@@ -54,7 +54,7 @@ _MAX_SEED = spec.EVAL_TASK_STRIDE  # reset seeds are per-object evaluation indic
 
 def start_seed(seed: int, object_name: str) -> int:
     """The env seed of evaluation index `seed` on `object_name`: distinct per object, inside the eval range."""
-    return spec.eval_env_seed(seed, list(objects.CATALOGUE).index(objects.get_object(object_name).name))
+    return spec.eval_env_seed(seed, objects.task_id(object_name))
 
 
 class BlindGraspGymEnv(gym.Env):

@@ -23,8 +23,8 @@ import torch
 from tqdm import tqdm
 
 from lerobot_blindgrasp import durable, platform_id, spec
-from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.sim import objects, rewards
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.gym_env import start_seed

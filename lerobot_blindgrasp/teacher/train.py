@@ -302,7 +302,7 @@ def _train_previous_stage(cfg: TrainTeacherConfig, name: str, iterations: int) -
 
 def write_learning_curve(run_dir: Path) -> None:
     """learning_curve.png in the run directory, from its TensorBoard scalars."""
-    from lerobot_blindgrasp.analysis.plots import plot_curves, teacher_curves
+    from lerobot_blindgrasp.results.plots import plot_curves, teacher_curves
 
     curves = teacher_curves(run_dir)
     if curves:
