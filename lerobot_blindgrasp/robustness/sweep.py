@@ -5,7 +5,7 @@ beyond the training randomization, then several factors combined.
     blindgrasp-robustness --preset=smoke --output_dir=/tmp/rob             # what the tests run
     blindgrasp-robustness --factors=obs_latency,force_gain --output_dir=... # a subset
 
-Each point (one `DomainRandomization`, see `factors.py`) runs `episodes` evaluation episodes per object for the
+Each point (one `DomainRandomization`, see `presets/robustness.py`) runs `episodes` evaluation episodes per object for the
 student and the teacher (`rollout.run_point`) and is saved as its own JSON under `<output_dir>/points/`, named by a
 hash of everything that decides its outcome (condition, objects, episodes, seed, both checkpoints' SHA-256, the
 sim's source fingerprint). A re-run with the same arguments skips the points already there, so a killed sweep
@@ -27,17 +27,13 @@ from tqdm import tqdm
 
 from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.cli import command_line, parse_config
+from lerobot_blindgrasp.presets import robustness as factors
+from lerobot_blindgrasp.presets.robustness import SWEEPS
 from lerobot_blindgrasp.results import rates
-from lerobot_blindgrasp.robustness import envelope, factors
+from lerobot_blindgrasp.robustness import envelope
 from lerobot_blindgrasp.sim import objects
 
 log = logging.getLogger(__name__)
-
-PRESETS = {
-    # name: (episodes per object, objects, factor set)
-    "default": (10, "all", "default"),
-    "smoke": (1, "cuboid_a_medium,sphere_medium", "smoke"),
-}
 
 
 @dataclass
@@ -61,15 +57,15 @@ class RobustnessConfig:
     models_dir: Path | None = None
 
     def __post_init__(self):
-        if self.preset not in PRESETS:
-            raise ValueError(f"unknown preset {self.preset!r}; choose from {', '.join(PRESETS)}")
-        eps, objs, fset = PRESETS[self.preset]
-        self.episodes = self.episodes or eps
+        if self.preset not in SWEEPS:
+            raise ValueError(f"unknown preset {self.preset!r}; choose from {', '.join(SWEEPS)}")
+        sweep = SWEEPS[self.preset]
+        self.episodes = self.episodes or sweep.episodes
         if self.episodes < 1:
             raise ValueError(f"episodes must be >= 1, got {self.episodes}")
-        self.object_names = objects.resolve_objects(self.objects or objs)
+        self.object_names = objects.resolve_objects(self.objects or sweep.objects)
         spec.eval_env_seed(self.seed + self.episodes - 1, 0)
-        all_factors = factors.build_factors(fset)
+        all_factors = sweep.factors()
         if self.factors:
             wanted = [x.strip() for x in self.factors.split(",") if x.strip()]
             known = {f.name for f in all_factors}
