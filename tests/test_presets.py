@@ -16,9 +16,8 @@ from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.pipeline import run as pipeline
 from lerobot_blindgrasp.policies.blindgrasp_transformer import configuration_blindgrasp_transformer as student_cfg
-from lerobot_blindgrasp.presets import ablations
+from lerobot_blindgrasp.presets import ablations, teacher_configs
 from lerobot_blindgrasp.presets import teacher as teacher_presets
-from lerobot_blindgrasp.presets import teacher_configs
 from lerobot_blindgrasp.sim import rewards
 from lerobot_blindgrasp.teacher.train import TrainTeacherConfig
 
