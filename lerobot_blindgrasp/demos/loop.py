@@ -33,8 +33,10 @@ from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, records
 from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
 from lerobot_blindgrasp.demos.records import CollectStats
-from lerobot_blindgrasp.demos.rollout import Episode, run_episodes
 from lerobot_blindgrasp.hub import REPO_ID_PATTERN
+from lerobot_blindgrasp.rollout.actors import TeacherActor
+from lerobot_blindgrasp.rollout.envs import make_env
+from lerobot_blindgrasp.rollout.loop import Episode, stream
 from lerobot_blindgrasp.sim import randomization
 
 logger = logging.getLogger(__name__)
@@ -44,6 +46,9 @@ logger = logging.getLogger(__name__)
 # of every step until the next object finishes, usually hundreds of steps later. At 0.5, a 30-minute cpu run spent
 # ~19 % of its rollouts on objects that were already done.
 REBUILD_WASTE_FRACTION = 0.25
+
+# What a demo episode keeps of each step: o_t, the commanded targets, r_t and the forces (for curation).
+DEMO_TRACES = ("state", "action", "task_reward", "uniaxial_force")
 
 STOP_NOTE = "finishing this step and finalizing the dataset (again to abort now; written episodes stay readable)"
 
@@ -159,11 +164,14 @@ def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: st
                 env_objects = env.object_names
                 stale = {"now": False}
 
-                def act(obs, _env=env):
-                    stats.env_steps += _env.num_envs
-                    return teacher(obs, stochastic=cfg.stochastic)
+                teacher_act = TeacherActor(teacher, stochastic=cfg.stochastic)
 
-                episodes = run_episodes(env, act, lambda s=stale: stop.requested is not None or s["now"])
+                def act(obs, env, _act=teacher_act):
+                    stats.env_steps += env.num_envs
+                    return _act(obs, env)
+
+                should_stop = lambda s=stale: stop.requested is not None or s["now"]  # noqa: E731
+                episodes = stream(env, act, should_stop, record=DEMO_TRACES)
                 for ep in episodes:
                     with stop.saving():
                         cut, written = _handle_episode(saved.ds, ep, cfg.curation, tally, stats, target, bar)
@@ -232,20 +240,16 @@ def _finalize_or_abandon(ds) -> None:
 
 def _build_env(cfg: CollectConfig, object_names: list[str], seed: int, dr, reward_cfg):
     """Envs with autoreset for the objects that still need demos, env i seeded seed + i."""
-    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-
-    return BatchedGraspEnv(
-        GraspEnvConfig(
-            num_envs=cfg.num_envs,
-            objects=tuple(object_names),
-            seed=seed,
-            episode_s=cfg.curation.episode_s,
-            dr=dr,
-            reward=reward_cfg,
-            nthread=cfg.threads,
-            autoreset=True,
-            backend=cfg.backend,
-        )
+    return make_env(
+        "demos",
+        tuple(object_names),
+        num_envs=cfg.num_envs,
+        seed=seed,
+        dr=dr,
+        episode_s=cfg.curation.episode_s,
+        reward=reward_cfg,
+        nthread=cfg.threads,
+        backend=cfg.backend,
     )
 
 

@@ -6,7 +6,7 @@ beyond the training randomization, then several factors combined.
     blindgrasp-robustness --factors=obs_latency,force_gain --output_dir=... # a subset
 
 Each point (one `DomainRandomization`, see `presets/robustness.py`) runs `episodes` evaluation episodes per object for the
-student and the teacher (`rollout.run_point`) and is saved as its own JSON under `<output_dir>/points/`, named by a
+student and the teacher (`point.run_point`) and is saved as its own JSON under `<output_dir>/points/`, named by a
 hash of everything that decides its outcome (condition, objects, episodes, seed, both checkpoints' SHA-256, the
 sim's source fingerprint). A re-run with the same arguments skips the points already there, so a killed sweep
 continues where it stopped. After every point the summary is rewritten (summary.json, summary.md, envelope.md for
@@ -111,14 +111,15 @@ def run(cfg: RobustnessConfig, command: str = "") -> dict:
     """Run (or continue) the sweep; returns the summary it wrote. `command`: the command line, for the records."""
     import torch
 
-    from lerobot_blindgrasp.robustness.rollout import Student, run_point
+    from lerobot_blindgrasp.robustness.point import run_point
+    from lerobot_blindgrasp.rollout.actors import StudentActor
     from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     student_path = Path(cfg.student or default_student(cfg.models_dir))
-    student = Student.load(student_path, cfg.object_names)
+    student = StudentActor.load(student_path, cfg.object_names)
     teacher = TeacherPolicy(cfg.teacher or default_teacher())
     context = {
         "objects": list(cfg.object_names),

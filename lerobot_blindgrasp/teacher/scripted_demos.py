@@ -19,14 +19,12 @@ def collect(cfg: ScriptedDemos) -> dict:
     float32. Both observation groups are kept so that an actor reading either (the teacher's privileged one, or the
     "RL w/ o_t" row's student one) can be cloned."""
     # MuJoCo only when demos are collected, not when a preset names them
+    from lerobot_blindgrasp.rollout.envs import make_env
     from lerobot_blindgrasp.sim import scripted
-    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 
     n = cfg.episodes_per_object * len(cfg.objects)
     dr = randomization.PAPER_DR if cfg.pushes else randomization.EVAL_DR  # as train.build_env_config chooses
-    env = BatchedGraspEnv(
-        GraspEnvConfig(num_envs=n, objects=cfg.objects, seed=cfg.seed, dr=dr, autoreset=False, nthread=1)
-    )
+    env = make_env("scripts", cfg.objects, num_envs=n, seed=cfg.seed, dr=dr, nthread=1)
     obs = env.reset()
     script = scripted.SideGraspScript(
         env.joint_positions(), env.object_position(), [objects.get_object(name) for name in env.object_names]

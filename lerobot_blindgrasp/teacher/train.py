@@ -33,7 +33,8 @@ from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_confi
 from lerobot_blindgrasp.presets import SHIPPED_TEACHER_PRESET
 from lerobot_blindgrasp.presets.teacher import get_preset
 from lerobot_blindgrasp.presets.teacher_configs import TeacherPreset, Variant
-from lerobot_blindgrasp.sim import randomization
+from lerobot_blindgrasp.rollout.envs import env_config
+from lerobot_blindgrasp.sim import objects, randomization
 from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.teacher import blind_approach, distributed
 from lerobot_blindgrasp.teacher.checkpoints import atomic_save, export, newest_loadable_checkpoint
@@ -60,11 +61,13 @@ def build_env_config(
     dr = randomization.PAPER_DR if preset.external_force else randomization.EVAL_DR
     if preset.joint_calibration_rad:
         dr = dataclasses.replace(dr, joint_calibration_rad=preset.joint_calibration_rad)
-    return GraspEnvConfig(
+    return env_config(
+        "train",
+        objects.PAPER_OBJECTS,
         num_envs=num_envs,
         seed=seed,
-        reward=preset.reward,
         dr=dr,
+        reward=preset.reward,
         nthread=nthread,
         object_weights=preset.object_weights,
         backend=backend,
