@@ -299,7 +299,7 @@ def test_table_v_commands_for_the_recipe(tmp_path):
 
 
 def test_report_does_not_import_the_pipeline():
-    code = "import sys, lerobot_blindgrasp.pipeline.report; sys.exit('lerobot_blindgrasp.pipeline.run' in sys.modules)"
+    code = "import sys, lerobot_blindgrasp.pipeline.job_report; sys.exit('lerobot_blindgrasp.pipeline.run' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
 

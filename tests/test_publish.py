@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from lerobot_blindgrasp import shipped, spec
-from lerobot_blindgrasp.demos import curation, loop
+from lerobot_blindgrasp.demos import collection, curation
 from lerobot_blindgrasp.demos.config import CollectConfig
 from lerobot_blindgrasp.hub import cards, project, publish
 from lerobot_blindgrasp.teacher.policy import default_teacher
@@ -21,7 +21,7 @@ REAL = "https://code.example.org/lab/lerobot_blindgrasp"  # stands in for a publ
 def demos(tmp_path_factory) -> Path:
     """Two uncurated episodes of two objects from the shipped teacher: a real demo dataset, made in seconds."""
     out = tmp_path_factory.mktemp("publish") / "demos"
-    loop.collect(CollectConfig(teacher=default_teacher(), output_dir=out, repo_id="test/demos",
+    collection.collect(CollectConfig(teacher=default_teacher(), output_dir=out, repo_id="test/demos",
                                objects="sphere_medium,capsule_medium",
                                episodes_per_object=1, num_envs=2, seed=spec.DEMO_SEED + 11,
                                curation=curation.NO_CURATION, progress=False))  # fmt: skip

@@ -15,7 +15,7 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.analysis import student_diagnosis as diag
-from lerobot_blindgrasp.demos import curation, dagger, loop
+from lerobot_blindgrasp.demos import collection, curation, dagger
 from lerobot_blindgrasp.demos.config import CollectConfig
 from lerobot_blindgrasp.sim import objects
 
@@ -29,7 +29,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 def demos(tmp_path_factory) -> Path:
     """Two whole uncurated episodes per object from the shipped teacher."""
     out = tmp_path_factory.mktemp("demos") / "demos"
-    loop.collect(
+    collection.collect(
         CollectConfig(
             output_dir=out,
             repo_id="test/demos",

@@ -22,7 +22,7 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.rollout.envs import make_env
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 
 PRESSING_DOWN = 0.5  # -F_z/|F| above this: more than 30 degrees below horizontal
 

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 
 
 class TeacherActor:
@@ -53,7 +53,7 @@ class StudentActor:
         from lerobot.envs.factory import make_env_pre_post_processors
         from lerobot.policies import make_policy, make_pre_post_processors
 
-        from lerobot_blindgrasp.envs.sim_env import BlindGraspEnvConfig
+        from lerobot_blindgrasp.envs.sim_config import BlindGraspEnvConfig
 
         cfg = PreTrainedConfig.from_pretrained(str(path))
         cfg.pretrained_path = Path(path)

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 
 # Names of the per-episode randomization values an episode keeps (the Table II draw plus the reset's object offset).
 PHYSICS_DRAW_NAMES: tuple[str, ...] = (

@@ -44,7 +44,7 @@ import numpy as np  # noqa: E402
 
 from lerobot_blindgrasp import spaces, spec  # noqa: E402
 from lerobot_blindgrasp.sim import objects, randomization  # noqa: E402
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
 
 GYM_ID = "lerobot_blindgrasp/BlindGrasp-v0"
 # The scene's offscreen framebuffer (sim/gripper.py, <visual><global offwidth offheight>) bounds render sizes.

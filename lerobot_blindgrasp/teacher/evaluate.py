@@ -64,7 +64,7 @@ class EvalTeacherConfig:
 # sim/ modules that no policy episode runs: the scripted grasps (physics checks, cloning targets) and the sim demo
 # CLI. Editing them must not invalidate the recorded evals (a new script once forced the main job to re-evaluate
 # the shipped teacher).
-NOT_IN_EPISODES = ("scripted.py", "demo.py")
+NOT_IN_EPISODES = ("scripted.py", "viewer.py")
 
 
 def sim_fingerprint(root: Path | None = None) -> str:

@@ -25,14 +25,12 @@ homing offset.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import (
-    backends,
     events,
     gripper,
     objects,
@@ -44,64 +42,11 @@ from lerobot_blindgrasp.sim import (
     termination,
 )
 from lerobot_blindgrasp.sim.backends.batch import BatchBackend
+from lerobot_blindgrasp.sim.env_config import GraspEnvConfig, allocate_objects
 
 log = logging.getLogger(__name__)
 
 HOLD_PUSH_AFTER_STEPS = events.HOLD_PUSH_AFTER_STEPS
-
-
-@dataclass
-class GraspEnvConfig:
-    num_envs: int = 18
-    objects: tuple[str, ...] = objects.PAPER_OBJECTS  # assigned round-robin: env i gets objects[i % len]
-    # Relative share of envs per object (same order as `objects`); None: even, as the paper's 18 x 500.
-    object_weights: tuple[float, ...] | None = None
-    seed: int = 0  # env i uses seed + i
-    # Explicit per-env seeds (length num_envs), instead of seed + i: lets one batch hold several objects' evaluation
-    # seed blocks (spec.eval_env_seed), each env on exactly the start state the one-env gym env gives it.
-    env_seeds: tuple[int, ...] | None = None
-    episode_s: float = spec.EPISODE_S
-    dr: randomization.DomainRandomization = field(default_factory=lambda: randomization.PAPER_DR)
-    reward: rewards.RewardConfig = field(default_factory=lambda: rewards.PAPER_REWARD)
-    physics: gripper.PhysicsOptions = field(default_factory=gripper.PhysicsOptions)
-    nthread: int = 0  # 0: all CPUs
-    autoreset: bool = True
-    backend: str = (
-        "batch"  # physics: "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp, GPU; needs the gpu extra)
-    )
-    device: str | None = None  # warp only: "cuda:0", "cpu"; None: this process's GPU (LOCAL_RANK) if any, else CPU
-
-    def __post_init__(self):
-        backends.check_backend(self.backend)
-        self.objects = objects.resolve_objects(self.objects)
-        if self.num_envs < 1:
-            raise ValueError(f"num_envs must be >= 1, got {self.num_envs}")
-        if self.env_seeds is not None and len(self.env_seeds) != self.num_envs:
-            raise ValueError(f"env_seeds needs one seed per env ({self.num_envs}), got {len(self.env_seeds)}")
-        if self.object_weights is not None:
-            w = np.asarray(self.object_weights, dtype=float)
-            if w.shape != (len(self.objects),) or not np.isfinite(w).all() or (w <= 0).any():
-                raise ValueError(
-                    f"object_weights needs one positive weight per object ({len(self.objects)}), got {self.object_weights}"
-                )
-
-
-def allocate_objects(num_envs: int, num_objects: int, weights: tuple[float, ...] | None) -> np.ndarray:
-    """Object index of each env. Even weights give the round-robin i % num_objects. Otherwise each object gets
-    its weighted share of envs (largest remainders, at least one env each), interleaved so that any prefix of the
-    batch holds a mix of objects."""
-    if weights is None:
-        return np.arange(num_envs) % num_objects
-    w = np.asarray(weights, dtype=float) / np.sum(weights)
-    counts = np.minimum(1, num_envs // num_objects) + np.zeros(num_objects, dtype=np.int64)
-    share = w * (num_envs - counts.sum())
-    counts += np.floor(share).astype(np.int64)
-    rest = num_envs - counts.sum()
-    counts[np.argsort(-(share - np.floor(share)), kind="stable")[:rest]] += 1
-    # Interleave: sort envs by their fractional position within their object's run.
-    obj = np.repeat(np.arange(num_objects), counts)
-    pos = np.concatenate([(np.arange(c) + 0.5) / c for c in counts])
-    return obj[np.argsort(pos, kind="stable")]
 
 
 class BatchedGraspEnv:
@@ -237,37 +182,10 @@ class BatchedGraspEnv:
         if ids is not None and self.batch is None:
             raise NotImplementedError("stepping a subset of envs needs the batch backend")
         a = np.clip(self.validate_action(action), -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
-        q = self._qpos[:, observations.JOINTS]
-        target = self.action_latency(np.clip(q + a, spec.JOINT_LOWER, spec.JOINT_UPPER))
-        self.pushes(self._xfrc, self._object_body)
-        if self.servo.on:
-            failed = self.servo.step(self, target, ids)
-        else:
-            self._ctrl[:] = target
-            # unstable envs are reset below
-            failed = self.physics.step(self.cfg.physics.substeps, *(() if ids is None else (ids,)))
-        self.servo.last_target = target
-        self.hold_push.end(
-            self._xfrc, self._object_body
-        )  # a hold push lasts the one control period it was set for
-
+        target, failed = self._actuate(a, ids)
         obs = self._observe()
         raw = self._raw
-        step = rewards.StepQuantities(
-            lift=raw["lift"],
-            d_xy=raw["d_xy"],
-            uniaxial_force=raw["uniaxial_clean"],
-            q=raw["q"],
-            action=a,
-            prev_action=self.prev_action,
-            tip_object_distance=raw["tip_object_distance"],
-            tip_object_force=raw["tip_object_force"],
-            contact_threshold_n=self.cfg.reward.contact_threshold_n,
-        )
-        terms = rewards.compute_terms(step, self.cfg.reward)
-        reward = rewards.total(terms, self.cfg.reward)
-        reward[failed] = 0.0
-
+        terms, reward = self._rewards(raw, a, failed)
         self.episode_length += 1
         self.lifted_steps = termination.held_steps(self.lifted_steps, raw["lift"])
         self.success |= termination.is_success(self.lifted_steps)
@@ -276,7 +194,6 @@ class BatchedGraspEnv:
         self.episode_return += reward
         for k, v in terms.items():
             self.episode_terms[k] += v
-
         terminated = termination.out_of_workspace(raw["d_xy"], self.cfg.reward.workspace_radius_m) | failed
         truncated = termination.timed_out(self.episode_length, self.max_episode_steps, terminated)
         info = {
@@ -298,26 +215,64 @@ class BatchedGraspEnv:
             self.physics_resets += int(failed.sum())
             log.warning("physics unstable in envs %s; resetting them", np.flatnonzero(failed)[:10].tolist())
         if done.any():
-            ids = np.flatnonzero(done)
-            info["final"] = {
-                "env_ids": ids,
-                "object_index": self.object_index[ids],
-                "success": self.success[ids].copy(),
-                "episode_return": self.episode_return[ids].copy(),
-                "episode_length": self.episode_length[ids].copy(),
-                "terminated": terminated[ids],
-                "truncated": truncated[ids],
-                "terms": {k: v[ids].copy() for k, v in self.episode_terms.items()},
-                "observation": {k: v[ids].copy() for k, v in obs.items()},
-            }
-            if self.cfg.autoreset:
-                self.episode[ids] += 1
-                self._reset_envs(ids)
-                fresh = self._observe(ids)
-                for k in obs:
-                    obs[k][ids] = fresh[k]
-                self.obs_latency.restart(ids, fresh)  # a new episode starts with its own observation
+            self._end_episodes(np.flatnonzero(done), obs, info, terminated, truncated)
         return self.obs_latency(obs, done), reward, terminated, truncated, info
+
+    def _actuate(self, a: np.ndarray, ids: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """One control period of physics towards q + a: the events before it, the servos, the events after it.
+        Returns the target the servos were given and the envs whose physics failed."""
+        q = self._qpos[:, observations.JOINTS]
+        target = self.action_latency(np.clip(q + a, spec.JOINT_LOWER, spec.JOINT_UPPER))
+        self.pushes(self._xfrc, self._object_body)
+        if self.servo.on:
+            failed = self.servo.step(self, target, ids)
+        else:
+            self._ctrl[:] = target
+            # unstable envs are reset below
+            failed = self.physics.step(self.cfg.physics.substeps, *(() if ids is None else (ids,)))
+        self.servo.last_target = target
+        self.hold_push.end(self._xfrc, self._object_body)  # it lasts the one control period it was set for
+        return target, failed
+
+    def _rewards(self, raw: dict, a: np.ndarray, failed: np.ndarray) -> tuple[dict, np.ndarray]:
+        """The reward terms (eq. 1-6, `rewards.py`) and their weighted sum; 0 where the physics failed."""
+        step = rewards.StepQuantities(
+            lift=raw["lift"],
+            d_xy=raw["d_xy"],
+            uniaxial_force=raw["uniaxial_clean"],
+            q=raw["q"],
+            action=a,
+            prev_action=self.prev_action,
+            tip_object_distance=raw["tip_object_distance"],
+            tip_object_force=raw["tip_object_force"],
+            contact_threshold_n=self.cfg.reward.contact_threshold_n,
+        )
+        terms = rewards.compute_terms(step, self.cfg.reward)
+        reward = rewards.total(terms, self.cfg.reward)
+        reward[failed] = 0.0
+        return terms, reward
+
+    def _end_episodes(self, ids: np.ndarray, obs: dict, info: dict, terminated, truncated) -> None:
+        """Describe the episodes that ended in info["final"]; with autoreset, start their next ones (their rows of
+        `obs` become the new episodes' first observations)."""
+        info["final"] = {
+            "env_ids": ids,
+            "object_index": self.object_index[ids],
+            "success": self.success[ids].copy(),
+            "episode_return": self.episode_return[ids].copy(),
+            "episode_length": self.episode_length[ids].copy(),
+            "terminated": terminated[ids],
+            "truncated": truncated[ids],
+            "terms": {k: v[ids].copy() for k, v in self.episode_terms.items()},
+            "observation": {k: v[ids].copy() for k, v in obs.items()},
+        }
+        if self.cfg.autoreset:
+            self.episode[ids] += 1
+            self._reset_envs(ids)
+            fresh = self._observe(ids)
+            for k in obs:
+                obs[k][ids] = fresh[k]
+            self.obs_latency.restart(ids, fresh)  # a new episode starts with its own observation
 
     # --- frames and targets -------------------------------------------------------------------------------------
     def _measured_frame(self, q: np.ndarray, sel: slice | np.ndarray = slice(None)) -> np.ndarray:
