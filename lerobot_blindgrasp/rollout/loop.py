@@ -73,21 +73,11 @@ class Episode:
     randomization: np.ndarray  # (len(RANDOMIZATION_NAMES),) the physics draw and the object's start offset
     traces: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (length, width)
 
-    @property
-    def state(self) -> np.ndarray:
-        return self.traces["state"]
-
-    @property
-    def action(self) -> np.ndarray:
-        return self.traces["action"]
-
-    @property
-    def task_reward(self) -> np.ndarray:
-        return self.traces["task_reward"]
-
-    @property
-    def uniaxial_force(self) -> np.ndarray:
-        return self.traces["uniaxial_force"]
+    # the recorded traces a demo dataset and curation read, by name
+    state = property(lambda self: self.traces["state"])
+    action = property(lambda self: self.traces["action"])
+    task_reward = property(lambda self: self.traces["task_reward"])
+    uniaxial_force = property(lambda self: self.traces["uniaxial_force"])
 
 
 class _Recorder:
