@@ -17,8 +17,8 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.demos.rollout import Episode
 from lerobot_blindgrasp.hub import cards
+from lerobot_blindgrasp.rollout.loop import Episode
 from lerobot_blindgrasp.sim import objects
 
 OBJECTS = ("sphere_small", "capsule_large", "cuboid_a_medium", "cylinder_b_small")
@@ -32,16 +32,20 @@ def synthetic_episode(i: int, hold_start: int) -> Episode:
     r[hold_start:] = 0.8
     return Episode(
         object_name=OBJECTS[i % len(OBJECTS)],
-        state=rng.normal(size=(t, spec.STATE_DIM)).astype(np.float32),
-        action=rng.normal(size=(t, spec.ACTION_DIM)).astype(np.float32),
-        task_reward=r,
-        uniaxial_force=np.full((t, 3), 3.0),  # 9 N per step: the sum passes 200 N at step 22
         success=i % 2 == 0,
         left_workspace=False,
         physics_failed=False,
+        length=t,
+        max_lift=0.0,
         env_seed=100 + i,
         env_episode=i,
         randomization=np.array([0.8, 0.9, 1.1 + 0.1 * i, 2.0, 1.0, 0.01, -0.02]),
+        traces={
+            "state": rng.normal(size=(t, spec.STATE_DIM)).astype(np.float32),
+            "action": rng.normal(size=(t, spec.ACTION_DIM)).astype(np.float32),
+            "task_reward": r,
+            "uniaxial_force": np.full((t, 3), 3.0),  # 9 N per step: the sum passes 200 N at step 22
+        },
     )
 
 

@@ -15,6 +15,7 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.analysis import student_diagnosis as diag
+from lerobot_blindgrasp.analysis import student_fit
 from lerobot_blindgrasp.demos import collection, curation, dagger
 from lerobot_blindgrasp.demos.config import CollectConfig
 from lerobot_blindgrasp.sim import objects
@@ -48,9 +49,9 @@ def test_windows_are_the_windows_lerobot_train_loads(demos):
     ds = LeRobotDataset(
         "test/demos", root=demos, delta_timestamps={spec.STATE_KEY: [i / spec.CONTROL_HZ for i in range(-29, 1)]}
     )
-    episodes = diag.episodes_by_object(demos)
+    episodes = student_fit.episodes_by_object(demos)
     state, action = episodes["capsule_small"][0]
-    win, pad = diag.windows(state, 30)
+    win, pad = student_fit.windows(state, 30)
     capsule = list(ds.meta.tasks.index).index(objects.get_object("capsule_small").task)
     first = int(
         np.flatnonzero(np.asarray(ds.hf_dataset.with_format("numpy")["task_index"]).reshape(-1) == capsule)[0]
@@ -90,7 +91,7 @@ def test_each_failure_kind_follows_from_ground_truth():
 
 def test_drift_is_the_first_run_of_outside_steps():
     dist = np.array([[0, 5, 0, 5, 5, 5, 0], [5, 5, 5, 0, 0, 0, 0], [0, 0, 0, 0, 0, 5, 5]], float)
-    steps = diag.first_run_above(dist, 1.0, 3, np.array([7, 7, 6]))
+    steps = student_fit.first_run_above(dist, 1.0, 3, np.array([7, 7, 6]))
     assert steps.tolist() == [3, 0, -1]  # the third episode ended before its run of 2 grew to 3
 
 
