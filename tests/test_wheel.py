@@ -15,6 +15,7 @@ import os
 import subprocess
 import sys
 import sysconfig
+import tarfile
 import time
 import zipfile
 from pathlib import Path
@@ -95,6 +96,36 @@ def test_sdist_and_wheel_pass_twine_check_and_carry_the_shipped_files(built):
     metadata = next(n for n in names if n.endswith(".dist-info/METADATA"))
     text = zipfile.ZipFile(wheel).read(metadata).decode()
     assert "Project-URL: Source, " in text and f"Name: {DIST}" in text
+    # The license the metadata names travels with the code, as its full text.
+    assert "License-Expression: Apache-2.0" in text and "License-File: LICENSE" in text
+    licence = next(n for n in names if n.endswith(".dist-info/licenses/LICENSE"))
+    assert zipfile.ZipFile(wheel).read(licence).decode() == (ROOT / "LICENSE").read_text()
+
+
+def test_the_sdist_carries_what_a_packager_builds_and_tests_from(built):
+    """The license, changelog and citation, the guides, the tests with their data and emulators, the scripts the
+    README runs, and the shipped files; no training state or bytecode."""
+    sdist = _one(built, f"{DIST}-*.tar.gz")
+    with tarfile.open(sdist) as tar:
+        names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
+    tracked = [p.relative_to(ROOT).as_posix() for p in _tracked_or_none() or []]
+    wanted = {"LICENSE", "CHANGELOG.md", "CITATION.cff", "README.md", "pyproject.toml", "setup.py", "MANIFEST.in"}
+    wanted |= {p for p in tracked if p.split("/")[0] in ("docs", "tests", "scripts", "models", "robot_configs")}
+    wanted |= {"docs/getting-started.md", "docs/results.md", "tests/conftest.py", "scripts/main.sh"}
+    missing = sorted(wanted - names)
+    assert not missing, f"not in the sdist: {missing[:20]}"
+    assert not [n for n in names if n.endswith((".pyc", ".pt")) or "__pycache__" in n]
+
+
+def _tracked_or_none() -> list[Path] | None:
+    """The tracked files (none outside a git checkout, where the fixed list above is what is checked)."""
+    try:
+        proc = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True)
+    except OSError:  # no git
+        return None
+    if proc.returncode != 0:
+        return None
+    return [ROOT / p for p in proc.stdout.decode().split("\0") if p and (ROOT / p).is_file()]
 
 
 @pytest.mark.slow
