@@ -117,6 +117,33 @@ def test_the_sdist_carries_what_a_packager_builds_and_tests_from(built):
     assert not [n for n in names if n.endswith((".pyc", ".pt")) or "__pycache__" in n]
 
 
+def test_the_project_page_is_the_readme_with_absolute_links(built):
+    """The index shows the long description alone: each of the README's relative links and its image becomes an
+    address built from [project.urls] (a page under the Changelog URL's folder, the image's bytes under /raw/)."""
+    import tomllib
+
+    from lerobot_blindgrasp.hub import links
+
+    wheel = _one(built, f"{DIST}-*.whl")
+    with zipfile.ZipFile(wheel) as z:
+        metadata = z.read(next(n for n in z.namelist() if n.endswith(".dist-info/METADATA"))).decode()
+    assert "Description-Content-Type: text/markdown" in metadata
+    description = metadata.split("\n\n", 1)[1]
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    urls = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["urls"]
+    base, raw = links.file_base(urls), links.raw_base(urls)
+    assert base.startswith(urls["Source"]) and raw.startswith(urls["Source"])
+    relative = [m for m in links.LINK.finditer(readme) if links.is_relative(m.group(3))]
+    assert relative and any(m.group(1) for m in relative)  # pages and the picture
+    found = [m.group(3) for m in links.LINK.finditer(description)]
+    assert len(found) == len(list(links.LINK.finditer(readme)))
+    assert all(not links.is_relative(t) for t in found), [t for t in found if links.is_relative(t)]
+    for m in relative:  # each one points at the file it pointed at in the tree
+        path, fragment = links.repo_path(m.group(3), "README.md")
+        assert (ROOT / path).exists(), path
+        assert f"]({(raw if m.group(1) else base) + path}{fragment})" in description, m.group(0)
+
+
 def _tracked_or_none() -> list[Path] | None:
     """The tracked files (none outside a git checkout, where the fixed list above is what is checked)."""
     try:
