@@ -108,7 +108,7 @@ def collect_demos(cfg: PublishConfig, out: Path, repo_id: str) -> Path:
         joint_calibration_rad=recipe.demos.joint_calibration_rad,
         num_envs=min(recipe.demos.num_envs, _ENVS_PER_OBJECT * n_objects), resume=provenance.path(out).is_file(),
     )  # fmt: skip
-    print(f"demos: collecting {cfg.demo_episodes} curated episodes per object ({n_objects} objects) from "
+    print(f"demos: {'resuming' if collect.resume else 'collecting'} {cfg.demo_episodes} curated episodes per object ({n_objects} objects) from "
           f"{collect.teacher.name} into {out}", flush=True)  # fmt: skip
     loop.collect(collect, command=f"blindgrasp-publish (preset {DEMO_RECIPE}'s demo settings)")
     return out
