@@ -165,8 +165,13 @@ def test_the_wheel_works_outside_the_source_tree(built, tmp_path):
     Path(site, "_test_venv_packages.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     wheel = _one(built, f"{DIST}-*.whl")
     # This venv's pip, told to install into the fresh venv's interpreter (`--python`): no pip download either.
+    # Without PYTHONPATH: a source tree on it shows pip the build's egg-info as this version, already installed.
+    clean = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "--no-deps", "--no-index",
-                    "--quiet", str(wheel)], check=True, timeout=300)  # fmt: skip
+                    "--quiet", str(wheel)], check=True, timeout=300, env=clean)  # fmt: skip
+    assert (Path(site) / "lerobot_blindgrasp" / "__init__.py").is_file(), (
+        "pip left the fresh venv without the wheel"
+    )
     work = tmp_path / "elsewhere"  # no models/ or robot_configs/ here: only the wheel can provide them
     work.mkdir()
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "BLINDGRASP_TEACHER", "VIRTUAL_ENV")}
