@@ -130,10 +130,12 @@ def test_a_real_scripted_lift_passes_and_an_idle_hand_does_not():
     """The thresholds are reachable in our physics: the scripted pinch-and-lift of the medium cylinder passes once
     lifted (kept whole, hold included; trimmed before the hold when asked), a hand that never moves fails both criteria."""
     from lerobot_blindgrasp.demos.rollout import run_episodes
+
     from lerobot_blindgrasp.sim import randomization
-    from lerobot_blindgrasp.sim.demo import grasp_geometry
-    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+    from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
+    from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
     from lerobot_blindgrasp.sim.scripted import PinchLiftScript
+    from lerobot_blindgrasp.sim.viewer import grasp_geometry
 
     name = "cylinder_a_medium"
     env = BatchedGraspEnv(

@@ -22,7 +22,7 @@ import jinja2
 
 from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.demos import provenance, report
+from lerobot_blindgrasp.demos import provenance, yield_report
 from lerobot_blindgrasp.hub import project
 from lerobot_blindgrasp.sim import objects, randomization
 
@@ -124,7 +124,7 @@ def _dataset_fields(repo_id: str, meta) -> dict:
 
 def _sim_context(root: Path, repo_id: str, meta) -> dict:
     prov = provenance.load(root)
-    tally = report.load_tally(root)
+    tally = yield_report.load_tally(root)
     rows = []
     for name in prov["objects"]:
         o = tally.of(name)
