@@ -103,7 +103,7 @@ used to collect the curated demonstrations the `blindgrasp_transformer` student 
 - `teacher_config.json`: preset, reward, PPO settings, observation layout, source checkpoint `{w["source_checkpoint"]}`
   (sha256 `{w["source_sha256"]}`).
 
-Use it (`pip install {PACKAGE}`):
+Use it (`{project.install_line()}`):
 
     blindgrasp-eval-teacher --teacher=THIS_FOLDER --episodes=20
     blindgrasp-collect-demos --teacher=THIS_FOLDER --output_dir=runs/demos --repo_id=you/blindgrasp_demos
