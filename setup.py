@@ -6,7 +6,7 @@
    and `lerobot_blindgrasp.shipped.robot_configs` (their files are listed as package data in pyproject.toml). An
    explicit package list and a mapping cannot sit beside pyproject's `packages.find`, so the package list lives here.
 2. The long description (the package index's project page) is README.md with its relative links and its image made
-   absolute from `[project.urls]` (`lerobot_blindgrasp/hub/links.py`): the index shows the README alone, where
+   absolute from `[project.urls]` (`lerobot_blindgrasp/cards/links.py`): the index shows the README alone, where
    `docs/...` resolves to nothing.
 
 Everything else is in pyproject.toml.
@@ -28,7 +28,7 @@ SHIPPED = {
 def long_description() -> str:
     # Loaded by path: importing the package would import LeRobot, which a build environment does not have.
     spec = importlib.util.spec_from_file_location(
-        "_blindgrasp_links", ROOT / "lerobot_blindgrasp" / "hub" / "links.py"
+        "_blindgrasp_links", ROOT / "lerobot_blindgrasp" / "cards" / "links.py"
     )
     links = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(links)

@@ -15,11 +15,12 @@ import pytest
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.cli import GracefulStop, parse_config
 from lerobot_blindgrasp.demos import collect, collection, curation, provenance, yield_report
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos.config import CollectConfig
-from lerobot_blindgrasp.hub import cards, push
+from lerobot_blindgrasp.hub import push
 from lerobot_blindgrasp.sim import objects
 
 N_ENVS = 18  # one env per object

@@ -15,9 +15,10 @@ from lerobot.datasets.dataset_tools import delete_episodes, merge_datasets, remo
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.hub import cards
+from lerobot_blindgrasp.hub import push
 from lerobot_blindgrasp.rollout.loop import Episode
 from lerobot_blindgrasp.sim import objects
 
@@ -176,12 +177,12 @@ def test_sim_demos_merge_with_glove_schema_after_dropping_metadata(written, tmp_
     assert set(merged.meta.features) == set(glove.meta.features)
     # ...and the glove card renders from a lerobot-record style dataset.
     text = str(
-        cards.build_card(cards.card_kwargs(tmp_path / "glove", "test/glove", operators=["alice"]), "test/glove")
+        cards.build_card(push.card_kwargs(tmp_path / "glove", "test/glove", operators=["alice"]), "test/glove")
     )
     meta = cards.validate(text)
     assert "teleoperation" in meta["tags"] and "LeRobot" in meta["tags"]
     assert "grasp and lift the large sphere | 2 | 24" in text and "alice" in text
-    assert cards.detect_kind(tmp_path / "glove") == "glove"
+    assert push.detect_kind(tmp_path / "glove") == "glove"
 
 
 def test_resume_refuses_foreign_schema(tmp_path):

@@ -20,8 +20,7 @@ from lerobot.processor import PolicyProcessorPipeline
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch.utils.data import default_collate
 
-from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hub import project
+from lerobot_blindgrasp import project, spec
 from lerobot_blindgrasp.policies.blindgrasp_transformer import (
     BlindgraspTransformerConfig,
     BlindgraspTransformerPolicy,

@@ -11,9 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from lerobot_blindgrasp import presets, shipped
+from lerobot_blindgrasp import presets, project, shipped
+from lerobot_blindgrasp.cards import dataset_cards as cards
+from lerobot_blindgrasp.cards import links, model_cards
 from lerobot_blindgrasp.demos import provenance
-from lerobot_blindgrasp.hub import cards, links, model_cards, project, publish
+from lerobot_blindgrasp.hub import publish
 
 REAL = "https://code.example.org/lab/lerobot_blindgrasp"  # stands in for a public home in the tests only
 MODELS = [name for name, (kind, _) in project.HUB_REPOS.items() if kind == "model"]

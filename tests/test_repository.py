@@ -143,7 +143,7 @@ def test_citation_and_changelog_name_the_paper_release_and_code():
     import yaml
 
     from lerobot_blindgrasp import __version__
-    from lerobot_blindgrasp.hub import cards
+    from lerobot_blindgrasp.cards import dataset_cards as cards
 
     cff = yaml.safe_load((ROOT / "CITATION.cff").read_text(encoding="utf-8"))
     assert cff["cff-version"] == "1.2.0" and cff["version"] == __version__ and cff["authors"]

@@ -38,7 +38,7 @@ from lerobot.robots.config import RobotConfig
 from lerobot.teleoperators.config import TeleoperatorConfig
 import lerobot_blindgrasp
 from lerobot_blindgrasp import shipped
-from lerobot_blindgrasp.hub import project
+from lerobot_blindgrasp import project
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig
 from lerobot_blindgrasp.teacher.policy import default_teacher
 from dataclasses import dataclass
@@ -92,7 +92,7 @@ def test_sdist_and_wheel_pass_twine_check_and_carry_the_shipped_files(built):
         assert files, top
         missing = [str(f) for f in files if f"lerobot_blindgrasp/shipped/{f.as_posix()}" not in names]
         assert not missing, f"not in the wheel: {missing}"
-    assert "lerobot_blindgrasp/hub/card_templates/sim_teacher_demos.md" in names
+    assert "lerobot_blindgrasp/cards/card_templates/sim_teacher_demos.md" in names
     metadata = next(n for n in names if n.endswith(".dist-info/METADATA"))
     text = zipfile.ZipFile(wheel).read(metadata).decode()
     assert "Project-URL: Source, " in text and f"Name: {DIST}" in text
@@ -122,7 +122,7 @@ def test_the_project_page_is_the_readme_with_absolute_links(built):
     address built from [project.urls] (a page under the Changelog URL's folder, the image's bytes under /raw/)."""
     import tomllib
 
-    from lerobot_blindgrasp.hub import links
+    from lerobot_blindgrasp.cards import links
 
     wheel = _one(built, f"{DIST}-*.whl")
     with zipfile.ZipFile(wheel) as z:

@@ -33,7 +33,7 @@ from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, records
 from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
 from lerobot_blindgrasp.demos.records import CollectStats
-from lerobot_blindgrasp.hub import REPO_ID_PATTERN
+from lerobot_blindgrasp.project import REPO_ID_PATTERN
 from lerobot_blindgrasp.rollout.actors import TeacherActor
 from lerobot_blindgrasp.rollout.envs import make_env
 from lerobot_blindgrasp.rollout.loop import Episode, stream

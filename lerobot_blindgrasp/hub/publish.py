@@ -24,9 +24,11 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp import durable, shipped
+from lerobot_blindgrasp import durable, project, shipped
+from lerobot_blindgrasp.cards import model_cards
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.hub import REPO_ID_PATTERN, model_cards, project, push
+from lerobot_blindgrasp.hub import push
+from lerobot_blindgrasp.project import REPO_ID_PATTERN
 
 # Files of a shipped model folder that belong on the Hub (the student's are all of LeRobot's pretrained_model).
 _TEACHER_FILES = ("teacher.safetensors", "teacher_config.json", "README.md", "eval/*")

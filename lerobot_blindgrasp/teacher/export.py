@@ -18,9 +18,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp import durable
+from lerobot_blindgrasp import durable, project
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.hub import project
 from lerobot_blindgrasp.teacher import policy
 
 CARD_NAME = "README.md"

@@ -35,8 +35,7 @@ from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch import Tensor, nn
 
-from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hub import project
+from lerobot_blindgrasp import project, spec
 
 from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
 from .processor_blindgrasp_transformer import Q_NOW, normalized_delta_to_target

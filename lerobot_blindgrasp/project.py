@@ -15,7 +15,10 @@
 from __future__ import annotations
 
 import importlib.metadata
+import re
 
+# The shape of a Hub repo id, checked before anything is written or uploaded.
+REPO_ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*/[A-Za-z0-9][A-Za-z0-9_.-]*$")
 DIST = "lerobot_policy_blindgrasp"  # LeRobot's plugin discovery imports the module named like the distribution
 PLACEHOLDER_HOST = "example.invalid"
 # The Hub repo names, under the namespace given to `blindgrasp-publish --namespace=`: folder under models/ (or

@@ -13,10 +13,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from lerobot_blindgrasp.hub import links, project
+from lerobot_blindgrasp import project
+from lerobot_blindgrasp.cards import links
 
 BEGIN = (
-    "<!-- install-and-use: generated (lerobot_blindgrasp/hub/model_cards.py); blindgrasp-publish rewrites it -->"
+    "<!-- install-and-use: generated (lerobot_blindgrasp/cards/model_cards.py); blindgrasp-publish rewrites it -->"
 )
 END = "<!-- /install-and-use -->"
 HEADING = "## Install and use"
