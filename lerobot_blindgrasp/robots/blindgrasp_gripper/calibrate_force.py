@@ -59,10 +59,7 @@ def _window(reader: ForceSensorReader, settle_s: float, window_s: float) -> fc.W
     while time.monotonic() < deadline or len(samples) < 5:
         if not reader.wait_frames(1, reader.stale_timeout_s * 4):
             raise ForceStreamError(f"The force board stopped sending ({len(samples)} frames in this window).")
-        frame = reader.fresh()
-        if frame.status:
-            raise ForceStreamError(reader.fault_message(frame))
-        samples.append(frame.counts)
+        samples.append(reader.fresh().counts)  # fresh() raises on a fault the frame flags
     return fc.Window.of(samples)
 
 
