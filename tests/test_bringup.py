@@ -133,7 +133,7 @@ def test_connect_on_the_emulators_says_nothing_about_latency(tmp_path, monkeypat
     with GripperRig() as rig, caplog.at_level(logging.DEBUG, logger=latency_timer.__name__):
         rig.hand_move(spec.HOME_POSE)
         _connect(rig, tmp_path / "calibration", monkeypatch).disconnect()
-    assert not caplog.records
+    assert not [r for r in caplog.records if r.name == latency_timer.__name__]
 
 
 def test_no_calibration_and_no_operator_is_refused_before_a_byte_is_sent(tmp_path, monkeypatch):
@@ -151,6 +151,14 @@ def test_no_calibration_and_no_operator_is_refused_before_a_byte_is_sent(tmp_pat
     message = str(err.value)
     assert "'eval_gripper'" in message and str(calibration_dir / "eval_gripper.json") in message
     assert "lab_gripper" in message and "--robot.id" in message and "lerobot-calibrate" in message
+
+
+def test_force_calibrations_in_the_folder_are_not_offered_as_robot_ids(tmp_path):
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.connect_checks import calibrated_ids
+
+    for name in ("lab_gripper.json", "lab_gripper.force.json", "spare.force.json", "old_gripper.json"):
+        (tmp_path / name).write_text("{}")
+    assert calibrated_ids(tmp_path) == ["lab_gripper", "old_gripper"]
 
 
 def test_the_bringup_geometry_table_is_the_sims():
