@@ -128,6 +128,27 @@ def test_a_dead_or_saturated_cell_is_a_named_fault_and_the_stream_goes_on(build_
         board.stop()
 
 
+def test_a_cell_whose_dout_is_held_low_keeps_its_last_value(build_dir):
+    """A DOUT line shorted to GND reads as "ready" and clocks out 24 zeros, and the 25th pulse leaves it low, so the
+    firmware rejects the read. The fault frames then carry that cell's last valid conversion with its bit set,
+    never the zeros of the failed read."""
+    board = _board(build_dir)
+    reader = _reader(board.port)
+    try:
+        reader.connect()
+        assert reader.wait_frames(3, 1.0)
+        board.hold_dout_low(1)
+        assert reader.wait_frames(3, 2.0)  # 50 ms without a valid conversion, then a fault frame every 50 ms
+        frame = reader.latest()[0]
+    finally:
+        reader.disconnect()
+        board.stop()
+    assert frame.status == 0b010, frame
+    assert "mf_tip (channel 1) stopped converting" in reader.fault_message(frame)
+    assert abs(frame.counts[1] - OFFSET[1]) <= 200, frame  # the last conversion (+-200 counts of noise), not 0
+    assert [abs(c - o) <= 200 for c, o in zip(frame.counts, OFFSET)] == [True] * 3
+
+
 def test_a_board_at_36_per_second_is_called_slow(build_dir):
     """Every frame fresh and on time, none old enough to be stale, just fewer than the 40/s the host needs: "slow",
     with the rate the board sends at and the RATE pin named."""

@@ -4,7 +4,7 @@ real reader exactly like the board's USB serial port.
 The firmware runs unchanged (its HEX image, the one a user flashes) on an emulated ATmega328P; three emulated HX711
 chips sit on its pins (`simavr/hx711_sim.c`). What the load cells feel is set in counts (`set_counts`) or newtons
 (`set_forces`, through a scale and an offset as a real cell and bridge give them); faults are `kill_cell` (a chip
-stops converting) and `revive_cell`. Built on first use into `build_dir` (a temporary folder by default).
+stops converting), `hold_dout_low` (a DOUT line shorted to GND) and `revive_cell`. Built on first use into `build_dir` (a temporary folder by default).
 """
 
 from __future__ import annotations
@@ -88,7 +88,12 @@ class SimulatedForceBoard:
     def kill_cell(self, index: int) -> None:
         self._send(f"dead {index}")
 
+    def hold_dout_low(self, index: int) -> None:
+        """Cell `index`'s DOUT line held low (shorted to GND): every read clocks out zeros and fails its check."""
+        self._send(f"stuck {index}")
+
     def revive_cell(self, index: int) -> None:
+        """Undo `kill_cell` or `hold_dout_low`."""
         self._send(f"alive {index}")
 
     def stop(self) -> None:
