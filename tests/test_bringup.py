@@ -205,3 +205,14 @@ def test_real_report_answers_a_bare_path_and_takes_the_run_folder(tmp_path, caps
     (run / "eval_info.json").write_text('{"overall": {}}')
     with pytest.raises(SystemExit, match="no per_task list"):
         real_report.main([f"--eval_info={run}"])
+
+
+def test_a_force_port_that_is_not_there_says_how_to_find_it(tmp_path):
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import ForceSensorConfig
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader, ForceStreamError
+
+    assert ForceSensorConfig().port.startswith("/dev/ttyUSB")  # what a Nano's FT232RL or CH340 appears as
+    reader = ForceSensorReader(str(tmp_path / "ttyUSB1"), 115_200, [2.5e-5] * 3)
+    with pytest.raises(ForceStreamError, match=r"ttyUSB1'.*lerobot-find-port.*99-blindgrasp\.rules"):
+        reader.connect()
+    assert not reader.is_connected

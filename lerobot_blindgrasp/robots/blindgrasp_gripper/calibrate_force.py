@@ -1,7 +1,7 @@
 """`blindgrasp-calibrate-force`: weigh each fingertip with a known mass; save scale, offset and the verified wiring.
 
     blindgrasp-calibrate-force --robot.type=blindgrasp_gripper --robot.id=lab_gripper \
-        --robot.force_sensor.port=/dev/ttyACM0 --mass_kg=0.5
+        --robot.force_sensor.port=/dev/ttyUSB1 --mass_kg=0.5
 
 The same `--robot` flags as `lerobot-calibrate` (or `--robot="include robot_configs/blindgrasp_gripper.yaml"`), so the
 file lands next to that robot's servo calibration and the robot finds it at connect. Only the force board is

@@ -200,7 +200,11 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         except ConnectionError:
             raise  # PortInUseError: says itself what to do
         except (OSError, serial.SerialException) as e:
-            raise ForceStreamError(f"Could not open the force-sensor port '{self.port}': {e}") from e
+            raise ForceStreamError(
+                f"Could not open the force-sensor port '{self.port}': {e}. Find the force board's port with "
+                "lerobot-find-port and pass --robot.force_sensor.port=..., or install "
+                "robot_configs/udev/99-blindgrasp.rules for /dev/blindgrasp_force (docs/bringup.md, section 5)."
+            ) from e
         self._serial.reset_input_buffer()
 
     def _receive(self) -> list[Frame]:
