@@ -10,6 +10,7 @@ stops converting), `hold_dout_low` (a DOUT line shorted to GND) and `revive_cell
 from __future__ import annotations
 
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -125,37 +126,65 @@ class SimConfig:
     sps: float = 80.0
     # Force on each pad while it runs (N), ff, mf, th.
     forces_n: list[float] = field(default_factory=lambda: [1.0, 2.0, 3.0])
+    # Where the firmware and the harness are built (the build command's --out_dir; reused when up to date).
+    build_dir: Path = Path("build/force_board")
+
+
+def _newest_frame_ages_ms(reader, seconds: float) -> list[float]:
+    """The newest frame's age at reads spread over every phase of the board's period, for `seconds`: what a
+    control loop that reads at its own times sees (half a period on average when frames are handed on as they
+    arrive)."""
+    ages, k, deadline = [], 0, time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        time.sleep(0.003 + 0.0013 * (k % 7))
+        ages.append(reader.latest()[1] * 1e3)
+        k += 1
+    return ages
+
+
+def _report(reader, board: SimulatedForceBoard, cfg: SimConfig) -> None:
+    """Rate and latency first (they need no tare), then forces in newtons; raises the reader's error when it
+    refuses the stream (a slow board cannot be tared)."""
+    time.sleep(0.3)
+    frames0, t1 = reader.frames, time.monotonic()
+    ages_ms = _newest_frame_ages_ms(reader, cfg.seconds)
+    rate = (reader.frames - frames0) / (time.monotonic() - t1)
+    print(
+        f"port {board.port}: {rate:.1f} frames/s, {reader.dropped_frames} dropped, "
+        f"{reader.parser.crc_errors} CRC errors, stream rate estimate {reader.rate_hz():.0f}/s"
+    )
+    print(f"newest frame's age when read: mean {np.mean(ages_ms):.1f} ms, max {np.max(ages_ms):.1f} ms "
+          f"({len(ages_ms)} reads)")  # fmt: skip
+    reader.tare(0.5)
+    board.set_forces(cfg.forces_n)
+    reader.wait_frames(4, 1.0)  # past any conversion made before the change (read() says if none came)
+    print(f"forces given {cfg.forces_n} N, read {np.round(reader.read(), 3).tolist()} N")
 
 
 def main(argv: list[str] | None = None) -> None:
     """`python -m lerobot_blindgrasp.hardware.force_board.sim`: the board without hardware, read by the robot's
-    reader with the robot config's defaults."""
+    reader with the robot config's defaults. Exits 1 when the reader refuses the stream (e.g. `--sps=10`)."""
     from lerobot_blindgrasp.cli import parse_config
     from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import ForceSensorConfig
-    from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader, ForceStreamError
 
     cfg = parse_config(SimConfig, argv)
-    with SimulatedForceBoard(sps=cfg.sps) as board:
+    refused = None
+    with SimulatedForceBoard(sps=cfg.sps, build_dir=cfg.build_dir) as board:
         fs = ForceSensorConfig(port=board.port)
         reader = ForceSensorReader(board.port, fs.baudrate, board.scale.tolist(), stale_timeout_s=fs.stale_timeout_s,
                                    connect_timeout_s=fs.connect_timeout_s, frozen_frames=fs.frozen_frames,
                                    min_rate_hz=fs.min_rate_hz)  # fmt: skip
         reader.connect()
         try:
-            reader.tare(0.5)
-            board.set_forces(cfg.forces_n)
-            time.sleep(0.3)
-            frames0, t1 = reader.frames, time.monotonic()
-            time.sleep(cfg.seconds)
-            rate = (reader.frames - frames0) / (time.monotonic() - t1)
-            print(
-                f"port {board.port}: {rate:.1f} frames/s, {reader.dropped_frames} dropped, "
-                f"{reader.parser.crc_errors} CRC errors, stream rate estimate {reader.rate_hz():.0f}/s"
-            )
-            print(f"forces given {cfg.forces_n} N, read {np.round(reader.read(), 3).tolist()} N")
+            _report(reader, board, cfg)
+        except ForceStreamError as e:
+            refused = e
         finally:
             reader.disconnect()
     print(board.log.strip())
+    if refused is not None:
+        sys.exit(f"the robot's reader refuses this stream: {refused}")
 
 
 if __name__ == "__main__":
