@@ -105,7 +105,9 @@ def test_the_udev_rules_name_the_adapters_and_set_the_timer():
     assert sum('SYMLINK+="blindgrasp_force"' in r for r in rules) >= 2  # the Nano's FTDI and CH340 variants
     # The Nano's USB chips the guide names are the ones the rules give the force board's name.
     named = set(re.findall(r'idVendor}=="(\w+)", ATTRS{idProduct}=="(\w+)", SYMLINK\+="blindgrasp_force"', text))
-    [nano] = re.findall(r"the Nano \(([^)]*)\) `/dev/blindgrasp_force`", (ROOT / "docs" / "bringup.md").read_text())
+    [nano] = re.findall(
+        r"the Nano \(([^)]*)\) `/dev/blindgrasp_force`", (ROOT / "docs" / "bringup.md").read_text()
+    )
     assert set(re.findall(r"([0-9a-f]{4}):([0-9a-f]{4})", nano)) == named, (nano, named)
 
 
