@@ -107,8 +107,7 @@ def _signal_handlers():
 
 
 def test_the_documented_gripper_calibration(lab):
-    [argv] = documented("lerobot-calibrate", BRINGUP)[:1]
-    assert f"--robot.id={GRIPPER_ID}" in argv
+    [argv] = [a for a in documented("lerobot-calibrate", BRINGUP) if f"--robot.id={GRIPPER_ID}" in a]
     lab.run(argv + lab.robot_args(), operator=lab.rig.calibration_inputs())
     assert (lab.calibration_dir / f"{GRIPPER_ID}.json").is_file()
     assert not lab.rig.dxl.any_torque()
