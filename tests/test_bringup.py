@@ -103,6 +103,12 @@ def test_the_udev_rules_name_the_adapters_and_set_the_timer():
     assert any('SYMLINK+="blindgrasp_u2d2"' in r and 'GROUP="dialout"' in r for r in u2d2)
     assert any('ATTR{latency_timer}="1"' in r and 'SUBSYSTEM=="usb-serial"' in r for r in u2d2)
     assert sum('SYMLINK+="blindgrasp_force"' in r for r in rules) >= 2  # the Nano's FTDI and CH340 variants
+    # The Nano's USB chips the guide names are the ones the rules give the force board's name.
+    named = set(re.findall(r'idVendor}=="(\w+)", ATTRS{idProduct}=="(\w+)", SYMLINK\+="blindgrasp_force"', text))
+    [nano] = re.findall(
+        r"the Nano \(([^)]*)\) `/dev/blindgrasp_force`", (ROOT / "docs" / "bringup.md").read_text()
+    )
+    assert set(re.findall(r"([0-9a-f]{4}):([0-9a-f]{4})", nano)) == named, (nano, named)
 
 
 def _connect(rig: GripperRig, calibration_dir: Path, monkeypatch):
@@ -133,7 +139,7 @@ def test_connect_on_the_emulators_says_nothing_about_latency(tmp_path, monkeypat
     with GripperRig() as rig, caplog.at_level(logging.DEBUG, logger=latency_timer.__name__):
         rig.hand_move(spec.HOME_POSE)
         _connect(rig, tmp_path / "calibration", monkeypatch).disconnect()
-    assert not caplog.records
+    assert not [r for r in caplog.records if r.name == latency_timer.__name__]
 
 
 def test_no_calibration_and_no_operator_is_refused_before_a_byte_is_sent(tmp_path, monkeypatch):
@@ -151,6 +157,14 @@ def test_no_calibration_and_no_operator_is_refused_before_a_byte_is_sent(tmp_pat
     message = str(err.value)
     assert "'eval_gripper'" in message and str(calibration_dir / "eval_gripper.json") in message
     assert "lab_gripper" in message and "--robot.id" in message and "lerobot-calibrate" in message
+
+
+def test_force_calibrations_in_the_folder_are_not_offered_as_robot_ids(tmp_path):
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.connect_checks import calibrated_ids
+
+    for name in ("lab_gripper.json", "lab_gripper.force.json", "spare.force.json", "old_gripper.json"):
+        (tmp_path / name).write_text("{}")
+    assert calibrated_ids(tmp_path) == ["lab_gripper", "old_gripper"]
 
 
 def test_the_bringup_geometry_table_is_the_sims():
@@ -197,3 +211,14 @@ def test_real_report_answers_a_bare_path_and_takes_the_run_folder(tmp_path, caps
     (run / "eval_info.json").write_text('{"overall": {}}')
     with pytest.raises(SystemExit, match="no per_task list"):
         real_report.main([f"--eval_info={run}"])
+
+
+def test_a_force_port_that_is_not_there_says_how_to_find_it(tmp_path):
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import ForceSensorConfig
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader, ForceStreamError
+
+    assert ForceSensorConfig().port.startswith("/dev/ttyUSB")  # what a Nano's FT232RL or CH340 appears as
+    reader = ForceSensorReader(str(tmp_path / "ttyUSB1"), 115_200, [2.5e-5] * 3)
+    with pytest.raises(ForceStreamError, match=r"ttyUSB1'.*lerobot-find-port.*99-blindgrasp\.rules"):
+        reader.connect()
+    assert not reader.is_connected

@@ -10,7 +10,9 @@ history under docs/research or the records under docs/results). For each `lerobo
 - `--help` of each program prints its help and exits 0;
 - where an emulator or a recorded file can serve it, the command runs whole (`real_report` on an eval_info.json
   recorded by lerobot-eval on the emulated gripper; `lerobot-find-port` up to its first question). The guide's
-  lerobot-record and lerobot-teleoperate lines run whole on the emulators in test_glove_training.py.
+  lerobot-record and lerobot-teleoperate lines run whole on the emulators in test_glove_training.py; its
+  calibrations (gripper, glove, `blindgrasp-calibrate-force`), `blindgrasp-rollout`, `lerobot-eval` of the real env
+  with its report, and the force board's build and sim lines in test_docs_commands_run.py.
 Placeholders (`<user>`, `<checkpoint>` ...) become concrete values; a `--policy.path` that does not exist becomes the
 shipped student, since LeRobot reads a policy's config at parse time. Nothing trains, records or moves.
 """

@@ -20,6 +20,7 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper impo
     BlindgraspGripperConfig,
     ForceSensorConfig,
 )
+from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader
 
 TRUE_SCALE = (3.1e-5, -2.2e-5, 2.7e-5)  # the cells as built: one bridge wired the other way round
 WEIGHT_N = 0.5 * fc.STANDARD_GRAVITY
@@ -27,7 +28,7 @@ WEIGHT_N = 0.5 * fc.STANDARD_GRAVITY
 LOADS = [[0, 0, 0], [WEIGHT_N, 0, 0], [0, WEIGHT_N, 0], [0, 0, WEIGHT_N], [0, 0, 0]]
 
 
-def test_the_command_calibrates_each_fingertip_and_the_robot_uses_it(tmp_path, monkeypatch):
+def test_the_command_calibrates_each_fingertip_and_the_robot_uses_it(tmp_path, monkeypatch, caplog):
     cal_dir = tmp_path / "calibration"
     with GripperRig(scale_n_per_count=TRUE_SCALE) as rig:
         rig.hand_move(spec.HOME_POSE)
@@ -53,6 +54,7 @@ def test_the_command_calibrates_each_fingertip_and_the_robot_uses_it(tmp_path, m
         monkeypatch.setattr("builtins.input", rig.calibration_inputs())
         robot = BlindgraspGripper(cfg)
         robot.connect()
+        assert "No force calibration" not in caplog.text
         try:
             rig.force.forces_n = np.array([3.0, 4.0, 0.0])
             robot.force.wait_frames(4, 1.0)
@@ -62,6 +64,23 @@ def test_the_command_calibrates_each_fingertip_and_the_robot_uses_it(tmp_path, m
             assert obs["mf_tip.force"] == pytest.approx(4.0, abs=0.05)
         finally:
             robot.disconnect()
+
+
+def test_without_a_force_calibration_connect_warns_and_names_the_command(tmp_path, caplog):
+    """The placeholder scale is used, but not silently: the warning names the file it looked for and the command
+    that makes it, with this robot's id."""
+    reader = ForceSensorReader("/dev/null", 115_200, [2.5e-5] * 3)
+    (tmp_path / "lab_gripper.json").write_text("{}")  # a servo calibration is not a force calibration
+    assert fc.apply(reader, tmp_path, "lab_gripper") is None
+    assert reader.scale.tolist() == [2.5e-5] * 3
+    [record] = [r for r in caplog.records if "No force calibration" in r.getMessage()]
+    assert record.levelname == "WARNING"
+    message = record.getMessage()
+    assert str(tmp_path / "lab_gripper.force.json") in message
+    assert (
+        'blindgrasp-calibrate-force --robot="include robot_configs/blindgrasp_gripper.yaml" --robot.id=lab_gripper'
+        in message
+    )
 
 
 def _calibrate_on(emu: ForceSensorEmulator, tmp_path, monkeypatch, loads, channel_map=(0, 1, 2)):

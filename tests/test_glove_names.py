@@ -77,16 +77,37 @@ def test_every_accepted_spelling_decodes_to_the_same_channels(style):
     assert d.ergonomics == {k: OPEN[k] for k in rt.REQUIRED_KEYS}
 
 
+def _documented_python_sender() -> str:
+    """The ```python block of docs/glove.md that builds datagrams with this package's sender."""
+    blocks = re.findall(r"^```python\n(.*?)^```", DOC.read_text(), flags=re.M | re.S)
+    [block] = [b for b in blocks if "GloveSender(" in b]
+    return block
+
+
 def test_an_sdk_array_through_the_documented_python_sender():
-    """docs/glove.md's Python sender: ErgonomicsData.data (40 floats by ErgonomicsDataType) -> datagram."""
+    """docs/glove.md's Python sender, run as the page prints it (only its two port numbers swapped for free ones):
+    ErgonomicsData.data (40 floats by ErgonomicsDataType) -> the datagram the receiver decodes."""
+    block = _documented_python_sender()
+    assert "50120" in block and "source_port=50121" in block
     data = [float(i) for i in range(40)]  # value = its enum index, so a wrong index shows
-    sender = GloveSender("127.0.0.1", 9, "right")
-    try:
-        d = decode(sender.pack({c.name: data[c.enum_value("right")] for c in names.CHANNELS}), rt.REQUIRED_KEYS)
-    finally:
-        sender.close()
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as rx:
+        rx.bind(("127.0.0.1", 0))
+        rx.settimeout(5.0)
+        source = free_udp_port()
+        code = block.replace("50120", str(rx.getsockname()[1])).replace("50121", str(source))
+        scope: dict = {}
+        exec(compile(code, f"{DOC}:python sender", "exec"), scope)
+        try:
+            scope["on_ergonomics"](data)
+            datagram, addr = rx.recvfrom(65536)
+        finally:
+            scope["sender"].close()
+    assert addr[1] == source
+    d = decode(datagram, rt.REQUIRED_KEYS)
+    assert d.side == "right" and d.seq == 1
     assert d.ergonomics["ThumbMCPSpread"] == 20.0 and d.ergonomics["IndexMCPSpread"] == 24.0
     assert d.ergonomics["MiddleDIPStretch"] == 31.0
+    assert set(d.ergonomics) == set(rt.REQUIRED_KEYS)  # decode keeps the channels the retargeting uses
 
 
 def _teleop(tmp_path, port, **kw) -> ManusGlove:

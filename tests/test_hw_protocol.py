@@ -160,3 +160,21 @@ def test_force_frames_resync_after_garbage_and_bad_crcs():
     assert [f.seq for f in out] == [k for k in range(50) if k != 10]
     assert out[0].counts == tuple(int(c) for c in np.frombuffer(frames[0][5:17], "<i4"))
     assert parser.crc_errors == 1 and parser.bad_lengths >= 1
+
+
+def test_the_parser_never_asks_for_bytes_past_the_frame_in_progress():
+    """`wanted()` is what the reader's serial read may wait for: reading exactly that many bytes at a time, each
+    read ends with a whole frame (so it is stamped on arrival), garbage and a bad CRC included."""
+    frames = [encode_frame(k, [k, -k, 2 * k]) for k in range(5)]
+    stream = b"\x00\xa5" + frames[0] + frames[1][:-1] + b"\x00" + b"".join(frames[2:])
+    parser, pos, done = FrameParser(), 0, []
+    while pos < len(stream):
+        n = parser.wanted()
+        got = parser.feed(stream[pos : pos + n])
+        pos += n
+        done.append((pos, [f.seq for f in got]))
+    ends = {len(b"\x00\xa5" + frames[0]): [0]}
+    for k in range(2, 5):
+        ends[len(stream) - len(b"".join(frames[k + 1 :]))] = [k]
+    assert {p: seqs for p, seqs in done if seqs} == ends
+    assert parser.crc_errors == 1

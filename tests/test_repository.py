@@ -76,7 +76,7 @@ def test_the_readme_is_a_short_product_page():
     assert "bash scripts/main.sh" in text and "bash scripts/test.sh" in text
     assert "exec bash scripts/test.sh" in (ROOT / ".ci" / "run").read_text()
     for section in ("## Install", "## Headline numbers", "## The shipped student in one command",
-                    "## The real gripper in five commands", "## Training your own", "## Documentation",
+                    "## The real gripper in seven commands", "## Training your own", "## Documentation",
                     "## Layout", "CITATION.cff"):  # fmt: skip
         assert section in text, section
     assert "docs/bringup.md" in text and "docs/results.md" in text

@@ -17,9 +17,11 @@ Liveness is judged by content, not only by arrival: a device can keep sending wh
 Stale and slow are told apart. Stale: no fresh frame for `stale_timeout_s` (silence, or only re-sent, replayed or
 frozen frames). Slow: fresh frames keep coming, but fewer per second than `min_rate_hz` (0: not checked), e.g. a
 force board whose ADCs convert at 10/s instead of 80/s; the control loop would then see the same sample for
-several periods without any frame being old enough to be stale. The rate is estimated from the arrival intervals of
-the last `RATE_WINDOW` frames without their longest quarter: a host or USB stall is one long interval followed by a
-burst, and must not read as a slow device, while a slow device has every interval long.
+several periods without any frame being old enough to be stale. The rate is the newest `RATE_WINDOW` intervals over
+the time they span, each frame stamped when `_receive` hands it on (so `_receive` must hand each frame on as soon as
+it is complete, not in timed batches). A host or USB stall does not read as a slow device: the device's frames wait
+in the OS buffer and arrive in one burst after it, so the window holds as many frames over as much time as without
+the stall. A slow device has fewer frames over the same time.
 
 Subclasses say how to open, receive and close (`_open`, `_receive`, `_close`), and may filter frames (`_keep`).
 Hand-written because neither LeRobot nor pyserial offers this; LeRobot's cameras do the same inside
@@ -28,7 +30,6 @@ Hand-written because neither LeRobot nor pyserial offers this; LeRobot's cameras
 
 from __future__ import annotations
 
-import itertools
 import logging
 import threading
 import time
@@ -181,32 +182,37 @@ class LatestFrameStream[F]:
         return frame, time.monotonic() - t
 
     def rate_hz(self) -> float | None:
-        """Frames per second the device sends, from the newest arrivals (longest quarter of the intervals left
-        out); None until `RATE_MIN_INTERVALS` intervals were seen."""
+        """Frames per second the device sends: the newest arrival intervals over the time they span; None until
+        `RATE_MIN_INTERVALS` intervals were seen."""
         with self._cond:
             times = list(self._arrivals)
-        intervals = sorted(b - a for a, b in itertools.pairwise(times))
-        if len(intervals) < RATE_MIN_INTERVALS:
+        if len(times) - 1 < RATE_MIN_INTERVALS:
             return None
-        kept = intervals[: len(intervals) - len(intervals) // 4]
-        mean = sum(kept) / len(kept)
-        return float("inf") if mean <= 0 else 1.0 / mean
+        span = times[-1] - times[0]
+        return float("inf") if span <= 0 else (len(times) - 1) / span
 
     def fresh(self) -> F:
-        """The newest frame if it is at most `stale_timeout_s` old and the stream is not slow; raises `error_type`
-        otherwise, saying which of the two it is."""
+        """The newest frame if it is at most `stale_timeout_s` old, flags no fault and the stream is not slow;
+        raises `error_type` otherwise, saying which it is. A fault the device names comes before "slow": a device
+        with a failed channel sends fewer frames, and the failed channel is the cause to report."""
         frame, age = self.latest()
         if age > self.stale_timeout_s:
             raise self.error_type(
                 f"{self.name} data is stale: newest frame is {age * 1e3:.0f} ms old "
                 f"(limit {self.stale_timeout_s * 1e3:.0f} ms{self._stale_detail()})."
             )
+        if fault := self._fault(frame):
+            raise self.error_type(fault)
         if self.min_rate_hz and (rate := self.rate_hz()) is not None and rate < self.min_rate_hz:
             raise self.error_type(
                 f"{self.name} stream is slow: fresh frames arrive at {rate:.1f}/s, below the {self.min_rate_hz:g}/s "
                 f"the control loop needs{self._slow_detail()}."
             )
         return frame
+
+    def _fault(self, frame: F) -> str:
+        """The fault a frame itself flags, for the operator ("" when none)."""
+        return ""
 
     def _slow_detail(self) -> str:
         return ""

@@ -1,7 +1,9 @@
 """Build the force board's firmware (avr-gcc, through its Makefile) and its simavr harness (the host C compiler).
 
-    python -m lerobot_blindgrasp.hardware.force_board.build --out_dir=build/force_board
-    make -C build/force_board -f <printed Makefile> flash PORT=/dev/ttyUSB0       (or avrdude, docs/force_board.md)
+    python -m lerobot_blindgrasp.hardware.force_board.build --out_dir=build/force_board --port=/dev/ttyUSB0
+
+prints the HEX image it built and the two ways to flash it onto the Nano at `--port`: the avrdude command, and the
+same through the firmware's Makefile (its path inside the installed package, which a user cannot guess).
 
 The sources ship inside the package (package data), so this works from a wheel as well as from a checkout; the
 build writes only into `out_dir`. What each step needs, as Debian/Ubuntu packages, is `missing_packages`'s answer.
@@ -96,16 +98,29 @@ class BuildConfig:
     out_dir: Path = Path("build/force_board")
     # UART baud rate; the robot's --robot.force_sensor.baudrate must match (default 115 200 on both sides).
     baud: int = 115_200
+    # The Nano's serial port, for the printed flash commands (`lerobot-find-port` names it).
+    port: str = "/dev/ttyUSB0"
     simulator: bool = False
+
+
+def flash_commands(hex_path: Path, port: str) -> list[str]:
+    """The two equivalent ways to flash `hex_path` through a Nano's bootloader: avrdude, and the Makefile's target."""
+    out_dir = hex_path.parent
+    return [
+        f"avrdude -p m328p -c arduino -P {port} -b 115200 -U flash:w:{hex_path}:i",
+        f"make -f {FIRMWARE_DIR / 'Makefile'} OUT={out_dir} flash PORT={port}",
+    ]
 
 
 def main(argv: list[str] | None = None) -> None:
     cfg = parse_config(BuildConfig, argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     hex_path = build_firmware(cfg.out_dir, cfg.baud)
+    avrdude, make = flash_commands(hex_path, cfg.port)
     print(f"firmware: {hex_path}")
-    print(f"flash it: avrdude -p m328p -c arduino -P /dev/ttyUSB0 -b 115200 -U flash:w:{hex_path}:i")
-    print("  (a Nano with the old bootloader takes -b 57600)")
+    print(f"flash it: {avrdude}")
+    print(f"      or: {make}")
+    print("  (a Nano with the old bootloader: avrdude -b 57600, or make BOOTLOADER_BAUD=57600)")
     if cfg.simulator:
         print(f"simulator: {build_simulator(cfg.out_dir)} {hex_path}")
 

@@ -4,12 +4,13 @@ real reader exactly like the board's USB serial port.
 The firmware runs unchanged (its HEX image, the one a user flashes) on an emulated ATmega328P; three emulated HX711
 chips sit on its pins (`simavr/hx711_sim.c`). What the load cells feel is set in counts (`set_counts`) or newtons
 (`set_forces`, through a scale and an offset as a real cell and bridge give them); faults are `kill_cell` (a chip
-stops converting) and `revive_cell`. Built on first use into `build_dir` (a temporary folder by default).
+stops converting), `hold_dout_low` (a DOUT line shorted to GND) and `revive_cell`. Built on first use into `build_dir` (a temporary folder by default).
 """
 
 from __future__ import annotations
 
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -88,7 +89,12 @@ class SimulatedForceBoard:
     def kill_cell(self, index: int) -> None:
         self._send(f"dead {index}")
 
+    def hold_dout_low(self, index: int) -> None:
+        """Cell `index`'s DOUT line held low (shorted to GND): every read clocks out zeros and fails its check."""
+        self._send(f"stuck {index}")
+
     def revive_cell(self, index: int) -> None:
+        """Undo `kill_cell` or `hold_dout_low`."""
         self._send(f"alive {index}")
 
     def stop(self) -> None:
@@ -120,37 +126,65 @@ class SimConfig:
     sps: float = 80.0
     # Force on each pad while it runs (N), ff, mf, th.
     forces_n: list[float] = field(default_factory=lambda: [1.0, 2.0, 3.0])
+    # Where the firmware and the harness are built (the build command's --out_dir; reused when up to date).
+    build_dir: Path = Path("build/force_board")
+
+
+def _newest_frame_ages_ms(reader, seconds: float) -> list[float]:
+    """The newest frame's age at reads spread over every phase of the board's period, for `seconds`: what a
+    control loop that reads at its own times sees (half a period on average when frames are handed on as they
+    arrive)."""
+    ages, k, deadline = [], 0, time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        time.sleep(0.003 + 0.0013 * (k % 7))
+        ages.append(reader.latest()[1] * 1e3)
+        k += 1
+    return ages
+
+
+def _report(reader, board: SimulatedForceBoard, cfg: SimConfig) -> None:
+    """Rate and latency first (they need no tare), then forces in newtons; raises the reader's error when it
+    refuses the stream (a slow board cannot be tared)."""
+    time.sleep(0.3)
+    frames0, t1 = reader.frames, time.monotonic()
+    ages_ms = _newest_frame_ages_ms(reader, cfg.seconds)
+    rate = (reader.frames - frames0) / (time.monotonic() - t1)
+    print(
+        f"port {board.port}: {rate:.1f} frames/s, {reader.dropped_frames} dropped, "
+        f"{reader.parser.crc_errors} CRC errors, stream rate estimate {reader.rate_hz():.0f}/s"
+    )
+    print(f"newest frame's age when read: mean {np.mean(ages_ms):.1f} ms, max {np.max(ages_ms):.1f} ms "
+          f"({len(ages_ms)} reads)")  # fmt: skip
+    reader.tare(0.5)
+    board.set_forces(cfg.forces_n)
+    reader.wait_frames(4, 1.0)  # past any conversion made before the change (read() says if none came)
+    print(f"forces given {cfg.forces_n} N, read {np.round(reader.read(), 3).tolist()} N")
 
 
 def main(argv: list[str] | None = None) -> None:
     """`python -m lerobot_blindgrasp.hardware.force_board.sim`: the board without hardware, read by the robot's
-    reader with the robot config's defaults."""
+    reader with the robot config's defaults. Exits 1 when the reader refuses the stream (e.g. `--sps=10`)."""
     from lerobot_blindgrasp.cli import parse_config
     from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import ForceSensorConfig
-    from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader, ForceStreamError
 
     cfg = parse_config(SimConfig, argv)
-    with SimulatedForceBoard(sps=cfg.sps) as board:
+    refused = None
+    with SimulatedForceBoard(sps=cfg.sps, build_dir=cfg.build_dir) as board:
         fs = ForceSensorConfig(port=board.port)
         reader = ForceSensorReader(board.port, fs.baudrate, board.scale.tolist(), stale_timeout_s=fs.stale_timeout_s,
                                    connect_timeout_s=fs.connect_timeout_s, frozen_frames=fs.frozen_frames,
                                    min_rate_hz=fs.min_rate_hz)  # fmt: skip
         reader.connect()
         try:
-            reader.tare(0.5)
-            board.set_forces(cfg.forces_n)
-            time.sleep(0.3)
-            frames0, t1 = reader.frames, time.monotonic()
-            time.sleep(cfg.seconds)
-            rate = (reader.frames - frames0) / (time.monotonic() - t1)
-            print(
-                f"port {board.port}: {rate:.1f} frames/s, {reader.dropped_frames} dropped, "
-                f"{reader.parser.crc_errors} CRC errors, stream rate estimate {reader.rate_hz():.0f}/s"
-            )
-            print(f"forces given {cfg.forces_n} N, read {np.round(reader.read(), 3).tolist()} N")
+            _report(reader, board, cfg)
+        except ForceStreamError as e:
+            refused = e
         finally:
             reader.disconnect()
     print(board.log.strip())
+    if refused is not None:
+        sys.exit(f"the robot's reader refuses this stream: {refused}")
 
 
 if __name__ == "__main__":

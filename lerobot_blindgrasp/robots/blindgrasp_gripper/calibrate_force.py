@@ -1,7 +1,7 @@
 """`blindgrasp-calibrate-force`: weigh each fingertip with a known mass; save scale, offset and the verified wiring.
 
     blindgrasp-calibrate-force --robot.type=blindgrasp_gripper --robot.id=lab_gripper \
-        --robot.force_sensor.port=/dev/ttyACM0 --mass_kg=0.5
+        --robot.force_sensor.port=/dev/ttyUSB1 --mass_kg=0.5
 
 The same `--robot` flags as `lerobot-calibrate` (or `--robot="include robot_configs/blindgrasp_gripper.yaml"`), so the
 file lands next to that robot's servo calibration and the robot finds it at connect. Only the force board is
@@ -59,10 +59,7 @@ def _window(reader: ForceSensorReader, settle_s: float, window_s: float) -> fc.W
     while time.monotonic() < deadline or len(samples) < 5:
         if not reader.wait_frames(1, reader.stale_timeout_s * 4):
             raise ForceStreamError(f"The force board stopped sending ({len(samples)} frames in this window).")
-        frame = reader.fresh()
-        if frame.status:
-            raise ForceStreamError(reader.fault_message(frame))
-        samples.append(frame.counts)
+        samples.append(reader.fresh().counts)  # fresh() raises on a fault the frame flags
     return fc.Window.of(samples)
 
 

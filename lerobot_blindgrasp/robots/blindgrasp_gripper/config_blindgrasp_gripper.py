@@ -29,7 +29,9 @@ DYNAMIXEL_BAUDRATES = (9600, 57_600, 115_200, 1_000_000, 2_000_000, 3_000_000, 4
 class ForceSensorConfig:
     """The fingertip load-cell microcontroller (wire protocol in `force_sensor.py` and `docs/force_board.md`)."""
 
-    port: str = "/dev/ttyACM0"
+    # The Nano's USB-serial chip (FT232RL or CH340) makes it a /dev/ttyUSBn; with the U2D2 (`port`, /dev/ttyUSB0)
+    # plugged in first it is ttyUSB1. robot_configs/blindgrasp_gripper.yaml uses the udev name /dev/blindgrasp_force.
+    port: str = "/dev/ttyUSB1"
     baudrate: int = 115_200
     # N per raw count, one per channel in `spec.FORCE_SENSOR_NAMES` order; the sign makes a push on the pad
     # positive. Placeholder of the order of an HX711 (gain 128) on a 5-10 kg, 1 mV/V cell: `blindgrasp-calibrate-force` measures

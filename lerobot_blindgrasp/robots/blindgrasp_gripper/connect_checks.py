@@ -14,6 +14,7 @@ import builtins
 import sys
 from pathlib import Path
 
+from . import force_calibration
 from .calibration import CalibrationFileError
 
 _BUILTIN_INPUT = builtins.input
@@ -31,7 +32,10 @@ def operator_can_answer() -> bool:
 
 
 def calibrated_ids(calibration_dir: Path) -> list[str]:
-    return sorted(p.stem for p in Path(calibration_dir).glob("*.json"))
+    """The robot ids with a servo calibration `<id>.json` in the folder (force calibrations `<id>.force.json`
+    share the folder and are not ids)."""
+    files = Path(calibration_dir).glob("*.json")
+    return sorted(p.stem for p in files if not force_calibration.is_force_calibration(p))
 
 
 def refuse_unattended_calibration(robot) -> None:

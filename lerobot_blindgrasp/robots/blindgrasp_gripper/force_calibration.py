@@ -36,6 +36,7 @@ logger = logging.getLogger(__name__)
 FORMAT = "blindgrasp-force-calibration"
 VERSION = 1
 STANDARD_GRAVITY = 9.80665
+SUFFIX = ".force.json"  # <robot id>.force.json, next to the servo calibration <robot id>.json
 
 
 class ForceCalibrationError(ValueError):
@@ -161,7 +162,25 @@ def fit(
 
 
 def path_for(calibration_dir, robot_id: str) -> Path:
-    return Path(calibration_dir) / f"{robot_id}.force.json"
+    return Path(calibration_dir) / f"{robot_id}{SUFFIX}"
+
+
+def is_force_calibration(path) -> bool:
+    """Whether a file in the calibration folder is a force calibration (not a servo calibration `<id>.json`)."""
+    return Path(path).name.endswith(SUFFIX)
+
+
+def missing_warning(path, robot_id: str, scales) -> str:
+    """What connect says when the robot has no force calibration: forces in newtons then rest on the config's
+    `scale_n_per_count`, a placeholder of the right order of magnitude unless someone measured these cells."""
+    return (
+        f"No force calibration for robot id '{robot_id}' ({path}): the fingertip forces use the config's "
+        f"force_sensor.scale_n_per_count {[f'{s:.3g}' for s in scales]} N/count, a placeholder unless measured on "
+        "these cells, so forces in newtons (and the overload stop) may be off by about a factor of two, or of the "
+        "wrong sign where a bridge is wired the other way round. Weigh the cells once, with the force board "
+        'plugged in:\n    blindgrasp-calibrate-force --robot="include robot_configs/blindgrasp_gripper.yaml" '
+        f"--robot.id={robot_id} --mass_kg=0.5\n(docs/force_board.md, Calibration)."
+    )
 
 
 def save(calibration: ForceCalibration, path) -> Path:
@@ -195,9 +214,11 @@ def load(path) -> ForceCalibration:
 
 def apply(reader, calibration_dir, robot_id: str) -> ForceCalibration | None:
     """Give `reader` (a ForceSensorReader) the scales and zero of the robot's force calibration file, if there is
-    one; None (the config's scales stay) when there is none."""
+    one; None (the config's scales stay, with a warning naming the command that measures them) when there is
+    none."""
     path = path_for(calibration_dir, robot_id)
     if not path.is_file():
+        logger.warning(missing_warning(path, robot_id, reader.scale))
         return None
     cal = load(path)
     if list(reader.channel_map) != cal.channel_map:

@@ -54,6 +54,7 @@ from .ports import open_exclusive
 
 SYNC = b"\xa5\x5a"
 MAX_CHANNELS = 8
+RECEIVE_TIMEOUT_S = 0.05  # a silent port returns this often, so the reader thread sees a stop request
 ADC_RAILS = (0x7FFFFF, -0x800000)  # a 24-bit ADC's full scale: a channel there is saturated, not measuring
 
 
@@ -83,6 +84,13 @@ class FrameParser:
     crc_errors: int = 0
     bad_lengths: int = 0
     garbage_bytes: int = 0
+
+    def wanted(self) -> int:
+        """Bytes that would complete the frame at the head of the buffer (the header first when it is not in yet):
+        what a read may wait for without ever waiting past a frame's end."""
+        if len(self.buffer) < 3 or self.buffer[:2] != SYNC:
+            return max(1, 3 - len(self.buffer))
+        return max(1, 3 + self.buffer[2] + 2 - len(self.buffer))
 
     def feed(self, data: bytes) -> list[Frame]:
         self.buffer += data
@@ -188,15 +196,22 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         import serial  # pyserial comes with lerobot[dynamixel]
 
         try:
-            self._serial = open_exclusive(self.port, self.baudrate, "force-sensor", timeout=0.02)
+            self._serial = open_exclusive(self.port, self.baudrate, "force-sensor", timeout=RECEIVE_TIMEOUT_S)
         except ConnectionError:
             raise  # PortInUseError: says itself what to do
         except (OSError, serial.SerialException) as e:
-            raise ForceStreamError(f"Could not open the force-sensor port '{self.port}': {e}") from e
+            raise ForceStreamError(
+                f"Could not open the force-sensor port '{self.port}': {e}. Find the force board's port with "
+                "lerobot-find-port and pass --robot.force_sensor.port=..., or install "
+                "robot_configs/udev/99-blindgrasp.rules for /dev/blindgrasp_force (docs/bringup.md, section 5)."
+            ) from e
         self._serial.reset_input_buffer()
 
     def _receive(self) -> list[Frame]:
-        data = self._serial.read(256)
+        """What is waiting, and no more than completes the frame in progress: pyserial's `read(n)` returns as soon as
+        n bytes are in, so each frame is handed on (and timestamped) the moment its last byte arrives. A fixed
+        `read(256)` would wait out the whole timeout on every call, and hand frames on in timed batches."""
+        data = self._serial.read(max(self._serial.in_waiting, self.parser.wanted()))
         return self.parser.feed(data) if data else []
 
     def _close(self) -> None:
@@ -227,6 +242,9 @@ class ForceSensorReader(LatestFrameStream[Frame]):
     def _slow_detail(self) -> str:
         return (" (an HX711 with its RATE pin low converts at 10/s: tie RATE to VCC for 80/s, docs/force_board.md; "
                 f"{self.dropped_frames} frames dropped so far)")  # fmt: skip
+
+    def _fault(self, frame: Frame) -> str:
+        return self.fault_message(frame) if frame.status else ""
 
     def fault_message(self, frame: Frame) -> str:
         """Which fingertip channels flag a fault, and the likely cause of each (saturated when its counts sit at
@@ -262,9 +280,7 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         while time.monotonic() < deadline or len(samples) < min_frames:
             if not self.wait_frames(1, self.stale_timeout_s * 4):
                 raise ForceStreamError(f"Force-sensor stream stopped during tare ({len(samples)} frames).")
-            frame = self.fresh()  # a frozen or re-sent stream cannot be tared
-            if frame.status:
-                raise ForceStreamError(f"During the tare: {self.fault_message(frame)}")
+            frame = self.fresh()  # a frozen, re-sent or faulty stream cannot be tared
             samples.append(self._channels(frame))
         samples = np.asarray(samples)
         offset = samples.mean(axis=0)
@@ -284,10 +300,7 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         return self.offset
 
     def read(self) -> np.ndarray:
-        frame = self.fresh()
-        counts = self._channels(frame)
-        if frame.status:
-            raise ForceStreamError(self.fault_message(frame))
+        counts = self._channels(self.fresh())
         newtons = force.counts_to_newtons(counts, self.offset, self.scale)
         pulling = [
             f"{n} {f:+.2f} N" for n, f in zip(spec.FORCE_SENSOR_NAMES, newtons) if f < -self.negative_fault_n

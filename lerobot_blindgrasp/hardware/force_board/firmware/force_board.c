@@ -92,8 +92,9 @@ static void uart_put(uint8_t b) {
 
 /* One conversion of cell i (its DOUT is low): 24 bits MSB first, then a 25th pulse that selects channel A, gain
  * 128, for the next conversion and makes the chip pull DOUT high again. Interrupts stay off for the ~60 us of
- * clocking: PD_SCK held high for more than 60 us powers the HX711 down. Returns 0 when DOUT stayed low after the
- * 25th pulse (nothing is driving the pin: the value is not a conversion). */
+ * clocking: PD_SCK held high for more than 60 us powers the HX711 down. Returns 0, and leaves *value alone, when
+ * DOUT stayed low after the 25th pulse (the line is held low, not driven by a chip: the bits are not a
+ * conversion, and the cell keeps its last valid value). */
 static uint8_t hx711_read(uint8_t i, int32_t *value) {
     const uint8_t dout = DOUT_MASK[i], sck = SCK_MASK[i];
     uint32_t v = 0;
@@ -112,10 +113,12 @@ static uint8_t hx711_read(uint8_t i, int32_t *value) {
         _delay_us(1);
         ok = (DOUT_PIN & dout) != 0;
     }
+    if (!ok)
+        return 0;
     if (v & 0x800000UL)
         v |= 0xFF000000UL; /* 24-bit two's complement -> int32 */
     *value = (int32_t)v;
-    return ok;
+    return 1;
 }
 
 static void send_frame(uint16_t seq, const int32_t *counts, uint8_t status) {

@@ -13,6 +13,8 @@
  *   counts C0 C1 C2     the channel-A counts at gain 128 each cell produces (the ADC clamps them to 24 bits)
  *   noise N             uniform noise of +-N counts on every conversion (a real bridge never repeats exactly)
  *   dead I / alive I    chip I stops converting (DOUT stays high: unpowered chip, broken wire) / recovers
+ *   stuck I             chip I's DOUT line held low (shorted to GND, a latched-up chip): every read clocks out
+ *                       zeros and DOUT stays low after the 25th pulse; `alive I` releases it
  *   quit
  * On exit it reports per chip the conversions made, those read, and reads with another pulse count than 25.
  *
@@ -51,7 +53,7 @@ typedef struct {
     avr_irq_t *dout;
     int64_t input;          /* counts the bridge produces now (channel A, gain 128), before the ADC's clamp */
     uint32_t data;          /* the conversion being shifted out, 24 bits */
-    int ready, pulses, dead, sck_high;
+    int ready, pulses, dead, stuck, sck_high;
     int gain_pulses;        /* pulse count of the last read: the gain of the next conversion */
     avr_cycle_count_t period, sck_rise;
     long conversions, reads, bad_reads, powered_down;
@@ -69,6 +71,9 @@ static int32_t noise(void) {
     rng ^= rng << 5;
     return noise_counts ? (int32_t)(rng % (2u * noise_counts + 1)) - noise_counts : 0;
 }
+
+/* What the pin reads: the chip's output, unless something holds the line low. */
+static void drive_dout(hx711_t *c, uint32_t level) { avr_raise_irq(c->dout, c->stuck ? 0 : level); }
 
 static int32_t clamp24(int64_t v) { return v > 0x7FFFFF ? 0x7FFFFF : v < -0x800000 ? -0x800000 : (int32_t)v; }
 
@@ -95,7 +100,7 @@ static avr_cycle_count_t convert(avr_t *avr, avr_cycle_count_t when, void *param
         c->ready = 1;
         c->conversions++;
     }
-    avr_raise_irq(c->dout, !c->ready);
+    drive_dout(c, !c->ready);
     return when + c->period;
 }
 
@@ -109,9 +114,9 @@ static void sck_changed(struct avr_irq_t *irq, uint32_t value, void *param) {
             return;
         c->pulses++;
         if (c->pulses <= 24)
-            avr_raise_irq(c->dout, (c->data >> (24 - c->pulses)) & 1);
+            drive_dout(c, (c->data >> (24 - c->pulses)) & 1);
         else if (c->pulses == 25)
-            avr_raise_irq(c->dout, 1);
+            drive_dout(c, 1);
     } else if (!value && c->sck_high) {
         c->sck_high = 0;
         if (c->avr->cycle - c->sck_rise > POWER_DOWN_US * (F_CPU / 1000000)) {
@@ -119,7 +124,7 @@ static void sck_changed(struct avr_irq_t *irq, uint32_t value, void *param) {
             c->powered_down++;
             c->ready = c->pulses = 0;
             c->gain_pulses = 25;
-            avr_raise_irq(c->dout, 1);
+            drive_dout(c, 1);
             avr_cycle_timer_cancel(c->avr, convert, c);
             avr_cycle_timer_register_usec(c->avr, settle_us, convert, c);
         }
@@ -144,7 +149,11 @@ static int command(const char *line) {
     } else if (sscanf(line, "dead %d", &i) == 1 && i >= 0 && i < N_CHIPS) {
         chips[i].dead = 1;
     } else if (sscanf(line, "alive %d", &i) == 1 && i >= 0 && i < N_CHIPS) {
-        chips[i].dead = 0;
+        chips[i].dead = chips[i].stuck = 0;
+        drive_dout(&chips[i], !chips[i].ready || chips[i].pulses >= 25);
+    } else if (sscanf(line, "stuck %d", &i) == 1 && i >= 0 && i < N_CHIPS) {
+        chips[i].stuck = 1;
+        drive_dout(&chips[i], 0);
     } else if (strncmp(line, "quit", 4) == 0) {
         return 1;
     } else if (line[0] != '\n' && line[0]) {
