@@ -51,6 +51,10 @@ class GripperHealthError(GripperSafetyStop):
     too close to its limit to start a trial or episode (`health.py`): stopped before the firmware's own shutdown."""
 
 
+class GripperFirmwareError(GripperSafetyStop):
+    """A servo's firmware is older than a defence needs (Drive_Mode and Bus_Watchdog: v38); refused at connect."""
+
+
 class PolicyMismatchError(ValueError):
     """The policy checkpoint was trained for another robot (feature names, shapes or order, robot type, fps, action
     meaning): refused before any servo takes torque (`policy_check.py`)."""

@@ -38,7 +38,14 @@ LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
 BLOCK = ("Present_Current", "Present_Temperature")  # first and last register of the health read (21 bytes)
 READ = ("Present_Current", "Present_Input_Voltage", "Present_Temperature")
 LIMITS_BLOCK = ("Temperature_Limit", "Shutdown")  # EEPROM 31..63, read once at connect
-LIMITS_READ = ("Temperature_Limit", "Max_Voltage_Limit", "Min_Voltage_Limit", "Current_Limit", "Shutdown")
+LIMITS_READ = (
+    "Temperature_Limit",
+    "Max_Voltage_Limit",
+    "Min_Voltage_Limit",
+    "Current_Limit",
+    "Startup_Configuration",
+    "Shutdown",
+)
 
 
 @dataclass(frozen=True)
