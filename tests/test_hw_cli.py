@@ -219,7 +219,7 @@ def test_rollout_of_a_trained_checkpoint_on_the_gripper(station, checkpoint):
     with GripperRig() as rig:
         rig.hand_move(spec.HOME_POSE)
         before = rig.dxl.instruction_counts.get(0x83, 0)
-        cmd = [str(BIN / "python"), "-m", "lerobot_blindgrasp.robots.blindgrasp_gripper.rollout",
+        cmd = [str(BIN / "python"), "-m", "lerobot_blindgrasp.deploy.run_policy",
                *_rollout_args(rig, checkpoint)]  # fmt: skip
         res = _run(cmd, station.env)
         assert "Duration limit reached" in res.stderr
@@ -332,7 +332,7 @@ def test_sigterm_during_rollout_turns_the_torque_off(station, checkpoint):
     with GripperRig() as rig:
         rig.hand_move(spec.HOME_POSE)
         args = [a if not a.startswith("--duration") else "--duration=60" for a in _rollout_args(rig, checkpoint)]
-        op = Operator([str(BIN / "python"), "-m", "lerobot_blindgrasp.robots.blindgrasp_gripper.rollout", *args],
+        op = Operator([str(BIN / "python"), "-m", "lerobot_blindgrasp.deploy.run_policy", *args],
                       station.env)  # fmt: skip
         dt = _signal_when(op, None, signal.SIGTERM, rig, after_s=1.5)
         assert op.wait(60) == 0, op.text[-3000:]
