@@ -29,6 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 ROBOT_FILE = ROOT / "robot_configs" / "blindgrasp_gripper.yaml"
 GLOVE_FILE = ROOT / "robot_configs" / "manus_glove.yaml"
 REPO_ID = "local/blindgrasp_glove_demo"
+ROBOT = "blindgrasp_gripper"
 
 
 def _robot_args(rig: GripperRig, prefix: str = "--robot") -> list[str]:
@@ -216,6 +217,8 @@ def _rollout_args(rig, checkpoint) -> list[str]:
 
 
 def test_rollout_of_a_trained_checkpoint_on_the_gripper(station, checkpoint):
+    facts = json.loads((checkpoint / "config.json").read_text())["trained_for"]  # lerobot-train recorded it
+    assert (facts["robot_type"], facts["fps"], facts["state_names"]) == (ROBOT, 20, list(spec.STATE_NAMES))
     with GripperRig() as rig:
         rig.hand_move(spec.HOME_POSE)
         before = rig.dxl.instruction_counts.get(0x83, 0)

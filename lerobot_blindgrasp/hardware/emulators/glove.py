@@ -12,6 +12,8 @@ Faults:
 - `garbage_every`: a malformed datagram every n frames. `reorder`: each frame is sent after its successor.
 - `delay_next(n)`: the next datagram arrives n frames late. `duplicate_next(n)`: it arrives again n frames later.
 - `restart()`: the bridge restarts (new session, counter from 1), from the same source address.
+- `clock_offset_s`: added to every `sent` stamp: a bridge whose clock jumps (a step back or ahead within a
+  session), or one that is behind (its poses leave it already old: a lagging SDK, a clogged link at connect).
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ class GloveEmulator:
         self.stalled = False
         self.garbage_every = 0
         self.reorder = False
+        self.clock_offset_s = 0.0
         self.sender = GloveSender(host, port, side, source_host=host)  # a fixed source address, like a bridge's
         self._later: list[tuple[int, bytes]] = []  # (frames to wait, datagram)
         self._delay_next: list[tuple[int, bool]] = []  # (n, keep the original on time)
@@ -114,7 +117,7 @@ class GloveEmulator:
                 continue
             closure = self.closure_fn(time.monotonic() - self._t0) if self.closure_fn else self.closure
             with self._lock:
-                datagram = self.sender.pack(self.pose(closure))
+                datagram = self.sender.pack(self.pose(closure), sent=time.monotonic() + self.clock_offset_s)
                 out = self._network(datagram)
             if self.reorder:
                 if held is None:
