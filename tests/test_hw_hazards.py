@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import ast
 import errno
+import json
 import logging
 import os
+import re
 import subprocess
 import sys
 import time
@@ -187,3 +189,52 @@ def test_a_second_failure_during_cleanup_never_masks_the_first_or_aborts(tmp_pat
     assert out.returncode == 4, text[-3000:]
     assert "Traceback" not in text and "also failed" in text, text[-3000:]
     assert "error: could not write" in text and "the disk is full (ENOSPC)" in text
+
+
+# --- the glove bridge's clock --------------------------------------------------------------------------------------
+@pytest.fixture
+def glove_teleop(tmp_path):
+    from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
+    from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
+
+    (tmp_path / "op.json").write_text(json.dumps({"open": OPEN, "fist": FIST}))
+    port = free_udp_port()
+    with GloveEmulator(port, rate_hz=100.0) as glove:
+        teleop = ManusGlove(ManusGloveConfig(id="op", port=port, calibration_dir=tmp_path))
+        teleop.connect()
+        try:
+            yield teleop, glove
+        finally:
+            teleop.disconnect()
+
+
+def test_a_bridge_clock_that_jumps_ahead_is_followed(glove_teleop, caplog):
+    """The bridge's `sent` jumps 5 s ahead within its session: no longer this machine's clock, so the receiver says
+    so and ages by an estimated offset; the poses stay live."""
+    teleop, glove = glove_teleop
+    with caplog.at_level(logging.WARNING):
+        glove.clock_offset_s = 5.0
+        glove.closure = 1.0
+        time.sleep(0.3)
+        action = teleop.get_action()
+    assert "not this machine's monotonic clock" in caplog.text
+    assert action["ff_j11.pos"] == pytest.approx(teleop.config.closed_pose[1], abs=1e-6)  # the fist, live
+    assert teleop.receiver.stale == 0 and teleop.receiver.latest()[1] < 0.05
+
+
+def test_a_bridge_clock_that_steps_back_is_named_and_stops(glove_teleop, caplog):
+    """The bridge's `sent` steps 5 s back while its `seq` goes on: not a late datagram, a clock that is not
+    monotonic. Its poses cannot be aged: dropped, the action holds, then the stream is lost, and both say why."""
+    from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost
+
+    teleop, glove = glove_teleop
+    held = teleop.get_action()
+    with caplog.at_level(logging.WARNING):
+        glove.clock_offset_s = -5.0
+        glove.closure = 1.0
+        time.sleep(0.3)
+        assert teleop.get_action() == held  # holding the last live target
+        time.sleep(0.8)
+        with pytest.raises(GloveStreamLost, match=r"after the bridge's clock stepped back"):
+            teleop.get_action()
+    assert re.search(r"clock stepped back 4\.9\d\d s", caplog.text) and teleop.receiver.late == 0  # 5 s - a frame

@@ -43,7 +43,7 @@ from lerobot.motors.motors_bus import get_address
 
 from lerobot_blindgrasp.hardware.xm430 import EXTRA_REGISTERS, MODEL
 
-from .ports import PortInUseError, open_exclusive
+from .ports import PortAccessError, PortInUseError, open_exclusive
 
 logger = logging.getLogger(__name__)
 
@@ -198,7 +198,7 @@ class RetryingDynamixelBus(DynamixelMotorsBus):
         try:
             super().connect(handshake=False)
         except ConnectionError as e:  # LeRobot's "Could not connect ... wrong port?" would hide a busy port
-            if isinstance(e.__cause__, PortInUseError):
+            if isinstance(e.__cause__, (PortInUseError, PortAccessError)):
                 raise e.__cause__ from None
             raise
         if handshake:

@@ -36,6 +36,10 @@ class GripperPortBusyError(GripperSafetyStop, ConnectionError):
     """Another process (or robot object) owns the bus or force-sensor port; refused before a byte was sent."""
 
 
+class GripperPortAccessError(GripperSafetyStop, ConnectionError):
+    """This user may not open the bus or force-sensor port (permissions); refused before a byte was sent."""
+
+
 class GripperTimingError(GripperSafetyStop):
     """The control loop overran its period for longer than `max_overrun_s`: the data would no longer be at the
     rate the policy and the dataset assume."""

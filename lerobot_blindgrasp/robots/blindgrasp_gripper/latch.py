@@ -27,6 +27,7 @@ from .errors import (
     ForceSensorError,
     ForceTareError,
     GripperBusError,
+    GripperPortAccessError,
     GripperPortBusyError,
     GripperReadingError,
     GripperSafetyStop,
@@ -34,7 +35,7 @@ from .errors import (
 )
 from .force_sensor import ForceStreamError
 from .plausibility import ImplausibleReadingError
-from .ports import PortInUseError
+from .ports import PortAccessError, PortInUseError
 from .timing import LoopOverrunError
 
 logger = logging.getLogger(__name__)
@@ -43,6 +44,7 @@ logger = logging.getLogger(__name__)
 _NAMED_STOPS = (
     (GripperSafetyStop, None, ""),
     (PortInUseError, GripperPortBusyError, ""),
+    (PortAccessError, GripperPortAccessError, ""),
     (ImplausibleReadingError, GripperReadingError, "Stopped while {what}: "),
     (LoopOverrunError, GripperTimingError, ""),
     (ForceTareError, None, ""),
