@@ -1,5 +1,7 @@
-"""Record in a blindgrasp_transformer checkpoint what it was trained for: `trained_for` in its config.json (robot
-type, fps, the state and action names in order, the action meaning, and where they were read).
+"""Record in a blindgrasp_transformer checkpoint what it was trained for (`trained_for` in its config.json).
+
+The record holds the robot type, the fps, the state and action names in order, the action meaning, and where they
+were read.
 
 lerobot-train writes it for every checkpoint it trains (the policy fills it from the training dataset's
 metadata). This is the one-off for a checkpoint trained before that, whose fit the real gripper otherwise refuses
