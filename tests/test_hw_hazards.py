@@ -65,31 +65,32 @@ def _assert_spaced(times: list[float]) -> None:
     assert gaps.min() >= 0.8 * DT, np.round(gaps * 1e3, 1)
 
 
+def _lerobot_paced_loop(robot, steps: int, step: list[int]) -> None:
+    """lerobot_record.py's `record_loop`: observe, act, sleep the rest of the period from the loop's start."""
+    for step[0] in range(steps):
+        start = time.perf_counter()
+        obs = robot.get_observation()
+        robot.send_action(dict(zip(spec.ACTION_NAMES, as_q(obs).tolist(), strict=True)))
+        precise_sleep(max(DT - (time.perf_counter() - start), 0.0))
+
+
 def test_no_short_step_after_a_stall_in_a_loop_paced_as_lerobots(rig, robot):
     """lerobot-record's and lerobot-rollout's loop (lerobot_record.py `record_loop`): observe, act, sleep the rest of
     the period from the loop's start. After a stalled observation it goes straight on; the robot spaces its samples
     (`timing.SampleSpacing`), whatever the stall's length."""
     times, step = _sample_times(robot), [0]
     _stall_reads(robot, step)
-    for step[0] in range(24):
-        start = time.perf_counter()
-        obs = robot.get_observation()
-        robot.send_action(dict(zip(spec.ACTION_NAMES, as_q(obs).tolist(), strict=True)))
-        precise_sleep(max(DT - (time.perf_counter() - start), 0.0))
+    _lerobot_paced_loop(robot, 24, step)
     _assert_spaced(times)
     assert robot.spacing.waits >= len(STALLS_MS)
 
 
 def test_a_steadily_loaded_loop_is_not_slowed(rig, robot):
     """Reads of 30 ms every step (a slow bus all along): samples come one period apart and the loop keeps its rate."""
-    times, step = _sample_times(robot), [0]
+    times = _sample_times(robot)
     read = robot.force.read
     robot.force.read = lambda: (time.sleep(0.03), read())[1]
-    for step[0] in range(12):
-        start = time.perf_counter()
-        obs = robot.get_observation()
-        robot.send_action(dict(zip(spec.ACTION_NAMES, as_q(obs).tolist(), strict=True)))
-        precise_sleep(max(DT - (time.perf_counter() - start), 0.0))
+    _lerobot_paced_loop(robot, 12, [0])
     _assert_spaced(times)
     assert robot.spacing.waited_s <= 0.05 * (times[-1] - times[0])  # the spacing added (almost) nothing
 
@@ -189,52 +190,3 @@ def test_a_second_failure_during_cleanup_never_masks_the_first_or_aborts(tmp_pat
     assert out.returncode == 4, text[-3000:]
     assert "Traceback" not in text and "also failed" in text, text[-3000:]
     assert "error: could not write" in text and "the disk is full (ENOSPC)" in text
-
-
-# --- the glove bridge's clock --------------------------------------------------------------------------------------
-@pytest.fixture
-def glove_teleop(tmp_path):
-    from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
-    from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
-
-    (tmp_path / "op.json").write_text(json.dumps({"open": OPEN, "fist": FIST}))
-    port = free_udp_port()
-    with GloveEmulator(port, rate_hz=100.0) as glove:
-        teleop = ManusGlove(ManusGloveConfig(id="op", port=port, calibration_dir=tmp_path))
-        teleop.connect()
-        try:
-            yield teleop, glove
-        finally:
-            teleop.disconnect()
-
-
-def test_a_bridge_clock_that_jumps_ahead_is_followed(glove_teleop, caplog):
-    """The bridge's `sent` jumps 5 s ahead within its session: no longer this machine's clock, so the receiver says
-    so and ages by an estimated offset; the poses stay live."""
-    teleop, glove = glove_teleop
-    with caplog.at_level(logging.WARNING):
-        glove.clock_offset_s = 5.0
-        glove.closure = 1.0
-        time.sleep(0.3)
-        action = teleop.get_action()
-    assert "not this machine's monotonic clock" in caplog.text
-    assert action["ff_j11.pos"] == pytest.approx(teleop.config.closed_pose[1], abs=1e-6)  # the fist, live
-    assert teleop.receiver.stale == 0 and teleop.receiver.latest()[1] < 0.05
-
-
-def test_a_bridge_clock_that_steps_back_is_named_and_stops(glove_teleop, caplog):
-    """The bridge's `sent` steps 5 s back while its `seq` goes on: not a late datagram, a clock that is not
-    monotonic. Its poses cannot be aged: dropped, the action holds, then the stream is lost, and both say why."""
-    from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost
-
-    teleop, glove = glove_teleop
-    held = teleop.get_action()
-    with caplog.at_level(logging.WARNING):
-        glove.clock_offset_s = -5.0
-        glove.closure = 1.0
-        time.sleep(0.3)
-        assert teleop.get_action() == held  # holding the last live target
-        time.sleep(0.8)
-        with pytest.raises(GloveStreamLost, match=r"after the bridge's clock stepped back"):
-            teleop.get_action()
-    assert re.search(r"clock stepped back 4\.9\d\d s", caplog.text) and teleop.receiver.late == 0  # 5 s - a frame

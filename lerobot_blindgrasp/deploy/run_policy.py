@@ -18,6 +18,7 @@ features again, so `observation.state` is built with exactly `spec.STATE_NAMES`,
 
 # No `from __future__ import annotations`: LeRobot's parser.wrap reads the config class from the real annotation.
 import logging
+import sys
 
 from lerobot.configs import parser
 from lerobot.configs.types import PipelineFeatureType
@@ -82,7 +83,9 @@ def rollout(cfg: RolloutConfig) -> None:
         strategy.teardown(ctx)  # returns to the start pose (unless disabled) and disconnects: torque off
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    if argv is not None:  # LeRobot's parser reads the command line from sys.argv
+        sys.argv = [sys.argv[0], *argv]
     register_third_party_plugins()
     rollout()
 
