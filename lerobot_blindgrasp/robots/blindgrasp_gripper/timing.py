@@ -93,14 +93,19 @@ class SampleSpacing:
     observation that took long to read (a slow bus, a loaded host: 30 ms or 49 ms alike), the loop goes straight
     on, and the next observation's data would be read a few ms after the slow one's, which the policy and the
     dataset take for one whole period. So before every read the robot waits until the read will end no earlier
-    than `min_gap_s` after the previous one ended, taking the shortest of the recent reads as this read's length.
+    than `min_gap_s` after the previous one ended. It cannot know how long the read will take: it takes the
+    shortest of the recent reads, less half the slack (so a read up to that much faster than any recent one still
+    keeps the gap), and nothing until it has seen `MIN_READS` reads since the loop (re)started.
     A steadily loaded loop never waits: its reads take the same time every step, so its samples come one caller
-    period apart. After a wait the caller's next start comes that much later and its own sleep shrinks by as
-    much, so the waits die out by `slack` periods a step and the caller's pacing takes over again."""
+    period apart, half the slack inside the gap. After a wait the caller's next start comes that much later and its
+    own sleep shrinks by as much, so the waits die out and the caller's pacing takes over again."""
+
+    MIN_READS = 4
 
     def __init__(self, period_s: float, slack: float = 0.1):
         self.period_s = period_s
         self.min_gap_s = period_s * (1.0 - slack)
+        self.margin_s = period_s * slack / 2
         self.waits = 0  # reads that were held back, and for how long in all (for tests and logs)
         self.waited_s = 0.0
         self._last_end: float | None = None
@@ -108,12 +113,18 @@ class SampleSpacing:
 
     def restart(self) -> None:
         self._last_end = None
+        self._reads.clear()
+
+    def expected_read_s(self) -> float:
+        if len(self._reads) < self.MIN_READS:
+            return 0.0
+        return max(0.0, min(self._reads) - self.margin_s)
 
     def before_read(self) -> float:
         """Sleep until this read may start; returns the time slept (s)."""
         if self._last_end is None:
             return 0.0
-        delay = self._last_end + self.min_gap_s - min(self._reads, default=0.0) - time.monotonic()
+        delay = self._last_end + self.min_gap_s - self.expected_read_s() - time.monotonic()
         if delay <= 0:
             return 0.0
         self.waits += 1
@@ -140,6 +151,7 @@ class Schedule:
 
     def start(self) -> None:
         self._next = time.monotonic() + self.period_s
+        self.spacing.restart()
 
     def wait(self) -> None:
         """Sleep until the next tick and until the read is due. If the tick has already passed, go on at once and
