@@ -139,7 +139,9 @@ def test_recorded_dataset_has_the_sim_schema(recorded):
     assert ds.num_episodes == 2
     frames = [ds[i] for i in range(len(ds))]
     lengths = np.bincount([int(f["episode_index"]) for f in frames])
-    assert all(30 <= n <= 41 for n in lengths), lengths  # 2 s at 20 Hz, minus frames lost to a loaded CPU
+    # 2 s at 20 Hz, minus frames lost to a loaded CPU: there the emulator's reads vary by tens of ms, and the robot
+    # keeps its samples >= 0.9 period apart (`timing.SampleSpacing`), which costs the loop the time it waits.
+    assert all(24 <= n <= 41 for n in lengths), lengths
     np.testing.assert_allclose([float(f["timestamp"]) for f in frames[: lengths[0]]],
                                np.arange(lengths[0]) / spec.CONTROL_HZ, atol=1e-4)  # fmt: skip
 
@@ -312,7 +314,7 @@ def test_sigterm_during_recording_keeps_the_saved_episodes(station, tmp_path):
         assert op.wait(60) == 128 + signal.SIGTERM, op.text[-3000:]
     print(f"lerobot-record, SIGTERM: torque off {dt * 1e3:.0f} ms after the signal")
     ds = LeRobotDataset(REPO_ID, root=root)  # finalized: readable, the interrupted episode discarded
-    assert ds.num_episodes == 1 and 25 <= len(ds) <= 31
+    assert ds.num_episodes == 1 and 18 <= len(ds) <= 31  # 1.5 s at 20 Hz, less what a loaded CPU costs
 
 
 def test_sighup_during_real_eval_turns_the_torque_off(station, checkpoint, tmp_path):

@@ -94,18 +94,17 @@ class SampleSpacing:
     on, and the next observation's data would be read a few ms after the slow one's, which the policy and the
     dataset take for one whole period. So before every read the robot waits until the read will end no earlier
     than `min_gap_s` after the previous one ended. It cannot know how long the read will take: it takes the
-    shortest of the recent reads, less half the slack (so a read up to that much faster than any recent one still
-    keeps the gap), and nothing until it has seen `MIN_READS` reads since the loop (re)started.
-    A steadily loaded loop never waits: its reads take the same time every step, so its samples come one caller
-    period apart, half the slack inside the gap. After a wait the caller's next start comes that much later and its
-    own sleep shrinks by as much, so the waits die out and the caller's pacing takes over again."""
+    shortest of the recent reads (none until it has seen `MIN_READS` since the loop (re)started).
+    A steadily loaded loop does not wait: its samples come one caller period apart, and a read that takes up to the
+    slack (5 ms at 20 Hz: a health read, bus jitter) longer than the shortest recent one leaves the next gap
+    inside the contract. After a wait the caller's next start comes that much later and its own sleep shrinks by as
+    much, so the waits die out and the caller's pacing takes over again."""
 
     MIN_READS = 4
 
     def __init__(self, period_s: float, slack: float = 0.1):
         self.period_s = period_s
         self.min_gap_s = period_s * (1.0 - slack)
-        self.margin_s = period_s * slack / 2
         self.waits = 0  # reads that were held back, and for how long in all (for tests and logs)
         self.waited_s = 0.0
         self._last_end: float | None = None
@@ -118,7 +117,7 @@ class SampleSpacing:
     def expected_read_s(self) -> float:
         if len(self._reads) < self.MIN_READS:
             return 0.0
-        return max(0.0, min(self._reads) - self.margin_s)
+        return min(self._reads)
 
     def before_read(self) -> float:
         """Sleep until this read may start; returns the time slept (s)."""
