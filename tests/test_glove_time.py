@@ -7,6 +7,7 @@ from __future__ import annotations
 import itertools
 import json
 import logging
+import re
 import sys
 import threading
 import time
@@ -19,6 +20,7 @@ from hypothesis import strategies as st
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
+from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveDatagram, GloveSender
 from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
 from lerobot_blindgrasp.teleoperators.manus_glove.stream import OFFSET_LEAK, GloveReceiver
@@ -229,3 +231,33 @@ def test_a_restarted_bridge_is_followed_after_a_warning(rig, caplog):
         assert teleop.receiver.wait_frames(3, 2.0)
         assert _closure(teleop) == pytest.approx(1.0, abs=1e-9)
     assert teleop.receiver.restarts == 1 and "Glove bridge restarted" in caplog.text
+
+
+def test_a_bridge_clock_that_jumps_ahead_is_followed(rig, caplog):
+    """The bridge's `sent` jumps 5 s ahead within its session: no longer this machine's clock, so the receiver says
+    so and ages by an estimated offset; the poses stay live."""
+    teleop, glove = rig
+    with caplog.at_level(logging.WARNING):
+        glove.clock_offset_s = 5.0
+        glove.closure = 1.0
+        time.sleep(0.3)
+        action = teleop.get_action()
+    assert "not this machine's monotonic clock" in caplog.text
+    assert action["ff_j11.pos"] == pytest.approx(teleop.config.closed_pose[1], abs=1e-6)  # the fist, live
+    assert teleop.receiver.stale == 0 and teleop.receiver.latest()[1] < 0.05
+
+
+def test_a_bridge_clock_that_steps_back_is_named_and_stops(rig, caplog):
+    """The bridge's `sent` steps 5 s back while its `seq` goes on: not a late datagram, a clock that is not
+    monotonic. Its poses cannot be aged: dropped, the action holds, then the stream is lost, and both say why."""
+    teleop, glove = rig
+    held = teleop.get_action()
+    with caplog.at_level(logging.WARNING):
+        glove.clock_offset_s = -5.0
+        glove.closure = 1.0
+        time.sleep(0.3)
+        assert teleop.get_action() == held  # holding the last live target
+        time.sleep(0.8)
+        with pytest.raises(GloveStreamLost, match=r"after the bridge's clock stepped back"):
+            teleop.get_action()
+    assert re.search(r"clock stepped back 4\.9\d\d s", caplog.text) and teleop.receiver.late == 0  # 5 s - a frame

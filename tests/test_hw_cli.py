@@ -29,6 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 ROBOT_FILE = ROOT / "robot_configs" / "blindgrasp_gripper.yaml"
 GLOVE_FILE = ROOT / "robot_configs" / "manus_glove.yaml"
 REPO_ID = "local/blindgrasp_glove_demo"
+ROBOT = "blindgrasp_gripper"
 
 
 def _robot_args(rig: GripperRig, prefix: str = "--robot") -> list[str]:
@@ -138,7 +139,9 @@ def test_recorded_dataset_has_the_sim_schema(recorded):
     assert ds.num_episodes == 2
     frames = [ds[i] for i in range(len(ds))]
     lengths = np.bincount([int(f["episode_index"]) for f in frames])
-    assert all(30 <= n <= 41 for n in lengths), lengths  # 2 s at 20 Hz, minus frames lost to a loaded CPU
+    # 2 s at 20 Hz, minus frames lost to a loaded CPU: there the emulator's reads vary by tens of ms, and the robot
+    # keeps its samples >= 0.9 period apart (`timing.SampleSpacing`), which costs the loop the time it waits.
+    assert all(24 <= n <= 41 for n in lengths), lengths
     np.testing.assert_allclose([float(f["timestamp"]) for f in frames[: lengths[0]]],
                                np.arange(lengths[0]) / spec.CONTROL_HZ, atol=1e-4)  # fmt: skip
 
@@ -216,10 +219,12 @@ def _rollout_args(rig, checkpoint) -> list[str]:
 
 
 def test_rollout_of_a_trained_checkpoint_on_the_gripper(station, checkpoint):
+    facts = json.loads((checkpoint / "config.json").read_text())["trained_for"]  # lerobot-train recorded it
+    assert (facts["robot_type"], facts["fps"], facts["state_names"]) == (ROBOT, 20, list(spec.STATE_NAMES))
     with GripperRig() as rig:
         rig.hand_move(spec.HOME_POSE)
         before = rig.dxl.instruction_counts.get(0x83, 0)
-        cmd = [str(BIN / "python"), "-m", "lerobot_blindgrasp.robots.blindgrasp_gripper.rollout",
+        cmd = [str(BIN / "python"), "-m", "lerobot_blindgrasp.deploy.run_policy",
                *_rollout_args(rig, checkpoint)]  # fmt: skip
         res = _run(cmd, station.env)
         assert "Duration limit reached" in res.stderr
@@ -309,7 +314,7 @@ def test_sigterm_during_recording_keeps_the_saved_episodes(station, tmp_path):
         assert op.wait(60) == 128 + signal.SIGTERM, op.text[-3000:]
     print(f"lerobot-record, SIGTERM: torque off {dt * 1e3:.0f} ms after the signal")
     ds = LeRobotDataset(REPO_ID, root=root)  # finalized: readable, the interrupted episode discarded
-    assert ds.num_episodes == 1 and 25 <= len(ds) <= 31
+    assert ds.num_episodes == 1 and 18 <= len(ds) <= 31  # 1.5 s at 20 Hz, less what a loaded CPU costs
 
 
 def test_sighup_during_real_eval_turns_the_torque_off(station, checkpoint, tmp_path):
@@ -332,7 +337,7 @@ def test_sigterm_during_rollout_turns_the_torque_off(station, checkpoint):
     with GripperRig() as rig:
         rig.hand_move(spec.HOME_POSE)
         args = [a if not a.startswith("--duration") else "--duration=60" for a in _rollout_args(rig, checkpoint)]
-        op = Operator([str(BIN / "python"), "-m", "lerobot_blindgrasp.robots.blindgrasp_gripper.rollout", *args],
+        op = Operator([str(BIN / "python"), "-m", "lerobot_blindgrasp.deploy.run_policy", *args],
                       station.env)  # fmt: skip
         dt = _signal_when(op, None, signal.SIGTERM, rig, after_s=1.5)
         assert op.wait(60) == 0, op.text[-3000:]

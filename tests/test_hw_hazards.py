@@ -1,13 +1,20 @@
 """Rows of the hazard analysis (docs/hardware.md, "Hazard analysis") that no other test file holds: the host loop's
-timing after a stall, in a loop paced as LeRobot's and in the eval trial, and a second failure during cleanup."""
+timing after a stall of 30-49 ms, in a loop paced as LeRobot's and in the eval trial, and a second failure during
+cleanup."""
 
 from __future__ import annotations
 
+import ast
+import errno
+import json
+import logging
 import os
+import re
 import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -19,41 +26,80 @@ from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
 from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 
 DT = spec.CONTROL_DT
+PACKAGE = Path(__file__).resolve().parents[1] / "lerobot_blindgrasp"
 
 
 def _sample_times(robot) -> list[float]:
-    """When each observation's data was in: the return of get_observation."""
+    """When each observation's data was in: the end of its reads (positions, then forces), as the robot saw it.
+    (Not the return of get_observation: on a loaded CI host the thread may wait there for the CPU, after the data.)"""
     times: list[float] = []
-    observe = robot.get_observation
+    after_read = robot.spacing.after_read
 
-    def timed():
-        obs = observe()
-        times.append(time.monotonic())
-        return obs
+    def timed(started: float, ended: float) -> None:
+        times.append(ended)
+        after_read(started, ended)
 
-    robot.get_observation = timed
+    robot.spacing.after_read = timed
     return times
 
 
-def _stall(rig, k: int) -> None:
-    rig.dxl.reply_delay_s = 0.03 if k in (4, 5) else 0.0  # two steps on a slow bus: ~0.2 s per observation
+STALLS_MS = {4: 30, 9: 39, 14: 45, 19: 49}  # step -> how long that step's read stalls (a slow bus, a loaded host)
+
+
+def _stall_reads(robot, step: list[int]) -> None:
+    """The force read of the steps in STALLS_MS takes that much longer: the whole observation is that late."""
+    read = robot.force.read
+
+    def slow():
+        if (ms := STALLS_MS.get(step[0])) is not None:
+            time.sleep(ms / 1e3)
+        return read()
+
+    robot.force.read = slow
+
+
+def _assert_spaced(times: list[float]) -> None:
+    gaps = np.diff(times)
+    # The contract is 0.9 period (`SampleSpacing.min_gap_s`). 0.75 leaves room for a read faster than the recent ones
+    # and for the timestamps themselves, which a shared 2-core CI host at load ~9 delays by several ms. Before the
+    # fix, a 30-49 ms read was followed by the next sample 3-19 ms later.
+    assert gaps.min() >= 0.75 * DT, np.round(gaps * 1e3, 1)
+
+
+def _lerobot_paced_loop(robot, steps: int, step: list[int]) -> None:
+    """lerobot_record.py's `record_loop`: observe, act, sleep the rest of the period from the loop's start."""
+    for step[0] in range(steps):
+        start = time.perf_counter()
+        obs = robot.get_observation()
+        robot.send_action(dict(zip(spec.ACTION_NAMES, as_q(obs).tolist(), strict=True)))
+        precise_sleep(max(DT - (time.perf_counter() - start), 0.0))
 
 
 def test_no_short_step_after_a_stall_in_a_loop_paced_as_lerobots(rig, robot):
-    """lerobot-record's and lerobot-rollout's loop: observe, act, sleep the rest of the period from the loop's start.
-    After a stalled observation it goes straight on; the robot spaces its samples (`timing.SampleSpacing`)."""
+    """lerobot-record's and lerobot-rollout's loop (lerobot_record.py `record_loop`): observe, act, sleep the rest of
+    the period from the loop's start. After a stalled observation it goes straight on; the robot spaces its samples
+    (`timing.SampleSpacing`), whatever the stall's length."""
+    times, step = _sample_times(robot), [0]
+    _stall_reads(robot, step)
+    _lerobot_paced_loop(robot, 24, step)
+    _assert_spaced(times)
+    assert robot.spacing.waits >= len(STALLS_MS)
+
+
+def test_a_steadily_loaded_loop_is_not_slowed(rig, robot):
+    """Reads of 30 ms every step (a slow bus all along): samples come one period apart and the loop keeps its rate.
+    (The first reads after a (re)start are spaced as if reads took no time: until `SampleSpacing.MIN_READS` of them
+    say how long a read takes.)"""
     times = _sample_times(robot)
-    for k in range(18):
-        start = time.perf_counter()
-        rig.dxl.reply_delay_s = 0.04 if k == 5 else 0.0  # the observation alone stalls (> 1 period)
-        obs = robot.get_observation()
-        rig.dxl.reply_delay_s = 0.0
-        robot.send_action(dict(zip(spec.ACTION_NAMES, as_q(obs).tolist(), strict=True)))
-        precise_sleep(max(DT - (time.perf_counter() - start), 0.0))
-    gaps = np.diff(times)[5:]  # from the stalled observation on
-    # The step after the stall was 3-10 ms (a read's time on a loaded host); the spacing keeps >= 0.9 period.
-    assert gaps[0] >= 0.8 * DT and gaps.min() >= 0.5 * DT, gaps  # no burst after it either
-    assert robot.spacing.waits >= 1
+    read = robot.force.read
+    robot.force.read = lambda: (time.sleep(0.03), read())[1]
+    _lerobot_paced_loop(robot, 6, [0])
+    start, waited = len(times), robot.spacing.waited_s
+    _lerobot_paced_loop(robot, 12, [0])
+    _assert_spaced(times)
+    assert robot.spacing.waited_s - waited <= 0.05 * (
+        times[-1] - times[start]
+    )  # the spacing added (almost) nothing
 
 
 def test_no_short_step_after_a_stall_in_the_eval_trial(rig, tmp_path, monkeypatch):
@@ -63,14 +109,54 @@ def test_no_short_step_after_a_stall_in_the_eval_trial(rig, tmp_path, monkeypatc
     env = RealGraspEnv(GripperSession(cfg.trial_settings()), "foam_brick")
     try:
         env.reset(seed=0)
-        times = _sample_times(env.robot)
-        for k in range(16):
-            _stall(rig, k)
+        times, step = _sample_times(env.robot), [0]
+        _stall_reads(env.robot, step)
+        for step[0] in range(24):
             env.step(spec.HOME_POSE)
-        gaps = np.diff(times)[5:]
-        assert gaps[0] >= 0.8 * DT and gaps[1] >= 0.8 * DT and gaps.min() >= 0.5 * DT, gaps
+        _assert_spaced(times)
+        # The trial spaces its reads itself (`Schedule`, re-based on the held read), and the loop keeps its rate.
+        assert env._schedule.spacing.waits >= len(STALLS_MS)
+        assert np.median(np.diff(times)) <= 1.5 * DT
     finally:
         env.close()
+
+
+def test_no_cleanup_finalizes_a_dataset_bare():
+    """Every `finalize()` in a `finally` of the package goes through demos/loop.py's `_finalize_or_abandon` inside
+    `_cleanup`: a second failure there (a full disk fails the footer write too) is logged, never raised over the
+    first, and the writers are abandoned so that pyarrow does not abort at exit."""
+    bare = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Try):
+                calls = [c for stmt in node.finalbody for c in ast.walk(stmt) if isinstance(c, ast.Call)]
+                bare += [f"{path.relative_to(PACKAGE.parent)}:{c.lineno}" for c in calls
+                         if isinstance(c.func, ast.Attribute) and c.func.attr == "finalize"]  # fmt: skip
+    assert not bare, bare
+
+
+def test_a_full_disk_at_finalize_keeps_the_first_error(tmp_path, monkeypatch, caplog):
+    """No root needed: the write fails with ENOSPC (the first error), then finalize() fails with ENOSPC too."""
+    from lerobot_blindgrasp.bench.demos import _writer_speed
+    from lerobot_blindgrasp.demos import curation, dataset
+
+    create = dataset.create
+
+    def full_disk(*args, **kwargs):
+        ds = create(*args, **kwargs)
+        ds.finalize = lambda: (_ for _ in ()).throw(OSError(errno.ENOSPC, "No space left on device", "footer"))
+        return ds
+
+    def write_episode(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", "episode data")
+
+    monkeypatch.setattr(curation, "evaluate", lambda *args: None)
+    monkeypatch.setattr(dataset, "create", full_disk)
+    monkeypatch.setattr(dataset, "write_episode", write_episode)
+    with caplog.at_level(logging.ERROR), pytest.raises(OSError) as e:
+        _writer_speed([SimpleNamespace(task_reward=None, uniaxial_force=None)], tmp_path / "w", per_frame=False)
+    assert e.value.filename == "episode data"  # the first error, not the finalize's
+    assert "Finalizing the dataset also failed (the disk is full (ENOSPC)); the first error stands" in caplog.text
 
 
 def _tmpfs(path: Path, size_kb: int) -> bool:

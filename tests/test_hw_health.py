@@ -127,3 +127,42 @@ def test_a_stall_at_the_current_limit_stops_before_the_firmware_overload(rig, ro
         _hold(robot, 100, target)
     assert _stopped(rig, robot)
     assert not any(s.get("Hardware_Error_Status") for s in rig.dxl.servos.values())  # before the firmware's stop
+
+
+def test_a_recording_episode_does_not_start_with_a_servo_near_its_limit(rig, robot):
+    """lerobot-record announces every episode (`log_say("Recording episode N")`, at INFO; its init_logging leaves
+    the root logger open to INFO). A servo that warmed to the start level during the last episode refuses the
+    next one at its first read: the episode before it ran on, with a warning only."""
+    from lerobot.utils.utils import log_say
+
+    rig.servo("mf_j21").health.temperature_c = 74.0  # start needs < 72; stop at 77
+    _hold(robot, 6)  # the episode in progress goes on
+    assert robot.is_connected
+    root = logging.getLogger()
+    level, root.level = root.level, logging.NOTSET  # as LeRobot's init_logging leaves it
+    try:
+        log_say("Recording episode 1", play_sounds=False)
+    finally:
+        root.level = level
+    with pytest.raises(GripperHealthError, match=r"Refused to start: mf_j21 temperature 74 degC"):
+        robot.get_observation()
+    assert _stopped(rig, robot)
+
+
+def test_a_loop_that_resumes_after_a_pause_is_checked_as_a_start(rig, robot):
+    rig.servo("ff_j10").health.temperature_c = 73.0
+    _hold(robot, 2)
+    time.sleep(1.1)  # a save, a prompt: the loop paused
+    with pytest.raises(GripperHealthError, match=r"Refused to start: ff_j10 temperature 73 degC"):
+        _hold(robot, 1)
+    assert _stopped(rig, robot)
+
+
+def test_an_action_only_loop_reads_health_too(rig, robot):
+    """A loop that only sends actions (a replay script): send_action stands in for the period's reads."""
+    rig.servo("th_j32").health.temperature_c = 78.0  # over the stop level (77)
+    with pytest.raises(GripperHealthError, match=r"th_j32 temperature: 78 degC .*: too hot"):
+        for _ in range(8):
+            robot.send_action(dict(zip(spec.ACTION_NAMES, spec.HOME_POSE.tolist(), strict=True)))
+            time.sleep(spec.CONTROL_DT)
+    assert _stopped(rig, robot)

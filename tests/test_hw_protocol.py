@@ -19,10 +19,8 @@ from lerobot_blindgrasp.hardware.emulators.dynamixel import (
     XM430_W350_MODEL,
     DynamixelBusEmulator,
     EmulatedServo,
-    _stuff,
-    _unstuff,
-    crc16,
 )
+from lerobot_blindgrasp.hardware.emulators.dynamixel_wire import crc16, stuff, unstuff
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
 from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import FrameParser, crc16_ccitt_false, encode_frame
 
@@ -45,7 +43,7 @@ def test_crc_and_byte_stuffing_match_the_sdk():
         data = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 64)))
         assert crc16(data) == ph.updateCRC(0, list(data), len(data))
     raw = bytes([0x55, 0x00, 0xFF, 0xFF, 0xFD, 0x01])
-    assert _stuff(raw) == bytes([0x55, 0x00, 0xFF, 0xFF, 0xFD, 0xFD, 0x01]) and _unstuff(_stuff(raw)) == raw
+    assert stuff(raw) == bytes([0x55, 0x00, 0xFF, 0xFF, 0xFD, 0xFD, 0x01]) and unstuff(stuff(raw)) == raw
 
 
 def test_ping_read_write_and_broadcast_ping(bus):

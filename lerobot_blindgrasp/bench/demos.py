@@ -20,6 +20,7 @@ import contextlib
 import dataclasses
 import io
 import shutil
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -59,6 +60,7 @@ def _writer_speed(episodes, root: Path, per_frame: bool, fast: bool = True) -> f
     """Frames per second through one write path, on real rollouts (whole, untrimmed)."""
     from lerobot_blindgrasp import spec
     from lerobot_blindgrasp.demos import curation, dataset
+    from lerobot_blindgrasp.demos.collection import _cleanup, _finalize_or_abandon
 
     ds = dataset.create(root, "bench/writer")
     frames, t0 = 0, time.perf_counter()
@@ -81,7 +83,8 @@ def _writer_speed(episodes, root: Path, per_frame: bool, fast: bool = True) -> f
             ds.save_episode()
             frames += buf["size"]
     finally:
-        ds.finalize()
+        with _cleanup("finalizing the dataset", sys.exc_info()[1]):  # never masks the error that ended the run
+            _finalize_or_abandon(ds)
     return frames / (time.perf_counter() - t0)
 
 

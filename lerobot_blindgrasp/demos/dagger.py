@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +36,7 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
+from lerobot_blindgrasp.demos.collection import _cleanup, _finalize_or_abandon
 from lerobot_blindgrasp.durable import atomic_write_json
 from lerobot_blindgrasp.rollout.actors import StudentActor, TeacherActor
 from lerobot_blindgrasp.rollout.envs import make_env
@@ -129,7 +131,8 @@ def run(cfg: DaggerConfig) -> dict:
                 bar.update(1)
     finally:
         bar.close()
-        ds.finalize()
+        with _cleanup("finalizing the dataset", sys.exc_info()[1]):  # never masks the error that ended the run
+            _finalize_or_abandon(ds)
     demo_dataset.aggregate(
         [_repo_id(cfg.demos), cfg.repo_id + "_relabelled"],
         [cfg.demos, out / "relabelled"],

@@ -106,7 +106,9 @@ class BlindGraspRealEnvConfig(EnvConfig):
 
         path = parser.get_path_arg("policy")
         if path and (where := policy_check.local_checkpoint(path)) is not None:
-            policy_check.check(where, policy_check.gripper_contract(self.robot.type, self.fps, "--env.fps"))
+            contract = policy_check.gripper_contract(self.robot.type, self.fps, "--env.fps")
+            allow = getattr(self.robot, "allow_unverified_policy", False)
+            policy_check.check(where, contract, allow_unverified=allow)
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
         from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv

@@ -5,8 +5,9 @@ One trial (= one lerobot-eval episode):
    places the object at the claw centre and presses ENTER (unattended force mode: waits `unattended_reset_s`);
    the fingertip sensors are tared (fingers in free air).
 2. 200 steps at 20 Hz (10 s): action = absolute joint targets, through `robot.send_action` (clipped on the robot).
-   The steps keep time with a `Schedule`: after a late step (a stalled bus, a slow policy) it re-bases on now
-   rather than firing the missed steps back to back. The robot measures the period in every get_observation:
+   The steps keep time with a `Schedule`: after a late step (a slow policy) it re-bases on now rather than
+   firing the missed steps back to back, and after a slow read (a stalled bus) the next read waits until it is at
+   least 0.9 period after it, so no two samples come a few ms apart. The robot measures the period in every get_observation:
    overruns are warned, counted in the trial log, and a sustained overrun ends the run (`GripperTimingError`).
 3. success, "lifted and held >= 1 s within 10 s", decided by
    - `success_mode=operator` (the paper's protocol): the operator presses `s` as soon as the object has been held
@@ -127,7 +128,9 @@ class RealGraspEnv(gym.Env):
         return self.session.robot
 
     def _observe(self) -> dict[str, np.ndarray]:
+        started = time.monotonic()
         obs = self.robot.get_observation()
+        self._schedule.sampled(started, time.monotonic())
         self._obs = np.array([obs[k] for k in spec.STATE_NAMES], dtype=np.float32)
         return spaces.observation(self._obs)
 

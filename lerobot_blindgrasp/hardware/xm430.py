@@ -25,6 +25,13 @@ CURRENT_LIMIT_MAX_UNITS = 1193  # Current_Limit register maximum (~3.2 A)
 HOMING_OFFSET_MAX = 1_044_479  # Homing_Offset(20) range, +-
 WATCHDOG_UNIT_MS = 20  # Bus_Watchdog(98) counts 20 ms units
 WATCHDOG_TRIPPED = 255  # Bus_Watchdog reads -1 (one unsigned byte) after the watchdog stopped the servo
+# Firmware the defences need (e-Manual): Drive_Mode(10) (half of the calibration) and Bus_Watchdog(98) (the dead
+# host's stop) are "available from firmware v38"; Startup_Configuration(60) and Backup_Ready(147) from v45.
+FIRMWARE_MIN = 38
+FIRMWARE_STARTUP_CONFIGURATION = 45
+STARTUP_TORQUE_ON = 0x01  # Startup_Configuration(60) bit 0: the torque comes on by itself at power-up
+# Items of the e-Manual's control table that LeRobot's X-series table lacks: (address, size).
+EXTRA_REGISTERS = {"Startup_Configuration": (60, 1), "Backup_Ready": (147, 1)}
 HARDWARE_ERROR_BITS = {  # Hardware_Error_Status(70)
     0x01: "input voltage",
     0x04: "overheating",
@@ -66,7 +73,7 @@ SHUTDOWN_DEFAULT = 0x34  # Shutdown(63): overheating | electrical shock | overlo
 TEMPERATURE_WARN_MARGIN_C = 15.0  # WARN at 65 degC with the default limit
 TEMPERATURE_START_MARGIN_C = 8.0  # a trial or episode does not start at >= 72 degC
 TEMPERATURE_STOP_MARGIN_C = 3.0  # named stop, torque off, at >= 77 degC (the firmware's own shutdown is 80)
-TEMPERATURE_TREND_HORIZON_S = 30.0  # stop when the trend reaches the stop level within this horizon
+TEMPERATURE_TREND_HORIZON_S = 30.0  # stop when the trend reaches Temperature_Limit within this horizon
 VOLTAGE_WARN_LOW_V = 11.0  # under load, below this the servo no longer has its 12 V torque
 VOLTAGE_START_LOW_V = 10.8  # no trial below this at rest: the load will sag it under the rating
 VOLTAGE_STOP_LOW_V = RATED_VOLTAGE_V[0]  # below the rating for VOLTAGE_STOP_HOLD_S: named stop

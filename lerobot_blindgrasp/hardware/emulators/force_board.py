@@ -4,7 +4,8 @@ It streams the frame format of `lerobot_blindgrasp.robots.blindgrasp_gripper.for
 counts = offset + gain x force / scale (+ noise), saturating at 24 bits, and can misbehave the ways a USB serial sensor does: dropped frames,
 garbage bytes between frames, frames with a bad CRC, a stalled stream, channel-fault status bits, a different
 channel count (firmware/config mismatch), an unplugged cable (`unplug`), and dead data that still arrives: the last
-frame re-sent, a counter running backwards, a channel frozen at one value.
+frame re-sent, a counter running backwards, a channel frozen at one value, and a reset of the board (`reset`:
+silent while it boots, then a counter that starts again at 0).
 
 It follows the board's rule (`docs/force_board.md`): one frame per fresh sample, under the next SEQ, and nothing in
 between; STATUS bits mean faults only: a channel at the ADC's full scale sets its bit, as the firmware does, and
@@ -70,6 +71,12 @@ class ForceSensorEmulator(PtyDevice):
         self._last_frame = b""
         self._last_counts: list[int] = []
         self.sent = 0
+
+    def reset(self, boot_s: float = 0.5) -> None:
+        """The microcontroller resets (a brown-out, a USB glitch, a watchdog): nothing for `boot_s` (its bootloader
+        and HX711 settling), then frames again from SEQ 0."""
+        self.seq = 0
+        self._next = time.monotonic() + boot_s
 
     def counts_for(self, forces) -> np.ndarray:
         return self.offset + self.gain * np.asarray(forces, dtype=np.float64) / self.scale

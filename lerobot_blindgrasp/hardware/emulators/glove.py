@@ -12,10 +12,16 @@ Faults:
 - `garbage_every`: a malformed datagram every n frames. `reorder`: each frame is sent after its successor.
 - `delay_next(n)`: the next datagram arrives n frames late. `duplicate_next(n)`: it arrives again n frames later.
 - `restart()`: the bridge restarts (new session, counter from 1), from the same source address.
+- `noise_deg`: each channel's sensor noise (a real glove's values never repeat bit for bit); `frozen`: the bridge
+  keeps sending the last values under new numbers and stamps (the SDK's cached data after the glove's radio link
+  dropped).
+- `clock_offset_s`: added to every `sent` stamp: a bridge whose clock jumps (a step back or ahead within a
+  session), or one that is behind (its poses leave it already old: a lagging SDK, a clogged link at connect).
 """
 
 from __future__ import annotations
 
+import random
 import socket
 import threading
 import time
@@ -54,6 +60,11 @@ class GloveEmulator:
         self.stalled = False
         self.garbage_every = 0
         self.reorder = False
+        self.clock_offset_s = 0.0
+        self.noise_deg = 0.0
+        self.frozen = False
+        self._rng = random.Random(0)
+        self._last_pose: dict[str, float] | None = None
         self.sender = GloveSender(host, port, side, source_host=host)  # a fixed source address, like a bridge's
         self._later: list[tuple[int, bytes]] = []  # (frames to wait, datagram)
         self._delay_next: list[tuple[int, bool]] = []  # (n, keep the original on time)
@@ -112,9 +123,8 @@ class GloveEmulator:
         while not self._stop.wait(self.period):
             if self.paused:
                 continue
-            closure = self.closure_fn(time.monotonic() - self._t0) if self.closure_fn else self.closure
             with self._lock:
-                datagram = self.sender.pack(self.pose(closure))
+                datagram = self.sender.pack(self._glove(), sent=time.monotonic() + self.clock_offset_s)
                 out = self._network(datagram)
             if self.reorder:
                 if held is None:
@@ -123,6 +133,16 @@ class GloveEmulator:
                     out, held = out + held, None
             for d in out:
                 self.sender.send_raw(d)
+
+    def _glove(self) -> dict[str, float]:
+        """What the glove reports now: the hand's pose and its sensor noise, or, frozen, the last report again."""
+        if self.frozen and self._last_pose is not None:
+            return self._last_pose
+        closure = self.closure_fn(time.monotonic() - self._t0) if self.closure_fn else self.closure
+        pose = {k: v + self._rng.gauss(0.0, self.noise_deg) if self.noise_deg else v
+                for k, v in self.pose(closure).items()}  # fmt: skip
+        self._last_pose = pose
+        return pose
 
     def _network(self, datagram: bytes) -> list[bytes]:
         """What leaves the network now, given this frame's datagram."""

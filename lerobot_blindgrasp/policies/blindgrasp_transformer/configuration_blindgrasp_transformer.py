@@ -80,6 +80,45 @@ class ConstantThenLinearDecaySchedulerConfig(LRSchedulerConfig):
         return LambdaLR(optimizer, lr_lambda, -1)
 
 
+# What this policy's action means once its postprocessor has run: the processors turn the dataset's absolute
+# targets into the network's deltas and back (`processor_blindgrasp_transformer.py`).
+ACTION_MEANING = "absolute joint targets (rad)"
+
+
+@dataclass
+class TrainedFor:
+    """The robot a checkpoint was trained for, read from its training dataset's metadata (`meta/info.json`: robot
+    type, fps, the names of `observation.state` and `action`, in order) and the policy's own action meaning.
+    `source` says where the facts were read. The real gripper refuses a checkpoint whose facts differ from its own,
+    or that has none, before any servo takes torque (`robots/blindgrasp_gripper/policy_check.py`)."""
+
+    robot_type: str | None = None
+    fps: float | None = None
+    state_names: list[str] | None = None  # None: the dataset's metadata named no features
+    action_names: list[str] | None = None
+    action_meaning: str = ACTION_MEANING
+    source: str | None = None
+
+    @classmethod
+    def from_dataset(cls, meta, source: str | None = None) -> TrainedFor:
+        """From a `LeRobotDatasetMetadata` (or anything with `robot_type`, `fps`, `features` and `repo_id`)."""
+        features = getattr(meta, "features", None) or {}
+
+        def names(key: str) -> list[str] | None:
+            value = (features.get(key) or {}).get("names")
+            if isinstance(value, dict):  # LeRobot also writes {"axes": [...]} for some features
+                value = next(iter(value.values()), None)
+            return [str(n) for n in value] if isinstance(value, (list, tuple)) else None
+
+        return cls(
+            robot_type=getattr(meta, "robot_type", None),
+            fps=float(meta.fps) if getattr(meta, "fps", None) is not None else None,
+            state_names=names(OBS_STATE),
+            action_names=names(ACTION),
+            source=source or f"the metadata of dataset {getattr(meta, 'repo_id', '?')}",
+        )
+
+
 @PreTrainedConfig.register_subclass("blindgrasp_transformer")
 @dataclass
 class BlindgraspTransformerConfig(PreTrainedConfig):
@@ -131,6 +170,11 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     augment_force_gain: float = 0.0
     augment_force_bias_n: float = 0.0
     augment_joint_offset_rad: float = 0.0
+
+    # The robot this policy was trained for (`TrainedFor`), filled from the training dataset's metadata when
+    # lerobot-train builds the policy (`make_policy` hands the policy the dataset's metadata; fine-tuning on another
+    # dataset replaces it) and saved in config.json. None: not recorded (a checkpoint from before it was).
+    trained_for: TrainedFor | None = None
 
     @property
     def augmentation_active(self) -> bool:

@@ -37,7 +37,7 @@ from torch import Tensor, nn
 
 from lerobot_blindgrasp import project, spec
 
-from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
+from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig, TrainedFor
 from .processor_blindgrasp_transformer import Q_NOW, normalized_delta_to_target
 
 STATE_IS_PAD = f"{OBS_STATE}_is_pad"
@@ -228,6 +228,8 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         # kwargs: make_policy passes dataset_stats / dataset_meta; normalization lives in the processors instead.
         super().__init__(config)
         config.validate_features()
+        if kwargs.get("dataset_meta") is not None:  # lerobot-train: the dataset it trains on says the robot
+            config.trained_for = TrainedFor.from_dataset(kwargs["dataset_meta"])
         self.config = config
         self.model = BlindgraspGPT(config)
         self.reset()

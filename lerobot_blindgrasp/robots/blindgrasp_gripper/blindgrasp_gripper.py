@@ -3,100 +3,53 @@
 Observation and action follow `spec` exactly (names, order, rad and N), so datasets recorded here have the sim
 demos' schema. Every bus transaction goes through LeRobot's `DynamixelMotorsBus`, subclassed in `bus.py` for
 retries, clean retries and raw registers: the calibration lives in the servos (Drive_Mode, Homing_Offset), so
-rad = (ticks - 2048) * 2pi/4096 needs no LeRobot normalization mode. The rest reads like LeRobot's `koch_follower`
-plus the safety latch (`_safety`).
+rad = (ticks - 2048) * 2pi/4096 needs no LeRobot normalization mode. The rest reads like LeRobot's `koch_follower`.
 
 No reading is used unchecked: every position reading passes one plausibility gate (`plausibility.py`) before
 it is returned or used to bound a goal, the force stream is checked for liveness by content (`force_sensor.py`),
-get_observation measures the loop's period (`timing.py`), and both ports are opened for exclusive use (`ports.py`).
+the servos' state and health are read as `servo_checks.py` says, get_observation measures the loop's period and
+spaces its samples (`timing.py`), and both ports are opened for exclusive use (`ports.py`).
 
-Safety is latched: any failure while connected (bus error after the retries, a lost port, servo hardware error, a
-servo that reset or lost its settings, an implausible reading, force overload, stale or frozen force data, a
-sustained loop overrun, an exception, Ctrl-C or SIGTERM/SIGHUP inside a call) turns the torque off on every servo that answers, closes the ports and raises one error that says
-so. Reconnecting is an explicit decision of the operator. The servos' bus watchdog stops them on their own when the
-host goes quiet (`bus_watchdog_ms`), and SIGTERM/SIGHUP unwind the LeRobot scripts like Ctrl-C (`signals.py`).
-
-Why this module is over 300 lines: LeRobot's `Robot` interface puts connect, the interactive calibrate, configure,
-setup_motors, get_observation, send_action and disconnect on one class. The safety latch (about 100 lines) wraps
-all of them, so splitting it out would scatter the one place that decides when the torque goes off.
+Safety is latched (`latch.py`): any failure while connected turns the torque off on every servo that answers,
+closes the ports and raises one error that says so. The servos' bus watchdog stops them on their own when the host
+goes quiet (`bus_watchdog_ms`), and SIGTERM/SIGHUP unwind the LeRobot scripts like Ctrl-C (`signals.py`).
+The interactive calibration and motor setup are in `interactive.py`.
 """
 
 from __future__ import annotations
 
-import atexit
-import dataclasses
 import logging
 import time
-import weakref
 from contextlib import contextmanager
 from functools import cached_property
 
-import draccus
 import numpy as np
 from lerobot.motors import Motor, MotorNormMode
 from lerobot.motors.dynamixel import OperatingMode
 from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 
-from lerobot_blindgrasp import durable, spec
+from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware.force import force_bias_warning
-from lerobot_blindgrasp.hardware.xm430 import (
-    MODEL,
-    RAD_PER_TICK,
-    WATCHDOG_UNIT_MS,
-    amps_to_current_units,
-    decode_hardware_error,
-)
+from lerobot_blindgrasp.hardware.xm430 import MODEL, RAD_PER_TICK, WATCHDOG_UNIT_MS, amps_to_current_units
 
 from . import calibration as calib
-from . import connect_checks, force_calibration, health, latency_timer, policy_check, servo_state, signals
-from .bus import PortLostError, RetryingDynamixelBus
+from . import connect_checks, force_calibration, health, interactive, latency_timer, policy_check, signals
+from .bus import RetryingDynamixelBus
 from .calibration import rad_to_ticks, ticks_to_rad
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
-from .errors import (
-    ForceOverloadError,
-    ForceSensorError,
-    ForceTareError,
-    GripperBusError,
-    GripperHardwareError,
-    GripperHealthError,
-    GripperPortBusyError,
-    GripperReadingError,
-    GripperSafetyStop,
-    GripperStateError,
-    GripperTimingError,
-)
-from .force_sensor import ForceSensorReader, ForceStreamError
-from .plausibility import ImplausibleReadingError, PositionGate
-from .ports import PortInUseError
-from .timing import LoopOverrunError, PeriodMonitor, SampleSpacing
+from .episodes import EpisodeStarts
+from .errors import ForceOverloadError, ForceTareError, GripperBusError, GripperSafetyStop
+from .force_sensor import ForceSensorReader
+from .latch import SafetyLatch
+from .plausibility import PositionGate
+from .servo_checks import ServoChecks
+from .timing import PeriodMonitor, SampleSpacing
 
 logger = logging.getLogger(__name__)
 
-REFERENCE_POSE_HELP = (
-    "REFERENCE pose (q = 0 on all 9 joints): every finger hangs straight down from the plate, proximal and distal "
-    "links in line, each finger in its own vertical plane through the claw axis (see robot_configs/README.md)."
-)
-POSITIVE_POSE_HELP = (
-    "POSITIVE pose: from the reference pose, move EVERY joint by hand by at least ~10-15 degrees in its positive "
-    "direction: J*0 turns the fingertip counter-clockwise seen from above; J*1 and J*2 swing the fingertip away "
-    "from the claw axis (opening the claw)."
-)
 
-
-# What the latched stop raises for a failure below it: (cause, named error or None to keep the type, prefix).
-_NAMED_STOPS = (
-    (GripperSafetyStop, None, ""),
-    (PortInUseError, GripperPortBusyError, ""),
-    (ImplausibleReadingError, GripperReadingError, "Stopped while {what}: "),
-    (LoopOverrunError, GripperTimingError, ""),
-    (ForceTareError, None, ""),
-    (PortLostError, GripperBusError, "Dynamixel port lost while {what}: "),
-    (ForceStreamError, ForceSensorError, "Force sensor failure while {what}: "),
-)
-
-
-class BlindgraspGripper(Robot):
+class BlindgraspGripper(SafetyLatch, ServoChecks, calib.CheckedCalibrationFile, Robot):
     """D'Claw-derived three-finger gripper (`--robot.type=blindgrasp_gripper`)."""
 
     config_class = BlindgraspGripperConfig
@@ -118,8 +71,27 @@ class BlindgraspGripper(Robot):
         # What configure() set, checked every control period (`servo_state.py`); empty while the torque is off.
         self.expected: dict[str, int] = {}
         self._last_state_check = 0.0
-        fs = config.force_sensor
-        self.force = ForceSensorReader(
+        self._startup_torque_on: dict[str, int] = {}
+        self.force = self._make_force_reader(config.force_sensor)
+        self.gate = PositionGate(
+            speed_ticks_s=config.max_joint_speed_rad_s / RAD_PER_TICK,
+            margin_ticks=config.plausibility_margin_rad / RAD_PER_TICK,
+            backdrive_ticks=config.plausibility_backdrive_rad / RAD_PER_TICK,
+            rereads=config.plausibility_rereads,
+        )
+        self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
+        self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no two samples closer than the contract allows
+        self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
+        self.episodes = EpisodeStarts()  # lerobot-record's episode announcements (`episodes.py`)
+        self.lower = np.asarray(config.joint_lower, dtype=np.float64)
+        self.upper = np.asarray(config.joint_upper, dtype=np.float64)
+        self._atexit = None
+        # Vision-free by design; lerobot-record and lerobot-rollout still read `robot.cameras`.
+        self.cameras: dict = {}
+
+    @staticmethod
+    def _make_force_reader(fs) -> ForceSensorReader:
+        return ForceSensorReader(
             fs.port,
             fs.baudrate,
             fs.scale_n_per_count,
@@ -132,21 +104,6 @@ class BlindgraspGripper(Robot):
             tare_max_shift_n=fs.tare_max_shift_n,
             negative_fault_n=fs.negative_fault_n,
         )
-        self.gate = PositionGate(
-            speed_ticks_s=config.max_joint_speed_rad_s / RAD_PER_TICK,
-            margin_ticks=config.plausibility_margin_rad / RAD_PER_TICK,
-            backdrive_ticks=config.plausibility_backdrive_rad / RAD_PER_TICK,
-            rereads=config.plausibility_rereads,
-        )
-        self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
-        self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no short step after a stalled observation
-        self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
-        self._health_countdown = 0
-        self.lower = np.asarray(config.joint_lower, dtype=np.float64)
-        self.upper = np.asarray(config.joint_upper, dtype=np.float64)
-        self._atexit = None
-        # Vision-free by design; lerobot-record and lerobot-rollout still read `robot.cameras`.
-        self.cameras: dict = {}
 
     # --- features (valid while disconnected) ---------------------------------------------------------------------
     @cached_property
@@ -180,38 +137,45 @@ class BlindgraspGripper(Robot):
             # Both ports are taken (exclusively) before the first byte goes out: a second owner is refused here.
             force_calibration.apply(self.force, self.calibration_dir, self.id)  # <id>.force.json, if measured
             self.force.open()
-            self.bus.connect()  # pings all nine, with retries
-            self._register_atexit()
+            self.bus.connect()  # pings all nine, with retries; names a Status_Return_Level that hides replies
+            self._guard_process()
             signals.install(self)
+            self.episodes.install()
             self._check_servo_state()
-            self._check_health_limits()  # before any torque: a hot servo or a weak supply refuses the start
-            if self.calibration and not self.bus.is_calibrated:
-                logger.info("Writing the calibration file %s to the servos.", self.calibration_fpath)
-                self.bus.write_calibration(self.calibration)
-                self.gate.forget()  # the readings change frame
-            if not self.bus.is_calibrated:
-                if not calibrate:
-                    logger.warning("%s is not calibrated: run lerobot-calibrate before using it.", self)
-                    self.force.wait_first_frame()
-                    return
-                self.calibrate()
-            self.force.wait_first_frame()
-            self.force.tare(self.config.force_sensor.tare_s)
-            self.configure()
-            if warning := force_bias_warning(self.force.read()):  # at rest, holding the start pose
-                logger.warning(warning)
+            self._check_servo_setup()  # firmware, EEPROM limits, the start check of the servos' health
+            if not self._bring_up(calibrate):
+                return
         self.timing.restart()
         self.spacing.restart()
         logger.info("%s connected (force tare %s counts).", self, np.round(self.force.offset).tolist())
 
+    def _bring_up(self, calibrate: bool) -> bool:
+        """Calibration to the servos, the force tare, configure; False when left uncalibrated (lerobot-calibrate)."""
+        if self.calibration and not self.bus.is_calibrated:
+            logger.info("Writing the calibration file %s to the servos.", self.calibration_fpath)
+            self.bus.write_calibration(self.calibration)
+            self.gate.forget()  # the readings change frame
+        if not self.bus.is_calibrated:
+            if not calibrate:
+                logger.warning("%s is not calibrated: run lerobot-calibrate before using it.", self)
+                self.force.wait_first_frame()
+                return False
+            self.calibrate()
+        self.force.wait_first_frame()
+        self.force.tare(self.config.force_sensor.tare_s)
+        self.configure()
+        if warning := force_bias_warning(self.force.read()):  # at rest, holding the start pose
+            logger.warning(warning)
+        return True
+
     def configure(self) -> None:
         mode = OperatingMode[self.config.operating_mode].value
         current = amps_to_current_units(self.config.current_limit_a)
-        watchdog = self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS
         with self._safety("configuring the servos"):
             self.expected = {}
             self.bus.disable_torque()
             self.bus.configure_motors()  # Return_Delay_Time 0: status packets come back without the 500 us delay
+            self._clear_startup_torque()
             for j in self.joints:
                 # A watchdog stop from the last session (the host went quiet before its stop, e.g. while a servo
                 # was losing power) outlives the torque-off and makes Goal_Current read-only: clear it first.
@@ -230,7 +194,7 @@ class BlindgraspGripper(Robot):
                 "Position_P_Gain": self.config.position_p_gain,
                 "Position_I_Gain": self.config.position_i_gain,
                 "Position_D_Gain": self.config.position_d_gain,
-                "Bus_Watchdog": watchdog,
+                "Bus_Watchdog": self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS,
                 "Goal_Current": current,
             }
 
@@ -289,56 +253,10 @@ class BlindgraspGripper(Robot):
                 if answer.strip().lower() != "c":
                     self.bus.write_calibration(self.calibration)
                     return
-            self._calibrate_interactively()
-
-    def _calibrate_interactively(self) -> None:
-        for j in self.joints:
-            # Multi-turn mode so that readings never wrap at 0/4095 while the fingers are moved by hand.
-            self.bus.write("Operating_Mode", j, OperatingMode.EXTENDED_POSITION.value)
-            self.bus.write("Drive_Mode", j, 0)
-            self.bus.write("Homing_Offset", j, 0)
-        input(f"\nTorque is off. Hold the gripper in the {REFERENCE_POSE_HELP}\nPress ENTER when it is there: ")
-        reference = self.bus.sync_read("Present_Position")
-        input(f"\nNow the {POSITIVE_POSE_HELP}\nPress ENTER while holding it: ")
-        positive = self.bus.sync_read("Present_Position")
-        modes = calib.directions(reference, positive, self.config.calibration_min_motion_rad)
-        for j in self.joints:
-            self.bus.write("Drive_Mode", j, modes[j])
-        present = self.bus.sync_read("Present_Position")
-        homings = calib.homing_offsets(reference, positive, present)
-        ids = {j: m.id for j, m in self.bus.motors.items()}
-        self.calibration = calib.build(ids, modes, homings, self.lower, self.upper)
-        self.bus.write_calibration(self.calibration)
-        self._save_calibration()
-        check = self.bus.sync_read("Present_Position")
-        print("\nCalibrated joint angles in the positive pose (all should be > 0):")
-        for j in self.joints:
-            print(f"  {j:7s} id {ids[j]:2d}  drive_mode {modes[j]}  q = {ticks_to_rad(check[j]):+.3f} rad")
-        logger.info("Calibration saved to %s", self.calibration_fpath)
+            interactive.calibrate_by_hand(self)
 
     def setup_motors(self) -> None:
-        """`lerobot-setup-motors`: give factory-fresh servos (ID 1, 57 600 bps) their D'Claw ID and the bus baud rate,
-        one servo on the cable at a time, through LeRobot's `setup_motor`. Baud rates are tried factory rate first:
-        a broadcast ping waits its full window at each rate (4 s at 9600 bps, LeRobot's first guess)."""
-        self.bus.use_latency_timer()
-        self.bus.default_baudrate = self.config.baudrate  # the rate setup_motor writes into each servo
-        rates = [57_600, self.config.baudrate, *self.bus.model_baudrate_table[MODEL]]
-        rates = list(dict.fromkeys(rates))
-        try:
-            for j in reversed(self.joints):
-                input(f"Connect the controller board to the '{j}' servo (ID {self.bus.motors[j].id}) only, "
-                      "then press ENTER: ")  # fmt: skip
-                for k, rate in enumerate(rates):
-                    try:
-                        self.bus.setup_motor(j, initial_baudrate=rate)
-                        break
-                    except RuntimeError:
-                        if k == len(rates) - 1:
-                            raise
-                print(f"'{j}' servo: ID {self.bus.motors[j].id} at {self.config.baudrate} bps")
-        finally:
-            if self.bus.is_connected:
-                self.bus.disconnect(disable_torque=False)
+        interactive.setup_motors(self)
 
     @check_if_not_connected
     def tare_forces(self) -> None:
@@ -357,12 +275,12 @@ class BlindgraspGripper(Robot):
     # --- control loop --------------------------------------------------------------------------------------------
     @check_if_not_connected
     def get_observation(self) -> dict[str, float]:
-        self.spacing.before_read()
+        self.spacing.before_read()  # after a slow read, the next sample waits its turn (`timing.SampleSpacing`)
         with self._safety("reading the gripper state"):
             started = time.monotonic()
-            self.timing.tick()
+            self.timing.tick(started)
             self._check_servo_state()  # first: a reset servo is named as such, not as an odd position
-            self._health_every_n()
+            self._poll_health(started)
             q = self._read_q()
             forces = self.force.read()
             self.spacing.after_read(started, time.monotonic())
@@ -393,8 +311,10 @@ class BlindgraspGripper(Robot):
         if not np.all(np.isfinite(target)):
             raise ValueError(f"Non-finite joint target {target.tolist()}; nothing was sent.")
         with self._safety("sending joint targets"):
-            if time.monotonic() - self._last_state_check > spec.CONTROL_DT:  # no get_observation this period
+            now = time.monotonic()
+            if now - self._last_state_check > spec.CONTROL_DT:  # no get_observation this period: stand in for it
                 self._check_servo_state()
+                self._poll_health(now)  # health and a pending start are judged for action-only loops too
             q = self._read_q()  # the trusted estimate: the bound is never centred on an unchecked reading
             bound = self.config.max_relative_target
             target = np.clip(np.clip(target, self.lower, self.upper), q - bound, q + bound)
@@ -414,200 +334,6 @@ class BlindgraspGripper(Robot):
 
     def _read_q(self) -> np.ndarray:
         return np.array([ticks_to_rad(t) for t in self._trusted_ticks()])
-
-    def _check_servo_state(self) -> None:
-        """One sync read per control period (`servo_state.py`): hardware errors, then anything `configure()` set
-        that changed (a reset), then a watchdog that stopped servos during a pause of this process."""
-        report = servo_state.compare(self.bus.read_block(*servo_state.BLOCK, servo_state.READ), self.expected)
-        if report.changed:  # read again before stopping: one corrupt reply with a valid CRC must not stop it
-            report = servo_state.compare(self.bus.read_block(*servo_state.BLOCK, servo_state.READ), self.expected)
-        self._last_state_check = time.monotonic()
-        bad = {j: v for j, v in report.hardware_error.items() if self._confirm_hardware_error(j)}
-        if bad:
-            detail = "; ".join(
-                f"{j} (ID {self.bus.motors[j].id}): {decode_hardware_error(v)}" for j, v in bad.items()
-            )
-            raise GripperHardwareError(
-                f"Servo hardware error: {detail}. The firmware keeps torque off until the servo is rebooted or "
-                "power-cycled; inspect the finger first."
-            )
-        if report.changed:
-            detail = "; ".join(
-                f"{j} (ID {self.bus.motors[j].id}): {', '.join(c)}" for j, c in report.changed.items()
-            )
-            raise GripperStateError(
-                f"Servo state changed without a command: {detail}. A servo reset (brown-out, loose power cable) "
-                "drops its torque and restores factory RAM settings; check the supply and cabling, then reconnect."
-            )
-        if report.watchdog_tripped:
-            self._rearm_watchdog(report.watchdog_tripped)
-
-    def _check_health_limits(self) -> None:
-        """At connect: the servos' own limits (EEPROM), then the start check (`health.py`)."""
-        self.health.reset()
-        for note in self.health.set_limits(self.bus.read_block(*health.LIMITS_BLOCK, health.LIMITS_READ)):
-            logger.warning("%s", note)
-        self._check_health(start=True)
-
-    def _health_every_n(self) -> None:
-        self._health_countdown -= 1
-        if self._health_countdown <= 0:
-            self._health_countdown = self.config.health_every_n
-            self._check_health()
-
-    def _check_health(self, *, start: bool = False) -> None:
-        """One sync read of the health block; ERROR stops (torque off by the latch), and at a start anything too
-        close to its limit refuses it."""
-        block = self.bus.read_block(*health.BLOCK, health.READ)
-        found = self.health.assess(block, self.expected.get("Goal_Current"), time.monotonic())
-        errors = [str(d) for d in found if d.level == health.ERROR]
-        if start and (close := self.health.start_problems(block) + errors):
-            raise GripperHealthError(f"Refused to start: {'; '.join(close)}.")
-        if errors:
-            raise GripperHealthError(f"Servo health: {'; '.join(errors)}. Stopped before the firmware's own "
-                                     "shutdown would drop the object.")  # fmt: skip
-
-    @check_if_not_connected
-    def check_health_before_start(self) -> None:
-        """Before a trial or an episode: refuse (torque off, named error) when a servo is too close to a limit."""
-        with self._safety("checking servo health before a start"):
-            self._check_health(start=True)
-
-    def _rearm_watchdog(self, joints: list[str]) -> None:
-        """The servos' bus watchdog stopped them because this process sent nothing for `bus_watchdog_ms` (a slow
-        save between episodes, an operator prompt). The host is evidently alive again: clear the error (goal
-        registers are read-only until then), hold the pose the servos stopped in, and arm the watchdog again."""
-        logger.warning("Bus watchdog stopped %s after more than %d ms without bus traffic; re-arming it.",
-                       joints, self.config.bus_watchdog_ms)  # fmt: skip
-        ticks = self._trusted_ticks()
-        present = {j: int(t) for j, t in zip(self.joints, ticks)}
-        for j in joints:
-            self.bus.write("Bus_Watchdog", j, 0)
-            self.bus.write("Goal_Position", j, present[j])
-            self.bus.write("Bus_Watchdog", j, self.expected["Bus_Watchdog"])
-            if self.gate.goal is not None:
-                self.gate.goal[self.joints.index(j)] = ticks[self.joints.index(j)]
-
-    def _confirm_hardware_error(self, joint: str) -> bool:
-        """Re-read one servo's Hardware_Error_Status (unicast, alert bit allowed): a corrupted or stale sync-read
-        reply must not stop the gripper, a real error reads the same twice."""
-        value = self.bus.read_despite_alert(joint, "Hardware_Error_Status")
-        if value is None:
-            return True  # cannot confirm either way: treat as an error
-        if not value:
-            logger.warning("Spurious Hardware_Error_Status on %s (not confirmed by a second read).", joint)
-        return bool(value)
-
-    # --- safety --------------------------------------------------------------------------------------------------
-    @contextmanager
-    def _safety(self, what: str):
-        try:
-            yield
-        except BaseException as e:
-            if getattr(e, "torque_off_handled", False):
-                raise  # an inner _safety already stopped the gripper and wrote the message
-            was_open = self.bus.is_connected
-            unconfirmed = self._stop()
-            if not was_open:
-                note = "The bus port was not open, so no torque was enabled by this process."
-            elif unconfirmed:
-                note = f"Torque-off NOT confirmed by servo IDs {unconfirmed}: cut the servo power."
-            else:
-                note = "Torque is off on all servos."
-            named = next(((stop, prefix) for cause, stop, prefix in _NAMED_STOPS if isinstance(e, cause)), None)
-            if named is not None:
-                stop, prefix = named
-                err = (stop or type(e))(f"{prefix.format(what=what)}{e} {note}")
-            elif isinstance(e, (ConnectionError, RuntimeError, OSError)):
-                tries = self.bus.tries
-                err = GripperBusError(
-                    f"Dynamixel bus failure while {what} (each transaction tried {tries} times): {e} {note}"
-                )
-            else:  # KeyboardInterrupt, programming errors: keep the original exception, the torque is off anyway
-                logger.error("%s while %s. %s", type(e).__name__, what, note)
-                e.torque_off_handled = True
-                raise
-            err.torque_off_handled = True
-            raise err from e
-
-    def _torque_off_all(self) -> list[int]:
-        """Torque off on every servo; returns the IDs that did not confirm it."""
-        self.expected = {}
-        self.gate.forget()
-        return self.bus.torque_off_everywhere()
-
-    def _stop(self) -> list[int]:
-        """Latched stop: torque off, then close both ports."""
-        unconfirmed = list(self.config.servo_ids)
-        with signals.deferred():  # a second Ctrl-C or SIGTERM must not cut the torque-off short
-            if self.bus.is_connected:
-                try:
-                    unconfirmed = self._torque_off_all()
-                finally:
-                    self._close()
-            else:
-                self._close()
-        return unconfirmed
-
-    def _close(self) -> None:
-        if self.bus.is_connected:
-            self.bus.disconnect(disable_torque=False)  # the torque-off, when wanted, was _stop's
-        self.force.disconnect()
-        signals.uninstall(self)
-        if self._atexit is not None:
-            atexit.unregister(self._atexit)
-            self._atexit = None
-
-    def _register_atexit(self) -> None:
-        ref = weakref.ref(self)
-
-        def _at_exit():
-            robot = ref()
-            if robot is not None and robot.is_connected:
-                robot._stop()
-
-        self._atexit = _at_exit
-        atexit.register(_at_exit)
-
-    def __exit__(self, exc_type, exc_value, traceback) -> None:
-        # After a latched safety stop the robot is already disconnected: LeRobot's __exit__ would raise
-        # DeviceNotConnectedError and hide the fault that stopped it. Let that fault propagate instead.
-        if self.is_connected:
-            self.disconnect()
-
-    def _load_calibration(self, fpath=None) -> None:
-        """Load and check the file by the rules `calibrate()` follows. A bad file is kept out of `self.calibration`
-        and refused by `connect()` (lerobot-calibrate still works: it connects with calibrate=False)."""
-        fpath = fpath or self.calibration_fpath
-        try:
-            bad = calib.schema_problems(calib.read_raw(fpath))
-            if not bad:
-                super()._load_calibration(fpath)
-                bad = calib.problems(self.calibration, dict(zip(self.joints, self.config.servo_ids, strict=True)))
-        except Exception as e:  # unreadable: empty, truncated, not JSON, not UTF-8
-            bad = [f"unreadable ({type(e).__name__}: {e})"]
-        if bad:
-            self.calibration = {}
-            self.calibration_error = calib.CalibrationFileError(
-                f"Calibration file {fpath} is invalid: {'; '.join(bad)}. Nothing was moved. Run "
-                f"lerobot-calibrate --robot.type={self.name} --robot.id={self.id} to replace it."
-            )
-            logger.error("%s", self.calibration_error)
-            return
-        self.calibration_error = None
-        # The position range is derived data: the config's joint limits are its authority (calibrate() builds it so).
-        cfg = self.config
-        self.calibration = {
-            j: dataclasses.replace(self.calibration[j], range_min=rad_to_ticks(lo), range_max=rad_to_ticks(hi))
-            for j, lo, hi in zip(self.joints, cfg.joint_lower, cfg.joint_upper, strict=True)
-        }
-
-    def _save_calibration(self, fpath=None) -> None:
-        """LeRobot's base class writes the file in place, so a full disk truncates the previous calibration. Written
-        atomically instead: on failure the old file is unchanged, and `durable.WriteError` (not an OSError, so the
-        safety latch does not call it a bus failure) names the file and the cause."""
-        with durable.atomic_open(fpath or self.calibration_fpath) as f, draccus.config_type("json"):
-            draccus.dump(self.calibration, f, indent=4)
 
     @check_if_not_connected
     def disconnect(self) -> None:

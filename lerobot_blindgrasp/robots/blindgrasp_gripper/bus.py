@@ -41,7 +41,9 @@ from lerobot.motors import Motor, MotorCalibration
 from lerobot.motors.dynamixel import DynamixelMotorsBus
 from lerobot.motors.motors_bus import get_address
 
-from .ports import PortInUseError, open_exclusive
+from lerobot_blindgrasp.hardware.xm430 import EXTRA_REGISTERS, MODEL
+
+from .ports import PortAccessError, PortInUseError, open_exclusive
 
 logger = logging.getLogger(__name__)
 
@@ -169,6 +171,9 @@ class RetryingDynamixelBus(DynamixelMotorsBus):
         latency_timer_ms: int,
     ):
         super().__init__(port, motors, calibration)
+        # The e-Manual's items LeRobot's table lacks (Startup_Configuration, Backup_Ready), for this bus only.
+        table = self.model_ctrl_table
+        self.model_ctrl_table = {**table, MODEL: {**table[MODEL], **EXTRA_REGISTERS}}
         self.num_retry = num_retry
         self.latency_timer_ms = latency_timer_ms
         self.port_handler = FlushingPortHandler(port)
@@ -193,7 +198,7 @@ class RetryingDynamixelBus(DynamixelMotorsBus):
         try:
             super().connect(handshake=False)
         except ConnectionError as e:  # LeRobot's "Could not connect ... wrong port?" would hide a busy port
-            if isinstance(e.__cause__, PortInUseError):
+            if isinstance(e.__cause__, (PortInUseError, PortAccessError)):
                 raise e.__cause__ from None
             raise
         if handshake:
@@ -227,7 +232,28 @@ class RetryingDynamixelBus(DynamixelMotorsBus):
             raise ConnectionError(
                 f"Servo check failed on '{self.port}' at {self.port_handler.baudrate} bps: missing IDs {missing}, "
                 f"wrong model numbers {wrong} (expected {models}, {sorted(set(self.models))}). "
-                "Check power, cabling, IDs and the Baud_Rate register (lerobot-setup-motors)."
+                f"{self._silent_hint(missing)}Check power, cabling, IDs (two servos set to one ID answer over each "
+                "other, and the other ID goes missing) and the Baud_Rate register (lerobot-setup-motors)."
+            )
+        self._assert_status_return_level()
+
+    def _silent_hint(self, missing: list[int]) -> str:
+        """A servo that answers PING but not READ has Status_Return_Level(68) 0 (PING always gets a reply)."""
+        silent = [i for i in missing if self.ping(i, num_retry=self.num_retry) is not None]
+        if not silent:
+            return ""
+        return (f"IDs {silent} answer PING but not READ: their Status_Return_Level(68) is 0 (a tool set it; it is "
+                "RAM: power-cycle them, or write 2). ")  # fmt: skip
+
+    def _assert_status_return_level(self) -> None:
+        """Status_Return_Level(68) 1 answers READ but not WRITE: every write would time out and its retries end in
+        a bus error that names no cause. Named here, before the first write."""
+        levels = self.sync_read("Status_Return_Level")
+        low = {self.motors[m].id: v for m, v in levels.items() if v != 2}
+        if low:
+            raise ConnectionError(
+                f"Status_Return_Level(68) {low} (by ID): those servos do not reply to writes, so no write can be "
+                "confirmed. It is RAM and a tool set it: power-cycle the servos, or write 2."
             )
 
     def write_calibration(self, calibration_dict: dict[str, MotorCalibration], cache: bool = True) -> None:

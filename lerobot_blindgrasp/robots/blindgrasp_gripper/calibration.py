@@ -18,11 +18,16 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 from pathlib import Path
 
+import draccus
 from lerobot.motors import MotorCalibration
 
+from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.hardware.xm430 import HOMING_OFFSET_MAX, RAD_PER_TICK, TICKS_PER_REV
+
+logger = logging.getLogger(__name__)
 
 REVERSE_BIT = 0x01
 ZERO_TICK = 2048  # Present_Position at q = 0 after calibration: mid-turn, far from 0/4095 on both sides
@@ -149,3 +154,41 @@ def problems(calibration: dict, ids: dict[str, int]) -> list[str]:
         if not 0 <= c.range_min < c.range_max <= TICKS_PER_REV - 1:
             out.append(f"{j}: range [{c.range_min}, {c.range_max}] must satisfy 0 <= min < max <= 4095")
     return out
+
+
+class CheckedCalibrationFile:
+    """Mixin of `BlindgraspGripper`: LeRobot's calibration file, checked when loaded and written atomically."""
+
+    def _load_calibration(self, fpath=None) -> None:
+        """Load and check the file by the rules `calibrate()` follows. A bad file is kept out of `self.calibration`
+        and refused by `connect()` (lerobot-calibrate still works: it connects with calibrate=False)."""
+        fpath = fpath or self.calibration_fpath
+        try:
+            bad = schema_problems(read_raw(fpath))
+            if not bad:
+                super()._load_calibration(fpath)
+                bad = problems(self.calibration, dict(zip(self.joints, self.config.servo_ids, strict=True)))
+        except Exception as e:  # unreadable: empty, truncated, not JSON, not UTF-8
+            bad = [f"unreadable ({type(e).__name__}: {e})"]
+        if bad:
+            self.calibration = {}
+            self.calibration_error = CalibrationFileError(
+                f"Calibration file {fpath} is invalid: {'; '.join(bad)}. Nothing was moved. Run "
+                f"lerobot-calibrate --robot.type={self.name} --robot.id={self.id} to replace it."
+            )
+            logger.error("%s", self.calibration_error)
+            return
+        self.calibration_error = None
+        # The position range is derived data: the config's joint limits are its authority (calibrate() builds it so).
+        cfg = self.config
+        self.calibration = {
+            j: dataclasses.replace(self.calibration[j], range_min=rad_to_ticks(lo), range_max=rad_to_ticks(hi))
+            for j, lo, hi in zip(self.joints, cfg.joint_lower, cfg.joint_upper, strict=True)
+        }
+
+    def _save_calibration(self, fpath=None) -> None:
+        """LeRobot's base class writes the file in place, so a full disk truncates the previous calibration. Written
+        atomically instead: on failure the old file is unchanged, and `durable.WriteError` (not an OSError, so the
+        safety latch does not call it a bus failure) names the file and the cause."""
+        with durable.atomic_open(fpath or self.calibration_fpath) as f, draccus.config_type("json"):
+            draccus.dump(self.calibration, f, indent=4)

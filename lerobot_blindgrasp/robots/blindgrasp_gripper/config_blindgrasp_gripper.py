@@ -122,6 +122,9 @@ class BlindgraspGripperConfig(RobotConfig):
     # Calibration: a joint must move at least this far (rad) in the "positive" pose to read its direction.
     calibration_min_motion_rad: float = 0.15
     disable_torque_on_disconnect: bool = True
+    # A policy on the command line whose fit no file states (no `trained_for` in its config.json and no training
+    # dataset metadata on this machine) is refused before any torque (`policy_check.py`); true runs it with a warning.
+    allow_unverified_policy: bool = False
     force_sensor: ForceSensorConfig = field(default_factory=ForceSensorConfig)
 
     def __post_init__(self):

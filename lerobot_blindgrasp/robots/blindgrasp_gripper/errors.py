@@ -36,6 +36,10 @@ class GripperPortBusyError(GripperSafetyStop, ConnectionError):
     """Another process (or robot object) owns the bus or force-sensor port; refused before a byte was sent."""
 
 
+class GripperPortAccessError(GripperSafetyStop, ConnectionError):
+    """This user may not open the bus or force-sensor port (permissions); refused before a byte was sent."""
+
+
 class GripperTimingError(GripperSafetyStop):
     """The control loop overran its period for longer than `max_overrun_s`: the data would no longer be at the
     rate the policy and the dataset assume."""
@@ -49,6 +53,10 @@ class ForceTareError(ValueError):
 class GripperHealthError(GripperSafetyStop):
     """A servo's health item (temperature, input voltage, current against its limit) reached its ERROR level, or was
     too close to its limit to start a trial or episode (`health.py`): stopped before the firmware's own shutdown."""
+
+
+class GripperFirmwareError(GripperSafetyStop):
+    """A servo's firmware is older than a defence needs (Drive_Mode and Bus_Watchdog: v38); refused at connect."""
 
 
 class PolicyMismatchError(ValueError):

@@ -2,22 +2,17 @@
 
 The XM430 firmware protects itself late: it drops the torque (and the object) at Temperature_Limit, after an
 overload held for an unpublished time, and it never drops it for a sagging supply (Shutdown 0x34 leaves the voltage
-bit out) until the MCU browns out. The host reads the health items and acts first:
-
-| item (address, unit) | WARN | refuse a start | ERROR: named stop, torque off |
-|---|---|---|---|
-| Present_Temperature (146, 1 degC) | >= limit - 15 | >= limit - 8 | >= limit - 3, or rising to the limit within 30 s |
-| Present_Input_Voltage (144, 0.1 V) | < 11.0 V | < 10.8 V or > 14.8 V | < 10.0 V (rating) for 0.5 s, or > 14.8 V |
-| Present_Current (126, 2.69 mA) vs the current limit | at >= 95 % for 2 s | - | at >= 95 % for 6 s (a stall) |
-
-"limit" is each servo's own Temperature_Limit(31), read at connect with the rest of its EEPROM limits; every
-number above is a constant of `hardware/xm430.py`, the one place they are stated.
+bit out) until the MCU browns out. The host reads the health items (Present_Temperature, Present_Input_Voltage,
+Present_Current against the current limit) and acts first: WARN, refuse a start, or ERROR (a named stop with the
+torque off). The levels are constants of `hardware/xm430.py`, the one place they are stated; `levels_table()`
+renders them as docs/hardware.md shows them (tests/test_hw_hazard_table.py keeps the two equal). Temperatures are relative to each servo's own Temperature_Limit(31),
+read at connect with the rest of its EEPROM limits.
 
 Bus budget at 1 Mbps (10 bits per byte): the health block Present_Current(126)..Present_Temperature(146) is 21
 bytes, one sync read = a 23-byte instruction + 9 replies of 11 + 21 bytes = 311 bytes = 3.1 ms of wire time, plus
 one USB round trip. The per-period traffic is already ~7 ms (state block 4.8 ms, positions 1.6 ms, goals 0.6 ms), so
 the health read runs every `health_every_n` periods (4: 5 Hz, +0.8 ms per period on average): temperature moves in
-seconds, a stall is judged over seconds, and a sag is judged over 0.5 s.
+seconds, a stall is judged over seconds, and a sag over half a second.
 """
 
 from __future__ import annotations
@@ -37,8 +32,16 @@ LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
 
 BLOCK = ("Present_Current", "Present_Temperature")  # first and last register of the health read (21 bytes)
 READ = ("Present_Current", "Present_Input_Voltage", "Present_Temperature")
+SLOPE_MIN_SPAN_S = 3.0  # a temperature trend is judged over at least this much history (whole-degree readings)
 LIMITS_BLOCK = ("Temperature_Limit", "Shutdown")  # EEPROM 31..63, read once at connect
-LIMITS_READ = ("Temperature_Limit", "Max_Voltage_Limit", "Min_Voltage_Limit", "Current_Limit", "Shutdown")
+LIMITS_READ = (
+    "Temperature_Limit",
+    "Max_Voltage_Limit",
+    "Min_Voltage_Limit",
+    "Current_Limit",
+    "Startup_Configuration",
+    "Shutdown",
+)
 
 
 @dataclass(frozen=True)
@@ -175,14 +178,39 @@ class ServoHealth:
         return bad
 
 
+def levels_table() -> str:
+    """The levels of `hardware/xm430.py` as the markdown table of docs/hardware.md."""
+    x = xm430
+    limit = x.TEMPERATURE_LIMIT_DEFAULT_C
+
+    def temp(margin: float) -> str:
+        return f"limit - {margin:g} degC ({limit - margin:g})"
+
+    rows = [
+        ("item", "WARN", "refuse a start (connect, every trial and recording episode)", "ERROR: named stop, torque off"),
+        ("---", "---", "---", "---"),
+        ("Present_Temperature", f">= {temp(x.TEMPERATURE_WARN_MARGIN_C)}", f">= {temp(x.TEMPERATURE_START_MARGIN_C)}",
+         f">= {temp(x.TEMPERATURE_STOP_MARGIN_C)}, or rising to the limit within {x.TEMPERATURE_TREND_HORIZON_S:g} s "
+         f"(a least-squares slope over >= {SLOPE_MIN_SPAN_S:g} s)"),
+        ("Present_Input_Voltage", f"< {x.VOLTAGE_WARN_LOW_V:.1f} V",
+         f"< {x.VOLTAGE_START_LOW_V:.1f} V or > {x.VOLTAGE_HIGH_V:.1f} V",
+         f"< {x.VOLTAGE_STOP_LOW_V:.1f} V (the rating) for {x.VOLTAGE_STOP_HOLD_S:g} s, or > {x.VOLTAGE_HIGH_V:.1f} V"),
+        ("Present_Current vs the current limit (Goal_Current in mode 5)",
+         f">= {x.STALL_FRACTION:.0%} for {x.STALL_WARN_S:g} s", "-",
+         f">= {x.STALL_FRACTION:.0%} for {x.STALL_STOP_S:g} s (a stall)"),
+    ]  # fmt: skip
+    return "\n".join("| " + " | ".join(r) + " |" for r in rows)
+
+
 def _signed16(value: int) -> int:
     """Present_Current is a signed 2-byte register; LeRobot's raw reads return it unsigned."""
     return value - 0x10000 if value >= 0x8000 else value
 
 
 def _slope(history: deque) -> float:
-    """Least-squares degC/s over the history (>= 3 s of it), 0 when too short: readings come in whole degrees."""
-    if len(history) < 5 or history[-1][0] - history[0][0] < 3.0:
+    """Least-squares degC/s over the history (>= SLOPE_MIN_SPAN_S of it), 0 when too short: readings come in whole
+    degrees."""
+    if len(history) < 5 or history[-1][0] - history[0][0] < SLOPE_MIN_SPAN_S:
         return 0.0
     t, y = np.array(history, dtype=np.float64).T
     return float(np.polyfit(t - t[0], y, 1)[0])

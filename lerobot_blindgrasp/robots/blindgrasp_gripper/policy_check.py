@@ -2,33 +2,40 @@
 
 LeRobot's `make_policy` overwrites a checkpoint's output features with the env's, and a config validates shapes
 only, so nothing else compares what a policy was trained for with the robot it is about to move. This reads the
-checkpoint's own files, names the file each fact came from, and compares:
-- `config.json`: policy type, `observation.state` and `action` shapes (as trained, before any overwrite);
-- `policy_preprocessor.json` / `policy_postprocessor.json`: the shapes their normalizers were fitted on, and the
-  action meaning: absolute joint targets in and out (`blindgrasp_target_to_delta` turns them into the network's
-  deltas and the policy back; LeRobot's `relative_actions_processor` without `absolute_actions_processor` in the
-  postprocessor would send deltas to a robot that takes targets);
-- `train_config.json`: the training dataset (repo id, root) and, when it trained with an env, that env's fps;
-- the dataset's `meta/info.json` (at the recorded root, or in `HF_LEROBOT_HOME`): robot type, fps and the feature
-  names and their order.
-A fact no file holds is reported as unverified (a warning); a fact that differs refuses the run
-(`PolicyMismatchError`), before the ports are opened.
+checkpoint's own files (`policy_files.py`), names the file each fact came from, and compares:
+- `config.json`: every input and output feature key (the robot gives `observation.state` and takes `action`, no
+  camera), their shapes as trained (before any overwrite), and `trained_for`: the robot type, fps, state and action
+  names (in order) and action meaning the policy recorded from its training dataset when lerobot-train built it;
+- `policy_preprocessor.json` / `policy_postprocessor.json`: the shapes their normalizers were fitted on, their
+  statistics (finite, a standard deviation above 0), and the action meaning: absolute joint targets in and out
+  (LeRobot's `relative_actions_processor` without `absolute_actions_processor` would send deltas to a robot that
+  takes targets);
+- `model.safetensors`: finite weights;
+- `train_config.json`: the env it trained with (its type and fps) and, for a checkpoint without `trained_for`, its
+  dataset, whose `meta/info.json` is read when it is on this machine.
+A fact that differs refuses the run (`PolicyMismatchError`). A fact no file holds (no `trained_for` and no dataset
+metadata here, or metadata without feature names) refuses it too, unless the robot's `allow_unverified_policy` is
+set: then it is a warning. `python -m lerobot_blindgrasp.deploy.policy_contract` records `trained_for` in an older
+checkpoint.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 from lerobot_blindgrasp import spec
 
+from . import policy_files as files
 from .errors import PolicyMismatchError
 
 logger = logging.getLogger(__name__)
 
-STATE, ACTION = "observation.state", "action"
+STATE, ACTION = files.STATE, files.ACTION
+ACTION_MEANING = "absolute joint targets (rad)"  # what `send_action` takes
+ENV_TYPES = ("blindgrasp", "blindgrasp_real")  # the envs whose observation and action are this robot's
+OVERRIDE = "--robot.allow_unverified_policy=true (lerobot-eval: --env.robot.allow_unverified_policy=true)"
 _checked: set[tuple] = set()
 
 
@@ -39,123 +46,119 @@ class RobotContract:
     action_names: tuple[str, ...]
     fps: float
     fps_source: str
+    action_meaning: str = ACTION_MEANING
+    env_types: tuple[str, ...] = ENV_TYPES
 
 
 def gripper_contract(robot_type: str, fps: float, fps_source: str) -> RobotContract:
     return RobotContract(robot_type, spec.STATE_NAMES, spec.ACTION_NAMES, float(fps), fps_source)
 
 
-def _load(path: Path) -> dict | None:
-    if not path.is_file():
-        return None
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise PolicyMismatchError(f"{path} is unreadable ({type(e).__name__}: {e}); nothing was moved.") from e
-
-
-def _dataset_info(train: dict | None, where: Path) -> tuple[dict | None, str]:
-    ds = (train or {}).get("dataset") or {}
-    candidates = []
-    if ds.get("root"):
-        candidates.append(Path(ds["root"]))
-    if ds.get("repo_id"):
-        from lerobot.utils.constants import HF_LEROBOT_HOME  # where LeRobot itself looks, env vars included
-
-        candidates.append(Path(HF_LEROBOT_HOME) / ds["repo_id"])
-    for root in candidates:
-        info = _load(root / "meta" / "info.json")
-        if info is not None:
-            return info, str(root / "meta" / "info.json")
-    return None, f"the training dataset's meta/info.json (looked in {[str(c) for c in candidates]}, from {where})"
-
-
-def _shape(features: dict | None, key: str) -> tuple | None:
-    ft = (features or {}).get(key)
-    return tuple(ft["shape"]) if isinstance(ft, dict) and "shape" in ft else None
-
-
-def _step_names(pipeline: dict | None) -> list[str]:
-    return [s.get("registry_name", "") for s in (pipeline or {}).get("steps", [])]
-
-
-def _normalizer_shapes(pipeline: dict | None) -> dict[str, tuple]:
-    out = {}
-    for step in (pipeline or {}).get("steps", []):
-        for key, ft in ((step.get("config") or {}).get("features") or {}).items():
-            if isinstance(ft, dict) and "shape" in ft:
-                out[key] = tuple(ft["shape"])
-    return out
-
-
-def _shape_problems(cfg: dict, where: Path, robot: RobotContract) -> list[str]:
+def _feature_problems(cfg: dict, where: Path, robot: RobotContract) -> list[str]:
     want = {STATE: (len(robot.state_names),), ACTION: (len(robot.action_names),)}
     bad = []
     for key, group in ((STATE, "input_features"), (ACTION, "output_features")):
-        have = _shape(cfg.get(group), key)
+        extra = sorted(set(cfg.get(group) or {}) - {key})
+        if extra:
+            bad.append(f"{group} {extra} in {where / 'config.json'}: the robot has only '{key}' there (no camera)")
+        have = files.shape(cfg.get(group), key)
         if have != want[key]:
             bad.append(f"'{key}' shape {have} in {where / 'config.json'} ({group}), the robot has {want[key]}")
-    for name in ("policy_preprocessor.json", "policy_postprocessor.json"):
-        for key, have in _normalizer_shapes(_load(where / name)).items():
+    for name in files.PROCESSORS:
+        for key, have in files.normalizer_shapes(files.load(where / name)).items():
             if key in want and have != want[key]:
                 bad.append(f"'{key}' shape {have} in {where / name} (normalizer), the robot has {want[key]}")
     return bad
 
 
 def _meaning_problems(where: Path) -> list[str]:
-    pre = _step_names(_load(where / "policy_preprocessor.json"))
-    post = _step_names(_load(where / "policy_postprocessor.json"))
+    pre = files.step_names(files.load(where / "policy_preprocessor.json"))
+    post = files.step_names(files.load(where / "policy_postprocessor.json"))
     if "relative_actions_processor" in pre and "absolute_actions_processor" not in post:
         return [
-            (
-                f"'action' meaning: {where / 'policy_preprocessor.json'} makes actions relative and "
-                f"{where / 'policy_postprocessor.json'} never makes them absolute again; the robot takes absolute "
-                "joint targets (rad)"
-            )
+            f"'action' meaning: {where / 'policy_preprocessor.json'} makes actions relative and "
+            f"{where / 'policy_postprocessor.json'} never makes them absolute again; the robot takes {ACTION_MEANING}"
         ]
     return []
 
 
-def _dataset_problems(info: dict, source: str, robot: RobotContract) -> list[str]:
+def _env_problems(train: dict | None, where: Path, robot: RobotContract) -> list[str]:
+    env = (train or {}).get("env") or {}
+    source = where / "train_config.json"
     bad = []
-    if info.get("robot_type") != robot.robot_type:
-        bad.append(f"robot type {info.get('robot_type')!r} in {source}, the robot is {robot.robot_type!r}")
-    if info.get("fps") is not None and float(info["fps"]) != robot.fps:
-        bad.append(f"fps {info['fps']} in {source}, the loop runs at {robot.fps:g} ({robot.fps_source})")
-    features = info.get("features") or {}
-    for key, want in ((STATE, robot.state_names), (ACTION, robot.action_names)):
-        names = (features.get(key) or {}).get("names")
-        if isinstance(names, dict):  # LeRobot also writes {"axes": [...]} for some features
-            names = next(iter(names.values()), None)
-        if names is not None and tuple(names) != tuple(want):
-            bad.append(f"'{key}' names {list(names)} in {source}, the robot's are {list(want)} (names and order)")
+    if env.get("type") is not None and env["type"] not in robot.env_types:
+        bad.append(f"env type {env['type']!r} in {source}, this robot's envs are {list(robot.env_types)}")
+    if env.get("fps") is not None and float(env["fps"]) != robot.fps:
+        bad.append(f"fps {env['fps']} in {source} (env), the loop runs at {robot.fps:g} ({robot.fps_source})")
     return bad
+
+
+def _trained_for(cfg: dict, train: dict | None, where: Path) -> tuple[dict | None, str]:
+    """The facts the checkpoint records (`trained_for` in config.json), else its dataset's meta/info.json."""
+    if isinstance(cfg.get("trained_for"), dict):
+        facts = cfg["trained_for"]
+        via = f" ({facts['source']})" if facts.get("source") else ""
+        return facts, f"{where / 'config.json'} (trained_for{via})"
+    info, source = files.dataset_info(train, where)
+    if info is None:
+        return None, f"{where / 'config.json'} has no trained_for, and {source} was not found"
+    features = info.get("features") or {}
+
+    def names(key: str):
+        value = (features.get(key) or {}).get("names")
+        return next(iter(value.values()), None) if isinstance(value, dict) else value
+
+    return {"robot_type": info.get("robot_type"), "fps": info.get("fps"), "state_names": names(STATE),
+            "action_names": names(ACTION)}, source  # fmt: skip
+
+
+def _contract_problems(facts: dict, source: str, robot: RobotContract) -> tuple[list[str], list[str]]:
+    bad, unverified = [], []
+    if facts.get("robot_type") is None:
+        unverified.append(f"robot type: not in {source}")
+    elif facts["robot_type"] != robot.robot_type:
+        bad.append(f"robot type {facts['robot_type']!r} in {source}, the robot is {robot.robot_type!r}")
+    if facts.get("fps") is None:
+        unverified.append(f"fps: not in {source}")
+    elif float(facts["fps"]) != robot.fps:
+        bad.append(f"fps {facts['fps']:g} in {source}, the loop runs at {robot.fps:g} ({robot.fps_source})")
+    for key, field, want in (
+        (STATE, "state_names", robot.state_names),
+        (ACTION, "action_names", robot.action_names),
+    ):
+        names = facts.get(field)
+        if names is None:
+            unverified.append(f"'{key}' names: not in {source}")
+        elif tuple(names) != tuple(want):
+            bad.append(f"'{key}' names {list(names)} in {source}, the robot's are {list(want)} (names and order)")
+    meaning = facts.get("action_meaning")
+    if meaning is not None and meaning != robot.action_meaning:
+        bad.append(f"'action' meaning {meaning!r} in {source}, the robot takes {robot.action_meaning}")
+    return bad, unverified
 
 
 def problems(path: str | Path, robot: RobotContract) -> tuple[list[str], list[str]]:
     """(mismatches, unverified facts) of the checkpoint at `path` against the robot."""
     where = Path(path)
-    cfg = _load(where / "config.json")
+    cfg = files.load(where / "config.json")
     if cfg is None:
         return [f"{where / 'config.json'} not found: not a LeRobot policy checkpoint directory"], []
-    bad = _shape_problems(cfg, where, robot) + _meaning_problems(where)
-    train = _load(where / "train_config.json")
-    unverified = []
-    info, source = _dataset_info(train, where)
-    if info is not None:
-        bad += _dataset_problems(info, source, robot)
-    else:
-        unverified.append(f"robot type, fps and feature names: {source} not found")
-    env_fps = ((train or {}).get("env") or {}).get("fps")
-    if env_fps is not None and float(env_fps) != robot.fps:
-        bad.append(f"fps {env_fps} in {where / 'train_config.json'} (env), the loop runs at {robot.fps:g} "
-                   f"({robot.fps_source})")  # fmt: skip
-    return bad, unverified
+    names = {STATE: robot.state_names, ACTION: robot.action_names}
+    bad = _feature_problems(cfg, where, robot) + _meaning_problems(where)
+    bad += files.stats_problems(where, names) + files.weight_problems(where)
+    train = files.load(where / "train_config.json")
+    bad += _env_problems(train, where, robot)
+    facts, source = _trained_for(cfg, train, where)
+    if facts is None:
+        return bad, [f"robot type, fps and feature names: {source}"]
+    mismatched, unverified = _contract_problems(facts, source, robot)
+    return bad + mismatched, unverified
 
 
-def check(path: str | Path, robot: RobotContract) -> None:
-    """Refuse (`PolicyMismatchError`) a checkpoint that does not fit the robot; warn about what no file says."""
-    key = (str(path), robot)
+def check(path: str | Path, robot: RobotContract, *, allow_unverified: bool = False) -> None:
+    """Refuse (`PolicyMismatchError`) a checkpoint that does not fit the robot, or whose fit no file states
+    (unless `allow_unverified`: then warn)."""
+    key = (str(path), robot, allow_unverified)
     if key in _checked:
         return
     bad, unverified = problems(path, robot)
@@ -164,10 +167,15 @@ def check(path: str | Path, robot: RobotContract) -> None:
             f"The policy at {path} does not fit the {robot.robot_type} robot: {'; '.join(bad)}. Nothing was moved "
             "(no servo took torque)."
         )
-    for note in unverified:
-        logger.warning(
-            "Policy at %s: could not verify %s; checked the shapes and action meaning only.", path, note
+    if unverified and not allow_unverified:
+        raise PolicyMismatchError(
+            f"The policy at {path} cannot be verified for the {robot.robot_type} robot: {'; '.join(unverified)}. "
+            "Nothing was moved (no servo took torque). Record what it was trained for with `python -m "
+            f"lerobot_blindgrasp.deploy.policy_contract --checkpoint={path} --dataset_root=<its training dataset>`, "
+            f"or run it anyway with {OVERRIDE}."
         )
+    for note in unverified:
+        logger.warning("Policy at %s: could not verify %s; run anyway (allow_unverified_policy).", path, note)
     _checked.add(key)
 
 
@@ -195,7 +203,7 @@ def check_cli_policy(robot) -> None:
     for flag in ("fps", "env.fps", "dataset.fps"):
         if (value := parser.parse_arg(flag)) is not None:
             fps, source = float(value), f"--{flag}"
-    check(where, gripper_contract(robot.name, fps, source))
+    check(where, gripper_contract(robot.name, fps, source), allow_unverified=robot.config.allow_unverified_policy)
     if fps != float(robot.config.loop_hz):
         raise PolicyMismatchError(
             f"{source}={fps:g} but the robot's loop_hz is {robot.config.loop_hz:g}: set "

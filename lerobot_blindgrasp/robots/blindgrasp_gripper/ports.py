@@ -12,11 +12,16 @@ import errno
 
 import serial
 
-_BUSY = {errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES}
+_BUSY = {errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES}  # what a refused flock() reports
+_NO_ACCESS = {errno.EACCES, errno.EPERM}  # what a refused open() reports
 
 
 class PortInUseError(ConnectionError):
     """The serial port is held by another process (or another robot object): refused before sending a byte."""
+
+
+class PortAccessError(ConnectionError):
+    """This user may not open the serial port (not in the `dialout` group, no udev rule): nothing was sent."""
 
 
 def open_exclusive(port: str, baudrate: int, what: str, **kwargs) -> serial.Serial:
@@ -24,6 +29,14 @@ def open_exclusive(port: str, baudrate: int, what: str, **kwargs) -> serial.Seri
     try:
         return serial.Serial(port, baudrate, exclusive=True, **kwargs)
     except serial.SerialException as e:
+        # pyserial says which step failed: "could not open port" (os.open: permissions) or "Could not exclusively
+        # lock port" (flock: another owner). Both can carry EACCES, so the step decides.
+        if e.errno in _NO_ACCESS and "could not open port" in str(e):
+            raise PortAccessError(
+                f"No permission to open the {what} port '{port}' ({e}). The ports belong to the `dialout` group: "
+                "`sudo usermod -aG dialout $USER`, then log out and in again, and install "
+                "robot_configs/udev/99-blindgrasp.rules (docs/bringup.md, section 5). Nothing was sent."
+            ) from e
         if e.errno in _BUSY:
             raise PortInUseError(
                 f"The {what} port '{port}' is already in use by another process (another lerobot script, a "

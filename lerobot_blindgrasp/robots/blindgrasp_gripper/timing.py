@@ -8,9 +8,12 @@ overrun (`LoopOverrunError`; the count keeps a few deliberately slow steps, e.g.
 from looking sustained): the data would no longer come at the rate the policy and the dataset assume. A gap of `pause_s` or more is a pause of the
 loop (a dataset save, an operator prompt), not an overrun.
 
+`SampleSpacing` keeps any loop's samples at least 0.9 period apart: the robot holds a read back when the previous
+one ended too recently (after a slow read), so no loop takes two samples a few ms apart for two periods.
+
 `Schedule` paces a loop we own (the real eval env's trial). It sleeps to the next tick; when a step comes late it
 re-bases the schedule on now, so after a stall the loop goes on at its period instead of firing the missed ticks
-back to back.
+back to back, and it spaces its reads as `SampleSpacing` does.
 """
 
 from __future__ import annotations
@@ -83,64 +86,85 @@ class PeriodMonitor:
         return period
 
 
-class Schedule:
-    """Ticks every `period_s`, re-based after a late step (never a burst of catch-up steps)."""
+class SampleSpacing:
+    """No two samples closer than `min_gap_s` (0.9 of a period), whoever's loop it is and however long its reads.
 
-    def __init__(self, period_s: float):
+    LeRobot's loops (lerobot-record, lerobot-rollout) sleep `period - (time since the loop's start)`: after an
+    observation that took long to read (a slow bus, a loaded host: 30 ms or 49 ms alike), the loop goes straight
+    on, and the next observation's data would be read a few ms after the slow one's, which the policy and the
+    dataset take for one whole period. So before every read the robot waits until the read will end no earlier
+    than `min_gap_s` after the previous one ended. It cannot know how long the read will take: it takes the
+    shortest of the recent reads (none until it has seen `MIN_READS` since the loop (re)started).
+    A steadily loaded loop does not wait: its samples come one caller period apart, and a read that takes up to the
+    slack (5 ms at 20 Hz: a health read, bus jitter) longer than the shortest recent one leaves the next gap
+    inside the contract. After a wait the caller's next start comes that much later and its own sleep shrinks by as
+    much, so the waits die out and the caller's pacing takes over again."""
+
+    MIN_READS = 4
+
+    def __init__(self, period_s: float, slack: float = 0.1):
         self.period_s = period_s
+        self.min_gap_s = period_s * (1.0 - slack)
+        self.waits = 0  # reads that were held back, and for how long in all (for tests and logs)
+        self.waited_s = 0.0
+        self._last_end: float | None = None
+        self._reads: deque = deque(maxlen=20)  # recent read durations (s)
+
+    def restart(self) -> None:
+        self._last_end = None
+        self._reads.clear()
+
+    def expected_read_s(self) -> float:
+        if len(self._reads) < self.MIN_READS:
+            return 0.0
+        return min(self._reads)
+
+    def before_read(self) -> float:
+        """Sleep until this read may start; returns the time slept (s)."""
+        if self._last_end is None:
+            return 0.0
+        delay = self._last_end + self.min_gap_s - self.expected_read_s() - time.monotonic()
+        if delay <= 0:
+            return 0.0
+        self.waits += 1
+        self.waited_s += delay
+        time.sleep(delay)
+        return delay
+
+    def after_read(self, started: float, ended: float) -> None:
+        self._reads.append(ended - started)
+        self._last_end = ended
+
+
+class Schedule:
+    """Paces a loop we own (the eval trial): one step per period, its read spaced from the last by
+    `SampleSpacing`. A step that comes late re-bases the schedule on now (never a burst of catch-up steps); a read
+    held back by the spacing re-bases it on the held read, so after a slow read the loop is back at its period at
+    once instead of over several steps."""
+
+    def __init__(self, period_s: float, slack: float = 0.1):
+        self.period_s = period_s
+        self.spacing = SampleSpacing(period_s, slack)
         self.rebased = 0
         self._next = time.monotonic() + period_s
 
     def start(self) -> None:
         self._next = time.monotonic() + self.period_s
+        self.spacing.restart()
 
     def wait(self) -> None:
-        """Sleep until the next tick. If it has already passed, return at once and put the tick after it one
-        full period from now."""
+        """Sleep until the next tick and until the read is due. If the tick has already passed, go on at once and
+        put the tick after it one full period from now."""
         now = time.monotonic()
         if now < self._next:
             time.sleep(self._next - now)
-            self._next += self.period_s
         else:
             self.rebased += 1
-            self._next = now + self.period_s
+            self._next = now
+        if self.spacing.before_read() > 0:
+            self._next = time.monotonic()
+        self._next += self.period_s
 
-
-class SampleSpacing:
-    """No short step after a stall, whoever's loop it is.
-
-    LeRobot's loops (lerobot-record, lerobot-rollout) and the eval trial sleep `period - (time since the loop's
-    start)`; after an observation stalled by a slow bus, the loop goes straight on, and the next observation's
-    data is read 3-10 ms after the stalled one's, which the policy and the dataset take for one whole period.
-    So the robot spaces its own samples: after an observation whose reads took longer than a period (a stall),
-    the next one's reads end no earlier than `period x (1 - slack)` after the slow one's (they start that long
-    after it, less the shortest recent read), and so on while calls keep coming early. A waiting observation
-    shifts the caller's next start by the same amount, so the waits shrink by `slack` periods per step and the
-    caller's own pacing takes over again within a few steps. Normal steps never wait."""
-
-    def __init__(self, period_s: float, slack: float = 0.1):
-        self.period_s = period_s
-        self.gap_s = period_s * (1.0 - slack)
-        self.waits = 0  # observations that were held back (for tests and logs)
-        self._last_end: float | None = None
-        self._recovering = False
-        self._reads: deque = deque(maxlen=20)  # recent read durations (s)
-
-    def restart(self) -> None:
-        self._last_end, self._recovering = None, False
-
-    def before_read(self) -> None:
-        if not self._recovering or self._last_end is None:
-            return
-        delay = self._last_end + self.gap_s - min(self._reads, default=0.0) - time.monotonic()
-        if delay > 0:
-            self.waits += 1
-            time.sleep(delay)
-        else:
-            self._recovering = False  # the caller's own pacing is back
-
-    def after_read(self, started: float, ended: float) -> None:
-        self._reads.append(ended - started)
-        if ended - started > self.period_s:
-            self._recovering = True
-        self._last_end = ended
+    def sampled(self, started: float, ended: float) -> None:
+        """The step's observation was read from `started` to `ended` (time.monotonic)."""
+        self.spacing.after_read(started, ended)

@@ -10,8 +10,12 @@ bridge shares: a new session must also be later by that clock than the newest po
 of an older session this receiver never saw, and is dropped too (`retired`; after a reboot of the bridge's
 machine, whose clock starts again, the stream goes stale and the teleoperator stops: reconnect).
 
-Age. The bridge stamps `sent` on its monotonic clock. For each datagram, arrival - sent is the one-way delay plus
-the (unknown, constant) offset between the two clocks. Its minimum over the stream estimates that offset with the
+Age. The bridge stamps `sent` on its monotonic clock. A bridge on this machine (a loopback source address) shares
+this host's monotonic clock, so a datagram's age is exact: arrival - sent, from the very first datagram on (a
+bridge that is behind, or a network that holds its datagrams, cannot make its first poses look fresh). Should its
+`sent` ever lie ahead of the arrival, it is not this machine's clock: the receiver says so once and estimates, as
+for a remote bridge. For a bridge elsewhere, arrival - sent is the one-way delay plus the (unknown, constant)
+offset between the two clocks. Its minimum over the stream estimates that offset with the
 fastest delivery seen; the estimate may rise by `OFFSET_LEAK` s per s so that a clock rate difference between
 the two machines (crystals: tens of ppm) never accumulates. A datagram's delay beyond that minimum is how long it
 was queued on the way ("arrival" is when the kernel received it, on Linux: a datagram that waits in the socket
@@ -19,7 +23,11 @@ buffer while this process is not scheduled was not queued on the network, though
 longer than `max_latency_s` is dropped (`stale`): after a network pause, the
 backlog that arrives in a burst is never replayed. A kept pose's age is the larger of its age by the bridge's
 clock (now - sent, mapped to this host) and the time since it arrived, so neither clock alone can make a pose
-look fresher than it is.
+look fresher than it is. A `sent` that steps back within a session while `seq` moves on is the bridge's clock,
+not the network (a monotonic clock never does): such datagrams are dropped (`clock_steps`, warned once), and the
+stream goes stale and stops rather than ageing poses by a clock that jumps. Arrivals are the kernel's receive stamp
+on the wall clock, mapped to the monotonic one at read time: a wall-clock step between the two (NTP) is seen as a
+change of their difference, and that datagram's arrival is then the read time.
 
 One glove per teleoperator: the receiver binds to one sender, the configured `sender` address or else the first
 that sends a valid datagram for its hand, and drops every other sender's datagrams (`foreign`, warned once per
@@ -31,6 +39,7 @@ warned about once per missing set, naming them; `diagnosis()` says all of it in 
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import socket
 import struct
@@ -53,6 +62,9 @@ _TIMESPEC = struct.Struct("@ll")
 # Upward drift allowed to the clock-offset estimate (s per s): 1000 ppm, over ten times a quartz clock's rate error.
 OFFSET_LEAK = 1e-3
 RETIRED_SESSIONS = 16  # earlier session ids remembered, to drop their late datagrams
+# A loopback bridge's `sent` may lead this host's receive stamp by scheduling noise only; more is another clock.
+SHARED_CLOCK_SLACK_S = 0.005
+WALL_STEP_S = 0.01  # a change of (wall - monotonic) between two reads beyond this is a step of the wall clock
 
 
 @dataclass(frozen=True)
@@ -87,7 +99,7 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
     def _reset(self) -> None:
         self._frames_at_open = self.frames  # the base class counts kept frames over all connections
         self.received = self.rejected = self.foreign = self.other_side = 0
-        self.late = self.stale = self.retired = self.restarts = 0
+        self.late = self.stale = self.retired = self.restarts = self.clock_steps = 0
         self.last_reject: str | None = None
         self._warned_senders: set[tuple[str, int]] = set()
         self._warned_missing: set[frozenset[str]] = set()
@@ -99,6 +111,8 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
         self._offset: float | None = None  # arrival - sent, minimum so far (leaking upwards)
         self._offset_at = 0.0
         self._stale_run, self._stale_max = 0, 0.0
+        self._shared_clock = False  # the bound sender is on this machine: its `sent` is our monotonic clock
+        self._wall_skew: float | None = None  # wall - monotonic at the last read
 
     @property
     def is_open(self) -> bool:
@@ -127,7 +141,7 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
                 pass
         self._sock = sock
         self._reset()  # each connection binds afresh, to any session
-        self.bound = self.sender
+        self._bind(self.sender)
 
     def _close(self) -> None:
         if self._sock is not None:
@@ -142,6 +156,10 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             return datagram, addr, time.monotonic()
         datagram, ancillary, _, addr = self._sock.recvmsg(65536, socket.CMSG_SPACE(_TIMESPEC.size))
         mono, wall = time.monotonic(), time.time()
+        skew, last = wall - mono, self._wall_skew
+        self._wall_skew = skew
+        if last is not None and abs(skew - last) > WALL_STEP_S:
+            return datagram, addr, mono  # the wall clock stepped: the kernel's stamp may be on either side of it
         for level, kind, raw in ancillary:
             if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= _TIMESPEC.size:
                 sec, nsec = _TIMESPEC.unpack(raw[: _TIMESPEC.size])
@@ -184,9 +202,16 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
         else:
             logger.debug("glove datagram rejected: %s", e)
 
+    def _bind(self, addr: tuple[str, int] | None) -> None:
+        self.bound = addr
+        try:
+            self._shared_clock = addr is not None and ipaddress.ip_address(addr[0]).is_loopback
+        except ValueError:  # a host name: not known to be this machine
+            self._shared_clock = False
+
     def _from_bound_sender(self, addr: tuple[str, int]) -> bool:
         if self.bound is None:
-            self.bound = addr
+            self._bind(addr)
             logger.info("Glove receiver bound to the bridge at %s:%d.", *addr)
         elif addr != self.bound:
             self.foreign += 1
@@ -208,12 +233,22 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
                 self._warn_behind(d)
                 return None
             self._new_session(d.session)
-        if d.seq <= self._seq or d.sent < self._sent:
+        if d.seq <= self._seq:
             self.late += 1  # reordered, delayed or duplicated: older than the pose already used
             return None
+        if d.sent < self._sent:
+            self._clock_stepped(d)
+            return None
         sample = arrival - d.sent
-        leaked = sample if self._offset is None else self._offset + OFFSET_LEAK * (arrival - self._offset_at)
-        self._offset, self._offset_at = min(leaked, sample), arrival
+        if self._shared_clock and sample < -SHARED_CLOCK_SLACK_S:
+            self._shared_clock = False
+            logger.warning("The glove bridge on this machine stamps `sent` %.3f s after its datagrams arrive: not "
+                           "this machine's monotonic clock; ageing its poses by an estimated offset.", -sample)  # fmt: skip
+        if self._shared_clock:
+            self._offset, self._offset_at = 0.0, arrival
+        else:
+            leaked = sample if self._offset is None else self._offset + OFFSET_LEAK * (arrival - self._offset_at)
+            self._offset, self._offset_at = min(leaked, sample), arrival
         queued = sample - self._offset
         # The sequence moves on even for a stale datagram: anything older than it is older still.
         self._seq, self._sent = d.seq, d.sent
@@ -230,6 +265,15 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             )  # fmt: skip
             self._stale_run, self._stale_max = 0, 0.0
         return GloveFrame(d.session, d.seq, d.side, d.ergonomics, arrival, d.sent + self._offset)
+
+    def _clock_stepped(self, d: GloveDatagram) -> None:
+        if not self.clock_steps:
+            logger.warning(
+                "The glove bridge's clock stepped back %.3f s within session %s (seq %d after %d): its `sent` is not "
+                "a monotonic clock, so its poses cannot be aged. Dropping them until it is past the old time; fix "
+                "the bridge (docs/glove.md), then reconnect.", self._sent - d.sent, d.session, d.seq, self._seq,
+            )  # fmt: skip
+        self.clock_steps += 1
 
     def _warn_behind(self, d: GloveDatagram) -> None:
         if d.session in self._retired or d.session in self._warned_behind:
@@ -278,7 +322,8 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
         if self.foreign:
             parts.append(f"{self.foreign} from another sender than the bound {self.bound[0]}:{self.bound[1]}")
         for count, what in ((self.late, "late or duplicated"), (self.stale, f"queued > {self.max_latency_s} s"),
-                            (self.retired, "from an older bridge session")):  # fmt: skip
+                            (self.retired, "from an older bridge session"),
+                            (self.clock_steps, "after the bridge's clock stepped back")):  # fmt: skip
             if count:
                 parts.append(f"{count} {what}")
         return "; ".join(parts)

@@ -3,7 +3,7 @@
     blindgrasp-rollout --strategy.type=base \\
         --policy.path=<checkpoint> --robot="include robot_configs/blindgrasp_gripper.yaml" --fps=20 --duration=10
 
-(`python -m lerobot_blindgrasp.robots.blindgrasp_gripper.rollout` is the same.) It is a draccus CLI already:
+(`python -m lerobot_blindgrasp.deploy.run_policy` is the same.) It is a draccus CLI already:
 LeRobot's own `parser.wrap` over `RolloutConfig`, so `--help`, `--config_path` and dotted flags work as in
 `lerobot-rollout`.
 
@@ -18,6 +18,7 @@ features again, so `observation.state` is built with exactly `spec.STATE_NAMES`,
 
 # No `from __future__ import annotations`: LeRobot's parser.wrap reads the config class from the real annotation.
 import logging
+import sys
 
 from lerobot.configs import parser
 from lerobot.configs.types import PipelineFeatureType
@@ -65,7 +66,9 @@ def rollout(cfg: RolloutConfig) -> None:
         # Before build_rollout_context loads the policy (its size errors never say "action") and connects the robot.
         where = policy_check.local_checkpoint(str(cfg.policy.pretrained_path))
         if where is not None:
-            policy_check.check(where, policy_check.gripper_contract(cfg.robot.type, cfg.fps, "--fps"))
+            contract = policy_check.gripper_contract(cfg.robot.type, cfg.fps, "--fps")
+            allow = getattr(cfg.robot, "allow_unverified_policy", False)
+            policy_check.check(where, contract, allow_unverified=allow)
     signal_handler = ProcessSignalHandler(use_threads=True, display_pid=False)
     ctx = build_rollout_context(
         cfg, signal_handler.shutdown_event, robot_observation_processor=make_robot_observation_processor()
@@ -80,7 +83,9 @@ def rollout(cfg: RolloutConfig) -> None:
         strategy.teardown(ctx)  # returns to the start pose (unless disabled) and disconnects: torque off
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    if argv is not None:  # LeRobot's parser reads the command line from sys.argv
+        sys.argv = [sys.argv[0], *argv]
     register_third_party_plugins()
     rollout()
 

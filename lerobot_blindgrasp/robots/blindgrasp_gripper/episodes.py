@@ -1,0 +1,41 @@
+"""Where a recording episode starts, as the robot can tell: a start is checked like a connect (`health.py`).
+
+LeRobot's Robot interface has no call at an episode's start: lerobot-record goes on calling get_observation and
+send_action through its reset phase and into the next episode. What it does at every episode is announce it: its
+`log_say(f"Recording episode {n}")` logs that line at INFO just before the episode's loop (lerobot_record.py,
+LeRobot 0.6.1), whether or not sounds are on, and its `init_logging` leaves the root logger at NOTSET, so the
+line reaches every root handler. `EpisodeStarts` is one: installed while the gripper is connected, it marks a
+start. The robot also counts a loop that resumes after a pause (a dataset save, an operator prompt, any script that
+waits between runs) as a start.
+"""
+
+from __future__ import annotations
+
+import logging
+
+ANNOUNCEMENT = "Recording episode"  # lerobot-record's log_say before every episode
+
+
+class EpisodeStarts(logging.Handler):
+    """A root-logger handler that marks LeRobot's episode announcements; `take()` reads and clears the mark."""
+
+    def __init__(self) -> None:
+        super().__init__(level=logging.INFO)
+        self._pending = False
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.funcName == "log_say" and isinstance(record.msg, str) and record.msg.startswith(ANNOUNCEMENT):
+            self._pending = True
+
+    def take(self) -> bool:
+        pending, self._pending = self._pending, False
+        return pending
+
+    def install(self) -> None:
+        self._pending = False
+        root = logging.getLogger()
+        if self not in root.handlers:
+            root.addHandler(self)
+
+    def uninstall(self) -> None:
+        logging.getLogger().removeHandler(self)

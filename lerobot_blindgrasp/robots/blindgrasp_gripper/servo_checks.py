@@ -1,0 +1,157 @@
+"""What the gripper reads from its servos besides positions: their setup at connect, their state every control
+period, and their health at a rate that fits the bus budget, with a stricter check at every start.
+
+- At connect, before anything is written: Firmware_Version(6) (Drive_Mode and Bus_Watchdog need v38), the EEPROM
+  limits Temperature_Limit(31)..Shutdown(63) (`health.set_limits`), Startup_Configuration(60) (v45+: a servo set
+  to turn its torque on at power-up is set back at configure, so a reset still shows as a dropped torque), then
+  the start check of `health.py`.
+- Every control period: the state block of `servo_state.py` (hardware errors, a reset, a tripped watchdog).
+- Every `health_every_n` periods, whoever calls (get_observation, or send_action alone as in a replay script): the
+  health block, judged by `health.py`. A start (connect, a trial, an announced recording episode, a loop resuming after a
+  pause, `episodes.py`) is judged at the start levels at once: too close to a limit refuses it.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+from lerobot.utils.decorators import check_if_not_connected
+
+from lerobot_blindgrasp.hardware import xm430
+
+from . import health, servo_state
+from .errors import GripperFirmwareError, GripperHardwareError, GripperHealthError, GripperStateError
+
+logger = logging.getLogger(__name__)
+
+
+class ServoChecks:
+    """Mixin of `BlindgraspGripper` (it holds `bus`, `joints`, `expected`, `gate`, `health`, `config`, `timing`,
+    `episodes` and `_safety`)."""
+
+    _startup_torque_on: dict[str, int]  # joint -> its Startup_Configuration, for those with Startup Torque On
+    _health_countdown = 0
+    _last_call: float | None = None
+
+    # --- at connect ----------------------------------------------------------------------------------------------
+    def _check_servo_setup(self) -> None:
+        versions = self.bus.sync_read("Firmware_Version")
+        old = {f"{j} (ID {self.bus.motors[j].id})": v for j, v in versions.items() if v < xm430.FIRMWARE_MIN}
+        if old:
+            raise GripperFirmwareError(
+                f"Servo firmware {old} is older than v{xm430.FIRMWARE_MIN}, which Drive_Mode (the calibration's "
+                "direction) and Bus_Watchdog (the stop when this host goes quiet) need. Update it with DYNAMIXEL "
+                "Wizard 2.0 (Firmware Update) before using the gripper."
+            )
+        eeprom = self.bus.read_block(*health.LIMITS_BLOCK, health.LIMITS_READ)
+        self.health.reset()
+        for note in self.health.set_limits(eeprom):
+            logger.warning("%s", note)
+        self._startup_torque_on = {
+            j: eeprom[j]["Startup_Configuration"]
+            for j in self.joints
+            if versions[j] >= xm430.FIRMWARE_STARTUP_CONFIGURATION
+            and eeprom[j]["Startup_Configuration"] & xm430.STARTUP_TORQUE_ON
+        }
+        self._check_health(start=True)  # before any torque: a hot servo or a weak supply refuses the start
+        self._last_call = None
+
+    def _clear_startup_torque(self) -> None:
+        """At configure (torque off, EEPROM writable): Startup Torque On cleared, the rest of the register kept."""
+        for j, value in self._startup_torque_on.items():
+            self.bus.write("Startup_Configuration", j, value & ~xm430.STARTUP_TORQUE_ON)
+        if self._startup_torque_on:
+            logger.warning(
+                "Startup_Configuration(60) of %s had Startup Torque On: such a servo turns its torque on by itself "
+                "after a power cycle or a brown-out, so a reset would not show as a dropped torque, and an unattended "
+                "gripper would stiffen at power-up. Cleared it (EEPROM).", sorted(self._startup_torque_on)
+            )  # fmt: skip
+        self._startup_torque_on = {}
+
+    # --- every period --------------------------------------------------------------------------------------------
+    def _check_servo_state(self) -> None:
+        """One sync read per control period (`servo_state.py`): hardware errors, then anything `configure()` set
+        that changed (a reset), then a watchdog that stopped servos during a pause of this process."""
+        report = servo_state.compare(self.bus.read_block(*servo_state.BLOCK, servo_state.READ), self.expected)
+        if report.changed:  # read again before stopping: one corrupt reply with a valid CRC must not stop it
+            report = servo_state.compare(self.bus.read_block(*servo_state.BLOCK, servo_state.READ), self.expected)
+        self._last_state_check = time.monotonic()
+        bad = {j: v for j, v in report.hardware_error.items() if self._confirm_hardware_error(j)}
+        if bad:
+            detail = "; ".join(
+                f"{j} (ID {self.bus.motors[j].id}): {xm430.decode_hardware_error(v)}" for j, v in bad.items()
+            )
+            raise GripperHardwareError(
+                f"Servo hardware error: {detail}. The firmware keeps torque off until the servo is rebooted or "
+                "power-cycled; inspect the finger first."
+            )
+        if report.changed:
+            detail = "; ".join(
+                f"{j} (ID {self.bus.motors[j].id}): {', '.join(c)}" for j, c in report.changed.items()
+            )
+            raise GripperStateError(
+                f"Servo state changed without a command: {detail}. A servo reset (brown-out, loose power cable) "
+                "drops its torque and restores factory RAM settings; check the supply and cabling, then reconnect."
+            )
+        if report.watchdog_tripped:
+            self._rearm_watchdog(report.watchdog_tripped)
+
+    def _confirm_hardware_error(self, joint: str) -> bool:
+        """Re-read one servo's Hardware_Error_Status (unicast, alert bit allowed): a corrupted or stale sync-read
+        reply must not stop the gripper, a real error reads the same twice."""
+        value = self.bus.read_despite_alert(joint, "Hardware_Error_Status")
+        if value is None:
+            return True  # cannot confirm either way: treat as an error
+        if not value:
+            logger.warning("Spurious Hardware_Error_Status on %s (not confirmed by a second read).", joint)
+        return bool(value)
+
+    def _rearm_watchdog(self, joints: list[str]) -> None:
+        """The servos' bus watchdog stopped them because this process sent nothing for `bus_watchdog_ms` (a slow
+        save between episodes, an operator prompt). The host is evidently alive again: clear the error (goal
+        registers are read-only until then), hold the pose the servos stopped in, and arm the watchdog again."""
+        logger.warning("Bus watchdog stopped %s after more than %d ms without bus traffic; re-arming it.",
+                       joints, self.config.bus_watchdog_ms)  # fmt: skip
+        ticks = self._trusted_ticks()
+        present = {j: int(t) for j, t in zip(self.joints, ticks)}
+        for j in joints:
+            self.bus.write("Bus_Watchdog", j, 0)
+            self.bus.write("Goal_Position", j, present[j])
+            self.bus.write("Bus_Watchdog", j, self.expected["Bus_Watchdog"])
+            if self.gate.goal is not None:
+                self.gate.goal[self.joints.index(j)] = ticks[self.joints.index(j)]
+
+    # --- health --------------------------------------------------------------------------------------------------
+    def _poll_health(self, now: float) -> None:
+        """Once per control period (get_observation, or send_action when it stands alone): the health block every
+        `health_every_n` periods, and at once, at the start levels, when a start is pending."""
+        start = self._starting(now)
+        self._health_countdown -= 1
+        if start or self._health_countdown <= 0:
+            self._health_countdown = self.config.health_every_n
+            self._check_health(start=start)
+
+    def _starting(self, now: float) -> bool:
+        """A recording episode announced since the last call, or the first call after a pause of the loop."""
+        resumed = self._last_call is not None and now - self._last_call >= self.timing.pause_s
+        self._last_call = now
+        return self.episodes.take() or resumed
+
+    def _check_health(self, *, start: bool = False) -> None:
+        """One sync read of the health block; ERROR stops (torque off by the latch), and at a start anything too
+        close to its limit refuses it."""
+        block = self.bus.read_block(*health.BLOCK, health.READ)
+        found = self.health.assess(block, self.expected.get("Goal_Current"), time.monotonic())
+        errors = [str(d) for d in found if d.level == health.ERROR]
+        if start and (close := self.health.start_problems(block) + errors):
+            raise GripperHealthError(f"Refused to start: {'; '.join(close)}.")
+        if errors:
+            raise GripperHealthError(f"Servo health: {'; '.join(errors)}. Stopped before the firmware's own "
+                                     "shutdown would drop the object.")  # fmt: skip
+
+    @check_if_not_connected
+    def check_health_before_start(self) -> None:
+        """Before a trial or an episode: refuse (torque off, named error) when a servo is too close to a limit."""
+        with self._safety("checking servo health before a start"):
+            self._check_health(start=True)
