@@ -8,6 +8,7 @@ also through a spawned loader process as lerobot-train runs its workers.
 from __future__ import annotations
 
 import pickle
+import sys
 
 import numpy as np
 import pytest
@@ -115,6 +116,39 @@ def test_a_batch_through_a_spawned_loader_process_equals_lerobots(dataset_root):
     batch = next(iter(loader))
     ref = default_collate([DatasetReader.get_item(ds.reader, i) for i in indices])
     assert_same_item(batch, ref)
+
+
+def test_lerobot_train_itself_trains_on_the_caches_samples(dataset_root, tmp_path, monkeypatch):
+    """The real lerobot-train (its `main`, in this process, no loader workers): every sample it draws is served by
+    the cache's reader, and the reader says so in the log."""
+    from lerobot.scripts import lerobot_train
+
+    from lerobot_blindgrasp.policies.blindgrasp_transformer import window_cache
+
+    served, get_item = [], LowDimWindowReader.get_item
+    monkeypatch.setattr(LowDimWindowReader, "get_item", lambda self, i: served.append(i) or get_item(self, i))
+    logged = []
+    monkeypatch.setattr(window_cache.logger, "info", lambda msg, *args: logged.append(msg % args))
+    steps, batch = 2, 4
+    argv = [
+        "lerobot-train",
+        "--policy.type=blindgrasp_transformer",
+        "--policy.size=quick",
+        "--policy.device=cpu",
+        "--policy.push_to_hub=false",
+        "--dataset.repo_id=local/data_path",
+        f"--dataset.root={dataset_root}",
+        f"--output_dir={tmp_path / 'out'}",
+        f"--steps={steps}",
+        f"--batch_size={batch}",
+        "--num_workers=0",
+        "--save_checkpoint=false",
+        "--wandb.enable=false",
+    ]
+    monkeypatch.setattr(sys, "argv", argv)
+    lerobot_train.main()
+    assert len(served) >= steps * batch
+    assert any(window_cache.SERVED_LOG in line and str(dataset_root) in line for line in logged)
 
 
 def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):

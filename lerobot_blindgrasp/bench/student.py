@@ -27,6 +27,7 @@ round), the same rule for all, so the ratios within a run hold:
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -41,7 +42,7 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.bench import BenchConfig
 from lerobot_blindgrasp.bench.policy import flops_per_step, make_policy
 from lerobot_blindgrasp.bench.student_parts import compiled_vs_eager, format_table, gemm_gflops, update_parts
-from lerobot_blindgrasp.policies.blindgrasp_transformer.window_cache import ENV_SWITCH
+from lerobot_blindgrasp.policies.blindgrasp_transformer.window_cache import ENV_SWITCH, SERVED_LOG
 from lerobot_blindgrasp.presets.student import SIZES
 
 
@@ -58,10 +59,12 @@ class BenchStudentConfig(BenchConfig):
     num_workers: int = 1  # loader processes beside the training thread, for the bound
     loader_workers: list[int] = field(default_factory=lambda: [0, 2])  # DataLoader worker counts to time
     loader_batches: int = 4  # timed batches per DataLoader row (after the first); 0 skips the loader rows
-    prefetch_factor: int = 4  # lerobot-train's default
+    prefetch_factors: list[int] = field(default_factory=lambda: [4])  # per worker row; 4 is lerobot-train's
     profile: bool = False  # also split forward + backward by operator (torch.profiler)
     compile: bool = False  # also time torch.compile of the model against eager (minutes of compiling on a CPU)
     train_steps: int = 0  # >0: also time the real lerobot-train for this many steps, on both map-style paths
+    log_freq: int = 50  # lerobot-train's --log_freq in those runs: its updt_s / data_s are read per logged window
+    device: str = "cpu"  # where the update and lerobot-train's policy run (cuda: a GPU); loading stays on the CPU
     seed: int = 0
 
     def __post_init__(self):
@@ -69,8 +72,15 @@ class BenchStudentConfig(BenchConfig):
             raise ValueError(f"--bench.size must be one of {sorted(SIZES)}, got {self.size!r}")
         if self.dataset_root is None or not (Path(self.dataset_root) / "meta" / "info.json").is_file():
             raise ValueError(f"--bench.dataset_root must be a LeRobotDataset folder, got {self.dataset_root}")
-        if min(self.loader_workers, default=0) < 0 or self.prefetch_factor < 1:
-            raise ValueError("--bench.loader_workers must be >= 0 and --bench.prefetch_factor >= 1")
+        if min(self.loader_workers, default=0) < 0 or min(self.prefetch_factors, default=0) < 1:
+            raise ValueError("--bench.loader_workers must be >= 0 and --bench.prefetch_factors >= 1")
+        if self.device != "cpu":
+            if not torch.device(self.device).type == "cuda" or not torch.cuda.is_available():
+                raise ValueError(
+                    f"--bench.device must be cpu, or cuda on a machine with a GPU, got {self.device!r}"
+                )
+            if self.profile or self.compile:
+                raise ValueError("--bench.profile and --bench.compile time the update on the CPU only")
 
 
 def _delta(n_obs_steps: int) -> dict:
@@ -122,8 +132,9 @@ def streaming_ms(root: Path, n_obs_steps: int, samples: int, seed: int) -> float
 
 
 def loader_samples_per_s(root: Path, n_obs_steps: int, cfg: BenchStudentConfig) -> list[dict]:
-    """samples/s through torch's DataLoader as lerobot-train builds it, per data path and worker count, in steady
-    state: timed after the first batch and the `workers x prefetch_factor` batches the workers had queued by then."""
+    """samples/s through torch's DataLoader as lerobot-train builds it, per data path, worker count and prefetch
+    factor, in steady state: timed after the first batch and the `workers x prefetch` batches the workers had
+    queued by then."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     rows, before = [], os.environ.get(ENV_SWITCH)
@@ -131,32 +142,11 @@ def loader_samples_per_s(root: Path, n_obs_steps: int, cfg: BenchStudentConfig) 
         os.environ[ENV_SWITCH] = switch  # the spawned workers read it at their plugin import
         ds = LeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps))
         for workers in cfg.loader_workers:
-            extra = (
-                {
-                    "multiprocessing_context": "spawn",
-                    "persistent_workers": True,
-                    "prefetch_factor": cfg.prefetch_factor,
-                }
-                if workers
-                else {}
-            )
-            loader = torch.utils.data.DataLoader(
-                ds,
-                batch_size=cfg.batch_size,
-                shuffle=True,
-                num_workers=workers,
-                generator=torch.Generator().manual_seed(cfg.seed),
-                **extra,
-            )
-            it = iter(loader)
-            for _ in range(1 + workers * cfg.prefetch_factor):  # start-up, then what the workers had queued
-                next(it)
-            t = time.perf_counter()
-            for _ in range(cfg.loader_batches):
-                next(it)
-            rate = cfg.loader_batches * cfg.batch_size / (time.perf_counter() - t)
-            rows.append({"path": path, "num_workers": workers, "samples_per_s": rate})
-            del it, loader
+            for prefetch in cfg.prefetch_factors if workers else [None]:  # no workers: nothing to prefetch
+                rate = _loader_rate(ds, workers, prefetch, cfg)
+                rows.append(
+                    {"path": path, "num_workers": workers, "prefetch_factor": prefetch, "samples_per_s": rate}
+                )
     if before is None:
         os.environ.pop(ENV_SWITCH, None)
     else:
@@ -164,35 +154,133 @@ def loader_samples_per_s(root: Path, n_obs_steps: int, cfg: BenchStudentConfig) 
     return rows
 
 
+def _loader_rate(ds, workers: int, prefetch: int | None, cfg: BenchStudentConfig) -> float:
+    extra = {"multiprocessing_context": "spawn", "persistent_workers": True, "prefetch_factor": prefetch}
+    loader = torch.utils.data.DataLoader(
+        ds,
+        batch_size=cfg.batch_size,
+        shuffle=True,
+        num_workers=workers,
+        generator=torch.Generator().manual_seed(cfg.seed),
+        **(extra if workers else {}),
+    )
+    it = iter(loader)
+    for _ in range(1 + workers * (prefetch or 0)):  # start-up, then what the workers had queued
+        next(it)
+    t = time.perf_counter()
+    for _ in range(cfg.loader_batches):
+        next(it)
+    rate = cfg.loader_batches * cfg.batch_size / (time.perf_counter() - t)
+    del it, loader
+    return rate
+
+
+def cache_memory(root: Path, n_obs_steps: int) -> dict:
+    """What one process's low-dim cache holds for this dataset: bytes per frame from its tensors (the columns'
+    dtypes), and the growth of the process's anonymous resident memory (Linux) when a second dataset object builds
+    its cache, so that the first build's one-off costs (imports, the allocator's first arenas) are not counted."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    def build():
+        ds = LeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps))
+        before = _rss_anon_bytes()
+        ds[0]  # builds the cache
+        after = _rss_anon_bytes()
+        return ds, (after - before if before is not None and after is not None else None)
+
+    warm, _ = build()
+    ds, growth = build()
+    cache = ds.reader.__dict__.get("_low_dim_cache")
+    if cache is None:
+        raise RuntimeError(f"{root}: the low-dim cache does not serve this dataset")
+    del warm
+    columns = sum(t.nbytes for t in cache.columns.values())
+    frames = len(ds)
+    return {
+        "frames": frames,
+        "bytes_per_frame": columns / frames,
+        "cache_bytes": columns + cache.ep_from.nbytes + cache.ep_to.nbytes,
+        "rss_anon_growth_bytes": growth,
+        "columns": {
+            k: str(t.dtype).removeprefix("torch.") + str(list(t.shape[1:])) for k, t in cache.columns.items()
+        },
+    }
+
+
+def _rss_anon_bytes() -> int | None:
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("RssAnon:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
 def lerobot_train_samples_per_s(cfg: BenchStudentConfig, cache: bool) -> dict:
-    """Run the real lerobot-train for cfg.train_steps steps; samples/s from its wall clock (start-up included)."""
+    """Run the real lerobot-train (its module, so that no console script is needed) for cfg.train_steps steps:
+    samples/s from its wall clock (start-up included), and its own per-step `updt_s` / `data_s`, averaged over
+    the logged windows after the first (which holds the start-up)."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [
-            str(Path(sys.executable).parent / "lerobot-train"),
+            sys.executable,
+            "-m",
+            "lerobot.scripts.lerobot_train",
             "--policy.type=blindgrasp_transformer",
             f"--policy.size={cfg.size}",
+            f"--policy.device={cfg.device}",
             "--dataset.repo_id=local/bench",
             f"--dataset.root={cfg.dataset_root}",
             f"--output_dir={tmp}/out",
             f"--steps={cfg.train_steps}",
             f"--batch_size={cfg.batch_size}",
-            f"--save_freq={cfg.train_steps}",
+            f"--log_freq={cfg.log_freq}",
+            "--save_checkpoint=false",
             "--policy.push_to_hub=false",
-            "--policy.device=cpu",
             f"--num_workers={cfg.num_workers}",
             "--wandb.enable=false",
             f"--seed={cfg.seed}",
         ]
         env = {**os.environ, "OMP_NUM_THREADS": "1", "HF_HUB_OFFLINE": "1", ENV_SWITCH: "1" if cache else "0"}
         t = time.perf_counter()
-        subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        done = subprocess.run(cmd, env=env, capture_output=True, text=True)
         wall = time.perf_counter() - t
+    if done.returncode:
+        raise RuntimeError(f"lerobot-train failed ({done.returncode}):\n{done.stderr[-3000:]}")
+    log = done.stdout + done.stderr
+    windows = train_log_windows(log)
+    steady = windows[1:] or windows
+    mean = {k: float(np.mean([w[k] for w in steady])) if steady else None for k in ("updt_s", "data_s")}
     return {
         "path": "cache" if cache else "lerobot",
+        "device": cfg.device,
         "steps": cfg.train_steps,
+        "num_workers": cfg.num_workers,
         "wall_s": wall,
         "samples_per_s": cfg.train_steps * cfg.batch_size / wall,
+        "logged_windows": len(windows),
+        "cache_served": SERVED_LOG in log,  # window_cache's log line: the reader was upgraded
+        "updt_s": mean["updt_s"],
+        "data_s": mean["data_s"],
+        "steady_samples_per_s": cfg.batch_size / (mean["updt_s"] + mean["data_s"]) if steady else None,
     }
+
+
+def train_log_windows(log: str) -> list[dict]:
+    """lerobot-train's logged windows (`step:... updt_s:... data_s:...`), in order."""
+    rows = []
+    for line in log.splitlines():
+        found = dict(re.findall(r"\b(step|updt_s|data_s):([0-9.]+[KMB]?)", line))
+        if {"updt_s", "data_s"} <= set(found):
+            rows.append(
+                {"step": found.get("step"), "updt_s": float(found["updt_s"]), "data_s": float(found["data_s"])}
+            )
+    return rows
+
+
+def _device_name(device: str) -> str:
+    return torch.cuda.get_device_name(torch.device(device)) if device != "cpu" else f"cpu ({os.cpu_count()} cores)"
 
 
 def run(cfg: BenchStudentConfig) -> dict:
@@ -201,12 +289,13 @@ def run(cfg: BenchStudentConfig) -> dict:
     n_obs = policy.config.n_obs_steps
     train_flops = 3 * flops_per_step(policy.config, last_token_only=True)
     load = load_ms(Path(cfg.dataset_root), n_obs, cfg.load_samples, cfg.seed)
-    update = update_parts(cfg.size, cfg.batch_size, cfg.update_steps, cfg.seed, cfg.profile)
-    gflops = gemm_gflops(cfg.size, cfg.batch_size)
+    update = update_parts(cfg.size, cfg.batch_size, cfg.update_steps, cfg.seed, cfg.profile, cfg.device)
+    gflops = gemm_gflops(cfg.size, cfg.batch_size, device=cfg.device)
     floor = train_flops / (gflops * 1e9) * 1e3
     per_sample = update["lerobot_adamw"]["total"]
     result = {
         "size": cfg.size,
+        "device": _device_name(cfg.device),
         "batch_size": cfg.batch_size,
         "num_workers": cfg.num_workers,
         "load_ms_per_sample": load,
@@ -221,6 +310,7 @@ def run(cfg: BenchStudentConfig) -> dict:
             for p in ("lerobot", "cache", "streaming")
         },
     }
+    result["cache_memory"] = cache_memory(Path(cfg.dataset_root), n_obs)
     if cfg.compile:
         result["compile"] = compiled_vs_eager(cfg.size, cfg.batch_size, max(cfg.update_steps, 3), cfg.seed)
     if cfg.loader_batches:
