@@ -32,18 +32,18 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.bench import BenchConfig
 from lerobot_blindgrasp.bench.policy import flops_per_step, make_policy
+from lerobot_blindgrasp.bench.student_data import cache_memory, load_ms, loader_samples_per_s, synthetic_demos
 from lerobot_blindgrasp.bench.student_parts import compiled_vs_eager, format_table, gemm_gflops, update_parts
+from lerobot_blindgrasp.policies.blindgrasp_transformer.configuration_blindgrasp_transformer import SIZES
 from lerobot_blindgrasp.policies.blindgrasp_transformer.window_cache import ENV_SWITCH, SERVED_LOG
-from lerobot_blindgrasp.presets.student import SIZES
 
 
 @BenchConfig.register_subclass("student")
@@ -51,7 +51,9 @@ from lerobot_blindgrasp.presets.student import SIZES
 class BenchStudentConfig(BenchConfig):
     """Per-sample cost of student training: each data path, the update's parts, and the model's FLOP floor."""
 
-    dataset_root: Path | None = None  # a blindgrasp LeRobotDataset (required: the loader's cost depends on it)
+    dataset_root: Path | None = None  # a blindgrasp LeRobotDataset (the loader's cost depends on its schema)
+    # No dataset_root: time on a synthetic dataset of this many episodes in the demos' schema (random values).
+    synthetic_episodes: int = 0
     size: str = "cpu"  # student size (presets.student.SIZES)
     batch_size: int = 128
     load_samples: int = 400  # random samples read per path for the load figures
@@ -70,8 +72,13 @@ class BenchStudentConfig(BenchConfig):
     def __post_init__(self):
         if self.size not in SIZES:
             raise ValueError(f"--bench.size must be one of {sorted(SIZES)}, got {self.size!r}")
-        if self.dataset_root is None or not (Path(self.dataset_root) / "meta" / "info.json").is_file():
-            raise ValueError(f"--bench.dataset_root must be a LeRobotDataset folder, got {self.dataset_root}")
+        if self.dataset_root is None and self.synthetic_episodes > 0:
+            pass  # made in run()
+        elif self.dataset_root is None or not (Path(self.dataset_root) / "meta" / "info.json").is_file():
+            raise ValueError(
+                f"--bench.dataset_root must be a LeRobotDataset folder (or give --bench.synthetic_episodes), "
+                f"got {self.dataset_root}"
+            )
         if min(self.loader_workers, default=0) < 0 or min(self.prefetch_factors, default=0) < 1:
             raise ValueError("--bench.loader_workers must be >= 0 and --bench.prefetch_factors >= 1")
         if self.device != "cpu":
@@ -81,141 +88,6 @@ class BenchStudentConfig(BenchConfig):
                 )
             if self.profile or self.compile:
                 raise ValueError("--bench.profile and --bench.compile time the update on the CPU only")
-
-
-def _delta(n_obs_steps: int) -> dict:
-    return {spec.STATE_KEY: [i / spec.CONTROL_HZ for i in range(1 - n_obs_steps, 1)]}
-
-
-def _per_sample_ms(read, indices, block: int = 25) -> float:
-    """ms per sample of the fastest block of `block` reads: on a shared machine the least-disturbed block is the
-    closest to the path's own cost (the same rule for every path and for the update, so their ratios hold)."""
-    read(int(indices[0]))  # opens the files, builds a cache
-    best = float("inf")
-    for start in range(0, len(indices), block):
-        chunk = indices[start : start + block]
-        t = time.perf_counter()
-        for i in chunk:
-            read(int(i))
-        best = min(best, (time.perf_counter() - t) / len(chunk))
-    return best * 1e3
-
-
-def load_ms(root: Path, n_obs_steps: int, samples: int, seed: int) -> dict[str, float]:
-    """ms per sample of each data path with the student's observation window, on the same random frames."""
-    from lerobot.datasets.dataset_reader import DatasetReader
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
-    ds = LeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps))
-    reader = ds.reader
-    idx = np.random.default_rng(seed).integers(0, len(ds), samples)
-    out = {
-        "lerobot": _per_sample_ms(lambda i: DatasetReader.get_item(reader, i), idx),
-        "cache": _per_sample_ms(lambda i: ds[i], idx),
-    }
-    col = reader.hf_dataset[spec.STATE_KEY]
-    out["lerobot_row"] = _per_sample_ms(lambda i: reader.hf_dataset[i], idx)
-    out["lerobot_window"] = _per_sample_ms(lambda i: col[list(range(max(0, i - n_obs_steps + 1), i + 1))], idx)
-    out["streaming"] = streaming_ms(root, n_obs_steps, samples, seed)
-    return out
-
-
-def streaming_ms(root: Path, n_obs_steps: int, samples: int, seed: int) -> float:
-    """ms per sample of `--dataset.streaming=true`'s dataset (StreamingLeRobotDataset), after its first sample."""
-    from lerobot.datasets.streaming_dataset import StreamingLeRobotDataset
-
-    ds = StreamingLeRobotDataset(
-        repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps), max_num_shards=1, seed=seed
-    )
-    it = iter(ds)
-    return _per_sample_ms(lambda _: next(it), np.zeros(samples + 1, dtype=int))
-
-
-def loader_samples_per_s(root: Path, n_obs_steps: int, cfg: BenchStudentConfig) -> list[dict]:
-    """samples/s through torch's DataLoader as lerobot-train builds it, per data path, worker count and prefetch
-    factor, in steady state: timed after the first batch and the `workers x prefetch` batches the workers had
-    queued by then."""
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
-    rows, before = [], os.environ.get(ENV_SWITCH)
-    for path, switch in (("lerobot", "0"), ("cache", "1")):
-        os.environ[ENV_SWITCH] = switch  # the spawned workers read it at their plugin import
-        ds = LeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps))
-        for workers in cfg.loader_workers:
-            for prefetch in cfg.prefetch_factors if workers else [None]:  # no workers: nothing to prefetch
-                rate = _loader_rate(ds, workers, prefetch, cfg)
-                rows.append(
-                    {"path": path, "num_workers": workers, "prefetch_factor": prefetch, "samples_per_s": rate}
-                )
-    if before is None:
-        os.environ.pop(ENV_SWITCH, None)
-    else:
-        os.environ[ENV_SWITCH] = before
-    return rows
-
-
-def _loader_rate(ds, workers: int, prefetch: int | None, cfg: BenchStudentConfig) -> float:
-    extra = {"multiprocessing_context": "spawn", "persistent_workers": True, "prefetch_factor": prefetch}
-    loader = torch.utils.data.DataLoader(
-        ds,
-        batch_size=cfg.batch_size,
-        shuffle=True,
-        num_workers=workers,
-        generator=torch.Generator().manual_seed(cfg.seed),
-        **(extra if workers else {}),
-    )
-    it = iter(loader)
-    for _ in range(1 + workers * (prefetch or 0)):  # start-up, then what the workers had queued
-        next(it)
-    t = time.perf_counter()
-    for _ in range(cfg.loader_batches):
-        next(it)
-    rate = cfg.loader_batches * cfg.batch_size / (time.perf_counter() - t)
-    del it, loader
-    return rate
-
-
-def cache_memory(root: Path, n_obs_steps: int) -> dict:
-    """What one process's low-dim cache holds for this dataset: bytes per frame from its tensors (the columns'
-    dtypes), and the growth of the process's anonymous resident memory (Linux) when a second dataset object builds
-    its cache, so that the first build's one-off costs (imports, the allocator's first arenas) are not counted."""
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
-    def build():
-        ds = LeRobotDataset(repo_id="local/bench", root=root, delta_timestamps=_delta(n_obs_steps))
-        before = _rss_anon_bytes()
-        ds[0]  # builds the cache
-        after = _rss_anon_bytes()
-        return ds, (after - before if before is not None and after is not None else None)
-
-    warm, _ = build()
-    ds, growth = build()
-    cache = ds.reader.__dict__.get("_low_dim_cache")
-    if cache is None:
-        raise RuntimeError(f"{root}: the low-dim cache does not serve this dataset")
-    del warm
-    columns = sum(t.nbytes for t in cache.columns.values())
-    frames = len(ds)
-    return {
-        "frames": frames,
-        "bytes_per_frame": columns / frames,
-        "cache_bytes": columns + cache.ep_from.nbytes + cache.ep_to.nbytes,
-        "rss_anon_growth_bytes": growth,
-        "columns": {
-            k: str(t.dtype).removeprefix("torch.") + str(list(t.shape[1:])) for k, t in cache.columns.items()
-        },
-    }
-
-
-def _rss_anon_bytes() -> int | None:
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("RssAnon:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return None
 
 
 def lerobot_train_samples_per_s(cfg: BenchStudentConfig, cache: bool) -> dict:
@@ -284,6 +156,16 @@ def _device_name(device: str) -> str:
 
 
 def run(cfg: BenchStudentConfig) -> dict:
+    if cfg.dataset_root is None:
+        with tempfile.TemporaryDirectory() as tmp:
+            cfg = replace(
+                cfg, dataset_root=synthetic_demos(Path(tmp) / "demos", cfg.synthetic_episodes, seed=cfg.seed)
+            )
+            return _run(cfg)
+    return _run(cfg)
+
+
+def _run(cfg: BenchStudentConfig) -> dict:
     torch.set_num_threads(1)
     policy = make_policy(cfg.size)
     n_obs = policy.config.n_obs_steps
