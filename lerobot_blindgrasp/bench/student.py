@@ -167,6 +167,8 @@ def run(cfg: BenchStudentConfig) -> dict:
 
 def _run(cfg: BenchStudentConfig) -> dict:
     torch.set_num_threads(1)
+    if cfg.device != "cpu":
+        torch.backends.cuda.matmul.allow_tf32 = True  # as lerobot-train sets it: its matrix products run in TF32
     policy = make_policy(cfg.size)
     n_obs = policy.config.n_obs_steps
     train_flops = 3 * flops_per_step(policy.config, last_token_only=True)
@@ -178,6 +180,7 @@ def _run(cfg: BenchStudentConfig) -> dict:
     result = {
         "size": cfg.size,
         "device": _device_name(cfg.device),
+        "matmul_tf32": cfg.device != "cpu",
         "batch_size": cfg.batch_size,
         "num_workers": cfg.num_workers,
         "load_ms_per_sample": load,

@@ -88,16 +88,19 @@ def loader_samples_per_s(root: Path, n_obs_steps: int, cfg) -> list[dict]:
 
 def _loader_rate(ds, workers: int, prefetch: int | None, cfg) -> float:
     extra = {"multiprocessing_context": "spawn", "persistent_workers": True, "prefetch_factor": prefetch}
-    loader = torch.utils.data.DataLoader(
+    warm = 1 + workers * (prefetch or 0)  # start-up, then what the workers had queued
+    # Shuffled as lerobot-train shuffles, over as many epochs as the batches need: a dataset smaller than them
+    # continues into the next permutation without the stall of a new epoch's iterator.
+    sampler = torch.utils.data.RandomSampler(
         ds,
-        batch_size=cfg.batch_size,
-        shuffle=True,
-        num_workers=workers,
+        num_samples=(warm + cfg.loader_batches) * cfg.batch_size,
         generator=torch.Generator().manual_seed(cfg.seed),
-        **(extra if workers else {}),
+    )
+    loader = torch.utils.data.DataLoader(
+        ds, batch_size=cfg.batch_size, sampler=sampler, num_workers=workers, **(extra if workers else {})
     )
     it = iter(loader)
-    for _ in range(1 + workers * (prefetch or 0)):  # start-up, then what the workers had queued
+    for _ in range(warm):
         next(it)
     t = time.perf_counter()
     for _ in range(cfg.loader_batches):
