@@ -164,7 +164,7 @@ def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
             load_samples=20,
             update_steps=2,
             loader_workers=[0],
-            loader_batches=1,
+            loader_batches=12,  # with the warm-up batch, more than one epoch of this dataset's 88 frames
             profile=True,
             json=True,
         )
@@ -186,3 +186,27 @@ def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
     assert all(row["samples_per_s"] > 0 for row in r["loader"])
     with pytest.raises(ValueError, match="dataset_root"):
         student.BenchStudentConfig(dataset_root=None)
+
+
+def test_lerobot_trains_log_is_read_per_window():
+    from lerobot_blindgrasp.bench.student import train_log_windows
+
+    log = (
+        "INFO 2026-12-04 17:42:11 ot_train.py:640 step:50 smpl:13K ep:130 epch:2.18 loss:0.923 grdn:1.234 "
+        "lr:1.0e-04 updt_s:0.016 data_s:0.226 smp/s:1058 mem_gb:1.23\n"
+        "INFO 2026-12-04 17:42:12 ot_train.py:700 Checkpoint policy after step 50\n"
+        "INFO 2026-12-04 17:42:23 ot_train.py:640 step:100 smpl:26K ep:260 epch:4.35 loss:0.811 grdn:1.1 "
+        "lr:1.0e-04 updt_s:0.015 data_s:0.005 smp/s:12800 mem_gb:1.23\n"
+    )
+    assert train_log_windows(log) == [
+        {"step": "50", "updt_s": 0.016, "data_s": 0.226},
+        {"step": "100", "updt_s": 0.015, "data_s": 0.005},
+    ]
+
+
+def test_blindgrasp_bench_imports_only_the_bench_it_runs():
+    from lerobot_blindgrasp.bench import BENCHMARKS, _modules
+
+    assert _modules(["--bench.type=student", "--bench.size=cpu"]) == ("student",)
+    assert _modules(["--bench.type", "teacher"]) == ("teacher",)
+    assert _modules(["--help"]) == BENCHMARKS  # all, so that --help and a wrong type list every choice
