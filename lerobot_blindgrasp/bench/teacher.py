@@ -7,9 +7,9 @@ Builds the preset's env and rsl-rl `OnPolicyRunner` exactly as `blindgrasp-train
 disk), runs a warm-up iteration and then `--iterations` timed ones. Per iteration it splits wall time into
 collection (env steps + the actor/critic forward passes rsl-rl does while acting) and update (`PPO.update`).
 After each iteration, in the same process, it times raw physics (`Batch.step` with the same per-env models, substeps
-and threads, no observation, reward or policy work) for as many control steps from where collection left off, so
-collection and raw physics alternate and see the same load on a shared machine: whole-loop / raw says how much of
-the machine the learner leaves to physics, and collection / raw what the env and the acting forward cost on top.
+and threads, no observation, reward or policy work) replaying that iteration's joint targets from its start state,
+so collection and the same physics alternate and see the same load on a shared machine: whole-loop / raw says how
+much of the machine the learner leaves to physics, and collection / raw what the env and the acting forward cost.
 
 Overrides (`--bench.hidden_dims`, `--bench.mini_batches`, `--bench.epochs`, `--bench.torch_threads`,
 `--bench.update_threads`, `--bench.num_envs`) set the timed loop. `--bench.update_variants=[5x4@1,5x4@2,5x2@2]`
@@ -89,19 +89,32 @@ def _preset(cfg: BenchTeacherConfig) -> presets.TeacherPreset:
     return replace(preset, runner=runner)
 
 
-def _raw_control_steps_per_s(env, steps: int) -> float:
-    """Raw stepping of the env's backend (`Batch.step`, or Warp's `step` per model) from its current state,
-    replaying the env's own last targets."""
-    saved = env.physics.snapshot()
+def _replayed_control_steps_per_s(env, start, targets: list) -> float:
+    """Raw stepping of the env's backend (`Batch.step`, or Warp's `step` per model) from `start`, the state before
+    an iteration's collection, commanding the joint targets that collection commanded, step by step: the same
+    physics without observations, rewards, resets or the policy. The env's state is put back afterwards."""
+    end = env.physics.snapshot()
+    env.physics.restore(start)
     ctrl = env.physics.ctrl
-    target = ctrl.copy()
     t = time.perf_counter()
-    for _ in range(steps):
+    for target in targets:
         ctrl[:] = target
         env.physics.raw_step(env.cfg.physics.substeps)
     wall = time.perf_counter() - t
-    env.physics.restore(saved)
-    return steps * env.num_envs / wall
+    env.physics.restore(end)
+    return len(targets) * env.num_envs / wall
+
+
+def _recording_targets(env, into: list):
+    """env.step that also keeps the joint command it left in the backend after each control step."""
+    step = type(env).step
+
+    def recorded(*args, **kwargs):
+        out = step(env, *args, **kwargs)
+        into.append(env.physics.ctrl.copy())
+        return out
+
+    return recorded
 
 
 def _build(cfg: BenchTeacherConfig):
@@ -133,10 +146,11 @@ def _build(cfg: BenchTeacherConfig):
     return preset, env, runner, device
 
 
-def _timed_iterations(runner, env, update, iterations: int, steps_per_it: int) -> list[dict]:
-    """Per PPO iteration (rsl-rl's own `learn`): wall and process CPU seconds of collection and of the update, then
-    raw physics for as many control steps from where collection left off. Raw physics runs right after each
-    iteration, so that it and the collection it is compared with see the same load on a shared machine."""
+def _timed_iterations(runner, env, update, iterations: int) -> list[dict]:
+    """Per PPO iteration (rsl-rl's own `learn`): wall and process CPU seconds of collection and of the update; then
+    raw physics replaying that collection's joint targets from its start state. Each replay runs right after its
+    iteration, so that it and the collection it is compared with see the same load on a shared machine. Envs that
+    reset during collection keep stepping in the replay: the same number of env steps, not the same resets."""
     spent: dict[str, float] = {}
 
     def timed_update():
@@ -146,23 +160,30 @@ def _timed_iterations(runner, env, update, iterations: int, steps_per_it: int) -
         return out
 
     runner.alg.update = timed_update
+    targets: list = []
+    env.step = _recording_targets(env, targets)  # the instance's step: what the vec env calls
     rows = []
-    for _ in range(iterations):
-        t, c = time.perf_counter(), time.process_time()
-        runner.learn(1)
-        wall, cpu = time.perf_counter() - t, time.process_time() - c
-        raw = _raw_control_steps_per_s(env, steps_per_it)
-        collect = wall - spent["update"]
-        rows.append(
-            {
-                "collect_s": collect,
-                "update_s": spent["update"],
-                "collect_cpu_s": cpu - spent["update_cpu"],
-                "update_cpu_s": spent["update_cpu"],
-                "collect_env_steps_per_s": steps_per_it * env.num_envs / collect,
-                "raw_control_steps_per_s": raw,
-            }
-        )
+    try:
+        for _ in range(iterations):
+            targets.clear()
+            start = env.physics.snapshot()
+            t, c = time.perf_counter(), time.process_time()
+            runner.learn(1)
+            wall, cpu = time.perf_counter() - t, time.process_time() - c
+            raw = _replayed_control_steps_per_s(env, start, targets)
+            collect = wall - spent["update"]
+            rows.append(
+                {
+                    "collect_s": collect,
+                    "update_s": spent["update"],
+                    "collect_cpu_s": cpu - spent["update_cpu"],
+                    "update_cpu_s": spent["update_cpu"],
+                    "collect_env_steps_per_s": len(targets) * env.num_envs / collect,
+                    "raw_control_steps_per_s": raw,
+                }
+            )
+    finally:
+        del env.step
     return rows
 
 
@@ -215,12 +236,11 @@ def run(cfg: BenchTeacherConfig) -> dict:
     from lerobot_blindgrasp.teacher.train import update_thread_count, with_torch_threads
 
     preset, env, runner, device = _build(cfg)
-    steps_per_it = preset.runner_cfg()["num_steps_per_env"]
     threads = update_thread_count(cfg, env)
     update = with_torch_threads(runner.alg.update, threads)
     runner.alg.update = update
     runner.learn(1, init_at_random_ep_len=True)  # warm-up: allocations, first normalizer stats
-    rows = _timed_iterations(runner, env, update, cfg.iterations, steps_per_it)
+    rows = _timed_iterations(runner, env, update, cfg.iterations)
     result = _summary(cfg, preset, env, rows, device, threads)
     if cfg.update_variants:  # on the last rollout, after the timing
         result["update_variants"] = update_variants(runner.alg, cfg.update_variants, cfg.variant_rounds)
