@@ -4,8 +4,10 @@ prefetch), the cache's memory per process, and a synthetic dataset in the demos'
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -112,8 +114,14 @@ def _loader_rate(ds, workers: int, prefetch: int | None, cfg) -> float:
 
 def cache_memory(root: Path, n_obs_steps: int) -> dict:
     """What one process's low-dim cache holds for this dataset: bytes per frame from its tensors (the columns'
-    dtypes), and the growth of the process's anonymous resident memory (Linux) when a second dataset object builds
-    its cache, so that the first build's one-off costs (imports, the allocator's first arenas) are not counted."""
+    dtypes), and, as a check, how much the anonymous resident memory (Linux) of a fresh process grows when a second
+    dataset object builds its cache: a fresh process, so that memory freed by earlier work is not reused, and the
+    second build, so that the first one's one-off costs (imports, the allocator's first arenas) are not counted."""
+    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return pool.submit(_cache_memory_here, str(root), n_obs_steps).result()
+
+
+def _cache_memory_here(root: str, n_obs_steps: int) -> dict:
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     def build():
@@ -123,17 +131,15 @@ def cache_memory(root: Path, n_obs_steps: int) -> dict:
         after = _rss_anon_bytes()
         return ds, (after - before if before is not None and after is not None else None)
 
-    warm, _ = build()
+    first, _ = build()
     ds, growth = build()
     cache = ds.reader.__dict__.get("_low_dim_cache")
     if cache is None:
         raise RuntimeError(f"{root}: the low-dim cache does not serve this dataset")
-    del warm
     columns = sum(t.nbytes for t in cache.columns.values())
-    frames = len(ds)
     return {
-        "frames": frames,
-        "bytes_per_frame": columns / frames,
+        "frames": len(ds),
+        "bytes_per_frame": columns / len(ds),
         "cache_bytes": columns + cache.ep_from.nbytes + cache.ep_to.nbytes,
         "rss_anon_growth_bytes": growth,
         "columns": {
