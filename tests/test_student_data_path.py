@@ -184,6 +184,9 @@ def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
     assert update["profile"]["matmul_ms"] > 0 and update["profile"]["aten_ops_per_step"] > 100
     assert [(row["path"], row["num_workers"]) for row in r["loader"]] == [("lerobot", 0), ("cache", 0)]
     assert all(row["samples_per_s"] > 0 for row in r["loader"])
+    memory = r["cache_memory"]  # state 12 + action 9 float32, seed 2 int64, timestamp float32, 4 int64 indices
+    assert memory["frames"] == sum(EPISODE_LENGTHS) and memory["bytes_per_frame"] == 48 + 36 + 16 + 4 + 32
+    assert memory["rss_anon_growth_bytes"] is not None
     with pytest.raises(ValueError, match="dataset_root"):
         student.BenchStudentConfig(dataset_root=None)
 
