@@ -8,6 +8,7 @@ also through a spawned loader process as lerobot-train runs its workers.
 from __future__ import annotations
 
 import pickle
+import sys
 
 import numpy as np
 import pytest
@@ -117,6 +118,39 @@ def test_a_batch_through_a_spawned_loader_process_equals_lerobots(dataset_root):
     assert_same_item(batch, ref)
 
 
+def test_lerobot_train_itself_trains_on_the_caches_samples(dataset_root, tmp_path, monkeypatch):
+    """The real lerobot-train (its `main`, in this process, no loader workers): every sample it draws is served by
+    the cache's reader, and the reader says so in the log."""
+    from lerobot.scripts import lerobot_train
+
+    from lerobot_blindgrasp.policies.blindgrasp_transformer import window_cache
+
+    served, get_item = [], LowDimWindowReader.get_item
+    monkeypatch.setattr(LowDimWindowReader, "get_item", lambda self, i: served.append(i) or get_item(self, i))
+    logged = []
+    monkeypatch.setattr(window_cache.logger, "info", lambda msg, *args: logged.append(msg % args))
+    steps, batch = 2, 4
+    argv = [
+        "lerobot-train",
+        "--policy.type=blindgrasp_transformer",
+        "--policy.size=quick",
+        "--policy.device=cpu",
+        "--policy.push_to_hub=false",
+        "--dataset.repo_id=local/data_path",
+        f"--dataset.root={dataset_root}",
+        f"--output_dir={tmp_path / 'out'}",
+        f"--steps={steps}",
+        f"--batch_size={batch}",
+        "--num_workers=0",
+        "--save_checkpoint=false",
+        "--wandb.enable=false",
+    ]
+    monkeypatch.setattr(sys, "argv", argv)
+    lerobot_train.main()
+    assert len(served) >= steps * batch
+    assert any(window_cache.SERVED_LOG in line and str(dataset_root) in line for line in logged)
+
+
 def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
     from lerobot_blindgrasp.bench import student
     from lerobot_blindgrasp.bench.student_parts import PARTS
@@ -130,7 +164,7 @@ def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
             load_samples=20,
             update_steps=2,
             loader_workers=[0],
-            loader_batches=1,
+            loader_batches=12,  # with the warm-up batch, more than one epoch of this dataset's 88 frames
             profile=True,
             json=True,
         )
@@ -150,5 +184,32 @@ def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
     assert update["profile"]["matmul_ms"] > 0 and update["profile"]["aten_ops_per_step"] > 100
     assert [(row["path"], row["num_workers"]) for row in r["loader"]] == [("lerobot", 0), ("cache", 0)]
     assert all(row["samples_per_s"] > 0 for row in r["loader"])
+    memory = r["cache_memory"]  # state 12 + action 9 float32, seed 2 int64, timestamp float32, 4 int64 indices
+    assert memory["frames"] == sum(EPISODE_LENGTHS) and memory["bytes_per_frame"] == 48 + 36 + 16 + 4 + 32
+    assert memory["rss_anon_growth_bytes"] is not None
     with pytest.raises(ValueError, match="dataset_root"):
         student.BenchStudentConfig(dataset_root=None)
+
+
+def test_lerobot_trains_log_is_read_per_window():
+    from lerobot_blindgrasp.bench.student import train_log_windows
+
+    log = (
+        "INFO 2026-12-04 17:42:11 ot_train.py:640 step:50 smpl:13K ep:130 epch:2.18 loss:0.923 grdn:1.234 "
+        "lr:1.0e-04 updt_s:0.016 data_s:0.226 smp/s:1058 mem_gb:1.23\n"
+        "INFO 2026-12-04 17:42:12 ot_train.py:700 Checkpoint policy after step 50\n"
+        "INFO 2026-12-04 17:42:23 ot_train.py:640 step:100 smpl:26K ep:260 epch:4.35 loss:0.811 grdn:1.1 "
+        "lr:1.0e-04 updt_s:0.015 data_s:0.005 smp/s:12800 mem_gb:1.23\n"
+    )
+    assert train_log_windows(log) == [
+        {"step": "50", "updt_s": 0.016, "data_s": 0.226},
+        {"step": "100", "updt_s": 0.015, "data_s": 0.005},
+    ]
+
+
+def test_blindgrasp_bench_imports_only_the_bench_it_runs():
+    from lerobot_blindgrasp.bench import BENCHMARKS, _modules
+
+    assert _modules(["--bench.type=student", "--bench.size=cpu"]) == ("student",)
+    assert _modules(["--bench.type", "teacher"]) == ("teacher",)
+    assert _modules(["--help"]) == BENCHMARKS  # all, so that --help and a wrong type list every choice

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import sys
 from dataclasses import dataclass
 
 import draccus
@@ -35,10 +36,22 @@ class BenchCommand:
     bench: BenchConfig  # --bench.type: sim, teacher, demos, policy or student
 
 
+def _modules(argv: list[str]) -> tuple[str, ...]:
+    """The benchmark named by --bench.type, else all (for --help and the parser's error): each imports only what it
+    times, so the student bench runs where MuJoCo is not installed."""
+    for arg, following in zip(argv, [*argv[1:], ""], strict=True):
+        name = (
+            arg.split("=", 1)[1] if arg.startswith("--bench.type=") else following if arg == "--bench.type" else ""
+        )
+        if name in BENCHMARKS:
+            return (name,)
+    return BENCHMARKS
+
+
 def main(argv=None) -> None:
     # The benchmarks time torch as training runs it, with idle OpenMP threads asleep.
     sleeping_openmp_threads(restart=argv is None)
-    for name in BENCHMARKS:  # each registers its --bench.type
+    for name in _modules(sys.argv[1:] if argv is None else list(argv)):  # each registers its --bench.type
         importlib.import_module(f"lerobot_blindgrasp.bench.{name}")
     cfg = parse_config(BenchCommand, argv).bench
     result = importlib.import_module(type(cfg).__module__).run(cfg)

@@ -75,14 +75,14 @@ def flops_per_step(config: BlindgraspTransformerConfig, last_token_only: bool = 
     return embed + (config.n_layers - 1) * full_layer + last_layer + head
 
 
-def make_policy(size: str) -> BlindgraspTransformerPolicy:
+def make_policy(size: str, device: str = "cpu") -> BlindgraspTransformerPolicy:
     config = BlindgraspTransformerConfig(
         size=size,
-        device="cpu",
+        device=device,
         input_features={OBS_STATE: PolicyFeature(FeatureType.STATE, (spec.STATE_DIM,))},
         output_features={ACTION: PolicyFeature(FeatureType.ACTION, (spec.ACTION_DIM,))},
     )
-    return BlindgraspTransformerPolicy(config).eval()
+    return BlindgraspTransformerPolicy(config).to(config.device).eval()
 
 
 def _model_gemms(policy: BlindgraspTransformerPolicy):

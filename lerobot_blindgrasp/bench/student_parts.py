@@ -18,12 +18,25 @@ PARTS = ("forward", "backward", "clip", "step", "zero_grad")
 ADAMW = {"lerobot_adamw": {}, "foreach_adamw": {"foreach": True}, "fused_adamw": {"fused": True}}
 
 
-def _batch(batch_size: int, t_ctx: int) -> dict:
+def _batch(batch_size: int, t_ctx: int, device: str = "cpu") -> dict:
     return {
-        spec.STATE_KEY: torch.randn(batch_size, t_ctx, spec.STATE_DIM),
-        f"{spec.STATE_KEY}_is_pad": torch.zeros(batch_size, t_ctx, dtype=torch.bool),
-        spec.ACTION_KEY: torch.rand(batch_size, spec.ACTION_DIM) * 2 - 1,
+        spec.STATE_KEY: torch.randn(batch_size, t_ctx, spec.STATE_DIM, device=device),
+        f"{spec.STATE_KEY}_is_pad": torch.zeros(batch_size, t_ctx, dtype=torch.bool, device=device),
+        spec.ACTION_KEY: torch.rand(batch_size, spec.ACTION_DIM, device=device) * 2 - 1,
     }
+
+
+def clock(device: str):
+    """A wall clock for work on `device`: on a GPU it first waits for the queued kernels, so each mark counts
+    the work launched before it, not just its launch."""
+    if str(device).startswith("cuda"):
+
+        def synced() -> float:
+            torch.cuda.synchronize()
+            return time.perf_counter()
+
+        return synced
+    return time.perf_counter
 
 
 def _timed_steps(policy, opt, batch: dict, steps: int, clip: float) -> dict[str, float]:
@@ -31,27 +44,28 @@ def _timed_steps(policy, opt, batch: dict, steps: int, clip: float) -> dict[str,
     the least-disturbed step is the closest to the update's own cost."""
     best: dict[str, float] = {}
     params = list(policy.parameters())
+    now = clock(policy.config.device)
     for _ in range(steps):
-        marks = [time.perf_counter()]
+        marks = [now()]
         loss, _ = policy.forward(batch)
-        marks.append(time.perf_counter())
+        marks.append(now())
         loss.backward()
-        marks.append(time.perf_counter())
+        marks.append(now())
         torch.nn.utils.clip_grad_norm_(params, clip)
-        marks.append(time.perf_counter())
+        marks.append(now())
         opt.step()
-        marks.append(time.perf_counter())
+        marks.append(now())
         opt.zero_grad()
-        marks.append(time.perf_counter())
+        marks.append(now())
         spent = {part: b - a for part, a, b in zip(PARTS, marks, marks[1:], strict=False)}
         if not best or sum(spent.values()) < sum(best.values()):
             best = spent
     return best
 
 
-def _trainable(size: str, seed: int, **adamw):
+def _trainable(size: str, seed: int, device: str = "cpu", **adamw):
     torch.manual_seed(seed)
-    policy = make_policy(size).train()
+    policy = make_policy(size, device).train()
     preset = policy.config.get_optimizer_preset()
     opt = torch.optim.AdamW(
         policy.parameters(),
@@ -83,13 +97,13 @@ def compiled_vs_eager(size: str, batch_size: int, steps: int, seed: int) -> dict
     return {**ms, "compiled_over_eager": best["compiled"] / best["eager"], "compile_s": compile_s}
 
 
-def update_parts(size: str, batch_size: int, steps: int, seed: int, profile: bool) -> dict:
+def update_parts(size: str, batch_size: int, steps: int, seed: int, profile: bool, device: str = "cpu") -> dict:
     """ms per sample of each part of forward + backward + clip + AdamW step, per AdamW implementation."""
     out = {}
     for name, kwargs in ADAMW.items():
-        policy, opt, _ = _trainable(size, seed, **kwargs)
+        policy, opt, _ = _trainable(size, seed, device, **kwargs)
         preset = policy.config.get_optimizer_preset()
-        batch = _batch(batch_size, policy.config.n_obs_steps)
+        batch = _batch(batch_size, policy.config.n_obs_steps, policy.config.device)
         _timed_steps(policy, opt, batch, 2, preset.grad_clip_norm)  # warm-up
         spent = _timed_steps(policy, opt, batch, steps, preset.grad_clip_norm)
         parts = {p: spent[p] / batch_size * 1e3 for p in PARTS}
@@ -135,29 +149,30 @@ def operator_profile(policy, batch: dict, steps: int = 3) -> dict:
     }
 
 
-def gemm_gflops(size: str, batch_size: int, repeats: int = 20) -> float:
+def gemm_gflops(size: str, batch_size: int, repeats: int = 20, device: str = "cpu") -> float:
     """GFLOP/s of this machine's matrix products at the model's training shapes (batch x 30 tokens rows)."""
     policy = make_policy(size)
     d, t = policy.config.embed_dim, policy.config.n_obs_steps
     rows = batch_size * t
     shapes = [(rows, d, 3 * d), (rows, d, d), (rows, d, 4 * d), (rows, 4 * d, d)]
-    mats = [(torch.randn(m, k), torch.randn(n, k)) for m, k, n in shapes]
+    mats = [(torch.randn(m, k, device=device), torch.randn(n, k, device=device)) for m, k, n in shapes]
     flops = sum(2 * m * k * n for m, k, n in shapes)
     for a, w in mats:
         F.linear(a, w)
-    best = float("inf")
+    best, now = float("inf"), clock(device)
     for _ in range(repeats):  # the fastest round, as for the update
-        t0 = time.perf_counter()
+        t0 = now()
         for a, w in mats:
             F.linear(a, w)
-        best = min(best, time.perf_counter() - t0)
+        best = min(best, now() - t0)
     return flops / best / 1e9
 
 
 def format_table(r: dict) -> str:
     load, upd = r["load_ms_per_sample"], r["update_ms_per_sample"]
     lines = [
-        f"student {r['size']}, batch {r['batch_size']}, one torch thread (per sample; ratios within this run)"
+        f"student {r['size']}, batch {r['batch_size']}, update on {r['device']}, loading on one CPU thread "
+        "(per sample; ratios within this run)"
     ]
     for path in ("lerobot", "lerobot_row", "lerobot_window", "streaming", "cache"):
         lines.append(f"  load {path:15s} {load[path]:8.3f} ms  = {r['load_over_update'][path]:6.2f} x update")
@@ -187,13 +202,20 @@ def format_table(r: dict) -> str:
         + f"{r['num_workers']} loader process(es): "
         + ", ".join(f"{k} {v:.0f}" for k, v in r["bound_samples_per_s"].items())
     )
+    m = r["cache_memory"]
+    lines.append(
+        f"  cache: {m['bytes_per_frame']:.0f} bytes/frame, {m['cache_bytes'] / 2**20:.1f} MiB for {m['frames']} "
+        f"frames per process"
+    )
     for row in r.get("loader", []):
         lines.append(
-            f"  DataLoader {row['path']:8s} num_workers={row['num_workers']}: {row['samples_per_s']:.0f} samples/s"
+            f"  DataLoader {row['path']:8s} num_workers={row['num_workers']} prefetch={row['prefetch_factor']}: "
+            f"{row['samples_per_s']:.0f} samples/s"
         )
     for lt in r.get("lerobot_train", []):
+        steady = f", updt_s {lt['updt_s']:.4f} data_s {lt['data_s']:.4f}" if lt["updt_s"] is not None else ""
         lines.append(
             f"  lerobot-train {lt['path']:8s}: {lt['steps']} steps in {lt['wall_s']:.1f} s = "
-            f"{lt['samples_per_s']:.0f} samples/s"
+            f"{lt['samples_per_s']:.0f} samples/s{steady}"
         )
     return "\n".join(lines)

@@ -31,6 +31,7 @@ import torch
 from lerobot.datasets.dataset_reader import DatasetReader
 
 ENV_SWITCH = "BLINDGRASP_LOW_DIM_CACHE"
+SERVED_LOG = "windows served from an in-memory low-dim cache"  # logged (INFO) when a reader is upgraded
 logger = logging.getLogger(__name__)
 _CACHE_ATTR = "_low_dim_cache"
 
@@ -156,7 +157,7 @@ def _upgrade_after(load):
         result = load(self, *args, **kwargs)
         if type(self) is DatasetReader and self.hf_dataset is not None and enabled() and servable(self):
             self.__class__ = LowDimWindowReader
-            logger.info("blindgrasp: %s windows served from an in-memory low-dim cache", self.root)
+            logger.info("blindgrasp: %s %s", self.root, SERVED_LOG)
         elif type(self) is LowDimWindowReader:
             self.__dict__.pop(_CACHE_ATTR, None)  # reloaded: rebuild from the new table
         return result
