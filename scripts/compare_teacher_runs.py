@@ -17,8 +17,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from lerobot_blindgrasp import durable  # noqa: E402
-from lerobot_blindgrasp.analysis.plots import teacher_curves  # noqa: E402
 from lerobot_blindgrasp.cli import parse_config  # noqa: E402
+from lerobot_blindgrasp.results.plots import teacher_curves  # noqa: E402
 
 TAGS = (
     "Metrics/mean_contacts",

@@ -123,9 +123,9 @@ def preset_rows() -> list[str]:
                     f"{_cell(p.student_recipe)} |")  # fmt: skip
     rows += ["", "Teacher presets (`blindgrasp-train-teacher --preset=NAME`, "
              "`lerobot_blindgrasp/presets/teacher.py`):", "",
-             "| preset | envs | iterations | continues |", "|---|---:|---:|---|"]  # fmt: skip
-    for name, s in teacher.PRESETS.items():
-        cont = f"`{s.continues[0]}` to {s.continues[1]}" if s.continues else "from scratch"
+             "| preset | envs | iterations | trained after |", "|---|---:|---:|---|"]  # fmt: skip
+    for name, s in teacher.TEACHER_PRESETS.items():
+        cont = ", then ".join(f"`{n}` to {i}" for n, i in s.stages) or "from scratch"
         rows.append(f"| `{name}` | {s.num_envs} | {s.max_iterations} | {cont} |")
     rows += ["", "Table V rows (`scripts/paper_recipe.sh`, `lerobot_blindgrasp/presets/ablations.py`):", "",
              "| row | paper's column | teacher |", "|---|---|---|"]  # fmt: skip

@@ -11,7 +11,8 @@ import pytest
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.presets import teacher as presets
 from lerobot_blindgrasp.sim import randomization
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.teacher import blind_approach
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy, models_dir
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
@@ -96,7 +97,7 @@ def test_the_blind_group_flows_from_the_env_through_ppo_to_the_loaded_teacher(tm
     quick_blind = replace(
         presets.QUICK, name="quick_blind", runner=runner, actor_input=actor_input, joint_calibration_rad=0.05
     )
-    monkeypatch.setitem(presets.PRESETS, "quick_blind", quick_blind)
+    monkeypatch.setitem(presets.TEACHER_PRESETS, "quick_blind", quick_blind)
     assert train.build_env_config(quick_blind, 18, 0).dr.joint_calibration_rad == 0.05
     train.train(
         train.TrainTeacherConfig(
@@ -106,7 +107,7 @@ def test_the_blind_group_flows_from_the_env_through_ppo_to_the_loaded_teacher(tm
     teacher = TeacherPolicy(tmp_path)
     assert teacher.actor_input == actor_input and teacher.config["joint_calibration_rad"] == 0.05
     monkeypatch.setitem(
-        presets.PRESETS, "quick_blind", replace(quick_blind, actor_input=blind_approach.ActorInput())
+        presets.TEACHER_PRESETS, "quick_blind", replace(quick_blind, actor_input=blind_approach.ActorInput())
     )
     with pytest.raises(SystemExit, match="actor_input"):
         train.train(
@@ -127,7 +128,7 @@ def test_the_blind_group_flows_from_the_env_through_ppo_to_the_loaded_teacher(tm
 
 def test_blind_preset_continues_the_shipped_teachers_run_with_an_asymmetric_actor_critic():
     p = presets.get_preset("cpu_bc_blind_approach")
-    assert p.continues == (presets.CPU_BC_CAPSULE.name, presets.CPU_BC_CAPSULE.max_iterations)
+    assert p.stages[-1] == (presets.CPU_BC_CAPSULE.name, presets.CPU_BC_CAPSULE.max_iterations)
     assert p.runner["obs_groups"] == {"actor": [blind_approach.GROUP], "critic": ["privileged"]}
     assert p.object_weights == presets.CPU_BC_CAPSULE.object_weights
     assert p.max_iterations - presets.CPU_BC_CAPSULE.max_iterations == 250
@@ -136,8 +137,8 @@ def test_blind_preset_continues_the_shipped_teachers_run_with_an_asymmetric_acto
 
 def test_blind_presets_chain_reveal6_then_calibration_blind():
     r6, cal = presets.get_preset("cpu_bc_blind_reveal6"), presets.get_preset("cpu_bc_calib_blind")
-    assert r6.continues == (presets.CPU_BC_BLIND_APPROACH.name, presets.CPU_BC_BLIND_APPROACH.max_iterations)
-    assert cal.continues == (r6.name, r6.max_iterations) and (r6.max_iterations, cal.max_iterations) == (
+    assert r6.stages[-1] == (presets.CPU_BC_BLIND_APPROACH.name, presets.CPU_BC_BLIND_APPROACH.max_iterations)
+    assert cal.stages[-1] == (r6.name, r6.max_iterations) and (r6.max_iterations, cal.max_iterations) == (
         2550,
         2950,
     )

@@ -16,7 +16,7 @@ from lerobot_blindgrasp.teacher.train import TrainTeacherConfig
 ROOT = Path(__file__).resolve().parents[1]
 # Commands run as `python -m MODULE` (no console script): what README.md and the docs show.
 MODULE_COMMANDS = (
-    "lerobot_blindgrasp.analysis.compare",
+    "lerobot_blindgrasp.results.compare",
     "lerobot_blindgrasp.analysis.table_v",
     "lerobot_blindgrasp.analysis.progress",
     "lerobot_blindgrasp.analysis.diversity",

@@ -1,10 +1,10 @@
-"""`python -m lerobot_blindgrasp.analysis.compare`: two evaluations paired start state by start state."""
+"""`python -m lerobot_blindgrasp.results.compare`: two evaluations paired start state by start state."""
 
 import json
 
 import pytest
 
-from lerobot_blindgrasp.analysis import compare
+from lerobot_blindgrasp.results import compare
 from lerobot_blindgrasp.sim import objects
 
 

@@ -15,11 +15,12 @@ import pytest
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.cli import GracefulStop, parse_config
-from lerobot_blindgrasp.demos import collect, curation, loop, provenance, report
+from lerobot_blindgrasp.demos import collect, collection, curation, provenance, yield_report
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos.config import CollectConfig
-from lerobot_blindgrasp.hub import cards, push
+from lerobot_blindgrasp.hub import push
 from lerobot_blindgrasp.sim import objects
 
 N_ENVS = 18  # one env per object
@@ -59,7 +60,7 @@ def config(teacher: Path, out: Path, **kw) -> CollectConfig:
 def tiny(teacher, tmp_path_factory):
     """One whole episode per object from the deterministic teacher (so a reference rollout can replay it)."""
     out = tmp_path_factory.mktemp("tiny") / "demos"
-    stats = loop.collect(config(teacher, out, stochastic=False))
+    stats = collection.collect(config(teacher, out, stochastic=False))
     return out, stats
 
 
@@ -98,7 +99,7 @@ def test_tiny_collection_loads_back(tiny):
     assert (action >= spec.JOINT_LOWER - 1e-6).all() and (action <= spec.JOINT_UPPER + 1e-6).all()
     assert np.abs(action - q).max() > 0.05  # the teacher moved the fingers
 
-    rep = json.loads((out / report.REPORT_NAME).read_text())
+    rep = json.loads((out / yield_report.REPORT_NAME).read_text())
     assert set(rep["objects"]) == set(objects.PAPER_OBJECTS)
     assert all(row["kept"] == 1 for row in rep["objects"].values())
     assert rep["total"]["kept"] == n_obj and rep["demos_per_minute"] > 0
@@ -125,7 +126,7 @@ def test_demos_under_a_calibration_offset_record_it_and_act_in_the_measured_fram
     from lerobot_blindgrasp.sim import randomization
 
     out = tmp_path / "demos"
-    loop.collect(config(teacher, out, stochastic=False, joint_calibration_rad=0.05))
+    collection.collect(config(teacher, out, stochastic=False, joint_calibration_rad=0.05))
     assert json.loads((out / "collection.json").read_text())["randomization"]["joint_calibration_rad"] == 0.05
     assert "joint_calibration_rad" in (out / "README.md").read_text()
     _assert_replays(teacher, out, replace(randomization.EVAL_DR, joint_calibration_rad=0.05))
@@ -135,7 +136,8 @@ def test_demos_under_a_calibration_offset_record_it_and_act_in_the_measured_fram
 
 def _assert_replays(teacher: Path, out: Path, dr) -> None:
     from lerobot_blindgrasp.sim import rewards
-    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+    from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
+    from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 
     policy = TeacherPolicy(teacher)
@@ -213,13 +215,13 @@ def test_exception_mid_collection_leaves_finished_episodes_readable(teacher, tmp
             raise RuntimeError("injected failure")
 
     with pytest.raises(RuntimeError, match="injected failure"):
-        loop.collect(config(teacher, out, episodes_per_object=5), on_episode=explode)
+        collection.collect(config(teacher, out, episodes_per_object=5), on_episode=explode)
     ds = LeRobotDataset("test/demos", root=out, video_backend="pyav")
     assert ds.num_episodes == 3 and len(ds) == ds.meta.total_frames
     ds[len(ds) - 1]  # the last frame of the last episode reads back
     run = provenance.load(out)["runs"][-1]
     assert run["stop_reason"].startswith("error: RuntimeError") and run["kept"] == 3
-    assert json.loads((out / report.REPORT_NAME).read_text())["total"]["kept"] == 3
+    assert json.loads((out / yield_report.REPORT_NAME).read_text())["total"]["kept"] == 3
 
 
 def test_second_ctrl_c_aborts_at_once_but_never_inside_a_save(teacher, tmp_path):
@@ -232,7 +234,7 @@ def test_second_ctrl_c_aborts_at_once_but_never_inside_a_save(teacher, tmp_path)
 
     before = signal.getsignal(signal.SIGINT)  # default_int_handler; SIG_IGN under a shell's background `&`
     with pytest.raises(KeyboardInterrupt):
-        loop.collect(config(teacher, out, episodes_per_object=5), on_episode=double_ctrl_c)
+        collection.collect(config(teacher, out, episodes_per_object=5), on_episode=double_ctrl_c)
     assert signal.getsignal(signal.SIGINT) is before  # handlers restored
     ds = LeRobotDataset("test/demos", root=out, video_backend="pyav")
     assert ds.num_episodes == 2 and provenance.load(out)["runs"][-1]["stop_reason"] == "interrupted"
@@ -292,7 +294,7 @@ def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     old_seeds = set(demo_dataset.episode_table(out).env_seed)
 
     # --resume appends until every object has 2 episodes, with env seeds no earlier run used.
-    stats = loop.collect(
+    stats = collection.collect(
         config(teacher, out, repo_id="test/sig", episodes_per_object=2, seed=spec.DEMO_SEED + 11, resume=True)
     )
     assert stats.stop_reason == "done" and stats.kept >= 1
@@ -374,4 +376,6 @@ def test_an_empty_curated_collection_is_a_one_line_error(teacher, tmp_path, caps
     assert exc.value.code == collect.EXIT_EMPTY
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
     assert len(err) == 1 and "is empty" in err[0] and "--curation.enabled=false" in err[0]
-    assert json.loads((out / report.REPORT_NAME).read_text())["total"]["kept"] == 0  # the rollouts were counted
+    assert (
+        json.loads((out / yield_report.REPORT_NAME).read_text())["total"]["kept"] == 0
+    )  # the rollouts were counted

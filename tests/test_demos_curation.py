@@ -129,24 +129,26 @@ def test_hold_run_lengths():
 def test_a_real_scripted_lift_passes_and_an_idle_hand_does_not():
     """The thresholds are reachable in our physics: the scripted pinch-and-lift of the medium cylinder passes once
     lifted (kept whole, hold included; trimmed before the hold when asked), a hand that never moves fails both criteria."""
-    from lerobot_blindgrasp.demos.rollout import run_episodes
+    from lerobot_blindgrasp import spec
+    from lerobot_blindgrasp.demos.collection import DEMO_TRACES
+    from lerobot_blindgrasp.rollout.envs import make_env
+    from lerobot_blindgrasp.rollout.loop import stream
     from lerobot_blindgrasp.sim import randomization
-    from lerobot_blindgrasp.sim.demo import grasp_geometry
-    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
     from lerobot_blindgrasp.sim.scripted import PinchLiftScript
+    from lerobot_blindgrasp.sim.viewer import grasp_geometry
 
     name = "cylinder_a_medium"
-    env = BatchedGraspEnv(
-        GraspEnvConfig(num_envs=1, objects=(name,), episode_s=5.0, dr=randomization.NO_DR, nthread=1)
+    env = make_env(
+        "demos", (name,), num_envs=1, seed=spec.DEMO_SEED, episode_s=5.0, dr=randomization.NO_DR, nthread=1
     )
     script = PinchLiftScript(*grasp_geometry(name), lift_m=0.03)
-    lifted = next(run_episodes(env, lambda obs: script(env.joint_positions()), lambda: False))
+    lifted = next(stream(env, lambda obs, env: script(env.joint_positions()), lambda: False, record=DEMO_TRACES))
     res = evaluate(lifted.task_reward, lifted.uniaxial_force)
     assert lifted.length == T and lifted.success
     assert res.passed and 40 <= res.criteria_step < 90 and res.keep_steps == T
     assert evaluate(lifted.task_reward, lifted.uniaxial_force, TRIM).keep_steps == res.criteria_step + 1
     assert res.force_sum_n > PAPER_CURATION.force_sum_threshold_n
 
-    idle = next(run_episodes(env, lambda obs: np.zeros((1, 9)), lambda: False))
+    idle = next(stream(env, lambda obs, env: np.zeros((1, 9)), lambda: False, record=DEMO_TRACES))
     res = evaluate(idle.task_reward, idle.uniaxial_force)
     assert not res.passed and res.force_sum_n == 0.0 and res.longest_hold_steps == 0

@@ -15,10 +15,11 @@ from lerobot.datasets.dataset_tools import delete_episodes, merge_datasets, remo
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.demos.rollout import Episode
-from lerobot_blindgrasp.hub import cards
+from lerobot_blindgrasp.hub import push
+from lerobot_blindgrasp.rollout.loop import Episode
 from lerobot_blindgrasp.sim import objects
 
 OBJECTS = ("sphere_small", "capsule_large", "cuboid_a_medium", "cylinder_b_small")
@@ -32,16 +33,20 @@ def synthetic_episode(i: int, hold_start: int) -> Episode:
     r[hold_start:] = 0.8
     return Episode(
         object_name=OBJECTS[i % len(OBJECTS)],
-        state=rng.normal(size=(t, spec.STATE_DIM)).astype(np.float32),
-        action=rng.normal(size=(t, spec.ACTION_DIM)).astype(np.float32),
-        task_reward=r,
-        uniaxial_force=np.full((t, 3), 3.0),  # 9 N per step: the sum passes 200 N at step 22
         success=i % 2 == 0,
         left_workspace=False,
         physics_failed=False,
+        length=t,
+        max_lift=0.0,
         env_seed=100 + i,
         env_episode=i,
         randomization=np.array([0.8, 0.9, 1.1 + 0.1 * i, 2.0, 1.0, 0.01, -0.02]),
+        traces={
+            "state": rng.normal(size=(t, spec.STATE_DIM)).astype(np.float32),
+            "action": rng.normal(size=(t, spec.ACTION_DIM)).astype(np.float32),
+            "task_reward": r,
+            "uniaxial_force": np.full((t, 3), 3.0),  # 9 N per step: the sum passes 200 N at step 22
+        },
     )
 
 
@@ -172,12 +177,12 @@ def test_sim_demos_merge_with_glove_schema_after_dropping_metadata(written, tmp_
     assert set(merged.meta.features) == set(glove.meta.features)
     # ...and the glove card renders from a lerobot-record style dataset.
     text = str(
-        cards.build_card(cards.card_kwargs(tmp_path / "glove", "test/glove", operators=["alice"]), "test/glove")
+        cards.build_card(push.card_kwargs(tmp_path / "glove", "test/glove", operators=["alice"]), "test/glove")
     )
     meta = cards.validate(text)
     assert "teleoperation" in meta["tags"] and "LeRobot" in meta["tags"]
     assert "grasp and lift the large sphere | 2 | 24" in text and "alice" in text
-    assert cards.detect_kind(tmp_path / "glove") == "glove"
+    assert push.detect_kind(tmp_path / "glove") == "glove"
 
 
 def test_resume_refuses_foreign_schema(tmp_path):

@@ -107,11 +107,11 @@ def test_the_sim_modules_left_out_of_the_fingerprint_are_not_run_by_any_episode(
 
     code = (
         "import json, sys\n"
-        "import lerobot_blindgrasp.sim.env, lerobot_blindgrasp.sim.gym_env, lerobot_blindgrasp.teacher.evaluate\n"
+        "import lerobot_blindgrasp.sim.batched_env, lerobot_blindgrasp.sim.gym_env, lerobot_blindgrasp.teacher.evaluate\n"
         "print(json.dumps(sorted(m for m in sys.modules if m.startswith('lerobot_blindgrasp.sim.'))))"
     )
     loaded = json.loads(_fresh(code).stdout.strip().splitlines()[-1])
-    assert "lerobot_blindgrasp.sim.env" in loaded  # the check sees sim modules at all
+    assert "lerobot_blindgrasp.sim.batched_env" in loaded  # the check sees sim modules at all
     left_out = {f"lerobot_blindgrasp.sim.{name.removesuffix('.py')}" for name in NOT_IN_EPISODES}
     assert not left_out & set(loaded), left_out & set(loaded)
 

@@ -59,7 +59,7 @@ def test_smoke_pipeline_runs_every_stage_and_writes_the_report(tmp_path):
 
 
 def test_step_counts_in_lerobot_logs_parse():
-    from lerobot_blindgrasp.pipeline.report import parse_step
+    from lerobot_blindgrasp.pipeline.job_report import parse_step
 
     assert parse_step("300") == 300
     assert parse_step("1K") == 1000
@@ -107,7 +107,7 @@ def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_state
     assert not pipeline._reuse_teacher_eval(teacher, tmp_path / "cpu", preset, spec.EVAL_SEED, objs, note=note)
     why = note["eval_rerun_because"]
     assert not (tmp_path / "cpu").exists() and repr(rec["platform"]["cpu"]) in why and "Newcomer CPU 9000" in why
-    from lerobot_blindgrasp.pipeline.report import _teacher_lines
+    from lerobot_blindgrasp.pipeline.job_report import _teacher_lines
 
     lines = _teacher_lines(
         {

@@ -1,6 +1,6 @@
 """The shared bar chart: the legend sits between the title and the axes, never over the bars."""
 
-from lerobot_blindgrasp.analysis import plots
+from lerobot_blindgrasp.results import plots
 
 
 def test_bar_chart_legend_is_above_the_axes_and_below_the_title(tmp_path, monkeypatch):

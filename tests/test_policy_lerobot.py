@@ -20,7 +20,7 @@ from lerobot.processor import PolicyProcessorPipeline
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch.utils.data import default_collate
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import project, spec
 from lerobot_blindgrasp.policies.blindgrasp_transformer import (
     BlindgraspTransformerConfig,
     BlindgraspTransformerPolicy,
@@ -225,7 +225,7 @@ def test_lerobot_train_pushes_the_policy_to_the_hub_with_an_install_card(dataset
                  "policy_preprocessor.json", "policy_postprocessor.json"):  # fmt: skip
         assert (repo / name).is_file(), name
     card = (repo / "README.md").read_text()
-    assert "pip install lerobot_policy_blindgrasp" in card and "--policy.path=you/blindgrasp_student" in card
+    assert project.install_line() in card and "--policy.path=you/blindgrasp_student" in card
     assert "lerobot_policy_blindgrasp" in card.split("---")[1]  # a tag in the card's metadata
     # What was uploaded is a complete policy: it loads as LeRobot loads a --policy.path download.
     policy = BlindgraspTransformerPolicy.from_pretrained(repo)

@@ -16,7 +16,7 @@ from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.pipeline import run as pipeline
 from lerobot_blindgrasp.policies.blindgrasp_transformer import configuration_blindgrasp_transformer as student_cfg
-from lerobot_blindgrasp.presets import ablations
+from lerobot_blindgrasp.presets import ablations, teacher_configs
 from lerobot_blindgrasp.presets import teacher as teacher_presets
 from lerobot_blindgrasp.sim import rewards
 from lerobot_blindgrasp.teacher.train import TrainTeacherConfig
@@ -51,7 +51,7 @@ def test_every_entry_is_complete():
                     "shipped_folder",
                 )
                 assert value is not None or optional, (name, f.name)
-        assert p.teacher.settings is teacher_presets.PRESETS[p.teacher.settings.name]
+        assert p.teacher.settings is teacher_presets.TEACHER_PRESETS[p.teacher.settings.name]
         assert p.student.size in presets.SIZES
         assert p.demos.max_rollouts_per_object >= p.demos.episodes_per_object
         assert p.evaluation.episodes_per_object >= (20 if name != "smoke" else 1)  # the evaluation protocol
@@ -65,9 +65,9 @@ def test_every_entry_is_complete():
 
 def test_pipeline_teacher_and_student_read_the_same_objects():
     assert pipeline.PRESETS is presets.PRESETS
-    assert teacher_presets.Variant is presets.Variant
+    assert teacher_configs.Variant is presets.Variant
     for name in ("paper", "cpu", "quick"):
-        assert teacher_presets.get_preset(name) is presets.teacher.PRESETS[name]
+        assert teacher_presets.get_preset(name) is presets.teacher.TEACHER_PRESETS[name]
     assert student_cfg.SIZES is presets.SIZES
     c = student_cfg.BlindgraspTransformerConfig(size="cpu", device="cpu")
     cpu = presets.SIZES["cpu"]
@@ -130,8 +130,8 @@ def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_pa
     assert b.student_recipe.startswith("beyond the paper") and "approaches blind" in b.student_recipe
     assert "reading off by +-0.05 rad" in b.student_recipe
     assert q.student_recipe.startswith("the paper's")
-    assert any("teacher_cpu_bc_calib" in d for d in b.deviations) and not any(
-        "1200 steps" in d for d in b.deviations
+    assert any("teacher_cpu_bc_calib" in d for d in b.deviations.values()) and not any(
+        "1200 steps" in d for d in b.deviations.values()
     )
     # only the teacher, the demos' calibration offset (the teacher's training one) and the student stage differ
     assert b.demos == dataclasses.replace(q.demos, joint_calibration_rad=0.05) and b.evaluation == q.evaluation
@@ -165,8 +165,8 @@ def test_the_shipped_students_preset_aims_demos_and_dagger_at_the_small_capsule(
     words = t.student_recipe
     assert words.startswith("beyond the paper") and "240 more curated episodes of capsule_small" in words
     assert "80 student episodes of capsule_small" in words and "approaches blind" in words
-    assert sum(d.startswith("beyond the paper") for d in t.deviations) == 4
-    assert not any(d.startswith("700 steps") for d in t.deviations)
+    assert sum(d.startswith("beyond the paper") for d in t.deviations.values()) == 4
+    assert not any(d.startswith("700 steps") for d in t.deviations.values())
     cmd = recipe.student_train(t, tmp_path, "x", tmp_path, 1)[0]
     assert {"--steps=1200", "--policy.scheduler_constant_steps=600", "--policy.optimizer_lr=0.0005"} <= set(cmd)
     # The extra collection: one object, the collector's default budget, start states of its own.
@@ -212,7 +212,7 @@ def test_the_shipped_teachers_record_matches_its_preset():
     """`blindgrasp-train-teacher` resumes only when these keys match, and the registry must still describe the
     shipped teacher: its recorded run config (models/teacher_cpu_bc/teacher_config.json) is its preset's."""
     old = json.loads((ROOT / "models" / "teacher_cpu_bc" / "teacher_config.json").read_text())
-    preset = teacher_presets.Variant(**old["variant"]).apply(teacher_presets.get_preset(old["preset"]))
+    preset = teacher_configs.Variant(**old["variant"]).apply(teacher_presets.get_preset(old["preset"]))
     assert old["preset"] == presets.SHIPPED_TEACHER_PRESET.name
     assert old["runner"] == preset.runner_cfg()
     assert old["reward"] == preset.reward.as_record()
@@ -235,7 +235,7 @@ def test_table_v_rows_and_the_no_r_i_teacher():
     assert not rows["rl_w_o_t"].student
     assert all(a.doc for a in rows.values()) and "reach" in rows["wo_r_i"].doc.lower()
     no_ri = presets.TEACHERS[rows["wo_r_i"].teacher].apply(teacher_presets.CPU)
-    for term in teacher_presets.CONTACT_REWARD_TERMS:
+    for term in teacher_configs.CONTACT_REWARD_TERMS:
         assert no_ri.reward.weight(term) == 0.0
     assert no_ri.reward.weight("reach") == teacher_presets.CPU.reward.weight("reach")
     assert no_ri.reward.weight("task") == 1.0
@@ -299,7 +299,7 @@ def test_table_v_commands_for_the_recipe(tmp_path):
 
 
 def test_report_does_not_import_the_pipeline():
-    code = "import sys, lerobot_blindgrasp.pipeline.report; sys.exit('lerobot_blindgrasp.pipeline.run' in sys.modules)"
+    code = "import sys, lerobot_blindgrasp.pipeline.job_report; sys.exit('lerobot_blindgrasp.pipeline.run' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
 

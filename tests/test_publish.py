@@ -1,30 +1,39 @@
 """`blindgrasp-publish` up to the network call: the placeholder project URL refuses the push, and with a real one
-every shipped model and the demo dataset are staged with their cards (install line, the code's location), then
-the uploads go where `project.HUB_REPOS` says, as the dataset push is tested (tests/test_demos_collect.py)."""
+every shipped model and the demo dataset are staged with their cards (one install section, the install line from
+[project.urls] Source, links that leave the model's folder made absolute), then the uploads go where
+`project.HUB_REPOS` says, as the dataset push is tested (tests/test_demos_collect.py). Without `--demos` the command
+collects the demo set itself."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
 
-from lerobot_blindgrasp import shipped, spec
-from lerobot_blindgrasp.demos import curation, loop
-from lerobot_blindgrasp.demos.config import CollectConfig
-from lerobot_blindgrasp.hub import cards, project, publish
-from lerobot_blindgrasp.teacher.policy import default_teacher
+from lerobot_blindgrasp import presets, project, shipped
+from lerobot_blindgrasp.cards import dataset_cards as cards
+from lerobot_blindgrasp.cards import links, model_cards
+from lerobot_blindgrasp.demos import provenance
+from lerobot_blindgrasp.hub import publish
 
 REAL = "https://code.example.org/lab/lerobot_blindgrasp"  # stands in for a public home in the tests only
+MODELS = [name for name, (kind, _) in project.HUB_REPOS.items() if kind == "model"]
 
 
 @pytest.fixture(scope="module")
 def demos(tmp_path_factory) -> Path:
-    """Two uncurated episodes of two objects from the shipped teacher: a real demo dataset, made in seconds."""
-    out = tmp_path_factory.mktemp("publish") / "demos"
-    loop.collect(CollectConfig(teacher=default_teacher(), output_dir=out, repo_id="test/demos",
-                               objects="sphere_medium,capsule_medium",
-                               episodes_per_object=1, num_envs=2, seed=spec.DEMO_SEED + 11,
-                               curation=curation.NO_CURATION, progress=False))  # fmt: skip
+    """The demo set one dry run of `blindgrasp-publish` collects when given none: one curated episode of each of two
+    objects, with the shipped student's teacher and demo settings (seconds)."""
+    stage = tmp_path_factory.mktemp("publish") / "stage"
+    publish.main(["--namespace=you", "--dry_run=true", "--demo_episodes=1",
+                  "--demo_objects=sphere_medium,capsule_medium", f"--staging_dir={stage}"])  # fmt: skip
+    out = stage / "demos"
+    prov = provenance.load(out)
+    assert prov["objects"] == ["sphere_medium", "capsule_medium"] and prov["curation"]["enabled"]
+    recipe = presets.PRESETS[publish.DEMO_RECIPE]
+    assert prov["randomization"]["joint_calibration_rad"] == recipe.demos.joint_calibration_rad > 0
+    assert Path(prov["teacher"]["checkpoint"]).parent == shipped.path(recipe.teacher.shipped_folder)
     return out
 
 
@@ -41,8 +50,11 @@ def test_the_placeholder_url_refuses_the_push(demos, tmp_path, capsys):
     publish.main(["--namespace=you", f"--demos={demos}", f"--staging_dir={tmp_path / 'stage'}", "--dry_run=true"])
     captured = capsys.readouterr()
     assert "an upload refuses" in captured.err and "dry run: nothing uploaded" in captured.out
-    staged = (tmp_path / "stage" / "student_cpu" / "README.md").read_text()
-    assert project.PLACEHOLDER_HOST not in staged and "not set yet" in staged  # no card names a fake location
+    for name in MODELS:
+        staged = (tmp_path / "stage" / name / "README.md").read_text()
+        assert project.PLACEHOLDER_HOST not in staged and "not set yet" in staged  # no card names a fake location
+        assert "python -m build" in staged  # the install line names the one install that works: a built wheel
+        _links_resolve_on_the_hub(staged, tmp_path / "stage" / name, absolute_base=None)
 
 
 def test_publish_stages_every_card_then_stops_at_the_network(demos, tmp_path, monkeypatch, capsys):
@@ -59,9 +71,13 @@ def test_publish_stages_every_card_then_stops_at_the_network(demos, tmp_path, mo
         assert f"https://huggingface.co/{'datasets/' if kind == 'dataset' else ''}{repo_id}" in out
         card = (demos / cards.CARD_NAME if kind == "dataset" else stage / name / "README.md").read_text()
         assert REAL in card and "lerobot_policy_blindgrasp" in card, name
+    for name in MODELS:
+        card = (stage / name / "README.md").read_text()
+        _one_install_section(card, name)
+        assert f'pip install "lerobot_policy_blindgrasp @ git+{REAL}"' in card, name
+        _links_resolve_on_the_hub(card, stage / name, absolute_base=f"{REAL}/blob/main/")
     student = (stage / "student_cpu" / "README.md").read_text()
-    assert "pip install lerobot_policy_blindgrasp" in student
-    assert f"--policy.path={ids['student_cpu'][1]}" in student
+    assert student.count(f"lerobot-eval --policy.path={ids['student_cpu'][1]} ") == 1
     assert "--policy.path=models/student_cpu" not in student
     shipped_files = {p.relative_to(shipped.path("student_cpu")) for p in shipped.path("student_cpu").rglob("*")}
     assert {p.relative_to(stage / "student_cpu") for p in (stage / "student_cpu").rglob("*")} == shipped_files
@@ -94,3 +110,36 @@ def test_publish_uploads_each_staged_folder_to_its_repo(demos, tmp_path, monkeyp
     assert "model.safetensors" in sent[ids["student_cpu"][1]]
     assert "README.md" in sent[ids["teacher_cpu_bc_calib"][1]]
     assert REAL in sent[ids["demos"][1]]  # the dataset card's body names the code's location
+
+
+def test_each_source_card_holds_its_one_generated_install_section():
+    """The section `blindgrasp-publish` rewrites is, in the source card, exactly what `install_section` makes
+    locally: the card and the renderer cannot drift apart, and no second install block sits beside it."""
+    for name in MODELS:
+        text = (shipped.path(name) / "README.md").read_text(encoding="utf-8")
+        start, end = model_cards.section_of(text, name)
+        assert text[start:end] == model_cards.install_section(name, shipped.path(name)), (
+            f"models/{name}/README.md: replace its install section with model_cards.install_section({name!r})"
+        )
+        _one_install_section(text, name)
+
+
+def _one_install_section(card: str, name: str) -> None:
+    assert card.count(model_cards.HEADING) == 1, name
+    assert len(re.findall(r"^pip install ", card, flags=re.M)) == 1, name
+    assert "\nUse it:" not in card and "Run it in simulation" not in card, name  # the old second blocks
+
+
+def _links_resolve_on_the_hub(card: str, folder: Path, absolute_base: str | None) -> None:
+    """Every link of a staged card: relative ones resolve inside the uploaded folder; absolute ones into the code's
+    own tree are built from [project.urls] and name a file the repository has."""
+    root = Path(__file__).resolve().parents[1]
+    for _, _, target in links.LINK.findall(card):
+        if links.is_relative(target):
+            assert (folder / target.split("#")[0]).exists(), (folder.name, target)
+        elif absolute_base and target.startswith(absolute_base):
+            assert (root / target.removeprefix(absolute_base).split("#")[0]).exists(), target
+        else:
+            assert project.PLACEHOLDER_HOST not in target, target
+    if absolute_base:
+        assert absolute_base in card

@@ -90,12 +90,43 @@ def _links(doc: Path) -> list[str]:
             if not re.match(r"^([a-z]+:|#)", m.group(1))]  # fmt: skip
 
 
-def test_every_relative_link_in_the_readme_guides_records_and_cards_resolves():
-    docs = [README, ROOT / "CHANGELOG.md", *(ROOT / "docs").glob("*.md"),
-            *(ROOT / "docs" / "research").glob("*.md"), *(ROOT / "models").glob("*/README.md")]  # fmt: skip
-    broken = [f"{d.relative_to(ROOT)} -> {link}" for d in docs if d.is_file() for link in _links(d)
+def _markdown() -> list[Path]:
+    """Every markdown file a clone carries (outside a git checkout: every one under the root but the venv's)."""
+    if shutil.which("git") is not None and (ROOT / ".git").exists():
+        return [p for p in _tracked() if p.suffix == ".md" and p.is_file()]
+    return [p for p in ROOT.rglob("*.md") if not {".venv", "build", "outputs", "runs"} & set(p.parts)]
+
+
+def test_every_relative_link_and_image_in_the_tracked_markdown_resolves():
+    docs = _markdown()
+    assert README in docs and ROOT / "docs" / "research" / "index.md" in docs
+    broken = [f"{d.relative_to(ROOT)} -> {link}" for d in docs for link in _links(d)
               if not (d.parent / link).exists()]  # fmt: skip
     assert not broken, broken
+
+
+def test_the_research_records_tags_are_made_by_its_one_command(tmp_path):
+    """The copy-paste block of docs/research/index.md, run in a copy of this history without tags, makes every tag
+    of its table on the commit the table names, and the old paths the pages restore from are there."""
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout")
+    git = ["git", "-C", str(tmp_path / "clone.git")]
+    subprocess.run(["git", "clone", "-q", "--bare", "--shared", "--no-tags", str(ROOT), str(tmp_path / "clone.git")],
+                   check=True, capture_output=True)  # fmt: skip
+    text = (ROOT / "docs" / "research" / "index.md").read_text(encoding="utf-8")
+    table = dict(re.findall(r"^\| `([\w.-]+)` \| `([0-9a-f]{7,40})` \|", text, flags=re.M))
+    if any(subprocess.run([*git, "cat-file", "-e", f"{c}^{{commit}}"]).returncode for c in table.values()):
+        pytest.skip("this clone's history lacks the tagged commits (shallow)")
+    block = re.search(r"```bash\n(while read .*?)```", text, flags=re.S).group(1)
+    for _ in range(2):  # twice: a tag that is already there is skipped, not an error
+        subprocess.run(["bash", "-e", "-c", block], cwd=tmp_path / "clone.git", check=True)
+    made = {t: subprocess.run([*git, "rev-parse", f"{t}^{{commit}}"], capture_output=True, text=True).stdout.strip()
+            for t in table}  # fmt: skip
+    assert len(table) == 8 and all(made[t].startswith(c) for t, c in table.items()), (table, made)
+    for tag, path in re.findall(r"--source=([\w.-]+) (docs/results/[\w/.-]+)", text):
+        assert subprocess.run([*git, "cat-file", "-e", f"{tag}:{path}"]).returncode == 0, (tag, path)
+    named = set(re.findall(r"git tag `([\w.-]+)`", " ".join(p.read_text(encoding="utf-8") for p in _markdown())))
+    assert named <= set(table), f"tags named in the docs but missing from the index: {named - set(table)}"
 
 
 def test_the_research_record_is_marked_as_history_and_current_results_are_apart():
@@ -112,7 +143,7 @@ def test_citation_and_changelog_name_the_paper_release_and_code():
     import yaml
 
     from lerobot_blindgrasp import __version__
-    from lerobot_blindgrasp.hub import cards
+    from lerobot_blindgrasp.cards import dataset_cards as cards
 
     cff = yaml.safe_load((ROOT / "CITATION.cff").read_text(encoding="utf-8"))
     assert cff["cff-version"] == "1.2.0" and cff["version"] == __version__ and cff["authors"]
@@ -120,4 +151,15 @@ def test_citation_and_changelog_name_the_paper_release_and_code():
     paper = cff["preferred-citation"]
     assert paper["title"] in " ".join(cards.PAPER.split())
     assert [a["family-names"] for a in paper["authors"]] == ["Lee", "Choi", "Kim", "Nam", "Jeong"]
-    assert f"## [{__version__}]" in (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
+    changelog = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
+    released = re.search(rf"^## \[{re.escape(__version__)}\] - (\d{{4}}-\d{{2}}-\d{{2}})$", changelog, flags=re.M)
+    assert released and str(cff["date-released"]) == released.group(1)  # dated, and the same date in both
+    # Its version links are the code's own address from [project.urls], as the README's is.
+    source = _project_urls()["Source"].rstrip("/")
+    refs = dict(re.findall(r"^\[([^\]]+)\]: (\S+)$", changelog, flags=re.M))
+    assert {"Unreleased", __version__} <= set(refs), refs
+    assert refs[__version__] == f"{source}/releases/tag/v{__version__}"
+    assert refs["Unreleased"] == f"{source}/compare/v{__version__}...HEAD"
+    assert _project_urls()["Changelog"].startswith(source) and _project_urls()["Changelog"].endswith(
+        "/CHANGELOG.md"
+    )

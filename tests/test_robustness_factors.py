@@ -11,7 +11,8 @@ import pytest
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import xm430
 from lerobot_blindgrasp.sim import objects, randomization
-from lerobot_blindgrasp.sim.env import HOLD_PUSH_AFTER_STEPS, BatchedGraspEnv, GraspEnvConfig
+from lerobot_blindgrasp.sim.batched_env import HOLD_PUSH_AFTER_STEPS, BatchedGraspEnv
+from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
 # The paper's sensor noise but no start-state randomization: the scripted pinch needs a centred object.
@@ -179,7 +180,7 @@ def test_hold_push_comes_once_half_way_through_the_hold():
     push_step = first + HOLD_PUSH_AFTER_STEPS - 1  # lifted_steps reaches 10 here; the push acts in the next step
     np.testing.assert_array_equal(lift_p[: push_step + 1], lift_c[: push_step + 1])
     assert np.abs(lift_p[push_step + 1 :] - lift_c[push_step + 1 :]).max() > 1e-4
-    assert pushed.hold_pushed[0]
+    assert pushed.hold_push.given[0]
     f = randomization.draw_hold_push(replace(QUIET, hold_push_n=5.0), np.arange(50, dtype=np.uint64), np.zeros(50))
     np.testing.assert_allclose(np.linalg.norm(f, axis=1), 5.0)
 

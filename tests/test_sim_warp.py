@@ -24,7 +24,7 @@ pytest.importorskip("mujoco_warp")
 
 from lerobot_blindgrasp import spec  # noqa: E402
 from lerobot_blindgrasp.sim import objects, randomization  # noqa: E402
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
 from lerobot_blindgrasp.sim.scripted import run_pinch_lift  # noqa: E402
 
 NO_PUSH = randomization.EVAL_DR
@@ -105,7 +105,7 @@ def test_collect_demos_on_warp_writes_the_same_start_states(tmp_path):
     (same env seeds, same draws; trajectories part ways only through contact, see above)."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from lerobot_blindgrasp.demos import curation, loop, provenance
+    from lerobot_blindgrasp.demos import collection, curation, provenance
     from lerobot_blindgrasp.demos import dataset as demo_dataset
     from lerobot_blindgrasp.demos.config import CollectConfig
 
@@ -126,7 +126,7 @@ def test_collect_demos_on_warp_writes_the_same_start_states(tmp_path):
             backend=backend,
             threads=1,
         )
-        stats = loop.collect(cfg)
+        stats = collection.collect(cfg)
         assert stats.kept == 4 and stats.stop_reason == "done"
         assert provenance.load(out)["runs"][0]["backend"] == backend
         ds = LeRobotDataset("test/warp_demos", root=out, video_backend="pyav")

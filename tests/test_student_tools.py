@@ -15,7 +15,8 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.analysis import student_diagnosis as diag
-from lerobot_blindgrasp.demos import curation, dagger, loop
+from lerobot_blindgrasp.analysis import student_fit
+from lerobot_blindgrasp.demos import collection, curation, dagger
 from lerobot_blindgrasp.demos.config import CollectConfig
 from lerobot_blindgrasp.sim import objects
 
@@ -29,7 +30,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 def demos(tmp_path_factory) -> Path:
     """Two whole uncurated episodes per object from the shipped teacher."""
     out = tmp_path_factory.mktemp("demos") / "demos"
-    loop.collect(
+    collection.collect(
         CollectConfig(
             output_dir=out,
             repo_id="test/demos",
@@ -48,9 +49,9 @@ def test_windows_are_the_windows_lerobot_train_loads(demos):
     ds = LeRobotDataset(
         "test/demos", root=demos, delta_timestamps={spec.STATE_KEY: [i / spec.CONTROL_HZ for i in range(-29, 1)]}
     )
-    episodes = diag.episodes_by_object(demos)
+    episodes = student_fit.episodes_by_object(demos)
     state, action = episodes["capsule_small"][0]
-    win, pad = diag.windows(state, 30)
+    win, pad = student_fit.windows(state, 30)
     capsule = list(ds.meta.tasks.index).index(objects.get_object("capsule_small").task)
     first = int(
         np.flatnonzero(np.asarray(ds.hf_dataset.with_format("numpy")["task_index"]).reshape(-1) == capsule)[0]
@@ -63,14 +64,10 @@ def test_windows_are_the_windows_lerobot_train_loads(demos):
 
 
 def _trace(lift, force, down=0.0, success=False, left=False, n=40):
-    return {
-        "lift": np.array([lift]),
-        "touch_force": np.array([force]),
-        "downward": np.full((1, n, 3), down),
-        "success": np.array([success]),
-        "left": np.array([left]),
-        "length": np.array([n]),
-    }
+    from lerobot_blindgrasp.rollout.loop import Episode
+
+    traces = {"lift": lift, "tip_object_force": force, "tip_object_downward": np.full((n, 3), down)}
+    return Episode("capsule_small", success, left, False, n, float(lift.max()), 0, 0, np.zeros(7), traces)
 
 
 def test_each_failure_kind_follows_from_ground_truth():
@@ -89,30 +86,39 @@ def test_each_failure_kind_follows_from_ground_truth():
     }
     assert set(cases) == set(diag.KINDS)
     for kind, trace in cases.items():
-        assert diag.failure_kind(trace, 0) == kind
+        assert diag.failure_kind(trace) == kind
 
 
 def test_drift_is_the_first_run_of_outside_steps():
     dist = np.array([[0, 5, 0, 5, 5, 5, 0], [5, 5, 5, 0, 0, 0, 0], [0, 0, 0, 0, 0, 5, 5]], float)
-    steps = diag.first_run_above(dist, 1.0, 3, np.array([7, 7, 6]))
+    steps = student_fit.first_run_above(dist, 1.0, 3, np.array([7, 7, 6]))
     assert steps.tolist() == [3, 0, -1]  # the third episode ended before its run of 2 grew to 3
 
 
-def test_dagger_labels_are_the_targets_the_env_commands_for_the_teachers_action():
-    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+@pytest.mark.parametrize("calibration_rad", [0.0, 0.05])
+def test_dagger_labels_are_the_targets_the_env_commands_for_the_teachers_action(calibration_rad):
+    """The label of a teacher action is the target the env commands for it, in the joints' measured frame: under a
+    calibration offset too, where target - true q is not the step."""
+    from dataclasses import replace
+
+    from lerobot_blindgrasp.rollout.actors import TeacherActor
+    from lerobot_blindgrasp.rollout.envs import make_env
     from lerobot_blindgrasp.sim.randomization import EVAL_DR
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
-    teacher = TeacherPolicy(default_teacher())
-    env = BatchedGraspEnv(
-        GraspEnvConfig(num_envs=2, objects=("sphere_small",), seed=spec.DEMO_SEED + 5, dr=EVAL_DR, autoreset=False)
-    )
+    teacher = TeacherActor(TeacherPolicy(default_teacher()))
+    dr = replace(EVAL_DR, joint_calibration_rad=calibration_rad)
+    env = make_env("dagger", ("sphere_small",), num_envs=2, seed=spec.DEMO_SEED + 5, dr=dr)
     obs = env.reset()
     for _ in range(15):
-        q = env.joint_positions()
         a = teacher(obs) * 3.0  # beyond the 0.3 rad bound somewhere, so both clips matter
+        true_frame = np.clip(env.joint_positions() + np.clip(a, -0.3, 0.3), spec.JOINT_LOWER, spec.JOINT_UPPER)
+        label = env.target_for_delta(a)
         obs, _, _, _, info = env.step(a)
-        np.testing.assert_allclose(dagger.label_targets(q, a), info["joint_target"], atol=1e-12)
+        np.testing.assert_array_equal(label, info["joint_target"])
+        # the label is the true-frame target read through the encoders' offset (0 without one)
+        np.testing.assert_allclose(label - true_frame, env.sensor_draw.joint_offset, atol=1e-12)
+        assert np.abs(env.sensor_draw.joint_offset).max() == calibration_rad
     env.close()
 
 

@@ -13,8 +13,10 @@ from tensordict import TensorDict
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.presets import teacher as presets
+from lerobot_blindgrasp.presets import teacher_configs
 from lerobot_blindgrasp.sim import objects, randomization, rewards
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.teacher import evaluate
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
@@ -72,7 +74,7 @@ def test_presets_paper_is_table_iii_exactly():
 
 
 def test_variants():
-    v = presets.Variant(no_incentive=True, student_obs=True).apply(presets.CPU)
+    v = teacher_configs.Variant(no_incentive=True, student_obs=True).apply(presets.CPU)
     assert v.reward.weight("incentive") == 0.0 == v.reward.weight("touch")
     assert v.runner["obs_groups"] == {"actor": ["policy"], "critic": ["policy"]}
     assert presets.CPU.reward.weight("incentive") == 0.2  # the preset itself is untouched

@@ -15,7 +15,8 @@ from rsl_rl.utils import resolve_callable
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.presets import teacher as teacher_presets
 from lerobot_blindgrasp.sim import objects, scripted
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.teacher import aux_bc, scripted_demos
 
 
@@ -110,7 +111,7 @@ def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, m
         max_iterations=3,
         runner=demos.runner_cfg(teacher_presets.CPU.runner),
     )
-    monkeypatch.setitem(teacher_presets.PRESETS, "cpu_bc_joint", short)
+    monkeypatch.setitem(teacher_presets.TEACHER_PRESETS, "cpu_bc_joint", short)
     out = tmp_path / "bc"
     previous = signal.getsignal(signal.SIGTERM)  # the trainer installs its own SIGTERM handler
     try:
@@ -152,8 +153,8 @@ def test_a_staged_preset_trains_the_stage_it_continues_first(tmp_path, monkeypat
     checkpoint, and running the same command again resumes rather than restarting either stage."""
     from lerobot_blindgrasp.teacher import train
 
-    second = replace(teacher_presets.QUICK, name="quick_second", continues=("quick", 2))
-    monkeypatch.setitem(teacher_presets.PRESETS, "quick_second", second)
+    second = replace(teacher_presets.QUICK, name="quick_second", stages=(("quick", 2),))
+    monkeypatch.setitem(teacher_presets.TEACHER_PRESETS, "quick_second", second)
     out = tmp_path / "staged"
     cfg = train.TrainTeacherConfig(
         output_dir=out, preset="quick_second", iterations=4, num_envs=18, threads=1, export=False

@@ -26,7 +26,7 @@ DRIVER = textwrap.dedent(
     from lerobot_blindgrasp.teacher import distributed, train
 
     # A staged preset (as the shipped recipe): `quick` for 1 iteration first, then this one resumes it.
-    presets.PRESETS["quick_staged"] = replace(presets.QUICK, name="quick_staged", continues=("quick", 1))
+    presets.TEACHER_PRESETS["quick_staged"] = replace(presets.QUICK, name="quick_staged", stages=(("quick", 1),))
 
     seen = {}
     make = distributed.runner_class

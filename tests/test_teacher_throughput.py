@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig, allocate_objects
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.env_config import GraspEnvConfig, allocate_objects
 
 # Harder objects (small, capsules) weighted up, as tried in docs/research/teacher_cpu_v2.md.
 HARD_FIRST = tuple(

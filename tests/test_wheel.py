@@ -15,6 +15,7 @@ import os
 import subprocess
 import sys
 import sysconfig
+import tarfile
 import time
 import zipfile
 from pathlib import Path
@@ -37,7 +38,7 @@ from lerobot.robots.config import RobotConfig
 from lerobot.teleoperators.config import TeleoperatorConfig
 import lerobot_blindgrasp
 from lerobot_blindgrasp import shipped
-from lerobot_blindgrasp.hub import project
+from lerobot_blindgrasp import project
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig
 from lerobot_blindgrasp.teacher.policy import default_teacher
 from dataclasses import dataclass
@@ -91,10 +92,67 @@ def test_sdist_and_wheel_pass_twine_check_and_carry_the_shipped_files(built):
         assert files, top
         missing = [str(f) for f in files if f"lerobot_blindgrasp/shipped/{f.as_posix()}" not in names]
         assert not missing, f"not in the wheel: {missing}"
-    assert "lerobot_blindgrasp/hub/card_templates/sim_teacher_demos.md" in names
+    assert "lerobot_blindgrasp/cards/card_templates/sim_teacher_demos.md" in names
     metadata = next(n for n in names if n.endswith(".dist-info/METADATA"))
     text = zipfile.ZipFile(wheel).read(metadata).decode()
     assert "Project-URL: Source, " in text and f"Name: {DIST}" in text
+    # The license the metadata names travels with the code, as its full text.
+    assert "License-Expression: Apache-2.0" in text and "License-File: LICENSE" in text
+    licence = next(n for n in names if n.endswith(".dist-info/licenses/LICENSE"))
+    assert zipfile.ZipFile(wheel).read(licence).decode() == (ROOT / "LICENSE").read_text()
+
+
+def test_the_sdist_carries_what_a_packager_builds_and_tests_from(built):
+    """The license, changelog and citation, the guides, the tests with their data and emulators, the scripts the
+    README runs, and the shipped files; no training state or bytecode."""
+    sdist = _one(built, f"{DIST}-*.tar.gz")
+    with tarfile.open(sdist) as tar:
+        names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
+    tracked = [p.relative_to(ROOT).as_posix() for p in _tracked_or_none() or []]
+    wanted = {"LICENSE", "CHANGELOG.md", "CITATION.cff", "README.md", "pyproject.toml", "setup.py", "MANIFEST.in"}
+    wanted |= {p for p in tracked if p.split("/")[0] in ("docs", "tests", "scripts", "models", "robot_configs")}
+    wanted |= {"docs/getting-started.md", "docs/results.md", "tests/conftest.py", "scripts/main.sh"}
+    missing = sorted(wanted - names)
+    assert not missing, f"not in the sdist: {missing[:20]}"
+    assert not [n for n in names if n.endswith((".pyc", ".pt")) or "__pycache__" in n]
+
+
+def test_the_project_page_is_the_readme_with_absolute_links(built):
+    """The index shows the long description alone: each of the README's relative links and its image becomes an
+    address built from [project.urls] (a page under the Changelog URL's folder, the image's bytes under /raw/)."""
+    import tomllib
+
+    from lerobot_blindgrasp.cards import links
+
+    wheel = _one(built, f"{DIST}-*.whl")
+    with zipfile.ZipFile(wheel) as z:
+        metadata = z.read(next(n for n in z.namelist() if n.endswith(".dist-info/METADATA"))).decode()
+    assert "Description-Content-Type: text/markdown" in metadata
+    description = metadata.split("\n\n", 1)[1]
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    urls = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["urls"]
+    base, raw = links.file_base(urls), links.raw_base(urls)
+    assert base.startswith(urls["Source"]) and raw.startswith(urls["Source"])
+    relative = [m for m in links.LINK.finditer(readme) if links.is_relative(m.group(3))]
+    assert relative and any(m.group(1) for m in relative)  # pages and the picture
+    found = [m.group(3) for m in links.LINK.finditer(description)]
+    assert len(found) == len(list(links.LINK.finditer(readme)))
+    assert all(not links.is_relative(t) for t in found), [t for t in found if links.is_relative(t)]
+    for m in relative:  # each one points at the file it pointed at in the tree
+        path, fragment = links.repo_path(m.group(3), "README.md")
+        assert (ROOT / path).exists(), path
+        assert f"]({(raw if m.group(1) else base) + path}{fragment})" in description, m.group(0)
+
+
+def _tracked_or_none() -> list[Path] | None:
+    """The tracked files (none outside a git checkout, where the fixed list above is what is checked)."""
+    try:
+        proc = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True)
+    except OSError:  # no git
+        return None
+    if proc.returncode != 0:
+        return None
+    return [ROOT / p for p in proc.stdout.decode().split("\0") if p and (ROOT / p).is_file()]
 
 
 @pytest.mark.slow
@@ -107,8 +165,13 @@ def test_the_wheel_works_outside_the_source_tree(built, tmp_path):
     Path(site, "_test_venv_packages.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     wheel = _one(built, f"{DIST}-*.whl")
     # This venv's pip, told to install into the fresh venv's interpreter (`--python`): no pip download either.
+    # Without PYTHONPATH: a source tree on it shows pip the build's egg-info as this version, already installed.
+    clean = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "--no-deps", "--no-index",
-                    "--quiet", str(wheel)], check=True, timeout=300)  # fmt: skip
+                    "--quiet", str(wheel)], check=True, timeout=300, env=clean)  # fmt: skip
+    assert (Path(site) / "lerobot_blindgrasp" / "__init__.py").is_file(), (
+        "pip left the fresh venv without the wheel"
+    )
     work = tmp_path / "elsewhere"  # no models/ or robot_configs/ here: only the wheel can provide them
     work.mkdir()
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "BLINDGRASP_TEACHER", "VIRTUAL_ENV")}

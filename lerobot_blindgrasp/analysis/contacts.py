@@ -20,10 +20,9 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.rollout.envs import make_env
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.sim.gym_env import start_seed
-from lerobot_blindgrasp.sim.randomization import EVAL_DR
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 
 PRESSING_DOWN = 0.5  # -F_z/|F| above this: more than 30 degrees below horizontal
 
@@ -63,24 +62,13 @@ def contact_directions(env: BatchedGraspEnv, obs: dict, act, steps: int, after_s
     }
 
 
-def env_config(cfg: ContactsConfig, name: str) -> GraspEnvConfig:
-    """One object's envs, on its evaluation start states."""
-    return GraspEnvConfig(
-        num_envs=cfg.episodes,
-        objects=(name,),
-        seed=start_seed(cfg.seed, name),
-        dr=EVAL_DR,
-        autoreset=False,
-    )
-
-
 def teacher_contacts(cfg: ContactsConfig) -> dict[str, dict[str, float]]:
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
     teacher = TeacherPolicy(cfg.teacher or default_teacher())
     out = {}
     for name in objects.resolve_objects(cfg.objects):
-        env = BatchedGraspEnv(env_config(cfg, name))
+        env = make_env("eval", (name,), episodes=cfg.episodes, seed=cfg.seed)
         obs = env.reset()
         after = int(round(cfg.after_s * spec.CONTROL_HZ))
         act = lambda o: teacher(o, stochastic=False)  # noqa: E731

@@ -167,25 +167,7 @@ def plot_progress(
             ax.plot(x, 100 * np.array(p["success_all18"]), colour, label=f"{label}: all 18")
             ax.plot(x, 100 * np.array(p["success_medium"]), colour, ls="--", label=f"{label}: 6 medium")
         for point in (held_out or {}).get(label, []):
-            at = _at_iteration(p, point["iteration"])
-            if at is None:
-                continue
-            for mode, fill in (("deterministic", colour), ("stochastic", "none")):
-                if mode not in point["success_all18"]:
-                    continue
-                y = 100 * point["success_all18"][mode]
-                for ax, x in ((axes[0], at[0] / 1e6), (axes[1], at[1])):
-                    ax.plot([x], [y], "o", mec=colour, mfc=fill, ms=6, zorder=3)
-                    if mode == "deterministic":
-                        ax.annotate(
-                            f"{y:.1f}",
-                            (x, y),
-                            textcoords="offset points",
-                            xytext=(-4, 6),
-                            ha="right",
-                            fontsize=7,
-                            color=colour,
-                        )
+            _held_out_marker(axes, p, point, colour)
     for ax, xlabel in zip(axes, ("env steps (M)", "training wall clock (h)")):
         ax.set_xlabel(xlabel)
         ax.set_ylim(0, 100)
@@ -208,6 +190,30 @@ def plot_progress(
         fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return curves
+
+
+def _held_out_marker(axes, p: dict, point: dict, colour: str) -> None:
+    """One held-out evaluation on both panels, at its iteration's env steps and wall clock: filled for the
+    deterministic teacher (labelled with its rate), hollow for the stochastic one."""
+    at = _at_iteration(p, point["iteration"])
+    if at is None:
+        return
+    for mode, fill in (("deterministic", colour), ("stochastic", "none")):
+        if mode not in point["success_all18"]:
+            continue
+        y = 100 * point["success_all18"][mode]
+        for ax, x in ((axes[0], at[0] / 1e6), (axes[1], at[1])):
+            ax.plot([x], [y], "o", mec=colour, mfc=fill, ms=6, zorder=3)
+            if mode == "deterministic":
+                ax.annotate(
+                    f"{y:.1f}",
+                    (x, y),
+                    textcoords="offset points",
+                    xytext=(-4, 6),
+                    ha="right",
+                    fontsize=7,
+                    color=colour,
+                )
 
 
 def plot_metrics(

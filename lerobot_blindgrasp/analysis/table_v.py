@@ -18,17 +18,17 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lerobot_blindgrasp import durable
-from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.demos.provenance import PROVENANCE_NAME
 from lerobot_blindgrasp.presets import TABLE_V
 from lerobot_blindgrasp.presets.ablations import teacher_words
+from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.sim import objects
 
 
 def row_successes(out: Path, name: str) -> dict[str, list[bool]] | None:
     """Object -> episode successes of one Table V row, or None if that row has not been evaluated."""
-    from lerobot_blindgrasp.analysis.compare import load_successes
+    from lerobot_blindgrasp.results.compare import load_successes
 
     row = TABLE_V[name]
     path = out / f"eval_{name}" / "eval_info.json" if row.student else out / f"{row.teacher}_eval" / "eval.json"
@@ -97,7 +97,7 @@ def paired_with_proposed(done: dict[str, dict[str, list[bool]]], names: list[str
 
 
 def write_table_v(out: Path) -> Path:
-    from lerobot_blindgrasp.analysis.plots import bar_chart
+    from lerobot_blindgrasp.results.plots import bar_chart
 
     results = {name: row_successes(out, name) for name in TABLE_V}
     done = {n: r for n, r in results.items() if r}

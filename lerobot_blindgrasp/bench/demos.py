@@ -89,8 +89,8 @@ def run(cfg: BenchDemosConfig) -> dict:
     import datasets
 
     from lerobot_blindgrasp.demos import curation
+    from lerobot_blindgrasp.demos.collection import collect
     from lerobot_blindgrasp.demos.config import CollectConfig
-    from lerobot_blindgrasp.demos.loop import collect
 
     tmp = Path(tempfile.mkdtemp(prefix="blindgrasp-bench-demos-"))
     try:

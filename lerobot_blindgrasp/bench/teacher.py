@@ -96,7 +96,7 @@ def _raw_control_steps_per_s(env, steps: int) -> float:
 def run(cfg: BenchTeacherConfig) -> dict:
     from rsl_rl.runners import OnPolicyRunner
 
-    from lerobot_blindgrasp.sim.env import BatchedGraspEnv
+    from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
     from lerobot_blindgrasp.teacher.train import build_env_config, update_thread_count, with_torch_threads
     from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 

@@ -4,7 +4,7 @@
     blindgrasp-collect-demos --teacher=runs/teacher_cpu --output_dir=runs/demos_cpu --repo_id=me/demos_cpu
 
 The stages live in their own modules: the config (`demos/config.py`), the rollout -> curate -> write loop
-(`demos/loop.py`), the run records (`demos/records.py`: provenance, statistics, yield report, card). This module
+(`demos/collection.py`), the run records (`demos/records.py`: provenance, statistics, yield report, card). This module
 is the command line only: parse, run, print the yield table, and map outcomes to exit codes.
 
 The output folder is the dataset root. Next to LeRobot's files it holds `collection.json` (provenance),
@@ -20,9 +20,9 @@ import sys
 
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import command_line, parse_config
-from lerobot_blindgrasp.demos import report
+from lerobot_blindgrasp.demos import yield_report
+from lerobot_blindgrasp.demos.collection import collect
 from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
-from lerobot_blindgrasp.demos.loop import collect
 
 EXIT_EMPTY = 3  # the collection ran but wrote no episode
 EXIT_WRITE = 4  # a write failed (full disk, quota)
@@ -48,8 +48,8 @@ def main(argv=None) -> None:
             file=sys.stderr,
         )
         raise SystemExit(EXIT_WRITE) from None
-    tally = report.load_tally(cfg.output_dir)
-    print(report.format_table(tally, list(cfg.object_names)))
+    tally = yield_report.load_tally(cfg.output_dir)
+    print(yield_report.format_table(tally, list(cfg.object_names)))
     s = stats.summary()
     print(
         f"\n{s['kept']} episodes written ({s['frames']} frames) from {s['rollouts']} rollouts in "

@@ -15,8 +15,8 @@ Output: `<output_dir>/relabelled`, a LeRobotDataset of those episodes (same sche
 the dataset the next student trains on. Start states come from their own block of the demo seed range, disjoint
 from the demos' and from evaluation.
 
-Label: target = clip(q + clip(a_teacher, +-0.3 rad), joint limits), exactly the target the env would have commanded
-for the teacher's action (`BatchedGraspEnv.step`), with q the true joint positions.
+Label: the absolute target the env would have commanded for the teacher's action (`BatchedGraspEnv.target_for_delta`:
+clip(q + clip(a_teacher, +-0.3 rad), joint limits), in the joints' measured frame).
 """
 
 from __future__ import annotations
@@ -35,9 +35,12 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.demos.rollout import RANDOMIZATION_NAMES, Episode
 from lerobot_blindgrasp.durable import atomic_write_json
+from lerobot_blindgrasp.rollout.actors import StudentActor, TeacherActor
+from lerobot_blindgrasp.rollout.envs import make_env
+from lerobot_blindgrasp.rollout.loop import Episode, run_batch
 from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
 # Block 2^10 of the demo seed range (blocks of 2^24 env seeds; the pipeline's demos use block `--seed`, 1 by
 # default): never shared with a demo collection.
@@ -70,67 +73,25 @@ class DaggerConfig:
         spec.check_seeds("demos", self.seed, n)
 
 
-def label_targets(q: np.ndarray, teacher_action: np.ndarray) -> np.ndarray:
-    """The absolute targets the env commands for a teacher action at true joints q (both (n, 9))."""
-    step = np.clip(teacher_action, -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
-    return np.clip(q + step, spec.JOINT_LOWER, spec.JOINT_UPPER)
+# What a relabelled episode keeps of each step: o_t, r_t and the forces; its action is the teacher's label.
+TRACES = ("state", "task_reward", "uniaxial_force")
 
 
-def relabelled_episodes(act_student, reset_student, teacher, names: list[str], seed: int):
-    """Run one batch (env i: object names[i], seed + i) for 10 s under the student; yield one Episode per env with
-    the teacher's labels."""
-    from lerobot_blindgrasp.analysis.student_diagnosis import Outcomes
-    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-    from lerobot_blindgrasp.sim.randomization import EVAL_DR
-
-    env = BatchedGraspEnv(
-        GraspEnvConfig(
-            num_envs=len(names), objects=tuple(dict.fromkeys(names)), seed=seed, dr=EVAL_DR, autoreset=False
-        )
-    )
+def relabelled_episodes(
+    student: StudentActor, teacher: TeacherPolicy, names: list[str], seed: int
+) -> list[Episode]:
+    """One batch (env i: object names[i], seed + i) for 10 s under the student; each episode's action is what the
+    env would have commanded for the teacher's mean action on the states the student visited."""
+    env = make_env("dagger", tuple(dict.fromkeys(names)), num_envs=len(names), seed=seed)
     if list(env.object_names) != list(names):
         raise RuntimeError("object allocation differs from the requested batch")
-    n, horizon = env.num_envs, env.max_episode_steps
-    state = np.zeros((n, horizon, spec.STATE_DIM), np.float32)
-    label = np.zeros((n, horizon, spec.ACTION_DIM), np.float32)
-    task = np.zeros((n, horizon))
-    force = np.zeros((n, horizon, spec.NUM_FORCES))
-    ends = Outcomes(n, horizon)
-    reset_student()
-    obs = env.reset()
-    start_xy = env.object_position()[:, :2].copy()
-    for t in range(horizon):
-        q = env.joint_positions()
-        state[:, t] = obs["policy"]
-        label[:, t] = label_targets(q, teacher(obs, stochastic=False))
-        obs, _, term, trunc, info = env.step(act_student(obs) - q)
-        task[:, t] = info["terms"]["task"]
-        force[:, t] = info["uniaxial_force"]
-        if not ends.update(t, info, term, trunc):
-            break
-    draws = [env.physics_draw.row(i) for i in range(n)]
-    env.close()
-    for i in range(n):
-        k = int(ends.length[i])
-        yield Episode(
-            object_name=names[i],
-            state=state[i, :k],
-            action=label[i, :k],
-            task_reward=task[i, :k],
-            uniaxial_force=force[i, :k],
-            success=bool(ends.success[i]),
-            left_workspace=bool(ends.left[i]),
-            physics_failed=False,
-            env_seed=seed + i,
-            env_episode=0,
-            randomization=np.array([*(draws[i][p] for p in RANDOMIZATION_NAMES[:5]), *start_xy[i]], np.float64),
-        )
+    label = TeacherActor(teacher).target
+    student.reset()
+    done = run_batch(env, student, record=TRACES, labels={"action": (spec.ACTION_DIM, label)})
+    return done
 
 
 def run(cfg: DaggerConfig) -> dict:
-    from lerobot_blindgrasp.analysis.student_diagnosis import load_student, student_actor
-    from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
-
     out = cfg.output_dir
     if (out / DONE).is_file():
         return json.loads((out / DONE).read_text())
@@ -139,10 +100,9 @@ def run(cfg: DaggerConfig) -> dict:
         if (out / part).exists():
             shutil.rmtree(out / part)
     out.mkdir(parents=True, exist_ok=True)
-    policy, pre, post = load_student(cfg.student, cfg.device)
-    act = student_actor(policy, pre, post)
-    teacher = TeacherPolicy(cfg.teacher or default_teacher())
     names = objects.resolve_objects(cfg.objects)
+    student = StudentActor.load(cfg.student, names, cfg.device)
+    teacher = TeacherPolicy(cfg.teacher or default_teacher())
     todo = [name for _ in range(cfg.episodes_per_object) for name in names]
     ds = demo_dataset.create(out / "relabelled", cfg.repo_id + "_relabelled")
     t0 = time.perf_counter()
@@ -153,7 +113,7 @@ def run(cfg: DaggerConfig) -> dict:
     try:
         for start in range(0, len(todo), cfg.num_envs):
             batch = todo[start : start + cfg.num_envs]
-            for ep in relabelled_episodes(act, policy.reset, teacher, batch, cfg.seed + start):
+            for ep in relabelled_episodes(student, teacher, batch, cfg.seed + start):
                 cut = curation.CurationResult(
                     passed=False,
                     keep=True,

@@ -32,7 +32,7 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.demos.curation import CurationResult
-from lerobot_blindgrasp.demos.rollout import RANDOMIZATION_NAMES, Episode
+from lerobot_blindgrasp.rollout.loop import RANDOMIZATION_NAMES, Episode
 from lerobot_blindgrasp.sim import objects
 
 # robot_type of every blindgrasp dataset, sim or real: `merge` refuses datasets whose robot_type differs, so the

@@ -20,7 +20,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.demos import provenance, report
+from lerobot_blindgrasp.demos import provenance, yield_report
 from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
 from lerobot_blindgrasp.sim import randomization
 
@@ -40,7 +40,7 @@ class CollectStats:
     stop_reason: str = ""  # "done" | "interrupted" | "error: ..."
     checkpoints: int = 0  # finalize-and-reopen cycles (demos/checkpoint.py)
     checkpoint_s: float = 0.0  # time they took
-    tally: report.Tally = field(default_factory=report.Tally)
+    tally: yield_report.Tally = field(default_factory=yield_report.Tally)
 
     @property
     def demos_per_minute(self) -> float:
@@ -102,7 +102,7 @@ def open_dataset(cfg: CollectConfig, prov_new: dict):
             shutil.rmtree(out)
         ds = demo_dataset.create(out, cfg.repo_id)
         provenance.save(out, prov_new)
-        return ds, prov_new, report.Tally()
+        return ds, prov_new, yield_report.Tally()
     prov = provenance.load(out)
     bad = provenance.mismatches(prov, prov_new)
     if bad:
@@ -112,12 +112,12 @@ def open_dataset(cfg: CollectConfig, prov_new: dict):
         ds = demo_dataset.resume(out, cfg.repo_id)
     except (ValueError, FileNotFoundError) as e:
         raise CollectError(f"--resume: {e}") from None
-    tally = report.load_tally(out)
+    tally = yield_report.load_tally(out)
     last = prov["runs"][-1] if prov["runs"] else {}
     if last.get("stop_reason") == RUNNING:  # the previous run was killed: its last checkpoint has the newest tally
         last["stop_reason"], last["interrupted"] = "killed (resumed from its last checkpoint)", True
         if "tally" in last:
-            tally = report.Tally.from_json(last.pop("tally"))
+            tally = yield_report.Tally.from_json(last.pop("tally"))
         provenance.save(out, prov)
     _existing_counts(out, tally)
     return ds, prov, tally
@@ -140,7 +140,7 @@ def _repair(out: Path) -> None:
         log.warning("--resume: the dataset was left unfinished by a crash; repaired it:\n%s", result.summary())
 
 
-def _existing_counts(root: Path, tally: report.Tally) -> None:
+def _existing_counts(root: Path, tally: yield_report.Tally) -> None:
     """Kept episodes and frames per object, from the dataset itself (authoritative after a crash)."""
     for o in tally.objects.values():
         o.kept, o.frames = 0, 0
@@ -168,7 +168,9 @@ def start_run(cfg: CollectConfig, prov: dict, command: str | None) -> dict:
 RUNNING = "running"  # the stop_reason of a run in progress; still there after a kill
 
 
-def checkpoint_run(cfg: CollectConfig, prov: dict, run: dict, tally: report.Tally, stats: CollectStats) -> None:
+def checkpoint_run(
+    cfg: CollectConfig, prov: dict, run: dict, tally: yield_report.Tally, stats: CollectStats
+) -> None:
     """Save collection.json with this run in progress and the tally that goes with the dataset on disk now."""
     record = {**_run_outcome(run, stats, RUNNING), "tally": tally.to_json()}
     provenance.save(cfg.output_dir, {**prov, "runs": [*prov["runs"], record]})
@@ -189,7 +191,7 @@ def _run_outcome(run: dict, stats: CollectStats, stop_reason: str) -> dict:
     }
 
 
-def finish_run(cfg: CollectConfig, prov: dict, run: dict, tally: report.Tally, stats: CollectStats) -> None:
+def finish_run(cfg: CollectConfig, prov: dict, run: dict, tally: yield_report.Tally, stats: CollectStats) -> None:
     """Record the run (however it ended) in collection.json, then rewrite the yield report and the card."""
     out = cfg.output_dir
     run.update(_run_outcome(run, stats, stats.stop_reason))
@@ -197,19 +199,19 @@ def finish_run(cfg: CollectConfig, prov: dict, run: dict, tally: report.Tally, s
     provenance.save(out, prov)
     _write_report(out, cfg, prov, tally)
     try:
-        from lerobot_blindgrasp.hub import cards
+        from lerobot_blindgrasp.demos import dataset_card
 
-        cards.write_card(out, cfg.repo_id)
+        dataset_card.write(out, cfg.repo_id)
     except Exception as e:  # noqa: BLE001  (a card problem must not mask the collection's outcome)
         log.warning("could not write the dataset card: %s", e)
 
 
-def _write_report(out: Path, cfg: CollectConfig, prov: dict, tally: report.Tally) -> Path:
+def _write_report(out: Path, cfg: CollectConfig, prov: dict, tally: yield_report.Tally) -> Path:
     runs = prov["runs"]
     wall = sum(r["wall_s"] for r in runs)
     cpu = sum(r["cpu_s"] for r in runs)
     kept_now = sum(r["kept"] for r in runs)
-    return report.write_report(
+    return yield_report.write_report(
         out,
         tally,
         {

@@ -106,8 +106,6 @@ def _chunk_file(path: Path) -> tuple[int, int]:
 def inspect(root: Path) -> tuple[dict, RepairReport, dict]:
     """Find the verified prefix without changing anything. Returns (info, report, plan) where plan holds the files
     to remove and the files to rewrite (path -> keep episodes below k)."""
-    import pyarrow.parquet as pq
-
     root = Path(root)
     try:
         info = json.loads((root / INFO).read_text())
@@ -120,18 +118,8 @@ def inspect(root: Path) -> tuple[dict, RepairReport, dict]:
         ) from None
     report = RepairReport(root=root, episodes_claimed=int(info.get("total_episodes", 0)))
     remove: list[Path] = [p for p in root.rglob(f".*{durable.TEMP_MARK}*") if p.is_file()]
-
-    def scan(folder: Path, columns: list[str]):
-        tables = {}
-        for p in sorted(folder.glob("chunk-*/file-*.parquet")):
-            if _readable(p) is None:
-                remove.append(p)
-            else:
-                tables[p] = pq.read_table(p, columns=columns)
-        return tables
-
-    meta_tables = scan(root / "meta" / "episodes", None)
-    data_tables = scan(root / "data", ["episode_index", "index"])
+    meta_tables = _read_tables(root / "meta" / "episodes", None, remove)
+    data_tables = _read_tables(root / "data", ["episode_index", "index"], remove)
     episodes: dict[int, dict] = {}
     for table in meta_tables.values():
         for row in table.select([c for c in table.column_names if not c.startswith("stats/")]).to_pylist():
@@ -140,47 +128,7 @@ def inspect(root: Path) -> tuple[dict, RepairReport, dict]:
     for p, table in data_tables.items():
         ep, idx = table["episode_index"].to_numpy(), table["index"].to_numpy()
         frames[_chunk_file(p)] = {int(e): idx[ep == e] for e in np.unique(ep)}
-    video_keys = [k for k, ft in features.items() if ft.get("dtype") == "video"]
-    video_path = info.get("video_path")
-
-    k, next_from = 0, 0
-    while True:
-        row = episodes.get(k)
-        if row is None:
-            report.first_problem = (
-                ""
-                if k >= report.episodes_claimed and not _beyond(k, episodes, frames)
-                else (f"episode {k} has no readable meta/episodes row")
-            )
-            break
-        where = (int(row["data/chunk_index"]), int(row["data/file_index"]))
-        idx = frames.get(where, {}).get(k)
-        length, lo, hi = int(row["length"]), int(row["dataset_from_index"]), int(row["dataset_to_index"])
-        if idx is None:
-            report.first_problem = f"episode {k}'s frames are not in a readable data file"
-            break
-        consistent = lo == next_from and hi - lo == length == len(idx) and np.array_equal(idx, np.arange(lo, hi))
-        if not consistent:
-            report.first_problem = f"episode {k}'s frames do not match its metadata ({len(idx)} of {length} rows)"
-            break
-        missing = [
-            vk
-            for vk in video_keys
-            if not (
-                root
-                / video_path.format(
-                    video_key=vk,
-                    chunk_index=int(row[f"videos/{vk}/chunk_index"]),
-                    file_index=int(row[f"videos/{vk}/file_index"]),
-                )
-            ).is_file()
-        ]
-        if missing:
-            report.first_problem = f"episode {k}'s video files are missing ({', '.join(missing)})"
-            break
-        next_from = hi
-        k += 1
-
+    k, next_from = _verified_prefix(root, info, features, episodes, frames, report)
     report.kept_episodes, report.kept_frames = k, next_from
     seen = set(episodes) | {e for per_file in frames.values() for e in per_file}
     report.lost_episodes = sorted(e for e in seen | set(range(report.episodes_claimed)) if e >= k)
@@ -193,6 +141,56 @@ def inspect(root: Path) -> tuple[dict, RepairReport, dict]:
             elif (ep >= k).any():
                 rewrite[p] = what
     return info, report, {"remove": remove, "rewrite": rewrite}
+
+
+def _read_tables(folder: Path, columns: list[str] | None, unreadable: list[Path]) -> dict:
+    """The readable parquet files of a dataset folder (path -> table); the unreadable ones go to `unreadable`."""
+    import pyarrow.parquet as pq
+
+    tables = {}
+    for p in sorted(folder.glob("chunk-*/file-*.parquet")):
+        if _readable(p) is None:
+            unreadable.append(p)
+        else:
+            tables[p] = pq.read_table(p, columns=columns)
+    return tables
+
+
+def _verified_prefix(
+    root: Path, info: dict, features: dict, episodes: dict, frames: dict, report
+) -> tuple[int, int]:
+    """(episodes, frames) of the longest prefix whose metadata, frames and videos agree; the first disagreement
+    goes to `report.first_problem`."""
+    video_keys = [k for k, ft in features.items() if ft.get("dtype") == "video"]
+    k, next_from = 0, 0
+    while True:
+        row = episodes.get(k)
+        if row is None:
+            beyond = k < report.episodes_claimed or _beyond(k, episodes, frames)
+            report.first_problem = f"episode {k} has no readable meta/episodes row" if beyond else ""
+            return k, next_from
+        idx = frames.get((int(row["data/chunk_index"]), int(row["data/file_index"])), {}).get(k)
+        length, lo, hi = int(row["length"]), int(row["dataset_from_index"]), int(row["dataset_to_index"])
+        if idx is None:
+            report.first_problem = f"episode {k}'s frames are not in a readable data file"
+            return k, next_from
+        if not (lo == next_from and hi - lo == length == len(idx) and np.array_equal(idx, np.arange(lo, hi))):
+            report.first_problem = f"episode {k}'s frames do not match its metadata ({len(idx)} of {length} rows)"
+            return k, next_from
+        missing = [vk for vk in video_keys if not _video_file(root, info, row, vk).is_file()]
+        if missing:
+            report.first_problem = f"episode {k}'s video files are missing ({', '.join(missing)})"
+            return k, next_from
+        next_from = hi
+        k += 1
+
+
+def _video_file(root: Path, info: dict, row: dict, key: str) -> Path:
+    return root / info.get("video_path").format(
+        video_key=key,
+        chunk_index=int(row[f"videos/{key}/chunk_index"]),
+        file_index=int(row[f"videos/{key}/file_index"]),
+    )
 
 
 def _beyond(k: int, episodes: dict, frames: dict) -> bool:

@@ -17,8 +17,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp.analysis.rates import wilson_interval
 from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.results.rates import wilson_interval
 
 USAGE = "python -m lerobot_blindgrasp.envs.real_report --eval_info=outputs/eval/<run>/eval_info.json"
 

@@ -1,12 +1,6 @@
-"""Sharing on the Hugging Face Hub: dataset cards and `blindgrasp-push-dataset` (`cards.py`, `push.py`), where the
-code lives and the Hub repo names (`project.py`, read from `[project.urls]`), and `blindgrasp-publish`, which
-pushes the shipped models and a demo dataset with their cards (`publish.py`).
+"""Sharing on the Hugging Face Hub: `blindgrasp-push-dataset` (`push.py`: a sim demo set or a glove recording, with
+its card) and `blindgrasp-publish` (`publish.py`: the shipped models and a demo dataset, each with its card).
 
-Dataset cards serve the sim teacher demos (`blindgrasp-collect-demos`) and glove teleoperation datasets
-(`lerobot-record`) alike, which is why this sits beside `demos/` rather than inside it.
+The cards themselves are rendered in `lerobot_blindgrasp.cards`; where the code lives and the Hub repo names are said
+once, in `lerobot_blindgrasp.project` (read from `[project.urls]`).
 """
-
-import re
-
-# The shape of a Hub repo id, checked before anything is written or uploaded.
-REPO_ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*/[A-Za-z0-9][A-Za-z0-9_.-]*$")

@@ -1,15 +1,17 @@
 """`blindgrasp-publish`: push the shipped teachers, the shipped student and a demo dataset to the Hugging Face Hub,
-each with its card and the code's location.
+each with its card and the code's location, in one command.
 
-    blindgrasp-collect-demos --teacher="$(blindgrasp-path --name=teacher_cpu_bc_calib)" --episodes_per_object=2 \\
-      --output_dir=runs/demos_publish --repo_id=you/blindgrasp-demos-sim
-    blindgrasp-publish --namespace=you --demos=runs/demos_publish --dry_run=true   # everything but the upload
-    blindgrasp-publish --namespace=you --demos=runs/demos_publish
+    blindgrasp-publish --namespace=you --dry_run=true     # everything but the upload
+    blindgrasp-publish --namespace=you                    # collects 2 demos per object, then pushes all four
+    blindgrasp-publish --namespace=you --demos=runs/demos_cpu   # an existing blindgrasp-collect-demos folder
 
 The repo names are `project.HUB_REPOS`, under `--namespace`. Everything is checked before the first network call:
 `[project.urls]` must name the project's real public home (a card must not send a reader to a placeholder), each
 model loads (the teachers through `TeacherPolicy`, the student's `config.json` as LeRobot's policy config), each
-model card is rendered into a staging folder with the install line and the code's location, and the dataset is
+model card is rendered into a staging folder with its one install section and absolute links
+(`model_cards.py`). Without `--demos`, a small demo set is collected into the staging folder with the shipped
+student's recipe (`DEMO_RECIPE`: its teacher, and the joint calibration offset its demos are rolled out under),
+`--demo_episodes` curated episodes per object; a rerun with the same `--staging_dir` resumes it. The dataset is
 prepared by `blindgrasp-push-dataset`'s own `prepare` (its card carries the code's location too). Then the models
 go up with `HfApi.upload_folder` and the dataset with LeRobot's `push_to_hub`.
 """
@@ -22,40 +24,17 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp import durable, shipped
+from lerobot_blindgrasp import durable, project, shipped
+from lerobot_blindgrasp.cards import model_cards
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.hub import REPO_ID_PATTERN, project, push
+from lerobot_blindgrasp.hub import push
+from lerobot_blindgrasp.project import REPO_ID_PATTERN
 
 # Files of a shipped model folder that belong on the Hub (the student's are all of LeRobot's pretrained_model).
 _TEACHER_FILES = ("teacher.safetensors", "teacher_config.json", "README.md", "eval/*")
-
-
-def _install_block(name: str, repo_id: str) -> str:
-    if name.startswith("teacher"):
-        use = (f"hf download {repo_id} --local-dir {name}\n"
-               f"blindgrasp-eval-teacher --teacher={name} --episodes=20")  # fmt: skip
-    else:
-        use = (f"lerobot-eval --policy.path={repo_id} --env.type=blindgrasp --env.task=all \\\n"
-               "  --eval.n_episodes=20"
-               " --eval.batch_size=20 --eval.use_async_envs=false --policy.device=cpu --seed=1000")  # fmt: skip
-    return (
-        f"\n## Install and use\n\n```bash\n{project.INSTALL}   # LeRobot plugin: the policy, env, robot and "
-        f"glove types\n{use}\n```\n\nThis model also ships inside the package: "
-        f"`blindgrasp-path --name={name}` prints its installed folder.\n\n{project.code_line()}\n"
-    )
-
-
-def render_model_card(folder: Path, repo_id: str) -> str:
-    """The folder's README.md with the install block after its title and its local path replaced by the repo id."""
-    name = folder.name
-    text = (folder / "README.md").read_text(encoding="utf-8").replace(f"--policy.path=models/{name}",
-                                                                       f"--policy.path={repo_id}")  # fmt: skip
-    lines = text.split("\n")
-    at = next((i + 1 for i, line in enumerate(lines) if line.startswith("# ")), None)
-    if at is None:
-        raise ValueError(f"{folder / 'README.md'} has no '# ' title line to put the install block under")
-    lines[at:at] = _install_block(name, repo_id).split("\n")
-    return "\n".join(lines)
+# The preset of the shipped student: a collected demo set uses its teacher and its demos' calibration offset.
+DEMO_RECIPE = "quick_blind_targeted"
+_ENVS_PER_OBJECT = 10  # parallel rollouts per object while collecting (the pipeline's 180 for 18 objects)
 
 
 def _check_loads(folder: Path) -> None:
@@ -82,7 +61,7 @@ def stage_model(name: str, repo_id: str, staging: Path) -> Path:
             if f.is_file() and f.name != "README.md":
                 (out / f.relative_to(src)).parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(f, out / f.relative_to(src))
-    durable.atomic_write_text(out / "README.md", render_model_card(src, repo_id))
+    durable.atomic_write_text(out / "README.md", model_cards.render_model_card(src, repo_id))
     return out
 
 
@@ -90,24 +69,51 @@ def stage_model(name: str, repo_id: str, staging: Path) -> Path:
 class PublishConfig:
     """Push the shipped teachers, the shipped student and a demo dataset to the Hub, each with its card.
 
-    blindgrasp-publish --namespace=you --demos=runs/demos_publish [--dry_run=true]
+    blindgrasp-publish --namespace=you [--demos=runs/demos_cpu] [--dry_run=true]
     """
 
     namespace: str | None = None  # Hub user or organization the repos go under (names: hub/project.py HUB_REPOS)
-    demos: Path | None = None  # the demo dataset folder to push (blindgrasp-collect-demos output)
+    # the demo dataset folder to push (blindgrasp-collect-demos output); default: collect one into the staging folder
+    demos: Path | None = None
+    demo_episodes: int = 2  # without --demos: curated episodes per object to collect
+    demo_objects: str = "all"  # without --demos: 'all', 'medium' or a comma list of objects
     private: bool = False  # create the repos as private
     dry_run: bool = False  # check and stage everything, then stop before the network
-    staging_dir: Path | None = None  # where the model cards are rendered (default: a temporary folder)
+    staging_dir: Path | None = None  # where the cards (and collected demos) go (default: a temporary folder)
 
     def __post_init__(self):
         if not self.namespace:
             raise ValueError("--namespace is required (your Hub user or organization)")
-        if self.demos is None:
-            raise ValueError("--demos is required (a blindgrasp-collect-demos folder; see --help for the command)")
         for _, name in project.HUB_REPOS.values():
             if not REPO_ID_PATTERN.match(f"{self.namespace}/{name}"):
                 raise ValueError(f"--namespace={self.namespace!r} does not make a Hub repo id")
-        self.demos = Path(self.demos).expanduser()
+        if self.demo_episodes < 1:
+            raise ValueError(f"--demo_episodes must be >= 1, got {self.demo_episodes}")
+        from lerobot_blindgrasp.sim import objects
+
+        self.n_demo_objects = len(objects.resolve_objects(self.demo_objects))  # a bad name fails here, not later
+        self.demos = Path(self.demos).expanduser() if self.demos is not None else None
+
+
+def collect_demos(cfg: PublishConfig, out: Path, repo_id: str) -> Path:
+    """A small curated demo set in `out`, made as the shipped student's demos were (`DEMO_RECIPE`); resumed when a
+    previous publish left it unfinished."""
+    from lerobot_blindgrasp import presets
+    from lerobot_blindgrasp.demos import collection, provenance
+    from lerobot_blindgrasp.demos.config import CollectConfig
+
+    recipe = presets.PRESETS[DEMO_RECIPE]
+    n_objects = cfg.n_demo_objects
+    collect = CollectConfig(
+        teacher=shipped.path(recipe.teacher.shipped_folder), output_dir=out, repo_id=repo_id,
+        episodes_per_object=cfg.demo_episodes, objects=cfg.demo_objects,
+        joint_calibration_rad=recipe.demos.joint_calibration_rad,
+        num_envs=min(recipe.demos.num_envs, _ENVS_PER_OBJECT * n_objects), resume=provenance.path(out).is_file(),
+    )  # fmt: skip
+    print(f"demos: {'resuming' if collect.resume else 'collecting'} {cfg.demo_episodes} curated episodes per object ({n_objects} objects) from "
+          f"{collect.teacher.name} into {out}", flush=True)  # fmt: skip
+    collection.collect(collect, command=f"blindgrasp-publish (preset {DEMO_RECIPE}'s demo settings)")
+    return out
 
 
 def repo_ids(namespace: str) -> dict[str, tuple[str, str]]:
@@ -127,10 +133,11 @@ def publish(cfg: PublishConfig) -> dict[str, str]:
     ids = repo_ids(cfg.namespace)
     staging = Path(cfg.staging_dir or tempfile.mkdtemp(prefix="blindgrasp_publish_"))
     staged = {name: stage_model(name, rid, staging) for name, (kind, rid) in ids.items() if kind == "model"}
-    ds, ds_kwargs, plan = push.prepare(cfg.demos, ids["demos"][1])
+    demos = cfg.demos or collect_demos(cfg, staging / "demos", ids["demos"][1])
+    ds, ds_kwargs, plan = push.prepare(demos, ids["demos"][1])
     for name, folder in staged.items():
         print(f"{name}: {folder} -> https://huggingface.co/{ids[name][1]}")
-    print(f"demos: {cfg.demos} ({ds.meta.total_episodes} episodes, {len(plan['files'])} files) -> "
+    print(f"demos: {demos} ({ds.meta.total_episodes} episodes, {len(plan['files'])} files) -> "
           f"https://huggingface.co/datasets/{ids['demos'][1]}")  # fmt: skip
     if cfg.dry_run:
         print("dry run: nothing uploaded")
@@ -150,10 +157,12 @@ def publish(cfg: PublishConfig) -> dict[str, str]:
 
 
 def main(argv=None) -> None:
+    from lerobot_blindgrasp.demos.config import CollectError
+
     cfg = parse_config(PublishConfig, argv)
     try:
         urls = publish(cfg)
-    except (project.PlaceholderURLError, push.PushError, shipped.ShippedError) as e:
+    except (project.PlaceholderURLError, push.PushError, shipped.ShippedError, CollectError) as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
     except push._network_errors() as e:

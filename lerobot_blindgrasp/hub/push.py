@@ -19,8 +19,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lerobot_blindgrasp import durable
+from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.hub import REPO_ID_PATTERN, cards
+from lerobot_blindgrasp.demos import dataset_card
+from lerobot_blindgrasp.project import REPO_ID_PATTERN
 
 # Not uploaded by LeRobot's push_to_hub (it ignores images/; state-only datasets have none anyway).
 _IGNORED_DIRS = ("images",)
@@ -59,9 +61,7 @@ def prepare(
     if json.loads((root / "meta" / "info.json").read_text()).get("total_episodes", 0) == 0:
         raise PushError(f"{root} has no episodes yet; nothing to upload")
     try:
-        kwargs = cards.card_kwargs(
-            root, repo_id, kind=kind, license=license, extra_tags=tags, operators=operators, notes=notes
-        )
+        kwargs = card_kwargs(root, repo_id, kind, license, tags, operators, notes)
     except (FileNotFoundError, ValueError) as e:
         raise PushError(str(e)) from None
     card = cards.build_card(kwargs, repo_id)
@@ -70,6 +70,20 @@ def prepare(
     ds = LeRobotDataset(repo_id, root=root, video_backend="pyav")  # reads local files only
     push_kwargs = {k: v for k, v in kwargs.items() if not k.startswith("_")}
     return ds, push_kwargs, upload_plan(root)
+
+
+def detect_kind(root: Path) -> str:
+    """'sim' for folders written by blindgrasp-collect-demos, else 'glove' (a lerobot-record dataset)."""
+    return "sim" if dataset_card.is_collection(root) else "glove"
+
+
+def card_kwargs(
+    root: Path, repo_id: str, kind=None, license=cards.DEFAULT_LICENSE, tags=None, operators=None, notes=""
+):
+    """The card's arguments for either kind of dataset (detected when not given)."""
+    if (kind or detect_kind(root)) == "sim":
+        return dataset_card.card_kwargs(root, repo_id, license=license, extra_tags=tags)
+    return cards.glove_card_kwargs(root, repo_id, operators, notes, license=license, extra_tags=tags)
 
 
 def push(ds, push_kwargs: dict, private: bool | None = None, branch: str | None = None) -> None:

@@ -29,6 +29,7 @@ from pathlib import Path
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.presets import student as student_presets
 from lerobot_blindgrasp.presets.glove import GlovePreset, get
 
@@ -140,28 +141,10 @@ def merged(sources: list[Path], dest: Path, repo_id: str) -> Path:
 def train_command(
     p: GlovePreset, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
 ) -> list[str]:
-    s = p.student
-    frames = student_presets.dataset_frames(dataset) if _complete(dataset) else None
-    sched = student_presets.schedule(s, frames)
-    exe = Path(sys.executable).parent / "lerobot-train"
-    cmd = [
-        str(exe) if exe.exists() else "lerobot-train",
-        "--policy.type=blindgrasp_transformer",
-        f"--policy.size={s.size}",
-        f"--dataset.repo_id={repo_id}",
-        f"--dataset.root={dataset}",
-        f"--output_dir={out}",
-        f"--steps={sched.steps}",
-        f"--batch_size={s.batch_size}",
-    ]
-    if sched.constant_lr_steps is not None:
-        cmd.append(f"--policy.scheduler_constant_steps={sched.constant_lr_steps}")
-    if s.lr is not None:
-        cmd.append(f"--policy.optimizer_lr={s.lr}")
-    return cmd + s.policy_flags + [
-        f"--save_freq={sched.steps}", f"--log_freq={max(1, sched.steps // 50)}", "--policy.push_to_hub=false",
-        f"--policy.device={device or s.device}", f"--num_workers={s.num_workers}", "--wandb.enable=false",
-        f"--seed={seed}"]  # fmt: skip
+    """lerobot-train of the preset's student on the merged recordings (the venv's lerobot-train, as run here)."""
+    cmd, _ = recipe.lerobot_train(p.student, dataset, repo_id, out, seed, device)
+    exe = Path(sys.executable).parent / cmd[0]
+    return [str(exe) if exe.exists() else cmd[0], *cmd[1:]]
 
 
 def run(cfg: GloveTrainConfig) -> Path:

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_blindgrasp import durable, spec
-from lerobot_blindgrasp.envs.sim_env import object_for_task_id
 from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp.sim.objects import object_for_task_id
 
 SIZE_PREFERENCE = ("medium", "large", "small")  # the medium objects are the paper's headline set
 

@@ -118,8 +118,15 @@ def collect(
 def student_train(
     p: presets.Preset, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
 ) -> tuple[list[str], presets.Schedule]:
-    """lerobot-train of the student; the step count (and LR schedule) follows from the dataset's frames."""
-    s = p.student
+    """lerobot-train of the preset's student; the step count (and LR schedule) follows from the dataset's frames."""
+    return lerobot_train(p.student, dataset, repo_id, out, seed, device)
+
+
+def lerobot_train(
+    s: presets.StudentStage, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
+) -> tuple[list[str], presets.Schedule]:
+    """lerobot-train of a student stage on a dataset (a sim demo set or glove recordings); the step count (and LR
+    schedule) follows from the dataset's frames once it is complete."""
     frames = presets.dataset_frames(dataset) if (dataset / "meta" / "info.json").exists() else None
     sched = presets.schedule(s, frames)
     cmd = [

@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 from lerobot_blindgrasp.presets import teacher
-from lerobot_blindgrasp.presets.teacher import TeacherPreset, Variant
+from lerobot_blindgrasp.presets.teacher_configs import TeacherPreset, Variant
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -46,11 +46,8 @@ def is_teacher_ablation(variant: Variant) -> bool:
 
 
 def _stages(settings: TeacherPreset) -> list[TeacherPreset]:
-    """The preset and every preset it continues (a staged recipe trains those first), latest first."""
-    chain = [settings]
-    while chain[-1].continues is not None:
-        chain.append(teacher.get_preset(chain[-1].continues[0]))
-    return chain
+    """The preset and every preset its staged recipe trains before it (`TeacherPreset.stages`)."""
+    return [settings, *(teacher.get_preset(name) for name, _ in settings.stages)]
 
 
 def _scripted_demos(settings: TeacherPreset) -> dict | None:
@@ -82,7 +79,7 @@ def teacher_words(preset: str, variant: Variant | dict | None, last_iteration: i
     what = " ".join([f"`{preset}`", *flags])
     if last_iteration is not None:
         what += f", iterations 0..{last_iteration}"
-    if preset not in teacher.PRESETS:
+    if preset not in teacher.TEACHER_PRESETS:
         return what + " (a preset this version does not have)"
     clones = has_scripted_cloning(teacher.get_preset(preset))
     return what + (", PPO with scripted-grasp cloning" if clones else ", PPO only (no cloning)")

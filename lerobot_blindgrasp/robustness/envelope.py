@@ -11,7 +11,7 @@ two-sided factors (gain, size, friction, servo gain) get a lower and an upper ed
 
 from __future__ import annotations
 
-from lerobot_blindgrasp.analysis import rates
+from lerobot_blindgrasp.results import rates
 
 THRESHOLD = 0.90
 

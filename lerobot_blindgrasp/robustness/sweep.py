@@ -5,8 +5,8 @@ beyond the training randomization, then several factors combined.
     blindgrasp-robustness --preset=smoke --output_dir=/tmp/rob             # what the tests run
     blindgrasp-robustness --factors=obs_latency,force_gain --output_dir=... # a subset
 
-Each point (one `DomainRandomization`, see `factors.py`) runs `episodes` evaluation episodes per object for the
-student and the teacher (`rollout.run_point`) and is saved as its own JSON under `<output_dir>/points/`, named by a
+Each point (one `DomainRandomization`, see `presets/robustness.py`) runs `episodes` evaluation episodes per object for the
+student and the teacher (`point.run_point`) and is saved as its own JSON under `<output_dir>/points/`, named by a
 hash of everything that decides its outcome (condition, objects, episodes, seed, both checkpoints' SHA-256, the
 sim's source fingerprint). A re-run with the same arguments skips the points already there, so a killed sweep
 continues where it stopped. After every point the summary is rewritten (summary.json, summary.md, envelope.md for
@@ -26,18 +26,14 @@ from pathlib import Path
 from tqdm import tqdm
 
 from lerobot_blindgrasp import durable, spec
-from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.cli import command_line, parse_config
-from lerobot_blindgrasp.robustness import envelope, factors
+from lerobot_blindgrasp.presets import robustness as factors
+from lerobot_blindgrasp.presets.robustness import SWEEPS
+from lerobot_blindgrasp.results import rates
+from lerobot_blindgrasp.robustness import envelope
 from lerobot_blindgrasp.sim import objects
 
 log = logging.getLogger(__name__)
-
-PRESETS = {
-    # name: (episodes per object, objects, factor set)
-    "default": (10, "all", "default"),
-    "smoke": (1, "cuboid_a_medium,sphere_medium", "smoke"),
-}
 
 
 @dataclass
@@ -61,15 +57,15 @@ class RobustnessConfig:
     models_dir: Path | None = None
 
     def __post_init__(self):
-        if self.preset not in PRESETS:
-            raise ValueError(f"unknown preset {self.preset!r}; choose from {', '.join(PRESETS)}")
-        eps, objs, fset = PRESETS[self.preset]
-        self.episodes = self.episodes or eps
+        if self.preset not in SWEEPS:
+            raise ValueError(f"unknown preset {self.preset!r}; choose from {', '.join(SWEEPS)}")
+        sweep = SWEEPS[self.preset]
+        self.episodes = self.episodes or sweep.episodes
         if self.episodes < 1:
             raise ValueError(f"episodes must be >= 1, got {self.episodes}")
-        self.object_names = objects.resolve_objects(self.objects or objs)
+        self.object_names = objects.resolve_objects(self.objects or sweep.objects)
         spec.eval_env_seed(self.seed + self.episodes - 1, 0)
-        all_factors = factors.build_factors(fset)
+        all_factors = sweep.factors()
         if self.factors:
             wanted = [x.strip() for x in self.factors.split(",") if x.strip()]
             known = {f.name for f in all_factors}
@@ -115,14 +111,15 @@ def run(cfg: RobustnessConfig, command: str = "") -> dict:
     """Run (or continue) the sweep; returns the summary it wrote. `command`: the command line, for the records."""
     import torch
 
-    from lerobot_blindgrasp.robustness.rollout import Student, run_point
+    from lerobot_blindgrasp.robustness.point import run_point
+    from lerobot_blindgrasp.rollout.actors import StudentActor
     from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     student_path = Path(cfg.student or default_student(cfg.models_dir))
-    student = Student.load(student_path, cfg.object_names)
+    student = StudentActor.load(student_path, cfg.object_names)
     teacher = TeacherPolicy(cfg.teacher or default_teacher())
     context = {
         "objects": list(cfg.object_names),

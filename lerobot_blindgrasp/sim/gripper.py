@@ -144,20 +144,7 @@ def gripper_mjcf(object_xml: str, options: PhysicsOptions | None = None, servo: 
         f'{o.torque_limit}" ctrlrange="{spec.JOINT_LOWER[k]:.4f} {spec.JOINT_UPPER[k]:.4f}"/>'
         for k, j in enumerate(spec.JOINT_NAMES)
     )
-    sensors = []
-    for f in spec.FINGERS:
-        sensors += [
-            f'<contact name="{f}_contact" geom1="{f}_tipgeom" data="force" reduce="netforce"/>',
-            # the same, restricted to the object: lets shaping tell a touch on the object from a push on the table
-            f'<contact name="{f}_objcontact" geom1="{f}_tipgeom" geom2="object_geom" data="force" reduce="netforce"/>',
-            f'<force name="{f}_force" site="{f}_loadcell"/>',
-            f'<torque name="{f}_torque" site="{f}_loadcell"/>',
-            f'<framepos name="{f}_pos" objtype="site" objname="{f}_tipsite"/>',
-            f'<framequat name="{f}_quat" objtype="site" objname="{f}_tipsite"/>',
-            f'<framezaxis name="{f}_zaxis" objtype="site" objname="{f}_loadcell"/>',
-            # distance from the tip END (where the axial load cell reads pushes) to the object, for the reach term
-            f'<distance name="{f}_objdist" geom1="{f}_tipend" geom2="object_geom" cutoff="0.3"/>',
-        ]
+    sensors = "".join(_sensors_xml(f) for f in spec.FINGERS)
     table_aff = _OBJECT_BIT | sum(_FINGER_BITS)
     return f"""
 <mujoco model="blindgrasp_dclaw">
@@ -195,8 +182,26 @@ def gripper_mjcf(object_xml: str, options: PhysicsOptions | None = None, servo: 
     {object_xml}
   </worldbody>
   <actuator>{actuators}</actuator>
-  <sensor>{"".join(sensors)}</sensor>
+  <sensor>{sensors}</sensor>
 </mujoco>"""
+
+
+def _sensors_xml(f: str) -> str:
+    """Finger f's sensors: tip contact forces, the load cell's wrench, the tip's pose, its distance to the object."""
+    return "".join(
+        [
+            f'<contact name="{f}_contact" geom1="{f}_tipgeom" data="force" reduce="netforce"/>',
+            # the same, restricted to the object: lets shaping tell a touch on the object from a push on the table
+            f'<contact name="{f}_objcontact" geom1="{f}_tipgeom" geom2="object_geom" data="force" reduce="netforce"/>',
+            f'<force name="{f}_force" site="{f}_loadcell"/>',
+            f'<torque name="{f}_torque" site="{f}_loadcell"/>',
+            f'<framepos name="{f}_pos" objtype="site" objname="{f}_tipsite"/>',
+            f'<framequat name="{f}_quat" objtype="site" objname="{f}_tipsite"/>',
+            f'<framezaxis name="{f}_zaxis" objtype="site" objname="{f}_loadcell"/>',
+            # distance from the tip END (where the axial load cell reads pushes) to the object, for the reach term
+            f'<distance name="{f}_objdist" geom1="{f}_tipend" geom2="object_geom" cutoff="0.3"/>',
+        ]
+    )
 
 
 OBJECT_CONTYPE = _OBJECT_BIT

@@ -44,7 +44,7 @@ import numpy as np  # noqa: E402
 
 from lerobot_blindgrasp import spaces, spec  # noqa: E402
 from lerobot_blindgrasp.sim import objects, randomization  # noqa: E402
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
 
 GYM_ID = "lerobot_blindgrasp/BlindGrasp-v0"
 # The scene's offscreen framebuffer (sim/gripper.py, <visual><global offwidth offheight>) bounds render sizes.
@@ -54,7 +54,7 @@ _MAX_SEED = spec.EVAL_TASK_STRIDE  # reset seeds are per-object evaluation indic
 
 def start_seed(seed: int, object_name: str) -> int:
     """The env seed of evaluation index `seed` on `object_name`: distinct per object, inside the eval range."""
-    return spec.eval_env_seed(seed, list(objects.CATALOGUE).index(objects.get_object(object_name).name))
+    return spec.eval_env_seed(seed, objects.task_id(object_name))
 
 
 class BlindGraspGymEnv(gym.Env):

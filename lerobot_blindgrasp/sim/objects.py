@@ -153,6 +153,18 @@ def resolve_objects(names: str | list[str] | tuple[str, ...] | None) -> tuple[st
     return out
 
 
+def task_id(object_name: str) -> int:
+    """An object's catalogue index: its lerobot-eval task_id (`per_task`) and its evaluation seed block."""
+    return list(CATALOGUE).index(get_object(object_name).name)
+
+
+def object_for_task_id(tid: int) -> str:
+    names = list(CATALOGUE)
+    if not 0 <= tid < len(names):
+        raise ValueError(f"task_id {tid} out of range: the catalogue has {len(names)} objects")
+    return names[tid]
+
+
 def object_mjcf(obj: ObjectSpec, contype: int, conaffinity: int, friction: float = 1.0) -> str:
     # The spawn rotation goes on the body, not the geom: every object then has the same sparsity layout, which
     # `mujoco.batch` needs to step models of different objects together.

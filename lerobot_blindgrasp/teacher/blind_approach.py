@@ -26,13 +26,12 @@ telling the policy (training, demo collection, evaluation); the tests check it a
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-
 import numpy as np
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.presets.teacher_configs import BLIND_GROUP as GROUP
+from lerobot_blindgrasp.presets.teacher_configs import ActorInput, reads_blind_group  # noqa: F401  (re-exported)
 
-GROUP = "privileged_blind"  # the observation group (rsl-rl obs_groups) of the masked vector
 HIDDEN = ("object_pos", "object_quat", "object_linvel", "object_angvel", "object_planar_distance")
 TOUCH_N = 2.0  # 4 sigma of the load cells' 0.5 N noise (spec.FORCE_NOISE_STD_N): above it, a touch
 _UNIAXIAL = spec.PRIVILEGED_SLICES["uniaxial_force"]
@@ -41,31 +40,6 @@ _JOINTS = spec.PRIVILEGED_SLICES["joint_pos"]
 _TIP_POS = spec.PRIVILEGED_SLICES["fingertip_pos"]
 _TIP_QUAT = spec.PRIVILEGED_SLICES["fingertip_quat"]
 _HIDDEN_COLUMNS = np.concatenate([np.arange(spec.PRIVILEGED_DIM)[spec.PRIVILEGED_SLICES[n]] for n in HIDDEN])
-
-
-@dataclass(frozen=True)
-class ActorInput:
-    """What a blind-approach teacher's actor is denied beyond the object before a touch (module docstring)."""
-
-    reveal_delay_steps: int = 0  # control steps of touch before the object is revealed (0: at the touch)
-    fingertips_from_joints: bool = False  # fingertip poses from the measured joints' kinematics, not the true ones
-
-    def __post_init__(self):
-        if self.reveal_delay_steps < 0:
-            raise ValueError(f"reveal_delay_steps must be >= 0, got {self.reveal_delay_steps}")
-
-    def as_record(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_record(cls, record: dict | None) -> ActorInput:
-        """From teacher_config.json's "actor_input" (absent in teachers made before it: the first blind teacher)."""
-        return cls(**(record or {}))
-
-
-def reads_blind_group(obs_groups: dict[str, list[str]]) -> bool:
-    """Whether any model of an rsl-rl `obs_groups` config reads GROUP (only then is it worth computing)."""
-    return any(GROUP in groups for groups in obs_groups.values())
 
 
 def first_steps(priv: np.ndarray) -> np.ndarray:

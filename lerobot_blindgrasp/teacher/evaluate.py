@@ -23,12 +23,13 @@ import torch
 from tqdm import tqdm
 
 from lerobot_blindgrasp import durable, platform_id, spec
-from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.results import rates
+from lerobot_blindgrasp.rollout.actors import TeacherActor
+from lerobot_blindgrasp.rollout.envs import make_env
+from lerobot_blindgrasp.rollout.loop import run_batch
 from lerobot_blindgrasp.sim import objects, rewards
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
 from lerobot_blindgrasp.sim.gym_env import start_seed
-from lerobot_blindgrasp.sim.randomization import EVAL_DR
 from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, default_teacher
 
 MODES = ("deterministic", "stochastic")
@@ -63,7 +64,7 @@ class EvalTeacherConfig:
 # sim/ modules that no policy episode runs: the scripted grasps (physics checks, cloning targets) and the sim demo
 # CLI. Editing them must not invalidate the recorded evals (a new script once forced the main job to re-evaluate
 # the shipped teacher).
-NOT_IN_EPISODES = ("scripted.py", "demo.py")
+NOT_IN_EPISODES = ("scripted.py", "viewer.py")
 
 
 def sim_fingerprint(root: Path | None = None) -> str:
@@ -103,30 +104,10 @@ def _without_docstrings(tree):
 
 
 def _run_object(teacher: TeacherPolicy, name: str, episodes: int, seed: int, mode: str, reward_cfg) -> tuple:
-    """One object's episodes in one batch: env k has seed start_seed(seed + k, name), episode 0, as the gym env."""
-    env = BatchedGraspEnv(
-        GraspEnvConfig(
-            num_envs=episodes,
-            objects=(name,),
-            seed=start_seed(seed, name),
-            dr=EVAL_DR,
-            reward=reward_cfg,
-            autoreset=False,
-        )
-    )
-    obs = env.reset()
-    alive = np.ones(episodes, dtype=bool)
-    success = np.zeros(episodes, dtype=bool)
-    max_lift = np.zeros(episodes)
-    for _ in range(env.max_episode_steps):
-        obs, _, term, trunc, info = env.step(teacher(obs, stochastic=mode == "stochastic"))
-        success |= info["success"] & alive
-        max_lift = np.where(alive, np.maximum(max_lift, info["lift"]), max_lift)
-        alive &= ~(term | trunc)
-        if not alive.any():
-            break
-    env.close()
-    return success, max_lift
+    """One object's episodes in one batch, on evaluation indices seed .. seed + episodes - 1, as the gym env."""
+    env = make_env("eval", (name,), episodes=episodes, seed=seed, reward=reward_cfg)
+    done = run_batch(env, TeacherActor(teacher, stochastic=mode == "stochastic"))
+    return np.array([e.success for e in done]), np.array([e.max_lift for e in done])
 
 
 def evaluate(cfg: EvalTeacherConfig) -> tuple[dict, Path]:

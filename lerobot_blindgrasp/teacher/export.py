@@ -18,9 +18,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp import durable
+from lerobot_blindgrasp import durable, project
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.hub import project
 from lerobot_blindgrasp.teacher import policy
 
 CARD_NAME = "README.md"
@@ -103,7 +102,7 @@ used to collect the curated demonstrations the `blindgrasp_transformer` student 
 - `teacher_config.json`: preset, reward, PPO settings, observation layout, source checkpoint `{w["source_checkpoint"]}`
   (sha256 `{w["source_sha256"]}`).
 
-Use it (`pip install {PACKAGE}`):
+Use it (`{project.install_line()}`):
 
     blindgrasp-eval-teacher --teacher=THIS_FOLDER --episodes=20
     blindgrasp-collect-demos --teacher=THIS_FOLDER --output_dir=runs/demos --repo_id=you/blindgrasp_demos

@@ -19,8 +19,6 @@ import contextlib
 import dataclasses
 import json
 import logging
-import os
-import re
 import shutil
 import sys
 import time
@@ -33,29 +31,44 @@ from tqdm import tqdm
 from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_config, sleeping_openmp_threads
 from lerobot_blindgrasp.presets import SHIPPED_TEACHER_PRESET
-from lerobot_blindgrasp.presets import teacher as presets
-from lerobot_blindgrasp.sim import randomization
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
+from lerobot_blindgrasp.presets.teacher import get_preset
+from lerobot_blindgrasp.presets.teacher_configs import TeacherPreset, Variant
+from lerobot_blindgrasp.rollout.envs import env_config
+from lerobot_blindgrasp.sim import objects, randomization
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.teacher import blind_approach, distributed
+from lerobot_blindgrasp.teacher.checkpoints import atomic_save, export, newest_loadable_checkpoint
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME, latest_checkpoint, observation_layout
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
 log = logging.getLogger("blindgrasp.teacher")
-# teacher_config.json keys added after runs were made, with the value those runs had
-_DEFAULTS = {"actor_input": blind_approach.ActorInput().as_record(), "joint_calibration_rad": 0.0}
+# teacher_config.json keys that must match for a run to resume: they decide what is trained
+RESUME_KEYS = (
+    "preset",
+    "variant",
+    "num_envs",
+    "runner",
+    "reward",
+    "object_weights",
+    "actor_input",
+    "joint_calibration_rad",
+)
 
 
 def build_env_config(
-    preset: presets.TeacherPreset, num_envs: int, seed: int, nthread: int = 0, backend: str = "batch"
+    preset: TeacherPreset, num_envs: int, seed: int, nthread: int = 0, backend: str = "batch"
 ) -> GraspEnvConfig:
     dr = randomization.PAPER_DR if preset.external_force else randomization.EVAL_DR
     if preset.joint_calibration_rad:
         dr = dataclasses.replace(dr, joint_calibration_rad=preset.joint_calibration_rad)
-    return GraspEnvConfig(
+    return env_config(
+        "train",
+        objects.PAPER_OBJECTS,
         num_envs=num_envs,
         seed=seed,
-        reward=preset.reward,
         dr=dr,
+        reward=preset.reward,
         nthread=nthread,
         object_weights=preset.object_weights,
         backend=backend,
@@ -91,19 +104,21 @@ class TrainTeacherConfig:
         if self.output_dir is None:
             raise ValueError("--output_dir is required (the run directory; re-running with it resumes)")
         self.output_dir = Path(self.output_dir)
-        presets.get_preset(self.preset)  # unknown preset: a clear error before anything heavy
+        get_preset(self.preset)  # unknown preset: a clear error before anything heavy
 
 
 def train(cfg: TrainTeacherConfig) -> Path:
-    preset = presets.Variant(no_incentive=cfg.no_incentive, student_obs=cfg.student_obs).apply(
-        presets.get_preset(cfg.preset)
-    )
+    """Train the preset (first the stages of a staged one) in cfg.output_dir; returns the last checkpoint."""
+    preset = Variant(no_incentive=cfg.no_incentive, student_obs=cfg.student_obs).apply(get_preset(cfg.preset))
     num_envs = cfg.num_envs or preset.num_envs
-    iterations = cfg.iterations or preset.max_iterations
+    if preset.stages and newest_loadable_checkpoint(cfg.output_dir) is None:
+        _train_stages(cfg, preset.stages)
+    return _train_one(cfg, preset, num_envs, cfg.iterations or preset.max_iterations)
+
+
+def _train_one(cfg: TrainTeacherConfig, preset: TeacherPreset, num_envs: int, iterations: int) -> Path:
     spec.check_seeds("teacher_train", cfg.seed, num_envs)
     out = cfg.output_dir
-    if preset.continues and newest_loadable_checkpoint(out) is None:
-        _train_previous_stage(cfg, *preset.continues)
     out.mkdir(parents=True, exist_ok=True)
     device = cfg.device or distributed.default_device()
     rank_envs, rank_seed = distributed.split_envs(num_envs, cfg.seed)  # (num_envs, seed) outside torchrun
@@ -112,8 +127,43 @@ def train(cfg: TrainTeacherConfig) -> Path:
     # While acting, torch runs small forward passes between physics steps: OpenMP threads that spin there while
     # MuJoCo's threads hold the cores made collection 2-3x slower on a busy 2-core machine, so acting keeps one.
     torch.set_num_threads(cfg.torch_threads)
+    _check_or_write_config(out, _run_config(cfg, preset, num_envs, iterations), lead)
+    env = BatchedGraspEnv(build_env_config(preset, rank_envs, rank_seed, cfg.threads, cfg.backend))
+    bar = tqdm(total=iterations, desc=f"teacher[{preset.name}]", unit="it", dynamic_ncols=True)
+    runner, done_its = _runner(cfg, preset, env, device, bar)
+    remaining = iterations - done_its
+    t0 = time.time()
+    interrupted = _learn(runner, out, remaining, lead, bar)
+    wall = time.time() - t0
+    # A resume that finds every iteration done runs none: its count is the checkpoint's, not one past it.
+    completed = runner.current_learning_iteration + 1 if remaining > 0 else done_its
+    final = latest_checkpoint(out)
+    if not lead:
+        return final
+    if cfg.export:
+        export(runner, out / "exported")
+    write_learning_curve(out)
+    steps = (completed - done_its) * preset.runner["num_steps_per_env"] * num_envs
+    summary = {
+        "checkpoint": str(final),
+        "iterations": completed,
+        "interrupted": interrupted,
+        "wall_clock_s_this_session": wall,
+        "env_steps_this_session": steps,
+        "env_steps_per_s": steps / max(wall, 1e-9),
+        "physics_resets": env.physics_resets,
+    }
+    durable.atomic_write_json(out / "train_summary.json", summary, indent=2)  # last: marks the run finished
+    print(json.dumps(summary, indent=2))
+    if interrupted:
+        print(f"interrupted: saved {final}; run the same command to resume", file=sys.stderr)
+        raise SystemExit(130)
+    return final
 
-    config = {
+
+def _run_config(cfg: TrainTeacherConfig, preset: TeacherPreset, num_envs: int, iterations: int) -> dict:
+    """What teacher_config.json records of a run: every setting that decides it, and the command."""
+    return {
         "preset": preset.name,
         "variant": {"no_incentive": cfg.no_incentive, "student_obs": cfg.student_obs},
         "num_envs": num_envs,
@@ -131,27 +181,22 @@ def train(cfg: TrainTeacherConfig) -> Path:
         "observation_layout": observation_layout(),
         "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
     }
+
+
+def _check_or_write_config(out: Path, config: dict, lead: bool) -> None:
+    """A new run records its config; a resumed one must have been started with the same RESUME_KEYS."""
     cfg_path = out / CONFIG_NAME
     if cfg_path.exists():
         old = json.loads(cfg_path.read_text())
-        for key in (
-            "preset",
-            "variant",
-            "num_envs",
-            "runner",
-            "reward",
-            "object_weights",
-            "actor_input",
-            "joint_calibration_rad",
-        ):
-            # runs made before a key existed had its default
-            if old.get(key, _DEFAULTS.get(key)) != config[key]:
+        for key in RESUME_KEYS:
+            if old.get(key) != config[key]:
                 raise SystemExit(f"{out} holds a run with a different {key!r}; use another --output_dir")
     elif lead:
         durable.atomic_write_json(cfg_path, config, indent=2)
 
-    env = BatchedGraspEnv(build_env_config(preset, rank_envs, rank_seed, cfg.threads, cfg.backend))
-    bar = tqdm(total=iterations, desc=f"teacher[{preset.name}]", unit="it", dynamic_ncols=True)
+
+def _runner(cfg: TrainTeacherConfig, preset: TeacherPreset, env: BatchedGraspEnv, device: str, bar):
+    """rsl-rl's runner on the env, resumed from the newest loadable checkpoint. Returns (runner, iterations done)."""
     steps_per_it = preset.runner["num_steps_per_env"]
     counter = {"steps": 0}
 
@@ -162,100 +207,41 @@ def train(cfg: TrainTeacherConfig) -> Path:
 
     reads_blind = blind_approach.reads_blind_group(preset.runner["obs_groups"])
     vec = RslRlGraspEnv(env, device=device, on_step=tick, blind_group=preset.actor_input if reads_blind else None)
-    runner = distributed.runner_class(device)(vec, preset.runner_cfg(), log_dir=str(out), device=device)
+    runner = distributed.runner_class(device)(vec, preset.runner_cfg(), log_dir=str(cfg.output_dir), device=device)
     runner.alg.update = with_torch_threads(runner.alg.update, update_thread_count(cfg, env))
     runner.save = atomic_save(runner.save)
-    ckpt = newest_loadable_checkpoint(out)
-    done_its = 0
-    if ckpt is not None:
-        runner.load(str(ckpt))
-        done_its = runner.current_learning_iteration + 1
-        runner.current_learning_iteration = done_its
-        if hasattr(runner.alg, "bc_iteration"):  # the scripted-demo cloning's decay continues where it stopped
-            runner.alg.bc_iteration = done_its
-        bar.update(done_its)
-        log.info("resuming from %s (iteration %d)", ckpt, done_its)
-    remaining = iterations - done_its
+    ckpt = newest_loadable_checkpoint(cfg.output_dir)
+    if ckpt is None:
+        return runner, 0
+    runner.load(str(ckpt))
+    done_its = runner.current_learning_iteration + 1
+    runner.current_learning_iteration = done_its
+    if hasattr(runner.alg, "bc_iteration"):  # the scripted-demo cloning's decay continues where it stopped
+        runner.alg.bc_iteration = done_its
+    bar.update(done_its)
+    log.info("resuming from %s (iteration %d)", ckpt, done_its)
+    return runner, done_its
+
+
+def _learn(runner, out: Path, remaining: int, lead: bool, bar) -> bool:
+    """`remaining` PPO iterations, rsl-rl's per-iteration table going to the console log. Returns whether it was
+    interrupted (SIGINT, SIGTERM, SIGHUP: a checkpoint is saved first)."""
     console = open(out / ("train_console.log" if lead else f"train_console_rank{distributed.world()[1]}.log"), "a")
-    t0 = time.time()
-    interrupted = False
     try:
         # SIGTERM/SIGHUP (a job scheduler, a closed terminal) behave like Ctrl-C: save and exit.
         with interrupts_as_keyboard_interrupt(), contextlib.redirect_stdout(console):
-            if remaining > 0:  # rsl-rl prints a table per iteration; it goes to the console log
+            if remaining > 0:
                 # Random episode lengths on resume too: otherwise every env restarts at step 0 and, for a few
                 # iterations, all of them are in the same phase of the episode (dips in the training curve).
                 runner.learn(remaining, init_at_random_ep_len=True)
     except KeyboardInterrupt:
-        interrupted = True
         if lead:
             runner.save(str(out / f"model_{runner.current_learning_iteration}.pt"))
+        return True
     finally:
         console.close()
         bar.close()
-    wall = time.time() - t0
-    # A resume that finds every iteration done runs none: its count is the checkpoint's, not one past it.
-    completed = runner.current_learning_iteration + 1 if remaining > 0 else done_its
-    its_run = completed - done_its
-    final = latest_checkpoint(out)
-    if not lead:
-        return final
-    if cfg.export:
-        export(runner, out / "exported")
-    write_learning_curve(out)
-    summary = {
-        "checkpoint": str(final),
-        "iterations": completed,
-        "interrupted": interrupted,
-        "wall_clock_s_this_session": wall,
-        "env_steps_this_session": its_run * steps_per_it * num_envs,
-        "env_steps_per_s": its_run * steps_per_it * num_envs / max(wall, 1e-9),
-        "physics_resets": env.physics_resets,
-    }
-    durable.atomic_write_json(out / "train_summary.json", summary, indent=2)  # last: marks the run finished
-    print(json.dumps(summary, indent=2))
-    if interrupted:
-        print(f"interrupted: saved {final}; run the same command to resume", file=sys.stderr)
-        raise SystemExit(130)
-    return final
-
-
-def atomic_save(save):
-    """rsl-rl's `OnPolicyRunner.save(path, infos)` (a plain torch.save, in place) made atomic: it writes a temp file
-    beside `path`, which is renamed over `path` once complete."""
-
-    def save_atomically(path, infos=None):
-        with durable.atomic_path(path) as tmp:
-            save(str(tmp), infos)
-
-    return save_atomically
-
-
-def newest_loadable_checkpoint(run_dir: Path) -> Path | None:
-    """The newest model_<it>.pt that torch can read. Newer ones that cannot be read are renamed `<name>.corrupt`
-    (kept for inspection, out of the way of every later resume) with a warning; killed saves' temp files go.
-    Under torchrun only rank 0 renames or deletes; the other ranks skip the same files."""
-    lead = distributed.world()[1] == 0
-    if lead:
-        for stale in durable.remove_stale_temps(run_dir):
-            log.info("removed %s, the temp file of a save that was killed", stale)
-    ckpts = sorted(Path(run_dir).glob("model_*.pt"), key=lambda p: int(re.findall(r"\d+", p.stem)[-1]))
-    for ckpt in reversed(ckpts):
-        try:
-            torch.load(ckpt, map_location="cpu", weights_only=False)
-            return ckpt
-        except Exception as e:  # noqa: BLE001  (truncated zip, bad pickle, I/O error: all mean "cannot resume here")
-            why = f"{type(e).__name__}: {str(e).splitlines()[0][:200] if str(e) else ''}"
-            if lead:
-                aside = ckpt.with_name(ckpt.name + ".corrupt")
-                os.replace(ckpt, aside)
-                log.warning(
-                    "checkpoint %s cannot be read (%s); set aside as %s, resuming from the one before",
-                    ckpt,
-                    why,
-                    aside.name,
-                )
-    return None
+    return False
 
 
 def update_thread_count(cfg, env) -> int:
@@ -280,19 +266,28 @@ def with_torch_threads(update, threads: int):
     return threaded
 
 
-def _train_previous_stage(cfg: TrainTeacherConfig, name: str, iterations: int) -> None:
-    """A staged preset starts from another preset's checkpoint (`TeacherPreset.continues`): train that one first,
-    with the same seed, envs and variant, in <output_dir>/stages/<name> (which resumes like any run), then start
-    this run from its last checkpoint."""
-    final = train(
-        dataclasses.replace(
-            cfg, preset=name, iterations=iterations, export=False, output_dir=cfg.output_dir / "stages" / name
-        )
-    )
-    if distributed.world()[1] == 0:  # under torchrun one rank copies; the others must not read a half-written file
-        cfg.output_dir.mkdir(parents=True, exist_ok=True)
-        with durable.atomic_path(cfg.output_dir / final.name) as tmp:  # a kill mid-copy leaves no half checkpoint
-            shutil.copy2(final, tmp)
+def _train_stages(cfg: TrainTeacherConfig, stages: tuple[tuple[str, int], ...]) -> None:
+    """A staged preset starts from its last stage's checkpoint (`TeacherPreset.stages`): train each stage in order,
+    with the same seed, envs and variant, in <output_dir>/stages/<name> (which resumes like any run), each from the
+    previous stage's last checkpoint; then start this run from the last one's."""
+    previous = None
+    for name, iterations in stages:
+        folder = cfg.output_dir / "stages" / name
+        if previous is not None and newest_loadable_checkpoint(folder) is None:
+            _copy_checkpoint(previous, folder)
+        stage = dataclasses.replace(cfg, preset=name, iterations=iterations, export=False, output_dir=folder)
+        preset = Variant(no_incentive=cfg.no_incentive, student_obs=cfg.student_obs).apply(get_preset(name))
+        previous = _train_one(stage, preset, cfg.num_envs or preset.num_envs, iterations)
+    _copy_checkpoint(previous, cfg.output_dir)
+
+
+def _copy_checkpoint(ckpt: Path, folder: Path) -> None:
+    """`ckpt` into `folder`, where the next stage resumes from it. Under torchrun one rank copies; the others must
+    not read a half-written file (a kill mid-copy leaves no half checkpoint either)."""
+    if distributed.world()[1] == 0:
+        folder.mkdir(parents=True, exist_ok=True)
+        with durable.atomic_path(folder / ckpt.name) as tmp:
+            shutil.copy2(ckpt, tmp)
     if torch.distributed.is_initialized():
         # The next stage's runner keeps this process group (distributed.runner_class's gloo runner does not open a
         # second one). Closing and reopening it raced in CI. rsl-rl's own NCCL runner would try to open a second
@@ -302,23 +297,11 @@ def _train_previous_stage(cfg: TrainTeacherConfig, name: str, iterations: int) -
 
 def write_learning_curve(run_dir: Path) -> None:
     """learning_curve.png in the run directory, from its TensorBoard scalars."""
-    from lerobot_blindgrasp.analysis.plots import plot_curves, teacher_curves
+    from lerobot_blindgrasp.results.plots import plot_curves, teacher_curves
 
     curves = teacher_curves(run_dir)
     if curves:
         plot_curves(run_dir / "learning_curve.png", curves, f"Teacher PPO ({run_dir.name})")
-
-
-def export(runner, path: Path) -> None:
-    """TorchScript and ONNX of the actor's mean (the deterministic teacher), via rsl-rl's exporters."""
-    # rsl-rl's exporters write in place; they write temp files here that are renamed once complete.
-    with durable.atomic_path(path / "teacher.pt") as tmp:
-        runner.export_policy_to_jit(str(path), tmp.name)
-    try:
-        with durable.atomic_path(path / "teacher.onnx") as tmp:
-            runner.export_policy_to_onnx(str(path), tmp.name)
-    except Exception as e:  # ONNX export depends on optional onnxscript versions; JIT is enough for us
-        log.warning("ONNX export failed: %s", e)
 
 
 def main(argv=None) -> None:

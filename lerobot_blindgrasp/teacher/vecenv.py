@@ -16,7 +16,7 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.sim.env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 from lerobot_blindgrasp.teacher.blind_approach import ActorInput, BlindGroup
 
 

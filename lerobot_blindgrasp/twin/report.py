@@ -6,7 +6,7 @@ OUT is what `docs/results/twin/measure.sh` fills: `real_trials.jsonl` (the real 
 trial that ended), `stops.jsonl` (trials the real stack's safety latch ended: a failure, with its error) and
 `twin.log`. Trials are keyed by their evaluation index (lerobot-eval's seed), so the result pairs with a
 `--env.type=blindgrasp` run of the same seed: `eval_info.json` is written in lerobot-eval's per_task layout for
-`analysis/compare.py`.
+`results/compare.py`.
 """
 
 from __future__ import annotations

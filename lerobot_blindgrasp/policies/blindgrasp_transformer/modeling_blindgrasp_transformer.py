@@ -35,8 +35,7 @@ from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch import Tensor, nn
 
-from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hub import project
+from lerobot_blindgrasp import project, spec
 
 from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
 from .processor_blindgrasp_transformer import Q_NOW, normalized_delta_to_target
@@ -52,7 +51,7 @@ This policy type comes from a LeRobot plugin. Install it next to `lerobot` so th
 `blindgrasp_transformer` type (plugin discovery imports `{PACKAGE}`; no extra flag is needed):
 
 ```bash
-pip install {PACKAGE}
+{{install}}
 ```
 
 Then, for example, evaluate it in the blindgrasp simulation:
@@ -244,7 +243,9 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         lines = card.text.split("\n")
         # After the card's title line, so the install step is the first thing a reader sees.
         at = next((i + 1 for i, line in enumerate(lines) if line.startswith("# ")), 0)
-        lines[at:at] = CARD_INSTALL.format(repo_id=repo_id, code_line=project.code_line()).split("\n")
+        lines[at:at] = CARD_INSTALL.format(
+            repo_id=repo_id, install=project.install_line(), code_line=project.code_line()
+        ).split("\n")
         card.text = "\n".join(lines)
         return card
 

@@ -7,16 +7,20 @@
 - The project has no public home yet, so those URLs are placeholders under `example.invalid` (a domain reserved
   never to resolve). `require_public_urls()` refuses `blindgrasp-publish` while any of them still is one, and
   `code_line()` never writes one into a card.
+- The install line every card gives (`install_line()`) installs from that Source with pip's `git+` form: the
+  distribution is not on the package index, where `pip install lerobot_policy_blindgrasp` finds nothing.
 - `HUB_REPOS`: the Hub repo names of the shipped teacher, student and demo dataset (`blindgrasp-publish`).
 """
 
 from __future__ import annotations
 
 import importlib.metadata
+import re
 
+# The shape of a Hub repo id, checked before anything is written or uploaded.
+REPO_ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*/[A-Za-z0-9][A-Za-z0-9_.-]*$")
 DIST = "lerobot_policy_blindgrasp"  # LeRobot's plugin discovery imports the module named like the distribution
 PLACEHOLDER_HOST = "example.invalid"
-INSTALL = f"pip install {DIST}"
 # The Hub repo names, under the namespace given to `blindgrasp-publish --namespace=`: folder under models/ (or
 # "demos" for the dataset) -> (repo type, repo name).
 HUB_REPOS = {
@@ -70,3 +74,15 @@ def code_line() -> str:
         return (f"Code: the `{DIST}` package (importable as `lerobot_blindgrasp`); its public source location is "
                 "not set yet.")  # fmt: skip
     return f"Code, guides and issues: {src} (package `{DIST}`, importable as `lerobot_blindgrasp`)."
+
+
+def install_line() -> str:
+    """The shell line that installs the plugin, for a card: from the public Source with pip's `git+` form, or, while
+    that is a placeholder, the wheel built from the code (nothing else installs it: it is not on the index)."""
+    from lerobot_blindgrasp import __version__
+
+    src = source_url()
+    if is_placeholder(src):
+        return (f"pip install dist/{DIST}-{__version__}-py3-none-any.whl   # built from the code by python -m build; "
+                "not on the package index")  # fmt: skip
+    return f'pip install "{DIST} @ git+{src}"'

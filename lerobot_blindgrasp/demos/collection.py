@@ -33,8 +33,10 @@ from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, records
 from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
 from lerobot_blindgrasp.demos.records import CollectStats
-from lerobot_blindgrasp.demos.rollout import Episode, run_episodes
-from lerobot_blindgrasp.hub import REPO_ID_PATTERN
+from lerobot_blindgrasp.project import REPO_ID_PATTERN
+from lerobot_blindgrasp.rollout.actors import TeacherActor
+from lerobot_blindgrasp.rollout.envs import make_env
+from lerobot_blindgrasp.rollout.loop import Episode, stream
 from lerobot_blindgrasp.sim import randomization
 
 logger = logging.getLogger(__name__)
@@ -44,6 +46,9 @@ logger = logging.getLogger(__name__)
 # of every step until the next object finishes, usually hundreds of steps later. At 0.5, a 30-minute cpu run spent
 # ~19 % of its rollouts on objects that were already done.
 REBUILD_WASTE_FRACTION = 0.25
+
+# What a demo episode keeps of each step: o_t, the commanded targets, r_t and the forces (for curation).
+DEMO_TRACES = ("state", "action", "task_reward", "uniaxial_force")
 
 STOP_NOTE = "finishing this step and finalizing the dataset (again to abort now; written episodes stay readable)"
 
@@ -101,100 +106,120 @@ def collect(
 
 def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: str | None) -> CollectStats:
     import datasets
-    import torch
-    from tqdm import tqdm
 
-    from lerobot_blindgrasp.sim import rewards
-
-    teacher, object_names = _check_inputs(cfg)
-    try:  # the teacher's own reward settings: r_t must be the task reward it was trained on
-        reward_cfg = rewards.RewardConfig.from_record(teacher.config["reward"])
-    except (KeyError, TypeError) as e:
-        raise CollectError(f"teacher config has no usable reward settings: {e}") from None
-    dr = dataclasses.replace(randomization.EVAL_DR, joint_calibration_rad=cfg.joint_calibration_rad)
-    ds, prov, tally = records.open_dataset(cfg, records.new_provenance(cfg, teacher, object_names, dr))
-
-    target, budget = cfg.episodes_per_object, cfg.rollout_budget
-    stats = CollectStats(tally=tally)
-    run = records.start_run(cfg, prov, command)
-    t_wall, t_cpu = time.perf_counter(), time.process_time()
-
-    def record_checkpoint(episodes: int) -> None:
-        stats.wall_s, stats.cpu_s = time.perf_counter() - t_wall, time.process_time() - t_cpu
-        records.checkpoint_run(cfg, prov, run, tally, stats)
-
-    saved = checkpoint_mod.Checkpoints(
-        ds, cfg.output_dir, cfg.repo_id, cfg.checkpoint_s, cfg.num_envs, record_checkpoint
-    )
-    torch.manual_seed(prov["next_env_seed"])  # the stochastic teacher's samples
-
-    def done(name: str) -> bool:
-        o = tally.of(name)
-        return o.kept >= target or o.rollouts >= budget
-
+    run = _Run(cfg, on_episode, command)
     # `datasets` draws a progress bar for every map LeRobot runs while saving; one per episode is noise here.
     bars_were_off = datasets.are_progress_bars_disabled()
     datasets.disable_progress_bars()
-    bar = tqdm(
-        total=target * len(object_names),
-        initial=sum(min(tally.of(n).kept, target) for n in object_names),
-        desc="demos",
-        unit="ep",
-        dynamic_ncols=True,
-        disable=not cfg.progress,
-    )
     try:
         with GracefulStop(STOP_NOTE) as stop:
             while stop.requested is None:
-                todo = [n for n in object_names if not done(n)]
+                todo = [n for n in run.object_names if not run.done(n)]
                 if not todo:
-                    stats.stop_reason = "done"
+                    run.stats.stop_reason = "done"
                     break
-                spec.check_seeds("demos", prov["next_env_seed"], cfg.num_envs)  # a long --resume stays in range
-                env = _build_env(cfg, todo, prov["next_env_seed"], dr, reward_cfg)
-                prov["next_env_seed"] += cfg.num_envs  # later envs (and --resume) never repeat a draw
-                # On disk before any episode of these envs is: a resume after a kill never repeats their draws.
-                record_checkpoint(saved.ds.meta.total_episodes)
-                stats.env_builds += 1
-                env_objects = env.object_names
-                stale = {"now": False}
-
-                def act(obs, _env=env):
-                    stats.env_steps += _env.num_envs
-                    return teacher(obs, stochastic=cfg.stochastic)
-
-                episodes = run_episodes(env, act, lambda s=stale: stop.requested is not None or s["now"])
-                for ep in episodes:
-                    with stop.saving():
-                        cut, written = _handle_episode(saved.ds, ep, cfg.curation, tally, stats, target, bar)
-                        if written:
-                            saved.written()
-                    if on_episode is not None:
-                        on_episode(ep, cut, written, stats)
-                    if done(ep.object_name):
-                        finished = sum(done(n) for n in env_objects)
-                        stale["now"] = finished >= REBUILD_WASTE_FRACTION * len(env_objects)
-                env.close()
+                run.one_env(todo, stop)
             else:
-                stats.stop_reason = "interrupted"
+                run.stats.stop_reason = "interrupted"
     except BaseException as e:
-        stats.stop_reason = (
+        run.stats.stop_reason = (
             "interrupted" if isinstance(e, KeyboardInterrupt) else f"error: {type(e).__name__}: {e}"
         )
         raise
     finally:
-        bar.close()
         if not bars_were_off:
             datasets.enable_progress_bars()
-        first = sys.exc_info()[1]  # the error that ended the run, if any: a cleanup failure must not mask it
+        run.finish(sys.exc_info()[1])  # the error that ended the run, if any: a cleanup failure must not mask it
+    return run.stats
+
+
+class _Run:
+    """One run of a collection: its dataset, provenance, tally and statistics, and the teacher rolling out."""
+
+    def __init__(self, cfg: CollectConfig, on_episode: EpisodeCallback | None, command: str | None):
+        import torch
+        from tqdm import tqdm
+
+        from lerobot_blindgrasp.sim import rewards
+
+        self.cfg, self.on_episode = cfg, on_episode
+        teacher, self.object_names = _check_inputs(cfg)
+        try:  # the teacher's own reward settings: r_t must be the task reward it was trained on
+            self.reward_cfg = rewards.RewardConfig.from_record(teacher.config["reward"])
+        except (KeyError, TypeError) as e:
+            raise CollectError(f"teacher config has no usable reward settings: {e}") from None
+        self.teacher = TeacherActor(teacher, stochastic=cfg.stochastic)
+        self.dr = dataclasses.replace(randomization.EVAL_DR, joint_calibration_rad=cfg.joint_calibration_rad)
+        ds, self.prov, self.tally = records.open_dataset(
+            cfg, records.new_provenance(cfg, teacher, self.object_names, self.dr)
+        )
+        self.stats = CollectStats(tally=self.tally)
+        self.run = records.start_run(cfg, self.prov, command)
+        self.t_wall, self.t_cpu = time.perf_counter(), time.process_time()
+        self.saved = checkpoint_mod.Checkpoints(
+            ds, cfg.output_dir, cfg.repo_id, cfg.checkpoint_s, cfg.num_envs, self.record_checkpoint
+        )
+        torch.manual_seed(self.prov["next_env_seed"])  # the stochastic teacher's samples
+        target = cfg.episodes_per_object
+        self.bar = tqdm(
+            total=target * len(self.object_names),
+            initial=sum(min(self.tally.of(n).kept, target) for n in self.object_names),
+            desc="demos",
+            unit="ep",
+            dynamic_ncols=True,
+            disable=not cfg.progress,
+        )
+
+    def done(self, name: str) -> bool:
+        o = self.tally.of(name)
+        return o.kept >= self.cfg.episodes_per_object or o.rollouts >= self.cfg.rollout_budget
+
+    def record_checkpoint(self, episodes: int | None = None) -> None:
+        self.stats.wall_s = time.perf_counter() - self.t_wall
+        self.stats.cpu_s = time.process_time() - self.t_cpu
+        records.checkpoint_run(self.cfg, self.prov, self.run, self.tally, self.stats)
+
+    def one_env(self, todo: list[str], stop: GracefulStop) -> None:
+        """Envs for the objects still short of demos, rolled out until the run stops or enough of them are done."""
+        cfg, prov, stats = self.cfg, self.prov, self.stats
+        spec.check_seeds("demos", prov["next_env_seed"], cfg.num_envs)  # a long --resume stays in range
+        env = _build_env(cfg, todo, prov["next_env_seed"], self.dr, self.reward_cfg)
+        prov["next_env_seed"] += cfg.num_envs  # later envs (and --resume) never repeat a draw
+        # On disk before any episode of these envs is: a resume after a kill never repeats their draws.
+        self.record_checkpoint()
+        stats.env_builds += 1
+        stale = {"now": False}
+
+        def act(obs, env):
+            stats.env_steps += env.num_envs
+            return self.teacher(obs, env)
+
+        for ep in stream(env, act, lambda: stop.requested is not None or stale["now"], record=DEMO_TRACES):
+            with stop.saving():
+                cut, written = _handle_episode(
+                    self.saved.ds, ep, cfg.curation, self.tally, stats, cfg.episodes_per_object, self.bar
+                )
+                if written:
+                    self.saved.written()
+            if self.on_episode is not None:
+                self.on_episode(ep, cut, written, stats)
+            if self.done(ep.object_name):
+                finished = sum(self.done(n) for n in env.object_names)
+                stale["now"] = finished >= REBUILD_WASTE_FRACTION * len(env.object_names)
+        env.close()
+
+    def finish(self, first: BaseException | None) -> None:
+        """Finalize the dataset and record the run, however it ended; `first` is the error that ended it."""
+        self.bar.close()
         with _cleanup("finalizing the dataset", first):
-            _finalize_or_abandon(saved.ds)  # closes the parquet writers: every saved episode is readable after it
-        stats.wall_s = time.perf_counter() - t_wall
-        stats.cpu_s = time.process_time() - t_cpu
-        stats.checkpoints, stats.checkpoint_s = saved.count, saved.seconds
+            _finalize_or_abandon(
+                self.saved.ds
+            )  # closes the parquet writers: every saved episode is readable after
+        self.stats.wall_s = time.perf_counter() - self.t_wall
+        self.stats.cpu_s = time.process_time() - self.t_cpu
+        self.stats.checkpoints, self.stats.checkpoint_s = self.saved.count, self.saved.seconds
         with _cleanup("recording the run", first):
-            records.finish_run(cfg, prov, run, tally, stats)
-    return stats
+            records.finish_run(self.cfg, self.prov, self.run, self.tally, self.stats)
 
 
 @contextlib.contextmanager
@@ -232,20 +257,16 @@ def _finalize_or_abandon(ds) -> None:
 
 def _build_env(cfg: CollectConfig, object_names: list[str], seed: int, dr, reward_cfg):
     """Envs with autoreset for the objects that still need demos, env i seeded seed + i."""
-    from lerobot_blindgrasp.sim.env import BatchedGraspEnv, GraspEnvConfig
-
-    return BatchedGraspEnv(
-        GraspEnvConfig(
-            num_envs=cfg.num_envs,
-            objects=tuple(object_names),
-            seed=seed,
-            episode_s=cfg.curation.episode_s,
-            dr=dr,
-            reward=reward_cfg,
-            nthread=cfg.threads,
-            autoreset=True,
-            backend=cfg.backend,
-        )
+    return make_env(
+        "demos",
+        tuple(object_names),
+        num_envs=cfg.num_envs,
+        seed=seed,
+        dr=dr,
+        episode_s=cfg.curation.episode_s,
+        reward=reward_cfg,
+        nthread=cfg.threads,
+        backend=cfg.backend,
     )
 
 

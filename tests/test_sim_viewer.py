@@ -1,4 +1,4 @@
-"""`blindgrasp-sim-demo`: the scripted lift renders to a playable mp4 and reports what happened."""
+"""`blindgrasp-sim-viewer`: the scripted lift renders to a playable mp4 and reports what happened."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import imageio.v3 as iio
 import pytest
 
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp.sim.demo import run_demo
+from lerobot_blindgrasp.sim.viewer import run_demo
 
-DEMO = Path(sys.executable).with_name("blindgrasp-sim-demo")
+DEMO = Path(sys.executable).with_name("blindgrasp-sim-viewer")
 
 
 @pytest.mark.slow

@@ -1,6 +1,6 @@
 """Two evaluations side by side, paired start state by start state: per-object rates and an exact McNemar test.
 
-    python -m lerobot_blindgrasp.analysis.compare --a=PATH --b=PATH [--a_label=teacher --b_label=student]
+    python -m lerobot_blindgrasp.results.compare --a=PATH --b=PATH [--a_label=teacher --b_label=student]
 
 PATH is a lerobot-eval output (`eval_info.json`, or its folder) or a `blindgrasp-eval-teacher` output (`eval.json`,
 or its folder; deterministic mode unless written `PATH:stochastic`). Both must have been run with the same seed
@@ -14,16 +14,22 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.sim import objects
+
+
+def student_successes(eval_info: dict) -> dict[str, list[bool]]:
+    """Per-object episode successes, in episode (= evaluation index) order, from lerobot-eval's per_task."""
+    return {
+        objects.object_for_task_id(int(e["task_id"])): [bool(x) for x in e["metrics"].get("successes", [])]
+        for e in eval_info.get("per_task", [])
+    }
 
 
 def load_successes(path: str | Path, mode: str | None = None) -> dict[str, list[bool]]:
     """Object -> episode successes in evaluation-index order, from either evaluation tool's output. A teacher
     eval's mode is `mode`, else a `:MODE` suffix of `path`, else deterministic."""
-    from lerobot_blindgrasp.pipeline.report import student_successes
-
     text = str(path)
     if mode is None:
         text, _, mode = text.partition(":")

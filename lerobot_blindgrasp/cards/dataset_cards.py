@@ -20,13 +20,10 @@ from pathlib import Path
 
 import jinja2
 
-from lerobot_blindgrasp import durable, spec
-from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.demos import provenance, report
-from lerobot_blindgrasp.hub import project
-from lerobot_blindgrasp.sim import objects, randomization
+from lerobot_blindgrasp import durable, project
+from lerobot_blindgrasp.sim import randomization
 
-TEMPLATE_PACKAGE, TEMPLATE_DIR = "lerobot_blindgrasp.hub", "card_templates"
+TEMPLATE_PACKAGE, TEMPLATE_DIR = "lerobot_blindgrasp.cards", "card_templates"
 TEMPLATES = {"sim": "sim_teacher_demos.md", "glove": "glove_teleop_demos.md"}
 CARD_NAME = "README.md"
 DEFAULT_LICENSE = "apache-2.0"  # the project's license
@@ -56,11 +53,6 @@ HUB_LICENSES = frozenset(
 )  # fmt: skip
 
 
-def detect_kind(root: Path) -> str:
-    """'sim' for folders written by blindgrasp-collect-demos, else 'glove' (a lerobot-record dataset)."""
-    return "sim" if provenance.path(root).is_file() else "glove"
-
-
 def render_body(kind: str, context: dict) -> str:
     if kind not in TEMPLATES:
         raise ValueError(f"unknown card kind {kind!r}; choose from {', '.join(TEMPLATES)}")
@@ -71,7 +63,7 @@ def render_body(kind: str, context: dict) -> str:
     return env.from_string(template.read_text(encoding="utf-8")).render(**context).strip() + "\n"
 
 
-def _versions() -> dict:
+def versions() -> dict:
     from lerobot_blindgrasp import __version__
 
     return {
@@ -81,7 +73,7 @@ def _versions() -> dict:
     }
 
 
-def _randomization_rows(dr: dict) -> list[tuple[str, str]]:
+def randomization_rows(dr: dict) -> list[tuple[str, str]]:
     labels = {
         "joint_offset_rad": "joint offset at reset, per joint (rad), uniform ±",
         "object_xy_m": "object position at reset, x and y (m), uniform ±",
@@ -111,7 +103,7 @@ def _randomization_rows(dr: dict) -> list[tuple[str, str]]:
     return rows
 
 
-def _dataset_fields(repo_id: str, meta) -> dict:
+def dataset_fields(repo_id: str, meta) -> dict:
     """What both card kinds say about the dataset itself, from LeRobot's metadata."""
     return {
         "repo_id": repo_id,
@@ -122,34 +114,7 @@ def _dataset_fields(repo_id: str, meta) -> dict:
     }
 
 
-def _sim_context(root: Path, repo_id: str, meta) -> dict:
-    prov = provenance.load(root)
-    tally = report.load_tally(root)
-    rows = []
-    for name in prov["objects"]:
-        o = tally.of(name)
-        rows.append({"name": name, "task": objects.get_object(name).task, "yield": o.yield_rate, **vars(o)})
-    total = tally.total()
-    return {
-        **_dataset_fields(repo_id, meta),
-        "objects": rows,
-        "total": {"yield": total.yield_rate, **vars(total)},
-        "stochastic": prov["stochastic"],
-        "curation": prov["curation"],
-        "teacher": prov["teacher"],
-        "randomization": _randomization_rows(prov["randomization"]),
-        "runs": prov["runs"],
-        "state_names": list(spec.STATE_NAMES),
-        "action_names": list(spec.ACTION_NAMES),
-        "metadata_features": demo_dataset.EPISODE_FEATURES,
-        "merge_hint": demo_dataset.MERGE_HINT.format(
-            repo_id=repo_id, root="<root>", names=list(demo_dataset.METADATA_FEATURE_NAMES)
-        ),
-        **_versions(),
-    }
-
-
-def _glove_context(root: Path, repo_id: str, meta, operators: list[str], notes: str) -> dict:
+def glove_context(root: Path, repo_id: str, meta, operators: list[str], notes: str) -> dict:
     import pandas as pd
 
     files = sorted(Path(root, "meta", "episodes").glob("chunk-*/file-*.parquet"))
@@ -162,7 +127,7 @@ def _glove_context(root: Path, repo_id: str, meta, operators: list[str], notes: 
                 row["episodes"] += 1
                 row["frames"] += int(length)
     return {
-        **_dataset_fields(repo_id, meta),
+        **dataset_fields(repo_id, meta),
         "tasks": list(per_task.values()),
         "features": {
             k: v
@@ -171,31 +136,22 @@ def _glove_context(root: Path, repo_id: str, meta, operators: list[str], notes: 
         },
         "operators": operators,
         "notes": notes,
-        **_versions(),
+        **versions(),
     }
 
 
 def card_kwargs(
-    root: Path,
     repo_id: str,
-    kind: str | None = None,
+    kind: str,
+    context: dict,
+    meta,
     license: str = DEFAULT_LICENSE,
     extra_tags: list[str] | None = None,
-    operators: list[str] | None = None,
-    notes: str = "",
 ) -> dict:
-    """Keyword arguments for `create_lerobot_dataset_card` and `LeRobotDataset.push_to_hub` (same keys)."""
-    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
-
+    """Keyword arguments for `create_lerobot_dataset_card` and `LeRobotDataset.push_to_hub` (same keys), for a
+    card of `kind` ("sim" or "glove") rendered from `context`; `meta` is the dataset's LeRobotDatasetMetadata."""
     if license not in HUB_LICENSES:
         raise ValueError(f"license {license!r} is not one of {sorted(HUB_LICENSES)}")
-    root = Path(root)
-    kind = kind or detect_kind(root)
-    meta = LeRobotDatasetMetadata(repo_id, root=root)
-    if kind == "sim":
-        context = _sim_context(root, repo_id, meta)
-    else:
-        context = _glove_context(root, repo_id, meta, operators or [], notes)
     return {
         "tags": TAGS[kind] + list(extra_tags or []),
         "license": license,
@@ -204,6 +160,16 @@ def card_kwargs(
         "citation_bibtex": CITATION_BIBTEX,
         "_dataset_info": meta.info,  # not a card kwarg: popped by build_card
     }
+
+
+def glove_card_kwargs(root: Path, repo_id: str, operators: list[str] | None = None, notes: str = "", **kw) -> dict:
+    """The card of a glove teleoperation recording (`lerobot-record`), from its LeRobot metadata."""
+    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+
+    meta = LeRobotDatasetMetadata(repo_id, root=Path(root))
+    return card_kwargs(
+        repo_id, "glove", glove_context(Path(root), repo_id, meta, operators or [], notes), meta, **kw
+    )
 
 
 def build_card(kwargs: dict, repo_id: str):
@@ -216,9 +182,9 @@ def build_card(kwargs: dict, repo_id: str):
     return create_lerobot_dataset_card(tags=tags, dataset_info=info, repo_id=repo_id, **kw)
 
 
-def write_card(root: Path, repo_id: str, **kwargs) -> Path:
-    """Render the card for the dataset in `root` and save it as `root/README.md`."""
-    card = build_card(card_kwargs(root, repo_id, **kwargs), repo_id)
+def write_card(root: Path, repo_id: str, kwargs: dict) -> Path:
+    """Render the card of these `card_kwargs` and save it as `root/README.md`."""
+    card = build_card(kwargs, repo_id)
     validate(str(card))
     out = Path(root) / CARD_NAME
     durable.atomic_write_text(out, str(card))  # what DatasetCard.save writes, but atomically

@@ -1,10 +1,10 @@
-"""`blindgrasp-sim-demo`: watch the sim work before training anything.
+"""`blindgrasp-sim-viewer`: watch the sim work before training anything.
 
 A scripted pinch-and-lift runs through the same gymnasium env lerobot-eval uses (absolute joint targets in, o_t
 out, the paper's randomization and sensor noise), rendered to an mp4, with a printed summary: lift, fingertip
 forces in newtons, success by the shared rule.
 
-    blindgrasp-sim-demo --object=sphere_small --output=outputs/sim_demo/sphere_small.mp4
+    blindgrasp-sim-viewer --object=sphere_small --output=outputs/sim_demo/sphere_small.mp4
 
 The script is not a policy: it knows the object's shape and assumes it is centred, so the object's xy offset is
 off here. It lifts every Table I object.
@@ -92,10 +92,10 @@ def run_demo(
     if not 1 <= steps <= spec.EPISODE_STEPS:
         raise ValueError(f"steps must be in [1, {spec.EPISODE_STEPS}] (one 10 s trial), got {steps}")
     dr = gym_env.eval_dr(object_xy=False) if randomize else randomization.NO_DR
+    render = "rgb_array" if output else None
     env = gym_env.BlindGraspGymEnv(
-        object_name, dr=dr, render_mode="rgb_array" if output else None,
-        render_width=width, render_height=height, render_shadows=shadows,
-    )  # fmt: skip
+        object_name, dr=dr, render_mode=render, render_width=width, render_height=height, render_shadows=shadows
+    )
     radius, grasp_height = grasp_geometry(object_name)
     script = PinchLiftScript(radius, grasp_height, LIFT_M)
     obs, _ = env.reset(seed=seed)
@@ -133,13 +133,18 @@ def run_demo(
         "video": None,
     }
     if output:
-        from lerobot.utils.io_utils import write_video  # the writer lerobot-eval uses for its videos (PyAV, H.264)
-
-        output.parent.mkdir(parents=True, exist_ok=True)
-        with durable.atomic_path(output) as tmp:
-            write_video(str(tmp), frames, spec.CONTROL_HZ)
-        summary["video"] = str(output)
+        summary["video"] = str(_write_video(output, frames))
     return summary
+
+
+def _write_video(output: Path, frames: list) -> Path:
+    """The rendered frames as an mp4, with the writer lerobot-eval uses for its videos (PyAV, H.264)."""
+    from lerobot.utils.io_utils import write_video
+
+    output.parent.mkdir(parents=True, exist_ok=True)
+    with durable.atomic_path(output) as tmp:
+        write_video(str(tmp), frames, spec.CONTROL_HZ)
+    return output
 
 
 def format_summary(s: dict) -> str:

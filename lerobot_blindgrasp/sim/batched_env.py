@@ -1,9 +1,10 @@
 """Batched blind-grasp environment: N grippers, each with one object, stepped together.
 
-This module steps the task, written once, numpy over the env axis (no Python loop over envs): resets, actions and
-the servo and timing model. What it combines lives in one module each: the randomization draws, Table II's
-application and the push schedule in `sim/randomization.py`, the reward terms in `sim/rewards.py`, success and
-termination in `sim/termination.py`, what the envs observe in `sim/observations.py`. Physics
+This module steps, observes and resets the task, written once, numpy over the env axis (no Python loop over envs).
+What it combines lives in one module each: the randomization draws and Table II's application in
+`sim/randomization.py`, the event terms (pushes, the hold push, latencies, the servo model) in `sim/events.py`, the
+reward terms in `sim/rewards.py`, success and termination in `sim/termination.py`, what the envs observe in
+`sim/observations.py`. Physics
 runs in a backend (`sim/backends/`) chosen by `GraspEnvConfig.backend`:
 - "batch" (default): `mujoco.batch.Batch` (MuJoCo >= 3.17) on CPU threads, each env on its own MjModel copy
   carrying its object and its domain-randomization draw (friction, mass, servo gains);
@@ -14,30 +15,23 @@ the joint limits, as the real robot does), and `substeps` physics steps cover on
 Episodes last 10 s; an episode terminates when the object leaves the 10 cm workspace. Envs auto-reset inside
 `step` (rsl-rl never calls reset); `info["final"]` describes the episodes that ended.
 
-The servo and timing factors beyond Table II (`DomainRandomization`, all off by default) act here:
-- torque limit: the actuators' forcerange (the current limit caps torque, xm430.torque_at_current_nm);
-- action latency: a ring of the last k targets, the servos get the one sent k steps ago;
-- observation latency: a ring of the last k observations, the policy gets the one measured k steps ago;
-- velocity limit, backlash, period jitter: the control period is then stepped one physics substep at a time; the
-  setpoint moves towards the target at most `velocity_limit_rad_s` (the servo's profile velocity), the servo
-  exerts no torque within +-backlash/2 of it (a dead zone in the position error), and the new target takes over
-  from the previous one only after the step's random delay;
-- joint calibration offset: readings are q + offset, and the servo reaches an absolute target in that frame
-  (`delta_for_target`), as a real servo does with a wrong homing offset;
-- the hold push: one push of `hold_push_n` on the object 0.5 s after it is first lifted in an episode.
+The factors beyond Table II (`DomainRandomization`, all off by default) act through the event terms, the sensor
+model (`observations.py`) and two places here: the torque limit is the actuators' forcerange (the current limit
+caps torque, xm430.torque_at_current_nm), and under a joint calibration offset readings are q + offset and the servo
+reaches an absolute target in that frame (`delta_for_target`, `target_for_delta`), as a real servo does with a wrong
+homing offset.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import (
-    backends,
+    events,
     gripper,
     objects,
     observations,
@@ -48,66 +42,11 @@ from lerobot_blindgrasp.sim import (
     termination,
 )
 from lerobot_blindgrasp.sim.backends.batch import BatchBackend
+from lerobot_blindgrasp.sim.env_config import GraspEnvConfig, allocate_objects
 
 log = logging.getLogger(__name__)
 
-# The hold push comes this many control steps (0.5 s) after the object is first lifted in an episode: half-way
-# through the 1 s hold that success needs.
-HOLD_PUSH_AFTER_STEPS = spec.SUCCESS_HOLD_STEPS // 2
-
-
-@dataclass
-class GraspEnvConfig:
-    num_envs: int = 18
-    objects: tuple[str, ...] = objects.PAPER_OBJECTS  # assigned round-robin: env i gets objects[i % len]
-    # Relative share of envs per object (same order as `objects`); None: even, as the paper's 18 x 500.
-    object_weights: tuple[float, ...] | None = None
-    seed: int = 0  # env i uses seed + i
-    # Explicit per-env seeds (length num_envs), instead of seed + i: lets one batch hold several objects' evaluation
-    # seed blocks (spec.eval_env_seed), each env on exactly the start state the one-env gym env gives it.
-    env_seeds: tuple[int, ...] | None = None
-    episode_s: float = spec.EPISODE_S
-    dr: randomization.DomainRandomization = field(default_factory=lambda: randomization.PAPER_DR)
-    reward: rewards.RewardConfig = field(default_factory=lambda: rewards.PAPER_REWARD)
-    physics: gripper.PhysicsOptions = field(default_factory=gripper.PhysicsOptions)
-    nthread: int = 0  # 0: all CPUs
-    autoreset: bool = True
-    backend: str = (
-        "batch"  # physics: "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp, GPU; needs the gpu extra)
-    )
-    device: str | None = None  # warp only: "cuda:0", "cpu"; None: this process's GPU (LOCAL_RANK) if any, else CPU
-
-    def __post_init__(self):
-        backends.check_backend(self.backend)
-        self.objects = objects.resolve_objects(self.objects)
-        if self.num_envs < 1:
-            raise ValueError(f"num_envs must be >= 1, got {self.num_envs}")
-        if self.env_seeds is not None and len(self.env_seeds) != self.num_envs:
-            raise ValueError(f"env_seeds needs one seed per env ({self.num_envs}), got {len(self.env_seeds)}")
-        if self.object_weights is not None:
-            w = np.asarray(self.object_weights, dtype=float)
-            if w.shape != (len(self.objects),) or not np.isfinite(w).all() or (w <= 0).any():
-                raise ValueError(
-                    f"object_weights needs one positive weight per object ({len(self.objects)}), got {self.object_weights}"
-                )
-
-
-def allocate_objects(num_envs: int, num_objects: int, weights: tuple[float, ...] | None) -> np.ndarray:
-    """Object index of each env. Even weights give the round-robin i % num_objects. Otherwise each object gets
-    its weighted share of envs (largest remainders, at least one env each), interleaved so that any prefix of the
-    batch holds a mix of objects."""
-    if weights is None:
-        return np.arange(num_envs) % num_objects
-    w = np.asarray(weights, dtype=float) / np.sum(weights)
-    counts = np.minimum(1, num_envs // num_objects) + np.zeros(num_objects, dtype=np.int64)
-    share = w * (num_envs - counts.sum())
-    counts += np.floor(share).astype(np.int64)
-    rest = num_envs - counts.sum()
-    counts[np.argsort(-(share - np.floor(share)), kind="stable")[:rest]] += 1
-    # Interleave: sort envs by their fractional position within their object's run.
-    obj = np.repeat(np.arange(num_objects), counts)
-    pos = np.concatenate([(np.arange(c) + 0.5) / c for c in counts])
-    return obj[np.argsort(pos, kind="stable")]
+HOLD_PUSH_AFTER_STEPS = events.HOLD_PUSH_AFTER_STEPS
 
 
 class BatchedGraspEnv:
@@ -164,17 +103,15 @@ class BatchedGraspEnv:
         self.lifted_steps = np.zeros(n, dtype=np.int64)  # consecutive steps lifted >= SUCCESS_LIFT_M
         self.success = np.zeros(n, dtype=bool)  # latched once held for SUCCESS_HOLD_S
         self.prev_action = np.zeros((n, spec.NUM_JOINTS))
-        self.pushes = randomization.PushSchedule(cfg.dr, self.env_seeds)  # Table II's random pushes
         self.episode_return = np.zeros(n)
         self.episode_terms = {k: np.zeros(n) for k in rewards.TERM_NAMES}
         self.physics_resets = 0  # envs reset because their physics went unstable
-        # Servo and timing factors (unused at their defaults).
-        self._action_ring = np.zeros((cfg.dr.action_latency_steps + 1, n, spec.NUM_JOINTS))  # newest last
-        self._obs_ring: dict[str, np.ndarray] = {}  # key -> (obs_latency_steps + 1, n, dim), newest last
-        self._setpoint = np.zeros((n, spec.NUM_JOINTS))  # velocity-limited servo setpoint
-        self._last_target = np.zeros((n, spec.NUM_JOINTS))  # the target in force before this step's arrives
-        self.hold_pushed = np.zeros(n, dtype=bool)  # this episode's hold push was given
-        self._hold_pushing = np.zeros(n, dtype=bool)
+        # The event terms (sim/events.py); all but Table II's pushes are off at their defaults.
+        self.pushes = events.Pushes(cfg.dr, self.env_seeds)
+        self.hold_push = events.HoldPush(cfg.dr, self.env_seeds)
+        self.action_latency = events.ActionLatency(cfg.dr.action_latency_steps, n)
+        self.obs_latency = events.ObservationLatency(cfg.dr.obs_latency_steps)
+        self.servo = events.ServoModel(cfg.dr, self.env_seeds)
         self._raw: dict[str, np.ndarray] = {}
 
     # --- construction ----------------------------------------------------------------------------------------
@@ -199,10 +136,7 @@ class BatchedGraspEnv:
         ids = np.arange(self.num_envs)
         self._reset_envs(ids)
         obs = self._observe()
-        if self.cfg.dr.obs_latency_steps:
-            self._obs_ring = {
-                k: np.repeat(v[None], self.cfg.dr.obs_latency_steps + 1, axis=0) for k, v in obs.items()
-            }
+        self.obs_latency.start(obs)
         return obs
 
     def _reset_envs(self, ids: np.ndarray) -> None:
@@ -218,11 +152,9 @@ class BatchedGraspEnv:
         qpos[:, observations.OBJECT_QUAT] = self._rest_quat[ids]
         self._qpos[ids] = qpos
         self._ctrl[ids] = q0
-        self._action_ring[:, ids] = q0  # a late target: the servos hold the start pose until the first arrives
-        self._setpoint[ids] = q0
-        self._last_target[ids] = q0
-        self.hold_pushed[ids] = False
-        self._hold_pushing[ids] = False
+        self.action_latency.reset(ids, q0)
+        self.servo.reset(ids, q0)
+        self.hold_push.reset(ids)
         self.physics.forward(ids)
         self.episode_length[ids] = 0
         self.lifted_steps[ids] = 0
@@ -231,8 +163,7 @@ class BatchedGraspEnv:
         self.episode_return[ids] = 0.0
         for v in self.episode_terms.values():
             v[ids] = 0.0
-        if self.cfg.dr.external_force:
-            self.pushes.reset(ids)
+        self.pushes.reset(ids)
 
     # --- step -------------------------------------------------------------------------------------------------
     def validate_action(self, action) -> np.ndarray:
@@ -251,54 +182,18 @@ class BatchedGraspEnv:
         if ids is not None and self.batch is None:
             raise NotImplementedError("stepping a subset of envs needs the batch backend")
         a = np.clip(self.validate_action(action), -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
-        q = self._qpos[:, observations.JOINTS]
-        dr = self.cfg.dr
-        target = np.clip(q + a, spec.JOINT_LOWER, spec.JOINT_UPPER)
-        if dr.action_latency_steps:
-            self._action_ring = np.roll(self._action_ring, -1, axis=0)
-            self._action_ring[-1] = target
-            target = self._action_ring[0].copy()
-        if dr.external_force:
-            self._update_pushes()
-
-        if dr.substep_servo:
-            failed = self._step_servo_substeps(target, ids)
-        elif ids is None:
-            self._ctrl[:] = target
-            failed = self.physics.step(self.cfg.physics.substeps)  # unstable envs: reset below
-        else:
-            self._ctrl[:] = target
-            failed = self.physics.step(self.cfg.physics.substeps, ids)
-        self._last_target = target
-        self._clear_hold_push()  # a hold push lasts the one control period it was set for
-
+        target, failed = self._actuate(a, ids)
         obs = self._observe()
         raw = self._raw
-        step = rewards.StepQuantities(
-            lift=raw["lift"],
-            d_xy=raw["d_xy"],
-            uniaxial_force=raw["uniaxial_clean"],
-            q=raw["q"],
-            action=a,
-            prev_action=self.prev_action,
-            tip_object_distance=raw["tip_object_distance"],
-            tip_object_force=raw["tip_object_force"],
-            contact_threshold_n=self.cfg.reward.contact_threshold_n,
-        )
-        terms = rewards.compute_terms(step, self.cfg.reward)
-        reward = rewards.total(terms, self.cfg.reward)
-        reward[failed] = 0.0
-
+        terms, reward = self._rewards(raw, a, failed)
         self.episode_length += 1
         self.lifted_steps = termination.held_steps(self.lifted_steps, raw["lift"])
         self.success |= termination.is_success(self.lifted_steps)
-        if dr.hold_push_n:
-            self._start_hold_push()
+        self.hold_push.start(self._xfrc, self._object_body, self.lifted_steps, self.episode)
         self.prev_action = a
         self.episode_return += reward
         for k, v in terms.items():
             self.episode_terms[k] += v
-
         terminated = termination.out_of_workspace(raw["d_xy"], self.cfg.reward.workspace_radius_m) | failed
         truncated = termination.timed_out(self.episode_length, self.max_episode_steps, terminated)
         info = {
@@ -320,62 +215,78 @@ class BatchedGraspEnv:
             self.physics_resets += int(failed.sum())
             log.warning("physics unstable in envs %s; resetting them", np.flatnonzero(failed)[:10].tolist())
         if done.any():
-            ids = np.flatnonzero(done)
-            info["final"] = {
-                "env_ids": ids,
-                "object_index": self.object_index[ids],
-                "success": self.success[ids].copy(),
-                "episode_return": self.episode_return[ids].copy(),
-                "episode_length": self.episode_length[ids].copy(),
-                "terminated": terminated[ids],
-                "truncated": truncated[ids],
-                "terms": {k: v[ids].copy() for k, v in self.episode_terms.items()},
-                "observation": {k: v[ids].copy() for k, v in obs.items()},
-            }
-            if self.cfg.autoreset:
-                self.episode[ids] += 1
-                self._reset_envs(ids)
-                fresh = self._observe(ids)
-                for k in obs:
-                    obs[k][ids] = fresh[k]
-                for k, ring in self._obs_ring.items():  # a new episode starts with its own observation
-                    ring[:, ids] = fresh[k]
-        if dr.obs_latency_steps:
-            obs = self._delayed(obs, done)
-        return obs, reward, terminated, truncated, info
+            self._end_episodes(np.flatnonzero(done), obs, info, terminated, truncated)
+        return self.obs_latency(obs, done), reward, terminated, truncated, info
 
-    # --- servo and timing factors (beyond Table II) -------------------------------------------------------------
-    def _step_servo_substeps(self, target: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
-        """One control period, one physics substep at a time: the step's target arrives after its jitter delay,
-        the setpoint follows it at most at the velocity limit, and backlash leaves a dead zone around it."""
-        dr, n_sub = self.cfg.dr, self.cfg.physics.substeps
-        dt = self.cfg.physics.timestep
-        delay = np.zeros(self.num_envs, dtype=np.int64)
-        if dr.period_jitter_s:
-            counter = self.episode * 100_003 + self.episode_length
-            delay = randomization.draw_jitter_substeps(dr, self.env_seeds, counter, n_sub)
-        failed = np.zeros(self.num_envs, dtype=bool)
-        for k in range(n_sub):
-            goal = np.where((k >= delay)[:, None], target, self._last_target)
-            if dr.velocity_limit_rad_s:
-                step = dr.velocity_limit_rad_s * dt
-                self._setpoint = self._setpoint + np.clip(goal - self._setpoint, -step, step)
-            else:
-                self._setpoint = goal
-            cmd = self._setpoint
-            if dr.backlash_rad:
-                q = self._qpos[:, observations.JOINTS]
-                err = cmd - q
-                cmd = q + np.sign(err) * np.maximum(np.abs(err) - dr.backlash_rad / 2, 0.0)
-            self._ctrl[:] = cmd
-            failed |= self.physics.step(1) if ids is None else self.physics.step(1, ids)
-        return failed
+    def _actuate(self, a: np.ndarray, ids: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """One control period of physics towards q + a: the events before it, the servos, the events after it.
+        Returns the target the servos were given and the envs whose physics failed."""
+        q = self._qpos[:, observations.JOINTS]
+        target = self.action_latency(np.clip(q + a, spec.JOINT_LOWER, spec.JOINT_UPPER))
+        self.pushes(self._xfrc, self._object_body)
+        if self.servo.on:
+            failed = self.servo.step(self, target, ids)
+        else:
+            self._ctrl[:] = target
+            # unstable envs are reset below
+            failed = self.physics.step(self.cfg.physics.substeps, *(() if ids is None else (ids,)))
+        self.servo.last_target = target
+        self.hold_push.end(self._xfrc, self._object_body)  # it lasts the one control period it was set for
+        return target, failed
 
+    def _rewards(self, raw: dict, a: np.ndarray, failed: np.ndarray) -> tuple[dict, np.ndarray]:
+        """The reward terms (eq. 1-6, `rewards.py`) and their weighted sum; 0 where the physics failed."""
+        step = rewards.StepQuantities(
+            lift=raw["lift"],
+            d_xy=raw["d_xy"],
+            uniaxial_force=raw["uniaxial_clean"],
+            q=raw["q"],
+            action=a,
+            prev_action=self.prev_action,
+            tip_object_distance=raw["tip_object_distance"],
+            tip_object_force=raw["tip_object_force"],
+            contact_threshold_n=self.cfg.reward.contact_threshold_n,
+        )
+        terms = rewards.compute_terms(step, self.cfg.reward)
+        reward = rewards.total(terms, self.cfg.reward)
+        reward[failed] = 0.0
+        return terms, reward
+
+    def _end_episodes(self, ids: np.ndarray, obs: dict, info: dict, terminated, truncated) -> None:
+        """Describe the episodes that ended in info["final"]; with autoreset, start their next ones (their rows of
+        `obs` become the new episodes' first observations)."""
+        info["final"] = {
+            "env_ids": ids,
+            "object_index": self.object_index[ids],
+            "success": self.success[ids].copy(),
+            "episode_return": self.episode_return[ids].copy(),
+            "episode_length": self.episode_length[ids].copy(),
+            "terminated": terminated[ids],
+            "truncated": truncated[ids],
+            "terms": {k: v[ids].copy() for k, v in self.episode_terms.items()},
+            "observation": {k: v[ids].copy() for k, v in obs.items()},
+        }
+        if self.cfg.autoreset:
+            self.episode[ids] += 1
+            self._reset_envs(ids)
+            fresh = self._observe(ids)
+            for k in obs:
+                obs[k][ids] = fresh[k]
+            self.obs_latency.restart(ids, fresh)  # a new episode starts with its own observation
+
+    # --- frames and targets -------------------------------------------------------------------------------------
     def _measured_frame(self, q: np.ndarray, sel: slice | np.ndarray = slice(None)) -> np.ndarray:
         """Absolute joint positions of envs `sel` in the joints' measured frame (+ the calibration offset; a copy)."""
         if self.cfg.dr.joint_calibration_rad:
             return q + self.sensor_draw.joint_offset[sel]
         return q.copy()
+
+    def target_for_delta(self, delta: np.ndarray) -> np.ndarray:
+        """The absolute targets (n, 9), in the joints' measured frame, that `step` commands for `delta`: the step
+        clipped to +-0.3 rad, then the target to the joint limits (the inverse of `delta_for_target`)."""
+        q = self._qpos[:, observations.JOINTS]
+        step = np.clip(np.asarray(delta, dtype=np.float64), -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
+        return self._measured_frame(np.clip(q + step, spec.JOINT_LOWER, spec.JOINT_UPPER))
 
     def delta_for_target(self, target: np.ndarray, ids: slice | np.ndarray | None = None) -> np.ndarray:
         """The step (n, 9) that makes the servos of all envs (or `ids`) go to absolute `target`s given in the
@@ -384,47 +295,6 @@ class BatchedGraspEnv:
         return np.asarray(target, dtype=np.float64) - self._measured_frame(
             self._qpos[sel, observations.JOINTS], sel
         )
-
-    def _delayed(self, obs: dict[str, np.ndarray], done: np.ndarray) -> dict[str, np.ndarray]:
-        """Push this step's observation into the ring and return the one from `obs_latency_steps` ago (an episode
-        that just ended reports its own final observation, and a fresh one its first, undelayed)."""
-        out = {}
-        for k, v in obs.items():
-            ring = np.roll(self._obs_ring[k], -1, axis=0)
-            ring[-1] = v
-            self._obs_ring[k] = ring
-            out[k] = np.where(done[:, None], v, ring[0])
-        return out
-
-    def _start_hold_push(self) -> None:
-        due = np.flatnonzero((self.lifted_steps == HOLD_PUSH_AFTER_STEPS) & ~self.hold_pushed)
-        if due.size:
-            force = randomization.draw_hold_push(self.cfg.dr, self.env_seeds[due], self.episode[due])
-            xfrc = self._xfrc[due]
-            xfrc[:, self._object_body, :3] += force
-            self._xfrc[due] = xfrc
-            self.hold_pushed[due] = True
-            self._hold_pushing[due] = True
-
-    def _clear_hold_push(self) -> None:
-        ids = np.flatnonzero(self._hold_pushing)
-        if ids.size:
-            xfrc = self._xfrc[ids]
-            xfrc[:, self._object_body, :3] = 0.0
-            self._xfrc[ids] = xfrc
-            self._hold_pushing[ids] = False
-
-    def _update_pushes(self) -> None:
-        """Table II's pushes (`randomization.PushSchedule`): end last step's, start the ones now due."""
-        ended, due, force = self.pushes.step()
-        if ended.size:
-            xfrc = self._xfrc[ended]
-            xfrc[:, self._object_body, :3] = 0.0
-            self._xfrc[ended] = xfrc
-        if due.size:
-            xfrc = self._xfrc[due]
-            xfrc[:, self._object_body, :3] = force
-            self._xfrc[due] = xfrc
 
     # --- observation --------------------------------------------------------------------------------------------
     def _observe(self, ids: np.ndarray | None = None) -> dict[str, np.ndarray]:
@@ -449,6 +319,10 @@ class BatchedGraspEnv:
         return obs
 
     # --- helpers for tests, rendering and eval ---------------------------------------------------------------
+    def set_targets(self, cmd: np.ndarray) -> None:
+        """The servos' position targets (n, 9) for the next physics substep (the servo model steps substeps)."""
+        self._ctrl[:] = cmd
+
     def joint_positions(self) -> np.ndarray:
         return self._qpos[:, observations.JOINTS].copy()
 

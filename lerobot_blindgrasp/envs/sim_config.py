@@ -26,21 +26,10 @@ from lerobot.envs.configs import EnvConfig
 
 from lerobot_blindgrasp import spaces, spec
 from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp.sim.objects import object_for_task_id, task_id  # noqa: F401  (lerobot-eval task ids)
 
 TASK_GROUP = "blindgrasp"
 RENDER_STRIDE_REST = spec.CONTROL_HZ  # one video frame a second for the episodes past `render_episodes`
-
-
-def task_id(object_name: str) -> int:
-    """The stable task_id of an object in lerobot-eval's `per_task` (its catalogue index)."""
-    return list(objects.CATALOGUE).index(objects.get_object(object_name).name)
-
-
-def object_for_task_id(tid: int) -> str:
-    names = list(objects.CATALOGUE)
-    if not 0 <= tid < len(names):
-        raise ValueError(f"task_id {tid} out of range: the catalogue has {len(names)} objects")
-    return names[tid]
 
 
 # The 18 paper objects; OOD objects registered later get the next ids (see `task_id`).

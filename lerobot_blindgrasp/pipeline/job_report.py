@@ -16,26 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_blindgrasp import durable
-from lerobot_blindgrasp.analysis import rates
-from lerobot_blindgrasp.analysis.plots import bar_chart, plot_curves, teacher_curves
-from lerobot_blindgrasp.envs.sim_env import object_for_task_id
 from lerobot_blindgrasp.pipeline.grasp_strips import write_grasp_strips
+from lerobot_blindgrasp.results import rates
+from lerobot_blindgrasp.results.compare import student_successes
+from lerobot_blindgrasp.results.plots import bar_chart, plot_curves, teacher_curves
 from lerobot_blindgrasp.sim import objects
 
 _LOSS_LINE = re.compile(r"step:\s*([\d.]+[KMB]?)\b.*?\bloss:\s*([\d.eE+-]+)")
-
-
-def student_successes(eval_info: dict) -> dict[str, list[bool]]:
-    """Per-object episode successes, in episode (= evaluation index) order, from lerobot-eval's per_task."""
-    return {
-        object_for_task_id(int(e["task_id"])): [bool(x) for x in e["metrics"].get("successes", [])]
-        for e in eval_info.get("per_task", [])
-    }
-
-
-def student_success(eval_info: dict) -> dict[str, float]:
-    """Per-object success rate from lerobot-eval's per_task entries."""
-    return {o: float(np.mean(f)) if f else 0.0 for o, f in student_successes(eval_info).items()}
 
 
 def parse_step(s: str) -> float:
@@ -74,6 +61,7 @@ def _teacher_lines(record: dict) -> list[str]:
 
 
 def write_report(out: Path, record: dict, bigger: str) -> Path:
+    """report.md with its figures, from what each stage left in the output folder."""
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
     preset = record["preset"]["name"]
@@ -87,14 +75,24 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
             f"`{record.get('student_checkpoint', '')}`.",
             "",
         ]
-
-    # --- stages
     lines += ["## Stages", "", "| stage | wall time | command |", "|---|---:|---|"]
-    for name, st in record["stages"].items():
-        lines.append(f"| {name} | {st['wall_s']:.0f} s | `{st['command']}` |")
+    lines += [f"| {name} | {st['wall_s']:.0f} s | `{st['command']}` |" for name, st in record["stages"].items()]
     lines.append("")
+    lines += _success_lines(out, record, figs)
+    lines += _curve_lines(out, figs)
+    lines += _demo_lines(out, record, figs)
+    if record.get("deviations"):
+        lines += ["## Deviations from the paper (preset `" + preset + "`)", ""]
+        lines += [f"- {d}" for d in record["deviations"]] + [""]
+    lines += ["## Next", "", bigger]
+    path = out / "report.md"
+    durable.atomic_write_text(path, "\n".join(lines) + "\n")
+    return path
 
-    # --- success per object
+
+def _success_lines(out: Path, record: dict, figs: Path) -> list[str]:
+    """Teacher and student success per object, paired start state by start state, with the grasp strips."""
+    lines: list[str] = []
     teacher = json.loads((out / "teacher_eval" / "eval.json").read_text())
     t_det = {o: r["successes"] for o, r in teacher["modes"]["deterministic"]["per_object"].items()}
     t_sto = {o: r["successes"] for o, r in teacher["modes"].get("stochastic", {}).get("per_object", {}).items()}
@@ -129,6 +127,84 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
         "| object | " + " | ".join(teacher_cols) + " | student | paired both / teacher only / student only |",
         "|---|" + "---:|" * (len(teacher_cols) + 2),
     ]
+    lines += _paired_rows(names, teacher_cols, t_det, stu)
+    lines.append("")
+    strip = write_grasp_strips(eval_info, figs / "grasp_strips.png")
+    if strip is not None:
+        lines += [
+            "Successful student grasps, one rendered lerobot-eval episode per shape (frames across the 10 s "
+            "episode; the videos are in `student_eval/videos/`):",
+            "",
+            "![grasps](figures/grasp_strips.png)",
+            "",
+        ]
+    return lines
+
+
+def _curve_lines(out: Path, figs: Path) -> list[str]:
+    """The teacher's (when trained in this run) and the student's learning curves."""
+    lines: list[str] = []
+    lines += ["## Learning curves", ""]
+    tc = teacher_curves(out / "teacher") if (out / "teacher").is_dir() else {}  # only when trained in this run
+    if tc:
+        plot_curves(figs / "teacher_curves.png", tc, "Teacher (PPO)")
+        lines += ["![teacher](figures/teacher_curves.png)", ""]
+    curves = {}
+    for log in sorted((out / "logs").glob("student*.log")):  # the student, then each DAgger round's fine-tuning
+        steps, losses = student_loss_curve(log.read_text())
+        if steps:
+            offset = max((max(c[0]) for c in curves.values()), default=0)
+            curves[f"{log.stem}: train loss (MSE, normalized delta)"] = ([offset + x for x in steps], losses)
+    if curves:
+        plot_curves(figs / "student_loss.png", curves, "Student (BC)")
+        lines += ["![student](figures/student_loss.png)", ""]
+    return lines
+
+
+def _demo_lines(out: Path, record: dict, figs: Path) -> list[str]:
+    """The demo sets' yield, and what the student trained on."""
+    lines: list[str] = []
+    lines += ["## Demonstrations", ""]
+    extra = [name for name, _ in ((record.get("preset") or {}).get("demos") or {}).get("extra_episodes", ())]
+    sets = [("curated", "demos"), ("uncurated", "demos_uncurated")]
+    sets += [(f"{label}, extra episodes of {name}", f"{sub}_{name}") for label, sub in sets for name in extra]
+    for label, sub in sets:
+        path = out / sub / "yield_report.json"
+        if not path.exists():
+            continue
+        y = json.loads(path.read_text())
+        rows = y["objects"]
+        demo_names = [n for n in objects.PAPER_OBJECTS if n in rows] or list(rows)
+        bar_chart(
+            figs / f"yield_{sub}.png",
+            demo_names,
+            {"yield (%)": [rows.get(n, {}).get("yield", 0) * 100 for n in demo_names]},
+            f"Demo yield ({label})",
+            "episodes passing curation (%)",
+        )
+        tot = y["total"]
+        lines += [
+            f"**{label}** (`{sub}/`): {tot['kept']} episodes written from {tot['rollouts']} rollouts; "
+            f"{rates.format_rate(tot['passed'], tot['rollouts'], digits=1)} of the rollouts passed curation.",
+            "",
+            f"![yield](figures/yield_{sub}.png)",
+            "",
+        ]
+    lines += [f"The student was trained on the **{record.get('student_dataset', 'curated')}** set.", ""]
+    sched = record.get("student_schedule") or {}
+    if sched.get("steps_per_epoch"):
+        lines += [
+            f"Student length from its dataset: {sched['total_frames']} frames = {sched['steps_per_epoch']} "
+            f"steps per epoch, {sched['steps']} steps, LR constant for the first {sched['constant_lr_steps']}.",
+            "",
+        ]
+    return lines
+
+
+def _paired_rows(names: list[str], teacher_cols: dict, t_det: dict, stu: dict) -> list[str]:
+    """One row per object (every teacher column, the student, the paired counts), the pooled row, and the paired
+    McNemar test of the deterministic teacher against the student over all objects."""
+    lines: list[str] = []
     pooled = {label: [] for label in teacher_cols}
     pooled_student: list[bool] = []
     paired_all = {"both": 0, "a_only": 0, "b_only": 0}
@@ -164,72 +240,4 @@ def write_report(out: Path, record: dict, bigger: str) -> Path:
         f"Paired over all objects: the teacher alone solved {t_only} start states, the student alone "
         f"{s_only}; exact McNemar p = {p_paired:.3g} ({rates.paired_verdict(p_paired)}).",
     ]
-    lines.append("")
-    strip = write_grasp_strips(eval_info, figs / "grasp_strips.png")
-    if strip is not None:
-        lines += [
-            "Successful student grasps, one rendered lerobot-eval episode per shape (frames across the 10 s "
-            "episode; the videos are in `student_eval/videos/`):",
-            "",
-            "![grasps](figures/grasp_strips.png)",
-            "",
-        ]
-
-    # --- learning curves
-    lines += ["## Learning curves", ""]
-    tc = teacher_curves(out / "teacher") if (out / "teacher").is_dir() else {}  # only when trained in this run
-    if tc:
-        plot_curves(figs / "teacher_curves.png", tc, "Teacher (PPO)")
-        lines += ["![teacher](figures/teacher_curves.png)", ""]
-    curves = {}
-    for log in sorted((out / "logs").glob("student*.log")):  # the student, then each DAgger round's fine-tuning
-        steps, losses = student_loss_curve(log.read_text())
-        if steps:
-            offset = max((max(c[0]) for c in curves.values()), default=0)
-            curves[f"{log.stem}: train loss (MSE, normalized delta)"] = ([offset + x for x in steps], losses)
-    if curves:
-        plot_curves(figs / "student_loss.png", curves, "Student (BC)")
-        lines += ["![student](figures/student_loss.png)", ""]
-
-    # --- demo yield
-    lines += ["## Demonstrations", ""]
-    extra = [name for name, _ in ((record.get("preset") or {}).get("demos") or {}).get("extra_episodes", ())]
-    sets = [("curated", "demos"), ("uncurated", "demos_uncurated")]
-    sets += [(f"{label}, extra episodes of {name}", f"{sub}_{name}") for label, sub in sets for name in extra]
-    for label, sub in sets:
-        path = out / sub / "yield_report.json"
-        if not path.exists():
-            continue
-        y = json.loads(path.read_text())
-        rows = y["objects"]
-        demo_names = [n for n in objects.PAPER_OBJECTS if n in rows] or list(rows)
-        bar_chart(
-            figs / f"yield_{sub}.png",
-            demo_names,
-            {"yield (%)": [rows.get(n, {}).get("yield", 0) * 100 for n in demo_names]},
-            f"Demo yield ({label})",
-            "episodes passing curation (%)",
-        )
-        tot = y["total"]
-        lines += [
-            f"**{label}** (`{sub}/`): {tot['kept']} episodes written from {tot['rollouts']} rollouts; "
-            f"{rates.format_rate(tot['passed'], tot['rollouts'], digits=1)} of the rollouts passed curation.",
-            "",
-            f"![yield](figures/yield_{sub}.png)",
-            "",
-        ]
-    lines += [f"The student was trained on the **{record.get('student_dataset', 'curated')}** set.", ""]
-    sched = record.get("student_schedule") or {}
-    if sched.get("steps_per_epoch"):
-        lines += [
-            f"Student length from its dataset: {sched['total_frames']} frames = {sched['steps_per_epoch']} "
-            f"steps per epoch, {sched['steps']} steps, LR constant for the first {sched['constant_lr_steps']}.",
-            "",
-        ]
-    if record.get("deviations"):
-        lines += ["## Deviations from the paper (preset `" + preset + "`)", ""]
-        lines += [f"- {d}" for d in record["deviations"]] + [""]
-    lines += ["## Next", "", bigger]
-    path = out / "report.md"
-    durable.atomic_write_text(path, "\n".join(lines) + "\n")
-    return path
+    return lines
