@@ -23,10 +23,10 @@ def recorder(cls, lift_of, lifts: list, rng):
     """Wrap cls.step: perturb the action (with NOISE) and keep each step's lift."""
     step = cls.step
 
-    def wrapped(self, action):
+    def wrapped(self, action, *args, **kwargs):
         if rng is not None:
             action = np.asarray(action) * (1 + 2e-7 * rng.choice([-1.0, 1.0], size=np.shape(action)))
-        out = step(self, action)
+        out = step(self, action, *args, **kwargs)
         lifts.append(lift_of(out[4]))
         return out
 
@@ -34,7 +34,7 @@ def recorder(cls, lift_of, lifts: list, rng):
 
 
 def run_teacher(obj: str, seed: int, out: str, lifts: list, rng) -> bool:
-    from lerobot_blindgrasp.sim.env import BatchedGraspEnv
+    from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
     from lerobot_blindgrasp.teacher import evaluate
 
     recorder(BatchedGraspEnv, lambda info: float(info["lift"][0]), lifts, rng)
