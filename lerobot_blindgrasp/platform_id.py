@@ -13,8 +13,10 @@ on another by an episode. A record that compares floats therefore says which pla
 
 `BLINDGRASP_CPU_MODEL` overrides the model name read from /proc/cpuinfo: tests use it to play a machine that no
 record has seen, and a user can name a CPU that reports none (some virtual machines and ARM boards). Environment
-variables that move the math libraries onto another code path (`MKL_CBWR`, `ATEN_CPU_CAPABILITY`,
-`GLIBC_TUNABLES`, ...) count as part of the platform: with them set, the floats are another family's.
+variables that can move the math libraries onto another code path (`MKL_CBWR`, `ATEN_CPU_CAPABILITY`,
+`GLIBC_TUNABLES`, ...) count as part of the platform: what each moves depends on the CPU (`MKL_CBWR=SSE4_2` moves
+every MKL product on Intel but only single-row ones on AMD; `ATEN_CPU_CAPABILITY=default` moves torch's kernels on
+both), so a record made with one set is never taken as bit-identical to one made without.
 """
 
 from __future__ import annotations

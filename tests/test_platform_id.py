@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_the_cpu_model_can_be_played_and_float_paths_count_as_another_platform(monkeypatch):
-    for name in platform_id.FLOAT_ENV:
+    for name in (*platform_id.FLOAT_ENV, platform_id.CPU_MODEL_ENV):  # this machine as itself, whatever plays it
         monkeypatch.delenv(name, raising=False)
     here = platform_id.platform()
     assert here["cpu"] and set(here["versions"]) == {"mujoco", "torch", "numpy"}
@@ -24,15 +24,19 @@ def test_the_cpu_model_can_be_played_and_float_paths_count_as_another_platform(m
     newcomer = platform_id.platform()
     assert newcomer["cpu"] == "Newcomer CPU 9000" and not platform_id.same(here, newcomer)
     monkeypatch.delenv(platform_id.CPU_MODEL_ENV)
-    monkeypatch.setenv("MKL_CBWR", "SSE4_2")  # the teacher's products on another code path: other floats
+    monkeypatch.setenv("MKL_CBWR", "SSE4_2")  # a float-path variable: on some CPUs it moves MKL's products
     other = platform_id.platform()
     assert other["env"] == {"MKL_CBWR": "SSE4_2"} and not platform_id.same(here, other)
     assert "MKL_CBWR=SSE4_2" in platform_id.describe(other)
-    # Two CPUs that report one model name (two EPYC generations) still read apart, by their widest vectors.
-    narrower = {**here, "isa": [f for f in here["isa"] if not f.startswith("avx512")] or ["avx2"]}
-    assert not platform_id.same(here, narrower)
-    if "avx512f" in here["isa"]:
-        assert "[AVX-512]" in platform_id.describe(here) and "[AVX2]" in platform_id.describe(narrower)
+    # Two CPUs that report one model name (two EPYC generations) still read apart, by their instruction sets: the
+    # other one is built from this machine's, with AVX-512 toggled, so the check holds with or without it here.
+    toggled = sorted(set(here["isa"]) ^ {"avx512f"})
+    assert not platform_id.same(here, {**here, "isa": toggled})
+    with_512 = {**here, "isa": ["avx", "avx2", "avx512f", "fma", "sse4_2"]}
+    without_512 = {**here, "isa": ["avx", "avx2", "fma", "sse4_2"]}
+    assert not platform_id.same(with_512, without_512)
+    assert "[AVX-512]" in platform_id.describe(with_512) and "[AVX2]" in platform_id.describe(without_512)
+    assert "[NEON]" in platform_id.describe({**here, "isa": ["asimd"]})  # an ARM board
     assert not platform_id.same(None, here) and platform_id.describe(None) == "an unrecorded machine"
 
 
