@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.pipeline import recipe
+from lerobot_blindgrasp.pipeline import recipe, teacher_source
 from lerobot_blindgrasp.pipeline import run as pipeline
 
 
@@ -98,13 +98,15 @@ def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_state
                            ({"platform": None}, False)):  # fmt: skip
         (teacher / "eval" / "eval.json").write_text(json.dumps({**rec, **change}))
         dest = tmp_path / f"dest{len(list(tmp_path.iterdir()))}"
-        assert pipeline._reuse_teacher_eval(teacher, dest, preset, spec.EVAL_SEED, objs) is reused, change
+        assert teacher_source.reuse_teacher_eval(teacher, dest, preset, spec.EVAL_SEED, objs) is reused, change
         assert (dest / "eval.json").is_file() is reused
     # Recorded on another CPU family (played by another model name): re-run, and the report will say why.
     (teacher / "eval" / "eval.json").write_text(json.dumps(rec))
     monkeypatch.setenv(platform_id.CPU_MODEL_ENV, "Newcomer CPU 9000")
     note: dict = {}
-    assert not pipeline._reuse_teacher_eval(teacher, tmp_path / "cpu", preset, spec.EVAL_SEED, objs, note=note)
+    assert not teacher_source.reuse_teacher_eval(
+        teacher, tmp_path / "cpu", preset, spec.EVAL_SEED, objs, note=note
+    )
     why = note["eval_rerun_because"]
     assert not (tmp_path / "cpu").exists() and repr(rec["platform"]["cpu"]) in why and "Newcomer CPU 9000" in why
     from lerobot_blindgrasp.pipeline.job_report import _teacher_lines
