@@ -90,7 +90,7 @@ def test_every_script_has_help(script, monkeypatch, capsys):
 
 def test_the_benchmark_is_picked_by_its_type():
     from lerobot_blindgrasp.bench import BenchCommand
-    from lerobot_blindgrasp.bench.sim import BenchSimConfig
+    from lerobot_blindgrasp.bench.sim_bench import BenchSimConfig
 
     cfg = parse_config(
         BenchCommand, ["--bench.type=sim", "--bench.num_envs=36", "--bench.threads=[1,2]", "--bench.json=true"]

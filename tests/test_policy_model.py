@@ -9,7 +9,7 @@ from lerobot.policies.factory import get_policy_class
 from lerobot.utils.constants import ACTION, OBS_STATE
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.bench.policy import flops_per_step
+from lerobot_blindgrasp.bench.policy_bench import flops_per_step
 from lerobot_blindgrasp.policies.blindgrasp_transformer import (
     BlindgraspTransformerConfig,
     BlindgraspTransformerPolicy,

@@ -152,7 +152,7 @@ def test_lerobot_train_itself_trains_on_the_caches_samples(dataset_root, tmp_pat
 
 
 def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
-    from lerobot_blindgrasp.bench import student
+    from lerobot_blindgrasp.bench import student_bench as student
     from lerobot_blindgrasp.bench.student_parts import PARTS
 
     torch.manual_seed(0)
@@ -192,7 +192,7 @@ def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
 
 
 def test_lerobot_trains_log_is_read_per_window():
-    from lerobot_blindgrasp.bench.student import train_log_windows
+    from lerobot_blindgrasp.bench.student_bench import train_log_windows
 
     log = (
         "INFO 2026-12-04 17:42:11 ot_train.py:640 step:50 smpl:13K ep:130 epch:2.18 loss:0.923 grdn:1.234 "

@@ -81,7 +81,7 @@ def test_bench_teacher_reports_collection_update_and_raw_physics():
 def test_bench_teacher_times_a_trained_checkpoint_and_refuses_another_presets(tmp_path, capsys):
     import signal
 
-    from lerobot_blindgrasp.bench.teacher import BenchTeacherConfig, run
+    from lerobot_blindgrasp.bench.teacher_bench import BenchTeacherConfig, run
     from lerobot_blindgrasp.teacher import train
 
     previous = signal.getsignal(signal.SIGTERM)

@@ -5,8 +5,8 @@ with --bench.json=true).
     blindgrasp-bench --bench.type=teacher --bench.preset=cpu --bench.iterations=6 --bench.json=true
 
 `--bench.type` picks the benchmark (as `--policy.type` picks a LeRobot policy); `--bench.*` are that benchmark's
-options (`--bench.type=sim --help` lists them). Each lives in its own module (`bench/sim.py`, `bench/teacher.py`,
-`bench/demos.py`, `bench/policy.py`, `bench/student.py`) that registers its `BenchConfig` subclass under its name and
+options (`--bench.type=sim --help` lists them). Each lives in its own module (`bench/sim_bench.py`, `bench/teacher_bench.py`,
+`bench/demos_bench.py`, `bench/policy_bench.py`, `bench/student_bench.py`) that registers its `BenchConfig` subclass under its name and
 has `run(cfg) -> dict`.
 """
 
@@ -52,7 +52,7 @@ def main(argv=None) -> None:
     # The benchmarks time torch as training runs it, with idle OpenMP threads asleep.
     sleeping_openmp_threads(restart=argv is None)
     for name in _modules(sys.argv[1:] if argv is None else list(argv)):  # each registers its --bench.type
-        importlib.import_module(f"lerobot_blindgrasp.bench.{name}")
+        importlib.import_module(f"lerobot_blindgrasp.bench.{name}_bench")
     cfg = parse_config(BenchCommand, argv).bench
     result = importlib.import_module(type(cfg).__module__).run(cfg)
     if cfg.json:

@@ -11,7 +11,7 @@ import torch
 import torch.nn.functional as F  # noqa: N812
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.bench.policy import make_policy
+from lerobot_blindgrasp.bench.policy_bench import make_policy
 
 PARTS = ("forward", "backward", "clip", "step", "zero_grad")
 # torch.optim.AdamW as LeRobot's AdamWConfig builds it (for-loop on CPU tensors), and its two other implementations.

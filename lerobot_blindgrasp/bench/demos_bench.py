@@ -17,7 +17,6 @@ reopening.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import io
 import shutil
 import sys
@@ -89,12 +88,6 @@ def _writer_speed(episodes, root: Path, per_frame: bool, fast: bool = True) -> f
 
 
 def run(cfg: BenchDemosConfig) -> dict:
-    import datasets
-
-    from lerobot_blindgrasp.demos import curation
-    from lerobot_blindgrasp.demos.collection import collect
-    from lerobot_blindgrasp.demos.config import CollectConfig
-
     tmp = Path(tempfile.mkdtemp(prefix="blindgrasp-bench-demos-"))
     try:
         teacher = cfg.teacher or _throwaway_teacher(tmp)
@@ -104,76 +97,22 @@ def run(cfg: BenchDemosConfig) -> dict:
             if len(seen) < cfg.write_episodes and not ep.physics_failed:
                 seen.append(ep)
 
-        def collect_into(folder: str, checkpoint_s: float, on_episode=None):
-            c = dataclasses.replace(collect_cfg, output_dir=tmp / folder, checkpoint_s=checkpoint_s)
-            with contextlib.redirect_stderr(io.StringIO()):
-                return collect(c, on_episode=on_episode)
-
-        collect_cfg = CollectConfig(
-            teacher=teacher,
-            output_dir=tmp / "demos",
-            repo_id="bench/demos",
-            episodes_per_object=cfg.episodes_per_object,
-            max_rollouts_per_object=cfg.max_rollouts_per_object,
-            objects=cfg.objects,
-            curation=curation.PAPER_CURATION if cfg.curation else curation.NO_CURATION,
-            num_envs=cfg.num_envs,
-            threads=cfg.threads,
-            backend=cfg.backend,
-            progress=False,
+        stats = _collect(
+            cfg, teacher, tmp, "demos", 0.0 if cfg.durable_side_by_side else cfg.checkpoint_s, keep_some
         )
-        stats = collect_into("demos", 0.0 if cfg.durable_side_by_side else cfg.checkpoint_s, keep_some)
-        durable_run = collect_into("demos_durable", cfg.checkpoint_s) if cfg.durable_side_by_side else None
-        cpu_min = stats.cpu_s / 60.0
-        whole = whole_default = per_frame = 0.0
-        bars_were_off = datasets.are_progress_bars_disabled()
-        datasets.disable_progress_bars()  # LeRobot's default path maps with a bar per episode
-        if seen:
-            _writer_speed(seen[:3], tmp / "w_warmup", per_frame=False)  # pays the lazy imports of a first write
-            whole = _writer_speed(seen, tmp / "w_episode_data", per_frame=False)
-            whole_default = _writer_speed(seen, tmp / "w_episode_data_default", per_frame=False, fast=False)
-            per_frame = _writer_speed(seen, tmp / "w_add_frame", per_frame=True)
-        if not bars_were_off:
-            datasets.enable_progress_bars()
+        durable_run = (
+            _collect(cfg, teacher, tmp, "demos_durable", cfg.checkpoint_s) if cfg.durable_side_by_side else None
+        )
         result = {
             "teacher": str(cfg.teacher) if cfg.teacher else "throwaway quick teacher (1 iteration)",
             "curation": cfg.curation,
             "num_envs": cfg.num_envs,
             "backend": cfg.backend,
-            "rollouts": stats.rollouts,
-            "curated_demos": stats.kept,
-            "frames": stats.frames,
-            "wall_s": stats.wall_s,
-            "cpu_s": stats.cpu_s,
-            "env_steps_per_s": stats.env_steps / stats.wall_s if stats.wall_s else 0.0,
-            "rollouts_per_cpu_minute": stats.rollouts / cpu_min if cpu_min else 0.0,
-            "curated_demos_per_cpu_minute": stats.demos_per_cpu_minute,
-            "demos_per_minute": stats.demos_per_minute,
-            "write_share_of_wall": stats.write_s / stats.wall_s if stats.wall_s else 0.0,
-            "frames_written_per_s": whole,
-            "frames_written_per_s_lerobot_default": whole_default,
-            "frames_written_per_s_add_frame": per_frame,
-            "writer_episodes": len(seen),
+            **_collection_figures(stats),
+            **_writer_figures(seen, tmp),
         }
         if durable_run is not None:
-            result.update(
-                durable_checkpoint_s=cfg.checkpoint_s,
-                durable_checkpoints=durable_run.checkpoints,
-                durable_checkpoint_ms_mean=1000 * durable_run.checkpoint_s / max(1, durable_run.checkpoints),
-                durable_curated_demos=durable_run.kept,
-                durable_wall_s=durable_run.wall_s,
-                durable_env_steps_per_s=durable_run.env_steps / durable_run.wall_s if durable_run.wall_s else 0.0,
-                durable_demos_per_minute=durable_run.demos_per_minute,
-                durable_cpu_s=durable_run.cpu_s,
-                durable_curated_demos_per_cpu_minute=durable_run.demos_per_cpu_minute,
-                durable_cpu_throughput_ratio=durable_run.demos_per_cpu_minute / stats.demos_per_cpu_minute
-                if stats.demos_per_cpu_minute
-                else 0.0,
-                durable_throughput_ratio=durable_run.demos_per_minute / stats.demos_per_minute
-                if stats.demos_per_minute
-                else 0.0,
-                checkpoint_share_of_wall=durable_run.checkpoint_s / max(durable_run.wall_s, 1e-9),
-            )
+            result.update(_durable_figures(cfg, durable_run, stats))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     if not cfg.json:
@@ -181,3 +120,84 @@ def run(cfg: BenchDemosConfig) -> dict:
         for k, v in result.items():
             print(f"{k:<{width}}  {v:.2f}" if isinstance(v, float) else f"{k:<{width}}  {v}")
     return result
+
+
+def _collect(cfg: BenchDemosConfig, teacher: Path, tmp: Path, folder: str, checkpoint_s: float, on_episode=None):
+    """One collection into tmp/folder, as blindgrasp-collect-demos runs it."""
+    from lerobot_blindgrasp.demos import curation
+    from lerobot_blindgrasp.demos.collection import collect
+    from lerobot_blindgrasp.demos.config import CollectConfig
+
+    c = CollectConfig(
+        teacher=teacher,
+        output_dir=tmp / folder,
+        repo_id="bench/demos",
+        episodes_per_object=cfg.episodes_per_object,
+        max_rollouts_per_object=cfg.max_rollouts_per_object,
+        objects=cfg.objects,
+        curation=curation.PAPER_CURATION if cfg.curation else curation.NO_CURATION,
+        num_envs=cfg.num_envs,
+        threads=cfg.threads,
+        backend=cfg.backend,
+        progress=False,
+        checkpoint_s=checkpoint_s,
+    )
+    with contextlib.redirect_stderr(io.StringIO()):
+        return collect(c, on_episode=on_episode)
+
+
+def _collection_figures(stats) -> dict:
+    cpu_min = stats.cpu_s / 60.0
+    return {
+        "rollouts": stats.rollouts,
+        "curated_demos": stats.kept,
+        "frames": stats.frames,
+        "wall_s": stats.wall_s,
+        "cpu_s": stats.cpu_s,
+        "env_steps_per_s": stats.env_steps / stats.wall_s if stats.wall_s else 0.0,
+        "rollouts_per_cpu_minute": stats.rollouts / cpu_min if cpu_min else 0.0,
+        "curated_demos_per_cpu_minute": stats.demos_per_cpu_minute,
+        "demos_per_minute": stats.demos_per_minute,
+        "write_share_of_wall": stats.write_s / stats.wall_s if stats.wall_s else 0.0,
+    }
+
+
+def _writer_figures(seen: list, tmp: Path) -> dict:
+    """Frames per second through each write path, on the rollouts kept."""
+    import datasets
+
+    whole = whole_default = per_frame = 0.0
+    bars_were_off = datasets.are_progress_bars_disabled()
+    datasets.disable_progress_bars()  # LeRobot's default path maps with a bar per episode
+    if seen:
+        _writer_speed(seen[:3], tmp / "w_warmup", per_frame=False)  # pays the lazy imports of a first write
+        whole = _writer_speed(seen, tmp / "w_episode_data", per_frame=False)
+        whole_default = _writer_speed(seen, tmp / "w_episode_data_default", per_frame=False, fast=False)
+        per_frame = _writer_speed(seen, tmp / "w_add_frame", per_frame=True)
+    if not bars_were_off:
+        datasets.enable_progress_bars()
+    return {
+        "frames_written_per_s": whole,
+        "frames_written_per_s_lerobot_default": whole_default,
+        "frames_written_per_s_add_frame": per_frame,
+        "writer_episodes": len(seen),
+    }
+
+
+def _durable_figures(cfg: BenchDemosConfig, durable_run, stats) -> dict:
+    """The collection with crash checkpoints, next to the one without."""
+    ratio = lambda a, b: a / b if b else 0.0  # noqa: E731
+    return {
+        "durable_checkpoint_s": cfg.checkpoint_s,
+        "durable_checkpoints": durable_run.checkpoints,
+        "durable_checkpoint_ms_mean": 1000 * durable_run.checkpoint_s / max(1, durable_run.checkpoints),
+        "durable_curated_demos": durable_run.kept,
+        "durable_wall_s": durable_run.wall_s,
+        "durable_env_steps_per_s": ratio(durable_run.env_steps, durable_run.wall_s),
+        "durable_demos_per_minute": durable_run.demos_per_minute,
+        "durable_cpu_s": durable_run.cpu_s,
+        "durable_curated_demos_per_cpu_minute": durable_run.demos_per_cpu_minute,
+        "durable_cpu_throughput_ratio": ratio(durable_run.demos_per_cpu_minute, stats.demos_per_cpu_minute),
+        "durable_throughput_ratio": ratio(durable_run.demos_per_minute, stats.demos_per_minute),
+        "checkpoint_share_of_wall": durable_run.checkpoint_s / max(durable_run.wall_s, 1e-9),
+    }

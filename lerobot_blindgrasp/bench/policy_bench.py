@@ -125,46 +125,12 @@ def run(cfg: BenchPolicyConfig) -> dict:
     torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
     policy = make_policy(cfg.size)
-    config = policy.config
-    rng = np.random.default_rng(cfg.seed)
     gemms, gemm_flops = _model_gemms(policy)
     a = torch.randn(PEAK_GEMM_N, PEAK_GEMM_N)
-    peak_flops = 2 * PEAK_GEMM_N**3
-
-    samples = {k: ([], []) for k in ("fast", "plain", "model_gemms", "peak_gemm")}
-    max_abs_diff = 0.0
-    with torch.inference_mode():
-        # Warm-up: allocator, BLAS buffers, weights into cache as far as they fit.
-        policy.reset()
-        for _ in range(5):
-            policy.predict_normalized_delta({OBS_STATE: torch.randn(1, spec.STATE_DIM)})
-        gemms()
-        a @ a
-        for _ in range(cfg.rounds):
-            episode = torch.from_numpy(rng.standard_normal((cfg.steps, 1, spec.STATE_DIM)).astype(np.float32))
-            # fast: the deployed path, step by step from reset; keep each step's window for the plain path.
-            policy.reset()
-            windows, fast_out = [], []
-            for obs in episode:
-                w0, c0 = time.perf_counter(), time.thread_time()
-                fast_out.append(policy.predict_normalized_delta({OBS_STATE: obs}))
-                samples["fast"][1].append(time.thread_time() - c0)
-                samples["fast"][0].append(time.perf_counter() - w0)
-                states, is_pad = policy.current_context()
-                windows.append((states, is_pad if bool(is_pad.any()) else None))
-            for (states, is_pad), out in zip(windows, fast_out, strict=True):
-                w0, c0 = time.perf_counter(), time.thread_time()
-                ref = policy.model.forward_reference(states, is_pad)
-                samples["plain"][1].append(time.thread_time() - c0)
-                samples["plain"][0].append(time.perf_counter() - w0)
-                max_abs_diff = max(max_abs_diff, float((ref - out).abs().max()))
-            for key, fn, n in (("model_gemms", gemms, 20), ("peak_gemm", lambda: a @ a, 5)):
-                wall, cpu = _timed(fn, n)
-                samples[key][0].extend(wall)
-                samples[key][1].extend(cpu)
+    samples, max_abs_diff = _timed_rounds(cfg, policy, gemms, a)
     if max_abs_diff > 1e-5:
         raise AssertionError(f"fast path differs from the plain path by {max_abs_diff:.3g} (> 1e-5)")
-
+    config = policy.config
     flops_plain = flops_per_step(config)
     result = {
         "size": cfg.size,
@@ -177,26 +143,70 @@ def run(cfg: BenchPolicyConfig) -> dict:
         "max_abs_diff_fast_vs_plain": max_abs_diff,
     }
     for clock, i in (("wall", 0), ("cpu", 1)):
-        gemm_gflops = gemm_flops / statistics.median(samples["model_gemms"][i]) / 1e9
-        peak_gflops = peak_flops / statistics.median(samples["peak_gemm"][i]) / 1e9
-        floor_ms = flops_plain / gemm_gflops / 1e6
-        peak_floor_ms = flops_plain / peak_gflops / 1e6
-        entry = {
-            "model_gemm_gflops": gemm_gflops,
-            "peak_gemm_gflops": peak_gflops,
-            "floor_ms": floor_ms,
-            "peak_floor_ms": peak_floor_ms,
-        }
-        for path in ("plain", "fast"):
-            entry[path] = {"p50_ms": _pct(samples[path][i], 50), "p95_ms": _pct(samples[path][i], 95)}
-        entry["fast_p50_over_floor"] = entry["fast"]["p50_ms"] / floor_ms
-        entry["fast_p50_over_peak_floor"] = entry["fast"]["p50_ms"] / peak_floor_ms
-        result[clock] = entry
+        result[clock] = _clock_entry(samples, i, gemm_flops, 2 * PEAK_GEMM_N**3, flops_plain)
     result["target"] = f"fast p50 <= {TARGET_RATIO} x floor (model-GEMM throughput), wall clock"
     result["target_met"] = result["wall"]["fast_p50_over_floor"] <= TARGET_RATIO
     if not cfg.json:
         print(format_table(result))
     return result
+
+
+def _timed_rounds(cfg: BenchPolicyConfig, policy, gemms, a) -> tuple[dict, float]:
+    """(wall, cpu) samples of each path per step: the deployed fast path step by step from reset, the plain path on
+    the same windows, the model's own GEMMs and a peak GEMM; and the largest difference between the two paths."""
+    rng = np.random.default_rng(cfg.seed)
+    samples = {k: ([], []) for k in ("fast", "plain", "model_gemms", "peak_gemm")}
+    max_abs_diff = 0.0
+
+    def timed(key, fn):
+        w0, c0 = time.perf_counter(), time.thread_time()
+        out = fn()
+        samples[key][1].append(time.thread_time() - c0)
+        samples[key][0].append(time.perf_counter() - w0)
+        return out
+
+    with torch.inference_mode():
+        # Warm-up: allocator, BLAS buffers, weights into cache as far as they fit.
+        policy.reset()
+        for _ in range(5):
+            policy.predict_normalized_delta({OBS_STATE: torch.randn(1, spec.STATE_DIM)})
+        gemms()
+        a @ a
+        for _ in range(cfg.rounds):
+            episode = torch.from_numpy(rng.standard_normal((cfg.steps, 1, spec.STATE_DIM)).astype(np.float32))
+            policy.reset()
+            windows, fast_out = [], []
+            for obs in episode:
+                fast_out.append(timed("fast", lambda o=obs: policy.predict_normalized_delta({OBS_STATE: o})))
+                states, is_pad = policy.current_context()
+                windows.append((states, is_pad if bool(is_pad.any()) else None))
+            for (states, is_pad), out in zip(windows, fast_out, strict=True):
+                ref = timed("plain", lambda s=states, p=is_pad: policy.model.forward_reference(s, p))
+                max_abs_diff = max(max_abs_diff, float((ref - out).abs().max()))
+            for key, fn, n in (("model_gemms", gemms, 20), ("peak_gemm", lambda: a @ a, 5)):
+                wall, cpu = _timed(fn, n)
+                samples[key][0].extend(wall)
+                samples[key][1].extend(cpu)
+    return samples, max_abs_diff
+
+
+def _clock_entry(samples: dict, i: int, gemm_flops: float, peak_flops: float, flops_plain: float) -> dict:
+    """Each path's p50/p95 on one clock (0: wall, 1: CPU), against the floors the GEMM throughputs give."""
+    gemm_gflops = gemm_flops / statistics.median(samples["model_gemms"][i]) / 1e9
+    peak_gflops = peak_flops / statistics.median(samples["peak_gemm"][i]) / 1e9
+    floor_ms = flops_plain / gemm_gflops / 1e6
+    peak_floor_ms = flops_plain / peak_gflops / 1e6
+    entry = {
+        "model_gemm_gflops": gemm_gflops,
+        "peak_gemm_gflops": peak_gflops,
+        "floor_ms": floor_ms,
+        "peak_floor_ms": peak_floor_ms,
+    }
+    for path in ("plain", "fast"):
+        entry[path] = {"p50_ms": _pct(samples[path][i], 50), "p95_ms": _pct(samples[path][i], 95)}
+    entry["fast_p50_over_floor"] = entry["fast"]["p50_ms"] / floor_ms
+    entry["fast_p50_over_peak_floor"] = entry["fast"]["p50_ms"] / peak_floor_ms
+    return entry
 
 
 def format_table(r: dict) -> str:

@@ -39,7 +39,7 @@ import numpy as np
 import torch
 
 from lerobot_blindgrasp.bench import BenchConfig
-from lerobot_blindgrasp.bench.policy import flops_per_step, make_policy
+from lerobot_blindgrasp.bench.policy_bench import flops_per_step, make_policy
 from lerobot_blindgrasp.bench.student_data import cache_memory, load_ms, loader_samples_per_s, synthetic_demos
 from lerobot_blindgrasp.bench.student_parts import compiled_vs_eager, format_table, gemm_gflops, update_parts
 from lerobot_blindgrasp.policies.blindgrasp_transformer.configuration_blindgrasp_transformer import SIZES
