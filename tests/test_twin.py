@@ -16,8 +16,8 @@ import pytest
 from emulators.harness import BIN, cli_env
 
 from lerobot_blindgrasp import durable, spec
+from lerobot_blindgrasp.hardware.emulators import mount
 from lerobot_blindgrasp.sim.gym_env import start_seed
-from lerobot_blindgrasp.twin import mount
 
 pytestmark = pytest.mark.slow
 

@@ -6,6 +6,7 @@ JSON lines over a Unix socket (the host's side is `envs/operator.py:SocketOperat
                    {"op": "ask", "token": N}                                 the time limit: was it a success?
                    {"op": "end", "token": N}                                 the trial is over
                    {"op": "hand", "q": [9 rad] | null}                       hold the joints there by hand / let go
+                   {"op": "weight", "tip": K | null, "mass_kg": M}           rest a weight on pad K alone / take it off
                    {"op": "status"}                                          the twin's timing and counters
     twin -> host   {"judge": TEXT}                                           once, on connect
                    {"key": "enter" | "s" | "f" | "y" | "n", "token": N}      the operator's keys for trial N
@@ -22,6 +23,7 @@ import logging
 import os
 import socket
 import threading
+import time
 
 from lerobot_blindgrasp import durable, spec
 
@@ -107,6 +109,9 @@ class OperatorServer:
         if op == "hand":
             self.twin.physics.hold_by_hand(msg["q"])
             return {"ok": True}
+        if op == "weight":
+            self.twin.physics.place_weight(msg["tip"], float(msg.get("mass_kg", 0.0)))
+            return {"ok": True}
         if op == "status":
             return {"ok": True, **self.twin.status()}
         raise ValueError(f"unknown op {op!r}")
@@ -142,6 +147,8 @@ class OperatorServer:
             "reason": reason,
             "judge": "twin",
             "peak_lift_m": round(self.twin.physics.peak_lift, 4),
+            "peak_tip_force_n": [round(float(f), 2) for f in self.twin.physics.peak_tip_force_n],
+            "t_end": round(time.time(), 2),
         }
         logger.info("trial %s: %s (%s)", placement["trial"], "SUCCESS" if success else "failure", reason)
         if self.trial_log:

@@ -19,9 +19,9 @@ from collections import deque
 import numpy as np
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware.emulators import mount
 from lerobot_blindgrasp.hardware.emulators.dynamixel import DynamixelBusEmulator
 from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulator
-from lerobot_blindgrasp.twin import mount
 from lerobot_blindgrasp.twin.operator_server import OperatorServer
 from lerobot_blindgrasp.twin.physics import TwinPhysics
 from lerobot_blindgrasp.twin.servo_link import SimShaft, read_commands
@@ -56,10 +56,9 @@ class Twin:
         lc = cfg.load_cell
         self.force = ForceSensorEmulator(
             rate_hz=lc.rate_hz,
-            scale_n_per_count=lc.scale_n_per_count,
+            scale_n_per_count=lc.true_scale(),
             offset_counts=lc.offset_counts,
             noise_counts=lc.noise_counts,
-            gain=lc.gain,
             seed=cfg.noise_seed,
             force_fn=lambda: self.physics.tip_force_n,
         )
