@@ -28,6 +28,7 @@ import gymnasium as gym
 import numpy as np
 
 from lerobot_blindgrasp import durable, spaces, spec
+from lerobot_blindgrasp.envs import real_report
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
 from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import Schedule
 from lerobot_blindgrasp.sim import objects
@@ -89,6 +90,9 @@ class GripperSession:
             self.robot.disconnect()
         if self.keys is not None:
             self.keys.stop()
+            # lerobot-eval writes eval_info.json after this: it names who judged the trials (envs/real_report.py).
+            judge = self.keys.judge if self.cfg.success_mode == "operator" else "force criterion"
+            real_report.stamp_judge_at_exit(judge)
 
 
 class RealGraspEnv(gym.Env):

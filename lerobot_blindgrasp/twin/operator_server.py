@@ -36,8 +36,9 @@ JUDGE = (
 
 
 class OperatorServer:
-    def __init__(self, path: str, twin, trial_log: str | None = None):
+    def __init__(self, path: str, twin, trial_log: str | None = None, empty_claw_after_s: float = 3.0):
         self.path, self.twin, self.trial_log = path, twin, trial_log
+        self.empty_claw_after_s = empty_claw_after_s
         if os.path.exists(path):
             os.unlink(path)  # a socket file left by a killed twin
         self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -87,8 +88,14 @@ class OperatorServer:
                     reply = {"ok": False, "error": f"{type(e).__name__}: {e}"}
                 if reply is not None:
                     self._send(conn, reply)
-        # The host went away (it finished, or its safety latch stopped it mid-trial): the operator takes the object
-        # out of the claw, so that the next session does not start with it there.
+        # The host went away (it finished, its safety latch stopped it mid-trial, or it died): a few seconds later
+        # the operator takes the object out of the claw, so that the next session does not start with it there.
+        # Not at once: what the gripper does to the object right after its host died is part of the trial.
+        timer = threading.Timer(self.empty_claw_after_s, self._finish_abandoned, args=(conn,))
+        timer.daemon = True
+        timer.start()
+
+    def _finish_abandoned(self, conn: socket.socket) -> None:
         with self._lock:
             token = self._active[1] if self._active is not None and self._active[0] is conn else None
         if token is not None:
