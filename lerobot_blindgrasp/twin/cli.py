@@ -17,6 +17,7 @@ import json
 import logging
 import signal
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -76,16 +77,21 @@ def serve(cfg: TwinConfig, stop: threading.Event) -> dict:
 
     with Twin(cfg) as twin:
         ports = twin.ports()
-        print(json.dumps(ports), flush=True)
-        if cfg.ports_json is not None:
+        if cfg.ports_json is not None:  # before the printed line: whoever reads that line finds the file too
             durable.atomic_write_json(cfg.ports_json, ports, indent=2)
+        print(json.dumps(ports), flush=True)
         print(
             f"blindgrasp-twin: Dynamixel bus {ports['dynamixel_port']}, force board {ports['force_port']}, "
             f"operator socket {ports['operator_socket']}. Ctrl-C stops.",
             flush=True,
         )
-        while not stop.wait(cfg.status_every_s or None):
-            print("twin status " + json.dumps(twin.status()), flush=True)
+        # Short waits, never an endless one: a signal that lands on one of the twin's threads only runs its Python
+        # handler once the main thread runs again, and an endless wait never does.
+        last = time.monotonic()
+        while not stop.wait(0.5):
+            if cfg.status_every_s and time.monotonic() - last >= cfg.status_every_s:
+                last = time.monotonic()
+                print("twin status " + json.dumps(twin.status()), flush=True)
         status = twin.status()
     print("twin final status " + json.dumps(status), flush=True)
     return status
