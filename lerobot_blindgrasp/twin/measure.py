@@ -197,8 +197,20 @@ def niceness(pid: int) -> int:
     return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[16])
 
 
+def commit() -> str:
+    """The source's git commit (and "+changes" when its tree differs), or "unknown" outside a checkout."""
+    here = Path(__file__).parent
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, check=True)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+                               capture_output=True, text=True, check=True)  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head.stdout.strip() + ("+changes" if dirty.stdout.strip() else "")
+
+
 def facts(cfg: TwinMeasureConfig) -> dict:
-    return {"command": " ".join([Path(sys.executable).name, "-m", __spec__.name, *sys.argv[1:]]),
+    return {"commit": commit(), "command": " ".join([Path(sys.executable).name, "-m", __spec__.name, *sys.argv[1:]]),
             "started_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()), "cpus": os.cpu_count(),
             "platform": platform_id.describe(platform_id.platform()), "root": os.geteuid() == 0,
             "config": {k: str(v) for k, v in asdict(cfg).items()}}  # fmt: skip

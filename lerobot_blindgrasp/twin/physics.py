@@ -167,7 +167,10 @@ class TwinPhysics:
                 self._recover()
             self.substeps += 1
             self._publish()
-            self.peak_tip_force_n = np.maximum(self.peak_tip_force_n, self.tip_force_n)
+            force = self.tip_force_n
+            if force.max() > self.peak_tip_force_n.max():
+                self.q_at_peak = self.q.copy()  # the pose that made the trial's largest squeeze (the record)
+            self.peak_tip_force_n = np.maximum(self.peak_tip_force_n, force)
             if self.substeps % self.options.substeps == 0 and self.judging:
                 verdict = self._judge()
         if verdict is not None and self.on_verdict is not None:

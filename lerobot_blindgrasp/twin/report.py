@@ -83,7 +83,7 @@ def timing(run: Path) -> dict[str, dict[str, float]]:
 def twin_status(run: Path) -> dict | None:
     log = run / "twin.log"
     lines = [x for x in log.read_text().splitlines() if x.startswith("twin ")] if log.is_file() else []
-    return json.loads(lines[-1].split(" ", 3)[-1]) if lines else None
+    return json.loads("{" + lines[-1].split("{", 1)[1]) if lines else None  # "twin [final ]status {...}"
 
 
 STOP_CAUSES = (  # (what the error says, the cause), first match wins
