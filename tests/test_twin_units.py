@@ -157,3 +157,22 @@ def test_the_docs_state_the_robots_overload_limit():
         text = (ROOT / doc).read_text()
         stated = {float(n) for n in re.findall(r"(\d+(?:\.\d+)?) N overload stop", text)}
         assert stated == {limit}, f"{doc} states the overload stop as {stated}, the robot's default is {limit} N"
+
+
+def test_the_measurement_keeps_the_robots_defaults_unless_told_and_resumes_from_its_records(tmp_path):
+    from lerobot_blindgrasp.twin.measure import TwinMeasureConfig, done_seeds, last_error
+
+    assert TwinMeasureConfig(output_dir=tmp_path).robot_flags() == []  # the shipped defaults
+    assert TwinMeasureConfig(output_dir=tmp_path, overload_n=40.0, current_limit_a=1.15).robot_flags() == [
+        "--env.robot.force_sensor.overload_n=40.0", "--env.robot.current_limit_a=1.15"]  # fmt: skip
+    _jsonl(
+        tmp_path / "real_trials.jsonl", [{"object": "sphere_small", "seed": 1000}, {"object": "x", "seed": 1000}]
+    )
+    _jsonl(tmp_path / "stops.jsonl", [{"object": "sphere_small", "seed": 1001, "error": "..."}])
+    assert done_seeds(tmp_path, "sphere_small") == {1000, 1001}  # the next lerobot-eval starts at seed 1002
+    log = tmp_path / "run.log"
+    log.write_text(
+        "INFO fine\nTraceback\nForceOverloadError: Fingertip force overload {'th_tip': 81.0} N > 80.0 N\n"
+    )
+    assert last_error(log) == "Fingertip force overload {'th_tip': 81.0} N > 80.0 N"
+    assert last_error(tmp_path / "missing.log") == "no error line"

@@ -68,6 +68,11 @@ class TwinConfig:
     # The physics falling behind the clock by more than this skips ahead (counted in the status as behind_s).
     max_lag_s: float = 0.05
     status_every_s: float = 30.0  # 0: quiet
+    # > 0: the servo bus, force board and physics threads run SCHED_FIFO at this priority (root or CAP_SYS_NICE).
+    # They stand in for the gripper's own processors, which answer within microseconds whatever else the PC runs;
+    # on a loaded machine a Python thread may wait longer than the host's reply window (34 ms at the robot's
+    # default latency_timer_ms) and the real stack then stops on a timeout no gripper would cause.
+    realtime_priority: int = 0
     load_cell: LoadCellConfig = field(default_factory=LoadCellConfig)
 
 

@@ -16,8 +16,9 @@ One command, resumable (re-run it with the same `--output_dir` and it goes on wh
    with the sim, McNemar p).
 
 The twin and the evaluations run at `--nice` (default -10, which needs root; otherwise they run at the normal
-priority and the record says so): they stand in for a gripper with its own processors and a lab PC that runs
-nothing else. `load.jsonl` samples the machine's load and CPU use every `--load_every_s` throughout.
+priority and `runs.log` says so), standing in for a lab PC that runs nothing else, and the twin's emulator and
+physics threads run real-time (`--twin_realtime_priority`), standing in for the gripper's own processors, which
+answer whatever the PC does. `load.jsonl` samples the machine's load and CPU use every `--load_every_s` throughout.
 """
 
 from __future__ import annotations
@@ -53,6 +54,9 @@ class TwinMeasureConfig:
     seed: int = 1000  # episode k of an object is evaluation index seed + k, in both envs
     sim: bool = True  # also run --env.type=blindgrasp on the same start states
     nice: int = -10  # the twin's and the evaluations' niceness (negative needs root)
+    # The twin's emulators and physics as SCHED_FIFO threads at this priority (blindgrasp-twin --realtime_priority;
+    # root): they stand in for the gripper's own processors. 0: normal threads.
+    twin_realtime_priority: int = 10
     load_every_s: float = 10.0
     # Robot settings; None keeps the robot's shipped default.
     overload_n: float | None = None
@@ -178,7 +182,8 @@ def start_twin(cfg: TwinMeasureConfig) -> tuple[subprocess.Popen, dict]:
     out = cfg.output_dir
     (out / "ports.json").unlink(missing_ok=True)
     cmd = [sys.executable, "-m", "lerobot_blindgrasp.twin.cli", f"--ports_json={out / 'ports.json'}",
-           f"--socket={out / 'twin.sock'}", f"--trial_log={out / 'twin_trials.jsonl'}", "--status_every_s=60"]  # fmt: skip
+           f"--socket={out / 'twin.sock'}", f"--trial_log={out / 'twin_trials.jsonl'}", "--status_every_s=60",
+           f"--realtime_priority={cfg.twin_realtime_priority}"]  # fmt: skip
     log = (out / "twin.log").open("a")
     proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, preexec_fn=_renice(cfg.nice))
     deadline = time.monotonic() + 120
