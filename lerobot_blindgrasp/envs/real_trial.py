@@ -175,8 +175,8 @@ class RealGraspEnv(gym.Env):
         if self.cfg.success_mode == "operator":
             print("Running (10 s): press 's' once the object is held off the table for 1 s, 'f' to abort.")
         self._overruns_at_start = self._overruns()
+        self._schedule.start()  # from the observation's start, as every later period: the first one is 50 ms too
         obs = self._observe()
-        self._schedule.start()
         self._returned_at = time.perf_counter()
         return obs, {"is_success": False}
 
