@@ -21,6 +21,8 @@ MODULE_COMMANDS = (
     "lerobot_blindgrasp.analysis.progress",
     "lerobot_blindgrasp.analysis.diversity",
     "lerobot_blindgrasp.envs.real_report",
+    "lerobot_blindgrasp.twin.measure",
+    "lerobot_blindgrasp.twin.report",
 )
 
 

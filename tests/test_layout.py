@@ -14,10 +14,12 @@ PACKAGE = Path(__file__).resolve().parents[1] / "lerobot_blindgrasp"
 
 # Floors, bottom first: a folder (or top-level module) may import only from floors below its own.
 FLOORS: tuple[tuple[str, ...], ...] = (
-    ("spec", "spaces", "cli", "durable", "platform_id", "project", "shipped"),
-    ("hardware", "results"),
+    ("spec", "durable", "platform_id"),
+    ("spaces", "cli", "project"),
+    ("shipped", "hardware"),
     ("sim", "policies", "robots"),
-    ("presets", "teleoperators", "envs", "cards"),
+    ("results", "presets", "teleoperators", "cards"),
+    ("envs", "emulators"),
     ("rollout",),
     ("teacher",),
     ("demos",),

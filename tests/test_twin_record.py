@@ -43,7 +43,7 @@ def recorded(tmp_path_factory):
     with Twin(TwinConfig(socket=str(tmp / "twin.sock"))) as twin, GloveEmulator(free_udp_port()) as glove:
         durable.atomic_write_json(tmp / "ports.json", twin.ports())
         _run([str(BIN / "blindgrasp-twin-calibrate"), f"--ports_json={tmp / 'ports.json'}", "--robot_id=twin",
-              f"--calibration_dir={tmp / 'calibration'}", f"--latency_timer_ms={LATENCY_TIMER_MS}"],
+              f"--calibration_dir={tmp / 'calibration'}", f"--latency_timer_ms={LATENCY_TIMER_MS}", "--force=false"],
              env)  # fmt: skip
         teleop = [f"--teleop=include {GLOVE_FILE}", f"--teleop.port={glove.addr[1]}", "--teleop.id=op"]
         op = Operator([str(BIN / "lerobot-calibrate"), *teleop, "--teleop.calibration_s=0.3"], env)
@@ -60,6 +60,7 @@ def recorded(tmp_path_factory):
         _run([str(BIN / "lerobot-record"), "--robot.type=blindgrasp_gripper", "--robot.id=twin",
               f"--robot.calibration_dir={tmp / 'calibration'}", f"--robot.port={ports['dynamixel_port']}",
               f"--robot.force_sensor.port={ports['force_port']}", "--robot.force_sensor.tare_s=0.2",
+              f"--robot.force_sensor.scale_n_per_count=[{','.join(map(str, ports['scale_n_per_count']))}]",
               f"--robot.latency_timer_ms={LATENCY_TIMER_MS}", "--robot.max_overrun_s=0", *teleop,
               f"--dataset.repo_id={REPO_ID}",
               f"--dataset.root={tmp / 'dataset'}", "--dataset.single_task=grasp and lift the medium sphere",

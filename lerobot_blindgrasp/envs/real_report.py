@@ -8,15 +8,23 @@ package (`lerobot_blindgrasp/cli.py`); a bare path is answered with the command 
 `--env.type=blindgrasp_real` makes each object its own task group, so `per_task[i].task_group` names the object of
 each task's trials. Each rate comes with its 95 % Wilson interval (10 trials per object is the paper's protocol;
 the interval says how little that pins down).
+
+Who judged the trials (an operator at the keyboard, the physics twin by the sim's rule, or the force criterion) is
+the first line. The real env names it in `eval_info.json` ("judge") when lerobot-eval was given `--output_dir`
+(`stamp_judge_at_exit`: lerobot-eval writes the file after it has closed the envs); otherwise `--trial_log` (the
+env's `--env.trial_log`) tells it from each trial's `decided_by`.
 """
 
 from __future__ import annotations
 
+import atexit
 import json
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.results.rates import wilson_interval
 
@@ -46,10 +54,52 @@ def success_table(eval_info: dict) -> str:
     return "\n".join(rows)
 
 
+_STAMPED: set[Path] = set()
+
+
+def stamp_judge_at_exit(judge: str, argv: list[str] | None = None) -> Path | None:
+    """Name `judge` in the eval_info.json this lerobot-eval process writes (into its `--output_dir`) once it exits.
+    A file older than this call (another run's) is left alone. Returns the path it will stamp, or None when the
+    command line names no output folder (lerobot-eval then makes one up; the trial log still names the judge)."""
+    from lerobot.configs.parser import parse_arg
+
+    out = parse_arg("output_dir", sys.argv[1:] if argv is None else argv)
+    if not out:
+        return None
+    path, since = Path(out) / "eval_info.json", time.time()
+    if path in _STAMPED:  # every per-object env closes the one session
+        return path
+    _STAMPED.add(path)
+
+    def stamp() -> None:
+        try:
+            if path.is_file() and path.stat().st_mtime >= since:
+                info = json.loads(path.read_text())
+                durable.atomic_write_json(path, {"judge": judge, **info}, indent=2)
+        except (OSError, ValueError):
+            pass  # the record stays as lerobot-eval wrote it; the trial log names the judge
+
+    atexit.register(stamp)
+    return path
+
+
+def judged_by(eval_info: dict, trial_log: Path | None) -> str:
+    if eval_info.get("judge"):
+        return str(eval_info["judge"])
+    if trial_log is not None and trial_log.is_file():
+        rows = [json.loads(x) for x in trial_log.read_text().splitlines() if x.strip()]
+        names = sorted({str(r.get("decided_by")) for r in rows})
+        if names:
+            return "; ".join(names) + f" (from {trial_log.name})"
+    return "not recorded (an eval_info.json without 'judge': pass --trial_log=<the run's --env.trial_log>)"
+
+
 @dataclass
 class RealReportConfig:
     # lerobot-eval's eval_info.json of a `--env.type=blindgrasp_real` run, or the folder that holds it
     eval_info: Path
+    # The run's --env.trial_log, when its eval_info.json does not name the judge
+    trial_log: Path | None = None
 
 
 def load(path: Path) -> dict:
@@ -70,10 +120,13 @@ def main(argv: list[str] | None = None) -> None:
         typed = USAGE.replace("outputs/eval/<run>/eval_info.json", args[0])
         raise SystemExit(f"error: named flags only; type\n    {typed}")
     cfg = parse_config(RealReportConfig, args)
+    info = load(cfg.eval_info)
     try:
-        print(success_table(load(cfg.eval_info)))
+        table = success_table(info)
     except ValueError as e:
         raise SystemExit(f"error: {cfg.eval_info}: {e}") from None
+    print(f"Judged by: {judged_by(info, cfg.trial_log)}\n")
+    print(table)
 
 
 if __name__ == "__main__":

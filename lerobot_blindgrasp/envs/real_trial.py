@@ -29,6 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 from lerobot_blindgrasp import durable, spaces, spec
+from lerobot_blindgrasp.envs import real_report
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
 from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import Schedule
 from lerobot_blindgrasp.sim import objects
@@ -90,6 +91,9 @@ class GripperSession:
             self.robot.disconnect()
         if self.keys is not None:
             self.keys.stop()
+            # lerobot-eval writes eval_info.json after this: it names who judged the trials (envs/real_report.py).
+            judge = self.keys.judge if self.cfg.success_mode == "operator" else "force criterion"
+            real_report.stamp_judge_at_exit(judge)
 
 
 class RealGraspEnv(gym.Env):
@@ -174,8 +178,8 @@ class RealGraspEnv(gym.Env):
         if self.cfg.success_mode == "operator":
             print("Running (10 s): press 's' once the object is held off the table for 1 s, 'f' to abort.")
         self._overruns_at_start = self._overruns()
+        self._schedule.start()  # from the observation's start, as every later period: the first one is 50 ms too
         obs = self._observe()
-        self._schedule.start()
         self._returned_at = time.perf_counter()
         return obs, {"is_success": False}
 

@@ -1,12 +1,17 @@
-"""`blindgrasp-twin-calibrate`: run the real `lerobot-calibrate` against a running twin, playing its operator.
+"""`blindgrasp-twin-calibrate`: run the real calibration commands against a running twin, playing their operator.
 
     blindgrasp-twin-calibrate --ports_json=outputs/twin/ports.json --robot_id=twin \\
         --calibration_dir=outputs/twin/calibration
 
-lerobot-calibrate asks for the REFERENCE pose (q = 0) and a POSITIVE pose by hand, torque off. Here the hand is
-the twin's (`hold_by_hand` over the operator socket): at each prompt the twin's joints are held in that pose
-(`positive_q` on every joint), then ENTER is pressed. The twin's mounting is not told to the host: Drive_Mode and
-Homing_Offset come out of the calibration itself, as on a freshly assembled gripper.
+Two commands, as on a freshly assembled gripper:
+- `lerobot-calibrate` asks for the REFERENCE pose (q = 0) and a POSITIVE pose by hand, torque off. Here the hand is
+  the twin's (`hold_by_hand` over the operator socket): at each prompt the twin's joints are held in that pose
+  (`positive_q` on every joint), then ENTER is pressed. The twin's mounting is not told to the host: Drive_Mode and
+  Homing_Offset come out of the calibration itself.
+- `blindgrasp-calibrate-force` (unless `--force=false`) asks for nothing on the pads, then a known weight on each pad
+  in turn, then nothing again. The twin rests `mass_kg` on the pad each prompt names (`place_weight`), so each
+  cell's scale (and any gain error the twin was started with, `--load_cell.gain`) is measured, not told.
+Both files land in `calibration_dir` under `robot_id`, where the robot finds them at connect.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,13 +48,14 @@ class TwinCalibrateConfig:
     robot_id: str = "twin"
     calibration_dir: Path | None = None  # None: LeRobot's default (HF_LEROBOT_CALIBRATION)
     positive_q: float = 0.3  # rad on every joint in the positive pose
-    latency_timer_ms: int = 60
-    timeout_s: float = 120.0
+    force: bool = True  # also weigh the fingertips (blindgrasp-calibrate-force)
+    mass_kg: float = 0.5  # the weight the twin rests on each pad
+    latency_timer_ms: int = 16  # the robot's default
+    timeout_s: float = 120.0  # per command
 
 
-def calibrate_command(cfg: TwinCalibrateConfig, ports: dict) -> list[str]:
-    cmd = [
-        str(BIN / "lerobot-calibrate"),
+def robot_flags(cfg: TwinCalibrateConfig, ports: dict) -> list[str]:
+    flags = [
         "--robot.type=blindgrasp_gripper",
         f"--robot.id={cfg.robot_id}",
         f"--robot.port={ports['dynamixel_port']}",
@@ -56,22 +63,45 @@ def calibrate_command(cfg: TwinCalibrateConfig, ports: dict) -> list[str]:
         f"--robot.latency_timer_ms={cfg.latency_timer_ms}",
     ]
     if cfg.calibration_dir is not None:
-        cmd.append(f"--robot.calibration_dir={cfg.calibration_dir}")
-    return cmd
+        flags.append(f"--robot.calibration_dir={cfg.calibration_dir}")
+    return flags
 
 
-def run(cfg: TwinCalibrateConfig) -> int:
-    ports = json.loads(cfg.ports_json.read_text())
-    sock = ports["operator_socket"]
-    proc = subprocess.Popen(
-        calibrate_command(cfg, ports),
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        bufsize=1,
-    )
-    deadline = time.monotonic() + cfg.timeout_s
+def servo_answers(sock: str, positive_q: float) -> Callable[[str], str | None]:
+    """lerobot-calibrate's prompts: the twin's hand holds each pose, then ENTER."""
+
+    def answer(prompt: str) -> str | None:
+        if "calibrate again" in prompt:
+            return "c"
+        for word, q in (("REFERENCE", 0.0), ("POSITIVE", positive_q)):
+            if word in prompt:
+                request(sock, {"op": "hand", "q": [q] * spec.NUM_JOINTS})
+                time.sleep(0.3)
+                return ""
+        return None
+
+    return answer
+
+
+def force_answers(sock: str, mass_kg: float) -> Callable[[str], str | None]:
+    """blindgrasp-calibrate-force's five prompts: the weight goes on the pad the prompt names, or comes off."""
+
+    def answer(prompt: str) -> str | None:
+        if "Step" not in prompt:
+            return None
+        named = [k for k, n in enumerate(spec.FORCE_SENSOR_NAMES) if f"on the {n} pad" in prompt]
+        request(sock, {"op": "weight", "tip": named[0] if named else None, "mass_kg": mass_kg})
+        return ""
+
+    return answer
+
+
+def play(cmd: list[str], answer: Callable[[str], str | None], timeout_s: float) -> int:
+    """Run `cmd`, echoing its output; each complete prompt (ends with ': ' and asks for ENTER) goes to `answer`,
+    whose text (None: not a prompt it knows) is typed in."""
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, bufsize=1)  # fmt: skip
+    deadline = time.monotonic() + timeout_s
     buf = ""
     try:
         while proc.poll() is None and time.monotonic() < deadline:
@@ -82,18 +112,10 @@ def run(cfg: TwinCalibrateConfig) -> int:
             buf += ch
             if not (buf.endswith(": ") and "ENTER" in buf):  # a prompt, complete
                 continue
-            if "calibrate again" in buf:
-                proc.stdin.write("c\n")
-            elif "REFERENCE" in buf:
-                request(sock, {"op": "hand", "q": [0.0] * spec.NUM_JOINTS})
-                time.sleep(0.3)
-                proc.stdin.write("\n")
-            elif "POSITIVE" in buf:
-                request(sock, {"op": "hand", "q": [cfg.positive_q] * spec.NUM_JOINTS})
-                time.sleep(0.3)
-                proc.stdin.write("\n")
-            else:
+            typed = answer(buf)
+            if typed is None:
                 continue
+            proc.stdin.write(typed + "\n")
             proc.stdin.flush()
             buf = ""
         sys.stdout.write(proc.stdout.read() or "")
@@ -101,7 +123,23 @@ def run(cfg: TwinCalibrateConfig) -> int:
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def run(cfg: TwinCalibrateConfig) -> int:
+    ports = json.loads(cfg.ports_json.read_text())
+    sock = ports["operator_socket"]
+    flags = robot_flags(cfg, ports)
+    try:
+        rc = play([str(BIN / "lerobot-calibrate"), *flags], servo_answers(sock, cfg.positive_q), cfg.timeout_s)
+    finally:
         request(sock, {"op": "hand", "q": None})  # let go: the fingers hang free again
+    if rc != 0 or not cfg.force:
+        return rc
+    cmd = [str(BIN / "blindgrasp-calibrate-force"), *flags, f"--mass_kg={cfg.mass_kg}"]
+    try:
+        return play(cmd, force_answers(sock, cfg.mass_kg), cfg.timeout_s)
+    finally:
+        request(sock, {"op": "weight", "tip": None})
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -17,26 +17,44 @@ import json
 import logging
 import signal
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import parse_config
 
+# A 10 kg (98 N), 1 mV/V cell on an HX711 at gain 128 with 5 V excitation (docs/force_board.md, "Load cell range"):
+# 98.0665 N give 5 mV, and the ADC's +-19.53 mV input spans +-2^23 counts.
+CELL_SCALE_N_PER_COUNT = 9.80665 * 10 / (5.0 * 2**23 / 19.53)
+
 
 @dataclass
 class LoadCellConfig:
     """Each fingertip's load cell and ADC as the force board's emulator models them: counts = offset + gain x F /
-    scale + noise. The host is configured with `scale_n_per_count`; `gain` is the cell's error against it."""
+    scale + noise. `scale_n_per_count` is the cells' datasheet scale (what ports.json publishes); `gain` is each
+    cell's own sensitivity against it (a cell's rated output is typically +-10 % off its nominal), which only a
+    calibration with a known weight (`blindgrasp-calibrate-force`) finds."""
 
-    scale_n_per_count: list[float] = field(default_factory=lambda: [2.5e-5, 2.5e-5, 2.5e-5])
+    scale_n_per_count: list[float] = field(default_factory=lambda: [CELL_SCALE_N_PER_COUNT] * 3)
     offset_counts: list[float] = field(default_factory=lambda: [81_000.0, -52_000.0, 12_000.0])
-    # ADC noise (counts, 1 sigma): 300 counts = 7.5 mN at the default scale, an HX711's noise on a 1 mV/V cell. The sim's
+    # ADC noise (counts, 1 sigma): 300 counts = 14 mN at this scale, an HX711's noise on a 1 mV/V cell. The sim's
     # 0.5 N is a training randomization, not a sensor: at 0.5 N the host's "below -1 N is a fault" check would
     # stop the gripper every few seconds.
     noise_counts: float = 300.0
-    gain: float = 1.0
+    gain: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0])
     rate_hz: float = 80.0  # the force board firmware's rate (one frame per fresh sample)
+
+    def __post_init__(self):
+        for name in ("scale_n_per_count", "offset_counts", "gain"):
+            if len(getattr(self, name)) != 3:
+                raise ValueError(f"load_cell.{name} needs one value per fingertip (3)")
+        if not all(g > 0 for g in self.gain) or not all(s != 0 for s in self.scale_n_per_count):
+            raise ValueError("load_cell.gain must be > 0 and scale_n_per_count non-zero")
+
+    def true_scale(self) -> list[float]:
+        """N per count of each cell as built (what the emulator converts with)."""
+        return [s / g for s, g in zip(self.scale_n_per_count, self.gain, strict=True)]
 
 
 @dataclass
@@ -50,6 +68,11 @@ class TwinConfig:
     # The physics falling behind the clock by more than this skips ahead (counted in the status as behind_s).
     max_lag_s: float = 0.05
     status_every_s: float = 30.0  # 0: quiet
+    # > 0: the servo bus, force board and physics threads run SCHED_FIFO at this priority (root or CAP_SYS_NICE).
+    # They stand in for the gripper's own processors, which answer within microseconds whatever else the PC runs;
+    # on a loaded machine a Python thread may wait longer than the host's reply window (34 ms at the robot's
+    # default latency_timer_ms) and the real stack then stops on a timeout no gripper would cause.
+    realtime_priority: int = 0
     load_cell: LoadCellConfig = field(default_factory=LoadCellConfig)
 
 
@@ -59,16 +82,21 @@ def serve(cfg: TwinConfig, stop: threading.Event) -> dict:
 
     with Twin(cfg) as twin:
         ports = twin.ports()
-        print(json.dumps(ports), flush=True)
-        if cfg.ports_json is not None:
+        if cfg.ports_json is not None:  # before the printed line: whoever reads that line finds the file too
             durable.atomic_write_json(cfg.ports_json, ports, indent=2)
+        print(json.dumps(ports), flush=True)
         print(
             f"blindgrasp-twin: Dynamixel bus {ports['dynamixel_port']}, force board {ports['force_port']}, "
             f"operator socket {ports['operator_socket']}. Ctrl-C stops.",
             flush=True,
         )
-        while not stop.wait(cfg.status_every_s or None):
-            print("twin status " + json.dumps(twin.status()), flush=True)
+        # Short waits, never an endless one: a signal that lands on one of the twin's threads only runs its Python
+        # handler once the main thread runs again, and an endless wait never does.
+        last = time.monotonic()
+        while not stop.wait(0.5):
+            if cfg.status_every_s and time.monotonic() - last >= cfg.status_every_s:
+                last = time.monotonic()
+                print("twin status " + json.dumps(twin.status()), flush=True)
         status = twin.status()
     print("twin final status " + json.dumps(status), flush=True)
     return status

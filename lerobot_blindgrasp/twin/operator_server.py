@@ -6,6 +6,7 @@ JSON lines over a Unix socket (the host's side is `envs/operator.py:SocketOperat
                    {"op": "ask", "token": N}                                 the time limit: was it a success?
                    {"op": "end", "token": N}                                 the trial is over
                    {"op": "hand", "q": [9 rad] | null}                       hold the joints there by hand / let go
+                   {"op": "weight", "tip": K | null, "mass_kg": M}           rest a weight on pad K alone / take it off
                    {"op": "status"}                                          the twin's timing and counters
     twin -> host   {"judge": TEXT}                                           once, on connect
                    {"key": "enter" | "s" | "f" | "y" | "n", "token": N}      the operator's keys for trial N
@@ -22,6 +23,7 @@ import logging
 import os
 import socket
 import threading
+import time
 
 from lerobot_blindgrasp import durable, spec
 
@@ -34,8 +36,9 @@ JUDGE = (
 
 
 class OperatorServer:
-    def __init__(self, path: str, twin, trial_log: str | None = None):
+    def __init__(self, path: str, twin, trial_log: str | None = None, empty_claw_after_s: float = 3.0):
         self.path, self.twin, self.trial_log = path, twin, trial_log
+        self.empty_claw_after_s = empty_claw_after_s
         if os.path.exists(path):
             os.unlink(path)  # a socket file left by a killed twin
         self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -85,8 +88,14 @@ class OperatorServer:
                     reply = {"ok": False, "error": f"{type(e).__name__}: {e}"}
                 if reply is not None:
                     self._send(conn, reply)
-        # The host went away (it finished, or its safety latch stopped it mid-trial): the operator takes the object
-        # out of the claw, so that the next session does not start with it there.
+        # The host went away (it finished, its safety latch stopped it mid-trial, or it died): a few seconds later
+        # the operator takes the object out of the claw, so that the next session does not start with it there.
+        # Not at once: what the gripper does to the object right after its host died is part of the trial.
+        timer = threading.Timer(self.empty_claw_after_s, self._finish_abandoned, args=(conn,))
+        timer.daemon = True
+        timer.start()
+
+    def _finish_abandoned(self, conn: socket.socket) -> None:
         with self._lock:
             token = self._active[1] if self._active is not None and self._active[0] is conn else None
         if token is not None:
@@ -106,6 +115,9 @@ class OperatorServer:
             return None
         if op == "hand":
             self.twin.physics.hold_by_hand(msg["q"])
+            return {"ok": True}
+        if op == "weight":
+            self.twin.physics.place_weight(msg["tip"], float(msg.get("mass_kg", 0.0)))
             return {"ok": True}
         if op == "status":
             return {"ok": True, **self.twin.status()}
@@ -142,6 +154,9 @@ class OperatorServer:
             "reason": reason,
             "judge": "twin",
             "peak_lift_m": round(self.twin.physics.peak_lift, 4),
+            "peak_tip_force_n": [round(float(f), 2) for f in self.twin.physics.peak_tip_force_n],
+            "q_at_peak_rad": [round(float(q), 3) for q in self.twin.physics.q_at_peak],
+            "t_end": round(time.time(), 2),
         }
         logger.info("trial %s: %s (%s)", placement["trial"], "SUCCESS" if success else "failure", reason)
         if self.trial_log:

@@ -63,6 +63,7 @@ class TwinPhysics:
         self.lock = threading.Lock()
         self.command = ServoCommand()
         self.hand_q: np.ndarray | None = None  # joints held by the operator's hand (torque off), or None
+        self.pad_load_n = np.zeros(spec.NUM_FORCES)  # a calibration weight resting on a pad, along its cell's axis
         self._templates: dict[str, mujoco.MjModel] = {}
         self.substeps = 0
         self.trial = 0  # placement counter; verdicts carry it
@@ -106,6 +107,9 @@ class TwinPhysics:
         self._held = np.zeros(1, dtype=np.int64)
         self.peak_lift = 0.0
         self._publish()
+        self.peak_tip_force_n = np.zeros(
+            spec.NUM_FORCES
+        )  # the true squeeze since the placement (the trial record)
         return {
             "object": name,
             "seed": seed,
@@ -163,6 +167,10 @@ class TwinPhysics:
                 self._recover()
             self.substeps += 1
             self._publish()
+            force = self.tip_force_n
+            if force.max() > self.peak_tip_force_n.max():
+                self.q_at_peak = self.q.copy()  # the pose that made the trial's largest squeeze (the record)
+            self.peak_tip_force_n = np.maximum(self.peak_tip_force_n, force)
             if self.substeps % self.options.substeps == 0 and self.judging:
                 verdict = self._judge()
         if verdict is not None and self.on_verdict is not None:
@@ -211,10 +219,20 @@ class TwinPhysics:
         sd, si = self._sensordata[None], self.sensor_index
         true = sensors.uniaxial_force(si.read(sd, "contact"), si.read(sd, "zaxis"))[0]
         # The pad sits on the cell: it can push on it, never pull (a side contact that tilts the tip reads 0).
-        return np.maximum(true, 0.0)
+        return np.maximum(true, 0.0) + self.pad_load_n
 
     def object_lift_m(self) -> float:
         return float(self.data.qpos[observations.OBJECT_POS][2] - self.rest_height)
+
+    def place_weight(self, tip: int | None, mass_kg: float = 0.0, g: float = 9.80665) -> None:
+        """The operator rests a calibration weight on pad `tip` alone (the gripper held so that the pad faces up: the
+        whole weight bears along the cell's axis); None takes it off."""
+        load = np.zeros(spec.NUM_FORCES)
+        if tip is not None:
+            if not (0 <= int(tip) < spec.NUM_FORCES and mass_kg > 0):
+                raise ValueError(f"a weight needs a pad 0..{spec.NUM_FORCES - 1} and a mass > 0 kg")
+            load[int(tip)] = mass_kg * g
+        self.pad_load_n = load
 
     def hold_by_hand(self, q) -> None:
         """The operator holds the joints at q (torque off, as during calibration); None lets go."""

@@ -1,23 +1,20 @@
 """A complete emulated gripper: the servo bus, the force sensor and how the servos are mounted on the fingers.
 
-The mounting (shaft ticks at the sim's q = 0 and the sign of each servo) is deliberately messy, as after assembly:
-calibration has to discover it. `hand_move` moves joints like an operator does with the torque off.
+The mounting (shaft ticks at the sim's q = 0 and the sign of each servo) is the package's one emulated layout
+(`hardware/emulators/mount.py`, the physics twin's too): calibration has to discover it. `hand_move` moves joints like
+an operator does with the torque off.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware.emulators.dynamixel import DynamixelBusEmulator
 from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulator
+from lerobot_blindgrasp.hardware.emulators.mount import MOUNT_SIGN, MOUNT_ZERO, q_for_shaft, shaft_for_q
 
-TICKS_PER_RAD = 4096 / (2 * math.pi)
-# Shaft ticks at q = 0 and mounting sign per joint (spec.JOINT_NAMES order).
-MOUNT_ZERO = tuple(1100.0 + 237.0 * k for k in range(spec.NUM_JOINTS))
-MOUNT_SIGN = (1, -1, 1, -1, 1, -1, 1, 1, -1)
+__all__ = ["LATENCY_TIMER_MS", "MOUNT_SIGN", "GripperRig"]
 # Reply timeout for clients of the emulators (see BlindgraspGripperConfig.latency_timer_ms): 2 x 60 + 2 = 122 ms.
 LATENCY_TIMER_MS = 60
 
@@ -49,12 +46,11 @@ class GripperRig:
     def hand_move(self, q) -> None:
         """Put the joints at q (rad, sim convention) by hand."""
         for k, i in enumerate(self.ids):
-            self.dxl.servos[i].shaft = MOUNT_ZERO[k] + MOUNT_SIGN[k] * float(q[k]) * TICKS_PER_RAD
+            self.dxl.servos[i].shaft = float(shaft_for_q(q[k], k))
 
     def true_q(self) -> np.ndarray:
         """Joint angles from the physical shaft positions (ground truth for the tests)."""
-        shafts = [self.dxl.servos[i].shaft for i in self.ids]
-        return (np.array(shafts) - MOUNT_ZERO) * np.array(MOUNT_SIGN) / TICKS_PER_RAD
+        return q_for_shaft([self.dxl.servos[i].shaft for i in self.ids])
 
     def place_object(self, contact_q: float = 0.2, stiffness_n_per_rad: float = 100.0, max_n: float = 25.0):
         """A rigid object at the claw centre: each proximal joint (J*1) stops at `contact_q` when closing, and its
@@ -64,7 +60,7 @@ class GripperRig:
         for f in range(spec.NUM_FORCES):
             k = 3 * f + 1
             servo = self.dxl.servos[self.ids[k]]
-            servo.obstacle = (MOUNT_ZERO[k] + MOUNT_SIGN[k] * contact_q * TICKS_PER_RAD, -MOUNT_SIGN[k])
+            servo.obstacle = (float(shaft_for_q(contact_q, k)), -int(MOUNT_SIGN[k]))
 
         def forces() -> np.ndarray:
             out = np.zeros(spec.NUM_FORCES)
@@ -74,7 +70,7 @@ class GripperRig:
                 if not servo.get("Torque_Enable"):
                     continue
                 shaft_goal = servo.position_for(servo.get("Goal_Position"))
-                q_goal = (shaft_goal - MOUNT_ZERO[k]) * MOUNT_SIGN[k] / TICKS_PER_RAD
+                q_goal = float(q_for_shaft(shaft_goal, k))
                 out[f] = min(max_n, max(0.0, stiffness_n_per_rad * (contact_q - q_goal)))
             return out
 

@@ -48,10 +48,10 @@ class ForceSensorConfig:
     # First frame after the port opens. Opening it resets an Arduino Nano (DTR): its bootloader waits ~1 s, then
     # the HX711s settle (~0.1 s at 80/s).
     connect_timeout_s: float = 3.0
-    # A tip force above this stops the gripper (torque off): protects the load cells and the object. It sits
-    # below the 98 N rating of the 10 kg cells the force board specifies and above what a grasp needs: the thumb
-    # opposes two fingers, so its cell carries up to twice one finger's force, and one XM430 at stall pushes its
-    # fingertip with 4.1 N m / 0.076 m = 54 N (docs/force_board.md, "Load cell range").
+    # A tip force above this stops the gripper (torque off). It protects the load cells (below the 98 N rating of
+    # the 10 kg cells the force board specifies; pressed along a nearly straight distal link a finger is a strut, so
+    # the servos' torque does not cap a cell's load) and catches a squeeze no grasp makes (above the grasps' own
+    # peaks). It is no grip-force limit: for fragile objects lower current_limit_a (docs/force_board.md).
     overload_n: float = 80.0
     # Liveness by content: a channel whose raw counts repeat bit for bit for this many frames in a row is frozen
     # (a load cell's ADC noise never does that), and the stream is stale. 0 disables the check.

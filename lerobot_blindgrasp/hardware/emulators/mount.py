@@ -1,18 +1,18 @@
-"""How the twin's servos sit on the fingers: shaft ticks at the sim's q = 0 and the sign of each servo.
+"""How an emulated gripper's servos sit on its fingers: shaft ticks at the sim's q = 0 and the sign of each servo.
 
-Deliberately messy, as after assembly (the same layout as the test rig's), so that `lerobot-calibrate` has to find
-Drive_Mode and Homing_Offset itself: the twin never tells the host its mounting.
+One layout for every emulated gripper (the tests' `GripperRig` and the physics twin). It is deliberately messy, as
+after assembly, so that `lerobot-calibrate` has to find Drive_Mode and Homing_Offset itself: no emulator ever tells
+the host its mounting.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware.xm430 import TICKS_PER_REV
 
-TICKS_PER_RAD = 4096 / (2 * math.pi)
+TICKS_PER_RAD = TICKS_PER_REV / (2 * np.pi)
 MOUNT_ZERO = np.array([1100.0 + 237.0 * k for k in range(spec.NUM_JOINTS)])  # spec.JOINT_NAMES order
 MOUNT_SIGN = np.array([1, -1, 1, -1, 1, -1, 1, 1, -1], dtype=np.float64)
 
@@ -23,4 +23,5 @@ def shaft_for_q(q, k=slice(None)):
 
 
 def q_for_shaft(shaft, k=slice(None)):
+    """Joint angle(s) (rad, sim convention) of joint(s) k at these shaft ticks."""
     return (np.asarray(shaft, dtype=np.float64) - MOUNT_ZERO[k]) * MOUNT_SIGN[k] / TICKS_PER_RAD
