@@ -27,7 +27,7 @@ from emulators.rig import LATENCY_TIMER_MS, GripperRig
 from test_docs_commands import ALL, ROOT, SHIPPED_STUDENT, offline_in, run_in_process
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.emulators.glove import GloveEmulator, free_udp_port
+from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator, free_udp_port
 from lerobot_blindgrasp.hardware.force_board import build
 from lerobot_blindgrasp.robots.blindgrasp_gripper import force_calibration as fc
 
@@ -179,7 +179,7 @@ def test_the_documented_force_board_build_and_sim(lab):
     # The two printed flash commands are one: make's recipe, printed without running it, is the avrdude line.
     dry = subprocess.run([*make.split(), "-n"], capture_output=True, text=True, check=True).stdout.strip()
     assert dry == avrdude, (dry, avrdude)
-    [sim_argv] = documented("python -m lerobot_blindgrasp.hardware.force_board.sim")
+    [sim_argv] = documented("python -m lerobot_blindgrasp.emulators.force_board_simavr")
     out = lab.run(sim_argv)
     rate = float(re.search(r"([\d.]+) frames/s", out).group(1))
     assert 50 < rate < 100 and "0 reads not of 25 pulses" in out, out  # simavr paced to a loaded wall clock

@@ -10,8 +10,8 @@ import time
 import numpy as np
 import pytest
 
+from lerobot_blindgrasp.emulators.force_board_simavr import SimulatedForceBoard
 from lerobot_blindgrasp.hardware.force_board import build
-from lerobot_blindgrasp.hardware.force_board.sim import SimulatedForceBoard
 from lerobot_blindgrasp.hardware.streams import RATE_WINDOW
 from lerobot_blindgrasp.robots.blindgrasp_gripper import force_calibration as fc
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibrate_force import CalibrateForceConfig, calibrate

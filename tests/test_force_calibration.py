@@ -12,7 +12,7 @@ from emulators.harness import BIN, Operator, cli_env
 from emulators.rig import GripperRig
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulator
+from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 from lerobot_blindgrasp.robots.blindgrasp_gripper import force_calibration as fc
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibrate_force import CalibrateForceConfig, calibrate

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
+from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, names
 from lerobot_blindgrasp.teleoperators.manus_glove import retarget as rt
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender, decode

@@ -18,7 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
+from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveDatagram, GloveSender

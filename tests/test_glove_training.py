@@ -21,7 +21,7 @@ from emulators.harness import BIN, cli_env
 from emulators.rig import LATENCY_TIMER_MS, GripperRig
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.emulators.glove import GloveEmulator, free_udp_port
+from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator, free_udp_port
 from lerobot_blindgrasp.pipeline import glove_train
 from lerobot_blindgrasp.presets.glove import GLOVE_PRESETS
 

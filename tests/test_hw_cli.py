@@ -21,7 +21,7 @@ from emulators.harness import BIN, Operator, as_from_a_terminal, cli_env, tiny_s
 from emulators.rig import LATENCY_TIMER_MS, MOUNT_SIGN, GripperRig
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.emulators.glove import GloveEmulator, free_udp_port
+from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator, free_udp_port
 
 pytestmark = pytest.mark.slow
 

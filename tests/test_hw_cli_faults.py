@@ -15,7 +15,7 @@ from emulators.rig import GripperRig
 from test_hw_cli import REPO_ID, _record_cmd, _wait_for_torque
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
+from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 
 pytestmark = pytest.mark.slow
 

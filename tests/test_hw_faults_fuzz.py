@@ -21,8 +21,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.emulators.dynamixel import make_packet
-from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN
+from lerobot_blindgrasp.emulators.dynamixel import make_packet
+from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN
 from lerobot_blindgrasp.hardware.xm430 import NO_LOAD_SPEED_RAD_S, RAD_PER_TICK
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
 from lerobot_blindgrasp.robots.blindgrasp_gripper import calibration as calib

@@ -22,9 +22,9 @@ from lerobot.robots.config import RobotConfig
 from lerobot.teleoperators.config import TeleoperatorConfig
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
 from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
-from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.hardware.xm430 import RAD_PER_TICK
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.hardware import force
-from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader, ForceStreamError
 from lerobot_blindgrasp.sim import randomization, sensors
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv

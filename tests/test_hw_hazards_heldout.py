@@ -17,8 +17,8 @@ from emulators.fixtures import rig, robot  # noqa: F401  (fixtures)
 from test_hw_health import _hold
 from test_policy_check import ROBOT, _checkpoint
 
+from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.hardware import xm430
-from lerobot_blindgrasp.hardware.emulators.glove import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, policy_check
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     ForceSensorError,

@@ -1,5 +1,5 @@
 """Servo health (`robots/blindgrasp_gripper/health.py`) against the emulated XM430's temperature, supply and
-firmware (`hardware/emulators/servo_health.py`): warnings with joint and value, refused starts, and named stops
+firmware (`emulators/servo_health.py`): warnings with joint and value, refused starts, and named stops
 with the torque off before the firmware's own shutdown. Rows of the hazard table in docs/hardware.md."""
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from dynamixel_sdk import robotis_def as dx
 from emulators.fixtures import as_q, rig, robot  # noqa: F401  (fixtures)
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.emulators.dynamixel import EmulatedServo
 from lerobot_blindgrasp.hardware import xm430
-from lerobot_blindgrasp.hardware.emulators.dynamixel import EmulatedServo
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import GripperHealthError
 

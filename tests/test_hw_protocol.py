@@ -13,14 +13,14 @@ from dynamixel_sdk import COMM_RX_CORRUPT, COMM_RX_TIMEOUT, COMM_SUCCESS, Packet
 from dynamixel_sdk import protocol2_packet_handler as p2
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.emulators.dynamixel import (
+from lerobot_blindgrasp.emulators.dynamixel import (
     CONTROL_TABLE,
     HW_OVERLOAD,
     XM430_W350_MODEL,
     DynamixelBusEmulator,
     EmulatedServo,
 )
-from lerobot_blindgrasp.hardware.emulators.dynamixel_wire import crc16, stuff, unstuff
+from lerobot_blindgrasp.emulators.dynamixel_wire import crc16, stuff, unstuff
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
 from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import FrameParser, crc16_ccitt_false, encode_frame
 

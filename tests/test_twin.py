@@ -21,7 +21,7 @@ import pytest
 from emulators.harness import BIN, as_from_a_terminal, cli_env
 
 from lerobot_blindgrasp import durable, spec
-from lerobot_blindgrasp.hardware.emulators import mount
+from lerobot_blindgrasp.emulators import mount
 from lerobot_blindgrasp.sim.gym_env import start_seed
 
 pytestmark = pytest.mark.slow
@@ -44,7 +44,7 @@ def test_the_twin_command_prints_and_writes_its_ports_and_stops_on_sigterm(tmp_p
     from lerobot_blindgrasp.twin.calibrate import request
 
     ports_json, sock = tmp_path / "ports.json", tmp_path / "twin.sock"
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.twin.cli", f"--ports_json={ports_json}", f"--socket={sock}",
+    cmd = [sys.executable, "-m", "lerobot_blindgrasp.twin.command", f"--ports_json={ports_json}", f"--socket={sock}",
            "--status_every_s=0"]  # fmt: skip
     proc = subprocess.Popen(as_from_a_terminal(cmd), env=cli_env(tmp_path), stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)  # fmt: skip
@@ -64,7 +64,7 @@ def test_the_twin_command_prints_and_writes_its_ports_and_stops_on_sigterm(tmp_p
 
 @pytest.fixture(scope="module")
 def twin(tmp_path_factory):
-    from lerobot_blindgrasp.twin.cli import LoadCellConfig, TwinConfig
+    from lerobot_blindgrasp.twin.command import LoadCellConfig, TwinConfig
     from lerobot_blindgrasp.twin.runner import Twin
 
     tmp = tmp_path_factory.mktemp("twin")

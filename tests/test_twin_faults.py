@@ -52,7 +52,7 @@ FIRMWARE_OVERLOAD_S = 0.3  # the emulated firmware's time at the current limit b
 @pytest.fixture(scope="module")
 def station(tmp_path_factory):
     """A running twin, calibrated through lerobot-calibrate, and the host, its LeRobot imported."""
-    from lerobot_blindgrasp.twin.cli import TwinConfig
+    from lerobot_blindgrasp.twin.command import TwinConfig
     from lerobot_blindgrasp.twin.runner import Twin
 
     tmp = tmp_path_factory.mktemp("twin_faults")

@@ -17,7 +17,7 @@ import pytest
 from emulators.harness import BIN, Operator, cli_env, tiny_student_train
 
 from lerobot_blindgrasp import durable, spec
-from lerobot_blindgrasp.hardware.emulators.glove import GloveEmulator, free_udp_port
+from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator, free_udp_port
 
 pytestmark = pytest.mark.slow
 
@@ -35,7 +35,7 @@ def _run(cmd: list[str], env: dict, timeout: int = 300) -> None:
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    from lerobot_blindgrasp.twin.cli import TwinConfig
+    from lerobot_blindgrasp.twin.command import TwinConfig
     from lerobot_blindgrasp.twin.runner import Twin
 
     tmp = tmp_path_factory.mktemp("twin_record")

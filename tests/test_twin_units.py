@@ -26,8 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_present_velocity_and_current_have_the_sims_signs_once_calibrated():
     """After calibration (Drive_Mode = 1 where a servo is mounted reversed) a joint opening in the sim (q rising,
     the actuator pushing it open) reads a positive Present_Velocity and Present_Current, closing a negative one."""
-    from lerobot_blindgrasp.hardware.emulators import mount
-    from lerobot_blindgrasp.hardware.emulators.dynamixel import EmulatedServo
+    from lerobot_blindgrasp.emulators import mount
+    from lerobot_blindgrasp.emulators.dynamixel import EmulatedServo
     from lerobot_blindgrasp.twin.physics import TwinPhysics
     from lerobot_blindgrasp.twin.servo_link import SimShaft
 

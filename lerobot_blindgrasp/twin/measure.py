@@ -181,7 +181,7 @@ def real_eval(cfg: TwinMeasureConfig, obj: str, ports: dict) -> None:
 def start_twin(cfg: TwinMeasureConfig) -> tuple[subprocess.Popen, dict]:
     out = cfg.output_dir
     (out / "ports.json").unlink(missing_ok=True)
-    cmd = [sys.executable, "-m", "lerobot_blindgrasp.twin.cli", f"--ports_json={out / 'ports.json'}",
+    cmd = [sys.executable, "-m", "lerobot_blindgrasp.twin.command", f"--ports_json={out / 'ports.json'}",
            f"--socket={out / 'twin.sock'}", f"--trial_log={out / 'twin_trials.jsonl'}", "--status_every_s=60",
            f"--realtime_priority={cfg.twin_realtime_priority}"]  # fmt: skip
     log = (out / "twin.log").open("a")

@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_blindgrasp import durable, spec
-from lerobot_blindgrasp.analysis import rates
 from lerobot_blindgrasp.cli import parse_config
+from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.sim import objects
 
 Outcomes = dict[str, dict[int, tuple[bool, str]]]  # object -> seed -> (success, who decided or what stopped it)

@@ -20,9 +20,9 @@ from collections import deque
 import numpy as np
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.emulators import mount
-from lerobot_blindgrasp.hardware.emulators.dynamixel import DynamixelBusEmulator
-from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulator
+from lerobot_blindgrasp.emulators import mount
+from lerobot_blindgrasp.emulators.dynamixel import DynamixelBusEmulator
+from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.twin.operator_server import OperatorServer
 from lerobot_blindgrasp.twin.physics import TwinPhysics
 from lerobot_blindgrasp.twin.servo_link import SimShaft, read_commands
@@ -57,7 +57,7 @@ def make_realtime(threads: dict[str, threading.Thread], priority: int) -> str:
 
 class Twin:
     def __init__(self, cfg):
-        """`cfg`: a `twin.cli.TwinConfig`."""
+        """`cfg`: a `twin.command.TwinConfig`."""
         self.cfg = cfg
         self.physics = TwinPhysics(park_object=cfg.park_object)
         self.ids = list(spec.SERVO_IDS)

@@ -9,9 +9,9 @@
 
 from __future__ import annotations
 
+from lerobot_blindgrasp.emulators import mount
+from lerobot_blindgrasp.emulators.dynamixel import EmulatedServo
 from lerobot_blindgrasp.hardware import xm430
-from lerobot_blindgrasp.hardware.emulators import mount
-from lerobot_blindgrasp.hardware.emulators.dynamixel import EmulatedServo
 
 DEFAULT_P_GAIN = 800  # XM430 factory Position_P_Gain: what the sim's nominal kp models
 POSITION_MODES = (3, 4, 5)  # position, extended position, current-based position

@@ -1,7 +1,7 @@
 """A complete emulated gripper: the servo bus, the force sensor and how the servos are mounted on the fingers.
 
 The mounting (shaft ticks at the sim's q = 0 and the sign of each servo) is the package's one emulated layout
-(`hardware/emulators/mount.py`, the physics twin's too): calibration has to discover it. `hand_move` moves joints like
+(`emulators/mount.py`, the physics twin's too): calibration has to discover it. `hand_move` moves joints like
 an operator does with the torque off.
 """
 
@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.emulators.dynamixel import DynamixelBusEmulator
-from lerobot_blindgrasp.hardware.emulators.force_board import ForceSensorEmulator
-from lerobot_blindgrasp.hardware.emulators.mount import MOUNT_SIGN, MOUNT_ZERO, q_for_shaft, shaft_for_q
+from lerobot_blindgrasp.emulators.dynamixel import DynamixelBusEmulator
+from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
+from lerobot_blindgrasp.emulators.mount import MOUNT_SIGN, MOUNT_ZERO, q_for_shaft, shaft_for_q
 
 __all__ = ["LATENCY_TIMER_MS", "MOUNT_SIGN", "GripperRig"]
 # Reply timeout for clients of the emulators (see BlindgraspGripperConfig.latency_timer_ms): 2 x 60 + 2 = 122 ms.

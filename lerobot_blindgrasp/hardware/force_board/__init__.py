@@ -6,5 +6,5 @@
                                                  chips on its pins, its UART on a pseudo-terminal
     build.py                                     `build_firmware(out_dir)`, `build_simulator(out_dir)`, and the
                                                  command `python -m lerobot_blindgrasp.hardware.force_board.build`
-    sim.py                                       `SimulatedForceBoard`: the simulated board for tests and the twin
+    (the board in simavr as a device for the tests and the twin: `emulators/force_board_simavr.py`)
 """

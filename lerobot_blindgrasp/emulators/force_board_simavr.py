@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .build import build_firmware, build_simulator
+from lerobot_blindgrasp.hardware.force_board.build import build_firmware, build_simulator
 
 
 class SimulatedForceBoard:
@@ -162,7 +162,7 @@ def _report(reader, board: SimulatedForceBoard, cfg: SimConfig) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """`python -m lerobot_blindgrasp.hardware.force_board.sim`: the board without hardware, read by the robot's
+    """`python -m lerobot_blindgrasp.emulators.force_board_simavr`: the board without hardware, read by the robot's
     reader with the robot config's defaults. Exits 1 when the reader refuses the stream (e.g. `--sps=10`)."""
     from lerobot_blindgrasp.cli import parse_config
     from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import ForceSensorConfig

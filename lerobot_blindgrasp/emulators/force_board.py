@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from lerobot_blindgrasp.hardware.emulators.pty_device import PtyDevice
+from lerobot_blindgrasp.emulators.pty_device import PtyDevice
 from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import encode_frame
 
 ADC_FULL_SCALE = 1 << 23  # 24-bit signed counts (HX711-class ADC), sign-extended into the frame's int32

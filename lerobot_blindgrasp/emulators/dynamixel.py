@@ -29,7 +29,7 @@ import time
 from dynamixel_sdk import protocol2_packet_handler as p2
 from dynamixel_sdk import robotis_def as dx
 
-from lerobot_blindgrasp.hardware.emulators.control_table import (  # noqa: F401  (re-exported for the tests)
+from lerobot_blindgrasp.emulators.control_table import (  # noqa: F401  (re-exported for the tests)
     BAUD_REGISTER,
     CONTROL_TABLE,
     HW_ELECTRICAL_SHOCK,
@@ -41,10 +41,10 @@ from lerobot_blindgrasp.hardware.emulators.control_table import (  # noqa: F401 
     XM430_W350_MODEL,
     write_error,
 )
-from lerobot_blindgrasp.hardware.emulators.dynamixel_servo import EmulatedServo, ShaftDynamics  # noqa: F401
-from lerobot_blindgrasp.hardware.emulators.dynamixel_wire import collide, crc_ok, make_packet, unstuff
-from lerobot_blindgrasp.hardware.emulators.pty_device import PtyDevice
-from lerobot_blindgrasp.hardware.emulators.servo_health import Supply
+from lerobot_blindgrasp.emulators.dynamixel_servo import EmulatedServo, ShaftDynamics  # noqa: F401
+from lerobot_blindgrasp.emulators.dynamixel_wire import collide, crc_ok, make_packet, unstuff
+from lerobot_blindgrasp.emulators.pty_device import PtyDevice
+from lerobot_blindgrasp.emulators.servo_health import Supply
 
 _TERMIOS_SPEED = {getattr(termios, f"B{b}"): b for b in BAUD_REGISTER if hasattr(termios, f"B{b}")}
 

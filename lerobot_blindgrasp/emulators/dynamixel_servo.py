@@ -8,14 +8,14 @@ import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from lerobot_blindgrasp.hardware.emulators.control_table import (
+from lerobot_blindgrasp.emulators.control_table import (
     CONTROL_TABLE,
     DEFAULTS,
     EEPROM_END,
     STARTUP_TORQUE_ON,
     TABLE_SIZE,
 )
-from lerobot_blindgrasp.hardware.emulators.servo_health import ServoHealthModel
+from lerobot_blindgrasp.emulators.servo_health import ServoHealthModel
 
 NO_LOAD_SPEED_TICKS_S = 46.0 / 60.0 * 4096  # 46 rpm at 12 V
 VELOCITY_UNIT_RPM = 0.229
