@@ -119,9 +119,12 @@ def test_calibrate_then_the_shipped_student_grasps_through_the_real_env(twin):
     assert [p["env_seed"] for p in placed] == [start_seed(s, OBJECT) for s in SEEDS]
     assert [p["success"] for p in placed] == [r["success"] for r in real] == list(successes)
     assert all(max(abs(v) for v in p["object_xy_m"]) <= spec.OBJECT_XY_RANGE_M for p in placed)
-    # The host read the squeeze the twin's physics had, through the calibrated cells (not the datasheet scale).
+    # The host read the squeeze the twin's physics had, through the calibrated cells (not the datasheet scale): at
+    # most the physics' instantaneous peak, and at least the largest force it held for two control periods (an
+    # impact between two 20 Hz reads is the physics' alone), each within the cells' noise and calibration.
     for r, p in zip(real, placed, strict=True):
-        assert max(r["peak_force_n"]) == pytest.approx(max(p["peak_tip_force_n"]), rel=0.25, abs=1.0)
+        host = max(r["peak_force_n"])
+        assert max(p["held_tip_force_n"]) * 0.8 - 1.0 <= host <= max(p["peak_tip_force_n"]) * 1.2 + 1.0, (r, p)
     # The real loop's timing is in the record: read, policy and write per trial.
     assert all(set(r["step_ms"]) == {"read", "policy", "write"} for r in real)
     assert t.status()["trials_placed"] == TRIALS

@@ -155,6 +155,7 @@ class OperatorServer:
             "judge": "twin",
             "peak_lift_m": round(self.twin.physics.peak_lift, 4),
             "peak_tip_force_n": [round(float(f), 2) for f in self.twin.physics.peak_tip_force_n],
+            "held_tip_force_n": [round(float(f), 2) for f in self.twin.physics.held_tip_force_n],
             "q_at_peak_rad": [round(float(q), 3) for q in self.twin.physics.q_at_peak],
             "t_end": round(time.time(), 2),
         }

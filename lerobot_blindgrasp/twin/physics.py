@@ -107,9 +107,13 @@ class TwinPhysics:
         self._held = np.zeros(1, dtype=np.int64)
         self.peak_lift = 0.0
         self._publish()
-        self.peak_tip_force_n = np.zeros(
-            spec.NUM_FORCES
-        )  # the true squeeze since the placement (the trial record)
+        # The true squeeze since the placement (the trial record): its instantaneous peak, which a short impact
+        # between two of the host's 20 Hz reads can set, and the largest force held for two control periods: a
+        # read late in such a window gets a board frame from inside it (frames are well under a period old). The
+        # host's peak reading lies between the two.
+        self.peak_tip_force_n = np.zeros(spec.NUM_FORCES)
+        self.held_tip_force_n = np.zeros(spec.NUM_FORCES)
+        self._recent_force = np.zeros((2 * self.options.substeps, spec.NUM_FORCES))
         return {
             "object": name,
             "seed": seed,
@@ -171,6 +175,8 @@ class TwinPhysics:
             if force.max() > self.peak_tip_force_n.max():
                 self.q_at_peak = self.q.copy()  # the pose that made the trial's largest squeeze (the record)
             self.peak_tip_force_n = np.maximum(self.peak_tip_force_n, force)
+            self._recent_force[self.substeps % len(self._recent_force)] = force
+            self.held_tip_force_n = np.maximum(self.held_tip_force_n, self._recent_force.min(axis=0))
             if self.substeps % self.options.substeps == 0 and self.judging:
                 verdict = self._judge()
         if verdict is not None and self.on_verdict is not None:
