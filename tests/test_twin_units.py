@@ -62,7 +62,9 @@ def test_the_position_gate_lets_a_load_push_a_torqued_joint_back_by_backdrive_ti
     gate.goal = np.array([1900.0])  # closing: the goal lies below the estimate
     pushed_open = np.array([2000.0 + 10 + backdrive - 1])  # the grasp pushed it back, away from its goal
     assert gate.read(lambda: pushed_open, ["ff_j11"], free=False)[0] == pushed_open[0]
-    gate.estimate = np.array([2000.0])
+    # the accepted read re-stamped the estimate "now": put it back far in the past, so that the speed bound (which a
+    # read a fraction of a millisecond later would trip first) leaves only the direction check to decide
+    gate.estimate, gate.estimate_t = np.array([2000.0]), 0.0
     too_far = np.array([2000.0 + 10 + backdrive + 5])
     with pytest.raises(ImplausibleReadingError, match="moved away from both the estimate and the goal"):
         gate.read(lambda: too_far, ["ff_j11"], free=False)
