@@ -25,8 +25,8 @@ lint=$?
 # of one process starve the others. The package itself sets nothing on import; a user's own setting wins.
 export OMP_WAIT_POLICY="${OMP_WAIT_POLICY:-PASSIVE}"
 # Two worker processes, each running whole test files (--dist loadfile keeps a file's module fixtures in one
-# process): most tests wait on a subprocess or a serial port, so the suite takes about 0.6 of its one-process time
-# on 2 cores. BLINDGRASP_TEST_WORKERS=0 runs it in one process; a later -n on the command line wins.
+# process): most tests wait on a subprocess or a serial port, which leaves a core idle in one process.
+# BLINDGRASP_TEST_WORKERS=0 runs it in one process; a later -n on the command line wins.
 python -m pytest -q --durations=15 -n "${BLINDGRASP_TEST_WORKERS:-2}" --dist loadfile "$@"
 code=$?
 set -e
