@@ -102,8 +102,9 @@ class SampleSpacing:
 
     MIN_READS = 4
 
-    def __init__(self, period_s: float, slack: float = 0.1):
+    def __init__(self, period_s: float, slack: float = 0.1, clock=time.monotonic, sleep=time.sleep):
         self.period_s = period_s
+        self._clock, self._sleep = clock, sleep  # injectable, so the rule can be checked on an emulated clock
         self.min_gap_s = period_s * (1.0 - slack)
         self.waits = 0  # reads that were held back, and for how long in all (for tests and logs)
         self.waited_s = 0.0
@@ -123,12 +124,12 @@ class SampleSpacing:
         """Sleep until this read may start; returns the time slept (s)."""
         if self._last_end is None:
             return 0.0
-        delay = self._last_end + self.min_gap_s - self.expected_read_s() - time.monotonic()
+        delay = self._last_end + self.min_gap_s - self.expected_read_s() - self._clock()
         if delay <= 0:
             return 0.0
         self.waits += 1
         self.waited_s += delay
-        time.sleep(delay)
+        self._sleep(delay)
         return delay
 
     def after_read(self, started: float, ended: float) -> None:
