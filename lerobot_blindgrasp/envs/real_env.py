@@ -59,6 +59,8 @@ class BlindGraspRealEnvConfig(EnvConfig):
     home_timeout_s: float = 5.0
     unattended_reset_s: float = 5.0
     tare_each_trial: bool = True
+    # Python's garbage collector off during each trial's 200 steps and run once after it (`hardware/realtime.py`).
+    pause_gc: bool = True
     # Optional JSON-lines log of every trial (object, index, success, who decided, peak forces).
     trial_log: str | None = None
     # An unattended operator's Unix socket (e.g. blindgrasp-twin's): it places the objects and presses the keys.
@@ -94,6 +96,7 @@ class BlindGraspRealEnvConfig(EnvConfig):
             tare_each_trial=self.tare_each_trial,
             trial_log=self.trial_log,
             operator_socket=self.operator_socket,
+            pause_gc=self.pause_gc,
         )
 
     def check_policy(self) -> None:

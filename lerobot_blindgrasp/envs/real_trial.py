@@ -31,6 +31,7 @@ import numpy as np
 from lerobot_blindgrasp import durable, spaces, spec
 from lerobot_blindgrasp.envs import real_report
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
+from lerobot_blindgrasp.hardware.realtime import GcPause
 from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import Schedule
 from lerobot_blindgrasp.sim import objects
 
@@ -53,6 +54,7 @@ class TrialSettings:
     tare_each_trial: bool
     trial_log: str | None
     operator_socket: str | None = None  # None: the keyboard; else an unattended operator there (envs/operator.py)
+    pause_gc: bool = True  # no garbage collection inside a trial; one after it
 
 
 def task_string(name: str) -> str:
@@ -109,6 +111,7 @@ class RealGraspEnv(gym.Env):
         self.action_space = spaces.action_space()
         self._max_episode_steps = int(round(self.cfg.episode_s * spec.CONTROL_HZ))
         self._obs = np.zeros(spec.STATE_DIM, dtype=np.float32)
+        self._gc = GcPause()
         self._reset_trial_state()
 
     def _reset_trial_state(self) -> None:
@@ -178,6 +181,8 @@ class RealGraspEnv(gym.Env):
         if self.cfg.success_mode == "operator":
             print("Running (10 s): press 's' once the object is held off the table for 1 s, 'f' to abort.")
         self._overruns_at_start = self._overruns()
+        if self.cfg.pause_gc:
+            self._gc.pause()
         self._schedule.start()  # from the observation's start, as every later period: the first one is 50 ms too
         obs = self._observe()
         self._returned_at = time.perf_counter()
@@ -209,6 +214,7 @@ class RealGraspEnv(gym.Env):
         success = bool(self._decided and self._decided[0])
         if terminated or truncated:
             self._log_trial(success)
+            self._gc.resume()  # between trials, where a collection may take its time
             self.session.keys.clear()  # keys pressed during this trial must not decide the next one
         self._returned_at = time.perf_counter()
         return obs, float(success), terminated, truncated, {"is_success": success}
@@ -270,4 +276,5 @@ class RealGraspEnv(gym.Env):
         return img
 
     def close(self) -> None:
+        self._gc.resume()
         self.session.close()
