@@ -11,8 +11,7 @@ own overrun check (`robots/blindgrasp_gripper/timing.py`) still stops a loop tha
 - `lock_memory`: mlockall(MCL_CURRENT | MCL_FUTURE) through libc (Python's os module has no mlockall). A page the
   loop needs is then never written out and read back from disk in the middle of a period. Allowed with CAP_IPC_LOCK
   or within RLIMIT_MEMLOCK (`ulimit -l`), which a torch process far exceeds at the usual 8 MiB default.
-- `GcPause`: what exists at the start of a trial is frozen out of the collector's reach (gc.freeze) and the
-  collector is off during the trial; it collects once at the end, between trials.
+- `GcPause`: the cyclic garbage collector is off during a trial and collects once at its end, between trials.
 """
 
 from __future__ import annotations
@@ -23,6 +22,7 @@ import errno
 import gc
 import logging
 import os
+import resource
 
 logger = logging.getLogger(__name__)
 
@@ -51,7 +51,7 @@ def set_realtime_priority(priority: int, pid: int = 0) -> str:
     try:
         os.sched_setscheduler(pid, os.SCHED_FIFO, os.sched_param(priority))
     except PermissionError:
-        limit = os.getrlimit(os.RLIMIT_RTPRIO)[0] if hasattr(os, "RLIMIT_RTPRIO") else "?"
+        limit = resource.getrlimit(resource.RLIMIT_RTPRIO)[0]
         msg = (
             f"real-time priority {priority} (SCHED_FIFO) not permitted: this user's RLIMIT_RTPRIO is {limit} and "
             f"the process lacks CAP_SYS_NICE; the loop runs at normal priority. To {RTPRIO_HELP.format(p=priority)}."
@@ -70,8 +70,8 @@ def lock_memory(flags: int = MCL_CURRENT | MCL_FUTURE) -> str:
     if _libc().mlockall(ctypes.c_int(flags)) == 0:
         return "locked"
     err = ctypes.get_errno()
-    soft = os.getrlimit(os.RLIMIT_MEMLOCK)[0]
-    limit = "unlimited" if soft == getattr(os, "RLIM_INFINITY", -1) else f"{soft // 1024} KiB"
+    soft = resource.getrlimit(resource.RLIMIT_MEMLOCK)[0]
+    limit = "unlimited" if soft == resource.RLIM_INFINITY else f"{soft // 1024} KiB"
     why = "over RLIMIT_MEMLOCK" if err in (errno.ENOMEM, errno.EPERM) else os.strerror(err)
     msg = (
         f"mlockall failed ({errno.errorcode.get(err, err)}: {why}; RLIMIT_MEMLOCK is {limit}): the loop's memory "
@@ -91,10 +91,11 @@ def prepare_host(config) -> dict[str, str]:
 
 
 class GcPause:
-    """Python's cyclic garbage collector kept out of a stretch of time-critical work (a trial): `pause` freezes
-    what exists (gc.freeze: a collection that something still forces skips it) and turns automatic collection off;
-    `resume` turns it back on and collects once, between trials, where a full pass over torch's objects may take
-    its time. Reference counting still frees almost everything a period allocates; only cycles wait."""
+    """Python's cyclic garbage collector kept out of a stretch of time-critical work (a trial): `pause` turns
+    automatic collection off, `resume` turns it back on and collects once, between trials, where a full pass over
+    torch's objects may take its time. Reference counting still frees almost everything a period allocates; only
+    cycles wait. (No gc.freeze: with collection off it gains nothing, and its undo, gc.unfreeze, would also release
+    whatever another part of the process had frozen.)"""
 
     def __init__(self):
         self.paused = False
@@ -104,7 +105,6 @@ class GcPause:
         if self.paused:
             return
         self._was_enabled = gc.isenabled()
-        gc.freeze()
         gc.disable()
         self.paused = True
 
@@ -112,7 +112,6 @@ class GcPause:
         if not self.paused:
             return
         self.paused = False
-        gc.unfreeze()
         if self._was_enabled:
             gc.enable()
         gc.collect()
