@@ -19,14 +19,17 @@ from emulators.fixtures import rig  # noqa: F401  (fixture)
 
 from lerobot_blindgrasp.hardware import realtime
 
-ROOT = Path(__file__).resolve().parents[1]
+# The module alone, by its path (standard library only): the package would import LeRobot and torch.
+LOAD = f"""
+import importlib.util
+spec = importlib.util.spec_from_file_location("realtime", {str(Path(realtime.__file__))!r})
+rt = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(rt)
+"""
 
 
 def run_python(code: str, *prefix: str) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    return subprocess.run(
-        [*prefix, sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60
-    )
+    return subprocess.run([*prefix, sys.executable, "-c", LOAD + code], capture_output=True, text=True, timeout=60)
 
 
 def without(cap: str, **limit: str) -> list[str]:
@@ -41,8 +44,7 @@ def without(cap: str, **limit: str) -> list[str]:
 SET_PRIORITY = """
 import logging, os, threading
 logging.basicConfig(level=logging.WARNING, format="%(message)s")
-from lerobot_blindgrasp.hardware.realtime import set_realtime_priority
-print("GOT", set_realtime_priority(7))
+print("GOT", rt.set_realtime_priority(7))
 seen = []
 t = threading.Thread(target=lambda: seen.append(os.sched_getscheduler(0)))
 t.start(); t.join()
@@ -76,8 +78,7 @@ def test_a_priority_outside_sched_fifo_range_is_refused_before_anything_changes(
 LOCK = """
 import logging
 logging.basicConfig(level=logging.WARNING, format="%(message)s")
-from lerobot_blindgrasp.hardware.realtime import lock_memory
-print("GOT", lock_memory())
+print("GOT", rt.lock_memory())
 print("VmLck", [l.split()[1] for l in open("/proc/self/status") if l.startswith("VmLck")][0])
 """
 
