@@ -110,6 +110,8 @@ def test_the_gc_pause_keeps_cycles_until_it_resumes_and_then_collects_them():
         pause.pause()
         pause.pause()  # a second pause changes nothing
         assert not gc.isenabled()
+        frozen = gc.get_freeze_count()
+        assert frozen > 0  # what existed: out of every later collection's way
         node = Node()
         node.me = node  # a cycle: only the collector frees it
         alive = weakref.ref(node)
@@ -120,7 +122,8 @@ def test_the_gc_pause_keeps_cycles_until_it_resumes_and_then_collects_them():
     finally:
         pause.resume()
     assert gc.isenabled() and not pause.paused
-    assert alive() is None  # collected on resuming
+    assert alive() is None  # collected on resuming, by a young-generation pass
+    assert gc.get_freeze_count() >= frozen  # the frozen stay frozen: no full pass over them after a trial
     pause.resume()  # a second resume changes nothing
     assert gc.isenabled()
 

@@ -11,7 +11,8 @@ own overrun check (`robots/blindgrasp_gripper/timing.py`) still stops a loop tha
 - `lock_memory`: mlockall(MCL_CURRENT | MCL_FUTURE) through libc (Python's os module has no mlockall). A page the
   loop needs is then never written out and read back from disk in the middle of a period. Allowed with CAP_IPC_LOCK
   or within RLIMIT_MEMLOCK (`ulimit -l`), which a torch process far exceeds at the usual 8 MiB default.
-- `GcPause`: the cyclic garbage collector is off during a trial and collects once at its end, between trials.
+- `GcPause`: what exists at a trial's start is frozen out of the collector's reach, the collector is off during the
+  trial, and the young objects are collected once at its end.
 """
 
 from __future__ import annotations
@@ -91,11 +92,15 @@ def prepare_host(config) -> dict[str, str]:
 
 
 class GcPause:
-    """Python's cyclic garbage collector kept out of a stretch of time-critical work (a trial): `pause` turns
-    automatic collection off, `resume` turns it back on and collects once, between trials, where a full pass over
-    torch's objects may take its time. Reference counting still frees almost everything a period allocates; only
-    cycles wait. (No gc.freeze: with collection off it gains nothing, and its undo, gc.unfreeze, would also release
-    whatever another part of the process had frozen.)"""
+    """Python's cyclic garbage collector kept out of a stretch of time-critical work (a trial).
+
+    A full collection in a host with LeRobot, torch and a policy loaded walks some 400 000 objects: hundreds of ms,
+    in the middle of a period whenever the collector's thresholds say so, with the GIL held (so the force reader's
+    thread waits too, and no packet keeps the servos' bus watchdog fed). So `pause` first freezes what exists
+    (gc.freeze: the loaded modules, the policy and the robot, which live as long as the process, are never scanned
+    again) and turns automatic collection off; `resume` turns it back on and collects the young generations only:
+    the cycles made since the pause, a fraction of a ms, never a full pass. Reference counting still frees almost
+    everything a period allocates; only cycles wait for the end of the trial."""
 
     def __init__(self):
         self.paused = False
@@ -105,6 +110,7 @@ class GcPause:
         if self.paused:
             return
         self._was_enabled = gc.isenabled()
+        gc.freeze()
         gc.disable()
         self.paused = True
 
@@ -114,4 +120,4 @@ class GcPause:
         self.paused = False
         if self._was_enabled:
             gc.enable()
-        gc.collect()
+        gc.collect(1)  # the objects made during the pause are all young: with the collector off none was promoted
