@@ -7,7 +7,9 @@ without the host mitigations (real-time priority, locked memory, no garbage coll
 The gripper is the physics twin (`lerobot_blindgrasp/twin/`), run in this process with its threads real-time: they
 stand in for the servos' and the force board's own processors, which answer whatever the PC does. The host is
 lerobot-eval's own pipeline (`--env.type=blindgrasp_real`, the shipped student, its processors, the robot's shipped
-timing defaults) in a child process: per condition one child, one object, `--episodes` trials from the same seed.
+timing defaults) in a child process: per condition one child, one object, `--episodes` trials from the same seed,
+each its whole `--episode_s` (the twin places the object; success is not the question here, so no criterion ends
+a trial early).
 The twin is calibrated once through `blindgrasp-twin-calibrate`, at no extra load.
 
 Per condition it records every period the robot's `PeriodMonitor` measured (the trials and the homing between
@@ -17,6 +19,7 @@ load average sampled through the run (the machine is shared: the load is what it
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import platform
@@ -34,10 +37,11 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
-# The host's side of each condition: no mitigation, the trial's GC pause alone, and all three.
+# The host's side of each condition: no mitigation, the trial's GC pause, with a real-time priority, and all three.
 CONDITIONS = {
     "none": ["--env.pause_gc=false"],
     "gc_pause": ["--env.pause_gc=true"],
+    "gc_pause_realtime": ["--env.pause_gc=true", "--env.robot.realtime_priority=5"],
     "all": ["--env.pause_gc=true", "--env.robot.realtime_priority=5", "--env.robot.lock_memory=true"],
 }
 
@@ -52,6 +56,7 @@ class LoopBenchConfig:
     seed: int = 1000  # every condition places the object from the same start states
     twin_realtime_priority: int = 10  # above the host's 5: the twin is the gripper's hardware
     output: Path | None = None  # JSON of every condition (written atomically)
+    profile: bool = False  # cProfile each host's trials (host_<condition>_<load>.prof next to --output)
     host_args: Path | None = None  # internal: a JSON file of one condition's host (the child process runs it)
 
 
@@ -62,6 +67,9 @@ def host_argv(a: dict) -> list[str]:
             f"--env.robot.calibration_dir={a['calibration_dir']}", f"--env.robot.port={a['dynamixel_port']}",
             f"--env.robot.force_sensor.port={a['force_port']}", f"--env.robot.force_sensor.scale_n_per_count=[{scale}]",
             f"--env.operator_socket={a['operator_socket']}", f"--env.episode_s={a['episode_s']}",
+            # Every trial runs its whole episode_s (the same number of periods in each condition): the twin places
+            # the object and presses ENTER, and no force criterion ends a trial early.
+            "--env.success_mode=force", "--env.hold_force_n=1000",
             f"--env.trial_log={a['output_dir']}/trials.jsonl", *CONDITIONS[a["condition"]],
             f"--eval.n_episodes={a['episodes']}", "--eval.batch_size=1", "--eval.use_async_envs=false",
             f"--seed={a['seed']}", f"--output_dir={a['output_dir']}/eval"]  # fmt: skip
@@ -90,7 +98,7 @@ def run_host(a: dict) -> None:
                                                 preprocessor_overrides={"device_processor": {"device": "cpu"}, "rename_observations_processor": {"rename_map": cfg.rename_map}})  # fmt: skip
         env_pre, env_post = le.make_env_pre_post_processors(env_cfg=cfg.env, policy_cfg=cfg.policy)
         try:
-            with torch.no_grad():
+            with torch.no_grad(), profiled(a.get("profile")):
                 le.eval_policy_all(envs=envs, policy=policy, env_preprocessor=env_pre, env_postprocessor=env_post,
                                    preprocessor=pre, postprocessor=post, n_episodes=cfg.eval.n_episodes,
                                    max_episodes_rendered=10, videos_dir=Path(cfg.output_dir) / "videos",
@@ -102,10 +110,31 @@ def run_host(a: dict) -> None:
         out["periods_s"] = list(robot.timing.recent)
         out["overruns"] = robot.timing.overruns
         out["host_setup"] = getattr(robot, "host_setup", None)
+        status = Path("/proc/self/status").read_text().splitlines()
+        out["memory_kb"] = {
+            k: int(v.split()[0]) for k, v in (x.split(":") for x in status) if k in ("VmRSS", "VmLck")
+        }
 
     run.__annotations__["cfg"] = le.EvalPipelineConfig  # parser.wrap reads the type (this module's are strings)
     parser.wrap()(run)()
     print("RESULT " + json.dumps(out), flush=True)
+
+
+@contextlib.contextmanager
+def profiled(path: str | None):
+    """cProfile over the trials (the host's `--profile` run), its stats written to `path`."""
+    if not path:
+        yield
+        return
+    import cProfile
+
+    prof = cProfile.Profile()
+    prof.enable()
+    try:
+        yield
+    finally:
+        prof.disable()
+        prof.dump_stats(path)
 
 
 def summarize(periods_s: list[float]) -> dict:
@@ -133,6 +162,8 @@ def run_condition(cfg: LoopBenchConfig, ports: dict, calib: Path, condition: str
     out_dir = tmp / f"{condition}_{load}"
     a = {**ports, "calibration_dir": str(calib), "object": cfg.object, "seed": cfg.seed, "episodes": cfg.episodes,
          "episode_s": cfg.episode_s, "condition": condition, "output_dir": str(out_dir)}  # fmt: skip
+    if cfg.profile and cfg.output is not None:
+        a["profile"] = str(cfg.output.with_name(f"host_{condition}_{load}.prof").resolve())
     stress = None
     if load > 0:
         stress = subprocess.Popen(["stress-ng", "--cpu", str(load), "--quiet"], start_new_session=True)
@@ -161,7 +192,7 @@ def run_condition(cfg: LoopBenchConfig, ports: dict, calib: Path, condition: str
     return {"condition": condition, "stress_ng_cpu": load, **summarize(r["periods_s"]), "overruns": r["overruns"],
             "stopped": r.get("stopped"), "trials_completed": len(trials),
             "trial_overruns": [t["loop_overruns"] for t in trials], "step_ms": [t["step_ms"] for t in trials],
-            "host_setup": r["host_setup"], "loadavg_1min": {"median": round(float(np.median(loadavg)), 2),
+            "host_setup": r["host_setup"], "memory_kb": r["memory_kb"], "loadavg_1min": {"median": round(float(np.median(loadavg)), 2),
             "max": round(max(loadavg), 2)}, "wall_s": round(time.time() - started, 1)}  # fmt: skip
 
 
@@ -198,7 +229,7 @@ def bench(cfg: LoopBenchConfig) -> dict:
         raise SystemExit("stress-ng is not installed (apt install stress-ng)")
     record = {"command": " ".join(["python -m lab.bench.loop_under_load", *sys.argv[1:]]),
               "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": machine(),
-              "settings": {k: v for k, v in vars(cfg).items() if k not in ("output", "host_args")}, "runs": []}  # fmt: skip
+              "settings": {k: v for k, v in vars(cfg).items() if k not in ("output", "host_args", "profile")}, "runs": []}  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="loopbench_") as d:
         tmp = Path(d)
         twin_cfg = TwinConfig(socket=str(tmp / "twin.sock"), realtime_priority=cfg.twin_realtime_priority)
