@@ -9,7 +9,10 @@ files that no reader opens, metadata for up to `metadata_buffer_size` episodes t
 and `info.json` / `stats.json` counting episodes whose frames are gone. LeRobot then refuses the folder
 (`LeRobotDataset.resume` and the loader fail with "Parquet magic bytes not found in footer").
 
-The repair keeps episodes 0..k-1, the longest prefix in which every episode has its meta/episodes row, all its
+First, when the data holds finished episodes that meta/episodes lacks (a killed `lerobot-record` keeps up to 10
+episode rows in memory, and a full disk leaves the file 0 bytes long), the metadata is rebuilt from the data
+(`rebuild_meta`: footerless data files are read to their last complete row group, the cut episode's bytes are set
+aside in `<root>.set-aside/`). Then the repair keeps episodes 0..k-1, the longest prefix in which every episode has its meta/episodes row, all its
 frames (exactly `length` rows with the right global indices) in a readable data file, and its video files. Then:
 unreadable parquet files and killed writers' temp files are removed; readable files that also hold later episodes
 are rewritten without them; tasks.parquet is rebuilt from the data if unreadable; stats.json is re-aggregated from
@@ -34,6 +37,8 @@ import numpy as np
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import parse_config
 
+from . import rebuild_meta
+
 log = logging.getLogger("blindgrasp.repair")
 
 INFO = Path("meta/info.json")
@@ -55,10 +60,11 @@ class RepairReport:
     removed: list[str] = field(default_factory=list)  # files deleted (unreadable or holding only lost episodes)
     rewritten: list[str] = field(default_factory=list)  # files rewritten without the lost episodes, or re-derived
     first_problem: str = ""  # why the prefix ends where it does ("" when every episode checks out)
+    rebuilt: rebuild_meta.Rebuilt | None = None  # the metadata rebuilt from the data first (`rebuild_meta`)
 
     @property
     def changed(self) -> bool:
-        return bool(self.removed or self.rewritten)
+        return bool(self.removed or self.rewritten or self.rebuilt)
 
     def summary(self) -> str:
         lost = self.lost_episodes
@@ -68,6 +74,7 @@ class RepairReport:
         ]
         if self.first_problem:
             lines.append(f"  the verified prefix ends at episode {self.kept_episodes}: {self.first_problem}")
+        lines += self.rebuilt.lines(self.root) if self.rebuilt else []
         lines += [f"  removed   {f}" for f in self.removed]
         lines += [f"  rewrote   {f}" for f in self.rewritten]
         if not self.changed:
@@ -203,7 +210,11 @@ def repair(root: str | Path, dry_run: bool = False) -> RepairReport:
     import pyarrow.parquet as pq
 
     root = Path(root)
+    rebuilt = rebuild_meta.rebuild(root, dry_run=dry_run)  # finished episodes the metadata lacks, from the data
+    if rebuilt and dry_run:
+        return RepairReport(root, kept_episodes=rebuilt.episodes, kept_frames=rebuilt.frames, rebuilt=rebuilt)
     info, report, plan = inspect(root)
+    report.rebuilt = rebuilt
     k = report.kept_episodes
     rel = lambda p: str(Path(p).relative_to(root))  # noqa: E731
     report.removed = [rel(p) for p in plan["remove"]]
@@ -321,7 +332,7 @@ def main(argv=None) -> None:
         raise SystemExit(2)
     try:
         report = repair(cfg.root, dry_run=cfg.dry_run)
-    except (RepairError, durable.WriteError) as e:
+    except (RepairError, rebuild_meta.RebuildError, durable.WriteError) as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
     print(("dry run: " if cfg.dry_run else "") + report.summary())
