@@ -205,7 +205,7 @@ def _rewrite_data(root: Path, files: list, episodes: list, done: Rebuilt) -> Non
         if ok and n == table.num_rows:
             continue
         why = "no footer: its writer was killed" if not ok else f"holds {table.num_rows - n} rows past the prefix"
-        why += f"; {cut} bytes of an unfinished episode" if cut else ""
+        why += f"; {cut} bytes after its last complete row group: an unfinished write" if cut else ""
         tmp = path.with_name(f".{path.name}{durable.TEMP_MARK}rebuild")
         if n:
             pq.write_table(table.slice(0, n), tmp, compression="snappy", use_dictionary=True)
