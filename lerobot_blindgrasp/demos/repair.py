@@ -312,8 +312,9 @@ def _write_stats(root: Path, meta, features: dict) -> None:
 
 @dataclass
 class RepairConfig:
-    """Bring a crashed LeRobotDataset (blindgrasp-collect-demos, lerobot-record) back to its longest verified
-    prefix of complete episodes, so that it loads and recording can resume."""
+    """Bring a crashed LeRobotDataset (blindgrasp-collect-demos, lerobot-record) back to every complete episode, so
+    that it loads and recording can resume: metadata LeRobot had not written yet is rebuilt from the data files,
+    cut data is set aside in <root>.set-aside/."""
 
     root: Path | None = None  # the dataset folder (the one holding meta/ and data/)
     dry_run: bool = False  # only say what would be kept, lost, removed and rewritten
