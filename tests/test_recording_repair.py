@@ -104,3 +104,53 @@ def test_the_estimate_bounds_what_an_episode_adds(tmp_path):
         sizes.append(sum(p.stat().st_size for p in (tmp_path / f"ds{n}").rglob("*") if p.is_file()))
     features = _features(tmp_path / "ds2")
     assert 0 < sizes[1] - sizes[0] <= episode_bytes(features, spec.CONTROL_HZ, 40 / spec.CONTROL_HZ)
+
+
+class _Killed(BaseException):
+    """The process dies here: no handler runs (a BaseException that no `except Exception` catches)."""
+
+
+def _repair_killed_at(root, k: int, monkeypatch) -> bool:
+    """Run the repair, killed at its k-th rename or link; True when it finished before that."""
+    import os
+
+    real = {name: getattr(os, name) for name in ("replace", "link")}
+    calls = [0]
+
+    def dying(name, *args, **kwargs):
+        if calls[0] == k:
+            raise _Killed
+        calls[0] += 1
+        return real[name](*args, **kwargs)
+
+    for name in real:
+        monkeypatch.setattr(os, name, lambda *a, _n=name, **kw: dying(_n, *a, **kw))
+    try:
+        repair.repair(root)
+        return True
+    except _Killed:
+        return False
+    finally:
+        for name, fn in real.items():
+            monkeypatch.setattr(os, name, fn)
+
+
+def test_a_repair_killed_at_any_rename_is_finished_by_running_it_again(tmp_path, monkeypatch):
+    """The repair's every rename or link (where its files change) is a kill point: killed at the k-th one, for
+    every k, the dataset is finished by the next run and loads with every saved episode."""
+    from lerobot.datasets import LeRobotDataset
+
+    lengths = [5, 8]
+    live = _dataset(tmp_path / "live", lengths, finalize=False)
+    shutil.copytree(tmp_path / "live", tmp_path / "crashed")
+    live.finalize()
+    k, finished = 0, False
+    while not finished:
+        root = tmp_path / f"kill{k}"
+        shutil.copytree(tmp_path / "crashed", root)
+        finished = _repair_killed_at(root, k, monkeypatch)
+        repair.repair(root)
+        ds = LeRobotDataset("local/crash", root=root)
+        assert [int(n) for n in ds.meta.episodes["length"]] == lengths, k
+        k += 1
+    assert k >= 5  # the data rewrite, the episode rows, stats.json and info.json at least

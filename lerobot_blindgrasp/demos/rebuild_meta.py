@@ -20,6 +20,7 @@ It applies only where the data can say everything: no image or video features (t
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -186,13 +187,18 @@ def _stage(root: Path, staging: Path, info, files: list, episodes: list, tasks: 
     meta.finalize()
 
 
-def _set_aside(root: Path, path: Path, why: str, done: Rebuilt) -> None:
+def _set_aside(root: Path, path: Path, why: str, done: Rebuilt, *, keep: bool = False) -> None:
+    """Move `path` to <root>.set-aside/ (a rename: no copy on a nearly full disk); with `keep`, link it there and
+    leave it in place for an atomic replacement, so that a kill in between never leaves the dataset without it."""
     dest = root.parent / f"{root.name}.set-aside" / path.relative_to(root)
     dest.parent.mkdir(parents=True, exist_ok=True)
     n = 1
     while dest.exists():
         dest, n = dest.with_name(f"{path.name}.{n}"), n + 1
-    path.replace(dest)  # same filesystem: a rename, no copy (the disk may still be nearly full)
+    if keep:
+        os.link(path, dest)
+    else:
+        path.replace(dest)
     done.set_aside.append(f"{path.relative_to(root)} ({why})")
 
 
@@ -206,12 +212,10 @@ def _rewrite_data(root: Path, files: list, episodes: list, done: Rebuilt) -> Non
             continue
         why = "no footer: its writer was killed" if not ok else f"holds {table.num_rows - n} rows past the prefix"
         why += f"; {cut} bytes after its last complete row group: an unfinished write" if cut else ""
-        tmp = path.with_name(f".{path.name}{durable.TEMP_MARK}rebuild")
+        _set_aside(root, path, why, done, keep=bool(n))
         if n:
-            pq.write_table(table.slice(0, n), tmp, compression="snappy", use_dictionary=True)
-        _set_aside(root, path, why, done)
-        if n:
-            tmp.replace(path)
+            with durable.atomic_path(path) as tmp:
+                pq.write_table(table.slice(0, n), tmp, compression="snappy", use_dictionary=True)
             done.rewritten.append(str(path.relative_to(root)))
 
 
