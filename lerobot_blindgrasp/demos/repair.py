@@ -1,24 +1,25 @@
-"""`blindgrasp-repair-dataset --root=DIR`: bring a crashed LeRobotDataset back to its longest verified prefix.
+"""`blindgrasp-repair-dataset --root=DIR`: bring a crashed LeRobotDataset back to every complete episode.
 
     blindgrasp-repair-dataset --root=runs/demos_cpu            # repair in place, say what was kept and lost
     blindgrasp-repair-dataset --root=runs/demos_cpu --dry_run=true
 
 A LeRobot v3 dataset that is being written keeps its parquet writers open; their footers are written only by
 `finalize()`. A process that dies without it (SIGKILL, the out-of-memory killer, a power cut) leaves footerless
-files that no reader opens, metadata for up to `metadata_buffer_size` episodes that never reached meta/episodes,
-and `info.json` / `stats.json` counting episodes whose frames are gone. LeRobot then refuses the folder
-(`LeRobotDataset.resume` and the loader fail with "Parquet magic bytes not found in footer").
+files that no reader opens, metadata for up to `metadata_buffer_size` episodes that never reached meta/episodes
+(a full disk leaves that file 0 bytes long), and `info.json` / `stats.json` counting episodes whose frames are
+gone. LeRobot then refuses the folder ("Parquet magic bytes not found in footer").
 
-First, when the data holds finished episodes that meta/episodes lacks (a killed `lerobot-record` keeps up to 10
-episode rows in memory, and a full disk leaves the file 0 bytes long), the metadata is rebuilt from the data
-(`rebuild_meta`: footerless data files are read to their last complete row group, the cut episode's bytes are set
-aside in `<root>.set-aside/`). Then the repair keeps episodes 0..k-1, the longest prefix in which every episode has its meta/episodes row, all its
-frames (exactly `length` rows with the right global indices) in a readable data file, and its video files. Then:
-unreadable parquet files and killed writers' temp files are removed; readable files that also hold later episodes
-are rewritten without them; tasks.parquet is rebuilt from the data if unreadable; stats.json is re-aggregated from
-the kept episodes' own stats (LeRobot's `aggregate_stats`, as `lerobot-edit-dataset` does); `info.json` is written
-last. Every rewrite is atomic (`durable`), so a repair killed half-way is simply run again; on a consistent dataset
-it changes nothing. What it cannot check: the content of video files (only that they exist).
+First, when the data holds finished episodes that meta/episodes lacks, the metadata is rebuilt from the data
+(`rebuild_meta`: footerless files read to their last complete row group, the cut bytes set aside in
+`<root>.set-aside/`). Not for a demo collection (it has collection.json): it resumes from its last checkpoint,
+whose tally and seeds describe the dataset as it was then. Then the repair keeps episodes 0..k-1, the longest
+prefix in which every episode has its meta/episodes row, all its frames (exactly `length` rows with the right
+global indices) in a readable data file, and its video files. Then: unreadable parquet files and killed writers'
+temp files are removed; readable files that also hold later episodes are rewritten without them; tasks.parquet
+is rebuilt from the data if unreadable; stats.json is re-aggregated from the kept episodes' own stats (LeRobot's
+`aggregate_stats`, as `lerobot-edit-dataset` does); `info.json` is written last. Every rewrite is atomic
+(`durable`), so a repair killed half-way is simply run again; on a consistent dataset it changes nothing. What it
+cannot check: the content of video files (only that they exist).
 
 `blindgrasp-collect-demos --resume=true` runs the same repair before it appends. After a crashed `lerobot-record`,
 run it, then record on with `lerobot-record ... --resume=true`.
@@ -37,7 +38,7 @@ import numpy as np
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import parse_config
 
-from . import rebuild_meta
+from . import provenance, rebuild_meta
 
 log = logging.getLogger("blindgrasp.repair")
 
@@ -210,7 +211,8 @@ def repair(root: str | Path, dry_run: bool = False) -> RepairReport:
     import pyarrow.parquet as pq
 
     root = Path(root)
-    rebuilt = rebuild_meta.rebuild(root, dry_run=dry_run)  # finished episodes the metadata lacks, from the data
+    demos = provenance.path(root).is_file()  # a demo collection resumes from its checkpoint (`records.py`)
+    rebuilt = None if demos else rebuild_meta.rebuild(root, dry_run=dry_run)
     if rebuilt and dry_run:
         return RepairReport(root, kept_episodes=rebuilt.episodes, kept_frames=rebuilt.frames, rebuilt=rebuilt)
     info, report, plan = inspect(root)
