@@ -106,7 +106,7 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         self.connect_timeout_s = connect_timeout_s
         self.offset = np.zeros(len(self.channel_map))
         self.parser = FrameParser()
-        self.rate_hz = rate_hz
+        self.board_rate_hz = rate_hz
         self.clock = self._new_clock()
         self.seq_ahead = 0  # frames dropped because their SEQ ran ahead of the time that passed
         self._serial = None
@@ -115,8 +115,8 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         """The SEQ against this host's clock. Twice the board's rate is as far above it as the slow threshold
         (`min_rate_hz`, half of it) is below: an oscillator errs by percent, a counter that runs faster counts
         something else. The slack is the stale timeout: a frame held up longer leaves the stream stale anyway."""
-        return CounterClock(max_rate_hz=2 * self.rate_hz, slack_s=self.stale_timeout_s,
-                            boot_silence_s=SETTLE_FRAMES / self.rate_hz, confirm_frames=SETTLE_FRAMES)  # fmt: skip
+        return CounterClock(max_rate_hz=2 * self.board_rate_hz, slack_s=self.stale_timeout_s,
+                            boot_silence_s=SETTLE_FRAMES / self.board_rate_hz, confirm_frames=SETTLE_FRAMES)  # fmt: skip
 
     @property
     def dropped_frames(self) -> int:
