@@ -21,7 +21,7 @@
  * 80 samples/s (RATE pin high) on its own oscillator, so frames come at the rate of the slowest chip, ~80/s.
  *
  * STATUS bit i reports a real fault of cell i, and nothing else:
- *   - not responding: no valid conversion for NOT_RESPONDING_MS (500 ms after power-up, while the chips settle).
+ *   - not responding: no valid conversion for NOT_RESPONDING_MS (until the first frame, 500 ms: the chips settle).
  *     DOUT stuck high (unpowered chip, broken wire: the pin's pull-up reads high), or DOUT still low after the
  *     25th clock (no chip driving it). Then a frame is still sent every NOT_RESPONDING_MS, with the fresh samples
  *     of the other cells, the faulty cell's last value and its bit set, so the host can say which cell failed.
@@ -124,8 +124,9 @@ static uint8_t hx711_read(uint8_t i, int32_t *value) {
         for (uint8_t b = 0; b < 24; b++) {
             SCK_PORT |= sck;
 #if defined(VIOLATE_T2) /* test build: DOUT sampled one cycle (62.5 ns) after the edge, before the bit is valid */
-            v = (v << 1) | ((DOUT_PIN & dout) ? 1 : 0);
+            const uint8_t pins = DOUT_PIN;
             _delay_us(1);
+            v = (v << 1) | ((pins & dout) ? 1 : 0);
 #elif defined(VIOLATE_T3) /* test build: PD_SCK high for one port write (< 0.2 us) */
             SCK_PORT &= ~sck;
             _delay_us(1);
@@ -261,8 +262,10 @@ int main(void) {
         if (fresh == ALL_CELLS || (late && since_frame >= NOT_RESPONDING_MS)) {
             uint8_t status = late | (saturated & fresh);
             send_frame(seq, counts, status, seq == 0);
-            if (seq++ == 0)
+            if (seq++ == 0) {
+                booted = 1;             /* every chip converted (or BOOT_GRACE_MS passed): settled */
                 wdt_enable(WDTO_250MS); /* from now on a frame goes out at least every NOT_RESPONDING_MS */
+            }
             wdt_reset();                /* progress: a frame went out */
             fresh = 0;
             since_frame = 0;

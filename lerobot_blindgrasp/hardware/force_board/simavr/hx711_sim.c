@@ -207,6 +207,7 @@ static int command(const char *line) {
         chips[i].hung = 1;
     } else if (strncmp(line, "reset", 5) == 0) {
         avr_reset(chips[0].avr);
+        avr_resets++;
         avr_regbit_set(chips[0].avr, chips[0].avr->reset_flags.extrf);
     } else if (sscanf(line, "alive %d", &i) == 1 && i >= 0 && i < N_CHIPS) {
         chips[i].dead = chips[i].stuck = chips[i].hung = 0;
@@ -253,7 +254,6 @@ static int poll_stdin(void) {
 static void rearm_after_reset(avr_t *avr) {
     if (avr_cycle_timer_status(avr, convert, &chips[0]) || avr_cycle_timer_status(avr, convert, &chips[1]))
         return;
-    avr_resets++;
     for (int i = 0; i < N_CHIPS; i++) {
         hx711_t *c = &chips[i];
         c->sck_fall = 0; /* the port's reset is no falling edge the chip saw */
@@ -328,7 +328,10 @@ int main(int argc, char **argv) {
     double t0 = now_s();
     avr_cycle_count_t next_check = 0;
     int state = cpu_Running;
+    void (*run_normal)(avr_t *) = avr->run;
     while (state != cpu_Done && state != cpu_Crashed) {
+        if (avr->run != run_normal)
+            avr_resets++; /* the watchdog fired: this run resets the AVR */
         state = avr_run(avr);
         if (avr->cycle < next_check)
             continue;
