@@ -314,3 +314,26 @@ def test_a_stuck_hx711_is_power_cycled_and_comes_back(build_dir):
         board.stop()
     assert "chip 1: " in board.log and re.search(r"chip 1: .* 2 power-downs", board.log), board.log
     assert "0 AVR resets" in board.log, board.log
+
+
+def test_a_board_reset_by_its_reset_pin_comes_back_with_the_same_forces(build_dir):
+    """The reset pin pulled (a USB glitch, DTR) with th_tip loaded: the boot frame says "reset pin", the host
+    resynchronises on the rebooted board's frame SETTLE_FRAMES and reads the same 2 N. The chips were not reset with
+    the AVR (only power-cycled by its boot), and stayed within every HX711 timing."""
+    board = _board(build_dir)
+    reader = _reader(board.port)
+    try:
+        reader.connect()
+        reader.tare(0.2)
+        board.set_forces([0.0, 0.0, 2.0])
+        assert reader.wait_frames(4, 1.0)
+        board.reset_board()
+        seen = _reads_until_resynchronised(reader, deadline_s=8.0)
+    finally:
+        reader.disconnect()
+        board.stop()
+    values = [s for s in seen if not isinstance(s, str)]
+    np.testing.assert_allclose(values, [[0.0, 0.0, 2.0]] * len(values), atol=0.02)
+    [restart] = reader.clock.restarts
+    assert restart.cause == "reset pin" and restart.confirmed_seq == SETTLE_FRAMES
+    assert "1 AVR resets" in board.log and "TIMING VIOLATIONS" not in board.log, board.log

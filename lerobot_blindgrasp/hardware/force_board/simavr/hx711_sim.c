@@ -194,6 +194,23 @@ static void uart_out(struct avr_irq_t *irq, uint32_t value, void *param) {
         perror("pty write"); /* no reader: a real UART's bytes are lost too */
 }
 
+/* After an AVR reset (the watchdog's, or `reset`): simavr cleared every cycle timer, the chips' conversion clocks
+ * too, and the pin registers, so PIND no longer shows the chips' DOUT. The chips themselves were not reset: their
+ * clocks are re-armed and their DOUT levels driven onto the pins again (toggled, since simavr passes on only a
+ * change). The port's reset drove PD_SCK low, which no chip takes for a clock edge. */
+static void after_reset(avr_t *avr) {
+    avr_resets++;
+    for (int i = 0; i < N_CHIPS; i++) {
+        hx711_t *c = &chips[i];
+        c->sck_high = 0;
+        c->sck_fall = 0;
+        avr_raise_irq(c->dout, !c->level);
+        avr_raise_irq(c->dout, c->level);
+        if (!avr_cycle_timer_status(avr, convert, c))
+            avr_cycle_timer_register(avr, c->period, convert, c);
+    }
+}
+
 static int command(const char *line) {
     int i;
     long a, b, c;
@@ -207,7 +224,7 @@ static int command(const char *line) {
         chips[i].hung = 1;
     } else if (strncmp(line, "reset", 5) == 0) {
         avr_reset(chips[0].avr);
-        avr_resets++;
+        after_reset(chips[0].avr);
         avr_regbit_set(chips[0].avr, chips[0].avr->reset_flags.extrf);
     } else if (sscanf(line, "alive %d", &i) == 1 && i >= 0 && i < N_CHIPS) {
         chips[i].dead = chips[i].stuck = chips[i].hung = 0;
@@ -247,19 +264,6 @@ static int poll_stdin(void) {
     len -= start - buf;
     memmove(buf, start, len);
     return 0;
-}
-
-/* An AVR reset (the watchdog's, or `reset`) clears every cycle timer, the chips' conversion clocks too; the chips
- * themselves were not reset and go on converting, and their DOUT level is driven onto the pin again. */
-static void rearm_after_reset(avr_t *avr) {
-    if (avr_cycle_timer_status(avr, convert, &chips[0]) || avr_cycle_timer_status(avr, convert, &chips[1]))
-        return;
-    for (int i = 0; i < N_CHIPS; i++) {
-        hx711_t *c = &chips[i];
-        c->sck_fall = 0; /* the port's reset is no falling edge the chip saw */
-        avr_raise_irq(c->dout, c->level);
-        avr_cycle_timer_register(avr, c->period, convert, c);
-    }
 }
 
 static double now_s(void) {
@@ -330,13 +334,13 @@ int main(int argc, char **argv) {
     int state = cpu_Running;
     void (*run_normal)(avr_t *) = avr->run;
     while (state != cpu_Done && state != cpu_Crashed) {
-        if (avr->run != run_normal)
-            avr_resets++; /* the watchdog fired: this run resets the AVR */
+        int watchdog_reset = avr->run != run_normal; /* the watchdog fired: this run resets the AVR */
         state = avr_run(avr);
+        if (watchdog_reset)
+            after_reset(avr);
         if (avr->cycle < next_check)
             continue;
         next_check = avr->cycle + F_CPU / 1000;
-        rearm_after_reset(avr);
         if (poll_stdin())
             break;
         double ahead = (double)avr->cycle / F_CPU - (now_s() - t0);
