@@ -13,6 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from emulators.fixtures import rig, robot  # noqa: F401  (fixtures)
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
@@ -240,3 +241,16 @@ def test_a_lossy_link_is_told_from_a_slow_board():
     finally:
         reader.disconnect()
         emu.stop()
+
+
+def test_a_board_reset_between_trials_leaves_the_robot_able_to_tare(rig, robot):
+    """The force board resets while the robot waits between trials (the operator places the object): the next
+    trial's tare works as soon as the rebooted board's SEQ confirmed the restart, instead of every frame being
+    refused as a replay until the counter caught up (minutes)."""
+    rig.force.reset(boot_s=0.3)
+    deadline = time.monotonic() + 5.0  # far above the 0.3 s boot and the SETTLE_FRAMES frames; not asserted
+    while not any(r.confirmed_seq >= 0 for r in robot.force.clock.restarts) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    robot.tare_forces()
+    assert robot.is_connected and robot.force.counter_faults == 0
+    np.testing.assert_allclose(robot.force.read(), 0.0, atol=0.5)
