@@ -406,7 +406,7 @@ class ManusSdk:
             raise BridgeError(f"cannot load the MANUS SDK library {path!r} ({e}): pass --sdk_library=<path to "
                               f"{default} from MANUS's SDK download> or set MANUS_SDK_LIBRARY") from None  # fmt: skip
         self._latest, self._lock = ErgonomicsStream(), threading.Lock()
-        self.fresh, self.lost, self.sides = threading.Event(), threading.Event(), {}
+        self.fresh, self.lost, self.sides, self.initialized = threading.Event(), threading.Event(), {}, False
         # Kept on self: the SDK holds only the C pointers, and a collected CFUNCTYPE object would crash it.
         self._callbacks = (ERGONOMICS_CB(self._on_ergonomics), HOST_CB(self._on_connect), HOST_CB(self._on_lost))
 
@@ -437,6 +437,7 @@ class ManusSdk:
         self.call(
             "CoreSdk_InitializeIntegrated" if self.cfg.sdk_mode == "integrated" else "CoreSdk_InitializeCore"
         )
+        self.initialized = True
         ergo, on_connect, on_lost = self._callbacks
         self.call("CoreSdk_RegisterCallbackForOnConnect", on_connect)
         self.call("CoreSdk_RegisterCallbackForOnDisconnect", on_lost)
@@ -502,10 +503,13 @@ class ManusSdk:
         return out
 
     def stop(self) -> None:
+        """Unregister the callbacks, so that no SDK thread calls into a closing Python, then shut the SDK down."""
+        if not self.initialized:
+            return
         for name in ("CoreSdk_RegisterCallbackForErgonomicsStream", "CoreSdk_RegisterCallbackForOnConnect",
                      "CoreSdk_RegisterCallbackForOnDisconnect", "CoreSdk_ShutDown"):  # fmt: skip
             try:
-                self.call(name, *([None] if "Register" in name else []))
+                self.call(name, *([SIGNATURES[name][0]()] if "Register" in name else []))  # a NULL callback
             except BridgeError as e:
                 logger.warning("At shutdown: %s", e)
 
