@@ -399,7 +399,7 @@ class ManusSdk:
     def __init__(self, cfg: BridgeConfig):
         self.cfg = cfg
         default = "libManusSDK_Integrated.so" if cfg.sdk_mode == "integrated" else "libManusSDK.so"
-        path = cfg.sdk_library or os.environ.get("MANUS_SDK_LIBRARY") or default
+        self.path = path = cfg.sdk_library or os.environ.get("MANUS_SDK_LIBRARY") or default
         try:
             self.lib = C.CDLL(path)
         except OSError as e:
@@ -413,9 +413,9 @@ class ManusSdk:
     def call(self, name: str, *args, ok=(0,)) -> int:
         fn = getattr(self.lib, name, None)
         if fn is None:
-            raise BridgeError(
-                f"the MANUS SDK library has no {name}: an SDK older or newer than ManusSDK.h 2.x/3.x?"
-            )
+            hint = " (with --glove_id=<id> the bridge does not ask)" if "GetDataForGlove" in name else ""
+            raise BridgeError(f"the MANUS SDK library {self.path!r} has no {name}{hint}: not the MANUS SDK, or a "
+                              "version whose API differs from the ManusSDK.h this bridge follows")  # fmt: skip
         fn.argtypes, fn.restype = SIGNATURES[name], C.c_int
         code = fn(*args)
         if code not in ok:
@@ -450,10 +450,10 @@ class ManusSdk:
     def connect(self) -> None:
         """Connect, retrying while there is no host yet (Core not started, dongle not plugged)."""
         deadline = time.monotonic() + self.cfg.connect_timeout_s
-        while self._connect_once() is not None:
+        while (why := self._connect_once()) is not None:
             if time.monotonic() > deadline:
-                raise BridgeError(f"no MANUS host to connect to after {self.cfg.connect_timeout_s:.0f} s: "
-                                  f"{self._connect_once()}")  # fmt: skip
+                raise BridgeError(f"no MANUS host to connect to within {self.cfg.connect_timeout_s:.0f} s: {why}")
+            logger.info("Waiting for a MANUS host: %s.", why)
             time.sleep(1.0)
 
     def _connect_once(self) -> str | None:
@@ -545,7 +545,7 @@ def _help() -> dict[str, str]:
 
 
 def parse_args(argv: list[str] | None = None) -> BridgeConfig:
-    p = argparse.ArgumentParser(prog="manus_bridge.py", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="manus_bridge.py", description=(__doc__ or "").split("\n\n")[0])
     helps = _help()
     for f in fields(BridgeConfig):
         default = f.default_factory() if callable(f.default_factory) else f.default
