@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import ast
 import json
+import re
+import shlex
 import shutil
 import signal
 import subprocess
@@ -257,3 +259,33 @@ def test_the_command_and_the_file_read_the_same_flags():
     assert mb.parse_args(["--topics=a,b"]).topics == ["a", "b"]
     with pytest.raises(SystemExit):
         mb.parse_args(["--source=serial"])
+
+
+def _documented_bridge_lines() -> list[str]:
+    """Every `python3 manus_bridge.py ...` line of README.md's and docs/glove.md's shell blocks."""
+    root = BRIDGE.parents[3]
+    out = []
+    for doc in (root / "README.md", root / "docs" / "glove.md"):
+        for block in re.findall(r"^\s*```(?:bash|sh)\n(.*?)^\s*```", doc.read_text(), flags=re.M | re.S):
+            out += [
+                line.strip() for line in block.splitlines() if line.strip().startswith("python3 manus_bridge.py")
+            ]
+    return out
+
+
+def test_the_documented_bridge_commands_parse(capsys):
+    """The docs' `python3 manus_bridge.py` lines (not read by test_docs_commands, which parses the package's own
+    commands) reach a valid config with the flags as printed; `--help` prints the help."""
+    lines = _documented_bridge_lines()
+    assert {"--source=ros2", "--source=sdk", "--help"} <= {
+        w for line in lines for w in shlex.split(line, comments=True)
+    }
+    for line in lines:
+        argv = shlex.split(line, comments=True)[2:]
+        argv = [re.sub(r"<([^>]+)>", lambda m: re.sub(r"\W+", "_", m.group(1)), a) for a in argv]
+        if argv == ["--help"]:
+            with pytest.raises(SystemExit) as e:
+                mb.parse_args(argv)
+            assert e.value.code == 0 and "--sdk_library" in capsys.readouterr().out
+        else:
+            assert isinstance(mb.parse_args(argv), mb.BridgeConfig), line
