@@ -1,8 +1,8 @@
-"""`blindgrasp-glove-bridge`: the glove bridge of `manus_bridge.py` as this package's command, its flags parsed by
-draccus like every `blindgrasp-*` command (`--topics=[manus_glove_0,manus_glove_1]`).
+"""`blindgrasp-glove-bridge`: MANUS's ROS 2 publisher or the MANUS SDK -> the glove receiver's UDP datagrams.
 
-On the MANUS machine, without this package, the same program runs as `python3 manus_bridge.py` with the same flags
-(docs/glove.md).
+The program of `manus_bridge.py` as this package's command, its flags parsed by draccus like every `blindgrasp-*`
+command (`--topics=[manus_glove_0,manus_glove_1]`). On the MANUS machine, without this package, the same program
+runs as `python3 manus_bridge.py` with the same flags (docs/glove.md).
 """
 
 from __future__ import annotations
