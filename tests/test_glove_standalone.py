@@ -147,20 +147,23 @@ def _drive_and_stop(proc: subprocess.Popen, teleop: ManusGlove) -> str:
     return err
 
 
-@pytest.mark.parametrize("mode", ["integrated", "core"])
-def test_the_sdk_bridge_under_python310_drives_the_teleoperator(py310, lab, sdk_library, teleop, tmp_path, mode):
+@pytest.mark.parametrize(("mode", "python"), [("integrated", "3.10"), ("core", "3.10"), ("integrated", "3.12")])
+def test_the_sdk_bridge_drives_the_teleoperator(request, lab, sdk_library, teleop, tmp_path, mode, python):
+    """Under Python 3.10 (ROS 2 Humble's) and this suite's own Python, 3.12 or later (Jazzy's is 3.12)."""
     log = tmp_path / "sdk_calls.log"
     args = ["--source=sdk", f"--sdk_mode={mode}", "--side=right", f"--port={teleop.config.port}", "--source_port=0",
             f"--sdk_library={sdk_library}", "--status_every_s=0.5"]  # fmt: skip
     if mode == "core":
         args.append("--sdk_host=10.0.0.6")  # the second host found, by its address
-    err = _drive_and_stop(_start(py310, lab, args, {"STANDIN_LOG": str(log)}), teleop)
+    py = request.getfixturevalue("py310") if python == "3.10" else sys.executable
+    err = _drive_and_stop(_start(py, lab, args, {"STANDIN_LOG": str(log)}), teleop)
     calls = log.read_text().splitlines()
     init = "CoreSdk_InitializeIntegrated" if mode == "integrated" else "CoreSdk_InitializeCore"
     order = [init, "CoreSdk_RegisterCallbackForErgonomicsStream", "CoreSdk_InitializeCoordinateSystemWithVUH",
              "CoreSdk_ConnectToHost", "CoreSdk_GetDataForGlove_UsingGloveId", "CoreSdk_ShutDown"]  # fmt: skip
     assert [calls.index(c) for c in order] == sorted(calls.index(c) for c in order), calls
     assert "  view=3 up=6 handedness=2 scale=1 world=1" in calls
+    assert "  not in the landscape yet" in calls  # the glove's side was asked again, not guessed
     assert calls[calls.index("CoreSdk_ConnectToHost") + 1] == (
         "  host ''" if mode == "integrated" else "  host 'other'"
     )
