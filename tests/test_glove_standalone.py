@@ -121,14 +121,21 @@ def _start(py: str, lab: Path, args: list[str], env: dict[str, str], isolated: b
     )
 
 
-def _drive_and_stop(proc: subprocess.Popen, teleop: ManusGlove) -> str:
-    """Connect the teleoperator to the running bridge, wait (bounded) for the fist, check the joints, SIGTERM it."""
+def _wait_for(condition, proc: subprocess.Popen, what: str) -> None:
+    deadline = time.monotonic() + 30.0  # a bound for a loaded machine, not a timing claim
+    while not condition():
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, f"no {what}"
+        time.sleep(0.02)
+
+
+def _drive_and_stop(proc: subprocess.Popen, teleop: ManusGlove, also=lambda: True) -> str:
+    """Connect the teleoperator to the running bridge, wait (bounded) for the fist and `also`, check the joints,
+    SIGTERM the bridge."""
     try:
         teleop.connect()  # calibrated from the file; waits for the first datagram
-        deadline = time.monotonic() + 30.0
-        while time.monotonic() < deadline and teleop.receiver.latest()[0].ergonomics["IndexMCPStretch"] != 85.0:
-            assert proc.poll() is None, proc.communicate()
-            time.sleep(0.02)
+        _wait_for(lambda: teleop.receiver.latest()[0].ergonomics["IndexMCPStretch"] == 85.0, proc, "fist")
+        _wait_for(also, proc, "bridge state")
         frame, _ = teleop.receiver.latest()
         assert frame.ergonomics == {k: FIST[k] for k in rt.REQUIRED_KEYS}  # the right glove, none of 77 or 66
         assert teleop.receiver.rejected == 0 and teleop.receiver.restarts == 0
@@ -156,7 +163,8 @@ def test_the_sdk_bridge_drives_the_teleoperator(request, lab, sdk_library, teleo
     if mode == "core":
         args.append("--sdk_host=10.0.0.6")  # the second host found, by its address
     py = request.getfixturevalue("py310") if python == "3.10" else sys.executable
-    err = _drive_and_stop(_start(py, lab, args, {"STANDIN_LOG": str(log)}), teleop)
+    proc = _start(py, lab, args, {"STANDIN_LOG": str(log), "STANDIN_DISCONNECT_AT": "5"})
+    err = _drive_and_stop(proc, teleop, also=lambda: log.read_text().count("CoreSdk_ConnectToHost") == 2)
     calls = log.read_text().splitlines()
     init = "CoreSdk_InitializeIntegrated" if mode == "integrated" else "CoreSdk_InitializeCore"
     order = [init, "CoreSdk_RegisterCallbackForErgonomicsStream", "CoreSdk_InitializeCoordinateSystemWithVUH",
@@ -170,6 +178,8 @@ def test_the_sdk_bridge_drives_the_teleoperator(request, lab, sdk_library, teleo
     if mode == "core":
         assert calls.index("CoreSdk_LookForHosts") < calls.index("CoreSdk_GetAvailableHostsFound")
     assert calls[-1] == "  shut down with the ergonomics callback unregistered"
+    # A disconnect in the stream (a dongle unplugged): the bridge connected again and went on.
+    assert calls.count("CoreSdk_ConnectToHost") == 2 and "MANUS SDK disconnected: reconnecting." in err
     assert "is the right hand" in err and "is the left hand" in err and "Stopped." in err
     forwarded = [line for line in err.splitlines() if "right-hand poses" in line][-1]
     assert "skipped 0 of the other hand" not in forwarded  # the left glove was seen and skipped

@@ -8,6 +8,7 @@
  * asked (SDKReturnCode_DataNotAvailable). After ConnectToHost a thread of its own calls the ergonomics callback
  * every 10 ms with the recorded streams of standin_frames.h (written by the test), then repeats the last one until
  * ShutDown.
+ * $STANDIN_DISCONNECT_AT=<n>: after n streams it reports a disconnect once (the dongle unplugged) and streams on.
  * Every call is appended to $STANDIN_LOG; $STANDIN_FAIL=<function>=<code> makes that function return <code>. */
 #include <pthread.h>
 #include <stdbool.h>
@@ -46,6 +47,7 @@ typedef void (*DisconnectedFromCoreCallback_t)(const ManusHost* const);
 static pthread_mutex_t g_mu = PTHREAD_MUTEX_INITIALIZER;
 static ErgonomicsStreamCallback_t g_ergonomics;
 static ConnectedToCoreCallback_t g_on_connect;
+static DisconnectedFromCoreCallback_t g_on_disconnect;
 static bool g_initialized, g_coordinates, g_stop, g_looked;
 static pthread_t g_thread;
 static bool g_thread_running;
@@ -88,7 +90,7 @@ SDKReturnCode CoreSdk_RegisterCallbackForOnConnect(ConnectedToCoreCallback_t cb)
   GATE(true); say("  callback %s", cb ? "set" : "NULL"); g_on_connect = cb; return 0;
 }
 SDKReturnCode CoreSdk_RegisterCallbackForOnDisconnect(DisconnectedFromCoreCallback_t cb) {
-  GATE(true); say("  callback %s", cb ? "set" : "NULL"); (void)cb; return 0;
+  GATE(true); say("  callback %s", cb ? "set" : "NULL"); g_on_disconnect = cb; return 0;
 }
 
 SDKReturnCode CoreSdk_InitializeCoordinateSystemWithVUH(CoordinateSystemVUH cs, bool world) {
@@ -121,6 +123,8 @@ SDKReturnCode CoreSdk_GetAvailableHostsFound(ManusHost* hosts, const uint32_t n)
 static void* stream_thread(void* arg) {
   (void)arg;
   static ErgonomicsStream s;
+  const char* drop = getenv("STANDIN_DISCONNECT_AT"); /* after that many streams, report one disconnect */
+  int drop_at = drop ? atoi(drop) : -1;
   struct timespec tick = {0, 10 * 1000 * 1000};
   for (int k = 0;; k++) {
     int i = k < N_STREAMS ? k : N_STREAMS - 1;
@@ -137,6 +141,11 @@ static void* stream_thread(void* arg) {
     if (!stop && g_ergonomics) g_ergonomics(&s);
     pthread_mutex_unlock(&g_mu);
     if (stop) return NULL;
+    if (k + 1 == drop_at && g_on_disconnect) {
+      static ManusHost gone;
+      say("  %s", "disconnected");
+      g_on_disconnect(&gone);
+    }
     nanosleep(&tick, NULL);
   }
 }
