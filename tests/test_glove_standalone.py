@@ -177,6 +177,8 @@ def test_the_sdk_bridge_drives_the_teleoperator(request, lab, sdk_library, teleo
     )
     if mode == "core":
         assert calls.index("CoreSdk_LookForHosts") < calls.index("CoreSdk_GetAvailableHostsFound")
+    else:
+        assert calls[calls.index("CoreSdk_ConnectToHost") - 1] == "ManusHost_Init"
     assert calls[-1] == "  shut down with the ergonomics callback unregistered"
     # A disconnect in the stream (a dongle unplugged): the bridge connected again and went on.
     assert calls.count("CoreSdk_ConnectToHost") == 2 and "MANUS SDK disconnected: reconnecting." in err

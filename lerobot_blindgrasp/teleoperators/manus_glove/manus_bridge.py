@@ -459,7 +459,11 @@ class ManusSdk:
     def _connect_once(self) -> str | None:
         """None when connected, else why not."""
         if self.cfg.sdk_mode == "integrated":
-            chosen = ManusHost()  # an empty host: the SDK's own integrated Core
+            chosen = ManusHost()  # an empty host: the SDK's own integrated Core, as ManusHost_Init makes it
+            init = getattr(self.lib, "ManusHost_Init", None)
+            if init is not None:
+                init.argtypes, init.restype = [C.POINTER(ManusHost)], None
+                init(C.byref(chosen))
         else:
             self.call("CoreSdk_LookForHosts", 1, False)
             n = C.c_uint32()
@@ -540,7 +544,10 @@ def from_sdk(cfg: BridgeConfig, bridge: GloveBridge) -> None:
 # --- the command line --------------------------------------------------------------------------------------------
 def _help() -> dict[str, str]:
     """Each BridgeConfig field's comment (the one text, for draccus and for argparse)."""
-    found = re.findall(r"# (.+)\n\s+(\w+):", inspect.getsource(BridgeConfig))
+    try:
+        found = re.findall(r"# (.+)\n\s+(\w+):", inspect.getsource(BridgeConfig))
+    except OSError:  # no source to read (a frozen or byte-compiled copy): help without the texts
+        found = []
     return {name: text for text, name in found}
 
 

@@ -150,6 +150,11 @@ static void* stream_thread(void* arg) {
   }
 }
 
+void ManusHost_Init(ManusHost* host) { /* ManusSDKTypeInitializers.h */
+  say("%s", "ManusHost_Init");
+  memset(host, 0, sizeof *host);
+}
+
 SDKReturnCode CoreSdk_ConnectToHost(ManusHost host) {
   GATE(true);
   say("  host '%s'", host.hostName[0] ? host.hostName : host.ipAddress);
