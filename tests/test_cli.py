@@ -18,11 +18,17 @@ ROOT = Path(__file__).resolve().parents[1]
 MODULE_COMMANDS = (
     "lerobot_blindgrasp.results.compare",
     "lerobot_blindgrasp.analysis.table_v",
-    "lerobot_blindgrasp.analysis.progress",
-    "lerobot_blindgrasp.analysis.diversity",
     "lerobot_blindgrasp.envs.real_report",
-    "lerobot_blindgrasp.twin.measure",
-    "lerobot_blindgrasp.twin.report",
+)
+# The lab's commands (`python -m lab.<tool>` from a clone's root): every lab module that runs as a command, and the
+# benchmarks' package (its `__main__.py`).
+LAB_COMMANDS = (
+    "lab.bench",
+    *sorted(
+        ".".join(p.relative_to(ROOT).with_suffix("").parts)
+        for p in (ROOT / "lab").rglob("*.py")
+        if '__name__ == "__main__"' in p.read_text(encoding="utf-8")
+    ),
 )
 
 
@@ -63,10 +69,11 @@ def test_other_spellings_are_refused(argv, capsys):
 
 
 def test_every_command_has_help(monkeypatch, capsys):
-    """`--help` of every console script in pyproject.toml and every `python -m` command lists its flags."""
+    """`--help` of every console script in pyproject.toml and every `python -m` command, the lab's included, lists
+    its flags."""
     monkeypatch.setenv("OMP_WAIT_POLICY", "PASSIVE")  # a command that would set it leaves this process alone
     targets = [(name, *target.split(":")) for name, target in _console_scripts().items()]
-    targets += [(module, module, "main") for module in MODULE_COMMANDS]
+    targets += [(module, module, "main") for module in (*MODULE_COMMANDS, *LAB_COMMANDS)]
     for name, module, func in targets:
         main = getattr(importlib.import_module(module), func)
         # LeRobot's own parser (the rollout reuses lerobot-rollout's config and parser) reads sys.argv.
@@ -91,8 +98,8 @@ def test_every_script_has_help(script, monkeypatch, capsys):
 
 
 def test_the_benchmark_is_picked_by_its_type():
-    from lerobot_blindgrasp.bench import BenchCommand
-    from lerobot_blindgrasp.bench.sim_bench import BenchSimConfig
+    from lab.bench import BenchCommand
+    from lab.bench.sim_bench import BenchSimConfig
 
     cfg = parse_config(
         BenchCommand, ["--bench.type=sim", "--bench.num_envs=36", "--bench.threads=[1,2]", "--bench.json=true"]

@@ -1,12 +1,12 @@
-"""`blindgrasp-bench --bench.type={sim,teacher,demos,policy,student}`: benchmarks that print one table per run (JSON
+"""`python -m lab.bench --bench.type={sim,teacher,demos,policy,student}`: benchmarks that print one table per run (JSON
 with --bench.json=true).
 
-    blindgrasp-bench --bench.type=sim --bench.num_envs=1026 --bench.threads=[1,2]
-    blindgrasp-bench --bench.type=teacher --bench.preset=cpu --bench.iterations=6 --bench.json=true
+    python -m lab.bench --bench.type=sim --bench.num_envs=1026 --bench.threads=[1,2]
+    python -m lab.bench --bench.type=teacher --bench.preset=cpu --bench.iterations=6 --bench.json=true
 
 `--bench.type` picks the benchmark (as `--policy.type` picks a LeRobot policy); `--bench.*` are that benchmark's
-options (`--bench.type=sim --help` lists them). Each lives in its own module (`bench/sim_bench.py`, `bench/teacher_bench.py`,
-`bench/demos_bench.py`, `bench/policy_bench.py`, `bench/student_bench.py`) that registers its `BenchConfig` subclass under its name and
+options (`--bench.type=sim --help` lists them). Each lives in its own module (`sim_bench.py`, `teacher_bench.py`,
+`demos_bench.py`, `policy_bench.py`, `student_bench.py`) that registers its `BenchConfig` subclass under its name and
 has `run(cfg) -> dict`.
 """
 
@@ -52,7 +52,7 @@ def main(argv=None) -> None:
     # The benchmarks time torch as training runs it, with idle OpenMP threads asleep.
     sleeping_openmp_threads(restart=argv is None)
     for name in _modules(sys.argv[1:] if argv is None else list(argv)):  # each registers its --bench.type
-        importlib.import_module(f"lerobot_blindgrasp.bench.{name}_bench")
+        importlib.import_module(f"lab.bench.{name}_bench")
     cfg = parse_config(BenchCommand, argv).bench
     result = importlib.import_module(type(cfg).__module__).run(cfg)
     if cfg.json:

@@ -1,4 +1,4 @@
-"""The student bench's data-path figures (`blindgrasp-bench --bench.type=student`): per-sample cost of each of
+"""The student bench's data-path figures (`python -m lab.bench --bench.type=student`): per-sample cost of each of
 LeRobot's data paths and of the plugin's low-dim cache, the DataLoader as lerobot-train builds it (workers and
 prefetch), the cache's memory per process, and a synthetic dataset in the demos' schema to time them on."""
 

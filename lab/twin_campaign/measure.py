@@ -1,6 +1,6 @@
 """The shipped student through the whole real stack on the physics twin, beside the sim env on the same start states.
 
-    python -m lerobot_blindgrasp.twin.measure --output_dir=outputs/twin_measure
+    python -m lab.twin_campaign.measure --output_dir=outputs/twin_measure
 
 One command, resumable (re-run it with the same `--output_dir` and it goes on where it stopped):
 1. `sim/`: `lerobot-eval --env.type=blindgrasp` on the objects and seeds below (skipped once its eval_info.json
@@ -34,10 +34,10 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from lab.twin_campaign import report
 from lerobot_blindgrasp import durable, platform_id, shipped
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.envs.real_env import resolve_real_objects
-from lerobot_blindgrasp.twin import report
 from lerobot_blindgrasp.twin.calibrate import TwinCalibrateConfig
 from lerobot_blindgrasp.twin.calibrate import run as calibrate
 

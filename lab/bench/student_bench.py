@@ -1,7 +1,7 @@
-"""`blindgrasp-bench --bench.type=student`: what one lerobot-train sample of the student costs, against its
+"""`python -m lab.bench --bench.type=student`: what one lerobot-train sample of the student costs, against its
 compute floor, with each of LeRobot's data paths side by side.
 
-    blindgrasp-bench --bench.type=student --bench.dataset_root=outputs/pipeline_quick_blind/demos --bench.size=cpu \\
+    python -m lab.bench --bench.type=student --bench.dataset_root=outputs/pipeline_quick_blind/demos --bench.size=cpu \\
         --bench.batch_size=128 --bench.json=true
 
 Per training sample, measured in this process on one torch thread, one after another in one run. On a shared
@@ -38,10 +38,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lerobot_blindgrasp.bench import BenchConfig
-from lerobot_blindgrasp.bench.policy_bench import flops_per_step, make_policy
-from lerobot_blindgrasp.bench.student_data import cache_memory, load_ms, loader_samples_per_s, synthetic_demos
-from lerobot_blindgrasp.bench.student_parts import compiled_vs_eager, format_table, gemm_gflops, update_parts
+from lab.bench import BenchConfig
+from lab.bench.policy_bench import flops_per_step, make_policy
+from lab.bench.student_data import cache_memory, load_ms, loader_samples_per_s, synthetic_demos
+from lab.bench.student_parts import compiled_vs_eager, format_table, gemm_gflops, update_parts
 from lerobot_blindgrasp.policies.blindgrasp_transformer.configuration_blindgrasp_transformer import SIZES
 from lerobot_blindgrasp.policies.blindgrasp_transformer.window_cache import ENV_SWITCH, SERVED_LOG
 

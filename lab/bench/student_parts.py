@@ -1,6 +1,6 @@
 """The student bench's update figures: the update split into its parts, three AdamW implementations, an operator
 profile, `torch.compile` against eager, and this machine's GEMM rate at the model's shapes
-(`blindgrasp-bench --bench.type=student`)."""
+(`python -m lab.bench --bench.type=student`)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from collections import defaultdict
 import torch
 import torch.nn.functional as F  # noqa: N812
 
+from lab.bench.policy_bench import make_policy
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.bench.policy_bench import make_policy
 
 PARTS = ("forward", "backward", "clip", "step", "zero_grad")
 # torch.optim.AdamW as LeRobot's AdamWConfig builds it (for-loop on CPU tensors), and its two other implementations.

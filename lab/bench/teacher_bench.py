@@ -1,7 +1,7 @@
 """Whole-loop PPO throughput: collection vs update time per iteration, against raw physics at the same env count.
 
-    blindgrasp-bench --bench.type=teacher --bench.preset=cpu --bench.iterations=6 --bench.json=true
-    blindgrasp-bench --bench.type=teacher --bench.preset=cpu --bench.checkpoint=runs/teacher_cpu/model_1397.pt
+    python -m lab.bench --bench.type=teacher --bench.preset=cpu --bench.iterations=6 --bench.json=true
+    python -m lab.bench --bench.type=teacher --bench.preset=cpu --bench.checkpoint=runs/teacher_cpu/model_1397.pt
 
 Builds the preset's env and rsl-rl `OnPolicyRunner` exactly as `blindgrasp-train-teacher` does (no logging to
 disk), runs a warm-up iteration and then `--iterations` timed ones. Per iteration it splits wall time into
@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lerobot_blindgrasp.bench import BenchConfig
+from lab.bench import BenchConfig
 from lerobot_blindgrasp.presets import teacher as teacher_presets
 from lerobot_blindgrasp.presets.teacher_configs import TeacherPreset
 

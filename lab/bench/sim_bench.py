@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lab.bench import BenchConfig
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.bench import BenchConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.gripper import PhysicsOptions

@@ -1,6 +1,6 @@
 """How varied a demo set is: the spread of grasp poses across episodes, and how much the commands jitter.
 
-    python -m lerobot_blindgrasp.analysis.diversity --datasets=[LABEL=DATASET_ROOT,...] [--at_s=3.0]
+    python -m lab.diagnosis.diversity --datasets=[LABEL=DATASET_ROOT,...] [--at_s=3.0]
 
 The paper credits the stochastic teacher with "trajectory diversity". Two numbers separate the two kinds a demo set
 can have, per object, averaged with equal weight over the objects it holds:

@@ -1,6 +1,6 @@
 """Training success against env steps and against training wall clock, from a run's TensorBoard scalars.
 
-    python -m lerobot_blindgrasp.analysis.progress --output=OUT.png --runs=[[LABEL=]RUN_DIR[+RUN_DIR...],...]
+    python -m lab.diagnosis.progress --output=OUT.png --runs=[[LABEL=]RUN_DIR[+RUN_DIR...],...]
         [--until=ITER] [--metrics=[TAG,TAG]] [--held_out=[EVAL_DIR,EVAL_DIR]]
 
 `RUN_A+RUN_B` is one training history kept in two directories: RUN_B was started from a checkpoint of RUN_A (for

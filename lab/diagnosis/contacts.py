@@ -1,6 +1,6 @@
 """How a teacher touches each object: the direction of its fingertip forces, next to its success.
 
-    python -m lerobot_blindgrasp.analysis.contacts --objects=capsule_small,sphere_small,sphere_medium --episodes=10
+    python -m lab.diagnosis.contacts --objects=capsule_small,sphere_small,sphere_medium --episodes=10
 
 Success says *that* a teacher fails on an object; this says *how*. For every control step after the approach
 (`--after_s`) and every fingertip touching the object (> 0.1 N, world-frame net force of the tip on the object),

@@ -25,7 +25,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp.bench import BenchConfig
+from lab.bench import BenchConfig
 
 
 @BenchConfig.register_subclass("demos")

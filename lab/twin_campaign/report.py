@@ -1,9 +1,9 @@
 """A twin measurement's record: per-object successes and who judged them, what stopped the real stack, the peak
 fingertip forces, the real loop's step timing, the twin's own cost and the machine's load.
 
-    python -m lerobot_blindgrasp.twin.report --run=OUT [--sim=OUT/sim]
+    python -m lab.twin_campaign.report --run=OUT [--sim=OUT/sim]
 
-OUT is what `python -m lerobot_blindgrasp.twin.measure` fills: `real_trials.jsonl` (the real env's trial log, one
+OUT is what `python -m lab.twin_campaign.measure` fills: `real_trials.jsonl` (the real env's trial log, one
 line per trial that ended), `stops.jsonl` (trials the real stack's safety latch ended: a failure, with its error),
 `twin_trials.jsonl` (the twin's placements, verdicts and true peak forces), `twin.log` and `load.jsonl`. Trials are
 keyed by their evaluation index (lerobot-eval's seed), so the result pairs with a `--env.type=blindgrasp` run of the

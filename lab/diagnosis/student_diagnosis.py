@@ -1,6 +1,6 @@
-"""`blindgrasp-diagnose-student`: why a student trails its teacher, object by object, before anyone tunes it.
+"""`python -m lab.diagnosis.student_diagnosis`: why a student trails its teacher, object by object, before anyone tunes it.
 
-    blindgrasp-diagnose-student --student=models/student_cpu --demos=outputs/pipeline_quick_blind/demos \
+    python -m lab.diagnosis.student_diagnosis --student=models/student_cpu --demos=outputs/pipeline_quick_blind/demos \
         --held_out=outputs/held_out_demos --objects=capsule_small,sphere_small --episodes=20
 
 Per object it measures:
@@ -31,8 +31,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.analysis.student_fit import (
+from lab.diagnosis.student_fit import (
     SPACES,
     Coverage,
     episodes_by_object,
@@ -40,6 +39,7 @@ from lerobot_blindgrasp.analysis.student_fit import (
     imitation_loss,
     label_noise_floor,
 )
+from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.durable import atomic_path, atomic_write_json, atomic_write_text
 from lerobot_blindgrasp.results import rates

@@ -1,4 +1,4 @@
-"""How well a student fits its demonstrations, and where its closed loop leaves them (`blindgrasp-diagnose-student`).
+"""How well a student fits its demonstrations, and where its closed loop leaves them (`python -m lab.diagnosis.student_diagnosis`).
 
 - `episodes_by_object`: a blindgrasp LeRobotDataset's episodes, per object, read with LeRobot's loader;
 - `imitation_loss`: the training loss (MSE of delta/0.3, what lerobot-train minimizes) over their frames, and its

@@ -28,8 +28,8 @@ import torch.nn.functional as F  # noqa: N812
 from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.utils.constants import ACTION, OBS_STATE
 
+from lab.bench import BenchConfig
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.bench import BenchConfig
 from lerobot_blindgrasp.policies.blindgrasp_transformer import (
     BlindgraspTransformerConfig,
     BlindgraspTransformerPolicy,
