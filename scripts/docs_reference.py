@@ -83,7 +83,9 @@ def module_tools(folder: str = "lerobot_blindgrasp") -> list[str]:
     for path in sorted((ROOT / folder).rglob("*.py")):
         text = path.read_text(encoding="utf-8")
         module = ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
-        runs = '__name__ == "__main__"' in text or (path.parent / "__main__.py").is_file() and path.stem == "__init__"
+        runs = (
+            '__name__ == "__main__"' in text or (path.parent / "__main__.py").is_file() and path.stem == "__init__"
+        )
         if runs and "parse_config(" in text and module not in scripted:
             if "emulators" not in path.parts:
                 out.append(module)

@@ -17,7 +17,7 @@ LAB = ROOT / "lab"  # benchmarks, the twin's measurement campaign, research diag
 
 # Floors, bottom first: a folder (or top-level module) may import only from floors below its own.
 FLOORS: tuple[tuple[str, ...], ...] = (
-    ("spec", "durable", "platform_id"),
+    ("spec", "durable"),
     ("spaces", "cli", "project"),
     ("shipped", "hardware"),
     ("sim", "policies", "robots"),

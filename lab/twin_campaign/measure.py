@@ -35,7 +35,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from lab.twin_campaign import report
-from lerobot_blindgrasp import durable, platform_id, shipped
+from lerobot_blindgrasp import durable, shipped
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.envs.real_env import resolve_real_objects
 from lerobot_blindgrasp.twin.calibrate import TwinCalibrateConfig
@@ -214,10 +214,20 @@ def commit() -> str:
     return head.stdout.strip() + ("+changes" if dirty.stdout.strip() else "")
 
 
+def cpu_model() -> str:
+    """The CPU's model name, for the record (/proc/cpuinfo; the machine type where it says none)."""
+    import platform
+
+    info = Path("/proc/cpuinfo")
+    lines = info.read_text(errors="replace").splitlines() if info.exists() else []
+    names = [line.partition(":")[2].strip() for line in lines if line.partition(":")[0].strip() == "model name"]
+    return names[0] if names else platform.machine()
+
+
 def facts(cfg: TwinMeasureConfig) -> dict:
     return {"commit": commit(), "command": " ".join([Path(sys.executable).name, "-m", __spec__.name, *sys.argv[1:]]),
             "started_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()), "cpus": os.cpu_count(),
-            "platform": platform_id.describe(platform_id.platform()), "root": os.geteuid() == 0,
+            "platform": cpu_model(), "root": os.geteuid() == 0,
             "config": {k: str(v) for k, v in asdict(cfg).items()}}  # fmt: skip
 
 

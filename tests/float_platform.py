@@ -1,22 +1,22 @@
-"""Which float platform this process runs on: what decides the last bits of the simulation's and the teacher's
-floats.
+"""The golden simulation test's key for a CPU family (tests/test_sim_golden.py, tests/golden_sim.py): what decides
+the last bits of the simulation's and the teacher's floats. Only the tests use it; the product records none.
 
 MuJoCo's physics (through the C library's math functions) and the teacher's matrix products (through MKL and
 oneDNN kernels) pick their code paths by CPU instruction set, so the same code on another CPU family gives other
-last bits; a contact-rich rollout amplifies them, so an evaluation recorded on one family can differ from a re-run
-on another by an episode. A record that compares floats therefore says which platform made it:
+last bits; a contact-rich rollout amplifies them. So the golden record keeps bit-for-bit digests per platform, and
+compares them only on the platform that made them:
 
     platform()          {"cpu": model name, "isa": float-relevant instruction sets, "env": float-path overrides,
                          "versions": mujoco, torch, numpy}
     same(a, b)          True when two records' floats are expected to agree to the bit
-    describe(p)         one line for messages and reports
+    describe(p)         one line for messages
 
 `BLINDGRASP_CPU_MODEL` overrides the model name read from /proc/cpuinfo: tests use it to play a machine that no
-record has seen, and a user can name a CPU that reports none (some virtual machines and ARM boards). Environment
-variables that can move the math libraries onto another code path (`MKL_CBWR`, `ATEN_CPU_CAPABILITY`,
-`GLIBC_TUNABLES`, ...) count as part of the platform: what each moves depends on the CPU (`MKL_CBWR=SSE4_2` moves
-every MKL product on Intel but only single-row ones on AMD; `ATEN_CPU_CAPABILITY=default` moves torch's kernels on
-both), so a record made with one set is never taken as bit-identical to one made without.
+record has seen (tests/test_unseen_machine.py). Environment variables that can move the math libraries onto another
+code path (`MKL_CBWR`, `ATEN_CPU_CAPABILITY`, `GLIBC_TUNABLES`, ...) count as part of the platform: what each moves
+depends on the CPU (`MKL_CBWR=SSE4_2` moves every MKL product on Intel but only single-row ones on AMD;
+`ATEN_CPU_CAPABILITY=default` moves torch's kernels on both), so a record made with one set is never taken as
+bit-identical to one made without.
 """
 
 from __future__ import annotations
