@@ -105,7 +105,7 @@ def test_quick_and_cpu_pipeline_numbers_are_unchanged():
     assert (q.student.size, q.student.steps, q.student.batch_size) == ("cpu", 1200, 128)
     assert (q.student.threads, q.student.num_workers) == (1, 1)  # one loader process next to one torch thread
     assert (q.evaluation.episodes_per_object, q.evaluation.teacher_modes) == (20, ("deterministic",))
-    # 100 demos per object: ~8 passes of the cpu student over them (docs/research/student_cpu.md, 2026-11-30)
+    # 100 demos per object: ~8 passes of the cpu student over them (measured 2026-11-30)
     assert (
         c.demos.episodes_per_object,
         c.demos.max_rollouts_per_object,
@@ -210,7 +210,7 @@ def test_the_shipped_students_preset_aims_demos_and_dagger_at_the_small_capsule(
 
 
 # The one recorded run that is not resumable: its object allocation was tried under the `cpu` name and not kept
-# (docs/research/teacher_cpu_v2.md), so no preset holds it any more.
+# (teacher_cpu_v2.md of the research record, docs/research.md), so no preset holds it any more.
 def test_the_shipped_teachers_record_matches_its_preset():
     """`blindgrasp-train-teacher` resumes only when these keys match, and the registry must still describe the
     shipped teacher: its recorded run config (models/teacher_cpu_bc/teacher_config.json) is its preset's."""
@@ -333,10 +333,11 @@ def test_quick_table_v_teacher_ablations_are_the_recorded_ones(tmp_path):
         ["--preset=cpu", f"--output_dir={tmp_path / name}", "--seed=1", "--iterations=1398", flag]
         for name, flag in (("teacher_no_ri", "--no_incentive=true"), ("rl_with_ot", "--student_obs=true"))
     ]
-    # The recorded table's teacher ablations (exported actors) were made exactly so.
-    recorded = ROOT / "docs" / "research" / "checkpoints"
-    for row, name in (("wo_r_i", "table_v_wo_r_i_1397"), ("rl_w_o_t", "table_v_rl_w_o_t_1397")):
-        run = json.loads((recorded / name / "teacher_config.json").read_text())
+    # The recorded table's teacher ablations were made exactly so (their run configs; the exported actors are at git
+    # tag research-record-2026-12-05).
+    recorded = ROOT / "docs" / "results" / "table_v"
+    for row in ("wo_r_i", "rl_w_o_t"):
+        run = json.loads((recorded / f"{row}_1397_teacher_config.json").read_text())
         variant = presets.TEACHERS[presets.TABLE_V[row].teacher]
         stage = presets.PRESETS["quick"].teacher_stage(variant)
         assert (run["preset"], run["variant"], run["weights"]["iteration"] + 1, run["seed"]) == (

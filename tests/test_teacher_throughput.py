@@ -14,7 +14,7 @@ from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 from lerobot_blindgrasp.sim.env_config import GraspEnvConfig, allocate_objects
 
-# Harder objects (small, capsules) weighted up, as tried in docs/research/teacher_cpu_v2.md.
+# Harder objects (small, capsules) weighted up, as tried in teacher_cpu_v2.md of the research record (docs/research.md).
 HARD_FIRST = tuple(
     {"large": 0.5, "medium": 1.0, "small": 1.5}[objects.get_object(n).size_label]
     * (1.5 if objects.get_object(n).mjcf_type == "capsule" else 1.0)
