@@ -97,6 +97,31 @@ def test_every_script_has_help(script, monkeypatch, capsys):
     assert e.value.code == 0 and "usage:" in capsys.readouterr().out
 
 
+def test_the_guides_lab_commands_parse_as_written(monkeypatch):
+    """Each `python -m lab...` line of the README and the guides parses with its tool's own config, flag by flag."""
+    import re
+    import shlex
+
+    spec = importlib.util.spec_from_file_location("docs_reference", ROOT / "scripts" / "docs_reference.py")
+    gen = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, gen)  # its dataclass resolves its module through sys.modules
+    spec.loader.exec_module(gen)
+    found = []
+    for doc in (ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))):
+        for module, args in re.findall(
+            r"^python -m (lab[\w.]*) ([^\\\n]*)$", doc.read_text(encoding="utf-8"), re.M
+        ):
+            argv = shlex.split(args)
+            if module == "lab.bench":  # each benchmark registers its --bench.type when imported
+                bench = importlib.import_module(module)
+                for name in bench._modules(argv):
+                    importlib.import_module(f"lab.bench.{name}_bench")
+            cls = getattr(importlib.import_module(module), gen.config_class(module))
+            parse_config(cls, argv)
+            found.append(module)
+    assert {"lab.bench", "lab.diagnosis.progress"} <= set(found), found
+
+
 def test_the_benchmark_is_picked_by_its_type():
     from lab.bench import BenchCommand
     from lab.bench.sim_bench import BenchSimConfig

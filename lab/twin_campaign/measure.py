@@ -11,7 +11,7 @@ One command, resumable (re-run it with the same `--output_dir` and it goes on wh
    (`--overload_n`, `--current_limit_a`, `--latency_timer_ms`, `--max_overrun_s` override them when given). A trial
    the real stack's safety latch stops is a failure (`stops.jsonl`, with its error), and lerobot-eval starts again
    at the next seed.
-4. The record: `report.md` (`twin/report.py`: per-object rates, the judge, stops by cause, peak forces, the real
+4. The record: `report.md` (`report.py`: per-object rates, the judge, stops by cause, peak forces, the real
    loop's step timing, the twin's own cost, the machine's load) and `compare.md` (`results/compare.py`: paired
    with the sim, McNemar p).
 
