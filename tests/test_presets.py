@@ -333,11 +333,11 @@ def test_quick_table_v_teacher_ablations_are_the_recorded_ones(tmp_path):
         ["--preset=cpu", f"--output_dir={tmp_path / name}", "--seed=1", "--iterations=1398", flag]
         for name, flag in (("teacher_no_ri", "--no_incentive=true"), ("rl_with_ot", "--student_obs=true"))
     ]
-    # The recorded table's teacher ablations were made exactly so (their run configs; the exported actors are at git
-    # tag research-record-2026-12-05).
-    recorded = ROOT / "docs" / "results" / "table_v"
+    # The recorded table's teacher ablations were made exactly so (their run configs, by row; the exported actors
+    # are at git tag research-record-2026-12-05).
+    recorded = json.loads((ROOT / "docs" / "results" / "table_v_teachers.json").read_text())
     for row in ("wo_r_i", "rl_w_o_t"):
-        run = json.loads((recorded / f"{row}_1397_teacher_config.json").read_text())
+        run = recorded[row]
         variant = presets.TEACHERS[presets.TABLE_V[row].teacher]
         stage = presets.PRESETS["quick"].teacher_stage(variant)
         assert (run["preset"], run["variant"], run["weights"]["iteration"] + 1, run["seed"]) == (
