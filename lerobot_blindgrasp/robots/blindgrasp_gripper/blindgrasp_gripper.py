@@ -30,7 +30,6 @@ from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware import realtime
 from lerobot_blindgrasp.hardware.force import force_bias_warning
 from lerobot_blindgrasp.hardware.xm430 import MODEL, RAD_PER_TICK, WATCHDOG_UNIT_MS, amps_to_current_units
 
@@ -134,7 +133,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, calib.CheckedCalibrationFile, 
         if calibrate:
             connect_checks.refuse_unattended_calibration(self)  # no file and nobody to answer the prompts
         latency_timer.ensure_low_latency(self.config.port, self.config.force_sensor.port)  # USB adapters at 1 ms
-        self.host_setup = realtime.prepare_host(self.config)  # before any thread starts: threads inherit it
+        self.host_setup = connect_checks.prepare_host(self)  # before any thread starts: threads inherit it
         with self._safety("connecting"):
             self.expected = {}
             self.gate.forget()
