@@ -3,7 +3,9 @@
 One trial (= one lerobot-eval episode):
 1. reset: the gripper drives to the paper's start pose (0, pi/3, 0) at <= 0.3 rad per 20 Hz step; the operator
    places the object at the claw centre and presses ENTER (unattended force mode: waits `unattended_reset_s`);
-   the fingertip sensors are tared (fingers in free air).
+   the fingertip sensors are tared (fingers in free air). Torque stays on, holding the pose, and the bus stays
+   alive through these waits (the robot's `keep_alive` each period, and during its tare), so the servos' bus
+   watchdog stays armed for a host that dies while waiting and never trips on a person's pause.
 2. 200 steps at 20 Hz (10 s): action = absolute joint targets, through `robot.send_action` (clipped on the robot).
    The steps keep time with a `Schedule`: after a late step (a slow policy) it re-bases on now rather than
    firing the missed steps back to back, and after a slow read (a stalled bus) the next read waits until it is at
@@ -167,10 +169,10 @@ class RealGraspEnv(gym.Env):
             keys.announce_trial(self.object_name, k, seed)
         if keys.available:  # an ENTER pressed while the gripper was homing counts: the operator is ready
             print(f"\n[{self.object_name}] trial {k}: place the object at the claw centre, hands clear, ENTER.")
-            keys.wait_for({"enter"})
+            self._wait_keeping_bus_alive({"enter"})
         else:
             logger.info("[%s] trial %d starts in %.1f s", self.object_name, k, self.cfg.unattended_reset_s)
-            time.sleep(self.cfg.unattended_reset_s)
+            self._wait_keeping_bus_alive(None, self.cfg.unattended_reset_s)
         if self.cfg.tare_each_trial and hasattr(self.robot, "tare_forces"):
             self.robot.tare_forces()
         if hasattr(self.robot, "check_health_before_start"):  # a servo near a limit must not start a trial
@@ -182,6 +184,23 @@ class RealGraspEnv(gym.Env):
         obs = self._observe()
         self._returned_at = time.perf_counter()
         return obs, {"is_success": False}
+
+    def _wait_keeping_bus_alive(self, keys: set[str] | None, duration_s: float = 0.0) -> str | None:
+        """Wait for one of `keys` (None: for `duration_s`) with the torque on, holding the pose: the robot's
+        `keep_alive` runs every control period, so its servos' bus watchdog stays armed and fed (a dead host is
+        still stopped by it) instead of tripping on a person's pause."""
+        keep_alive = getattr(self.robot, "keep_alive", None)
+        deadline = time.monotonic() + duration_s
+        while True:
+            if keys is not None:
+                if (key := self.session.keys.wait_for(keys, timeout_s=spec.CONTROL_DT)) is not None:
+                    return key
+            elif (left := deadline - time.monotonic()) > 0:
+                time.sleep(min(left, spec.CONTROL_DT))
+            else:
+                return None
+            if keep_alive is not None:
+                keep_alive()
 
     def step(self, action):
         action = np.asarray(action, dtype=np.float64).reshape(spec.ACTION_DIM)
@@ -228,7 +247,7 @@ class RealGraspEnv(gym.Env):
     def _ask_outcome(self) -> bool:
         # Hold the final pose while the operator answers: the last target stays on the servos.
         print("10 s elapsed. Was the object lifted and held for >= 1 s? press y or n.")
-        return self.session.keys.wait_for(SUCCESS_KEYS | FAILURE_KEYS) in SUCCESS_KEYS
+        return self._wait_keeping_bus_alive(SUCCESS_KEYS | FAILURE_KEYS) in SUCCESS_KEYS
 
     def _log_trial(self, success: bool) -> None:
         who = self._decided[1] if self._decided else "time limit"
