@@ -113,6 +113,7 @@ class TwinPhysics:
         # host's peak reading lies between the two.
         self.peak_tip_force_n = np.zeros(spec.NUM_FORCES)
         self.held_tip_force_n = np.zeros(spec.NUM_FORCES)
+        self.q_at_peak = q.copy()  # until a first squeeze: a trial that ends before any substep still has a record
         self._recent_force = np.zeros((2 * self.options.substeps, spec.NUM_FORCES))
         return {
             "object": name,
