@@ -95,16 +95,26 @@ def test_the_udev_rules_name_the_adapters_and_set_the_timer():
     text = (ROOT / "robot_configs" / "udev" / "99-blindgrasp.rules").read_text()
     rules = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
     token = re.compile(
-        r'^(ACTION|SUBSYSTEM|DRIVERS|ATTRS\{\w+\}|ATTR\{\w+\}|SYMLINK|GROUP|MODE)(==|\+=|=)"[^"]*"$'
+        r'^(ACTION|SUBSYSTEM|DRIVERS|ATTRS\{\w+\}|ATTR\{\w+\}|ENV\{\w+\}|SYMLINK|GROUP|MODE)(==|\+=|=)"[^"]*"$'
     )
     for rule in rules:  # udev's own syntax: comma-separated KEY op "value"
         assert all(token.match(t.strip()) for t in rule.split(",")), rule
+    # `udevadm trigger` sends "change" unless told --action=add: a rule of "add" alone would wait for a replug.
+    assert all('ACTION=="add|change"' in r for r in rules if "ACTION" in r)
+    assert "udevadm trigger --action=add" in (ROOT / "docs" / "bringup.md").read_text()
+    # The force board's name goes to one board: each of its lines names a serial number or a USB socket, which the
+    # lab fills in (a placeholder matches no device), never a chip alone.
+    force = [r for r in rules if "blindgrasp_force" in r or 'idProduct}=="6001"' in r]
+    assert force and all('ATTRS{serial}=="FORCE_BOARD_SERIAL"' in r or 'ENV{ID_PATH}=="FORCE_BOARD_USB_SOCKET"' in r
+                         for r in force), force  # fmt: skip
     u2d2 = [r for r in rules if 'ATTRS{idVendor}=="0403"' in r and 'ATTRS{idProduct}=="6014"' in r]
     assert any('SYMLINK+="blindgrasp_u2d2"' in r and 'GROUP="dialout"' in r for r in u2d2)
     assert any('ATTR{latency_timer}="1"' in r and 'SUBSYSTEM=="usb-serial"' in r for r in u2d2)
     assert sum('SYMLINK+="blindgrasp_force"' in r for r in rules) >= 2  # the Nano's FTDI and CH340 variants
     # The Nano's USB chips the guide names are the ones the rules give the force board's name.
-    named = set(re.findall(r'idVendor}=="(\w+)", ATTRS{idProduct}=="(\w+)", SYMLINK\+="blindgrasp_force"', text))
+    named = set(
+        re.findall(r'idVendor}=="(\w+)", ATTRS{idProduct}=="(\w+)", [^,]+, SYMLINK\+="blindgrasp_force"', text)
+    )
     [nano] = re.findall(
         r"the Nano \(([^)]*)\) `/dev/blindgrasp_force`", (ROOT / "docs" / "bringup.md").read_text()
     )
