@@ -1,4 +1,5 @@
-"""Bring-up checks of the real gripper's connect(): the USB latency timer and a calibration nobody can make.
+"""Bring-up checks of the real gripper: `lerobot-setup-motors` from factory servos, the udev rules, and connect()'s
+USB latency timer and a calibration nobody can make.
 
 The latency timer is checked on a fake sysfs tree (`tmp_path`), laid out as the kernel's ftdi_sio driver lays it
 out, and once through the robot's real connect() against the emulated servos and force board.
@@ -14,7 +15,8 @@ import re
 from pathlib import Path
 
 import pytest
-from emulators.rig import GripperRig
+from emulators.harness import BIN, Operator, cli_env
+from emulators.rig import LATENCY_TIMER_MS, GripperRig
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.robots.blindgrasp_gripper import latency_timer
@@ -232,3 +234,38 @@ def test_a_force_port_that_is_not_there_says_how_to_find_it(tmp_path):
     with pytest.raises(ForceStreamError, match=r"ttyUSB1'.*lerobot-find-port.*99-blindgrasp\.rules"):
         reader.connect()
     assert not reader.is_connected
+
+
+def test_lerobot_setup_motors_from_factory_servos_one_at_a_time(tmp_path):
+    """README's `lerobot-setup-motors` (the real CLI, the real dynamixel-sdk) on nine servos out of the box: each
+    at ID 1 and 57 600 bps, plugged onto the cable alone when the CLI asks for it. Afterwards all nine share the
+    cable at their own IDs and the config's baud rate, and `lerobot-calibrate`'s bus finds them."""
+    from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
+
+    from lerobot_blindgrasp.emulators.dynamixel import BAUD_REGISTER, DynamixelBusEmulator
+
+    config = ROOT / "robot_configs" / "blindgrasp_gripper.yaml"
+    joints = spec.JOINT_NAMES
+    with DynamixelBusEmulator([], baudrate=57_600) as emu:
+        cmd = [str(BIN / "lerobot-setup-motors"), f"--robot=include {config}", "--robot.id=new",
+               f"--robot.port={emu.port}", f"--robot.calibration_dir={tmp_path / 'calibration'}",
+               f"--robot.latency_timer_ms={LATENCY_TIMER_MS}"]  # fmt: skip
+        op = Operator(cmd, cli_env(tmp_path))
+        fresh = []
+        for joint, dxl_id in reversed(list(zip(joints, spec.SERVO_IDS, strict=True))):
+            op.expect(f"Connect the controller board to the '{joint}' servo (ID {dxl_id}) only")
+            fresh.append(DynamixelBusEmulator.factory_servo())
+            emu.plug(fresh[-1])  # the previous servo unplugged, this one out of its box
+            op.answer()
+            op.expect(f"'{joint}' servo: ID {dxl_id} at 1000000 bps")
+        assert op.wait() == 0, op.text[-3000:]
+        assert [s.get("ID") for s in fresh] == list(reversed(spec.SERVO_IDS))
+        assert {s.get("Baud_Rate") for s in fresh} == {BAUD_REGISTER[1_000_000]}
+        emu.plug(*fresh)  # the finished gripper: all nine on one cable
+        port, ph = PortHandler(emu.port), PacketHandler(2.0)
+        assert port.openPort() and port.setBaudRate(1_000_000)
+        try:
+            found, result = ph.broadcastPing(port)
+        finally:
+            port.closePort()
+    assert result == COMM_SUCCESS and sorted(found) == sorted(spec.SERVO_IDS)
