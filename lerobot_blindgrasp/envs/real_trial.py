@@ -1,7 +1,8 @@
 """One real-gripper trial as a gym env (`RealGraspEnv`), on the one gripper its `GripperSession` holds.
 
 One trial (= one lerobot-eval episode):
-1. reset: the gripper drives to the paper's start pose (0, pi/3, 0) at <= 0.3 rad per 20 Hz step; the operator
+1. reset: the gripper drives to the paper's start pose (0, pi/3, 0) at <= 0.3 rad per 20 Hz step (`start_pose=sim`:
+   to the sim env's start pose for the same evaluation index and object, its drawn joint offsets included); the operator
    places the object at the claw centre and presses ENTER (unattended force mode: waits `unattended_reset_s`);
    the fingertip sensors are tared (fingers in free air). Torque stays on, holding the pose, and the bus stays
    alive through these waits (the robot's `keep_alive` each period, and during its tare), so the servos' bus
@@ -34,7 +35,8 @@ from lerobot_blindgrasp import durable, spaces, spec
 from lerobot_blindgrasp.envs import real_report
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
 from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import Schedule
-from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp.sim import objects, randomization
+from lerobot_blindgrasp.sim.gym_env import start_seed
 
 logger = logging.getLogger(__name__)
 
@@ -54,7 +56,18 @@ class TrialSettings:
     unattended_reset_s: float
     tare_each_trial: bool
     trial_log: str | None
+    start_pose: str = "home"  # "home" | "sim": the sim env's start pose for (evaluation index, object)
     operator_socket: str | None = None  # None: the keyboard; else an unattended operator there (envs/operator.py)
+
+
+def sim_start_pose(object_name: str, eval_index: int) -> np.ndarray:
+    """The joints where `--env.type=blindgrasp` starts evaluation index `eval_index` on `object_name`: its own draw
+    (`randomization.draw_reset` of the eval randomization, first episode of the env seed), clipped to the limits."""
+    if object_name not in objects.CATALOGUE:
+        raise ValueError(f"start_pose=sim needs an object of the sim's catalogue; {object_name!r} is not one")
+    seeds = np.array([start_seed(eval_index, object_name)], dtype=np.uint64)
+    q0, _ = randomization.draw_reset(randomization.EVAL_DR, seeds, np.zeros(1, dtype=np.int64))
+    return np.clip(q0[0], spec.JOINT_LOWER, spec.JOINT_UPPER)
 
 
 def task_string(name: str) -> str:
@@ -140,12 +153,12 @@ class RealGraspEnv(gym.Env):
         self._obs = np.array([obs[k] for k in spec.STATE_NAMES], dtype=np.float32)
         return spaces.observation(self._obs)
 
-    def _go_home(self) -> None:
-        home = dict(zip(spec.ACTION_NAMES, spec.HOME_POSE.tolist(), strict=True))
+    def _go_home(self, pose: np.ndarray) -> None:
+        home = dict(zip(spec.ACTION_NAMES, pose.tolist(), strict=True))
         deadline = time.monotonic() + self.cfg.home_timeout_s
         while True:
             self._observe()
-            err = np.abs(self._obs[spec.STATE_JOINT_SLICE] - spec.HOME_POSE).max()
+            err = np.abs(self._obs[spec.STATE_JOINT_SLICE] - pose).max()
             if err <= self.cfg.home_tolerance_rad:
                 return
             if time.monotonic() > deadline:
@@ -160,11 +173,12 @@ class RealGraspEnv(gym.Env):
         super().reset(seed=seed)
         self.session.ensure_connected()
         self._reset_trial_state()
-        self._go_home()
         keys = self.session.keys
         k = self.session.trials.get(self.object_name, 0) + 1
-        self.session.trials[self.object_name] = k
         self._seed = seed  # lerobot-eval's evaluation index: the start state an unattended operator places
+        index = k - 1 if seed is None else int(seed)  # as the operator socket's placement (envs/operator.py)
+        self._go_home(sim_start_pose(self.object_name, index) if self.cfg.start_pose == "sim" else spec.HOME_POSE)
+        self.session.trials[self.object_name] = k
         if hasattr(keys, "announce_trial"):  # an unattended operator places the object this trial names
             keys.announce_trial(self.object_name, k, seed)
         if keys.available:  # an ENTER pressed while the gripper was homing counts: the operator is ready
