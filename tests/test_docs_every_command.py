@@ -18,6 +18,7 @@ import fnmatch
 import re
 import shlex
 import subprocess
+import sys
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +36,8 @@ ROOT_ONLY = "not runnable here: needs root (sudo) on a PC with the hardware; its
 ROS = "not runnable here: ROS 2 and the MANUS workspace are not installed (the glove's own machine)"
 GPU = "not runnable here: several GPUs; the program it starts is parsed with these flags"
 SHELL = "runs: a shell builtin or coreutils, checked by `bash -n`"
+BRIDGE = "parsed by the copied glove bridge's own argparse (`manus_bridge.parse_args`); `--help` runs"
+BRIDGE_FILE = ROOT / "lerobot_blindgrasp" / "teleoperators" / "manus_glove" / "manus_bridge.py"
 
 # (first words, what happens to the command here). First match wins; wildcards as in fnmatch.
 RULES: list[tuple[tuple[str, ...], str]] = [
@@ -43,6 +46,7 @@ RULES: list[tuple[tuple[str, ...], str]] = [
     (("python", "-m", "lerobot_blindgrasp*"), PARSED),
     (("python", "-m", "lerobot.*"), PARSED),
     (("python", "-m", "build"), BUILD),
+    (("python", "manus_bridge.py"), BRIDGE),
     (("pip", "install", "dist/*.whl"), WHEEL),
     (("pip", "install"), PIP),
     (("bash", "scripts/*.sh"), SCRIPT),
@@ -215,3 +219,15 @@ def test_no_command_hides_in_a_block_of_another_language():
             elif lang is not None and lang not in {"bash", "sh", "shell", "console"} and starts.match(line):
                 hidden.append(f"{doc.relative_to(ROOT)}:{i} ({lang or 'untagged'}): {line.strip()}")
     assert not hidden, hidden
+
+
+@pytest.mark.parametrize("cmd", _of(BRIDGE), ids=str)
+def test_glove_bridge_lines_parse_with_the_bridges_own_parser(cmd):
+    """The bridge is one file a lab copies to the glove's machine and runs with its python3: run it the same way."""
+    if "--help" in cmd.words:
+        res = subprocess.run([sys.executable, str(BRIDGE_FILE), "--help"], capture_output=True, text=True)
+        assert res.returncode == 0 and "usage" in res.stdout.lower(), res.stderr
+        return
+    from lerobot_blindgrasp.teleoperators.manus_glove import manus_bridge
+
+    assert manus_bridge.parse_args(list(cmd.words[2:])) is not None, cmd
