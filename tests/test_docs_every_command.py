@@ -36,6 +36,8 @@ ROOT_ONLY = "not runnable here: needs root (sudo) on a PC with the hardware; its
 ROS = "not runnable here: ROS 2 and the MANUS workspace are not installed (the glove's own machine)"
 GPU = "not runnable here: several GPUs; the program it starts is parsed with these flags"
 SHELL = "runs: a shell builtin or coreutils, checked by `bash -n`"
+LAB = "parsed: the lab tool's own draccus parser reads the flags (lab/ is the repository's, not the package's)"
+GIT_PROGRAM = "checked: `bash -n`, and every commit it names exists in this repository (the tags' targets)"
 BRIDGE = "parsed by the copied glove bridge's own argparse (`manus_bridge.parse_args`); `--help` runs"
 BRIDGE_FILE = ROOT / "lerobot_blindgrasp" / "teleoperators" / "manus_glove" / "manus_bridge.py"
 
@@ -45,6 +47,7 @@ RULES: list[tuple[tuple[str, ...], str]] = [
     (("blindgrasp-*",), PARSED),
     (("python", "-m", "lerobot_blindgrasp*"), PARSED),
     (("python", "-m", "lerobot.*"), PARSED),
+    (("python", "-m", "lab.*"), LAB),
     (("python", "-m", "build"), BUILD),
     (("python", "manus_bridge.py"), BRIDGE),
     (("pip", "install", "dist/*.whl"), WHEEL),
@@ -59,6 +62,7 @@ RULES: list[tuple[tuple[str, ...], str]] = [
     (("source", "*/install/setup.bash"), ROS),
     (("torchrun",), GPU),
     (("echo",), SHELL),
+    (("<program>", "while"), GIT_PROGRAM),
 ]
 SEPARATORS = {"&&", "||", ";", "|", "&"}
 WRAPPERS = {"nohup", "nice", "env", "time"}
@@ -81,8 +85,12 @@ class Command:
 
 
 def logical_lines(doc: Path):
-    """(line number, text) of each command line of the doc's shell blocks, continuation lines joined."""
+    """(line number, text) of each command line of the doc's shell blocks, continuation lines joined; a block that
+    is one shell program (a here-document) is one text."""
     for start, block in shell_blocks(doc.read_text()):
+        if any("<<" in line for line in block):
+            yield start, "\n".join(block)
+            continue
         logical, first = "", start
         for k, raw in enumerate(block):
             text = raw[2:] if raw.startswith("$ ") else raw
@@ -100,6 +108,9 @@ def commands() -> list[Command]:
     out = []
     for doc in doc_files():
         for line, text in logical_lines(doc):
+            if "\n" in text:  # a program: one command, named by its first word
+                out.append(Command(str(doc.relative_to(ROOT)), line, ("<program>", text.split()[0]), False, text))
+                continue
             lexer = shlex.shlex(concrete(text), posix=True, punctuation_chars=";&|")
             lexer.whitespace_split, lexer.commenters = True, "#"
             cmd: list[str] = []
@@ -231,3 +242,24 @@ def test_glove_bridge_lines_parse_with_the_bridges_own_parser(cmd):
     from lerobot_blindgrasp.teleoperators.manus_glove import manus_bridge
 
     assert manus_bridge.parse_args(list(cmd.words[2:])) is not None, cmd
+
+
+@pytest.mark.parametrize("cmd", _of(GIT_PROGRAM), ids=str)
+def test_git_programs_name_commits_of_this_history(cmd):
+    commits = re.findall(r"\b[0-9a-f]{40}\b", cmd.text)
+    assert commits and "git " in cmd.text, cmd
+    if not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout (an sdist)")
+    for commit in commits:
+        res = subprocess.run(
+            ["git", "-C", str(ROOT), "cat-file", "-e", f"{commit}^{{commit}}"], capture_output=True
+        )
+        assert res.returncode == 0, f"{cmd.doc}:{cmd.line}: {commit} is not a commit of this repository"
+
+
+@pytest.mark.parametrize("cmd", _of(LAB), ids=str)
+def test_lab_tool_lines_parse_their_flags(cmd, monkeypatch, tmp_path):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.syspath_prepend(str(ROOT))  # lab/ is run from the repository's root
+    cfg, code, out = run_in_process(["python", *cmd.words[1:]], monkeypatch, stop_at_parse=True)
+    assert cfg is not None, f"{cmd}\nexit {code}:\n{out[-2000:]}"
