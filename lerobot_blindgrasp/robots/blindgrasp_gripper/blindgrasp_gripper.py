@@ -43,6 +43,7 @@ from .errors import ForceOverloadError, ForceTareError, GripperBusError, Gripper
 from .force_sensor import ForceSensorReader
 from .latch import SafetyLatch
 from .plausibility import PositionGate
+from .recording_space import recording_from_command_line
 from .servo_checks import ServoChecks
 from .timing import PeriodMonitor, SampleSpacing
 
@@ -126,6 +127,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, calib.CheckedCalibrationFile, 
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
         policy_check.check_cli_policy(self)  # a policy named on the command line must fit, before any port opens
+        self.recording = recording_from_command_line(self)  # disk space checked at each start (`recording_space`)
         if self.calibration_error is not None and calibrate:
             raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
         if calibrate:

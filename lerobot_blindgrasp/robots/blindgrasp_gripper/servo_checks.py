@@ -33,6 +33,7 @@ class ServoChecks:
     _startup_torque_on: dict[str, int]  # joint -> its Startup_Configuration, for those with Startup Torque On
     _health_countdown = 0
     _last_call: float | None = None
+    recording = None  # `recording_space.RecordingSpace` of the dataset being recorded, set at connect
 
     # --- at connect ----------------------------------------------------------------------------------------------
     def _check_servo_setup(self) -> None:
@@ -136,7 +137,10 @@ class ServoChecks:
         """A recording episode announced since the last call, or the first call after a pause of the loop."""
         resumed = self._last_call is not None and now - self._last_call >= self.timing.pause_s
         self._last_call = now
-        return self.episodes.take() or resumed
+        started = self.episodes.take() or resumed
+        if started and self.recording is not None:
+            self.recording.check()  # room on disk for the episode (`recording_space.py`)
+        return started
 
     def _check_health(self, *, start: bool = False) -> None:
         """One sync read of the health block; ERROR stops (torque off by the latch), and at a start anything too
