@@ -166,7 +166,7 @@ def real_eval(cfg: TwinMeasureConfig, obj: str, ports: dict) -> None:
                "--env.type=blindgrasp_real", f"--env.task={obj}", "--env.robot.type=blindgrasp_gripper",
                "--env.robot.id=twin", f"--env.robot.calibration_dir={out / 'calibration'}",
                f"--env.robot.port={ports['dynamixel_port']}", f"--env.robot.force_sensor.port={ports['force_port']}",
-               *cfg.robot_flags(), f"--env.operator_socket={ports['operator_socket']}",
+               *cfg.robot_flags(), f"--env.operator_socket={ports['operator_socket']}", "--env.start_pose=sim",
                f"--env.trial_log={out / 'real_trials.jsonl'}", f"--eval.n_episodes={cfg.episodes - done}",
                "--eval.batch_size=1", "--eval.use_async_envs=false", f"--seed={seed}", f"--output_dir={run}"]  # fmt: skip
         rc = run_logged(cmd, run.with_suffix(".log"), cfg.nice, cfg.eval_timeout_s)
