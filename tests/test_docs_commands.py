@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import importlib.metadata
 import io
+import os
 import re
 import runpy
 import shlex
@@ -212,6 +213,9 @@ def run_in_process(argv: list[str], monkeypatch, stop_at_parse: bool):
             return cfg
         raise _Parsed(cfg)
 
+    # With the variable unset, a command restarts itself with it (`cli.sleeping_openmp_threads`: os.execv), which
+    # here would replace the test process.
+    monkeypatch.setenv("OMP_WAIT_POLICY", os.environ.get("OMP_WAIT_POLICY", "PASSIVE"))
     if stop_at_parse:
         monkeypatch.setattr(draccus, "parse", recording_parse)
         monkeypatch.setattr(draccus.argparsing, "parse", recording_parse)
