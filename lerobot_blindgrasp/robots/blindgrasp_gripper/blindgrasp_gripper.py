@@ -88,8 +88,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         self.lower = np.asarray(config.joint_lower, dtype=np.float64)
         self.upper = np.asarray(config.joint_upper, dtype=np.float64)
         self._atexit = None
-        # Vision-free by design; lerobot-record and lerobot-rollout still read `robot.cameras`.
-        self.cameras: dict = {}
+        self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
 
     @staticmethod
     def _make_force_reader(fs) -> ForceSensorReader:
@@ -134,6 +133,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         if calibrate:
             connect_checks.refuse_unattended_calibration(self)  # no file and nobody to answer the prompts
         latency_timer.ensure_low_latency(self.config.port, self.config.force_sensor.port)  # USB adapters at 1 ms
+        self.host_setup = connect_checks.prepare_host(self)  # before any thread starts: threads inherit it
         with self._safety("connecting"):
             self.expected = {}
             self.gate.forget()
