@@ -57,6 +57,7 @@ RULES: list[tuple[tuple[str, ...], str]] = [
     (("udevadm",), ROOT_ONLY),
     (("usermod",), ROOT_ONLY),
     (("tee", "/sys/*"), ROOT_ONLY),
+    (("tee", "-a", "/etc/security/limits.d/*"), ROOT_ONLY),
     (("ros2",), ROS),
     (("source", "/opt/ros/*"), ROS),
     (("source", "*/install/setup.bash"), ROS),
