@@ -38,6 +38,7 @@ from . import connect_checks, force_calibration, health, interactive, latency_ti
 from .bus import RetryingDynamixelBus
 from .calibration import rad_to_ticks, ticks_to_rad
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
+from .consistency import KP_NM_PER_RAD, ConsistencyMonitor
 from .episodes import EpisodeStarts
 from .errors import ForceOverloadError, ForceTareError, GripperBusError, GripperSafetyStop
 from .force_sensor import ForceSensorReader
@@ -82,12 +83,12 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, calib.CheckedCalibrationFile, 
         self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no two samples closer than the contract allows
         self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
+        self.consistency = ConsistencyMonitor(KP_NM_PER_RAD * config.position_p_gain / 800)  # `consistency.py`
         self.episodes = EpisodeStarts()  # lerobot-record's episode announcements (`episodes.py`)
         self.lower = np.asarray(config.joint_lower, dtype=np.float64)
         self.upper = np.asarray(config.joint_upper, dtype=np.float64)
         self._atexit = None
-        # Vision-free by design; lerobot-record and lerobot-rollout still read `robot.cameras`.
-        self.cameras: dict = {}
+        self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
 
     @staticmethod
     def _make_force_reader(fs) -> ForceSensorReader:
@@ -284,6 +285,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, calib.CheckedCalibrationFile, 
             q = self._read_q()
             forces = self.force.read()
             self.spacing.after_read(started, time.monotonic())
+            self._check_consistency(q, forces)
             over = np.abs(forces) > self.config.force_sensor.overload_n
             if over.any():
                 tips = {spec.FORCE_SENSOR_NAMES[i]: round(float(forces[i]), 2) for i in np.flatnonzero(over)}
@@ -340,6 +342,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, calib.CheckedCalibrationFile, 
         if not self.config.disable_torque_on_disconnect:
             self._close()
             return
+        logger.info("%s %s", self, self.consistency.report())
         unconfirmed = self._stop()
         if unconfirmed:
             msg = f"Disconnected, but servo IDs {unconfirmed} did not confirm torque off: cut the power."

@@ -55,6 +55,11 @@ class GripperHealthError(GripperSafetyStop):
     too close to its limit to start a trial or episode (`health.py`): stopped before the firmware's own shutdown."""
 
 
+class GripperConsistencyError(GripperSafetyStop):
+    """Two inputs that see the same physics disagree beyond what physics allows (`consistency.py`): a fingertip force
+    its finger's servos do not hold, or a servo that does not drive its joint toward the goal."""
+
+
 class GripperFirmwareError(GripperSafetyStop):
     """A servo's firmware is older than a defence needs (Drive_Mode and Bus_Watchdog: v38); refused at connect."""
 

@@ -149,7 +149,7 @@ class ServoHealth:
             regs = block[j]
             out.append(self._temperature(j, regs["Present_Temperature"] * xm430.TEMPERATURE_UNIT_C, now))
             out.append(self._voltage(j, xm430.voltage_v(regs["Present_Input_Voltage"]), now))
-            out.append(self._current(j, _signed16(regs["Present_Current"]), limit_units, now))
+            out.append(self._current(j, signed16(regs["Present_Current"]), limit_units, now))
         for d in out:
             key = (d.joint, d.item)
             if d.level != self._reported.get(key, OK) and d.level >= WARN:
@@ -202,7 +202,7 @@ def levels_table() -> str:
     return "\n".join("| " + " | ".join(r) + " |" for r in rows)
 
 
-def _signed16(value: int) -> int:
+def signed16(value: int) -> int:
     """Present_Current is a signed 2-byte register; LeRobot's raw reads return it unsigned."""
     return value - 0x10000 if value >= 0x8000 else value
 

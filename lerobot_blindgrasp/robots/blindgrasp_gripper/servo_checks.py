@@ -21,7 +21,15 @@ from lerobot.utils.decorators import check_if_not_connected
 from lerobot_blindgrasp.hardware import xm430
 
 from . import health, servo_state
-from .errors import GripperFirmwareError, GripperHardwareError, GripperHealthError, GripperStateError
+from .calibration import ticks_to_rad
+from .consistency import ConsistencyError
+from .errors import (
+    GripperConsistencyError,
+    GripperFirmwareError,
+    GripperHardwareError,
+    GripperHealthError,
+    GripperStateError,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -33,6 +41,7 @@ class ServoChecks:
     _startup_torque_on: dict[str, int]  # joint -> its Startup_Configuration, for those with Startup Torque On
     _health_countdown = 0
     _last_call: float | None = None
+    _fresh_currents: list[int] | None = None  # Present_Current of the health read of this period, not yet judged
 
     # --- at connect ----------------------------------------------------------------------------------------------
     def _check_servo_setup(self) -> None:
@@ -142,6 +151,7 @@ class ServoChecks:
         """One sync read of the health block; ERROR stops (torque off by the latch), and at a start anything too
         close to its limit refuses it."""
         block = self.bus.read_block(*health.BLOCK, health.READ)
+        self._fresh_currents = [health.signed16(block[j]["Present_Current"]) for j in self.joints]
         found = self.health.assess(block, self.expected.get("Goal_Current"), time.monotonic())
         errors = [str(d) for d in found if d.level == health.ERROR]
         if start and (close := self.health.start_problems(block) + errors):
@@ -149,6 +159,18 @@ class ServoChecks:
         if errors:
             raise GripperHealthError(f"Servo health: {'; '.join(errors)}. Stopped before the firmware's own "
                                      "shutdown would drop the object.")  # fmt: skip
+
+    def _check_consistency(self, q, forces) -> None:
+        """After a period's readings, when its health read brought currents: the force and the motion checks of
+        `consistency.py` (ConsistencyError becomes a named stop, torque off by the latch)."""
+        currents, self._fresh_currents = self._fresh_currents, None
+        if currents is None:
+            return
+        goal = None if self.gate.goal is None or not self.expected else [ticks_to_rad(t) for t in self.gate.goal]
+        try:
+            self.consistency.assess(time.monotonic(), q, goal, forces, currents, self.expected.get("Goal_Current"))
+        except ConsistencyError as e:
+            raise GripperConsistencyError(f"Inputs disagree: {e}") from e
 
     @check_if_not_connected
     def check_health_before_start(self) -> None:
