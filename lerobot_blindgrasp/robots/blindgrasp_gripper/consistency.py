@@ -142,7 +142,7 @@ class ConsistencyMonitor:
     def assess(self, now, q, goal, forces, current_units, limit_units) -> None:
         """One current read: q and goal in rad (goal None with the torque off), forces in N, Present_Current in
         register units (signed, the calibrated joint frame), the current limit in units. Raises ConsistencyError."""
-        q, forces, amps = np.asarray(q, float), np.asarray(forces, float), np.asarray(current_units, float)
+        q, forces, amps = np.array(q, float), np.asarray(forces, float), np.asarray(current_units, float)
         amps = amps * xm430.CURRENT_UNIT_A
         if goal is None or not limit_units:
             self.reset()
