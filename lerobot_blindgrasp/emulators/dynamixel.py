@@ -312,6 +312,8 @@ class DynamixelBusEmulator(PtyDevice):
         for name, _ in touched:
             if name == "Torque_Enable" and staged.get(name) == 1 and servo.get("Hardware_Error_Status"):
                 continue  # the firmware refuses torque until a reboot clears the error
+            if name in servo.unwritable:
+                continue
             servo.set(name, staged.get(name))
             if name == "Torque_Enable" and staged.get(name) == 1:
                 servo.velocity = 0.0

@@ -51,6 +51,8 @@ class EmulatedServo:
     stripped: bool = False
     current_sign: int = 1
     frozen_position: int | None = None
+    # Registers that acknowledge a write but keep their old value (a worn EEPROM cell).
+    unwritable: set = field(default_factory=set)
 
     def __post_init__(self) -> None:
         for name, value in DEFAULTS.items():

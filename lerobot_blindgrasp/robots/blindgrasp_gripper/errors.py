@@ -60,6 +60,11 @@ class GripperConsistencyError(GripperSafetyStop):
     its finger's servos do not hold, or a servo that does not drive its joint toward the goal."""
 
 
+class GripperProtectionError(GripperSafetyStop):
+    """A register that protects a servo while no host watches it (Shutdown, Temperature_Limit, the voltage window,
+    PWM_Limit, Current_Limit) could not be restored to its configured value: refused at connect."""
+
+
 class GripperFirmwareError(GripperSafetyStop):
     """A servo's firmware is older than a defence needs (Drive_Mode and Bus_Watchdog: v38); refused at connect."""
 

@@ -4,7 +4,9 @@ period, and their health at a rate that fits the bus budget, with a stricter che
 - At connect, before anything is written: Firmware_Version(6) (Drive_Mode and Bus_Watchdog need v38), the EEPROM
   limits Temperature_Limit(31)..Shutdown(63) (`health.set_limits`), Startup_Configuration(60) (v45+: a servo set
   to turn its torque on at power-up is set back at configure, so a reset still shows as a dropped torque), then
-  the start check of `health.py`.
+  the start check of `health.py`. The registers that protect a servo when no host watches it
+  (`xm430.NO_HOST_PROTECTION` and Current_Limit) are restored at configure, with the torque off, and read back: one
+  that does not keep its value refuses the connect (`GripperProtectionError`), naming it.
 - Every control period: the state block of `servo_state.py` (hardware errors, a reset, a tripped watchdog).
 - Every `health_every_n` periods, whoever calls (get_observation, or send_action alone as in a replay script): the
   health block, judged by `health.py`. A start (connect, a trial, an announced recording episode, a loop resuming after a
@@ -28,6 +30,7 @@ from .errors import (
     GripperFirmwareError,
     GripperHardwareError,
     GripperHealthError,
+    GripperProtectionError,
     GripperStateError,
 )
 
@@ -55,8 +58,7 @@ class ServoChecks:
             )
         eeprom = self.bus.read_block(*health.LIMITS_BLOCK, health.LIMITS_READ)
         self.health.reset()
-        for note in self.health.set_limits(eeprom):
-            logger.warning("%s", note)
+        self.health.set_limits(eeprom)
         self._startup_torque_on = {
             j: eeprom[j]["Startup_Configuration"]
             for j in self.joints
@@ -77,6 +79,34 @@ class ServoChecks:
                 "gripper would stiffen at power-up. Cleared it (EEPROM).", sorted(self._startup_torque_on)
             )  # fmt: skip
         self._startup_torque_on = {}
+        self._restore_protection()
+
+    def _protection(self) -> dict[str, int]:
+        current = xm430.amps_to_current_units(self.config.current_limit_a)
+        return {**xm430.NO_HOST_PROTECTION, "Current_Limit": current}
+
+    def _restore_protection(self) -> None:
+        """The no-host protection registers to their configured values (torque off, EEPROM writable), then read back:
+        what a servo does not keep refuses the connect."""
+        want = self._protection()
+        eeprom = self.bus.read_block(*health.LIMITS_BLOCK, health.LIMITS_READ)
+        wrong = [(j, r, eeprom[j][r]) for j in self.joints for r in want if eeprom[j][r] != want[r]]
+        for j, reg, _ in wrong:
+            self.bus.write(reg, j, want[reg])
+        if wrong:
+            logger.warning("Restored the servos' no-host protection (EEPROM): %s. A tool or a previous session changed "
+                           "it; with no host running, the firmware is the only protection.",
+                           "; ".join(f"{j} {r} {have} -> {want[r]}" for j, r, have in wrong))  # fmt: skip
+            eeprom = self.bus.read_block(*health.LIMITS_BLOCK, health.LIMITS_READ)
+            self.health.set_limits(eeprom)
+        kept = [f"{j} (ID {self.bus.motors[j].id}) {r} = {eeprom[j][r]} (configured {want[r]})"
+                for j in self.joints for r in want if eeprom[j][r] != want[r]]  # fmt: skip
+        if kept:
+            raise GripperProtectionError(
+                f"Servo registers that protect the gripper when no host is running did not keep their configured "
+                f"value: {'; '.join(kept)}. Check them with DYNAMIXEL Wizard 2.0 (a failing EEPROM, a servo of "
+                "another model); the gripper is not used without them."
+            )
 
     # --- every period --------------------------------------------------------------------------------------------
     def _check_servo_state(self) -> None:
