@@ -44,7 +44,9 @@ LINK_J11_J12 = 0.068  # m
 TIP_CAPSULE_START = 0.033  # m below J12, along the distal axis
 TIP_CAPSULE_RADIUS = 0.011
 TIP_CAPSULE_END = 0.084 - TIP_CAPSULE_RADIUS
-TIP_FRICTION = 1.0  # the elastic tips' friction coefficient in the sim model: the friction cone's half-angle 45 deg
+TIP_FRICTION = (
+    1.0  # the elastic tips' friction coefficient in the sim model: the friction cone's half-angle 45 deg
+)
 
 KT_NM_PER_A = xm430.STALL_TORQUE_NM / xm430.STALL_CURRENT_A  # the stall line, through the origin
 NO_LOAD_CURRENT_A = 0.12  # XM430-W350 at 12 V (e-Manual, Specifications): what the gear train's friction costs
@@ -149,12 +151,14 @@ class ConsistencyMonitor:
             return
         error = np.asarray(goal, float) - q
         limit_a = limit_units * xm430.CURRENT_UNIT_A
+        # How far each joint moved toward its goal since the last read (none known at the first: not moving).
+        progress = np.zeros_like(q) if self._last_q is None else (q - self._last_q) * np.sign(error)
         for f, finger in enumerate(spec.FINGERS):
-            self._force_checks(now, finger, f, q, error, forces[f], amps, limit_a)
-        self._motion_check(now, q, error, amps, limit_a)
+            self._force_checks(now, finger, f, q, error, progress, forces[f], amps, limit_a)
+        self._motion_check(now, error, progress, amps, limit_a)
         self._last_q = q
 
-    def _force_checks(self, now, finger, f, q, error, force, amps, limit_a) -> None:
+    def _force_checks(self, now, finger, f, q, error, progress, force, amps, limit_a) -> None:
         j11, j12 = 3 * f + 1, 3 * f + 2
         needed = max(force, 0.0) * lever_m(q[j12])
         held = KT_NM_PER_A * max(abs(amps[j11]), abs(amps[j12])) + HOLD_ALLOWANCE_NM
@@ -169,33 +173,31 @@ class ConsistencyMonitor:
         self._note("force without effort", ratio)
         joints = range(3 * f, 3 * f + 3)
         pressing = [j for j in joints if abs(amps[j]) >= PRESSING_FRACTION * limit_a and abs(error[j])
-                    >= PRESSING_ERROR_RAD and amps[j] * error[j] > 0]  # fmt: skip
+                    >= PRESSING_ERROR_RAD and amps[j] * error[j] > 0 and progress[j] < STUCK_PROGRESS_RAD]  # fmt: skip
         missing = bool(pressing) and force < TOUCH_N
         if self._persist(("missing", finger), missing, now) >= PERSIST and finger not in self._warned:
             self._warned[finger] = now
             self.warnings += 1
             logger.warning("Consistency WARN %s: %s press (%s A, limit %.2f A) while %s_tip reads %.2f N: a dead "
                            "or unplugged load cell, or a contact off the tip.", finger,
-                           [spec.JOINT_NAMES[j] for j in pressing], [round(amps[j], 2) for j in pressing], limit_a,
+                           [spec.JOINT_NAMES[j] for j in pressing], [round(float(amps[j]), 2) for j in pressing], limit_a,
                            finger, force)  # fmt: skip
         elif not missing and finger in self._warned:
             logger.warning("Consistency OK %s: its tip force agrees with its servos again (%.2f N) after %.1f s.",
                            finger, force, now - self._warned.pop(finger))  # fmt: skip
 
-    def _motion_check(self, now, q, error, amps, limit_a) -> None:
-        moved = np.zeros_like(q) if self._last_q is None else q - self._last_q
+    def _motion_check(self, now, error, progress, amps, limit_a) -> None:
         for j, name in enumerate(spec.JOINT_NAMES):
             e = abs(error[j])
             asked = min(limit_a, KP_SOFTEST * self.kp_nm_per_rad * e / KT_NM_PER_A)
             along = amps[j] * math.copysign(1.0, error[j])
-            progress = moved[j] * math.copysign(1.0, error[j])
-            stuck = e >= STUCK_ERROR_RAD and along < 0.5 * asked and progress < STUCK_PROGRESS_RAD
-            if e >= STUCK_ERROR_RAD:
-                self._note("command without motion", (0.5 * asked) / max(along, 1e-6) if progress <
-                           STUCK_PROGRESS_RAD else 0.0)  # fmt: skip
+            still = progress[j] < STUCK_PROGRESS_RAD
+            stuck = e >= STUCK_ERROR_RAD and along < 0.5 * asked and still
+            if e >= STUCK_ERROR_RAD and still:
+                self._note("command without motion", (0.5 * asked) / max(along, 1e-6))
             if self._persist(("stuck", name), stuck, now) >= PERSIST + 1 and self._last_q is not None:
                 raise ConsistencyError(
-                    f"{name} does not move toward its goal ({error[j]:+.2f} rad away, moved {moved[j]:+.3f} rad "
+                    f"{name} does not move toward its goal ({error[j]:+.2f} rad away, moved {progress[j]:+.3f} rad toward it "
                     f"since the last read) and draws {amps[j]:+.2f} A where its position loop asks >= "
                     f"{0.5 * asked:.2f} A toward the goal, for {PERSIST + 1} current reads in a row: the servo is not "
                     "driving its joint (a stripped gear, a failed motor, a current reading of the wrong sign)."
@@ -204,4 +206,3 @@ class ConsistencyMonitor:
     def report(self) -> str:
         worst = ", ".join(f"{k} {v:.3f}" for k, v in sorted(self.worst.items())) or "nothing measured"
         return f"consistency margins (worst measured / tolerance, < 1 passes): {worst}; {self.warnings} WARN runs"
-
