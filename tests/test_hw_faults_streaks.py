@@ -64,7 +64,7 @@ def test_a_few_slow_steps_are_named_but_do_not_stop():
 
 def test_a_pause_ends_a_streak_and_a_slow_loop_with_the_stop_off_is_only_named(caplog):
     mon = _monitor()
-    t = _run(mon, 0.0, [0.0, 0.2, 0.2, 1.5])  # a pause (a dataset save) ends the streak
+    _run(mon, 0.0, [0.0, 0.2, 0.2, 1.5])  # a pause (a dataset save) ends the streak
     assert mon.streak is None and "ended (a pause of 1.5 s) after 2 periods" in " ".join(
         r.message for r in caplog.records
     )
