@@ -295,9 +295,10 @@ def test_demo_collection_killed_at_random_instants_loses_at_most_one_batch_and_r
     assert repair.repair(root).changed is False  # consistent: the repair is a no-op
 
 
-def test_repair_cuts_a_crashed_dataset_to_its_verified_prefix_idempotently(tmp_path):
-    """A LeRobot dataset written and finalized, then crashed while writing more (what lerobot-record leaves):
-    the repair keeps the finalized episodes, removes the footerless files, and a second run changes nothing."""
+def test_repair_keeps_every_saved_episode_of_a_crashed_recording_idempotently(tmp_path):
+    """A LeRobot dataset written and finalized, then crashed while writing more (what lerobot-record leaves): the
+    repair keeps the finalized episodes and the two saved after them (their rows rebuilt from the footerless data
+    file, which is set aside), and a second run changes nothing."""
     import numpy as np
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
@@ -327,19 +328,21 @@ os.kill(os.getpid(), 9)   # no finalize: footerless files, metadata claiming 5 e
     with pytest.raises(Exception):  # noqa: B017 (whatever pyarrow raises on a footerless file)
         LeRobotDataset("test/rec", root=root)
     report = repair.repair(root)
-    assert report.kept_episodes == 3 and report.lost_episodes == [3, 4] and report.kept_frames == 20 + 21 + 22
-    assert any("file-001" in f for f in report.removed)
+    assert (
+        report.kept_episodes == 5 and report.lost_episodes == [] and report.kept_frames == 20 + 21 + 22 + 23 + 24
+    )
+    assert report.rebuilt is not None and any("file-001" in f for f in report.rebuilt.set_aside)
     ds = LeRobotDataset("test/rec", root=root)
-    assert ds.meta.total_episodes == 3 and len(ds) == 63
+    assert ds.meta.total_episodes == 5 and len(ds) == 110
     stats = json.loads((root / "meta/stats.json").read_text())
-    assert stats[spec.STATE_KEY]["max"][0] == 2.0 and stats[spec.STATE_KEY]["count"] == [63]
-    np.testing.assert_array_equal(ds[62][spec.STATE_KEY].numpy(), np.full(12, 2.0))
+    assert stats[spec.STATE_KEY]["max"][0] == 4.0 and stats[spec.STATE_KEY]["count"] == [110]
+    np.testing.assert_array_equal(ds[109][spec.STATE_KEY].numpy(), np.full(12, 4.0))
     before = {p: _sha(p) for p in root.rglob("*") if p.is_file()}
     assert not repair.repair(root).changed
     assert {p: _sha(p) for p in root.rglob("*") if p.is_file()} == before
-    # Recording goes on where the prefix ends.
+    # Recording goes on after the last saved episode.
     ds = demo_dataset.resume(root, "test/rec")
-    assert ds.meta.total_episodes == 3
+    assert ds.meta.total_episodes == 5
     ds.finalize()
 
 

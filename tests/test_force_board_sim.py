@@ -5,6 +5,8 @@ the pseudo-terminal its UART is wired to. Skipped, naming the Debian packages, w
 
 from __future__ import annotations
 
+import logging
+import re
 import time
 
 import numpy as np
@@ -19,7 +21,11 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper impo
     BlindgraspGripperConfig,
     ForceSensorConfig,
 )
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader, ForceStreamError
+from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import (
+    SETTLE_FRAMES,
+    ForceSensorReader,
+    ForceStreamError,
+)
 
 if missing := build.missing_packages():
     pytest.skip(f"force-board firmware tests need: apt-get install {' '.join(missing)}", allow_module_level=True)
@@ -78,7 +84,9 @@ def test_the_real_reader_reads_the_forces_the_cells_were_given(build_dir):
     finally:
         reader.disconnect()
         board.stop()
-    assert "0 reads not of 25 pulses, 0 power-downs" in board.log, board.log  # gain 128, never powered down
+    # Gain 128 throughout, powered down only by the firmware's own power cycle at boot, within every HX711 timing.
+    assert board.log.count("0 reads not of 25 pulses, 1 power-downs") == 3, board.log
+    assert "TIMING VIOLATIONS" not in board.log, board.log
 
 
 def test_each_frame_is_handed_on_when_it_arrives(build_dir):
@@ -207,3 +215,125 @@ def test_force_calibration_on_the_simulated_board(build_dir, tmp_path, monkeypat
     np.testing.assert_allclose(cal.scales(), SCALE, rtol=3e-3)
     np.testing.assert_allclose(cal.offsets(), OFFSET, atol=60)
     assert fc.load(tmp_path / "lab.force.json").scales() == cal.scales()
+
+
+# What the harness reports for a build that breaks each HX711 timing (T2 cannot be seen on the pins: its cost is
+# the bits, each read one clock late).
+BROKEN = {"T1": r"T1 [1-9]", "T2": None, "T3": r"T3 [1-9]\d* \(high < 0.2 us\)", "T4": r"T4 [1-9]"}
+
+
+@pytest.mark.parametrize("timing", sorted(BROKEN))
+def test_a_firmware_that_breaks_an_hx711_timing_fails(build_dir, timing):
+    """Test builds of the firmware, each breaking one of the datasheet's minimum timings: T1 clocks chips whose DOUT
+    has not fallen (reads all three when the first is ready), T2 samples DOUT one cycle (62.5 ns) after the rising
+    edge, T3 holds PD_SCK high and T4 low for one port write (< 0.2 us). Each fails: the harness names the timing,
+    or the counts come back wrong."""
+    given = (100_000, -52_000, 12_000)
+    board = SimulatedForceBoard(build_dir=build_dir, noise_counts=0, defines=(f"VIOLATE_{timing}",)).start()
+    reader = _reader(board.port)
+    try:
+        board.set_counts(given)
+        reader.connect()
+        assert reader.wait_frames(20, 2.0)
+        counts = reader.latest()[0].counts
+    finally:
+        reader.disconnect()
+        board.stop()
+    if BROKEN[timing]:
+        assert re.search(BROKEN[timing], board.log), board.log
+    else:
+        assert counts != given, counts  # each bit read before it was valid: the previous one
+    wrong = counts != given or "TIMING VIOLATIONS" in board.log
+    assert wrong
+
+
+def _reads_until_resynchronised(reader, deadline_s: float) -> list:
+    """Read after read until one succeeds after the reader confirmed a restart (`deadline_s` bounds the wait far
+    above the watchdog, the boot and the frames the host waits for; it is no timing assertion)."""
+    seen, deadline = [], time.monotonic() + deadline_s
+    while time.monotonic() < deadline:
+        try:
+            seen.append(reader.read())
+            if reader.clock.restarts and reader.clock.restarts[-1].confirmed_seq >= 0:
+                break
+        except ForceStreamError as e:
+            seen.append(str(e))
+        time.sleep(0.005)
+    return seen
+
+
+def test_the_watchdog_resets_a_hung_firmware_and_the_host_resynchronises(build_dir, caplog):
+    """A test build whose main loop hangs once, 1.5 s after power-on, with ff_tip loaded (4 N). No frame goes out, so
+    the watchdog resets the board; it boots (every HX711 power-cycled) and sends its boot frame, "watchdog". The host
+    names the reset, holds the stream until SETTLE_FRAMES frames advanced with time, and reads 4 N again with the
+    same tare: stale in between, never 0 N."""
+    board = _board(build_dir, defines=("HANG_ONCE_MS=1500",))
+    reader = _reader(board.port)
+    try:
+        reader.connect()
+        reader.tare(0.2)
+        zero = reader.offset.copy()
+        board.set_forces([4.0, 0.0, 0.0])
+        assert reader.wait_frames(4, 1.0)
+        with caplog.at_level(logging.WARNING):
+            seen = _reads_until_resynchronised(reader, deadline_s=8.0)
+    finally:
+        reader.disconnect()
+        board.stop()
+    values = [s for s in seen if not isinstance(s, str)]
+    assert any("stale" in s for s in seen if isinstance(s, str)), seen[-3:]
+    np.testing.assert_allclose(values, [[4.0, 0.0, 0.0]] * len(values), atol=0.02)
+    [restart] = reader.clock.restarts
+    assert restart.cause == "watchdog" and restart.first_seq == 0 and restart.confirmed_seq == SETTLE_FRAMES
+    np.testing.assert_array_equal(reader.offset, zero)
+    assert "reset (watchdog)" in caplog.text and "replay" not in caplog.text, caplog.text
+    assert "1 AVR resets" in board.log, board.log
+    assert "TIMING VIOLATIONS" not in board.log, board.log
+
+
+def test_a_stuck_hx711_is_power_cycled_and_comes_back(build_dir):
+    """mf_tip's HX711 locks up (stops converting until it loses power). Its STATUS bit is set while it is stuck; after
+    250 ms the firmware powers it down through PD_SCK and up again, and it converts again: the stream recovers with no
+    host action and no board reset."""
+    board = _board(build_dir)
+    reader = _reader(board.port)
+    try:
+        reader.connect()
+        reader.tare(0.2)
+        board.hang_cell(1)
+        time.sleep(0.15)
+        with pytest.raises(ForceStreamError, match=r"mf_tip \(channel 1\) stopped converting"):
+            reader.read()
+        deadline = time.monotonic() + 5.0  # the 250 ms and the chip's 50 ms settling, with room for a busy host
+        while reader.latest()[0].status and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert reader.wait_frames(RATE_WINDOW + 1, 1.0)
+        np.testing.assert_allclose(reader.read(), 0.0, atol=0.02)
+    finally:
+        reader.disconnect()
+        board.stop()
+    assert "chip 1: " in board.log and re.search(r"chip 1: .* 2 power-downs", board.log), board.log
+    assert "0 AVR resets" in board.log, board.log
+
+
+def test_a_board_reset_by_its_reset_pin_comes_back_with_the_same_forces(build_dir):
+    """The reset pin pulled (a USB glitch, DTR) with th_tip loaded: the boot frame says "reset pin", the host
+    resynchronises on the rebooted board's frame SETTLE_FRAMES and reads the same 2 N. The chips were not reset with
+    the AVR (only power-cycled by its boot), and stayed within every HX711 timing."""
+    board = _board(build_dir)
+    reader = _reader(board.port)
+    try:
+        reader.connect()
+        reader.tare(0.2)
+        board.set_forces([0.0, 0.0, 2.0])
+        assert reader.wait_frames(4, 1.0)
+        board.reset_board()
+        seen = _reads_until_resynchronised(reader, deadline_s=8.0)
+    finally:
+        reader.disconnect()
+        board.stop()
+    values = [s for s in seen if not isinstance(s, str)]
+    np.testing.assert_allclose(values, [[0.0, 0.0, 2.0]] * len(values), atol=0.02)
+    [restart] = reader.clock.restarts
+    assert restart.cause == "reset pin" and restart.confirmed_seq == SETTLE_FRAMES
+    assert "1 AVR resets" in board.log and "TIMING VIOLATIONS" not in board.log, board.log

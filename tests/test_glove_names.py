@@ -8,6 +8,7 @@ import json
 import logging
 import re
 import socket
+import sys
 import threading
 import time
 from pathlib import Path
@@ -17,7 +18,7 @@ import pytest
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
-from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, names
+from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, manus_bridge, names
 from lerobot_blindgrasp.teleoperators.manus_glove import retarget as rt
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender, decode
 
@@ -84,9 +85,11 @@ def _documented_python_sender() -> str:
     return block
 
 
-def test_an_sdk_array_through_the_documented_python_sender():
-    """docs/glove.md's Python sender, run as the page prints it (only its two port numbers swapped for free ones):
-    ErgonomicsData.data (40 floats by ErgonomicsDataType) -> the datagram the receiver decodes."""
+def test_an_sdk_array_through_the_documented_python_sender(monkeypatch):
+    """docs/glove.md's Python sender, run as the page prints it (only its two port numbers swapped for free ones),
+    next to a copy of manus_bridge.py as on the MANUS machine: ErgonomicsData.data (40 floats by
+    ErgonomicsDataType) -> the datagram the receiver decodes."""
+    monkeypatch.syspath_prepend(str(Path(manus_bridge.__file__).parent))
     block = _documented_python_sender()
     assert "50120" in block and "source_port=50121" in block
     data = [float(i) for i in range(40)]  # value = its enum index, so a wrong index shows
@@ -102,6 +105,7 @@ def test_an_sdk_array_through_the_documented_python_sender():
             datagram, addr = rx.recvfrom(65536)
         finally:
             scope["sender"].close()
+            sys.modules.pop("manus_bridge", None)  # the top-level copy the block imported, as on the MANUS machine
     assert addr[1] == source
     d = decode(datagram, rt.REQUIRED_KEYS)
     assert d.side == "right" and d.seq == 1

@@ -205,8 +205,8 @@ def test_the_glove_port_in_use_is_named(tmp_path):
 
 
 def test_a_force_board_reset_mid_run_stops(rig, robot):
-    """The force board resets (a brown-out, a USB glitch): silent while it boots, then its counter starts again at 0,
-    below the last one seen. Its frames are taken for replays and the stream goes stale: stopped, torque off."""
+    """The force board resets (a brown-out, a USB glitch) mid-trial: silent for its 0.5 s boot, longer than the stale
+    timeout, so the trial stops, torque off (the reader itself resynchronises after it: test_hw_force.py)."""
     _hold(robot, 6)
     rig.force.reset()
     with pytest.raises(ForceSensorError, match=r"Force"):

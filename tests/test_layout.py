@@ -30,6 +30,13 @@ FLOOR = {room: k for k, rooms in enumerate(FLOORS) for room in rooms}
 # Arrows that may run up, each with its reason (the README's Layout section names them).
 EXCEPTIONS: dict[tuple[str, str], str] = {}
 MAX_MODULE_LINES, MAX_FUNCTION_LINES = 350, 60
+# Modules allowed more lines, each with its cap and reason.
+LONG_MODULES: dict[str, tuple[int, str]] = {
+    "teleoperators/manus_glove/manus_bridge.py": (
+        620,
+        "the glove bridge is one file a lab copies to the MANUS machine: names, datagram, ROS 2 and SDK sources, CLI",
+    ),
+}
 # Modules that share a name on purpose: the same role in parallel folders.
 SAME_NAME_OK = {"__init__.py", "__main__.py"}
 
@@ -83,7 +90,7 @@ def test_modules_and_functions_are_small():
     for path, tree in _sources():
         rel = path.relative_to(PACKAGE)
         lines = len(path.read_text().splitlines())
-        if lines > MAX_MODULE_LINES:
+        if lines > LONG_MODULES.get(rel.as_posix(), (MAX_MODULE_LINES,))[0]:
             big.append(f"{rel}: {lines} lines")
         for node in ast.walk(tree):
             if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):

@@ -1,21 +1,25 @@
-"""`blindgrasp-repair-dataset --root=DIR`: bring a crashed LeRobotDataset back to its longest verified prefix.
+"""`blindgrasp-repair-dataset --root=DIR`: bring a crashed LeRobotDataset back to every complete episode.
 
     blindgrasp-repair-dataset --root=runs/demos_cpu            # repair in place, say what was kept and lost
     blindgrasp-repair-dataset --root=runs/demos_cpu --dry_run=true
 
 A LeRobot v3 dataset that is being written keeps its parquet writers open; their footers are written only by
 `finalize()`. A process that dies without it (SIGKILL, the out-of-memory killer, a power cut) leaves footerless
-files that no reader opens, metadata for up to `metadata_buffer_size` episodes that never reached meta/episodes,
-and `info.json` / `stats.json` counting episodes whose frames are gone. LeRobot then refuses the folder
-(`LeRobotDataset.resume` and the loader fail with "Parquet magic bytes not found in footer").
+files that no reader opens, metadata for up to `metadata_buffer_size` episodes that never reached meta/episodes
+(a full disk leaves that file 0 bytes long), and `info.json` / `stats.json` counting episodes whose frames are
+gone. LeRobot then refuses the folder ("Parquet magic bytes not found in footer").
 
-The repair keeps episodes 0..k-1, the longest prefix in which every episode has its meta/episodes row, all its
-frames (exactly `length` rows with the right global indices) in a readable data file, and its video files. Then:
-unreadable parquet files and killed writers' temp files are removed; readable files that also hold later episodes
-are rewritten without them; tasks.parquet is rebuilt from the data if unreadable; stats.json is re-aggregated from
-the kept episodes' own stats (LeRobot's `aggregate_stats`, as `lerobot-edit-dataset` does); `info.json` is written
-last. Every rewrite is atomic (`durable`), so a repair killed half-way is simply run again; on a consistent dataset
-it changes nothing. What it cannot check: the content of video files (only that they exist).
+First, when the data holds finished episodes that meta/episodes lacks, the metadata is rebuilt from the data
+(`rebuild_meta`: footerless files read to their last complete row group, the cut bytes set aside in
+`<root>.set-aside/`). Not for a demo collection (it has collection.json): it resumes from its last checkpoint,
+whose tally and seeds describe the dataset as it was then. Then the repair keeps episodes 0..k-1, the longest
+prefix in which every episode has its meta/episodes row, all its frames (exactly `length` rows with the right
+global indices) in a readable data file, and its video files. Then: unreadable parquet files and killed writers'
+temp files are removed; readable files that also hold later episodes are rewritten without them; tasks.parquet
+is rebuilt from the data if unreadable; stats.json is re-aggregated from the kept episodes' own stats (LeRobot's
+`aggregate_stats`, as `lerobot-edit-dataset` does); `info.json` is written last. Every rewrite is atomic
+(`durable`), so a repair killed half-way is simply run again; on a consistent dataset it changes nothing. What it
+cannot check: the content of video files (only that they exist).
 
 `blindgrasp-collect-demos --resume=true` runs the same repair before it appends. After a crashed `lerobot-record`,
 run it, then record on with `lerobot-record ... --resume=true`.
@@ -33,6 +37,8 @@ import numpy as np
 
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import parse_config
+
+from . import provenance, rebuild_meta
 
 log = logging.getLogger("blindgrasp.repair")
 
@@ -55,10 +61,11 @@ class RepairReport:
     removed: list[str] = field(default_factory=list)  # files deleted (unreadable or holding only lost episodes)
     rewritten: list[str] = field(default_factory=list)  # files rewritten without the lost episodes, or re-derived
     first_problem: str = ""  # why the prefix ends where it does ("" when every episode checks out)
+    rebuilt: rebuild_meta.Rebuilt | None = None  # the metadata rebuilt from the data first (`rebuild_meta`)
 
     @property
     def changed(self) -> bool:
-        return bool(self.removed or self.rewritten)
+        return bool(self.removed or self.rewritten or self.rebuilt)
 
     def summary(self) -> str:
         lost = self.lost_episodes
@@ -68,6 +75,7 @@ class RepairReport:
         ]
         if self.first_problem:
             lines.append(f"  the verified prefix ends at episode {self.kept_episodes}: {self.first_problem}")
+        lines += self.rebuilt.lines(self.root) if self.rebuilt else []
         lines += [f"  removed   {f}" for f in self.removed]
         lines += [f"  rewrote   {f}" for f in self.rewritten]
         if not self.changed:
@@ -203,7 +211,12 @@ def repair(root: str | Path, dry_run: bool = False) -> RepairReport:
     import pyarrow.parquet as pq
 
     root = Path(root)
+    demos = provenance.path(root).is_file()  # a demo collection resumes from its checkpoint (`records.py`)
+    rebuilt = None if demos else rebuild_meta.rebuild(root, dry_run=dry_run)
+    if rebuilt and dry_run:
+        return RepairReport(root, kept_episodes=rebuilt.episodes, kept_frames=rebuilt.frames, rebuilt=rebuilt)
     info, report, plan = inspect(root)
+    report.rebuilt = rebuilt
     k = report.kept_episodes
     rel = lambda p: str(Path(p).relative_to(root))  # noqa: E731
     report.removed = [rel(p) for p in plan["remove"]]
@@ -301,8 +314,9 @@ def _write_stats(root: Path, meta, features: dict) -> None:
 
 @dataclass
 class RepairConfig:
-    """Bring a crashed LeRobotDataset (blindgrasp-collect-demos, lerobot-record) back to its longest verified
-    prefix of complete episodes, so that it loads and recording can resume."""
+    """Bring a crashed LeRobotDataset (blindgrasp-collect-demos, lerobot-record) back to every complete episode, so
+    that it loads and recording can resume: metadata LeRobot had not written yet is rebuilt from the data files,
+    cut data is set aside in <root>.set-aside/."""
 
     root: Path | None = None  # the dataset folder (the one holding meta/ and data/)
     dry_run: bool = False  # only say what would be kept, lost, removed and rewritten
@@ -321,7 +335,7 @@ def main(argv=None) -> None:
         raise SystemExit(2)
     try:
         report = repair(cfg.root, dry_run=cfg.dry_run)
-    except (RepairError, durable.WriteError) as e:
+    except (RepairError, rebuild_meta.RebuildError, durable.WriteError) as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
     print(("dry run: " if cfg.dry_run else "") + report.summary())

@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from lerobot_blindgrasp.emulators.pty_device import PtyDevice
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import encode_frame
+from lerobot_blindgrasp.hardware.force_board.frame_codec import encode_frame
 
 ADC_FULL_SCALE = 1 << 23  # 24-bit signed counts (HX711-class ADC), sign-extended into the frame's int32
 
@@ -70,13 +70,19 @@ class ForceSensorEmulator(PtyDevice):
         self.frozen_channels: set[int] = set()
         self._last_frame = b""
         self._last_counts: list[int] = []
+        self._boot_cause: int | None = None
+        self._unsettled = 0
         self.sent = 0
 
-    def reset(self, boot_s: float = 0.5) -> None:
+    def reset(self, boot_s: float = 0.5, cause: int | None = 0x08, unsettled_frames: int = 0) -> None:
         """The microcontroller resets (a brown-out, a USB glitch, a watchdog): nothing for `boot_s` (its bootloader
-        and HX711 settling), then frames again from SEQ 0."""
+        and HX711 settling), then frames again from SEQ 0, the first one a boot frame with the reset `cause` (MCUSR
+        bits; 0x08 watchdog) as the shipped firmware sends it (None: no boot frame, as older firmware). The first
+        `unsettled_frames` frames after the reset carry an unloaded cell's counts whatever the load: HX711s not yet settled, as a
+        firmware that does not wait for them would send."""
         self.seq = 0
         self._next = time.monotonic() + boot_s
+        self._boot_cause, self._unsettled = cause, unsettled_frames
 
     def counts_for(self, forces) -> np.ndarray:
         return self.offset + self.gain * np.asarray(forces, dtype=np.float64) / self.scale
@@ -106,6 +112,9 @@ class ForceSensorEmulator(PtyDevice):
         if self.drop_prob and self.rng.random() < self.drop_prob:
             return
         forces = self.force_fn() if self.force_fn is not None else self.forces_n
+        if self._unsettled > 0:
+            self._unsettled -= 1
+            forces = np.zeros(3)
         counts = self.counts_for(forces) + np.array([self.rng.gauss(0.0, self.noise) for _ in range(3)])
         counts = np.clip(np.round(counts), -ADC_FULL_SCALE, ADC_FULL_SCALE - 1)  # a 24-bit ADC saturates
         saturated = sum(1 << c for c, v in enumerate(counts) if abs(v + 0.5) >= ADC_FULL_SCALE - 0.5)
@@ -114,7 +123,8 @@ class ForceSensorEmulator(PtyDevice):
             if c < len(self._last_counts):
                 counts[c] = self._last_counts[c]
         self._last_counts = counts
-        frame = encode_frame(seq, counts, self.status | saturated & ((1 << self.channels) - 1))
+        frame = encode_frame(seq, counts, self.status | saturated & ((1 << self.channels) - 1), self._boot_cause)
+        self._boot_cause = None
         if self.corrupt_next > 0:
             self.corrupt_next -= 1
             frame = frame[:-1] + bytes([frame[-1] ^ 0xFF])

@@ -4,7 +4,9 @@ real reader exactly like the board's USB serial port.
 The firmware runs unchanged (its HEX image, the one a user flashes) on an emulated ATmega328P; three emulated HX711
 chips sit on its pins (`simavr/hx711_sim.c`). What the load cells feel is set in counts (`set_counts`) or newtons
 (`set_forces`, through a scale and an offset as a real cell and bridge give them); faults are `kill_cell` (a chip
-stops converting), `hold_dout_low` (a DOUT line shorted to GND) and `revive_cell`. Built on first use into `build_dir` (a temporary folder by default).
+stops converting), `hold_dout_low` (a DOUT line shorted to GND), `hang_cell` (a chip locked up until power-cycled),
+`reset_board` and `revive_cell`; `defines` runs a test build of the firmware (one that breaks an HX711 timing, or
+hangs). The harness enforces the HX711's timing and reports violations in `log`. Built on first use into `build_dir` (a temporary folder by default).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ class SimulatedForceBoard:
         sps: float = 80.0,
         build_dir=None,
         start_timeout_s: float = 10.0,
+        defines: tuple[str, ...] = (),
     ):
         self.scale = np.asarray(scale_n_per_count, dtype=np.float64)
         self.offset = np.asarray(offset_counts, dtype=np.float64)
@@ -40,13 +43,15 @@ class SimulatedForceBoard:
         self._tmp = None if build_dir else tempfile.TemporaryDirectory(prefix="force-board-")
         self.build_dir = Path(build_dir or self._tmp.name)
         self.start_timeout_s = start_timeout_s
+        self.defines = tuple(defines)  # a test build of the firmware (build.build_firmware), into its own folder
         self.port = ""
         self.log = ""  # the harness's report (stderr) once stopped
         self._proc: subprocess.Popen | None = None
         self._lock = threading.Lock()
 
     def start(self) -> SimulatedForceBoard:
-        hex_path = build_firmware(self.build_dir)
+        firmware_dir = self.build_dir / "-".join(self.defines) if self.defines else self.build_dir
+        hex_path = build_firmware(firmware_dir, defines=self.defines)
         exe = build_simulator(self.build_dir)
         self._proc = subprocess.Popen(
             [str(exe), str(hex_path), str(self.sps)],
@@ -93,8 +98,16 @@ class SimulatedForceBoard:
         """Cell `index`'s DOUT line held low (shorted to GND): every read clocks out zeros and fails its check."""
         self._send(f"stuck {index}")
 
+    def hang_cell(self, index: int) -> None:
+        """Cell `index`'s chip locks up (stops converting) until the firmware powers it down and up."""
+        self._send(f"hang {index}")
+
+    def reset_board(self) -> None:
+        """The ATmega's reset pin pulled (a USB glitch, DTR): it boots again, the chips keep converting."""
+        self._send("reset")
+
     def revive_cell(self, index: int) -> None:
-        """Undo `kill_cell` or `hold_dout_low`."""
+        """Undo `kill_cell`, `hold_dout_low` or `hang_cell`."""
         self._send(f"alive {index}")
 
     def stop(self) -> None:

@@ -181,6 +181,11 @@ class LatestFrameStream[F]:
             raise self.error_type(f"No {self.name.lower()} frame received on '{self.source}'.")
         return frame, time.monotonic() - t
 
+    def reset_rate_window(self) -> None:
+        """Forget the arrival times (call under the lock, from `_keep`): a device that restarted was silent while it
+        booted, which is not a slow device."""
+        self._arrivals.clear()
+
     def rate_hz(self) -> float | None:
         """Frames per second the device sends: the newest arrival intervals over the time they span; None until
         `RATE_MIN_INTERVALS` intervals were seen."""

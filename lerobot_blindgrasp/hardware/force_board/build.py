@@ -62,14 +62,14 @@ def _run(cmd: list[str], what: str) -> None:
         raise BuildError(f"{what} failed ({' '.join(cmd)}):\n{done.stdout}{done.stderr}")
 
 
-def build_firmware(out_dir, baud: int = 115_200) -> Path:
+def build_firmware(out_dir, baud: int = 115_200, defines: tuple[str, ...] = ()) -> Path:
     """Compile the firmware into `out_dir` with its own Makefile; returns the Intel HEX image to flash (the ELF
-    lies next to it)."""
+    lies next to it). `defines` (e.g. "VIOLATE_T2") make the tests' broken builds, never one to flash."""
     _require(FIRMWARE_NEEDS)
     out = Path(out_dir).resolve()
     out.mkdir(parents=True, exist_ok=True)
     makefile = FIRMWARE_DIR / "Makefile"
-    _run(["make", "--no-print-directory", "-s", "-C", str(out), "-f", str(makefile), f"OUT={out}", f"BAUD={baud}"],
+    _run(["make", "--no-print-directory", "-s", "-C", str(out), "-f", str(makefile), f"OUT={out}", f"BAUD={baud}", "DEFS=" + " ".join(f"-D{d}" for d in defines)],
          "firmware build")  # fmt: skip
     hex_path = out / "force_board.hex"
     if not hex_path.exists():

@@ -38,12 +38,12 @@ from . import connect_checks, force_calibration, health, interactive, latency_ti
 from .bus import RetryingDynamixelBus
 from .calibration import rad_to_ticks, ticks_to_rad
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
-from .consistency import KP_NM_PER_RAD, ConsistencyMonitor
 from .episodes import EpisodeStarts
 from .errors import ForceOverloadError, ForceTareError, GripperBusError, GripperSafetyStop
 from .force_sensor import ForceSensorReader
 from .latch import SafetyLatch
 from .plausibility import PositionGate
+from .recording_space import recording_from_command_line
 from .servo_checks import ServoChecks
 from .timing import PeriodMonitor, SampleSpacing
 
@@ -83,12 +83,12 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, calib.CheckedCalibrationFile, 
         self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no two samples closer than the contract allows
         self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
-        self.consistency = ConsistencyMonitor(KP_NM_PER_RAD * config.position_p_gain / 800)  # `consistency.py`
         self.episodes = EpisodeStarts()  # lerobot-record's episode announcements (`episodes.py`)
         self.lower = np.asarray(config.joint_lower, dtype=np.float64)
         self.upper = np.asarray(config.joint_upper, dtype=np.float64)
         self._atexit = None
-        self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
+        # Vision-free by design; lerobot-record and lerobot-rollout still read `robot.cameras`.
+        self.cameras: dict = {}
 
     @staticmethod
     def _make_force_reader(fs) -> ForceSensorReader:
@@ -127,6 +127,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, calib.CheckedCalibrationFile, 
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
         policy_check.check_cli_policy(self)  # a policy named on the command line must fit, before any port opens
+        self.recording = recording_from_command_line(self)  # disk space checked at each start (`recording_space`)
         if self.calibration_error is not None and calibrate:
             raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
         if calibrate:
@@ -342,7 +343,6 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, calib.CheckedCalibrationFile, 
         if not self.config.disable_torque_on_disconnect:
             self._close()
             return
-        logger.info("%s %s", self, self.consistency.report())
         unconfirmed = self._stop()
         if unconfirmed:
             msg = f"Disconnected, but servo IDs {unconfirmed} did not confirm torque off: cut the power."

@@ -124,6 +124,11 @@ class ConsistencyMonitor:
     _warned: dict = field(default_factory=dict)  # finger -> when its WARN started
     _last_q: np.ndarray | None = None
 
+    @classmethod
+    def at_p_gain(cls, position_p_gain: int) -> ConsistencyMonitor:
+        """The monitor of servos at this Position_P_Gain (the sim's kp is the XM430's at the factory 800)."""
+        return cls(KP_NM_PER_RAD * position_p_gain / 800)
+
     def reset(self) -> None:
         self._runs.clear()
         self._warned.clear()

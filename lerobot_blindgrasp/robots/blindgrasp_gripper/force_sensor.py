@@ -1,15 +1,7 @@
 """Fingertip force sensors: a microcontroller streams raw load-cell counts over a serial port.
 
 The board that ships is three HX711 on an Arduino Nano (`lerobot_blindgrasp/hardware/force_board/`, parts, wiring
-and flashing in `docs/force_board.md`). Wire protocol (microcontroller -> host only, little-endian):
-
-    offset size  field
-    0      2     SYNC    0xA5 0x5A
-    2      1     LEN     bytes from SEQ to STATUS = 2 + 4 * N + 1 (15 for N = 3 channels)
-    3      2     SEQ     uint16 frame counter, +1 per frame, wraps at 65535
-    5      4*N   COUNTS  int32 raw ADC counts per channel (24-bit ADCs sign-extended), ff, mf, th order
-    5+4N   1     STATUS  bit i set: channel i has a fault (its ADC stopped converting, or it is saturated)
-    6+4N   2     CRC     CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection) over LEN..STATUS
+and flashing in `docs/force_board.md`). Its frames and their decoder: `hardware/force_board/frame_codec.py`.
 
 Between conversions nothing is sent: a frame carries a fresh sample of every channel under a new SEQ, or no frame
 goes out. "No new sample yet" is therefore never a frame and never a STATUS bit, and any STATUS bit is a real fault
@@ -17,14 +9,19 @@ that stops the gripper. The HX711 board sends ~80 frames/s; the host needs `min_
 fresh samples per 20 Hz control period) and calls a stream that sends fewer fresh frames "slow", apart from
 "stale" (no fresh frame for `stale_timeout_s`).
 
-CRC-16/CCITT-FALSE of b"123456789" is 0x29B1 (check value for firmware authors). The host resynchronises on the
-next SYNC after any bad length or CRC, so garbage bytes on the line cost frames, never wrong values. SEQ gaps count
-dropped frames; the age of the newest good frame detects a stalled or unplugged stream.
+The host resynchronises on the next SYNC after any bad length or CRC; SEQ gaps count dropped frames; the age of
+the newest good frame detects a stalled or unplugged stream.
 
-Liveness by content (`LatestFrameStream`): a SEQ that repeats or runs backwards is a re-sent or replayed frame,
-dropped and counted, so a firmware stuck re-sending one frame goes stale like a silent one; a channel whose counts
-stay identical bit for bit for `frozen_frames` frames is frozen (a 24-bit ADC's noise never repeats that long),
-and the stream goes stale too. `dropped_frames` counts only forward SEQ gaps, so it stays a count of lost frames.
+Liveness by content (`LatestFrameStream`): the SEQ is judged against this host's clock (`hardware/counter_clock.py`).
+A SEQ that repeats or runs backwards is a re-sent or replayed frame, dropped and counted, so a firmware stuck
+re-sending one frame goes stale like a silent one. A board that reset is not a replay: it was silent while it booted
+and its SEQ starts again near 0 (its first frame, the boot frame, says so and why). Its frames are held, never
+fresh, until `SETTLE_FRAMES` more advance with time, then the stream is live again with a WARNING naming the reset.
+The tare is kept: the HX711s keep their bridges' offset and gain 128 through a reset, and a tare taken now would
+zero whatever presses on the pads. A SEQ further ahead than the time since the last frame allows (a stray frame
+from garbage, a corrupted counter) is dropped and counted, so one stray frame never locks the stream out. A
+channel whose counts stay identical bit for bit for `frozen_frames` frames is frozen (a 24-bit ADC's noise never
+repeats that long), and the stream goes stale too. `dropped_frames` counts only forward SEQ gaps.
 
 A tare is trusted only at rest (`tare`): the samples must vary no more than an unloaded pad does, and a re-tare
 must not move the zero by more than drift explains; otherwise it is refused and the old zero kept. A load cell
@@ -38,92 +35,35 @@ per-channel scale in N/count from the robot config, then the sensor pipeline the
 
 from __future__ import annotations
 
-import binascii
-import struct
+import logging
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force
+from lerobot_blindgrasp.hardware.counter_clock import CounterClock, Restart, Verdict
+from lerobot_blindgrasp.hardware.force_board.frame_codec import (  # noqa: F401  (the codec's home before)
+    SYNC,
+    Frame,
+    FrameParser,
+    crc16_ccitt_false,
+    encode_frame,
+    reset_cause_text,
+)
 from lerobot_blindgrasp.hardware.streams import LatestFrameStream, StreamError
 
 from .errors import ForceTareError
 from .ports import open_exclusive
 
-SYNC = b"\xa5\x5a"
-MAX_CHANNELS = 8
+logger = logging.getLogger(__name__)
+
 RECEIVE_TIMEOUT_S = 0.05  # a silent port returns this often, so the reader thread sees a stop request
 ADC_RAILS = (0x7FFFFF, -0x800000)  # a 24-bit ADC's full scale: a channel there is saturated, not measuring
-
-
-def crc16_ccitt_false(data: bytes) -> int:
-    return binascii.crc_hqx(data, 0xFFFF)
-
-
-def encode_frame(seq: int, counts, status: int = 0) -> bytes:
-    """One frame as the firmware sends it (used by the emulator and by firmware tests)."""
-    n = len(counts)
-    body = struct.pack(f"<BH{n}iB", 2 + 4 * n + 1, seq & 0xFFFF, *[int(c) for c in counts], status)
-    return SYNC + body + struct.pack("<H", crc16_ccitt_false(body))
-
-
-@dataclass(frozen=True)
-class Frame:
-    seq: int
-    counts: tuple[int, ...]
-    status: int
-
-
-@dataclass
-class FrameParser:
-    """Incremental decoder: feed bytes, get whole valid frames; counts what it had to throw away."""
-
-    buffer: bytearray = field(default_factory=bytearray)
-    crc_errors: int = 0
-    bad_lengths: int = 0
-    garbage_bytes: int = 0
-
-    def wanted(self) -> int:
-        """Bytes that would complete the frame at the head of the buffer (the header first when it is not in yet):
-        what a read may wait for without ever waiting past a frame's end."""
-        if len(self.buffer) < 3 or self.buffer[:2] != SYNC:
-            return max(1, 3 - len(self.buffer))
-        return max(1, 3 + self.buffer[2] + 2 - len(self.buffer))
-
-    def feed(self, data: bytes) -> list[Frame]:
-        self.buffer += data
-        frames = []
-        while True:
-            start = self.buffer.find(SYNC)
-            if start < 0:
-                keep = 1 if self.buffer[-1:] == SYNC[:1] else 0
-                self.garbage_bytes += len(self.buffer) - keep
-                del self.buffer[: len(self.buffer) - keep]
-                return frames
-            self.garbage_bytes += start
-            del self.buffer[:start]
-            if len(self.buffer) < 3:
-                return frames
-            length = self.buffer[2]
-            n = (length - 3) // 4
-            if (length - 3) % 4 or not 1 <= n <= MAX_CHANNELS:
-                self.bad_lengths += 1
-                del self.buffer[:1]  # not a frame start; look for the next SYNC
-                continue
-            total = 3 + length + 2
-            if len(self.buffer) < total:
-                return frames
-            body = bytes(self.buffer[2 : 3 + length])
-            (crc,) = struct.unpack_from("<H", self.buffer, 3 + length)
-            if crc != crc16_ccitt_false(body):
-                self.crc_errors += 1
-                del self.buffer[:1]
-                continue
-            _, seq, *rest = struct.unpack(f"<BH{n}iB", body)
-            frames.append(Frame(seq=seq, counts=tuple(rest[:n]), status=rest[n]))
-            del self.buffer[:total]
+BOARD_RATE_HZ = 80.0  # the HX711s' conversions per second with RATE high: one frame each
+# The HX711's output settling time after a reset or power-up (50 ms at 80 samples/s), in frames: a board that
+# restarted is trusted again only after this many frames advance with time, and it boots silent for at least as long.
+SETTLE_FRAMES = 4
 
 
 class ForceStreamError(StreamError):
@@ -149,6 +89,7 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         connect_timeout_s: float = 1.0,
         frozen_frames: int = 0,
         min_rate_hz: float = 0.0,
+        rate_hz: float = BOARD_RATE_HZ,
         tare_max_std_n: float = float("inf"),
         tare_max_shift_n: float = float("inf"),
         negative_fault_n: float = float("inf"),
@@ -165,8 +106,22 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         self.connect_timeout_s = connect_timeout_s
         self.offset = np.zeros(len(self.channel_map))
         self.parser = FrameParser()
-        self.dropped_frames = 0
+        self.board_rate_hz = rate_hz
+        self.clock = self._new_clock()
+        self.seq_ahead = 0  # frames dropped because their SEQ ran ahead of the time that passed
         self._serial = None
+
+    def _new_clock(self) -> CounterClock:
+        """The SEQ against this host's clock. Twice the board's rate is as far above it as the slow threshold
+        (`min_rate_hz`, half of it) is below: an oscillator errs by percent, a counter that runs faster counts
+        something else. The slack is the stale timeout: a frame held up longer leaves the stream stale anyway."""
+        return CounterClock(max_rate_hz=2 * self.board_rate_hz, slack_s=self.stale_timeout_s,
+                            boot_silence_s=SETTLE_FRAMES / self.board_rate_hz, confirm_frames=SETTLE_FRAMES)  # fmt: skip
+
+    @property
+    def dropped_frames(self) -> int:
+        """Frames lost on the way: forward SEQ gaps."""
+        return self.clock.lost
 
     @property
     def is_connected(self) -> bool:
@@ -195,6 +150,7 @@ class ForceSensorReader(LatestFrameStream[Frame]):
     def _open(self) -> None:
         import serial  # pyserial comes with lerobot[dynamixel]
 
+        self.clock = self._new_clock()  # a new session: the board may have restarted while the port was closed
         try:
             self._serial = open_exclusive(self.port, self.baudrate, "force-sensor", timeout=RECEIVE_TIMEOUT_S)
         except ConnectionError:
@@ -222,13 +178,27 @@ class ForceSensorReader(LatestFrameStream[Frame]):
                 self._serial = None
 
     def _keep(self, frame: Frame, now: float) -> bool:
-        if self._latest is not None:
-            step = (frame.seq - self._latest.seq) % 65536
-            if step == 0 or step > 32768:  # re-sent or replayed: a serial line never reorders frames
-                self.counter_faults += 1
-                return False
-            self.dropped_frames += step - 1  # forward SEQ gaps are frames lost on the way
-        return True
+        cause = reset_cause_text(frame.reset_cause)
+        verdict = self.clock.judge(frame.seq, now, frame.reset_cause is not None, cause)
+        if verdict is Verdict.LIVE:
+            if self.clock.confirmed is not None:
+                self._resynchronised(self.clock.confirmed)
+            return True
+        if verdict is Verdict.AHEAD:
+            self.seq_ahead += 1
+        elif verdict is not Verdict.HOLD:  # re-sent or replayed: a serial line never reorders frames
+            self.counter_faults += 1
+        return False
+
+    def _resynchronised(self, r: Restart) -> None:
+        """A board reset, confirmed: the rate window restarts (its boot silence is not a slow board), the tare stays."""
+        self.reset_rate_window()
+        logger.warning(
+            "Force board on %s reset (%s): silent for %.0f ms after SEQ %d, its SEQ restarted at %d; resynchronised "
+            "after %d frames that advanced with time. The tare is kept (the HX711s keep their offset).",
+            self.port, r.cause or "no boot frame; judged by SEQ against time", r.silence_s * 1e3, r.last_seq,
+            r.first_seq, SETTLE_FRAMES + 1,
+        )  # fmt: skip
 
     def _content(self, frame: Frame) -> tuple:
         return tuple(frame.counts[c] if c < len(frame.counts) else None for c in self.channel_map)
@@ -237,9 +207,20 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         return list(spec.FORCE_SENSOR_NAMES)
 
     def _stale_detail(self) -> str:
-        return f"{super()._stale_detail()}; {self.dropped_frames} frames dropped so far"
+        out = super()._stale_detail()
+        if r := self.clock.resyncing:
+            out += (f"; the board reset ({r.cause or 'SEQ ' + str(r.last_seq) + ' -> ' + str(r.first_seq)} after "
+                    f"{r.silence_s * 1e3:.0f} ms of silence): resynchronising")  # fmt: skip
+        if self.seq_ahead:
+            out += (f"; {self.seq_ahead} frames whose SEQ ran further ahead than the time since the last frame allows "
+                    f"(> {self.clock.max_rate_hz:g}/s: a corrupted counter)")  # fmt: skip
+        return f"{out}; {self.dropped_frames} frames dropped so far"
 
     def _slow_detail(self) -> str:
+        sent = self.clock.seq_rate_hz()
+        if sent is not None and sent >= self.min_rate_hz:
+            return (f" (the board's SEQ advances at {sent:.0f}/s, so frames are lost on the way: "
+                    f"{self.parser.crc_errors} CRC errors, {self.dropped_frames} frames dropped so far)")  # fmt: skip
         return (" (an HX711 with its RATE pin low converts at 10/s: tie RATE to VCC for 80/s, docs/force_board.md; "
                 f"{self.dropped_frames} frames dropped so far)")  # fmt: skip
 

@@ -24,7 +24,7 @@ from lerobot_blindgrasp.hardware import xm430
 
 from . import health, servo_state
 from .calibration import ticks_to_rad
-from .consistency import ConsistencyError
+from .consistency import ConsistencyError, ConsistencyMonitor
 from .errors import (
     GripperConsistencyError,
     GripperFirmwareError,
@@ -45,6 +45,15 @@ class ServoChecks:
     _health_countdown = 0
     _last_call: float | None = None
     _fresh_currents: list[int] | None = None  # Present_Current of the health read of this period, not yet judged
+    recording = None  # `recording_space.RecordingSpace` of the dataset being recorded, set at connect
+    _consistency: ConsistencyMonitor | None = None
+
+    @property
+    def consistency(self) -> ConsistencyMonitor:
+        """Tip forces against the servos, commands against motion (`consistency.py`); kp follows the P gain."""
+        if self._consistency is None:
+            self._consistency = ConsistencyMonitor.at_p_gain(self.config.position_p_gain)
+        return self._consistency
 
     # --- at connect ----------------------------------------------------------------------------------------------
     def _check_servo_setup(self) -> None:
@@ -175,7 +184,10 @@ class ServoChecks:
         """A recording episode announced since the last call, or the first call after a pause of the loop."""
         resumed = self._last_call is not None and now - self._last_call >= self.timing.pause_s
         self._last_call = now
-        return self.episodes.take() or resumed
+        started = self.episodes.take() or resumed
+        if started and self.recording is not None:
+            self.recording.check()  # room on disk for the episode (`recording_space.py`)
+        return started
 
     def _check_health(self, *, start: bool = False) -> None:
         """One sync read of the health block; ERROR stops (torque off by the latch), and at a start anything too

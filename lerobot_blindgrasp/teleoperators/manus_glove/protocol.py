@@ -18,23 +18,22 @@
 
 Version 1 (`blindgrasp-glove/1`, no session, wall-clock `t`) is refused with a message saying so: its receiver
 ordered by arrival, which is what version 2 fixes, so accepting it would keep the fault.
+
+The bridge's end (`encode`, `GloveSender`) lives in `manus_bridge.py`, the one-file bridge a lab copies to the MANUS
+machine; this module imports it from there, so sender and receiver share one definition of the datagram.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import re
-import secrets
-import socket
-import time
 from dataclasses import dataclass
 
 from . import names
+from .manus_bridge import PROTO, SESSION_RE, GloveSender, encode
 
-PROTO = "blindgrasp-glove/2"
+__all__ = ["MAX_ABS_DEG", "PROTO", "DatagramError", "GloveDatagram", "GloveSender", "decode", "encode"]
 MAX_ABS_DEG = 360.0
-SESSION_RE = re.compile(r"[0-9A-Za-z_-]{1,64}")
 
 
 class DatagramError(ValueError):
@@ -53,11 +52,6 @@ class GloveDatagram:
     sent: float  # sender's monotonic clock (s)
     side: str
     ergonomics: dict[str, float]  # by channel name (names.py), the required channels only
-
-
-def encode(session: str, seq: int, sent: float, ergonomics: dict[str, float], side: str = "right") -> bytes:
-    msg = {"proto": PROTO, "session": session, "seq": seq, "sent": sent, "side": side, "ergonomics": ergonomics}
-    return json.dumps(msg).encode()
 
 
 def _number(value) -> float:
@@ -116,45 +110,3 @@ def decode(datagram: bytes, required: set[str]) -> GloveDatagram:
     if any(abs(v) > MAX_ABS_DEG for v in values.values()):
         raise DatagramError("ergonomics value out of range")
     return GloveDatagram(session, seq, sent, side, values)
-
-
-class GloveSender:
-    """The bridge's end: numbers, stamps and sends datagrams for one hand. A fixed `source_port` keeps the
-    bridge's address across restarts, so a receiver bound to it (`--teleop.sender`) accepts the restarted bridge."""
-
-    def __init__(self, host: str, port: int, side: str = "right", *, source_host: str = "",
-                 source_port: int = 0, session: str | None = None):  # fmt: skip
-        if side not in names.SIDES:
-            raise ValueError(f"side must be 'left' or 'right', not {side!r}")
-        self.addr = (host, port)
-        self.side = side
-        self.session = session or secrets.token_hex(8)
-        self.seq = 0
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            self._sock.bind((source_host, source_port))
-        except OSError as e:
-            self._sock.close()
-            raise ConnectionError(f"Cannot send from udp port {source_port}: {e} (another bridge running?)") from e
-
-    @property
-    def source(self) -> tuple[str, int]:
-        return self._sock.getsockname()
-
-    def pack(self, ergonomics: dict[str, float], sent: float | None = None) -> bytes:
-        """The next datagram of this session (numbered and stamped now), not sent yet."""
-        self.seq += 1
-        return encode(self.session, self.seq, time.monotonic() if sent is None else sent, ergonomics, self.side)
-
-    def send_raw(self, datagram: bytes) -> None:
-        self._sock.sendto(datagram, self.addr)
-
-    def send(self, ergonomics: dict[str, float]) -> None:
-        self.send_raw(self.pack(ergonomics))
-
-    def restart(self) -> None:
-        """What a restarted bridge looks like: a new session, counting from 1 again."""
-        self.session, self.seq = secrets.token_hex(8), 0
-
-    def close(self) -> None:
-        self._sock.close()

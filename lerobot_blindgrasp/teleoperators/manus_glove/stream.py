@@ -308,7 +308,7 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
     def diagnosis(self) -> str:
         """What arrived and why it was not used, for the operator."""
         if not self.received:
-            return ("no datagram arrived: is the bridge running (blindgrasp-glove-bridge, docs/glove.md) and "
+            return ("no datagram arrived: is the bridge running (manus_bridge.py, docs/glove.md) and "
                     f"sending to {self.host}:{self.port}? A bridge on another machine needs --teleop.host and an "
                     "open firewall port")  # fmt: skip
         parts = [f"{self.received} datagrams arrived, {self.frames - self._frames_at_open} used"]

@@ -1,0 +1,254 @@
+"""A LeRobot recording's metadata rebuilt from its data files, for the episodes whose frames are all there.
+
+LeRobot 0.6.1 writes a recording's episode rows to meta/episodes only every `metadata_buffer_size` (10) episodes
+or at `finalize()`, and keeps its data parquet file open (no footer) until then. A `lerobot-record` killed after
+its first episode therefore leaves that episode's frames in a footerless data file and no episode row at all; one
+that meets a full disk leaves a 0-byte meta/episodes file besides (its `finalize()` opens the file, then the write
+fails). The prefix repair (`repair.py`) finds no episode row there and would keep nothing.
+
+`rebuild(root)` instead starts from the data: every complete row group of every data file (`parquet_salvage`),
+cut to the longest prefix whose episodes are whole (global `index` contiguous from 0, episode indices 0, 1, ...,
+each episode's `frame_index` 0..n-1). The metadata is then written by LeRobot's own `LeRobotDatasetMetadata`
+(episode rows, stats per episode with `compute_episode_stats`, aggregated stats, totals) into a staging folder and
+moved in file by file, each atomically, `info.json` last, so the result is what LeRobot itself would have
+written. Files that held anything else (a footerless data file, the cut episode's partial bytes, an unreadable
+metadata file) are moved, not deleted, to `<root>.set-aside/` and named in the report.
+
+It applies only where the data can say everything: no image or video features (their files are not in the data).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lerobot_blindgrasp import durable
+
+from .parquet_salvage import MAGIC, salvage
+
+EPISODES = Path("meta/episodes")
+TASKS = Path("meta/tasks.parquet")
+
+
+class RebuildError(Exception):
+    """The metadata cannot be rebuilt from the data (features unknown, or held in files outside the data)."""
+
+
+@dataclass
+class Rebuilt:
+    episodes: int = 0
+    frames: int = 0
+    set_aside: list[str] = field(default_factory=list)  # what was moved to <root>.set-aside/, and why
+    rewritten: list[str] = field(default_factory=list)
+
+    def lines(self, root: Path) -> list[str]:
+        out = [f"  rebuilt the metadata from the data: {self.episodes} finished episodes ({self.frames} frames)"]
+        out += [f"  rewrote   {f}" for f in self.rewritten]
+        out += [f"  set aside {f} -> {root.name}.set-aside/" for f in self.set_aside]
+        return out
+
+
+def _info(root: Path):
+    from lerobot.datasets.io_utils import load_info
+
+    try:
+        return load_info(root)
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise RebuildError(f"{root / 'meta/info.json'} is unreadable ({type(e).__name__}: {e})") from None
+
+
+def _template(features: dict):
+    """A one-row arrow table with the schema LeRobot's writer gives these features (`_save_episode_data`)."""
+    import datasets
+    from lerobot.datasets.feature_utils import get_hf_features_from_features
+
+    hf = get_hf_features_from_features(features)
+    row = {}
+    for key in hf:
+        ft = features[key]
+        value = np.zeros(tuple(ft["shape"]), dtype=ft["dtype"])
+        row[key] = [value.reshape(()).item() if tuple(ft["shape"]) == (1,) else value]
+    return datasets.Dataset.from_dict(row, features=hf).with_format("arrow")[:]
+
+
+def _footer_ok(path: Path) -> bool:
+    import pyarrow.parquet as pq
+
+    try:
+        pq.ParquetFile(path)
+        return True
+    except Exception:  # noqa: BLE001  (no footer, or unreadable: either way the pages are what is left)
+        return False
+
+
+def read_data(root: Path, features: dict) -> list[tuple[Path, object, bool, int]]:
+    """(path, complete rows, had a footer, bytes after the last complete row group) for each data file."""
+    import io
+
+    import pyarrow.parquet as pq
+
+    template, out = None, []
+    for p in sorted((root / "data").glob("chunk-*/file-*.parquet")):
+        if _footer_ok(p):
+            out.append((p, pq.read_table(p), True, 0))
+            continue
+        template = _template(features) if template is None else template
+        buf = p.read_bytes()
+        fixed, _, cut = salvage(buf, template) if buf[:4] == MAGIC else (None, 0, len(buf))
+        out.append((p, pq.read_table(io.BytesIO(fixed)) if fixed else template.slice(0, 0), False, cut))
+    return out
+
+
+def whole_prefix(files: list) -> tuple[list[dict], int]:
+    """The episodes 0..k-1 whose frames are all in the data, in order: [{index, length, file, rows}], frames."""
+    episodes, next_index = [], 0
+    for path, table, _, _ in files:
+        ep, idx, fi = (table[c].to_numpy() for c in ("episode_index", "index", "frame_index"))
+        for e in dict.fromkeys(ep.tolist()):
+            rows = np.flatnonzero(ep == e)
+            n = len(rows)
+            if e != len(episodes) or not np.array_equal(idx[rows], np.arange(next_index, next_index + n)):
+                return episodes, next_index
+            if not np.array_equal(fi[rows], np.arange(n)):
+                return episodes, next_index
+            episodes.append({"index": int(e), "length": n, "file": path, "rows": rows, "from": next_index})
+            next_index += n
+    return episodes, next_index
+
+
+def needed(root: Path, files: list, n_whole: int) -> bool:
+    """True when the data holds more finished episodes than readable meta/episodes rows say, or a file is cut."""
+    import pyarrow.parquet as pq
+
+    if any(not ok or cut for _, _, ok, cut in files):
+        return True
+    rows = set()
+    for p in sorted((root / EPISODES).glob("chunk-*/file-*.parquet")):
+        if not _footer_ok(p):
+            return True
+        rows |= set(pq.read_table(p, columns=["episode_index"])["episode_index"].to_pylist())
+    return not set(range(n_whole)) <= rows
+
+
+def _stats(table, rows, features: dict) -> dict:
+    from lerobot.datasets.compute_stats import compute_episode_stats
+
+    data = {}
+    for key, ft in features.items():
+        if key in table.column_names:
+            values = table[key].take(rows).to_pylist()
+            data[key] = np.asarray(values, dtype=ft["dtype"]).reshape(len(rows), *tuple(ft["shape"]))
+            if tuple(ft["shape"]) == (1,):
+                data[key] = data[key].reshape(len(rows))
+    return compute_episode_stats(data, {k: features[k] for k in data})
+
+
+def _tasks(root: Path) -> list[str]:
+    import pandas as pd
+
+    try:
+        tasks = pd.read_parquet(root / TASKS)
+    except Exception as e:  # noqa: BLE001  (a cut or missing file: the task strings are nowhere else)
+        raise RebuildError(
+            f"{root / TASKS} is unreadable ({type(e).__name__}); the task texts are only there"
+        ) from None
+    return [t for t, _ in sorted(zip(tasks.index, tasks["task_index"]), key=lambda x: x[1])]
+
+
+def _stage(root: Path, staging: Path, info, files: list, episodes: list, tasks: list[str]) -> None:
+    """LeRobot's own metadata writer, fed the kept episodes, writes the new meta/ into `staging`."""
+    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+
+    meta = LeRobotDatasetMetadata.create(
+        repo_id="local/rebuild",
+        fps=info.fps,
+        features=info.features,
+        robot_type=info.robot_type,
+        root=staging,
+        use_videos=False,
+        chunks_size=info.chunks_size,
+        data_files_size_in_mb=info.data_files_size_in_mb,
+    )
+    meta.save_episode_tasks(tasks)
+    tables = {p: t for p, t, _, _ in files}
+    for e in episodes:
+        table = tables[e["file"]]
+        rows = e["rows"]
+        task_of = sorted({tasks[i] for i in table["task_index"].take(rows).to_pylist()})
+        chunk, file = (int(x.split("-")[-1]) for x in (e["file"].parent.name, e["file"].stem))
+        where = {"data/chunk_index": chunk, "data/file_index": file}
+        where.update(dataset_from_index=e["from"], dataset_to_index=e["from"] + e["length"])
+        meta.save_episode(e["index"], e["length"], task_of, _stats(table, rows, info.features), where)
+    meta.finalize()
+
+
+def _set_aside(root: Path, path: Path, why: str, done: Rebuilt, *, keep: bool = False) -> None:
+    """Move `path` to <root>.set-aside/ (a rename: no copy on a nearly full disk); with `keep`, link it there and
+    leave it in place for an atomic replacement, so that a kill in between never leaves the dataset without it."""
+    dest = root.parent / f"{root.name}.set-aside" / path.relative_to(root)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    n = 1
+    while dest.exists():
+        dest, n = dest.with_name(f"{path.name}.{n}"), n + 1
+    if keep:
+        os.link(path, dest)
+    else:
+        path.replace(dest)
+    done.set_aside.append(f"{path.relative_to(root)} ({why})")
+
+
+def _rewrite_data(root: Path, files: list, episodes: list, done: Rebuilt) -> None:
+    import pyarrow.parquet as pq
+
+    keep = {e["file"]: max(int(r) for r in e["rows"]) + 1 for e in episodes}
+    for path, table, ok, cut in files:
+        n = keep.get(path, 0)
+        if ok and n == table.num_rows:
+            continue
+        why = "no footer: its writer was killed" if not ok else f"holds {table.num_rows - n} rows past the prefix"
+        why += f"; {cut} bytes after its last complete row group: an unfinished write" if cut else ""
+        _set_aside(root, path, why, done, keep=bool(n))
+        if n:
+            with durable.atomic_path(path) as tmp:
+                pq.write_table(table.slice(0, n), tmp, compression="snappy", use_dictionary=True)
+            done.rewritten.append(str(path.relative_to(root)))
+
+
+def rebuild(root: str | Path, dry_run: bool = False) -> Rebuilt | None:
+    """Rebuild `root`'s metadata from its data when the data holds finished episodes the metadata lacks (see the
+    module docstring); None when nothing needs it."""
+    root = Path(root)
+    info = _info(root)
+    if any(ft["dtype"] in ("image", "video") for ft in info.features.values()):
+        return None  # their frames live outside the data files: only the prefix repair applies
+    files = read_data(root, info.features)
+    episodes, frames = whole_prefix(files)
+    if not needed(root, files, len(episodes)):
+        return None
+    done = Rebuilt(episodes=len(episodes), frames=frames)
+    if dry_run:
+        return done
+    tasks = _tasks(root)
+    staging = root / f".meta{durable.TEMP_MARK}rebuild"
+    shutil.rmtree(staging, ignore_errors=True)
+    try:
+        _stage(root, staging, info, files, episodes, tasks)
+        _rewrite_data(root, files, episodes, done)
+        for p in sorted((root / EPISODES).glob("chunk-*/file-*.parquet")):
+            _set_aside(root, p, "episode rows replaced by the rebuilt ones", done)
+        for src in sorted((staging / EPISODES).glob("chunk-*/file-*.parquet")) + [staging / "meta/stats.json"]:
+            if src.is_file():
+                with durable.atomic_path(root / src.relative_to(staging)) as tmp:
+                    shutil.copyfile(src, tmp)
+        new = json.loads((staging / "meta/info.json").read_text())
+        old = json.loads((root / "meta/info.json").read_text())
+        old.update({k: new[k] for k in ("total_episodes", "total_frames", "total_tasks", "splits")})
+        durable.atomic_write_json(root / "meta/info.json", old, indent=4)  # last: LeRobot trusts these counts
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return done

@@ -1,0 +1,135 @@
+"""Room on disk for the next recording episode, checked at every episode start: refused with the numbers if not.
+
+LeRobot's dataset writer keeps an episode's frames in memory and writes them at `save_episode`, together with the
+episode's metadata; a disk that fills there fails the save, and the `finalize()` that follows leaves the episode
+metadata file 0 bytes long, so the episodes before are lost too (docs/upstream/dataset-crash-safety.md). Checking
+before an episode starts is the one place where refusing costs nothing: the episodes recorded so far are whole.
+
+What the robot can observe of a `lerobot-record` run: its own connect and control calls, and the process's command
+line. LeRobot creates (or resumes) the dataset before it connects the robot, so at connect the dataset's
+`meta/info.json` is on disk under `--dataset.root` (default `$HF_LEROBOT_HOME/<repo_id>`); the frames of an
+episode are `--dataset.fps` x `--dataset.episode_time_s`. These are read with LeRobot's own parser helpers, as the
+robot reads `--policy.path` (`policy_check.py`); defaults are `DatasetRecordConfig`'s. The starts are the robot's
+own (`servo_checks.ServoChecks._starting`: an announced episode, or the loop resuming after a pause).
+
+The estimate is an upper bound, not a measurement: raw bytes per frame from the features' dtypes and shapes
+(images and videos at their raw size: LeRobot stages them as PNG frames), the episode's metadata row (its
+per-feature stats, `STATS_PER_VALUE` float64 numbers per value), times `MARGIN` for parquet's dictionary pages and
+page headers (a column of distinct floats stores each value in the dictionary and again as an index), plus
+`FIXED_BYTES` for the files rewritten at every save (info.json, stats.json, tasks.parquet), the two parquet footers
+`finalize()` writes, and filesystem block rounding.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import GripperSafetyStop
+
+logger = logging.getLogger(__name__)
+
+MARGIN = 2.0
+STATS_PER_VALUE = 10  # min, max, mean, std, count and five quantiles (LeRobot's compute_episode_stats)
+FIXED_BYTES = 64 * 1024
+STRING_BYTES = 256  # a string feature (a task text) per frame, generously
+
+
+class RecordingSpaceError(GripperSafetyStop):
+    """Not enough free space for the next recording episode: refused before it starts."""
+
+
+def frame_bytes(features: dict) -> int:
+    """Raw bytes of one frame of a LeRobot feature dict (`{key: {"dtype", "shape"}}`)."""
+    total = 0
+    for ft in features.values():
+        n = int(np.prod(ft["shape"])) if len(ft["shape"]) else 1
+        if ft["dtype"] in ("image", "video"):
+            total += n
+        elif ft["dtype"] in ("string", "language"):
+            total += STRING_BYTES
+        else:
+            total += n * np.dtype(ft["dtype"]).itemsize
+    return total
+
+
+def episode_bytes(features: dict, fps: float, episode_time_s: float) -> int:
+    """The upper bound above for one episode of `episode_time_s` at `fps`."""
+    frames = int(np.ceil(fps * episode_time_s))
+    values = sum(int(np.prod(ft["shape"])) for ft in features.values() if ft["dtype"] not in ("image", "video"))
+    row = values * STATS_PER_VALUE * 8
+    return int(MARGIN * (frames * frame_bytes(features) + row)) + FIXED_BYTES
+
+
+def _existing(path: Path) -> Path:
+    """`path` or its nearest existing parent: the filesystem the dataset is (or will be) written to."""
+    path = Path(path).absolute()
+    while not path.exists() and path.parent != path:
+        path = path.parent
+    return path
+
+
+@dataclass
+class RecordingSpace:
+    root: Path
+    fps: float
+    episode_time_s: float
+    fallback_features: dict  # the robot's own, for a dataset whose info.json is not (yet) where expected
+
+    @classmethod
+    def from_command_line(cls, robot) -> RecordingSpace | None:
+        """The recording this process makes (`--dataset.repo_id` given), or None (no dataset is written)."""
+        from lerobot.configs import parser
+        from lerobot.configs.dataset import DatasetRecordConfig
+        from lerobot.utils.constants import HF_LEROBOT_HOME
+
+        repo_id = parser.parse_arg("dataset.repo_id")
+        if not repo_id:
+            return None
+        defaults = DatasetRecordConfig.__dataclass_fields__
+        root = parser.parse_arg("dataset.root") or HF_LEROBOT_HOME / repo_id
+        fps = float(parser.parse_arg("dataset.fps") or defaults["fps"].default)
+        episode_s = float(parser.parse_arg("dataset.episode_time_s") or defaults["episode_time_s"].default)
+        return cls(Path(root), fps, episode_s, _robot_features(robot))
+
+    def features(self) -> dict:
+        from lerobot.datasets.io_utils import load_info
+
+        try:
+            return load_info(self.root).features
+        except (OSError, ValueError, KeyError, TypeError):  # not there (a stamped repo_id) or unreadable
+            return self.fallback_features
+
+    def check(self) -> None:
+        """Refuse the episode about to start when the dataset's filesystem has less free space than it needs."""
+        where = _existing(self.root)
+        free = shutil.disk_usage(where).free
+        need = episode_bytes(self.features(), self.fps, self.episode_time_s)
+        if free < need:
+            raise RecordingSpaceError(
+                f"Refused to start the next recording episode: {free} bytes free on the filesystem of {where} "
+                f"(dataset {self.root}), the episode needs up to {need} bytes ({self.fps:g} fps x "
+                f"{self.episode_time_s:g} s). The episodes recorded so far are kept; free some space or shorten "
+                "--dataset.episode_time_s, then record on with --resume=true."
+            )
+        logger.debug("Recording space: %d bytes free on %s, an episode needs up to %d.", free, where, need)
+
+
+def recording_from_command_line(robot) -> RecordingSpace | None:
+    return RecordingSpace.from_command_line(robot)
+
+
+def _robot_features(robot) -> dict:
+    """The dataset features lerobot-record derives from the robot with its default (identity) processors."""
+    from lerobot.utils.constants import DEFAULT_FEATURES
+    from lerobot.utils.feature_utils import hw_to_dataset_features
+
+    return {
+        **hw_to_dataset_features(robot.action_features, "action"),
+        **hw_to_dataset_features(robot.observation_features, "observation"),
+        **DEFAULT_FEATURES,
+    }
