@@ -22,8 +22,9 @@ but that usually means a failing input is a WARN, logged when it starts and when
   reads in a row: the servo is not driving its joint (a stripped gear, a failed motor, a current reading of the wrong
   sign). The XM430's encoder sits on the output shaft, so a horn slipping on it shows as the force checks, not here.
 
-Margins: `worst` keeps, per check, the largest value of (measured / tolerance) seen while it did not fire;
-`report()` puts them into one log line at disconnect (the twin's record reads them).
+Margins: `worst` keeps, per check, the largest value of (measured / tolerance) seen while it did not fire (for the
+force check the needed over the held torque at one read; for the motion check the reads in a row over the reads it
+takes); `report()` puts them into one log line at every stop (the twin's record reads them).
 """
 
 from __future__ import annotations
@@ -198,12 +199,12 @@ class ConsistencyMonitor:
             along = amps[j] * math.copysign(1.0, error[j])
             still = progress[j] < STUCK_PROGRESS_RAD
             stuck = e >= STUCK_ERROR_RAD and along < 0.5 * asked and still
-            if e >= STUCK_ERROR_RAD and still:
-                self._note("command without motion", (0.5 * asked) / max(along, 1e-6))
-            if self._persist(("stuck", name), stuck, now) >= PERSIST + 1 and self._last_q is not None:
+            run = self._persist(("stuck", name), stuck, now)
+            self._note("command without motion (reads in a row)", run / (PERSIST + 1))
+            if run >= PERSIST + 1 and self._last_q is not None:
                 raise ConsistencyError(
-                    f"{name} does not move toward its goal ({error[j]:+.2f} rad away, moved {progress[j]:+.3f} rad toward it "
-                    f"since the last read) and draws {amps[j]:+.2f} A where its position loop asks >= "
+                    f"{name} does not move toward its goal ({error[j]:+.2f} rad away, moved {progress[j]:+.3f} rad "
+                    f"toward it since the last read) and draws {amps[j]:+.2f} A where its position loop asks >= "
                     f"{0.5 * asked:.2f} A toward the goal, for {PERSIST + 1} current reads in a row: the servo is not "
                     "driving its joint (a stripped gear, a failed motor, a current reading of the wrong sign)."
                 )
