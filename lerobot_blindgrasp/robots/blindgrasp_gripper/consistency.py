@@ -123,6 +123,7 @@ class ConsistencyMonitor:
     warnings: int = 0
     _runs: dict = field(default_factory=dict)
     _warned: dict = field(default_factory=dict)  # finger -> when its WARN started
+    _last_ratio: dict = field(default_factory=dict)  # finger -> its force ratio at the last read
     _last_q: np.ndarray | None = None
 
     @classmethod
@@ -133,6 +134,7 @@ class ConsistencyMonitor:
     def reset(self) -> None:
         self._runs.clear()
         self._warned.clear()
+        self._last_ratio.clear()
         self._last_q = None
 
     def _note(self, check: str, ratio: float) -> None:
@@ -177,6 +179,9 @@ class ConsistencyMonitor:
                 "reads in a row: the load cell reads a force that is not there (a drifting, swapped or shorted cell)."
             )
         self._note("force without effort", ratio)
+        # What stops is the ratio over PERSIST reads in a row: its margin is the smaller of the last two.
+        self._note("force without effort (2 reads)", min(ratio, self._last_ratio.get(finger, 0.0)))
+        self._last_ratio[finger] = ratio
         joints = range(3 * f, 3 * f + 3)
         pressing = [j for j in joints if abs(amps[j]) >= PRESSING_FRACTION * limit_a and abs(error[j])
                     >= PRESSING_ERROR_RAD and amps[j] * error[j] > 0 and progress[j] < STUCK_PROGRESS_RAD]  # fmt: skip
