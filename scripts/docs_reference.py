@@ -1,5 +1,5 @@
 """Write the generated part of docs/reference.md: every console script of pyproject.toml with its config class,
-every `python -m` tool of the package, and every preset of `lerobot_blindgrasp/presets`. So the reference cannot
+every `python -m` tool of the package and of the lab (`lab/`, from a clone), and every preset of `lerobot_blindgrasp/presets`. So the reference cannot
 drift: tests/test_docs_reference.py regenerates it and compares.
 
     python scripts/docs_reference.py            # rewrite docs/reference.md between its markers
@@ -61,7 +61,7 @@ def config_class(module: str, func: str = "main") -> str:
 def _first_sentence(text: str | None) -> str:
     """The first sentence of a docstring's first paragraph, without a leading "`command-name`: "."""
     line = " ".join((text or "").strip().split("\n\n")[0].split())
-    line = re.sub(r"^`blindgrasp-[^`]*`: ", "", line)
+    line = re.sub(r"^`(blindgrasp-|python -m )[^`]*`: ", "", line)
     line = re.split(r"(?<!\bSec)(?<!\be\.g)(?<!\bi\.e)(?<!\beq)\.\s+(?=[A-Z`(])", line)[0]
     line = line.rstrip(".")
     return line[:1].upper() + line[1:]
@@ -76,14 +76,17 @@ def summary(module: str, cls: str) -> str:
     return _first_sentence(ast.get_docstring(tree))
 
 
-def module_tools() -> list[str]:
-    """Package modules run as `python -m ...` that parse a config of their own and have no console script."""
+def module_tools(folder: str = "lerobot_blindgrasp") -> list[str]:
+    """Modules of `folder` run as `python -m ...` that parse a config of their own and have no console script."""
     scripted = {target.split(":")[0] for target in console_scripts().values()}
     out = []
-    for path in sorted((ROOT / "lerobot_blindgrasp").rglob("*.py")):
+    for path in sorted((ROOT / folder).rglob("*.py")):
         text = path.read_text(encoding="utf-8")
         module = ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
-        if '__name__ == "__main__"' in text and "parse_config(" in text and module not in scripted:
+        runs = (
+            '__name__ == "__main__"' in text or (path.parent / "__main__.py").is_file() and path.stem == "__init__"
+        )
+        if runs and "parse_config(" in text and module not in scripted:
             if "emulators" not in path.parts:
                 out.append(module)
     return out
@@ -103,6 +106,11 @@ def command_rows() -> list[str]:
     rows += ["", "Tools without a console script, run as `python -m MODULE`:", "",
              "| module | what it does | config class |", "|---|---|---|"]  # fmt: skip
     for module in module_tools():
+        cls = config_class(module)
+        rows.append(f"| `{module}` | {_cell(summary(module, cls))} | `{cls}` |")
+    rows += ["", "The lab's tools (`lab/`, not in the wheel), run from a clone's root as `python -m MODULE`:", "",
+             "| module | what it does | config class |", "|---|---|---|"]  # fmt: skip
+    for module in module_tools("lab"):
         cls = config_class(module)
         rows.append(f"| `{module}` | {_cell(summary(module, cls))} | `{cls}` |")
     return rows

@@ -17,9 +17,10 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Mapping
 
+import float_platform
 import numpy as np
 
-from lerobot_blindgrasp import platform_id, spec
+from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import randomization, rewards
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
@@ -252,7 +253,7 @@ def _compare_floats(s: str, rec: Mapping, got: Mapping[str, np.ndarray]) -> list
 
 def _compare_digests(record: Mapping, runs: Mapping, here: dict) -> list[str]:
     got = {s: digests(run) for s, run in runs.items()}
-    ours = [p for p in record.get("platforms", []) if platform_id.same(p.get("platform"), here)]
+    ours = [p for p in record.get("platforms", []) if float_platform.same(p.get("platform"), here)]
     if not ours or set(runs) != set(SETTINGS):
         return []  # an unrecorded family (or a partial run): the tolerant checks above are the whole check
     if any(all(got[s] == p["digests"][s] for s in SETTINGS) for p in ours):
@@ -267,7 +268,7 @@ def _compare_digests(record: Mapping, runs: Mapping, here: dict) -> list[str]:
         }
     )
     return [
-        f"on {platform_id.describe(here)}, a recorded platform, these quantities are no longer bit-identical: "
+        f"on {float_platform.describe(here)}, a recorded platform, these quantities are no longer bit-identical: "
         f"{changed}"
     ]
 
@@ -276,7 +277,7 @@ def matching_platforms(record: Mapping, runs: Mapping) -> list[str]:
     """The recorded platforms (with or without a full platform record) whose digests `runs` reproduces."""
     got = {s: digests(run) for s, run in runs.items()}
     return [
-        platform_id.describe(p.get("platform")) if p.get("platform") else repr(p.get("cpu"))
+        float_platform.describe(p.get("platform")) if p.get("platform") else repr(p.get("cpu"))
         for p in record.get("platforms", [])
         if all(got[s] == p["digests"][s] for s in SETTINGS)
     ]

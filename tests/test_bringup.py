@@ -1,4 +1,5 @@
-"""Bring-up checks of the real gripper's connect(): the USB latency timer and a calibration nobody can make.
+"""Bring-up checks of the real gripper: `lerobot-setup-motors` from factory servos, the udev rules, and connect()'s
+USB latency timer and a calibration nobody can make.
 
 The latency timer is checked on a fake sysfs tree (`tmp_path`), laid out as the kernel's ftdi_sio driver lays it
 out, and once through the robot's real connect() against the emulated servos and force board.
@@ -14,7 +15,8 @@ import re
 from pathlib import Path
 
 import pytest
-from emulators.rig import GripperRig
+from emulators.harness import BIN, Operator, cli_env
+from emulators.rig import LATENCY_TIMER_MS, GripperRig
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.robots.blindgrasp_gripper import latency_timer
@@ -95,16 +97,26 @@ def test_the_udev_rules_name_the_adapters_and_set_the_timer():
     text = (ROOT / "robot_configs" / "udev" / "99-blindgrasp.rules").read_text()
     rules = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
     token = re.compile(
-        r'^(ACTION|SUBSYSTEM|DRIVERS|ATTRS\{\w+\}|ATTR\{\w+\}|SYMLINK|GROUP|MODE)(==|\+=|=)"[^"]*"$'
+        r'^(ACTION|SUBSYSTEM|DRIVERS|ATTRS\{\w+\}|ATTR\{\w+\}|ENV\{\w+\}|SYMLINK|GROUP|MODE)(==|\+=|=)"[^"]*"$'
     )
     for rule in rules:  # udev's own syntax: comma-separated KEY op "value"
         assert all(token.match(t.strip()) for t in rule.split(",")), rule
+    # `udevadm trigger` sends "change" unless told --action=add: a rule of "add" alone would wait for a replug.
+    assert all('ACTION=="add|change"' in r for r in rules if "ACTION" in r)
+    assert "udevadm trigger --action=add" in (ROOT / "docs" / "bringup.md").read_text()
+    # The force board's name goes to one board: each of its lines names a serial number or a USB socket, which the
+    # lab fills in (a placeholder matches no device), never a chip alone.
+    force = [r for r in rules if "blindgrasp_force" in r or 'idProduct}=="6001"' in r]
+    assert force and all('ATTRS{serial}=="FORCE_BOARD_SERIAL"' in r or 'ENV{ID_PATH}=="FORCE_BOARD_USB_SOCKET"' in r
+                         for r in force), force  # fmt: skip
     u2d2 = [r for r in rules if 'ATTRS{idVendor}=="0403"' in r and 'ATTRS{idProduct}=="6014"' in r]
     assert any('SYMLINK+="blindgrasp_u2d2"' in r and 'GROUP="dialout"' in r for r in u2d2)
     assert any('ATTR{latency_timer}="1"' in r and 'SUBSYSTEM=="usb-serial"' in r for r in u2d2)
     assert sum('SYMLINK+="blindgrasp_force"' in r for r in rules) >= 2  # the Nano's FTDI and CH340 variants
     # The Nano's USB chips the guide names are the ones the rules give the force board's name.
-    named = set(re.findall(r'idVendor}=="(\w+)", ATTRS{idProduct}=="(\w+)", SYMLINK\+="blindgrasp_force"', text))
+    named = set(
+        re.findall(r'idVendor}=="(\w+)", ATTRS{idProduct}=="(\w+)", [^,]+, SYMLINK\+="blindgrasp_force"', text)
+    )
     [nano] = re.findall(
         r"the Nano \(([^)]*)\) `/dev/blindgrasp_force`", (ROOT / "docs" / "bringup.md").read_text()
     )
@@ -222,3 +234,38 @@ def test_a_force_port_that_is_not_there_says_how_to_find_it(tmp_path):
     with pytest.raises(ForceStreamError, match=r"ttyUSB1'.*lerobot-find-port.*99-blindgrasp\.rules"):
         reader.connect()
     assert not reader.is_connected
+
+
+def test_lerobot_setup_motors_from_factory_servos_one_at_a_time(tmp_path):
+    """README's `lerobot-setup-motors` (the real CLI, the real dynamixel-sdk) on nine servos out of the box: each
+    at ID 1 and 57 600 bps, plugged onto the cable alone when the CLI asks for it. Afterwards all nine share the
+    cable at their own IDs and the config's baud rate, and `lerobot-calibrate`'s bus finds them."""
+    from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
+
+    from lerobot_blindgrasp.emulators.dynamixel import BAUD_REGISTER, DynamixelBusEmulator
+
+    config = ROOT / "robot_configs" / "blindgrasp_gripper.yaml"
+    joints = spec.JOINT_NAMES
+    with DynamixelBusEmulator([], baudrate=57_600) as emu:
+        cmd = [str(BIN / "lerobot-setup-motors"), f"--robot=include {config}", "--robot.id=new",
+               f"--robot.port={emu.port}", f"--robot.calibration_dir={tmp_path / 'calibration'}",
+               f"--robot.latency_timer_ms={LATENCY_TIMER_MS}"]  # fmt: skip
+        op = Operator(cmd, cli_env(tmp_path))
+        fresh = []
+        for joint, dxl_id in reversed(list(zip(joints, spec.SERVO_IDS, strict=True))):
+            op.expect(f"Connect the controller board to the '{joint}' servo (ID {dxl_id}) only")
+            fresh.append(DynamixelBusEmulator.factory_servo())
+            emu.plug(fresh[-1])  # the previous servo unplugged, this one out of its box
+            op.answer()
+            op.expect(f"'{joint}' servo: ID {dxl_id} at 1000000 bps")
+        assert op.wait() == 0, op.text[-3000:]
+        assert [s.get("ID") for s in fresh] == list(reversed(spec.SERVO_IDS))
+        assert {s.get("Baud_Rate") for s in fresh} == {BAUD_REGISTER[1_000_000]}
+        emu.plug(*fresh)  # the finished gripper: all nine on one cable
+        port, ph = PortHandler(emu.port), PacketHandler(2.0)
+        assert port.openPort() and port.setBaudRate(1_000_000)
+        try:
+            found, result = ph.broadcastPing(port)
+        finally:
+            port.closePort()
+    assert result == COMM_SUCCESS and sorted(found) == sorted(spec.SERVO_IDS)

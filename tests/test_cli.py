@@ -18,11 +18,17 @@ ROOT = Path(__file__).resolve().parents[1]
 MODULE_COMMANDS = (
     "lerobot_blindgrasp.results.compare",
     "lerobot_blindgrasp.analysis.table_v",
-    "lerobot_blindgrasp.analysis.progress",
-    "lerobot_blindgrasp.analysis.diversity",
     "lerobot_blindgrasp.envs.real_report",
-    "lerobot_blindgrasp.twin.measure",
-    "lerobot_blindgrasp.twin.report",
+)
+# The lab's commands (`python -m lab.<tool>` from a clone's root): every lab module that runs as a command, and the
+# benchmarks' package (its `__main__.py`).
+LAB_COMMANDS = (
+    "lab.bench",
+    *sorted(
+        ".".join(p.relative_to(ROOT).with_suffix("").parts)
+        for p in (ROOT / "lab").rglob("*.py")
+        if '__name__ == "__main__"' in p.read_text(encoding="utf-8")
+    ),
 )
 
 
@@ -63,10 +69,11 @@ def test_other_spellings_are_refused(argv, capsys):
 
 
 def test_every_command_has_help(monkeypatch, capsys):
-    """`--help` of every console script in pyproject.toml and every `python -m` command lists its flags."""
+    """`--help` of every console script in pyproject.toml and every `python -m` command, the lab's included, lists
+    its flags."""
     monkeypatch.setenv("OMP_WAIT_POLICY", "PASSIVE")  # a command that would set it leaves this process alone
     targets = [(name, *target.split(":")) for name, target in _console_scripts().items()]
-    targets += [(module, module, "main") for module in MODULE_COMMANDS]
+    targets += [(module, module, "main") for module in (*MODULE_COMMANDS, *LAB_COMMANDS)]
     for name, module, func in targets:
         main = getattr(importlib.import_module(module), func)
         # LeRobot's own parser (the rollout reuses lerobot-rollout's config and parser) reads sys.argv.
@@ -90,9 +97,34 @@ def test_every_script_has_help(script, monkeypatch, capsys):
     assert e.value.code == 0 and "usage:" in capsys.readouterr().out
 
 
+def test_the_guides_lab_commands_parse_as_written(monkeypatch):
+    """Each `python -m lab...` line of the README and the guides parses with its tool's own config, flag by flag."""
+    import re
+    import shlex
+
+    spec = importlib.util.spec_from_file_location("docs_reference", ROOT / "scripts" / "docs_reference.py")
+    gen = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, gen)  # its dataclass resolves its module through sys.modules
+    spec.loader.exec_module(gen)
+    found = []
+    for doc in (ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))):
+        for module, args in re.findall(
+            r"^python -m (lab[\w.]*) ([^\\\n]*)$", doc.read_text(encoding="utf-8"), re.M
+        ):
+            argv = shlex.split(args)
+            if module == "lab.bench":  # each benchmark registers its --bench.type when imported
+                bench = importlib.import_module(module)
+                for name in bench._modules(argv):
+                    importlib.import_module(f"lab.bench.{name}_bench")
+            cls = getattr(importlib.import_module(module), gen.config_class(module))
+            parse_config(cls, argv)
+            found.append(module)
+    assert {"lab.bench", "lab.diagnosis.progress"} <= set(found), found
+
+
 def test_the_benchmark_is_picked_by_its_type():
-    from lerobot_blindgrasp.bench import BenchCommand
-    from lerobot_blindgrasp.bench.sim_bench import BenchSimConfig
+    from lab.bench import BenchCommand
+    from lab.bench.sim_bench import BenchSimConfig
 
     cfg = parse_config(
         BenchCommand, ["--bench.type=sim", "--bench.num_envs=36", "--bench.threads=[1,2]", "--bench.json=true"]

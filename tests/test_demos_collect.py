@@ -342,7 +342,7 @@ def test_push_prepares_everything_then_stops_at_the_network(tiny, monkeypatch, c
 
 
 def test_bench_demos_reports_speeds(teacher, capsys):
-    from lerobot_blindgrasp.bench import demos_bench as bench_demos
+    from lab.bench import demos_bench as bench_demos
 
     cfg = parse_config(
         bench_demos.BenchDemosConfig,

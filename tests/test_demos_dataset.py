@@ -219,7 +219,7 @@ def test_card_validation_catches_bad_metadata():
 
 
 def test_demo_diversity_is_computed_per_object_from_the_written_episodes(written):
-    from lerobot_blindgrasp.analysis.diversity import diversity
+    from lab.diagnosis.diversity import diversity
 
     root, episodes, cuts = written
     d = diversity(root, at_s=0.5)  # frame 10, inside every (trimmed) episode
@@ -242,7 +242,7 @@ def test_demo_diversity_is_computed_per_object_from_the_written_episodes(written
 
 
 def test_demo_diversity_command_line(written, capsys):
-    from lerobot_blindgrasp.analysis.diversity import diversity, main
+    from lab.diagnosis.diversity import diversity, main
 
     root = written[0]
     main([f"--datasets=[demos={root}]", "--at_s=0.5"])

@@ -1,8 +1,9 @@
 """Docs cannot drift: every shell command in the README and the user guides is parsed by the CLI it names.
 
-The commands come from the ```bash (sh, shell, console) blocks of README.md and every docs/*.md present (not the
-history under docs/research or the records under docs/results). For each `lerobot-*`, `blindgrasp-*` and
-`python -m lerobot...` command:
+The commands come from the ```bash (sh, shell, console) blocks of README.md, every docs/*.md present (not the
+history under docs/research or the records under docs/results) and the model cards (models/*/README.md); the
+other commands of those blocks (pip, scripts, udev, ROS 2, torchrun) are in test_docs_every_command.py's table.
+For each `lerobot-*`, `blindgrasp-*` and `python -m lerobot...` command:
 - its own parser reads the whole command line, in-process: the entry point runs with that argv until draccus has
   built its config (LeRobot's `parser.wrap`, `draccus.wrap` and this package's `parse_config` all end in
   `draccus.parse`), then stops. So every flag must exist on the config it reaches, `include` files must load and
@@ -22,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import importlib.metadata
 import io
+import os
 import re
 import runpy
 import shlex
@@ -47,7 +49,8 @@ PREFIXES = {"sudo", "nohup", "nice", "env", "time"}
 
 
 def doc_files() -> list[Path]:
-    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), ROOT / "robot_configs" / "README.md"]
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), ROOT / "robot_configs" / "README.md",
+            *sorted(ROOT.glob("models/*/README.md"))]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -210,6 +213,9 @@ def run_in_process(argv: list[str], monkeypatch, stop_at_parse: bool):
             return cfg
         raise _Parsed(cfg)
 
+    # With the variable unset, a command restarts itself with it (`cli.sleeping_openmp_threads`: os.execv), which
+    # here would replace the test process.
+    monkeypatch.setenv("OMP_WAIT_POLICY", os.environ.get("OMP_WAIT_POLICY", "PASSIVE"))
     if stop_at_parse:
         monkeypatch.setattr(draccus, "parse", recording_parse)
         monkeypatch.setattr(draccus.argparsing, "parse", recording_parse)

@@ -179,7 +179,7 @@ def test_no_cleanup_finalizes_a_dataset_bare():
 
 def test_a_full_disk_at_finalize_keeps_the_first_error(tmp_path, monkeypatch, caplog):
     """No root needed: the write fails with ENOSPC (the first error), then finalize() fails with ENOSPC too."""
-    from lerobot_blindgrasp.bench.demos_bench import _writer_speed
+    from lab.bench.demos_bench import _writer_speed
     from lerobot_blindgrasp.demos import curation, dataset
 
     create = dataset.create

@@ -1,5 +1,6 @@
 """The package's layout holds as the README's Layout section draws it: imports run down the floors, modules and
-functions stay small, and no two modules are named alike for different things.
+functions stay small, and no two modules are named alike for different things. The lab (`lab/`, outside the wheel)
+is the floor above everything: it may import the package, the package never imports it.
 
 Read from the code itself (every `import` and `from ... import`, lazy ones inside functions included), so a new arrow
 up the floors fails here with the file that draws it."""
@@ -10,11 +11,13 @@ import ast
 from collections import Counter
 from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parents[1] / "lerobot_blindgrasp"
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "lerobot_blindgrasp"
+LAB = ROOT / "lab"  # benchmarks, the twin's measurement campaign, research diagnosis: not in the wheel
 
 # Floors, bottom first: a folder (or top-level module) may import only from floors below its own.
 FLOORS: tuple[tuple[str, ...], ...] = (
-    ("spec", "durable", "platform_id"),
+    ("spec", "durable"),
     ("spaces", "cli", "project"),
     ("shipped", "hardware"),
     ("sim", "policies", "robots"),
@@ -23,7 +26,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("rollout",),
     ("teacher",),
     ("demos",),
-    ("analysis", "robustness", "bench", "twin"),
+    ("analysis", "robustness", "twin"),
     ("pipeline", "hub", "deploy"),
 )
 FLOOR = {room: k for k, rooms in enumerate(FLOORS) for room in rooms}
@@ -46,8 +49,8 @@ def _room(module: str) -> str | None:
     return parts[1] if parts[0] == "lerobot_blindgrasp" and len(parts) > 1 else None
 
 
-def _sources():
-    for path in sorted(PACKAGE.rglob("*.py")):
+def _sources(*roots: Path):
+    for path in sorted(p for root in roots or (PACKAGE,) for p in root.rglob("*.py")):
         yield path, ast.parse(path.read_text(), str(path))
 
 
@@ -85,12 +88,24 @@ def test_imports_run_down_the_floors():
     assert not up, "imports that do not run down the floors:\n" + "\n".join(up)
 
 
+def test_the_package_never_imports_the_lab():
+    """The wheel carries the package alone, so an import of `lab` from it would fail for every user."""
+    up = [
+        f"{path.relative_to(ROOT)} imports {module}"
+        for path, tree in _sources()
+        for module in _imported(tree)
+        if module == "lab" or module.startswith("lab.")
+    ]
+    assert LAB.is_dir() and not up, "the package imports the lab:\n" + "\n".join(up)
+
+
 def test_modules_and_functions_are_small():
     big = []
-    for path, tree in _sources():
-        rel = path.relative_to(PACKAGE)
+    for path, tree in _sources(PACKAGE, LAB):
+        rel = path.relative_to(ROOT)
         lines = len(path.read_text().splitlines())
-        if lines > LONG_MODULES.get(rel.as_posix(), (MAX_MODULE_LINES,))[0]:
+        key = path.relative_to(PACKAGE).as_posix() if path.is_relative_to(PACKAGE) else rel.as_posix()
+        if lines > LONG_MODULES.get(key, (MAX_MODULE_LINES,))[0]:
             big.append(f"{rel}: {lines} lines")
         for node in ast.walk(tree):
             if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
@@ -101,6 +116,7 @@ def test_modules_and_functions_are_small():
 
 
 def test_no_two_modules_are_named_alike():
-    names = Counter(p.name for p in PACKAGE.rglob("*.py") if p.name not in SAME_NAME_OK)
-    twice = {n: sorted(str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob(n)) for n, c in names.items() if c > 1}
+    files = [p for root in (PACKAGE, LAB) for p in root.rglob("*.py") if p.name not in SAME_NAME_OK]
+    names = Counter(p.name for p in files)
+    twice = {n: sorted(str(p.relative_to(ROOT)) for p in files if p.name == n) for n, c in names.items() if c > 1}
     assert not twice, f"modules named alike: {twice}"

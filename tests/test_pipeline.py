@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
 import subprocess
 import sys
 
 import pytest
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.pipeline import recipe, teacher_source
 from lerobot_blindgrasp.pipeline import run as pipeline
 
 
@@ -76,51 +74,3 @@ def test_presets_are_consistent():
     assert quick.teacher.shipped and quick.evaluation.episodes_per_object >= 20 and quick.evaluation.task == "all"
     assert not pipeline.PRESETS["smoke"].teacher.shipped  # CI still trains a (tiny) teacher
     assert pipeline.PRESETS["paper"].student.device == "cuda"
-
-
-def test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_states_sim_and_cpu(
-    tmp_path, monkeypatch
-):
-    from lerobot_blindgrasp import platform_id
-    from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
-    from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
-
-    teacher = tmp_path / "teacher"
-    shutil.copytree(default_teacher(), teacher, ignore=shutil.ignore_patterns("eval", "run"))  # weights and config
-    preset = pipeline.PRESETS["quick"]
-    objs = recipe.objects_of(preset.evaluation.task)
-    rec = {"checkpoint_sha256": TeacherPolicy(teacher).sha256, "sim_fingerprint": sim_fingerprint(),
-           "seed": spec.EVAL_SEED, "episodes_per_object": preset.evaluation.episodes_per_object, "objects": list(objs),
-           "modes": {"deterministic": {}}, "platform": platform_id.platform()}  # fmt: skip
-    (teacher / "eval").mkdir()
-    for change, reused in (({}, True), ({"seed": spec.EVAL_SEED + 1}, False), ({"sim_fingerprint": "other"}, False),
-                           ({"episodes_per_object": 5}, False), ({"checkpoint_sha256": "x"}, False),
-                           ({"platform": None}, False)):  # fmt: skip
-        (teacher / "eval" / "eval.json").write_text(json.dumps({**rec, **change}))
-        dest = tmp_path / f"dest{len(list(tmp_path.iterdir()))}"
-        assert teacher_source.reuse_teacher_eval(teacher, dest, preset, spec.EVAL_SEED, objs) is reused, change
-        assert (dest / "eval.json").is_file() is reused
-    # Recorded on another CPU family (played by another model name): re-run, and the report will say why.
-    (teacher / "eval" / "eval.json").write_text(json.dumps(rec))
-    monkeypatch.setenv(platform_id.CPU_MODEL_ENV, "Newcomer CPU 9000")
-    note: dict = {}
-    assert not teacher_source.reuse_teacher_eval(
-        teacher, tmp_path / "cpu", preset, spec.EVAL_SEED, objs, note=note
-    )
-    why = note["eval_rerun_because"]
-    assert not (tmp_path / "cpu").exists() and repr(rec["platform"]["cpu"]) in why and "Newcomer CPU 9000" in why
-    from lerobot_blindgrasp.pipeline.job_report import _teacher_lines
-
-    lines = _teacher_lines(
-        {
-            "teacher": {
-                "source": "shipped",
-                "path": str(teacher),
-                "file": "teacher.safetensors",
-                "iteration": 1,
-                "sha256": "0" * 64,
-                **note,
-            }
-        }
-    )
-    assert any("evaluated in this run, on this machine" in line and "Newcomer CPU 9000" in line for line in lines)

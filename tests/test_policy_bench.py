@@ -1,4 +1,4 @@
-"""`blindgrasp-bench --bench.type=policy` runs end to end (at a small size) and reports a consistent result."""
+"""`python -m lab.bench --bench.type=policy` runs end to end (at a small size) and reports a consistent result."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import json
 import pytest
 import torch
 
-from lerobot_blindgrasp.bench import main
+from lab.bench import main
 
 
 def test_policy_bench_json(capsys):

@@ -8,8 +8,8 @@ from lerobot.configs import FeatureType, PolicyFeature, PreTrainedConfig
 from lerobot.policies.factory import get_policy_class
 from lerobot.utils.constants import ACTION, OBS_STATE
 
+from lab.bench.policy_bench import flops_per_step
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.bench.policy_bench import flops_per_step
 from lerobot_blindgrasp.policies.blindgrasp_transformer import (
     BlindgraspTransformerConfig,
     BlindgraspTransformerPolicy,

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-# The whole tracked tree, so that every clone stays quick; today's is ~15 MB: the shipped models, the research
-# record's checkpoints, and the twin's per-trial logs.
+# The whole tracked tree, so that every clone stays quick: the shipped models and the twin's per-trial logs are most
+# of it (the research record lives at a git tag, docs/research.md).
 MAX_TREE_BYTES = 20_000_000
 TRAINING_STATE = (".pt", ".pth", ".ckpt")
 
@@ -45,22 +45,22 @@ def test_no_training_state_or_event_files_are_tracked():
     assert not bad, f"export these (blindgrasp-export-teacher) or keep them out of the tree: {bad}"
 
 
-def test_shipped_and_recorded_teachers_are_exported_actors_that_load():
+def test_shipped_teachers_are_exported_actors_that_load():
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 
-    folders = [*(ROOT / "models").glob("teacher_*"), *(ROOT / "docs" / "research" / "checkpoints").glob("*_*")]
+    folders = list((ROOT / "models").glob("teacher_*"))
     assert len(folders) >= 2
     for folder in folders:
         assert {p.suffix for p in folder.glob("*.*")} <= {".safetensors", ".json", ".md"}, folder
         teacher = TeacherPolicy(folder)
         assert teacher.checkpoint.name == "teacher.safetensors"
-        if folder.parent.name == "checkpoints":  # <run>_<iteration>: the folder says which checkpoint it is
-            assert folder.name.endswith(f"_{teacher.iteration}"), folder
 
 
 # The product face: a README a newcomer reads in five minutes, links that resolve, one place for the code's URL.
 README = ROOT / "README.md"
 MAX_README_LINES = 150
+RESEARCH = ROOT / "docs" / "research.md"  # what the dated record taught; the record is at a git tag
+MAX_RESEARCH_LINES = 90
 
 
 def _project_urls() -> dict[str, str]:
@@ -99,21 +99,21 @@ def _markdown() -> list[Path]:
 
 def test_every_relative_link_and_image_in_the_tracked_markdown_resolves():
     docs = _markdown()
-    assert README in docs and ROOT / "docs" / "research" / "index.md" in docs
+    assert README in docs and RESEARCH in docs
     broken = [f"{d.relative_to(ROOT)} -> {link}" for d in docs for link in _links(d)
               if not (d.parent / link).exists()]  # fmt: skip
     assert not broken, broken
 
 
 def test_the_research_records_tags_are_made_by_its_one_command(tmp_path):
-    """The copy-paste block of docs/research/index.md, run in a copy of this history without tags, makes every tag
-    of its table on the commit the table names, and the old paths the pages restore from are there."""
+    """The copy-paste block of docs/research.md, run in a copy of this history without tags, makes every tag of its
+    table on the commit the table names, and the old paths the pages restore from are there."""
     if shutil.which("git") is None or not (ROOT / ".git").exists():
         pytest.skip("not a git checkout")
     git = ["git", "-C", str(tmp_path / "clone.git")]
     subprocess.run(["git", "clone", "-q", "--bare", "--shared", "--no-tags", str(ROOT), str(tmp_path / "clone.git")],
                    check=True, capture_output=True)  # fmt: skip
-    text = (ROOT / "docs" / "research" / "index.md").read_text(encoding="utf-8")
+    text = RESEARCH.read_text(encoding="utf-8")
     table = dict(re.findall(r"^\| `([\w.-]+)` \| `([0-9a-f]{7,40})` \|", text, flags=re.M))
     if any(subprocess.run([*git, "cat-file", "-e", f"{c}^{{commit}}"]).returncode for c in table.values()):
         pytest.skip("this clone's history lacks the tagged commits (shallow)")
@@ -122,19 +122,24 @@ def test_the_research_records_tags_are_made_by_its_one_command(tmp_path):
         subprocess.run(["bash", "-e", "-c", block], cwd=tmp_path / "clone.git", check=True)
     made = {t: subprocess.run([*git, "rev-parse", f"{t}^{{commit}}"], capture_output=True, text=True).stdout.strip()
             for t in table}  # fmt: skip
-    assert len(table) == 8 and all(made[t].startswith(c) for t, c in table.items()), (table, made)
-    for tag, path in re.findall(r"--source=([\w.-]+) (docs/results/[\w/.-]+)", text):
+    assert len(table) == 9 and all(made[t].startswith(c) for t, c in table.items()), (table, made)
+    for tag, path in re.findall(r"--source=([\w.-]+) (docs/re\w+/[\w/.-]+|docs/research)\b", text):
         assert subprocess.run([*git, "cat-file", "-e", f"{tag}:{path}"]).returncode == 0, (tag, path)
+    # Every page the record's summary names is at the record's tag, where it says.
+    for page in set(re.findall(r"`([a-z_]+\.md)`", text)) - {"cpu_portability.md"}:
+        path = f"research-record-2026-12-05:docs/research/{page}"
+        assert subprocess.run([*git, "cat-file", "-e", path]).returncode == 0, path
     named = set(re.findall(r"git tag `([\w.-]+)`", " ".join(p.read_text(encoding="utf-8") for p in _markdown())))
     assert named <= set(table), f"tags named in the docs but missing from the index: {named - set(table)}"
 
 
-def test_the_research_record_is_marked_as_history_and_current_results_are_apart():
-    index = (ROOT / "docs" / "research" / "index.md").read_text(encoding="utf-8")
-    assert "history" in index.splitlines()[0].lower() and "../results.md" in index
-    listed = set(_links(ROOT / "docs" / "research" / "index.md"))
-    pages = {p.name for p in (ROOT / "docs" / "research").glob("*.md")} - {"index.md"}
-    assert pages <= listed, f"research pages missing from its index: {sorted(pages - listed)}"
+def test_the_research_record_is_a_short_page_of_history_and_current_results_are_apart():
+    """The dated record left the tree for its git tag; what stays is one short page of what it taught."""
+    text = RESEARCH.read_text(encoding="utf-8")
+    assert "history" in text.splitlines()[0].lower() and "results.md" in _links(RESEARCH)
+    assert len(text.splitlines()) <= MAX_RESEARCH_LINES, f"docs/research.md has {len(text.splitlines())} lines"
+    if shutil.which("git") is not None and (ROOT / ".git").exists():  # restored from the tag, it stays untracked
+        assert not [p for p in _tracked() if p.relative_to(ROOT).parts[:2] == ("docs", "research")]
     assert not list((ROOT / "docs" / "results").glob("teacher_cpu*.md"))  # the dated pages left docs/results/
     assert (ROOT / "docs" / "results.md").is_file()
 

@@ -16,9 +16,9 @@ of the evaluation, 20 % of scale by step 60). So, on every machine (tests/golden
   code path another CPU takes (`python tests/test_sim_golden.py --record` measures them,
   docs/results/cpu_portability.md has the numbers): MKL_CBWR=COMPATIBLE and SSE4_2, ATEN_CPU_CAPABILITY=default
   and avx2, NumPy without AVX-512, glibc's libm without FMA/AVX2, OpenBLAS as Haswell, two torch threads;
-- bit for bit: every quantity's sha256, where this machine's platform (`lerobot_blindgrasp.platform_id`: CPU
-  model, float-relevant instruction sets, float-path environment variables, mujoco/torch/numpy versions) is
-  recorded, so a refactor on a recorded machine must still be bit-identical.
+- bit for bit: every quantity's sha256, where this machine's platform (tests/float_platform.py: CPU model,
+  float-relevant instruction sets, float-path environment variables, mujoco/torch/numpy versions) is recorded in
+  the golden file's `platforms`, so a refactor on a recorded machine must still be bit-identical.
 An unrecorded family (`BLINDGRASP_CPU_MODEL=...` plays one) thus fails for no float noise up to 100 x the
 stand-ins' spread, and a real change fails everywhere: the last tests make one (a reward weight one ulp off, a
 success flipped), and tests/test_unseen_machine.py runs this module as a machine no record has seen. A change
@@ -32,11 +32,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import float_platform
 import golden_sim as g
 import numpy as np
 import pytest
 
-from lerobot_blindgrasp import platform_id, spec
+from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.durable import atomic_write_text
 from lerobot_blindgrasp.sim import objects
 
@@ -69,8 +70,8 @@ def runs():
 
 
 def test_the_shipped_teacher_sees_the_recorded_simulation(golden, runs):
-    problems = g.compare(golden, runs, platform_id.platform())
-    assert not problems, f"on {platform_id.describe(platform_id.platform())}:\n" + "\n".join(problems)
+    problems = g.compare(golden, runs, float_platform.platform())
+    assert not problems, f"on {float_platform.describe(float_platform.platform())}:\n" + "\n".join(problems)
     if os.environ.get("GOLDEN_REPORT"):  # tests/test_unseen_machine.py: which recorded digests it reproduced
         Path(os.environ["GOLDEN_REPORT"]).write_text(json.dumps(g.matching_platforms(golden, runs)))
 
@@ -86,7 +87,7 @@ def test_the_golden_successes_are_the_shipped_teachers_recorded_evaluation(golde
 
 @pytest.mark.parametrize("where", ["this machine", "a machine no record has seen"])
 def test_a_flipped_success_fails_everywhere(golden, runs, where):
-    here = platform_id.platform() if where == "this machine" else {**platform_id.platform(), "cpu": NEWCOMER}
+    here = float_platform.platform() if where == "this machine" else {**float_platform.platform(), "cpu": NEWCOMER}
     changed = json.loads(json.dumps(golden))
     flags = changed["settings"]["evaluation"]["exact"]["success"]
     flags[0] = not flags[0]
@@ -104,10 +105,10 @@ def test_float_noise_fails_only_where_this_platform_is_recorded(golden, runs):
     lift = noisy["evaluation"]["lift"].copy()
     lift[-1, 0] = np.nextafter(lift[-1, 0], np.inf)
     noisy["evaluation"]["lift"] = lift
-    if any(platform_id.same(p.get("platform"), platform_id.platform()) for p in golden["platforms"]):
-        problems = g.compare(golden, noisy, platform_id.platform())
+    if any(float_platform.same(p.get("platform"), float_platform.platform()) for p in golden["platforms"]):
+        problems = g.compare(golden, noisy, float_platform.platform())
         assert len(problems) == 1 and "no longer bit-identical: ['evaluation/lift']" in problems[0], problems
-    assert g.compare(golden, noisy, {**platform_id.platform(), "cpu": NEWCOMER}) == []
+    assert g.compare(golden, noisy, {**float_platform.platform(), "cpu": NEWCOMER}) == []
 
 
 @pytest.fixture(scope="module")
@@ -119,7 +120,7 @@ def nudged():
 
 @pytest.mark.parametrize("where", ["this machine", "a machine no record has seen"])
 def test_a_reward_weight_one_ulp_off_fails_everywhere(golden, nudged, where):
-    here = platform_id.platform() if where == "this machine" else {**platform_id.platform(), "cpu": NEWCOMER}
+    here = float_platform.platform() if where == "this machine" else {**float_platform.platform(), "cpu": NEWCOMER}
     problems = g.compare(golden, nudged, here)
     assert any("not eq. 1 of the terms" in p for p in problems), problems
 
@@ -184,7 +185,7 @@ def record(folder: Path) -> dict:
         for extra, run in stand_ins
     ]
     mine = {s: g.digests(base[s]) for s in g.SETTINGS}
-    out["platforms"] = [{"platform": platform_id.platform(), "digests": mine}]
+    out["platforms"] = [{"platform": float_platform.platform(), "digests": mine}]
     return out
 
 
@@ -212,18 +213,18 @@ elif __name__ == "__main__" and "--spread" in sys.argv:
         base = g.rollouts()
         print(
             "this machine:",
-            platform_id.describe(platform_id.platform()),
+            float_platform.describe(float_platform.platform()),
             "; training successes",
             g.successful_episodes(base["training"]),
         )
         spread(base, _stand_in_runs(Path(tmp)), json.loads(GOLDEN.read_text()))
 elif __name__ == "__main__" and "--record-platform" in sys.argv:
     golden, runs = json.loads(GOLDEN.read_text()), g.rollouts()
-    problems = g.compare(golden, runs, platform_id.platform())
+    problems = g.compare(golden, runs, float_platform.platform())
     assert not problems, "not the recorded simulation, so not a new platform's floats:\n" + "\n".join(problems)
-    mine = {"platform": platform_id.platform(), "digests": {s: g.digests(runs[s]) for s in g.SETTINGS}}
+    mine = {"platform": float_platform.platform(), "digests": {s: g.digests(runs[s]) for s in g.SETTINGS}}
     # An entry of the first format (a model name, no platform) with these very digests is this family: complete it.
     kept = [p for p in golden["platforms"] if p.get("platform") or p["digests"] != mine["digests"]]
     golden["platforms"] = [*kept, mine]
     atomic_write_text(GOLDEN, json.dumps(golden, indent=1) + "\n")
-    print("added", platform_id.describe(platform_id.platform()), "to", GOLDEN)
+    print("added", float_platform.describe(float_platform.platform()), "to", GOLDEN)

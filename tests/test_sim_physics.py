@@ -171,7 +171,7 @@ def test_contact_directions_tell_a_sideways_lift_from_a_press_from_above():
     """`teacher.contacts` on two scripted grasps: the pinch at mid-height of the medium cylinder squeezes sideways
     and lifts it; the same pinch closed on top of the small capsule presses it into the table (what the `cpu`
     teacher does to that capsule: -F_z/|F| ~ 0.86, tips ~21 mm above its axis)."""
-    from lerobot_blindgrasp.analysis.contacts import contact_directions
+    from lab.diagnosis.contacts import contact_directions
     from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
     dr = replace(randomization.PAPER_DR, joint_offset_rad=0.0, object_xy_m=0.0, external_force=False)

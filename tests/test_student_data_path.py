@@ -152,8 +152,8 @@ def test_lerobot_train_itself_trains_on_the_caches_samples(dataset_root, tmp_pat
 
 
 def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
-    from lerobot_blindgrasp.bench import student_bench as student
-    from lerobot_blindgrasp.bench.student_parts import PARTS
+    from lab.bench import student_bench as student
+    from lab.bench.student_parts import PARTS
 
     torch.manual_seed(0)
     r = student.run(
@@ -192,7 +192,7 @@ def test_bench_student_times_each_data_path_and_the_updates_parts(dataset_root):
 
 
 def test_lerobot_trains_log_is_read_per_window():
-    from lerobot_blindgrasp.bench.student_bench import train_log_windows
+    from lab.bench.student_bench import train_log_windows
 
     log = (
         "INFO 2026-12-04 17:42:11 ot_train.py:640 step:50 smpl:13K ep:130 epch:2.18 loss:0.923 grdn:1.234 "
@@ -208,7 +208,7 @@ def test_lerobot_trains_log_is_read_per_window():
 
 
 def test_blindgrasp_bench_imports_only_the_bench_it_runs():
-    from lerobot_blindgrasp.bench import BENCHMARKS, _modules
+    from lab.bench import BENCHMARKS, _modules
 
     assert _modules(["--bench.type=student", "--bench.size=cpu"]) == ("student",)
     assert _modules(["--bench.type", "teacher"]) == ("teacher",)

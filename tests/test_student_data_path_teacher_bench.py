@@ -1,4 +1,4 @@
-"""`blindgrasp-bench --bench.type=teacher`: raw physics timed beside collection, the PPO update's variants on one
+"""`python -m lab.bench --bench.type=teacher`: raw physics timed beside collection, the PPO update's variants on one
 rollout, and the update split into rsl-rl's parts (issue 48's teacher-loop figures)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import pytest
 
 @pytest.mark.slow
 def test_the_ppo_update_is_split_into_rsl_rls_parts(capsys):
-    from lerobot_blindgrasp.bench.teacher_bench import UPDATE_PARTS, BenchTeacherConfig, run
+    from lab.bench.teacher_bench import UPDATE_PARTS, BenchTeacherConfig, run
 
     r = run(
         BenchTeacherConfig(
@@ -37,7 +37,7 @@ def test_the_ppo_update_is_split_into_rsl_rls_parts(capsys):
 
 
 def test_an_update_variant_is_epochs_x_minibatches_at_threads():
-    from lerobot_blindgrasp.bench.teacher_bench import BenchTeacherConfig, parse_variant
+    from lab.bench.teacher_bench import BenchTeacherConfig, parse_variant
 
     assert parse_variant("5x4@2") == (5, 4, 2)
     with pytest.raises(ValueError, match="EPOCHSxMINIBATCHES@THREADS"):

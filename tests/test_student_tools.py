@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
+from lab.diagnosis import student_diagnosis as diag
+from lab.diagnosis import student_fit
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.analysis import student_diagnosis as diag
-from lerobot_blindgrasp.analysis import student_fit
 from lerobot_blindgrasp.demos import collection, curation, dagger
 from lerobot_blindgrasp.demos.config import CollectConfig
 from lerobot_blindgrasp.sim import objects
@@ -181,7 +181,7 @@ def test_dagger_and_diagnosis_end_to_end(demos, tmp_path):
         [
             sys.executable,
             "-m",
-            "lerobot_blindgrasp.analysis.student_diagnosis",
+            "lab.diagnosis.student_diagnosis",
             f"--student={STUDENT}",
             f"--demos={demos}",
             f"--held_out={out / 'relabelled'}",
@@ -192,6 +192,7 @@ def test_dagger_and_diagnosis_end_to_end(demos, tmp_path):
             "--progress=false",
         ],
         check=True,
+        cwd=ROOT,  # the lab runs from the repository root
         capture_output=True,
         env=env,
         timeout=600,

@@ -99,7 +99,7 @@ def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, m
     """Two iterations, then a resumed third: the cloning loss is logged and falls, its weight follows the decay
     across the resume (it is not restarted), and the checkpoint loads as a plain rsl-rl PPO one. The "RL w/ o_t"
     actor (student observation only) clones the same demonstrations through their o_t group."""
-    from lerobot_blindgrasp.analysis.progress import _scalars
+    from lab.diagnosis.progress import _scalars
     from lerobot_blindgrasp.teacher import train
 
     full = 3.0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 from lerobot_blindgrasp.sim.env_config import GraspEnvConfig, allocate_objects
 
-# Harder objects (small, capsules) weighted up, as tried in docs/research/teacher_cpu_v2.md.
+# Harder objects (small, capsules) weighted up, as tried in teacher_cpu_v2.md of the research record (docs/research.md).
 HARD_FIRST = tuple(
     {"large": 0.5, "medium": 1.0, "small": 1.5}[objects.get_object(n).size_label]
     * (1.5 if objects.get_object(n).mjcf_type == "capsule" else 1.0)
@@ -53,8 +54,8 @@ def test_bench_teacher_reports_collection_update_and_raw_physics():
     out = subprocess.run(
         [
             sys.executable,
-            "-c",
-            "from lerobot_blindgrasp.bench import main; main()",
+            "-m",
+            "lab.bench",
             "--bench.type=teacher",
             "--bench.preset=quick",
             "--bench.num_envs=18",
@@ -67,6 +68,7 @@ def test_bench_teacher_reports_collection_update_and_raw_physics():
         text=True,
         timeout=300,
         check=True,
+        cwd=Path(__file__).resolve().parents[1],  # the lab runs from the repository root
     ).stdout
     r = json.loads(out)  # stdout holds only the JSON (rsl-rl's model printout goes to stderr)
     assert r["num_envs"] == 18 and r["hidden_dims"] == [128, 64]
@@ -81,7 +83,7 @@ def test_bench_teacher_reports_collection_update_and_raw_physics():
 def test_bench_teacher_times_a_trained_checkpoint_and_refuses_another_presets(tmp_path, capsys):
     import signal
 
-    from lerobot_blindgrasp.bench.teacher_bench import BenchTeacherConfig, run
+    from lab.bench.teacher_bench import BenchTeacherConfig, run
     from lerobot_blindgrasp.teacher import train
 
     previous = signal.getsignal(signal.SIGTERM)
@@ -147,7 +149,7 @@ def test_the_update_defaults_to_the_physics_threads_then_the_acting_threads():
 def test_progress_curves_sum_training_time_and_weigh_objects_equally(tmp_path):
     from torch.utils.tensorboard import SummaryWriter
 
-    from lerobot_blindgrasp.analysis.progress import plot_metrics, plot_progress, progress
+    from lab.diagnosis.progress import plot_metrics, plot_progress, progress
 
     (tmp_path / "teacher_config.json").write_text(json.dumps({"num_envs": 10, "runner": {"num_steps_per_env": 4}}))
     # Two sessions (a resume): the second rewrites iteration 2, as rsl-rl does after loading model_2.pt.
@@ -175,7 +177,7 @@ def test_a_run_continued_in_another_directory_is_one_curve(tmp_path, capsys):
     """RUN_A+RUN_B: A up to B's first iteration, then B, with B's training time added to A's."""
     from torch.utils.tensorboard import SummaryWriter
 
-    from lerobot_blindgrasp.analysis.progress import main, progress
+    from lab.diagnosis.progress import main, progress
 
     for name, its, secs in (("a", range(5), 2.0), ("b", range(3, 6), 10.0)):  # b resumed a's model_2.pt
         d = tmp_path / name
@@ -212,7 +214,7 @@ def _timed_run(run_dir, iterations):
 
 
 def test_progress_command_line_takes_the_figure_and_the_runs_as_named_flags(tmp_path, capsys):
-    from lerobot_blindgrasp.analysis.progress import main
+    from lab.diagnosis.progress import main
 
     _timed_run(tmp_path, iterations=4)
     out = tmp_path / "figs" / "q.png"
@@ -236,7 +238,7 @@ def test_progress_command_line_takes_the_figure_and_the_runs_as_named_flags(tmp_
 
 
 def test_held_out_evals_are_marked_on_the_run_that_holds_their_checkpoint(tmp_path, capsys):
-    from lerobot_blindgrasp.analysis.progress import main
+    from lab.diagnosis.progress import main
     from lerobot_blindgrasp.teacher.policy import file_sha256
 
     runs = {}

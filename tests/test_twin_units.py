@@ -80,7 +80,7 @@ def _jsonl(path: Path, rows: list[dict]) -> None:
 
 
 def test_the_twin_report_pairs_names_the_judge_and_counts_stops_timing_forces_and_load(tmp_path):
-    from lerobot_blindgrasp.twin import report
+    from lab.twin_campaign import report
 
     judge = "twin (the sim's rule)"
     step = {"read": [10.0, 40.0, 50.0], "policy": [5.0, 15.0, 20.0], "write": [4.0, 20.0, 30.0]}
@@ -162,7 +162,7 @@ def test_the_docs_state_the_robots_overload_limit():
 
 
 def test_the_measurement_keeps_the_robots_defaults_unless_told_and_resumes_from_its_records(tmp_path):
-    from lerobot_blindgrasp.twin.measure import TwinMeasureConfig, done_seeds, last_error
+    from lab.twin_campaign.measure import TwinMeasureConfig, done_seeds, last_error
 
     assert TwinMeasureConfig(output_dir=tmp_path).robot_flags() == []  # the shipped defaults
     assert TwinMeasureConfig(output_dir=tmp_path, overload_n=40.0, current_limit_a=1.15).robot_flags() == [

@@ -4,10 +4,9 @@ made run again, in one fresh process, as such a machine.
 Each variable plays part of another CPU (docs/results/cpu_portability.md measures what each moves, on AMD and on
 Intel): a model name no record holds, so no bit-for-bit record applies; `ATEN_CPU_CAPABILITY=default`, torch's
 kernels without AVX2/AVX-512, which moves the teacher's matrix products on any x86 CPU that has them; and
-`MKL_CBWR=SSE4_2`, MKL's SSE4.2 path, which moves every product on Intel and single-row ones on AMD. The modules:
+`MKL_CBWR=SSE4_2`, MKL's SSE4.2 path, which moves every product on Intel and single-row ones on AMD. The module:
 the golden simulation (its floats within tolerance, and its two real changes, a reward weight one ulp off and a
-flipped success, still caught), the platform records, and the main job's choice to re-run a teacher evaluation
-carried from another platform. The slow single-episode outcomes (tests/test_shipped_student.py, test_wheel.py)
+flipped success, still caught). The slow single-episode outcomes (tests/test_shipped_student.py, test_wheel.py)
 are not re-run here: their outcomes under these variables are measured in cpu_portability.md, and the whole suite
 runs under them as that page says."""
 
@@ -20,16 +19,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-from lerobot_blindgrasp import platform_id
+import float_platform
 
 ROOT = Path(__file__).resolve().parents[1]
 NEWCOMER = "Newcomer CPU 9000 (no record holds it)"
-UNSEEN = {platform_id.CPU_MODEL_ENV: NEWCOMER, "ATEN_CPU_CAPABILITY": "default", "MKL_CBWR": "SSE4_2"}
-TESTS = (
-    "tests/test_sim_golden.py",
-    "tests/test_platform_id.py",
-    "tests/test_pipeline.py::test_a_recorded_teacher_eval_is_reused_only_for_the_same_weights_start_states_sim_and_cpu",
-)
+UNSEEN = {float_platform.CPU_MODEL_ENV: NEWCOMER, "ATEN_CPU_CAPABILITY": "default", "MKL_CBWR": "SSE4_2"}
+TESTS = ("tests/test_sim_golden.py",)
 
 
 def test_the_float_dependent_tests_pass_on_a_machine_no_record_has_seen_and_still_catch_real_changes(tmp_path):

@@ -93,6 +93,10 @@ def test_sdist_and_wheel_pass_twine_check_and_carry_the_shipped_files(built):
         missing = [str(f) for f in files if f"lerobot_blindgrasp/shipped/{f.as_posix()}" not in names]
         assert not missing, f"not in the wheel: {missing}"
     assert "lerobot_blindgrasp/cards/card_templates/sim_teacher_demos.md" in names
+    # The lab (benchmarks, the twin's measurement campaign, research diagnosis) runs from a clone, not the wheel.
+    assert not [n for n in names if n.startswith(("lab/", "tests/"))]
+    entry_points = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()
+    assert "lerobot_blindgrasp." in entry_points and " lab." not in entry_points and "= lab." not in entry_points
     metadata = next(n for n in names if n.endswith(".dist-info/METADATA"))
     text = zipfile.ZipFile(wheel).read(metadata).decode()
     assert "Project-URL: Source, " in text and f"Name: {DIST}" in text
@@ -104,13 +108,15 @@ def test_sdist_and_wheel_pass_twine_check_and_carry_the_shipped_files(built):
 
 def test_the_sdist_carries_what_a_packager_builds_and_tests_from(built):
     """The license, changelog and citation, the guides, the tests with their data and emulators, the scripts the
-    README runs, and the shipped files; no training state or bytecode."""
+    README runs, the lab the tests import, and the shipped files; no training state or bytecode."""
     sdist = _one(built, f"{DIST}-*.tar.gz")
     with tarfile.open(sdist) as tar:
         names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
     tracked = [p.relative_to(ROOT).as_posix() for p in _tracked_or_none() or []]
     wanted = {"LICENSE", "CHANGELOG.md", "CITATION.cff", "README.md", "pyproject.toml", "setup.py", "MANIFEST.in"}
-    wanted |= {p for p in tracked if p.split("/")[0] in ("docs", "tests", "scripts", "models", "robot_configs")}
+    wanted |= {
+        p for p in tracked if p.split("/")[0] in ("docs", "tests", "scripts", "lab", "models", "robot_configs")
+    }
     wanted |= {"docs/getting-started.md", "docs/results.md", "tests/conftest.py", "scripts/main.sh"}
     missing = sorted(wanted - names)
     assert not missing, f"not in the sdist: {missing[:20]}"

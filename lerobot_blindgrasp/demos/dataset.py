@@ -158,7 +158,7 @@ def skip_empty_image_embedding():
     `DatasetWriter._save_episode_data` always runs `io_utils.embed_images`, a per-row `datasets.Dataset.map` of
     `embed_table_storage`, even for state-only datasets. For features that need no embedding (no Image, Video,
     Audio...) `embed_table_storage` rebuilds each row unchanged, so the pass is pure overhead: about two thirds of
-    `save_episode` for our 100-frame episodes (see `blindgrasp-bench --bench.type=demos`). While this context is active, the
+    `save_episode` for our 100-frame episodes (see `python -m lab.bench --bench.type=demos`). While this context is active, the
     writer's `embed_images` returns the dataset as is when `datasets`' own `require_storage_embed` says no column
     needs it, and defers to LeRobot's function otherwise. The written files are identical but for the random
     cache fingerprint `datasets` stamps into a mapped table's parquet metadata (tests/test_demos_dataset.py checks

@@ -9,7 +9,8 @@ What it implements (ROBOTIS e-Manual, "DYNAMIXEL Protocol 2.0" and the XM430-W35
   rate (a servo answers only when the port's termios speed matches its Baud_Rate register, like a real bus at the
   wrong speed);
 - each servo (`dynamixel_servo.py`): Homing_Offset and Drive_Mode as the firmware applies them, first-order
-  dynamics or a plugged-in `ShaftDynamics`, the Bus Watchdog (98), a reboot with Startup_Configuration(60).
+  dynamics or a plugged-in `ShaftDynamics`, the Bus Watchdog (98), a reboot with Startup_Configuration(60);
+- bring-up: factory-fresh servos (`factory_servo`: ID 1, 57 600 bps) plugged onto the cable one at a time (`plug`).
 
 Fault injection (what the tests use): a missing ID, dropped status packets (timeouts), corrupted status CRCs,
 wrong positions with a valid CRC (`position_glitch`), stray late status packets (`stray_replies`), slow replies
@@ -111,6 +112,23 @@ class DynamixelBusEmulator(PtyDevice):
         twin.health.supply = self.supply
         self.twins[dxl_id] = twin
         return twin
+
+    # -- bring-up: servos out of the box, plugged in one at a time --
+    @staticmethod
+    def factory_servo(shaft: float = 2048.0) -> EmulatedServo:
+        """A servo as it leaves ROBOTIS (e-Manual, factory values): ID 1, Baud_Rate 1 = 57 600 bps."""
+        servo = EmulatedServo(1, shaft=shaft)
+        servo.set("Baud_Rate", BAUD_REGISTER[57_600])
+        servo.reboot()
+        return servo
+
+    def plug(self, *servos: EmulatedServo) -> None:
+        """The cable now carries exactly `servos` (each answers at its own ID and baud rate), as when the operator
+        unplugs one servo and plugs in the next; an ID a servo is given over the bus takes effect as on the wire."""
+        self.servos = {s.get("ID"): s for s in servos}
+        for servo in servos:
+            servo.id = servo.get("ID")
+            servo.health.supply = self.supply
 
     def torque_enabled(self, dxl_id: int) -> bool:
         return self.servos[dxl_id].get("Torque_Enable") == 1

@@ -144,6 +144,10 @@ class SocketOperator(_KeyQueue):
             self._send({"op": "end", "token": self._token})
 
     def stop(self) -> None:
+        try:  # shut down first: the reader thread's file object would keep the connection open past close()
+            self._sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
         try:
             self._sock.close()
         except OSError:

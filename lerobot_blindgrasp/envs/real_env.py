@@ -59,6 +59,10 @@ class BlindGraspRealEnvConfig(EnvConfig):
     home_timeout_s: float = 5.0
     unattended_reset_s: float = 5.0
     tare_each_trial: bool = True
+    # Where each trial starts: "home", the paper's start pose (0, pi/3, 0) on every finger; or "sim", the sim env's
+    # start pose for the same evaluation index and object (the start pose plus its drawn joint offsets, within
+    # +-20 deg), so that a run beside `--env.type=blindgrasp` (the physics twin's) starts like for like.
+    start_pose: str = "home"
     # Optional JSON-lines log of every trial (object, index, success, who decided, peak forces).
     trial_log: str | None = None
     # An unattended operator's Unix socket (e.g. blindgrasp-twin's): it places the objects and presses the keys.
@@ -68,6 +72,8 @@ class BlindGraspRealEnvConfig(EnvConfig):
 
     def __post_init__(self):
         self.objects = resolve_real_objects(self.task or "medium")
+        if self.start_pose not in ("home", "sim"):
+            raise ValueError("start_pose must be 'home' or 'sim'")
         if self.success_mode not in ("operator", "force"):
             raise ValueError("success_mode must be 'operator' or 'force'")
         if self.fps != spec.CONTROL_HZ:
@@ -92,6 +98,7 @@ class BlindGraspRealEnvConfig(EnvConfig):
             home_timeout_s=self.home_timeout_s,
             unattended_reset_s=self.unattended_reset_s,
             tare_each_trial=self.tare_each_trial,
+            start_pose=self.start_pose,
             trial_log=self.trial_log,
             operator_socket=self.operator_socket,
         )

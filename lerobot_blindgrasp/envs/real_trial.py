@@ -1,9 +1,12 @@
 """One real-gripper trial as a gym env (`RealGraspEnv`), on the one gripper its `GripperSession` holds.
 
 One trial (= one lerobot-eval episode):
-1. reset: the gripper drives to the paper's start pose (0, pi/3, 0) at <= 0.3 rad per 20 Hz step; the operator
+1. reset: the gripper drives to the paper's start pose (0, pi/3, 0) at <= 0.3 rad per 20 Hz step (`start_pose=sim`:
+   to the sim env's start pose for the same evaluation index and object, its drawn joint offsets included); the operator
    places the object at the claw centre and presses ENTER (unattended force mode: waits `unattended_reset_s`);
-   the fingertip sensors are tared (fingers in free air).
+   the fingertip sensors are tared (fingers in free air). Torque stays on, holding the pose, and the bus stays
+   alive through these waits (the robot's `keep_alive` each period, and during its tare), so the servos' bus
+   watchdog stays armed for a host that dies while waiting and never trips on a person's pause.
 2. 200 steps at 20 Hz (10 s): action = absolute joint targets, through `robot.send_action` (clipped on the robot).
    The steps keep time with a `Schedule`: after a late step (a slow policy) it re-bases on now rather than
    firing the missed steps back to back, and after a slow read (a stalled bus) the next read waits until it is at
@@ -32,7 +35,8 @@ from lerobot_blindgrasp import durable, spaces, spec
 from lerobot_blindgrasp.envs import real_report
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
 from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import Schedule
-from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp.sim import objects, randomization
+from lerobot_blindgrasp.sim.gym_env import start_seed
 
 logger = logging.getLogger(__name__)
 
@@ -52,7 +56,18 @@ class TrialSettings:
     unattended_reset_s: float
     tare_each_trial: bool
     trial_log: str | None
+    start_pose: str = "home"  # "home" | "sim": the sim env's start pose for (evaluation index, object)
     operator_socket: str | None = None  # None: the keyboard; else an unattended operator there (envs/operator.py)
+
+
+def sim_start_pose(object_name: str, eval_index: int) -> np.ndarray:
+    """The joints where `--env.type=blindgrasp` starts evaluation index `eval_index` on `object_name`: its own draw
+    (`randomization.draw_reset` of the eval randomization, first episode of the env seed), clipped to the limits."""
+    if object_name not in objects.CATALOGUE:
+        raise ValueError(f"start_pose=sim needs an object of the sim's catalogue; {object_name!r} is not one")
+    seeds = np.array([start_seed(eval_index, object_name)], dtype=np.uint64)
+    q0, _ = randomization.draw_reset(randomization.EVAL_DR, seeds, np.zeros(1, dtype=np.int64))
+    return np.clip(q0[0], spec.JOINT_LOWER, spec.JOINT_UPPER)
 
 
 def task_string(name: str) -> str:
@@ -138,12 +153,12 @@ class RealGraspEnv(gym.Env):
         self._obs = np.array([obs[k] for k in spec.STATE_NAMES], dtype=np.float32)
         return spaces.observation(self._obs)
 
-    def _go_home(self) -> None:
-        home = dict(zip(spec.ACTION_NAMES, spec.HOME_POSE.tolist(), strict=True))
+    def _go_home(self, pose: np.ndarray) -> None:
+        home = dict(zip(spec.ACTION_NAMES, pose.tolist(), strict=True))
         deadline = time.monotonic() + self.cfg.home_timeout_s
         while True:
             self._observe()
-            err = np.abs(self._obs[spec.STATE_JOINT_SLICE] - spec.HOME_POSE).max()
+            err = np.abs(self._obs[spec.STATE_JOINT_SLICE] - pose).max()
             if err <= self.cfg.home_tolerance_rad:
                 return
             if time.monotonic() > deadline:
@@ -158,19 +173,20 @@ class RealGraspEnv(gym.Env):
         super().reset(seed=seed)
         self.session.ensure_connected()
         self._reset_trial_state()
-        self._go_home()
         keys = self.session.keys
         k = self.session.trials.get(self.object_name, 0) + 1
-        self.session.trials[self.object_name] = k
         self._seed = seed  # lerobot-eval's evaluation index: the start state an unattended operator places
+        index = k - 1 if seed is None else int(seed)  # as the operator socket's placement (envs/operator.py)
+        self._go_home(sim_start_pose(self.object_name, index) if self.cfg.start_pose == "sim" else spec.HOME_POSE)
+        self.session.trials[self.object_name] = k
         if hasattr(keys, "announce_trial"):  # an unattended operator places the object this trial names
             keys.announce_trial(self.object_name, k, seed)
         if keys.available:  # an ENTER pressed while the gripper was homing counts: the operator is ready
             print(f"\n[{self.object_name}] trial {k}: place the object at the claw centre, hands clear, ENTER.")
-            keys.wait_for({"enter"})
+            self._wait_keeping_bus_alive({"enter"})
         else:
             logger.info("[%s] trial %d starts in %.1f s", self.object_name, k, self.cfg.unattended_reset_s)
-            time.sleep(self.cfg.unattended_reset_s)
+            self._wait_keeping_bus_alive(None, self.cfg.unattended_reset_s)
         if self.cfg.tare_each_trial and hasattr(self.robot, "tare_forces"):
             self.robot.tare_forces()
         if hasattr(self.robot, "check_health_before_start"):  # a servo near a limit must not start a trial
@@ -182,6 +198,23 @@ class RealGraspEnv(gym.Env):
         obs = self._observe()
         self._returned_at = time.perf_counter()
         return obs, {"is_success": False}
+
+    def _wait_keeping_bus_alive(self, keys: set[str] | None, duration_s: float = 0.0) -> str | None:
+        """Wait for one of `keys` (None: for `duration_s`) with the torque on, holding the pose: the robot's
+        `keep_alive` runs every control period, so its servos' bus watchdog stays armed and fed (a dead host is
+        still stopped by it) instead of tripping on a person's pause."""
+        keep_alive = getattr(self.robot, "keep_alive", None)
+        deadline = time.monotonic() + duration_s
+        while True:
+            if keys is not None:
+                if (key := self.session.keys.wait_for(keys, timeout_s=spec.CONTROL_DT)) is not None:
+                    return key
+            elif (left := deadline - time.monotonic()) > 0:
+                time.sleep(min(left, spec.CONTROL_DT))
+            else:
+                return None
+            if keep_alive is not None:
+                keep_alive()
 
     def step(self, action):
         action = np.asarray(action, dtype=np.float64).reshape(spec.ACTION_DIM)
@@ -228,7 +261,7 @@ class RealGraspEnv(gym.Env):
     def _ask_outcome(self) -> bool:
         # Hold the final pose while the operator answers: the last target stays on the servos.
         print("10 s elapsed. Was the object lifted and held for >= 1 s? press y or n.")
-        return self.session.keys.wait_for(SUCCESS_KEYS | FAILURE_KEYS) in SUCCESS_KEYS
+        return self._wait_keeping_bus_alive(SUCCESS_KEYS | FAILURE_KEYS) in SUCCESS_KEYS
 
     def _log_trial(self, success: bool) -> None:
         who = self._decided[1] if self._decided else "time limit"

@@ -45,19 +45,13 @@ def _teacher_lines(record: dict) -> list[str]:
     t = record.get("teacher") or {}
     if not t:
         return []
-    lines = [
+    return [
         "## Teacher",
         "",
         f"**{t['source']}**: `{t['path']}` (`{t['file']}`, iteration {t['iteration']}, preset "
         f"`{t.get('preset')}`, sha256 `{t['sha256'][:12]}…`).",
+        "",
     ]
-    if t.get("eval_reused_from"):
-        lines.append(
-            f"Its success below is its recorded eval on the same start states (`{t['eval_reused_from']}`)."
-        )
-    elif t.get("eval_rerun_because"):
-        lines.append(f"Its success below was evaluated in this run, on this machine: {t['eval_rerun_because']}.")
-    return lines + [""]
 
 
 def write_report(out: Path, record: dict, bigger: str) -> Path:

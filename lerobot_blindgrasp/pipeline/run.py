@@ -47,7 +47,7 @@ from lerobot_blindgrasp import presets, spec
 from lerobot_blindgrasp.cli import parse_config, sleeping_openmp_threads
 from lerobot_blindgrasp.pipeline import demo_stages, recipe
 from lerobot_blindgrasp.pipeline.stage import COMPLETED, Stage
-from lerobot_blindgrasp.pipeline.teacher_source import reuse_teacher_eval, teacher_for_run
+from lerobot_blindgrasp.pipeline.teacher_source import teacher_for_run
 
 PRESETS = presets.PRESETS  # the registry itself, not a copy
 DEMO_SEED_BLOCK = recipe.DEMO_SEED_BLOCK
@@ -127,16 +127,10 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
 
 
 def _teacher_eval(stage: Stage, preset: presets.Preset, teacher_dir: Path, dest: Path, eval_seed: int) -> None:
-    """The teacher on the student's evaluation start states: its carried eval where that is the paired one."""
-    note = stage.record["teacher"]
+    """The teacher on the student's evaluation start states, evaluated in this run: the paired eval is made on
+    this machine's floats, as the student's is."""
     if stage.done("teacher_eval"):
         stage.skip("teacher_eval", "done")
-    elif reuse_teacher_eval(teacher_dir, dest, preset, eval_seed, recipe.objects_of(preset.evaluation.task), note):
-        stage.skip(
-            "teacher_eval", f"the same start states were evaluated for this teacher in {teacher_dir / 'eval'}"
-        )
-        note["eval_reused_from"] = str(teacher_dir / "eval")
-        stage.complete("teacher_eval")
     else:
         stage.run("teacher_eval", recipe.teacher_eval(preset, teacher_dir, dest, eval_seed))
 

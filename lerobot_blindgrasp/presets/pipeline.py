@@ -131,8 +131,7 @@ CPU_DAGGER = derive(
 # cpu_bc_calib_blind), whose actor sees nothing of the object until 0.3 s of touch and reads its fingertips from the
 # measured joints; its demos are collected with every joint reading off by +-0.05 rad, so they show it grasping
 # through a calibration error the student can be taught to forgive. A shorter student stage at a 5x learning rate,
-# chosen by side-by-side runs (same demos, same seed; docs/research/quick_pipeline.md), with two loader processes
-# next to one torch thread.
+# chosen by side-by-side runs (same demos, same seed), with two loader processes next to one torch thread.
 QUICK_BLIND = derive(
     QUICK,
     "quick_blind",

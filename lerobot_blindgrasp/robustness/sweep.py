@@ -113,7 +113,6 @@ def run(cfg: RobustnessConfig, command: str = "") -> dict:
 
     from lerobot_blindgrasp.robustness.point import run_point
     from lerobot_blindgrasp.rollout.actors import StudentActor
-    from lerobot_blindgrasp.teacher.evaluate import sim_fingerprint
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
     if cfg.threads:
@@ -127,7 +126,6 @@ def run(cfg: RobustnessConfig, command: str = "") -> dict:
         "seed": cfg.seed,
         "student_sha256": _sha256_dir(student_path),
         "teacher_sha256": teacher.sha256,
-        "sim_fingerprint": sim_fingerprint(),
     }
     out = Path(cfg.output_dir)
     (out / "points").mkdir(parents=True, exist_ok=True)

@@ -63,7 +63,7 @@ class ServoParams:
 @dataclass(frozen=True)
 class PhysicsOptions:
     """Solver settings, chosen by a sweep of contact settings against scripted grasps
-    (`scripts/contact_settings_sweep.py`).
+    (`python -m lab.contact_settings_sweep`).
 
     Elliptic cones + noslip (3 iterations) hold a scripted grasp without creep under the paper's gain
     randomization, for ~20 % more step time. impratio = 10, the usual anti-creep knob, made squeezed objects

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_blindgrasp import durable, platform_id, spec
+from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.rollout.actors import TeacherActor
@@ -59,48 +59,6 @@ class EvalTeacherConfig:
     @property
     def mode_names(self) -> tuple[str, ...]:
         return tuple(m.strip() for m in self.modes.split(",") if m.strip())
-
-
-# sim/ modules that no policy episode runs: the scripted grasps (physics checks, cloning targets) and the sim demo
-# CLI. Editing them must not invalidate the recorded evals (a new script once forced the main job to re-evaluate
-# the shipped teacher).
-NOT_IN_EPISODES = ("scripted.py", "viewer.py")
-
-
-def sim_fingerprint(root: Path | None = None) -> str:
-    """sha256 of the code that decides an episode's outcome (sim/ but NOT_IN_EPISODES, and spec.py): an eval
-    recorded under another fingerprint ran other physics, so it is not reused as the paired eval of a new run.
-
-    It hashes each module's syntax tree without docstrings, so that comments, docstrings and formatting, which
-    change no episode, leave it as it is."""
-    import ast
-    import hashlib
-
-    root = root or Path(__file__).resolve().parents[1]  # the package folder
-    h = hashlib.sha256()
-    sources = [
-        p for p in (root / "sim").rglob("*.py") if p.relative_to(root / "sim").as_posix() not in NOT_IN_EPISODES
-    ]
-    for path in sorted([*sources, root / "spec.py"]):
-        h.update(path.relative_to(root).as_posix().encode())
-        h.update(ast.dump(_without_docstrings(ast.parse(path.read_bytes()))).encode())
-    return h.hexdigest()
-
-
-def _without_docstrings(tree):
-    import ast
-
-    for node in ast.walk(tree):
-        body = getattr(node, "body", None)
-        if (
-            isinstance(body, list)
-            and body
-            and isinstance(body[0], ast.Expr)
-            and isinstance(body[0].value, ast.Constant)
-            and isinstance(body[0].value.value, str)
-        ):
-            node.body = body[1:] or [ast.Pass()]
-    return tree
 
 
 def _run_object(teacher: TeacherPolicy, name: str, episodes: int, seed: int, mode: str, reward_cfg) -> tuple:
@@ -164,8 +122,6 @@ def evaluate_teacher(
         }
     results["checkpoint"] = str(teacher.checkpoint)
     results["checkpoint_sha256"] = teacher.sha256
-    results["sim_fingerprint"] = sim_fingerprint()
-    results["platform"] = platform_id.platform()  # floats drift between CPU families: where these were made
     results["iteration"] = teacher.iteration
     return results
 

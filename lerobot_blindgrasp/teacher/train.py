@@ -253,7 +253,7 @@ def update_thread_count(cfg, env) -> int:
 def with_torch_threads(update, threads: int):
     """`update` run with `threads` torch intra-op threads, then back to the acting count. Collection and update
     alternate, so the update may use the cores the physics threads use while collecting: on an idle 2-core
-    machine two threads make the `cpu` preset's update 1.8x faster (`blindgrasp-bench --bench.type=teacher`)."""
+    machine two threads make the `cpu` preset's update 1.8x faster (`python -m lab.bench --bench.type=teacher`)."""
 
     def threaded(*args, **kwargs):
         acting = torch.get_num_threads()

@@ -4,8 +4,10 @@ Model and draws are the sim env's own, not copies of them: the scene is `sim.gri
 object's MJCF; a placement from (seed, object) takes the env seed `sim.gym_env.start_seed(seed, object)` and draws
 the physics (friction, mass, the servos' kp/kv) with `randomization.draw_physics` and the object's start position
 with `randomization.draw_reset`, both under the eval randomization, as `--env.type=blindgrasp` does for the same
-`--seed`. Two things differ, because the real protocol differs: the gripper is wherever the host left it (it homes
-to the start pose before asking for the object), and the sensors are the real ones (encoder ticks, a load cell).
+`--seed`. The joints are wherever the host left them: it drives them to its start pose before asking for the
+object, the paper's home pose by default, or with `--env.start_pose=sim` the sim env's own start pose for the same
+(seed, object) (`envs/real_trial.sim_start_pose`, within the host's home tolerance), which makes the start state the
+sim's whole. The sensors are the real ones (encoder ticks, a load cell).
 
 The servos are the sim's XM430 model (a position actuator with back-EMF damping and a torque limit); what the
 host wrote into each servo's registers sets its target, gain (Position_P_Gain / 800 x the drawn kp), torque limit
@@ -113,6 +115,7 @@ class TwinPhysics:
         # host's peak reading lies between the two.
         self.peak_tip_force_n = np.zeros(spec.NUM_FORCES)
         self.held_tip_force_n = np.zeros(spec.NUM_FORCES)
+        self.q_at_peak = q.copy()  # until a first squeeze: a trial that ends before any substep still has a record
         self._recent_force = np.zeros((2 * self.options.substeps, spec.NUM_FORCES))
         return {
             "object": name,

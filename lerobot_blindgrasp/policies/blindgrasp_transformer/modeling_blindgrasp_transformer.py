@@ -22,7 +22,7 @@ Two forward paths compute the same function:
   last layer only the keys/values of all tokens plus the query, output projection and MLP of the last token, the
   only token the head reads. Exact, also with dropout, because the loss only uses the last token.
 - `BlindgraspGPT.forward_reference`: the plain path, every token through every layer with explicit softmax
-  attention. Kept to check the fast path (tests, `blindgrasp-bench --bench.type=policy`).
+  attention. Kept to check the fast path (tests, `python -m lab.bench --bench.type=policy`).
 """
 
 from __future__ import annotations

@@ -12,8 +12,8 @@ spaces its samples (`timing.py`), and both ports are opened for exclusive use (`
 
 Safety is latched (`latch.py`): any failure while connected turns the torque off on every servo that answers,
 closes the ports and raises one error that says so. The servos' bus watchdog stops them on their own when the host
-goes quiet (`bus_watchdog_ms`), and SIGTERM/SIGHUP unwind the LeRobot scripts like Ctrl-C (`signals.py`).
-The interactive calibration and motor setup are in `interactive.py`.
+goes quiet (`bus_watchdog_ms`; `keepalive.py` feeds it while a trial waits), and SIGTERM/SIGHUP unwind the LeRobot
+scripts like Ctrl-C (`signals.py`). The interactive calibration and motor setup are in `interactive.py`.
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ from .config_blindgrasp_gripper import BlindgraspGripperConfig
 from .episodes import EpisodeStarts
 from .errors import ForceOverloadError, ForceTareError, GripperBusError, GripperSafetyStop
 from .force_sensor import ForceSensorReader
+from .keepalive import BusKeepAlive
 from .latch import SafetyLatch
 from .plausibility import PositionGate
 from .recording_space import recording_from_command_line
@@ -50,7 +51,7 @@ from .timing import PeriodMonitor, SampleSpacing
 logger = logging.getLogger(__name__)
 
 
-class BlindgraspGripper(SafetyLatch, ServoChecks, calib.CheckedCalibrationFile, Robot):
+class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCalibrationFile, Robot):
     """D'Claw-derived three-finger gripper (`--robot.type=blindgrasp_gripper`)."""
 
     config_class = BlindgraspGripperConfig
@@ -267,7 +268,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, calib.CheckedCalibrationFile, 
         refused = None
         with self._safety("taring the force sensors"):
             try:
-                self.force.tare(self.config.force_sensor.tare_s)
+                self._tare_keeping_bus_alive()  # longer than the bus watchdog: the servos hear from us meanwhile
             except ForceTareError as e:  # a refusal stops nothing: the old zero stays, the pose is held
                 refused = e
         self.timing.restart()  # the tare window is not a loop period
