@@ -88,8 +88,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         self.lower = np.asarray(config.joint_lower, dtype=np.float64)
         self.upper = np.asarray(config.joint_upper, dtype=np.float64)
         self._atexit = None
-        # Vision-free by design; lerobot-record and lerobot-rollout still read `robot.cameras`.
-        self.cameras: dict = {}
+        self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
 
     @staticmethod
     def _make_force_reader(fs) -> ForceSensorReader:
