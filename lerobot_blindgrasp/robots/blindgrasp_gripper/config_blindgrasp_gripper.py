@@ -111,7 +111,7 @@ class BlindgraspGripperConfig(RobotConfig):
     # A softer loop (a lower position_p_gain, or the physics twin's Table II draws down to kp x 0.3) yields more.
     plausibility_backdrive_rad: float = 0.3
     # The control loop's rate (lerobot-record --dataset.fps, rollout --fps): get_observation measures its period.
-    # Overrun streaks are named when they start and end; one of max_overrun_s (and >= 5 periods) stops the gripper
+    # Overrun streaks are named when they start and end; one of max_overrun_s (and >= 10 periods) stops the gripper
     # (GripperTimingError): as long as the success rule's hold (1 s), so no hold is judged at another rate and no
     # more than two thirds of the student's 1.5 s context (30 steps) spans a rate it never saw. 0: never stop.
     loop_hz: float = spec.CONTROL_HZ

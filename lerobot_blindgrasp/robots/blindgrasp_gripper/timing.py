@@ -48,7 +48,7 @@ class PeriodMonitor:
     max_overrun_s: float = 1.0  # 0: name the streaks, never stop
     tolerance: float = 0.5
     pause_s: float = 1.0
-    min_overruns: int = 5
+    min_overruns: int = 10
     what: str = "control loop"
     periods: int = 0
     overruns: int = 0
