@@ -63,6 +63,8 @@ class BlindGraspRealEnvConfig(EnvConfig):
     # start pose for the same evaluation index and object (the start pose plus its drawn joint offsets, within
     # +-20 deg), so that a run beside `--env.type=blindgrasp` (the physics twin's) starts like for like.
     start_pose: str = "home"
+    # Python's garbage collector off during each trial's 200 steps and run once after it (`hardware/realtime.py`).
+    pause_gc: bool = True
     # Optional JSON-lines log of every trial (object, index, success, who decided, peak forces).
     trial_log: str | None = None
     # An unattended operator's Unix socket (e.g. blindgrasp-twin's): it places the objects and presses the keys.
@@ -101,6 +103,7 @@ class BlindGraspRealEnvConfig(EnvConfig):
             start_pose=self.start_pose,
             trial_log=self.trial_log,
             operator_socket=self.operator_socket,
+            pause_gc=self.pause_gc,
         )
 
     def check_policy(self) -> None:

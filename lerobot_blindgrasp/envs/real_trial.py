@@ -34,6 +34,7 @@ import numpy as np
 from lerobot_blindgrasp import durable, spaces, spec
 from lerobot_blindgrasp.envs import real_report
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
+from lerobot_blindgrasp.hardware.realtime import GcPause
 from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import Schedule
 from lerobot_blindgrasp.sim import objects, randomization
 from lerobot_blindgrasp.sim.gym_env import start_seed
@@ -58,6 +59,7 @@ class TrialSettings:
     trial_log: str | None
     start_pose: str = "home"  # "home" | "sim": the sim env's start pose for (evaluation index, object)
     operator_socket: str | None = None  # None: the keyboard; else an unattended operator there (envs/operator.py)
+    pause_gc: bool = True  # no garbage collection inside a trial; one after it
 
 
 def sim_start_pose(object_name: str, eval_index: int) -> np.ndarray:
@@ -124,6 +126,7 @@ class RealGraspEnv(gym.Env):
         self.action_space = spaces.action_space()
         self._max_episode_steps = int(round(self.cfg.episode_s * spec.CONTROL_HZ))
         self._obs = np.zeros(spec.STATE_DIM, dtype=np.float32)
+        self._gc = GcPause()
         self._reset_trial_state()
 
     def _reset_trial_state(self) -> None:
@@ -194,6 +197,8 @@ class RealGraspEnv(gym.Env):
         if self.cfg.success_mode == "operator":
             print("Running (10 s): press 's' once the object is held off the table for 1 s, 'f' to abort.")
         self._overruns_at_start = self._overruns()
+        if self.cfg.pause_gc:
+            self._gc.pause()
         self._schedule.start()  # from the observation's start, as every later period: the first one is 50 ms too
         obs = self._observe()
         self._returned_at = time.perf_counter()
@@ -242,6 +247,7 @@ class RealGraspEnv(gym.Env):
         success = bool(self._decided and self._decided[0])
         if terminated or truncated:
             self._log_trial(success)
+            self._gc.resume()  # between trials, where a collection may take its time
             self.session.keys.clear()  # keys pressed during this trial must not decide the next one
         self._returned_at = time.perf_counter()
         return obs, float(success), terminated, truncated, {"is_success": success}
@@ -303,4 +309,5 @@ class RealGraspEnv(gym.Env):
         return img
 
     def close(self) -> None:
+        self._gc.resume()
         self.session.close()

@@ -85,8 +85,9 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no two samples closer than the contract allows
         self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
         self.episodes = EpisodeStarts()  # lerobot-record's episode announcements (`episodes.py`)
-        self.lower = np.asarray(config.joint_lower, dtype=np.float64)
-        self.upper = np.asarray(config.joint_upper, dtype=np.float64)
+        self.lower, self.upper = (
+            np.asarray(b, dtype=np.float64) for b in (config.joint_lower, config.joint_upper)
+        )
         self._atexit = None
         self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
 
@@ -133,6 +134,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         if calibrate:
             connect_checks.refuse_unattended_calibration(self)  # no file and nobody to answer the prompts
         latency_timer.ensure_low_latency(self.config.port, self.config.force_sensor.port)  # USB adapters at 1 ms
+        self.host_setup = connect_checks.prepare_host(self)  # before any thread starts: threads inherit it
         with self._safety("connecting"):
             self.expected = {}
             self.gate.forget()

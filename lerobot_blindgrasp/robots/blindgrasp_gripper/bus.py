@@ -23,6 +23,7 @@ reused, not rewritten), `_assert_motors_exist`, `read_calibration`/`write_calibr
 from __future__ import annotations
 
 import logging
+import select
 import termios
 import time
 
@@ -48,6 +49,9 @@ from .ports import PortAccessError, PortInUseError, open_exclusive
 logger = logging.getLogger(__name__)
 
 _OS_ERRORS = (OSError, termios.error)  # serial.SerialException subclasses OSError; termios.error does not
+READ_IDLE_S = (
+    0.001  # longest wait for a reply's next byte between two polls of the SDK (its timeout: 2 ms and more)
+)
 ALERT_BIT = 0x80  # status-packet error byte: "hardware error, see Hardware_Error_Status"; the instruction worked
 
 
@@ -104,7 +108,13 @@ class FlushingPortHandler(PortHandler):
 
     def readPort(self, length):
         try:
-            return self.ser.read(length)
+            data = self.ser.read(length)
+            if not data:
+                # The SDK calls this in a loop until its reply timeout: wait for a byte (at most READ_IDLE_S) instead
+                # of spinning, so a control thread at a real-time priority leaves the CPU to the kernel's tty work
+                # at normal priority, which is what delivers the reply.
+                select.select([self.ser.fileno()], [], [], READ_IDLE_S)
+            return data
         except _OS_ERRORS as e:
             raise self._lost("read", e) from e
 

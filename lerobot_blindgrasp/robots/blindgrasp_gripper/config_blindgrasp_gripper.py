@@ -116,6 +116,12 @@ class BlindgraspGripperConfig(RobotConfig):
     # more than two thirds of the student's 1.5 s context (30 steps) spans a rate it never saw. 0: never stop.
     loop_hz: float = spec.CONTROL_HZ
     max_overrun_s: float = spec.SUCCESS_HOLD_S
+    # The host's control thread (`hardware/realtime.py`), set at connect: > 0 runs it SCHED_FIFO at this priority
+    # (1-99; the force reader's and torch's threads started after it inherit it), so background work on the PC does
+    # not delay a period; lock_memory keeps the process's memory in RAM (mlockall). Both need a permission the
+    # kernel may refuse (docs/hardware.md, "The host PC"): a refusal is a warning that says how to allow it.
+    realtime_priority: int = 0
+    lock_memory: bool = False
     # Servo health (`health.py`): the health block (temperature, input voltage, current) is read every this many
     # control periods; its levels are the datasheet's (`hardware/xm430.py`).
     health_every_n: int = 4
@@ -158,6 +164,8 @@ class BlindgraspGripperConfig(RobotConfig):
             raise ValueError("health_every_n must be in [1, 100] control periods")
         if not (self.loop_hz > 0 and self.max_overrun_s >= 0):
             raise ValueError("need loop_hz > 0 and max_overrun_s >= 0")
+        if not 0 <= self.realtime_priority <= 99:
+            raise ValueError("realtime_priority must be in [0, 99] (0: normal scheduling)")
         if self.bus_watchdog_ms % 20 or not 0 <= self.bus_watchdog_ms <= 127 * 20:
             raise ValueError("bus_watchdog_ms must be a multiple of 20 in [0, 2540] (0 disables the watchdog)")
         if not 1 <= self.latency_timer_ms <= 500:

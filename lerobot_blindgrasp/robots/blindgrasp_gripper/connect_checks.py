@@ -1,4 +1,5 @@
-"""What connect() decides before it opens a port: whether a missing calibration may be made now.
+"""What connect() decides before it opens a port: whether a missing calibration may be made now, and the control
+thread's scheduling and memory (`prepare_host`).
 
 LeRobot's robots calibrate interactively inside `connect()` when no calibration file exists (koch_follower does).
 That is right for `lerobot-teleoperate` or `lerobot-record` at a terminal, where the operator reads the prompt.
@@ -13,6 +14,8 @@ from __future__ import annotations
 import builtins
 import sys
 from pathlib import Path
+
+from lerobot_blindgrasp.hardware import realtime
 
 from . import force_calibration
 from .calibration import CalibrationFileError
@@ -50,3 +53,10 @@ def refuse_unattended_calibration(robot) -> None:
         f"terminal to calibrate it now (stdin is not a terminal). Nothing was moved.{hint} To calibrate, run "
         f'lerobot-calibrate --robot="include robot_configs/blindgrasp_gripper.yaml" --robot.id={robot.id}'
     )
+
+
+def prepare_host(robot) -> dict[str, str]:
+    """`realtime_priority` and `lock_memory` of the robot's config (`hardware/realtime.py`), applied to the calling
+    thread: call it before the robot starts a thread, since threads inherit the scheduling of the one that starts
+    them. Returns what the kernel granted."""
+    return realtime.prepare_host(robot.config)
