@@ -85,9 +85,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no two samples closer than the contract allows
         self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
         self.episodes = EpisodeStarts()  # lerobot-record's episode announcements (`episodes.py`)
-        self.lower, self.upper = (
-            np.asarray(b, dtype=np.float64) for b in (config.joint_lower, config.joint_upper)
-        )
+        self.lower, self.upper = np.asarray([config.joint_lower, config.joint_upper], dtype=np.float64)
         self._atexit = None
         self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
 
