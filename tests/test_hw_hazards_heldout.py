@@ -46,13 +46,14 @@ def _block(temp=35, volts=12.0, current=0) -> dict:
                        "Present_Current": current & 0xFFFF}}  # fmt: skip
 
 
-def test_a_cleared_shutdown_register_is_named_at_connect(rig, tmp_path, monkeypatch, caplog):
-    """Shutdown(63) = 0 (a tool wrote it): the firmware would never drop the torque itself. Warned, by joint."""
+def test_a_cleared_shutdown_register_is_restored_at_connect(rig, tmp_path, monkeypatch, caplog):
+    """Shutdown(63) = 0 (a tool wrote it): the firmware would never drop the torque itself. Restored, named."""
     rig.servo("mf_j22").set("Shutdown", 0)
     with caplog.at_level(logging.WARNING):
         robot = _connect(rig, tmp_path, monkeypatch)
     robot.disconnect()
-    assert "mf_j22: Shutdown(63) = 0x00 lacks overheating, electrical shock, overload" in caplog.text
+    assert "mf_j22 Shutdown 0 -> 52" in caplog.text
+    assert rig.servo("mf_j22").get("Shutdown") == 0x34
 
 
 def test_the_margins_follow_the_servos_own_temperature_limit(rig, tmp_path, monkeypatch):

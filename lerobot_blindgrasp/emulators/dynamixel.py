@@ -18,7 +18,9 @@ wrong positions with a valid CRC (`position_glitch`), stray late status packets 
 the alert bit), a servo reset (brown-out: RAM back to factory values, torque off, no error bit), two servos on one
 ID (`add_twin`: their replies collide on the line), from `PtyDevice`, an unplugged USB adapter, and
 (`servo_health.py`, one model per servo and one `supply` per bus) a hot servo, a heating servo, a weak or sagging
-supply and the firmware's overheating, voltage and overload errors.
+supply and the firmware's overheating, voltage and overload errors; per servo (`dynamixel_servo.py`), a stripped
+gear (`stripped`), a current reported with its sign flipped (`current_sign`), a Present_Position frozen while the shaft
+moves (`frozen_position`) and registers that acknowledge a write but keep their value (`unwritable`).
 """
 
 from __future__ import annotations
@@ -330,6 +332,8 @@ class DynamixelBusEmulator(PtyDevice):
         for name, _ in touched:
             if name == "Torque_Enable" and staged.get(name) == 1 and servo.get("Hardware_Error_Status"):
                 continue  # the firmware refuses torque until a reboot clears the error
+            if name in servo.unwritable:
+                continue
             servo.set(name, staged.get(name))
             if name == "Torque_Enable" and staged.get(name) == 1:
                 servo.velocity = 0.0

@@ -20,6 +20,7 @@ from lerobot_blindgrasp.emulators.servo_health import ServoHealthModel
 NO_LOAD_SPEED_TICKS_S = 46.0 / 60.0 * 4096  # 46 rpm at 12 V
 VELOCITY_UNIT_RPM = 0.229
 SLEW_TAU_S = 0.03  # time constant of the emulated position loop
+NO_LOAD_CURRENT_UNITS = 45  # 0.12 A at 12 V, 2.69 mA per unit
 
 
 class ShaftDynamics(Protocol):
@@ -45,6 +46,13 @@ class EmulatedServo:
     dynamics: ShaftDynamics | None = None
     # Temperature, input voltage and the firmware's shutdowns for them (`servo_health.py`); faults injected there.
     health: ServoHealthModel = field(default_factory=ServoHealthModel)
+    # Drive faults: a stripped gear (the motor spins at its no-load current, the output shaft stays), a current
+    # reported with its sign flipped, and a Present_Position that stays at one value while the shaft moves.
+    stripped: bool = False
+    current_sign: int = 1
+    frozen_position: int | None = None
+    # Registers that acknowledge a write but keep their old value (a worn EEPROM cell).
+    unwritable: set = field(default_factory=set)
 
     def __post_init__(self) -> None:
         for name, value in DEFAULTS.items():
@@ -82,8 +90,11 @@ class EmulatedServo:
             self.watchdog_tripped_at = now
 
     def step(self, dt: float) -> None:
-        current = self._first_order(dt) if self.dynamics is None else self.dynamics.advance(self, dt)
-        self._publish(current)
+        if self.stripped:
+            current = self._spinning_free()
+        else:
+            current = self._first_order(dt) if self.dynamics is None else self.dynamics.advance(self, dt)
+        self._publish(self.current_sign * current)
         self.health.step(self, dt)
 
     def _publish(self, current: float) -> None:
@@ -91,8 +102,18 @@ class EmulatedServo:
         self.set("Present_Current", int(current))
         rpm = self.velocity * self.direction / 4096 * 60.0
         self.set("Present_Velocity", int(rpm / VELOCITY_UNIT_RPM))
-        self.set("Present_Position", self.present_position())
+        frozen = self.frozen_position
+        self.set("Present_Position", self.present_position() if frozen is None else frozen)
         self.set("Moving", int(abs(self.velocity) > 1.0))
+
+    def _spinning_free(self) -> float:
+        """A stripped gear: the output shaft (and its encoder) stays; the motor behind it spins at its no-load
+        current (0.12 A at 12 V) in the direction of the goal."""
+        self.velocity = 0.0
+        if self.get("Torque_Enable") != 1:
+            return 0.0
+        error = (self.position_for(self.get("Goal_Position")) - self.shaft) * self.direction
+        return math.copysign(NO_LOAD_CURRENT_UNITS, error) if abs(error) > 1 else 0.0
 
     def _first_order(self, dt: float) -> float:
         """Slew the shaft toward the goal over dt; returns Present_Current (units, servo frame)."""

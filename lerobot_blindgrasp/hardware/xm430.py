@@ -66,6 +66,17 @@ MIN_VOLTAGE_LIMIT_DEFAULT_V = 9.5  # Min_Voltage_Limit(34) factory value (95)
 RATED_VOLTAGE_V = (10.0, 14.8)  # operating voltage range of the XM430-W350 (recommended 12.0 V)
 RECOMMENDED_VOLTAGE_V = 12.0
 SHUTDOWN_DEFAULT = 0x34  # Shutdown(63): overheating | electrical shock | overload turn the torque off
+# The EEPROM registers whose only job is to protect a servo while no host watches it (hung, killed, unplugged: the case
+# the Bus_Watchdog stops it for, after which only the firmware acts). Verified at every connect and restored to these
+# values, or the connect is refused naming the register (`servo_checks.py`); Current_Limit joins them with the
+# configured current limit. The factory values, which the sim's servo model and the health levels assume.
+NO_HOST_PROTECTION = {
+    "Shutdown": SHUTDOWN_DEFAULT,  # which hardware errors drop the torque by themselves
+    "Temperature_Limit": TEMPERATURE_LIMIT_DEFAULT_C,  # the overheating error's threshold
+    "Max_Voltage_Limit": round(MAX_VOLTAGE_LIMIT_DEFAULT_V / VOLTAGE_UNIT_V),  # the input-voltage error's window
+    "Min_Voltage_Limit": round(MIN_VOLTAGE_LIMIT_DEFAULT_V / VOLTAGE_UNIT_V),
+    "PWM_Limit": 885,  # the motor's voltage cap: its torque and speed with or without a host (100 %)
+}
 # Hardware_Error_Status bits that the firmware also sets in Shutdown's sense (bit 0x01 input voltage is flagged but,
 # with the factory Shutdown 0x34, does NOT turn the torque off: a sagging supply runs on until the MCU browns out).
 

@@ -85,8 +85,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no two samples closer than the contract allows
         self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
         self.episodes = EpisodeStarts()  # lerobot-record's episode announcements (`episodes.py`)
-        self.lower = np.asarray(config.joint_lower, dtype=np.float64)
-        self.upper = np.asarray(config.joint_upper, dtype=np.float64)
+        self.lower, self.upper = np.asarray([config.joint_lower, config.joint_upper], dtype=np.float64)
         self._atexit = None
         self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
 
@@ -287,6 +286,7 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
             q = self._read_q()
             forces = self.force.read()
             self.spacing.after_read(started, time.monotonic())
+            self._check_consistency(q, forces)
             over = np.abs(forces) > self.config.force_sensor.overload_n
             if over.any():
                 tips = {spec.FORCE_SENSOR_NAMES[i]: round(float(forces[i]), 2) for i in np.flatnonzero(over)}

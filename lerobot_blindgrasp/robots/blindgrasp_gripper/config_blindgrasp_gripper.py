@@ -111,11 +111,11 @@ class BlindgraspGripperConfig(RobotConfig):
     # A softer loop (a lower position_p_gain, or the physics twin's Table II draws down to kp x 0.3) yields more.
     plausibility_backdrive_rad: float = 0.3
     # The control loop's rate (lerobot-record --dataset.fps, rollout --fps): get_observation measures its period.
-    # Overruns are counted and warned; overruns back to back for max_overrun_s (and >= 10 periods) stop the gripper
-    # (GripperTimingError).
-    # 0 disables the stop (still counted and warned).
+    # Overrun streaks are named when they start and end; one of max_overrun_s (and >= 10 periods) stops the gripper
+    # (GripperTimingError): as long as the success rule's hold (1 s), so no hold is judged at another rate and no
+    # more than two thirds of the student's 1.5 s context (30 steps) spans a rate it never saw. 0: never stop.
     loop_hz: float = spec.CONTROL_HZ
-    max_overrun_s: float = 2.0
+    max_overrun_s: float = spec.SUCCESS_HOLD_S
     # The host's control thread (`hardware/realtime.py`), set at connect: > 0 runs it SCHED_FIFO at this priority
     # (1-99; the force reader's and torch's threads started after it inherit it), so background work on the PC does
     # not delay a period; lock_memory keeps the process's memory in RAM (mlockall). Both need a permission the

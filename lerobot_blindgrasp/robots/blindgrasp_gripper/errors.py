@@ -55,6 +55,16 @@ class GripperHealthError(GripperSafetyStop):
     too close to its limit to start a trial or episode (`health.py`): stopped before the firmware's own shutdown."""
 
 
+class GripperConsistencyError(GripperSafetyStop):
+    """Two inputs that see the same physics disagree beyond what physics allows (`consistency.py`): a fingertip force
+    its finger's servos do not hold, or a servo that does not drive its joint toward the goal."""
+
+
+class GripperProtectionError(GripperSafetyStop):
+    """A register that protects a servo while no host watches it (Shutdown, Temperature_Limit, the voltage window,
+    PWM_Limit, Current_Limit) could not be restored to its configured value: refused at connect."""
+
+
 class GripperFirmwareError(GripperSafetyStop):
     """A servo's firmware is older than a defence needs (Drive_Mode and Bus_Watchdog: v38); refused at connect."""
 

@@ -38,6 +38,7 @@ LIMITS_READ = (
     "Temperature_Limit",
     "Max_Voltage_Limit",
     "Min_Voltage_Limit",
+    "PWM_Limit",
     "Current_Limit",
     "Startup_Configuration",
     "Shutdown",
@@ -75,19 +76,10 @@ class ServoHealth:
         self._stall_since.clear()
         self._sag_since.clear()
 
-    def set_limits(self, eeprom: dict[str, dict[str, int]]) -> list[str]:
-        """The servos' own limits (LIMITS_READ per joint); returns warnings about settings that weaken the firmware's
-        own protection."""
-        notes = []
+    def set_limits(self, eeprom: dict[str, dict[str, int]]) -> None:
+        """The servos' own Temperature_Limit (LIMITS_READ per joint), which the temperature levels are relative to."""
         for j, regs in eeprom.items():
             self.temperature_limit_c[j] = regs["Temperature_Limit"] * xm430.TEMPERATURE_UNIT_C
-            missing = xm430.SHUTDOWN_DEFAULT & ~regs["Shutdown"]
-            if missing:
-                notes.append(
-                    f"{j}: Shutdown(63) = {regs['Shutdown']:#04x} lacks {xm430.decode_hardware_error(missing)}"
-                    f" (factory {xm430.SHUTDOWN_DEFAULT:#04x}): the firmware will not stop that servo itself"
-                )
-        return notes
 
     # --- the three items ---------------------------------------------------------------------------------------
     def _temperature(self, j: str, t: float, now: float) -> Diagnostic:
@@ -149,7 +141,7 @@ class ServoHealth:
             regs = block[j]
             out.append(self._temperature(j, regs["Present_Temperature"] * xm430.TEMPERATURE_UNIT_C, now))
             out.append(self._voltage(j, xm430.voltage_v(regs["Present_Input_Voltage"]), now))
-            out.append(self._current(j, _signed16(regs["Present_Current"]), limit_units, now))
+            out.append(self._current(j, signed16(regs["Present_Current"]), limit_units, now))
         for d in out:
             key = (d.joint, d.item)
             if d.level != self._reported.get(key, OK) and d.level >= WARN:
@@ -202,7 +194,7 @@ def levels_table() -> str:
     return "\n".join("| " + " | ".join(r) + " |" for r in rows)
 
 
-def _signed16(value: int) -> int:
+def signed16(value: int) -> int:
     """Present_Current is a signed 2-byte register; LeRobot's raw reads return it unsigned."""
     return value - 0x10000 if value >= 0x8000 else value
 

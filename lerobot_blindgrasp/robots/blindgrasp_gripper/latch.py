@@ -126,6 +126,7 @@ class SafetyLatch:
 
     def _stop(self) -> list[int]:
         """Latched stop: torque off, then close both ports."""
+        logger.info("%s %s", self, self.consistency.report())  # the margins of the consistency checks, per session
         unconfirmed = list(self.config.servo_ids)
         with signals.deferred():  # a second Ctrl-C or SIGTERM must not cut the torque-off short
             if self.bus.is_connected:

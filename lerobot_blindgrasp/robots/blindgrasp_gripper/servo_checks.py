@@ -4,7 +4,9 @@ period, and their health at a rate that fits the bus budget, with a stricter che
 - At connect, before anything is written: Firmware_Version(6) (Drive_Mode and Bus_Watchdog need v38), the EEPROM
   limits Temperature_Limit(31)..Shutdown(63) (`health.set_limits`), Startup_Configuration(60) (v45+: a servo set
   to turn its torque on at power-up is set back at configure, so a reset still shows as a dropped torque), then
-  the start check of `health.py`.
+  the start check of `health.py`. The registers that protect a servo when no host watches it
+  (`xm430.NO_HOST_PROTECTION` and Current_Limit) are restored at configure, with the torque off, and read back: one
+  that does not keep its value refuses the connect (`GripperProtectionError`), naming it.
 - Every control period: the state block of `servo_state.py` (hardware errors, a reset, a tripped watchdog).
 - Every `health_every_n` periods, whoever calls (get_observation, or send_action alone as in a replay script): the
   health block, judged by `health.py`. A start (connect, a trial, an announced recording episode, a loop resuming after a
@@ -21,7 +23,16 @@ from lerobot.utils.decorators import check_if_not_connected
 from lerobot_blindgrasp.hardware import xm430
 
 from . import health, servo_state
-from .errors import GripperFirmwareError, GripperHardwareError, GripperHealthError, GripperStateError
+from .calibration import ticks_to_rad
+from .consistency import ConsistencyError, ConsistencyMonitor
+from .errors import (
+    GripperConsistencyError,
+    GripperFirmwareError,
+    GripperHardwareError,
+    GripperHealthError,
+    GripperProtectionError,
+    GripperStateError,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -33,7 +44,16 @@ class ServoChecks:
     _startup_torque_on: dict[str, int]  # joint -> its Startup_Configuration, for those with Startup Torque On
     _health_countdown = 0
     _last_call: float | None = None
+    _fresh_currents: list[int] | None = None  # Present_Current of the health read of this period, not yet judged
     recording = None  # `recording_space.RecordingSpace` of the dataset being recorded, set at connect
+    _consistency: ConsistencyMonitor | None = None
+
+    @property
+    def consistency(self) -> ConsistencyMonitor:
+        """Tip forces against the servos, commands against motion (`consistency.py`); kp follows the P gain."""
+        if self._consistency is None:
+            self._consistency = ConsistencyMonitor.at_p_gain(self.config.position_p_gain)
+        return self._consistency
 
     # --- at connect ----------------------------------------------------------------------------------------------
     def _check_servo_setup(self) -> None:
@@ -47,8 +67,7 @@ class ServoChecks:
             )
         eeprom = self.bus.read_block(*health.LIMITS_BLOCK, health.LIMITS_READ)
         self.health.reset()
-        for note in self.health.set_limits(eeprom):
-            logger.warning("%s", note)
+        self.health.set_limits(eeprom)
         self._startup_torque_on = {
             j: eeprom[j]["Startup_Configuration"]
             for j in self.joints
@@ -69,6 +88,34 @@ class ServoChecks:
                 "gripper would stiffen at power-up. Cleared it (EEPROM).", sorted(self._startup_torque_on)
             )  # fmt: skip
         self._startup_torque_on = {}
+        self._restore_protection()
+
+    def _protection(self) -> dict[str, int]:
+        current = xm430.amps_to_current_units(self.config.current_limit_a)
+        return {**xm430.NO_HOST_PROTECTION, "Current_Limit": current}
+
+    def _restore_protection(self) -> None:
+        """The no-host protection registers to their configured values (torque off, EEPROM writable), then read back:
+        what a servo does not keep refuses the connect."""
+        want = self._protection()
+        eeprom = self.bus.read_block(*health.LIMITS_BLOCK, health.LIMITS_READ)
+        wrong = [(j, r, eeprom[j][r]) for j in self.joints for r in want if eeprom[j][r] != want[r]]
+        for j, reg, _ in wrong:
+            self.bus.write(reg, j, want[reg])
+        if wrong:
+            logger.warning("Restored the servos' no-host protection (EEPROM): %s. A tool or a previous session changed "
+                           "it; with no host running, the firmware is the only protection.",
+                           "; ".join(f"{j} {r} {have} -> {want[r]}" for j, r, have in wrong))  # fmt: skip
+            eeprom = self.bus.read_block(*health.LIMITS_BLOCK, health.LIMITS_READ)
+            self.health.set_limits(eeprom)
+        kept = [f"{j} (ID {self.bus.motors[j].id}) {r} = {eeprom[j][r]} (configured {want[r]})"
+                for j in self.joints for r in want if eeprom[j][r] != want[r]]  # fmt: skip
+        if kept:
+            raise GripperProtectionError(
+                f"Servo registers that protect the gripper when no host is running did not keep their configured "
+                f"value: {'; '.join(kept)}. Check them with DYNAMIXEL Wizard 2.0 (a failing EEPROM, a servo of "
+                "another model); the gripper is not used without them."
+            )
 
     # --- every period --------------------------------------------------------------------------------------------
     def _check_servo_state(self) -> None:
@@ -146,6 +193,7 @@ class ServoChecks:
         """One sync read of the health block; ERROR stops (torque off by the latch), and at a start anything too
         close to its limit refuses it."""
         block = self.bus.read_block(*health.BLOCK, health.READ)
+        self._fresh_currents = [health.signed16(block[j]["Present_Current"]) for j in self.joints]
         found = self.health.assess(block, self.expected.get("Goal_Current"), time.monotonic())
         errors = [str(d) for d in found if d.level == health.ERROR]
         if start and (close := self.health.start_problems(block) + errors):
@@ -153,6 +201,18 @@ class ServoChecks:
         if errors:
             raise GripperHealthError(f"Servo health: {'; '.join(errors)}. Stopped before the firmware's own "
                                      "shutdown would drop the object.")  # fmt: skip
+
+    def _check_consistency(self, q, forces) -> None:
+        """After a period's readings, when its health read brought currents: the force and the motion checks of
+        `consistency.py` (ConsistencyError becomes a named stop, torque off by the latch)."""
+        currents, self._fresh_currents = self._fresh_currents, None
+        if currents is None:
+            return
+        goal = None if self.gate.goal is None or not self.expected else [ticks_to_rad(t) for t in self.gate.goal]
+        try:
+            self.consistency.assess(time.monotonic(), q, goal, forces, currents, self.expected.get("Goal_Current"))
+        except ConsistencyError as e:
+            raise GripperConsistencyError(f"Inputs disagree: {e}") from e
 
     @check_if_not_connected
     def check_health_before_start(self) -> None:

@@ -2,11 +2,13 @@
 
 `PeriodMonitor` measures the period of whatever loop calls it once per step: the robot ticks it in every
 `get_observation`, so lerobot-record, lerobot-rollout and the real eval env are all measured, whoever's loop it is.
-A period over `(1 + tolerance)` times the nominal one is an overrun: counted and warned (the first, then every
-`warn_every`-th). Overruns back to back for `max_overrun_s` and at least `min_overruns` periods are a sustained
-overrun (`LoopOverrunError`; the count keeps a few deliberately slow steps, e.g. a script that waits between calls,
-from looking sustained): the data would no longer come at the rate the policy and the dataset assume. A gap of `pause_s` or more is a pause of the
-loop (a dataset save, an operator prompt), not an overrun.
+A period over `(1 + tolerance)` times the nominal one is an overrun. Overruns back to back are a streak, named as it
+happens: one warning when it starts and one when it ends (its length in periods and seconds, its worst period), so a
+second stall after a first is heard too. A streak of `max_overrun_s` and at least `min_overruns` periods stops
+(`LoopOverrunError`): the data no longer come at the rate the policy and the dataset assume, and the policy's hold
+(the success rule's 1 s) would be judged at another rate; the count keeps a few deliberately slow steps (a script
+that waits between calls) from stopping. A gap of `pause_s` or more is a pause of the loop (a dataset save, an
+operator prompt), not an overrun: it ends a streak.
 
 `SampleSpacing` keeps any loop's samples at least 0.9 period apart: the robot holds a read back when the previous
 one ended too recently (after a slow read), so no loop takes two samples a few ms apart for two periods.
@@ -31,25 +33,44 @@ class LoopOverrunError(RuntimeError):
 
 
 @dataclass
+class Streak:
+    """A run of overruns back to back."""
+
+    start: float  # when its first slow period ended (monotonic s)
+    periods: int = 0
+    seconds: float = 0.0
+    worst_s: float = 0.0
+
+
+@dataclass
 class PeriodMonitor:
     period_s: float
-    max_overrun_s: float = 2.0  # 0: count and warn only
+    max_overrun_s: float = 1.0  # 0: name the streaks, never stop
     tolerance: float = 0.5
     pause_s: float = 1.0
     min_overruns: int = 10
-    warn_every: int = 20
     what: str = "control loop"
     periods: int = 0
     overruns: int = 0
     worst_s: float = 0.0
     recent: deque = field(default_factory=lambda: deque(maxlen=200))  # the last periods measured (s)
+    streaks: deque = field(default_factory=lambda: deque(maxlen=100))  # the last streaks that ended
+    streak: Streak | None = None  # the streak under way
     _last: float | None = None
-    _streak_s: float = 0.0
-    _streak_n: int = 0
 
     def restart(self) -> None:
         """The next tick starts a new measurement (after a deliberate non-loop operation: connect, tare)."""
-        self._last, self._streak_s, self._streak_n = None, 0.0, 0
+        self._end_streak("the loop restarted")
+        self._last = None
+
+    def _end_streak(self, why: str) -> None:
+        s, self.streak = self.streak, None
+        if s is None:
+            return
+        self.streaks.append(s)
+        logger.warning("%s: slow streak ended (%s) after %d periods, %.2f s (about %.1f Hz instead of %.0f Hz), "
+                       "worst period %.0f ms.", self.what, why, s.periods, s.seconds, s.periods / s.seconds,
+                       1 / self.period_s, s.worst_s * 1e3)  # fmt: skip
 
     def tick(self, now: float | None = None) -> float | None:
         """Call once per loop step; returns the period just measured (None on the first tick or after a pause)."""
@@ -59,28 +80,29 @@ class PeriodMonitor:
             return None
         period = now - last
         if period >= self.pause_s:
-            self._streak_s, self._streak_n = 0.0, 0
+            self._end_streak(f"a pause of {period:.1f} s")
             return None
         self.periods += 1
         self.recent.append(period)
         if period <= self.period_s * (1.0 + self.tolerance):
-            self._streak_s, self._streak_n = 0.0, 0
+            self._end_streak(f"a {period * 1e3:.0f} ms period")
             return period
         self.overruns += 1
-        self._streak_s += period
-        self._streak_n += 1
         self.worst_s = max(self.worst_s, period)
-        if self.overruns == 1 or self.overruns % self.warn_every == 0:
-            logger.warning("%s overran its %.0f ms period: %.0f ms (%d of %d periods so far, worst %.0f ms).",
-                           self.what, self.period_s * 1e3, period * 1e3, self.overruns, self.periods,
-                           self.worst_s * 1e3)  # fmt: skip
-        if self.max_overrun_s and self._streak_s >= self.max_overrun_s and self._streak_n >= self.min_overruns:
-            rate = self._streak_n / self._streak_s
+        if self.streak is None:
+            self.streak = Streak(start=now)
+            logger.warning("%s: slow streak started: a %.0f ms period (nominal %.0f ms; %d overruns in %d periods "
+                           "so far).", self.what, period * 1e3, self.period_s * 1e3, self.overruns,
+                           self.periods)  # fmt: skip
+        s = self.streak
+        s.periods, s.seconds, s.worst_s = s.periods + 1, s.seconds + period, max(s.worst_s, period)
+        if self.max_overrun_s and s.seconds >= self.max_overrun_s and s.periods >= self.min_overruns:
+            self._end_streak("stopped")
             raise LoopOverrunError(
-                f"The {self.what} has overrun its {self.period_s * 1e3:.0f} ms period for {self._streak_s:.1f} s "
-                f"in a row (last period {period * 1e3:.0f} ms, about {rate:.1f} Hz instead of "
-                f"{1 / self.period_s:.0f} Hz; {self.overruns} overruns in {self.periods} periods). A slow bus "
-                "(latency_timer_ms, USB hub), a loaded host or a slow policy: fix it, or lower the rate and set "
+                f"The {self.what} has overrun its {self.period_s * 1e3:.0f} ms period for {s.seconds:.1f} s "
+                f"in a row ({s.periods} periods, worst {s.worst_s * 1e3:.0f} ms, about {s.periods / s.seconds:.1f} Hz "
+                f"instead of {1 / self.period_s:.0f} Hz; {self.overruns} overruns in {self.periods} periods). A slow "
+                "bus (latency_timer_ms, USB hub), a loaded host or a slow policy: fix it, or lower the rate and set "
                 "loop_hz to match."
             )
         return period
