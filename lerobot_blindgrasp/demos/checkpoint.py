@@ -14,8 +14,8 @@ from the metadata LeRobot already holds in memory: the last episode's file indic
 LeRobot's writer has the fields it expects and falls back to `LeRobotDataset.resume` otherwise.
 
 LeRobot's own metadata files (info.json, stats.json, tasks.parquet) are rewritten in place after every episode;
-`compat.atomic_lerobot_metadata` makes those writes atomic while a collection runs, so a kill during one cannot leave a
-truncated info.json (the one file the repair cannot re-derive). They are not fsynced per episode (two fsyncs per
+`compat.atomic_lerobot_metadata` makes those writes atomic while a collection runs, so a kill during one cannot
+leave a truncated info.json (the one file the repair cannot re-derive). They are not fsynced per episode (two fsyncs per
 episode cost more than the episode on a busy disk); each checkpoint fsyncs what changed since the last one, so a
 power cut, too, loses at most the episodes since the last checkpoint.
 """
