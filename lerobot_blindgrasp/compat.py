@@ -11,6 +11,9 @@ manager here, and nowhere else in the package (`tests/test_compat.py` scans for 
 - `cli_policy_path`, `cli_arg`, `set_lerobot_argv`: LeRobot's command line, read or set outside its parser.
 - `set_signal_handler`, `set_excepthook`: process-wide hooks the robot installs while a gripper is connected.
 
+`check()` also covers the dataset writers' private state that the demo collector reads and resets to reopen a
+finalized dataset in place (`demos/checkpoint.py`) or abandon a failed finalize (`demos/collection.py`).
+
 Each was written against LeRobot `WRITTEN_FOR`. `check()` lists what a reach relies on that the installed LeRobot
 no longer has; the first reach used under another LeRobot version logs the version and that list once, as a
 WARNING. A reach whose target is gone degrades to LeRobot's own behaviour, as before.
@@ -32,6 +35,14 @@ from lerobot_blindgrasp import durable
 
 WRITTEN_FOR = "0.6.1"  # the LeRobot release every reach below was read against
 ANNOUNCEMENT = "Recording episode"  # the text of lerobot-record's log_say before every episode
+_WRITER_STATE = ("self._finalized =", "self._pq_writer =", "self._latest_episode =")
+_META_STATE = (
+    "self._finalized =",
+    "self._pq_writer =",
+    "self.latest_episode =",
+    "self._metadata_buffer",
+    "self.episodes =",
+)
 _WRAPPED = "_blindgrasp_compat"  # marks a DatasetReader method this module has wrapped
 logger = logging.getLogger(__name__)
 _warned = False
@@ -94,6 +105,11 @@ def check() -> list[str]:
     problems += _mentions("lerobot.utils.utils", "logging.info(text)")
     problems += _mentions("lerobot.scripts.lerobot_record", f'log_say(f"{ANNOUNCEMENT} {{dataset.num_episodes}}"')
     problems += _has("lerobot.configs.parser", "get_path_arg", "parse_arg")
+    # The writers' private state the demo collector reads and resets (demos/checkpoint.py `reopen_in_place`,
+    # demos/collection.py `_finalize_or_abandon`); both fall back to LeRobot's own path when a field is missing.
+    problems += _mentions("lerobot.datasets.dataset_writer", *_WRITER_STATE)
+    problems += _mentions("lerobot.datasets.dataset_metadata", *_META_STATE)
+    problems += _mentions("lerobot.datasets.lerobot_dataset", "self._is_finalized =", "self.writer =")
     return problems
 
 
