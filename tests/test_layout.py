@@ -18,7 +18,7 @@ LAB = ROOT / "lab"  # benchmarks, the twin's measurement campaign, research diag
 # Floors, bottom first: a folder (or top-level module) may import only from floors below its own.
 FLOORS: tuple[tuple[str, ...], ...] = (
     ("spec", "durable"),
-    ("spaces", "cli", "project"),
+    ("spaces", "cli", "project", "compat"),
     ("shipped", "hardware"),
     ("sim", "policies", "robots"),
     ("results", "presets", "teleoperators", "cards"),

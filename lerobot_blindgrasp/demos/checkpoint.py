@@ -14,15 +14,14 @@ from the metadata LeRobot already holds in memory: the last episode's file indic
 LeRobot's writer has the fields it expects and falls back to `LeRobotDataset.resume` otherwise.
 
 LeRobot's own metadata files (info.json, stats.json, tasks.parquet) are rewritten in place after every episode;
-`atomic_lerobot_metadata` makes those writes atomic while a collection runs, so a kill during one cannot leave a
-truncated info.json (the one file the repair cannot re-derive). They are not fsynced per episode (two fsyncs per
+`compat.atomic_lerobot_metadata` makes those writes atomic while a collection runs, so a kill during one cannot
+leave a truncated info.json (the one file the repair cannot re-derive). They are not fsynced per episode (two fsyncs per
 episode cost more than the episode on a busy disk); each checkpoint fsyncs what changed since the last one, so a
 power cut, too, loses at most the episodes since the last checkpoint.
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import time
 from collections.abc import Callable
@@ -111,32 +110,3 @@ def reopen_in_place(ds) -> bool:
 def _unfinalize(ds) -> bool:
     ds.meta._finalized = ds.writer._finalized = ds._is_finalized = False
     return True
-
-
-@contextlib.contextmanager
-def atomic_lerobot_metadata():
-    """While active, LeRobot's dataset metadata writers (`write_info`, `write_stats` via `write_json`, and
-    `write_tasks`) write atomically. If LeRobot's modules are laid out differently, nothing is changed."""
-    try:
-        from lerobot.datasets import dataset_metadata, io_utils
-    except ImportError:
-        yield
-        return
-    saved = {}
-
-    def write_json(data, fpath):
-        durable.atomic_write_json(fpath, data, fsync=False, indent=4, ensure_ascii=False)
-
-    def write_tasks(tasks, local_dir):
-        with durable.atomic_path(local_dir / "meta" / "tasks.parquet", fsync=False) as tmp:
-            tasks.to_parquet(tmp)
-
-    for module, name, fn in ((io_utils, "write_json", write_json), (dataset_metadata, "write_tasks", write_tasks)):
-        if hasattr(module, name):
-            saved[(module, name)] = getattr(module, name)
-            setattr(module, name, fn)
-    try:
-        yield
-    finally:
-        for (module, name), fn in saved.items():
-            setattr(module, name, fn)

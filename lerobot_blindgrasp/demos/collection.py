@@ -25,7 +25,7 @@ import sys
 import time
 from collections.abc import Callable
 
-from lerobot_blindgrasp import durable, spec
+from lerobot_blindgrasp import compat, durable, spec
 from lerobot_blindgrasp.cli import GracefulStop
 from lerobot_blindgrasp.demos import checkpoint as checkpoint_mod
 from lerobot_blindgrasp.demos import curation as curation_mod
@@ -100,7 +100,7 @@ def collect(
 ) -> CollectStats:
     """Run a collection. Raises CollectError (nothing touched) for bad inputs; any later exception propagates
     after the dataset is finalized and the run is recorded. `command` is recorded as the run's command line."""
-    with checkpoint_mod.atomic_lerobot_metadata():  # LeRobot's info/stats/tasks files, atomically
+    with compat.atomic_lerobot_metadata():  # LeRobot's info/stats/tasks files, atomically
         return _collect(cfg, on_episode, command)
 
 

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.compat import skip_empty_image_embedding
 from lerobot_blindgrasp.demos.curation import CurationResult
 from lerobot_blindgrasp.rollout.loop import RANDOMIZATION_NAMES, Episode
 from lerobot_blindgrasp.sim import objects
@@ -149,42 +150,6 @@ def write_episode(ds, ep: Episode, cut: CurationResult, fast: bool = True) -> in
     with skip_empty_image_embedding() if fast else contextlib.nullcontext():
         ds.save_episode(episode_data=episode_buffer(ep, cut, ds.meta.total_episodes))
     return cut.keep_steps
-
-
-@contextlib.contextmanager
-def skip_empty_image_embedding():
-    """Skip LeRobot's image-embedding pass for episodes that have no image columns.
-
-    `DatasetWriter._save_episode_data` always runs `io_utils.embed_images`, a per-row `datasets.Dataset.map` of
-    `embed_table_storage`, even for state-only datasets. For features that need no embedding (no Image, Video,
-    Audio...) `embed_table_storage` rebuilds each row unchanged, so the pass is pure overhead: about two thirds of
-    `save_episode` for our 100-frame episodes (see `python -m lab.bench --bench.type=demos`). While this context is active, the
-    writer's `embed_images` returns the dataset as is when `datasets`' own `require_storage_embed` says no column
-    needs it, and defers to LeRobot's function otherwise. The written files are identical but for the random
-    cache fingerprint `datasets` stamps into a mapped table's parquet metadata (tests/test_demos_dataset.py checks
-    it). If LeRobot's writer is laid out differently, nothing is changed.
-    """
-    try:
-        from datasets.features.features import require_storage_embed
-        from lerobot.datasets import dataset_writer
-    except ImportError:
-        yield
-        return
-    original = getattr(dataset_writer, "embed_images", None)
-    if original is None:
-        yield
-        return
-
-    def embed_images_if_needed(dataset):
-        if any(require_storage_embed(f) for f in dataset.features.values()):
-            return original(dataset)
-        return dataset
-
-    dataset_writer.embed_images = embed_images_if_needed
-    try:
-        yield
-    finally:
-        dataset_writer.embed_images = original
 
 
 _TASK_TO_OBJECT: dict[str, str] = {}

@@ -18,7 +18,6 @@ features again, so `observation.state` is built with exactly `spec.STATE_NAMES`,
 
 # No `from __future__ import annotations`: LeRobot's parser.wrap reads the config class from the real annotation.
 import logging
-import sys
 
 from lerobot.configs import parser
 from lerobot.configs.types import PipelineFeatureType
@@ -30,7 +29,7 @@ from lerobot.utils.import_utils import register_third_party_plugins
 from lerobot.utils.process import ProcessSignalHandler
 from lerobot.utils.utils import init_logging
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import compat, spec
 from lerobot_blindgrasp.robots.blindgrasp_gripper import policy_check
 
 logger = logging.getLogger(__name__)
@@ -84,8 +83,8 @@ def rollout(cfg: RolloutConfig) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    if argv is not None:  # LeRobot's parser reads the command line from sys.argv
-        sys.argv = [sys.argv[0], *argv]
+    if argv is not None:
+        compat.set_lerobot_argv(argv)
     register_third_party_plugins()
     rollout()
 

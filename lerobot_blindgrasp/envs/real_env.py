@@ -24,7 +24,7 @@ from lerobot.configs import PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.robots.config import RobotConfig
 
-from lerobot_blindgrasp import spaces, spec
+from lerobot_blindgrasp import compat, spaces, spec
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig
 from lerobot_blindgrasp.sim import objects
 
@@ -110,11 +110,9 @@ class BlindGraspRealEnvConfig(EnvConfig):
         """lerobot-eval makes the envs before it loads the policy, and its make_policy would overwrite the
         checkpoint's output features with ours: the checkpoint's own files are checked here, before anything loads
         or moves (`policy_check.py`). The robot checks again at connect."""
-        from lerobot.configs import parser
-
         from lerobot_blindgrasp.robots.blindgrasp_gripper import policy_check
 
-        path = parser.get_path_arg("policy")
+        path = compat.cli_policy_path()
         if path and (where := policy_check.local_checkpoint(path)) is not None:
             contract = policy_check.gripper_contract(self.robot.type, self.fps, "--env.fps")
             allow = getattr(self.robot, "allow_unverified_policy", False)

@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from lerobot_blindgrasp import durable
+from lerobot_blindgrasp import compat, durable
 from lerobot_blindgrasp.cli import parse_config
 
 # A 10 kg (98 N), 1 mV/V cell on an HX711 at gain 128 with 5 V excitation (docs/force_board.md, "Load cell range"):
@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> None:
     cfg = parse_config(TwinConfig, argv)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(sig, lambda *_: stop.set())
+        compat.set_signal_handler(sig, lambda *_: stop.set())
     serve(cfg, stop)
 
 

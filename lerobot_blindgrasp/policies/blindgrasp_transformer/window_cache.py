@@ -9,11 +9,13 @@ torch tensor per process and slices the window from it: the same keys, dtypes, s
 reader, padding flags included (`tests/test_student_data_path.py` compares them).
 
 LeRobot has no hook for a dataset reader, so `install()` (run when the plugin is imported, which `lerobot-train`
-does before it builds the dataset) wraps `DatasetReader.try_load` / `load_and_activate`: a reader that has just
-loaded a dataset the cache can serve exactly becomes a `LowDimWindowReader`. No LeRobot file changes. Served: only
-readers asked for delta-timestamp windows (training), over datasets with no cameras, no language columns and no
-index remapping, whose columns are all integers, floats or booleans (scalars or fixed-length vectors); anything
-else keeps LeRobot's path. The reader's class travels with the dataset into lerobot-train's spawned loader
+does before it builds the dataset) asks `compat.serve_dataset_readers_with` to hand it every reader that has just
+loaded a table: one that has loaded a dataset of this plugin's schema (`ours`: the `observation.state` and `action`
+names of `spec.dataset_features()`, which every blindgrasp dataset, sim or real, carries) that the cache can serve
+exactly becomes a `LowDimWindowReader`. No LeRobot file changes, and every other dataset keeps LeRobot's path,
+whatever policy trains on it. Served: only readers asked for delta-timestamp windows (training), over datasets with
+no cameras, no language columns and no index remapping, whose columns are all integers, floats or booleans
+(scalars or fixed-length vectors); anything else keeps LeRobot's path. The reader's class travels with the dataset into lerobot-train's spawned loader
 processes, and each process builds its cache on its first sample (loader workers persist, so once per run).
 `BLINDGRASP_LOW_DIM_CACHE=0` in the environment when a dataset is loaded keeps LeRobot's path for it, e.g. to time
 the two side by side.
@@ -21,7 +23,6 @@ the two side by side.
 
 from __future__ import annotations
 
-import functools
 import logging
 import os
 
@@ -29,6 +30,8 @@ import numpy as np
 import pyarrow as pa
 import torch
 from lerobot.datasets.dataset_reader import DatasetReader
+
+from lerobot_blindgrasp import compat, spec
 
 ENV_SWITCH = "BLINDGRASP_LOW_DIM_CACHE"
 SERVED_LOG = "windows served from an in-memory low-dim cache"  # logged (INFO) when a reader is upgraded
@@ -151,24 +154,26 @@ def enabled() -> bool:
     return os.environ.get(ENV_SWITCH, "1") != "0"
 
 
-def _upgrade_after(load):
-    @functools.wraps(load)
-    def wrapper(self, *args, **kwargs):
-        result = load(self, *args, **kwargs)
-        if type(self) is DatasetReader and self.hf_dataset is not None and enabled() and servable(self):
-            self.__class__ = LowDimWindowReader
-            logger.info("blindgrasp: %s %s", self.root, SERVED_LOG)
-        elif type(self) is LowDimWindowReader:
-            self.__dict__.pop(_CACHE_ATTR, None)  # reloaded: rebuild from the new table
-        return result
+def ours(meta) -> bool:
+    """Whether a dataset carries this plugin's schema: its state and action names are `spec`'s, in `spec`'s order."""
+    features = getattr(meta, "features", None) or {}
+    return all(
+        isinstance(features.get(key), dict) and list(features[key].get("names") or ()) == list(feature["names"])
+        for key, feature in spec.dataset_features().items()
+    )
 
-    wrapper._blindgrasp_low_dim = True
-    return wrapper
+
+def _choose(reader: DatasetReader) -> type[DatasetReader] | None:
+    """The reader class for a reader that has just loaded its table (None: it stays as it is)."""
+    if type(reader) is LowDimWindowReader:
+        reader.__dict__.pop(_CACHE_ATTR, None)  # reloaded: rebuild from the new table
+    elif type(reader) is DatasetReader and enabled() and ours(reader._meta) and servable(reader):
+        logger.info("blindgrasp: %s %s", reader.root, SERVED_LOG)
+        return LowDimWindowReader
+    return None
 
 
 def install() -> None:
-    """From now on in this process, servable LeRobot readers loaded while `enabled()` are served from the cache."""
-    for name in ("try_load", "load_and_activate"):
-        method = getattr(DatasetReader, name)
-        if not getattr(method, "_blindgrasp_low_dim", False):
-            setattr(DatasetReader, name, _upgrade_after(method))
+    """From now on in this process, servable readers of this plugin's datasets loaded while `enabled()` are served
+    from the cache."""
+    compat.serve_dataset_readers_with(_choose)

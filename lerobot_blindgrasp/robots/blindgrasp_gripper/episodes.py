@@ -2,8 +2,8 @@
 
 LeRobot's Robot interface has no call at an episode's start: lerobot-record goes on calling get_observation and
 send_action through its reset phase and into the next episode. What it does at every episode is announce it: its
-`log_say(f"Recording episode {n}")` logs that line at INFO just before the episode's loop (lerobot_record.py,
-LeRobot 0.6.1), whether or not sounds are on, and its `init_logging` leaves the root logger at NOTSET, so the
+`log_say` logs a line at INFO just before the episode's loop, whether or not sounds are on
+(`compat.is_episode_announcement` recognises it), and its `init_logging` leaves the root logger at NOTSET, so the
 line reaches every root handler. `EpisodeStarts` is one: installed while the gripper is connected, it marks a
 start. The robot also counts a loop that resumes after a pause (a dataset save, an operator prompt, any script that
 waits between runs) as a start.
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 
-ANNOUNCEMENT = "Recording episode"  # lerobot-record's log_say before every episode
+from lerobot_blindgrasp import compat
 
 
 class EpisodeStarts(logging.Handler):
@@ -24,7 +24,7 @@ class EpisodeStarts(logging.Handler):
         self._pending = False
 
     def emit(self, record: logging.LogRecord) -> None:
-        if record.funcName == "log_say" and isinstance(record.msg, str) and record.msg.startswith(ANNOUNCEMENT):
+        if compat.is_episode_announcement(record):
             self._pending = True
 
     def take(self) -> bool:

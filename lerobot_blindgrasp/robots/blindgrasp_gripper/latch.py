@@ -21,6 +21,8 @@ import sys
 import weakref
 from contextlib import contextmanager
 
+from lerobot_blindgrasp import compat
+
 from . import signals
 from .bus import PortLostError
 from .errors import (
@@ -69,14 +71,15 @@ def _guard(robot) -> None:
     global _chained_hook
     _connected.add(robot)
     if sys.excepthook is not _stop_then_report:
-        _chained_hook, sys.excepthook = sys.excepthook, _stop_then_report
+        _chained_hook = compat.set_excepthook(_stop_then_report)
 
 
 def _unguard(robot) -> None:
     global _chained_hook
     _connected.discard(robot)
     if not _connected and sys.excepthook is _stop_then_report:
-        sys.excepthook, _chained_hook = _chained_hook or sys.__excepthook__, None
+        compat.set_excepthook(_chained_hook or sys.__excepthook__)
+        _chained_hook = None
 
 
 class SafetyLatch:

@@ -25,7 +25,7 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import compat, spec
 
 from . import policy_files as files
 from .errors import PolicyMismatchError
@@ -194,14 +194,12 @@ def local_checkpoint(path: str) -> Path | None:
 def check_cli_policy(robot) -> None:
     """The policy named on this process's command line (`--policy.path`, as LeRobot's parser reads it), checked
     against `robot` at its rate (`loop_hz`, and `--fps` / `--env.fps` / `--dataset.fps` when given)."""
-    from lerobot.configs import parser
-
-    path = parser.get_path_arg("policy")
+    path = compat.cli_policy_path()
     if not path or (where := local_checkpoint(path)) is None:
         return
     fps, source = float(robot.config.loop_hz), "the robot's loop_hz"
     for flag in ("fps", "env.fps", "dataset.fps"):
-        if (value := parser.parse_arg(flag)) is not None:
+        if (value := compat.cli_arg(flag)) is not None:
             fps, source = float(value), f"--{flag}"
     check(where, gripper_contract(robot.name, fps, source), allow_unverified=robot.config.allow_unverified_policy)
     if fps != float(robot.config.loop_hz):

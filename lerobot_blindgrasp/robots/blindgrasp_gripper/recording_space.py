@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lerobot_blindgrasp import compat
+
 from .errors import GripperSafetyStop
 
 logger = logging.getLogger(__name__)
@@ -83,17 +85,16 @@ class RecordingSpace:
     @classmethod
     def from_command_line(cls, robot) -> RecordingSpace | None:
         """The recording this process makes (`--dataset.repo_id` given), or None (no dataset is written)."""
-        from lerobot.configs import parser
         from lerobot.configs.dataset import DatasetRecordConfig
         from lerobot.utils.constants import HF_LEROBOT_HOME
 
-        repo_id = parser.parse_arg("dataset.repo_id")
+        repo_id = compat.cli_arg("dataset.repo_id")
         if not repo_id:
             return None
         defaults = DatasetRecordConfig.__dataclass_fields__
-        root = parser.parse_arg("dataset.root") or HF_LEROBOT_HOME / repo_id
-        fps = float(parser.parse_arg("dataset.fps") or defaults["fps"].default)
-        episode_s = float(parser.parse_arg("dataset.episode_time_s") or defaults["episode_time_s"].default)
+        root = compat.cli_arg("dataset.root") or HF_LEROBOT_HOME / repo_id
+        fps = float(compat.cli_arg("dataset.fps") or defaults["fps"].default)
+        episode_s = float(compat.cli_arg("dataset.episode_time_s") or defaults["episode_time_s"].default)
         return cls(Path(root), fps, episode_s, _robot_features(robot))
 
     def features(self) -> dict:

@@ -17,6 +17,8 @@ import signal
 import threading
 from contextlib import contextmanager
 
+from lerobot_blindgrasp import compat
+
 logger = logging.getLogger(__name__)
 
 TERMINATION_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n))
@@ -48,7 +50,7 @@ def install(owner: object) -> None:
     _owners.add(id(owner))
     for sig in TERMINATION_SIGNALS:
         if signal.getsignal(sig) is signal.SIG_DFL:
-            signal.signal(sig, _on_termination)
+            compat.set_signal_handler(sig, _on_termination)
 
 
 def uninstall(owner: object) -> None:
@@ -57,7 +59,7 @@ def uninstall(owner: object) -> None:
         return
     for sig in TERMINATION_SIGNALS:
         if signal.getsignal(sig) is _on_termination:
-            signal.signal(sig, signal.SIG_DFL)
+            compat.set_signal_handler(sig, signal.SIG_DFL)
 
 
 @contextmanager
@@ -69,11 +71,11 @@ def deferred():
     pending: list[int] = []
     previous = {}
     for sig in _DEFERRED_SIGNALS:
-        previous[sig] = signal.signal(sig, lambda signum, frame: pending.append(signum))
+        previous[sig] = compat.set_signal_handler(sig, lambda signum, frame: pending.append(signum))
     try:
         yield
     finally:
         for sig, handler in previous.items():
-            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+            compat.set_signal_handler(sig, handler if handler is not None else signal.SIG_DFL)
         if pending:
             signal.raise_signal(pending[0])

@@ -1,0 +1,304 @@
+"""Every place the plugin reaches into LeRobot's internals or installs a process-wide hook, as one set.
+
+A LeRobot plugin extends LeRobot through its registries (robot, teleoperator, env and policy configs). Where those
+do not reach, the plugin leans on how LeRobot works inside; each such reach is one small function or context
+manager here, and nowhere else in the package (`tests/test_compat.py` scans for strays):
+
+- `serve_dataset_readers_with`: wraps `DatasetReader.try_load` / `load_and_activate` (the student's window cache).
+- `skip_empty_image_embedding`: replaces the dataset writer's `embed_images` within a block (demo collection).
+- `atomic_lerobot_metadata`: replaces `io_utils.write_json` and `write_tasks` within a block (demo collection).
+- `is_episode_announcement`: recognises lerobot-record's `log_say` line that starts an episode (the robot).
+- `cli_policy_path`, `cli_arg`, `set_lerobot_argv`: LeRobot's command line, read or set outside its parser.
+- `set_signal_handler`, `set_excepthook`: process-wide hooks the robot installs while a gripper is connected.
+
+`check()` also covers the dataset writers' private state that the demo collector reads and resets to reopen a
+finalized dataset in place (`demos/checkpoint.py`) or abandon a failed finalize (`demos/collection.py`).
+
+Each was written against LeRobot `WRITTEN_FOR`. `check()` lists what a reach relies on that the installed LeRobot
+no longer has; the first reach used under another LeRobot version logs the version and that list once, as a
+WARNING. A reach whose target is gone degrades to LeRobot's own behaviour, as before.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import importlib
+import importlib.metadata
+import importlib.util
+import logging
+import signal
+import sys
+from collections.abc import Callable, Iterator
+
+from lerobot_blindgrasp import durable
+
+WRITTEN_FOR = "0.6.1"  # the LeRobot release every reach below was read against
+ANNOUNCEMENT = "Recording episode"  # the text of lerobot-record's log_say before every episode
+_WRITER_STATE = ("self._finalized =", "self._pq_writer =", "self._latest_episode =")
+_META_STATE = (
+    "self._finalized =",
+    "self._pq_writer =",
+    "self.latest_episode =",
+    "self._metadata_buffer",
+    "self.episodes =",
+)
+_WRAPPED = "_blindgrasp_compat"  # marks a DatasetReader method this module has wrapped
+logger = logging.getLogger(__name__)
+_warned = False
+
+
+def installed_version() -> str | None:
+    try:
+        return importlib.metadata.version("lerobot")
+    except importlib.metadata.PackageNotFoundError:
+        return None
+
+
+def _source(module: str) -> str:
+    """A LeRobot module's source text, read from its file (importing lerobot_record would load every robot)."""
+    try:
+        spec = importlib.util.find_spec(module)
+        with open(spec.origin) as f:  # type: ignore[union-attr, arg-type]
+            return f.read()
+    except (ImportError, AttributeError, TypeError, ValueError, OSError):
+        return ""
+
+
+def _has(module: str, *names: str) -> list[str]:
+    try:
+        mod = importlib.import_module(module)
+    except ImportError as e:
+        return [f"{module} cannot be imported ({e})"]
+    return [f"{module}.{name} is gone" for name in names if not _has_path(mod, name)]
+
+
+def _has_path(obj, dotted: str) -> bool:
+    for part in dotted.split("."):
+        if not hasattr(obj, part):
+            return False
+        obj = getattr(obj, part)
+    return True
+
+
+def _mentions(module: str, *texts: str) -> list[str]:
+    source = _source(module)
+    return [f"{module} no longer contains {text!r}" for text in texts if text not in source]
+
+
+def check() -> list[str]:
+    """What the reaches rely on that the installed LeRobot lacks: one line each; empty when all is there."""
+    reader = "lerobot.datasets.dataset_reader"
+    problems = _has(reader, "DatasetReader.try_load", "DatasetReader.load_and_activate", "DatasetReader.get_item")
+    problems += _mentions(reader, *(f"self.{a} =" for a in ("_meta", "hf_dataset", "delta_indices")))
+    problems += _mentions(reader, "self._image_transforms =", "self._absolute_to_relative_idx =")
+    problems += _has("lerobot.datasets.dataset_writer", "embed_images", "DatasetWriter._save_episode_data")
+    problems += _mentions("lerobot.datasets.dataset_writer", "embed_images(ep_dataset)")
+    problems += _has("datasets.features.features", "require_storage_embed")
+    problems += _has("lerobot.datasets.io_utils", "write_json", "write_info", "write_stats")
+    problems += _mentions(
+        "lerobot.datasets.io_utils", "    write_json(info.to_dict()", "    write_json(serialized"
+    )
+    problems += _has("lerobot.datasets.dataset_metadata", "write_tasks")
+    problems += _mentions("lerobot.datasets.dataset_metadata", "write_tasks(self.tasks, self.root)")
+    problems += _has("lerobot.utils.utils", "log_say")
+    problems += _mentions("lerobot.utils.utils", "logging.info(text)")
+    problems += _mentions("lerobot.scripts.lerobot_record", f'log_say(f"{ANNOUNCEMENT} {{dataset.num_episodes}}"')
+    problems += _has("lerobot.configs.parser", "get_path_arg", "parse_arg")
+    # The writers' private state the demo collector reads and resets (demos/checkpoint.py `reopen_in_place`,
+    # demos/collection.py `_finalize_or_abandon`); both fall back to LeRobot's own path when a field is missing.
+    problems += _mentions("lerobot.datasets.dataset_writer", *_WRITER_STATE)
+    problems += _mentions("lerobot.datasets.dataset_metadata", *_META_STATE)
+    problems += _mentions("lerobot.datasets.lerobot_dataset", "self._is_finalized =", "self.writer =")
+    return problems
+
+
+def _used(reach: str) -> None:
+    """On a LeRobot other than `WRITTEN_FOR`, say once (the first reach used) what `check()` finds."""
+    global _warned
+    if _warned:
+        return
+    _warned = True
+    version = installed_version()
+    if version == WRITTEN_FOR:
+        return
+    problems = check()
+    logger.warning(
+        "lerobot_blindgrasp was written for LeRobot %s, found %s (first used: %s); %s",
+        WRITTEN_FOR,
+        version,
+        reach,
+        "what it relies on is there" if not problems else "changed: " + "; ".join(problems),
+    )
+
+
+def serve_dataset_readers_with(choose: Callable) -> None:
+    """From now on in this process, after LeRobot's `DatasetReader.try_load` or `load_and_activate` loads a table,
+    `choose(reader)` may return a `DatasetReader` subclass the reader becomes (None: it stays as it is).
+
+    LeRobot 0.6.1: `LeRobotDataset.__init__` builds a private `DatasetReader` and calls `try_load()`; a finalized
+    or reloaded dataset calls `load_and_activate()`. LeRobot has no hook to choose a dataset's reader, so the student's
+    window cache (`policies/blindgrasp_transformer/window_cache.py`) wraps both. It runs at plugin import, which
+    `lerobot-train` does before it builds the dataset. Wrapping twice is a no-op; a missing method is left alone.
+    """
+    try:
+        from lerobot.datasets.dataset_reader import DatasetReader
+    except ImportError:
+        return
+    _used("serve_dataset_readers_with")
+    for name in ("try_load", "load_and_activate"):
+        method = getattr(DatasetReader, name, None)
+        if method is not None and not getattr(method, _WRAPPED, False):
+            setattr(DatasetReader, name, _choose_after(method, choose))
+
+
+def _choose_after(load: Callable, choose: Callable) -> Callable:
+    @functools.wraps(load)
+    def wrapper(self, *args, **kwargs):
+        result = load(self, *args, **kwargs)
+        if (cls := choose(self)) is not None:
+            self.__class__ = cls
+        return result
+
+    setattr(wrapper, _WRAPPED, True)
+    return wrapper
+
+
+@contextlib.contextmanager
+def skip_empty_image_embedding() -> Iterator[None]:
+    """Skip LeRobot's image-embedding pass for episodes that have no image columns.
+
+    LeRobot 0.6.1: `DatasetWriter._save_episode_data` always runs `io_utils.embed_images` (imported into
+    `dataset_writer`), a per-row `datasets.Dataset.map` of `embed_table_storage`, even for state-only datasets. For
+    features that need no embedding (no Image, Video, Audio...) it rebuilds each row unchanged, so the pass is pure
+    overhead: about two thirds of `save_episode` for the demos' 100-frame episodes. While this context is active,
+    the writer's `embed_images` returns the dataset as is when `datasets`' own `require_storage_embed` says no column
+    needs it, and defers to LeRobot's function otherwise. The written files are identical but for the random cache
+    fingerprint `datasets` stamps into a mapped table's parquet metadata. If LeRobot's writer is laid out
+    differently, nothing is changed.
+    """
+    try:
+        from datasets.features.features import require_storage_embed
+        from lerobot.datasets import dataset_writer
+    except ImportError:
+        yield
+        return
+    original = getattr(dataset_writer, "embed_images", None)
+    if original is None:
+        yield
+        return
+    _used("skip_empty_image_embedding")
+
+    def embed_images_if_needed(dataset):
+        if any(require_storage_embed(f) for f in dataset.features.values()):
+            return original(dataset)
+        return dataset
+
+    dataset_writer.embed_images = embed_images_if_needed
+    try:
+        yield
+    finally:
+        dataset_writer.embed_images = original
+
+
+@contextlib.contextmanager
+def atomic_lerobot_metadata() -> Iterator[None]:
+    """While active, LeRobot's dataset metadata writers write atomically (temp name + rename, not fsynced).
+
+    LeRobot 0.6.1 rewrites info.json and stats.json in place after every episode (`write_info` and `write_stats`,
+    both through `io_utils.write_json`) and tasks.parquet through `write_tasks` (imported into `dataset_metadata`);
+    a kill during one leaves a truncated file, and info.json is the one a repair cannot re-derive. The demo
+    collector runs inside this context. If LeRobot's modules are laid out differently, nothing is changed.
+    """
+    try:
+        from lerobot.datasets import dataset_metadata, io_utils
+    except ImportError:
+        yield
+        return
+    _used("atomic_lerobot_metadata")
+    saved = {}
+
+    def write_json(data, fpath):
+        durable.atomic_write_json(fpath, data, fsync=False, indent=4, ensure_ascii=False)
+
+    def write_tasks(tasks, local_dir):
+        with durable.atomic_path(local_dir / "meta" / "tasks.parquet", fsync=False) as tmp:
+            tasks.to_parquet(tmp)
+
+    for module, name, fn in ((io_utils, "write_json", write_json), (dataset_metadata, "write_tasks", write_tasks)):
+        if hasattr(module, name):
+            saved[(module, name)] = getattr(module, name)
+            setattr(module, name, fn)
+    try:
+        yield
+    finally:
+        for (module, name), fn in saved.items():
+            setattr(module, name, fn)
+
+
+def is_episode_announcement(record: logging.LogRecord) -> bool:
+    """Whether a log record is lerobot-record announcing the episode about to start.
+
+    LeRobot 0.6.1: the Robot interface has no call at an episode's start. lerobot-record's loop runs
+    `log_say(f"Recording episode {n}")` just before each episode (lerobot_record.py; lerobot-rollout's episodic
+    strategy too), and `log_say` logs the text at INFO (`logging.info(text)`) whether or not sounds are on. The
+    robot checks itself at each start (`robots/blindgrasp_gripper/episodes.py` hands these records to it).
+    """
+    if record.funcName == "log_say" and isinstance(record.msg, str) and record.msg.startswith(ANNOUNCEMENT):
+        _used("is_episode_announcement")
+        return True
+    return False
+
+
+def cli_policy_path() -> str | None:
+    """`--policy.path` of this process's command line, as LeRobot's parser reads it (None: not given).
+
+    LeRobot 0.6.1: lerobot-record, lerobot-eval and lerobot-rollout connect the robot (or make the env) before they
+    load the policy, and hand the robot nothing about it. `parser.get_path_arg("policy")` reads `sys.argv` the way
+    their `@parser.wrap()` does, so the gripper can check the checkpoint's contract before a servo moves.
+    """
+    from lerobot.configs import parser
+
+    _used("cli_policy_path")
+    return parser.get_path_arg("policy")
+
+
+def cli_arg(name: str) -> str | None:
+    """`--<name>` of this process's command line (e.g. `dataset.root`), as LeRobot's parser reads it.
+
+    LeRobot 0.6.1: the robot is told nothing about the dataset or the rates a script runs at; `parser.parse_arg`
+    reads them from `sys.argv` as the script's own config does (disk-space and rate checks at connect).
+    """
+    from lerobot.configs import parser
+
+    _used("cli_arg")
+    return parser.parse_arg(name)
+
+
+def set_lerobot_argv(argv: list[str]) -> None:
+    """Make `argv` the command line LeRobot's parser reads.
+
+    LeRobot 0.6.1: `@parser.wrap()` parses `sys.argv[1:]` and takes no argument list, so a command called from
+    Python with its arguments (tests, `blindgrasp-rollout`'s `main(argv)`) sets `sys.argv` first.
+    """
+    sys.argv = [sys.argv[0], *argv]
+
+
+def set_signal_handler(signum: int, handler) -> object:
+    """Install `handler` for `signum` (main thread only, as Python requires); returns the previous handler.
+
+    A process-wide hook: the robot installs SIGTERM/SIGHUP handlers while a gripper is connected, so a scheduler's
+    stop unwinds through the script's cleanup (torque off), and defers signals during the torque-off itself.
+    LeRobot 0.6.1's own `ProcessSignalHandler` (lerobot-rollout) is left in place by the caller.
+    """
+    return signal.signal(signum, handler)
+
+
+def set_excepthook(hook: Callable) -> Callable:
+    """Make `hook` the process's `sys.excepthook`; returns the one it replaced.
+
+    A process-wide hook: a script whose cleanup never reaches the robot's `disconnect` (LeRobot 0.6.1's scripts
+    call it in their own `finally`) would otherwise exit with the servos torqued; the robot's hook stops them.
+    """
+    previous, sys.excepthook = sys.excepthook, hook
+    return previous
