@@ -3,17 +3,20 @@
 Observation and action follow `spec` exactly (names, order, rad and N), so datasets recorded here have the sim
 demos' schema. Every bus transaction goes through LeRobot's `DynamixelMotorsBus`, subclassed in `bus.py` for
 retries, clean retries and raw registers: the calibration lives in the servos (Drive_Mode, Homing_Offset), so
-rad = (ticks - 2048) * 2pi/4096 needs no LeRobot normalization mode. The rest reads like LeRobot's `koch_follower`.
-
-No reading is used unchecked: every position reading passes one plausibility gate (`plausibility.py`) before
-it is returned or used to bound a goal, the force stream is checked for liveness by content (`force_sensor.py`),
-the servos' state and health are read as `servo_checks.py` says, get_observation measures the loop's period and
-spaces its samples (`timing.py`), and both ports are opened for exclusive use (`ports.py`).
-
-Safety is latched (`latch.py`): any failure while connected turns the torque off on every servo that answers,
-closes the ports and raises one error that says so. The servos' bus watchdog stops them on their own when the host
-goes quiet (`bus_watchdog_ms`; `keepalive.py` feeds it while a trial waits), and SIGTERM/SIGHUP unwind the LeRobot
-scripts like Ctrl-C (`signals.py`). The interactive calibration and motor setup are in `interactive.py`.
+rad = (ticks - 2048) * 2pi/4096 needs no LeRobot normalization mode. The class reads like LeRobot's `koch_follower`,
+in lifecycle order; what it checks is done by objects it holds, each given what it needs:
+- `gate` (`hardware/plausibility.py`): every position reading passes it before it is returned or bounds a goal;
+- `registers` (`hardware/servo_registers.py`): the servos' setup at connect, their state every control period;
+- `health` (`hardware/servo_health.py`): temperature, voltage and current, every `health_every_n` periods and at
+  every start; `consistency` (`hardware/consistency.py`): tip forces against the servos at each health read;
+- `timing`, `spacing` (`hardware/loop_timing.py`): the loop's period, and its samples spaced;
+- `force` (`force_sensor.py`): the fingertip stream, live by content; both ports are opened for exclusive use;
+- `latch` (`latch.py`): any failure while connected turns the torque off on every servo that answers, closes the
+  ports and raises one error that says so; it also guards the process (atexit, excepthook, SIGTERM/SIGHUP).
+The servos' bus watchdog stops them on their own when the host goes quiet (`bus_watchdog_ms`; `keep_alive` feeds it
+while a trial waits). The calibration file is checked when loaded (`calibration.py`); the interactive calibration
+and motor setup are in `interactive.py`. A policy named on the script's command line is checked against the robot
+before any port opens (`policy_contract.py`).
 """
 
 from __future__ import annotations
@@ -29,29 +32,30 @@ from lerobot.motors.dynamixel import OperatingMode
 from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import policy_contract, spec
+from lerobot_blindgrasp.hardware import realtime, xm430
+from lerobot_blindgrasp.hardware.consistency import ConsistencyMonitor
 from lerobot_blindgrasp.hardware.force import force_bias_warning
-from lerobot_blindgrasp.hardware.xm430 import MODEL, RAD_PER_TICK, WATCHDOG_UNIT_MS, amps_to_current_units
+from lerobot_blindgrasp.hardware.loop_timing import PeriodMonitor, SampleSpacing
+from lerobot_blindgrasp.hardware.plausibility import PositionGate
+from lerobot_blindgrasp.hardware.servo_health import ServoHealth
+from lerobot_blindgrasp.hardware.servo_registers import ServoRegisters
 
 from . import calibration as calib
-from . import connect_checks, force_calibration, health, interactive, latency_timer, policy_check, signals
+from . import force_calibration, interactive, latency_timer
 from .bus import RetryingDynamixelBus
 from .calibration import rad_to_ticks, ticks_to_rad
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
 from .episodes import EpisodeStarts
-from .errors import ForceOverloadError, ForceTareError, GripperBusError, GripperSafetyStop
-from .force_sensor import ForceSensorReader
-from .keepalive import BusKeepAlive
+from .errors import ForceOverloadError, ForceTareError, GripperBusError, GripperSafetyStop, PolicyMismatchError
+from .keepalive import feeding_the_bus
 from .latch import SafetyLatch
-from .plausibility import PositionGate
-from .recording_space import recording_from_command_line
-from .servo_checks import ServoChecks
-from .timing import PeriodMonitor, SampleSpacing
+from .recording_space import RecordingSpace, robot_dataset_features
 
 logger = logging.getLogger(__name__)
 
 
-class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCalibrationFile, Robot):
+class BlindgraspGripper(Robot):
     """D'Claw-derived three-finger gripper (`--robot.type=blindgrasp_gripper`)."""
 
     config_class = BlindgraspGripperConfig
@@ -61,49 +65,44 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         self.config = config
         self.joints = list(spec.JOINT_NAMES)
         self.calibration_error: calib.CalibrationFileError | None = None
-        super().__init__(config)  # loads and validates the calibration file through _load_calibration
+        super().__init__(config)  # loads and checks the calibration file through _load_calibration
         self.bus = RetryingDynamixelBus(
             port=config.port,
-            motors={j: Motor(i, MODEL, MotorNormMode.DEGREES) for j, i in zip(self.joints, config.servo_ids)},
+            motors={
+                j: Motor(i, xm430.MODEL, MotorNormMode.DEGREES) for j, i in zip(self.joints, config.servo_ids)
+            },
             calibration=self.calibration,
             baudrate=config.baudrate,
             num_retry=config.bus_num_retry,
             latency_timer_ms=config.latency_timer_ms,
         )
-        # What configure() set, checked every control period (`servo_state.py`); empty while the torque is off.
-        self.expected: dict[str, int] = {}
-        self._last_state_check = 0.0
-        self._startup_torque_on: dict[str, int] = {}
-        self.force = self._make_force_reader(config.force_sensor)
+        self.force = config.force_sensor.reader()
         self.gate = PositionGate(
-            speed_ticks_s=config.max_joint_speed_rad_s / RAD_PER_TICK,
-            margin_ticks=config.plausibility_margin_rad / RAD_PER_TICK,
-            backdrive_ticks=config.plausibility_backdrive_rad / RAD_PER_TICK,
+            speed_ticks_s=config.max_joint_speed_rad_s / xm430.RAD_PER_TICK,
+            margin_ticks=config.plausibility_margin_rad / xm430.RAD_PER_TICK,
+            backdrive_ticks=config.plausibility_backdrive_rad / xm430.RAD_PER_TICK,
             rereads=config.plausibility_rereads,
         )
+        protection = {
+            **xm430.NO_HOST_PROTECTION,
+            "Current_Limit": xm430.amps_to_current_units(config.current_limit_a),
+        }
+        self.registers = ServoRegisters(self.bus, self.joints, protection)
+        self.health = ServoHealth(self.joints)  # OK / WARN / ERROR per servo item
+        self.consistency = ConsistencyMonitor.at_p_gain(config.position_p_gain)  # tip forces against the servos
         self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no two samples closer than the contract allows
-        self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
         self.episodes = EpisodeStarts()  # lerobot-record's episode announcements (`episodes.py`)
+        self.latch = SafetyLatch(str(self), self.bus, self.force, config.servo_ids, on_torque_off=self._forget_goals,
+                                 on_close=self.episodes.uninstall, report=self.consistency.report)  # fmt: skip
         self.lower, self.upper = np.asarray([config.joint_lower, config.joint_upper], dtype=np.float64)
-        self._atexit = None
-        self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
-
-    @staticmethod
-    def _make_force_reader(fs) -> ForceSensorReader:
-        return ForceSensorReader(
-            fs.port,
-            fs.baudrate,
-            fs.scale_n_per_count,
-            channel_map=fs.channel_map,
-            stale_timeout_s=fs.stale_timeout_s,
-            connect_timeout_s=fs.connect_timeout_s,
-            frozen_frames=fs.frozen_frames,
-            min_rate_hz=fs.min_rate_hz,
-            tare_max_std_n=fs.tare_max_std_n,
-            tare_max_shift_n=fs.tare_max_shift_n,
-            negative_fault_n=fs.negative_fault_n,
+        self.recording: RecordingSpace | None = None  # the dataset a script records, checked at each start
+        self._health_countdown = 0
+        self._last_call: float | None = None
+        self._fresh_currents: list[int] | None = (
+            None  # Present_Current of this period's health read, not yet judged
         )
+        self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
 
     # --- features (valid while disconnected) ---------------------------------------------------------------------
     @cached_property
@@ -125,31 +124,45 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
     # --- connection ----------------------------------------------------------------------------------------------
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
-        policy_check.check_cli_policy(self)  # a policy named on the command line must fit, before any port opens
-        self.recording = recording_from_command_line(self)  # disk space checked at each start (`recording_space`)
+        self._check_policy()  # a policy named on the script's command line must fit, before any port opens
+        features = robot_dataset_features(self.action_features, self.observation_features)
+        self.recording = RecordingSpace.of(self.config.command_line, features)  # disk space, at each start
         if self.calibration_error is not None and calibrate:
             raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
         if calibrate:
-            connect_checks.refuse_unattended_calibration(self)  # no file and nobody to answer the prompts
+            calib.refuse_unattended(self.calibration, self.calibration_fpath, self.id)  # nobody to answer prompts
         latency_timer.ensure_low_latency(self.config.port, self.config.force_sensor.port)  # USB adapters at 1 ms
-        self.host_setup = connect_checks.prepare_host(self)  # before any thread starts: threads inherit it
-        with self._safety("connecting"):
-            self.expected = {}
-            self.gate.forget()
+        self.host_setup = realtime.prepare_host(self.config)  # before any thread starts: threads inherit it
+        with self.latch.guard("connecting"):
+            self._forget_goals()
             # Both ports are taken (exclusively) before the first byte goes out: a second owner is refused here.
             force_calibration.apply(self.force, self.calibration_dir, self.id)  # <id>.force.json, if measured
             self.force.open()
             self.bus.connect()  # pings all nine, with retries; names a Status_Return_Level that hides replies
-            self._guard_process()
-            signals.install(self)
+            self.latch.arm()
             self.episodes.install()
             self._check_servo_state()
-            self._check_servo_setup()  # firmware, EEPROM limits, the start check of the servos' health
+            self.health.reset()
+            self.health.set_limits(self.registers.check_setup())  # firmware, EEPROM limits, startup torque
+            self._check_health(start=True)  # before any torque: a hot servo or a weak supply refuses the start
+            self._last_call = None
             if not self._bring_up(calibrate):
                 return
         self.timing.restart()
         self.spacing.restart()
         logger.info("%s connected (force tare %s counts).", self, np.round(self.force.offset).tolist())
+
+    def _check_policy(self) -> None:
+        """The checkpoint the script runs (`command_line.policy_path`), at the rate its own flags give."""
+        cl, loop_hz = self.config.command_line, float(self.config.loop_hz)
+        if not cl.policy_path or (where := policy_contract.local_checkpoint(cl.policy_path)) is None:
+            return
+        fps, source = (cl.fps, f"--{cl.fps_flag}") if cl.fps is not None else (loop_hz, "the robot's loop_hz")
+        contract = policy_contract.gripper_contract(self.name, fps, source)
+        policy_contract.check(where, contract, allow_unverified=self.config.allow_unverified_policy)
+        if fps != loop_hz:
+            raise PolicyMismatchError(f"{source}={fps:g} but the robot's loop_hz is {self.config.loop_hz:g}: set "
+                                      "--robot.loop_hz to the loop's rate (it measures the loop against it).")  # fmt: skip
 
     def _bring_up(self, calibrate: bool) -> bool:
         """Calibration to the servos, the force tare, configure; False when left uncalibrated (lerobot-calibrate)."""
@@ -170,14 +183,39 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
             logger.warning(warning)
         return True
 
+    def _load_calibration(self, fpath=None) -> None:
+        ids = dict(zip(self.joints, self.config.servo_ids, strict=True))
+        fix = f"lerobot-calibrate --robot.type={self.name} --robot.id={self.id}"
+        self.calibration, self.calibration_error = calib.load_checked(
+            fpath or self.calibration_fpath, ids, self.config.joint_lower, self.config.joint_upper, fix
+        )
+
+    def _save_calibration(self, fpath=None) -> None:
+        calib.save_atomic(self.calibration, fpath or self.calibration_fpath)
+
+    def calibrate(self) -> None:
+        with self.latch.guard("calibrating"):
+            self._forget_goals()  # readings change frame with Drive_Mode and Homing_Offset
+            self.bus.disable_torque()
+            if self.calibration:
+                answer = input(
+                    f"Press ENTER to write the calibration file of '{self.id}' to the servos, "
+                    "or type 'c' and press ENTER to calibrate again: "
+                )
+                if answer.strip().lower() != "c":
+                    self.bus.write_calibration(self.calibration)
+                    return
+            interactive.calibrate_by_hand(self)
+
     def configure(self) -> None:
         mode = OperatingMode[self.config.operating_mode].value
-        current = amps_to_current_units(self.config.current_limit_a)
-        with self._safety("configuring the servos"):
-            self.expected = {}
+        current = xm430.amps_to_current_units(self.config.current_limit_a)
+        with self.latch.guard("configuring the servos"):
+            self.registers.expected = {}
             self.bus.disable_torque()
             self.bus.configure_motors()  # Return_Delay_Time 0: status packets come back without the 500 us delay
-            self._clear_startup_torque()
+            if (eeprom := self.registers.restore()) is not None:  # startup torque, no-host protection
+                self.health.set_limits(eeprom)
             for j in self.joints:
                 # A watchdog stop from the last session (the host went quiet before its stop, e.g. while a servo
                 # was losing power) outlives the torque-off and makes Goal_Current read-only: clear it first.
@@ -191,12 +229,12 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
                 self.bus.write("Position_D_Gain", j, self.config.position_d_gain)
                 self.bus.write("Profile_Velocity", j, self.config.profile_velocity)
             self._enable_torque_holding_pose()
-            self.expected = {
+            self.registers.expected = {
                 "Torque_Enable": 1,
                 "Position_P_Gain": self.config.position_p_gain,
                 "Position_I_Gain": self.config.position_i_gain,
                 "Position_D_Gain": self.config.position_d_gain,
-                "Bus_Watchdog": self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS,
+                "Bus_Watchdog": self.config.bus_watchdog_ms // xm430.WATCHDOG_UNIT_MS,
                 "Goal_Current": current,
             }
 
@@ -224,61 +262,60 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         self.bus.enable_torque()
         self.gate.goal = ticks
         for j in self.joints:
-            self.bus.write("Bus_Watchdog", j, self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS)
-
-    @contextmanager
-    def torque_disabled(self):
-        """Torque off for the block (e.g. to move the fingers by hand), then on again holding the new pose. The
-        per-period state check knows the torque is off on purpose."""
-        expected = self.expected
-        with self._safety("turning the torque off"):
-            self.expected = {}
-            self.gate.goal = None  # free: a hand may move the joints faster than the servos
-            self.bus.disable_torque()
-        yield
-        if self.is_connected:  # a fault inside the block already stopped the gripper
-            with self._safety("turning the torque back on"):
-                self._enable_torque_holding_pose()
-                self.expected = expected
-            self.timing.restart()
-
-    def calibrate(self) -> None:
-        with self._safety("calibrating"):
-            self.expected = {}
-            self.gate.forget()  # readings change frame with Drive_Mode and Homing_Offset
-            self.bus.disable_torque()
-            if self.calibration:
-                answer = input(
-                    f"Press ENTER to write the calibration file of '{self.id}' to the servos, "
-                    "or type 'c' and press ENTER to calibrate again: "
-                )
-                if answer.strip().lower() != "c":
-                    self.bus.write_calibration(self.calibration)
-                    return
-            interactive.calibrate_by_hand(self)
+            self.bus.write("Bus_Watchdog", j, self.config.bus_watchdog_ms // xm430.WATCHDOG_UNIT_MS)
 
     def setup_motors(self) -> None:
         interactive.setup_motors(self)
 
+    # --- between trials ------------------------------------------------------------------------------------------
+    @contextmanager
+    def torque_disabled(self):
+        """Torque off for the block (e.g. to move the fingers by hand), then on again holding the new pose. The
+        per-period state check knows the torque is off on purpose."""
+        expected = self.registers.expected
+        with self.latch.guard("turning the torque off"):
+            self.registers.expected = {}
+            self.gate.goal = None  # free: a hand may move the joints faster than the servos
+            self.bus.disable_torque()
+        yield
+        if self.is_connected:  # a fault inside the block already stopped the gripper
+            with self.latch.guard("turning the torque back on"):
+                self._enable_torque_holding_pose()
+                self.registers.expected = expected
+            self.timing.restart()
+
     @check_if_not_connected
     def tare_forces(self) -> None:
         """Re-zero the fingertip sensors (fingertips touching nothing), e.g. between evaluation trials: load cells
-        drift with temperature and use."""
+        drift with temperature and use. The tare outlasts the bus watchdog: the servos hear from us meanwhile."""
         refused = None
-        with self._safety("taring the force sensors"):
+        with self.latch.guard("taring the force sensors"):
             try:
-                self._tare_keeping_bus_alive()  # longer than the bus watchdog: the servos hear from us meanwhile
+                feeding_the_bus(lambda: self.force.tare(self.config.force_sensor.tare_s), self._check_servo_state)
             except ForceTareError as e:  # a refusal stops nothing: the old zero stays, the pose is held
                 refused = e
         self.timing.restart()  # the tare window is not a loop period
         if refused is not None:
             raise refused
 
+    @check_if_not_connected
+    def keep_alive(self) -> None:
+        """One servo state check outside the control loop (a wait for the operator): call it every
+        `keepalive.KEEPALIVE_S`, so the servos' bus watchdog stays armed and fed."""
+        with self.latch.guard("keeping the bus alive while waiting"):
+            self._check_servo_state()
+
+    @check_if_not_connected
+    def check_health_before_start(self) -> None:
+        """Before a trial or an episode: refuse (torque off, named error) when a servo is too close to a limit."""
+        with self.latch.guard("checking servo health before a start"):
+            self._check_health(start=True)
+
     # --- control loop --------------------------------------------------------------------------------------------
     @check_if_not_connected
     def get_observation(self) -> dict[str, float]:
-        self.spacing.before_read()  # after a slow read, the next sample waits its turn (`timing.SampleSpacing`)
-        with self._safety("reading the gripper state"):
+        self.spacing.before_read()  # after a slow read, the next sample waits its turn (`SampleSpacing`)
+        with self.latch.guard("reading the gripper state"):
             started = time.monotonic()
             self.timing.tick(started)
             self._check_servo_state()  # first: a reset servo is named as such, not as an odd position
@@ -313,9 +350,9 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         target = np.array([float(action[k]) for k in spec.ACTION_NAMES])
         if not np.all(np.isfinite(target)):
             raise ValueError(f"Non-finite joint target {target.tolist()}; nothing was sent.")
-        with self._safety("sending joint targets"):
+        with self.latch.guard("sending joint targets"):
             now = time.monotonic()
-            if now - self._last_state_check > spec.CONTROL_DT:  # no get_observation this period: stand in for it
+            if now - self.registers.last_check > spec.CONTROL_DT:  # no get_observation this period: stand in
                 self._check_servo_state()
                 self._poll_health(now)  # health and a pending start are judged for action-only loops too
             q = self._read_q()  # the trusted estimate: the bound is never centred on an unchecked reading
@@ -326,25 +363,75 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
             self.gate.goal = np.array([ticks[j] for j in self.joints], dtype=np.float64)
         return {f"{j}.pos": ticks_to_rad(ticks[j]) for j in self.joints}
 
+    @check_if_not_connected
+    def disconnect(self) -> None:
+        if not self.config.disable_torque_on_disconnect:
+            self.latch.close()
+            return
+        unconfirmed = self.latch.stop()
+        if unconfirmed:
+            msg = f"Disconnected, but servo IDs {unconfirmed} did not confirm torque off: cut the power."
+            raise GripperBusError(msg)
+        logger.info("%s disconnected, torque off.", self)
+
+    def __exit__(self, exc_type, exc_value, traceback) -> None:
+        # After a latched safety stop the robot is already disconnected: LeRobot's __exit__ would raise
+        # DeviceNotConnectedError and hide the fault that stopped it. Let that fault propagate instead.
+        if self.is_connected:
+            self.disconnect()
+
+    # --- what the calls above share --------------------------------------------------------------------------------
+    def _forget_goals(self) -> None:
+        """Torque off (or about to be): nothing configured is expected, no reading is trusted without a second."""
+        self.registers.expected = {}
+        self.gate.forget()
+
     def _trusted_ticks(self, *, free: bool | None = None) -> np.ndarray:
-        """Present_Position of all nine through the plausibility gate (`plausibility.py`)."""
+        """Present_Position of all nine through the plausibility gate."""
 
         def read() -> np.ndarray:
             raw = self.bus.sync_read("Present_Position")
             return np.array([raw[j] for j in self.joints], dtype=np.float64)
 
-        return self.gate.read(read, self.joints, free=not self.expected if free is None else free)
+        return self.gate.read(read, self.joints, free=not self.registers.expected if free is None else free)
 
     def _read_q(self) -> np.ndarray:
         return np.array([ticks_to_rad(t) for t in self._trusted_ticks()])
 
-    @check_if_not_connected
-    def disconnect(self) -> None:
-        if not self.config.disable_torque_on_disconnect:
-            self._close()
+    def _check_servo_state(self) -> None:
+        """The state block (`ServoRegisters.check_state`); joints the bus watchdog stopped during a pause of this
+        process hold the pose they stopped in and are re-armed."""
+        if tripped := self.registers.check_state():
+            ticks = self._trusted_ticks()
+            self.registers.rearm_watchdog(tripped, {j: int(t) for j, t in zip(self.joints, ticks)})
+            if self.gate.goal is not None:
+                for j in tripped:
+                    self.gate.goal[self.joints.index(j)] = ticks[self.joints.index(j)]
+
+    def _poll_health(self, now: float) -> None:
+        """Once per control period: the health block every `health_every_n` periods, and at once, at the start
+        levels, when a start is pending: a recording episode announced since the last call, or the first call after
+        a pause of the loop. A start also needs room on disk for the episode (`recording_space.py`)."""
+        resumed = self._last_call is not None and now - self._last_call >= self.timing.pause_s
+        self._last_call = now
+        start = self.episodes.take() or resumed
+        if start and self.recording is not None:
+            self.recording.check()
+        self._health_countdown -= 1
+        if start or self._health_countdown <= 0:
+            self._health_countdown = self.config.health_every_n
+            self._check_health(start=start)
+
+    def _check_health(self, *, start: bool = False) -> None:
+        self._fresh_currents = self.health.check(
+            self.bus, self.registers.expected.get("Goal_Current"), start=start
+        )
+
+    def _check_consistency(self, q, forces) -> None:
+        """After a period's readings, when its health read brought currents: the force and the motion checks."""
+        currents, self._fresh_currents = self._fresh_currents, None
+        if currents is None:
             return
-        unconfirmed = self._stop()
-        if unconfirmed:
-            msg = f"Disconnected, but servo IDs {unconfirmed} did not confirm torque off: cut the power."
-            raise GripperBusError(msg)
-        logger.info("%s disconnected, torque off.", self)
+        expected, goal = self.registers.expected, self.gate.goal
+        goal_q = None if goal is None or not expected else [ticks_to_rad(t) for t in goal]
+        self.consistency.assess(time.monotonic(), q, goal_q, forces, currents, expected.get("Goal_Current"))

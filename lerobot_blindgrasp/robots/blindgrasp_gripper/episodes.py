@@ -1,4 +1,4 @@
-"""Where a recording episode starts, as the robot can tell: a start is checked like a connect (`health.py`).
+"""Where a recording episode starts, as the robot can tell: a start is checked like a connect (`hardware/servo_health.py`).
 
 LeRobot's Robot interface has no call at an episode's start: lerobot-record goes on calling get_observation and
 send_action through its reset phase and into the next episode. What it does at every episode is announce it: its
