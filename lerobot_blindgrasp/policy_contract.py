@@ -307,6 +307,15 @@ def local_checkpoint(path: str) -> Path | None:
         return None
 
 
+def check_named(path, robot_type: str, fps: float, fps_source: str, *, allow_unverified: bool = False) -> bool:
+    """`check` the checkpoint a caller names (a folder, or a Hub id already in the cache) against the gripper at
+    `fps`; False when there is none here to check (LeRobot downloads it later)."""
+    if not path or (where := local_checkpoint(str(path))) is None:
+        return False
+    check(where, gripper_contract(robot_type, fps, fps_source), allow_unverified=allow_unverified)
+    return True
+
+
 # --- what a checkpoint records it was trained for -----------------------------------------------------------------
 def facts_from_dataset(meta, source: str | None = None) -> dict:
     """`trained_for` from a dataset's metadata (anything with `robot_type`, `fps`, `features`, `repo_id`): the

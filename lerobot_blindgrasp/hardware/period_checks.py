@@ -37,6 +37,19 @@ class PeriodChecks:
         self._countdown = 0
         self._currents: list[int] | None = None  # Present_Current of this period's health read, not yet judged
 
+    def at_connect(self, trusted_ticks) -> None:
+        """Before any write: the state block, the servos' setup (firmware, EEPROM limits, startup torque), then the
+        health block at the start levels: a hot servo or a weak supply refuses the start before any torque."""
+        self.state(trusted_ticks)
+        self.health.reset()
+        self.health.set_limits(self.registers.check_setup())
+        self.check_health(start=True)
+
+    def restore(self) -> None:
+        """At configure, torque off: the servos' startup torque and no-host protection (`ServoRegisters.restore`)."""
+        if (eeprom := self.registers.restore()) is not None:
+            self.health.set_limits(eeprom)
+
     def state(self, trusted_ticks) -> None:
         """The state block; `trusted_ticks()` reads the present pose through the gate, for a re-armed joint."""
         if tripped := self.registers.check_state():

@@ -163,6 +163,27 @@ class ServoRegisters:
             )
         return eeprom
 
+    def write_settings(self, settings: dict[str, int]) -> None:
+        """At configure (torque off): `settings` (register -> value, written in order) on every servo. Bus_Watchdog
+        is cleared on all of them first: a watchdog stop from the last session (the host went quiet before its
+        stop, e.g. while a servo was losing power) outlives the torque-off and makes Goal_Current read-only."""
+        for j in self.joints:
+            self.bus.write("Bus_Watchdog", j, 0)
+        for j in self.joints:
+            for register, value in settings.items():
+                self.bus.write(register, j, value)
+
+    def torque_on_holding(self, present: dict[str, int], watchdog_units: int) -> None:
+        """Torque on with Goal_Position = `present` (trusted ticks), so nothing moves. A watchdog error outlives the
+        torque-off (the register keeps reading -1) and makes the goal registers read-only: cleared first, armed once
+        the torque is on (it only watches while the torque is on)."""
+        for j in self.joints:
+            self.bus.write("Bus_Watchdog", j, 0)
+            self.bus.write("Goal_Position", j, present[j])
+        self.bus.enable_torque()
+        for j in self.joints:
+            self.bus.write("Bus_Watchdog", j, watchdog_units)
+
     def check_state(self) -> list[str]:
         """One sync read of the state block: hardware errors, then anything configure set that changed (a reset);
         returns the joints whose watchdog stopped them during a pause of this process."""

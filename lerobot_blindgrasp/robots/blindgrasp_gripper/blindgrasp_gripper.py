@@ -1,22 +1,11 @@
-"""The real gripper: nine XM430-W350 on one Dynamixel bus plus three fingertip load cells.
+"""The real gripper: nine XM430-W350 on one Dynamixel bus plus three fingertip load cells, in lifecycle order like
+LeRobot's `koch_follower`; observation and action are `spec`'s (names, order, rad and N), as in the sim demos.
 
-Observation and action follow `spec` exactly (names, order, rad and N), so datasets recorded here have the sim
-demos' schema. Every bus transaction goes through LeRobot's `DynamixelMotorsBus`, subclassed in `bus.py` for
-retries, clean retries and raw registers: the calibration lives in the servos (Drive_Mode, Homing_Offset), so
-rad = (ticks - 2048) * 2pi/4096 needs no LeRobot normalization mode. The class reads like LeRobot's `koch_follower`,
-in lifecycle order; what it checks is done by objects it holds, each given what it needs:
-- `gate` (`hardware/plausibility.py`): every position reading passes it before it is returned or bounds a goal;
-- `registers` (`hardware/servo_registers.py`): the servos' setup at connect, their state every control period;
-- `health` (`hardware/servo_health.py`): temperature, voltage and current, every `health_every_n` periods and at
-  every start; `consistency` (`hardware/consistency.py`): tip forces against the servos at each health read;
-- `timing`, `spacing` (`hardware/loop_timing.py`): the loop's period, and its samples spaced;
-- `force` (`force_sensor.py`): the fingertip stream, live by content; both ports are opened for exclusive use;
-- `latch` (`latch.py`): any failure while connected turns the torque off on every servo that answers, closes the
-  ports and raises one error that says so; it also guards the process (atexit, excepthook, SIGTERM/SIGHUP).
-The servos' bus watchdog stops them on their own when the host goes quiet (`bus_watchdog_ms`; `keep_alive` feeds it
-while a trial waits). The calibration file is checked when loaded (`calibration.py`); the interactive calibration
-and motor setup are in `interactive.py`. A policy named on the script's command line is checked against the robot
-before any port opens (`policy_contract.py`).
+It holds what checks it, each object given what it needs: bus and force reader on exclusive ports (`hardware/`); the
+plausibility `gate` of every position reading; the servos' `registers`, `health` and tip `consistency`, run each period
+by `checks`; the loop's `timing` and `spacing`; the safety `latch` (`latch.py`: any failure while connected turns the
+torque off on every servo that answers, closes the ports, raises one named error); the policy named on the script's
+command line, checked before any port opens (`policy_contract.py`).
 """
 
 from __future__ import annotations
@@ -25,6 +14,7 @@ import logging
 import time
 from contextlib import contextmanager
 from functools import cached_property
+from operator import itemgetter
 
 import numpy as np
 from lerobot.motors import Motor, MotorNormMode
@@ -35,22 +25,24 @@ from lerobot.utils.decorators import check_if_already_connected, check_if_not_co
 from lerobot_blindgrasp import policy_contract, spec
 from lerobot_blindgrasp.hardware import realtime, xm430
 from lerobot_blindgrasp.hardware.consistency import ConsistencyMonitor
+from lerobot_blindgrasp.hardware.dynamixel import RetryingDynamixelBus, latency_timer
 from lerobot_blindgrasp.hardware.force import force_bias_warning
+from lerobot_blindgrasp.hardware.force_board import ForceTareError, force_calibration
 from lerobot_blindgrasp.hardware.loop_timing import PeriodMonitor, SampleSpacing
+from lerobot_blindgrasp.hardware.period_checks import PeriodChecks
 from lerobot_blindgrasp.hardware.plausibility import PositionGate
 from lerobot_blindgrasp.hardware.servo_health import ServoHealth
 from lerobot_blindgrasp.hardware.servo_registers import ServoRegisters
 
 from . import calibration as calib
-from . import force_calibration, interactive, latency_timer
-from .bus import RetryingDynamixelBus
+from . import interactive
 from .calibration import rad_to_ticks, ticks_to_rad
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
-from .episodes import EpisodeStarts
-from .errors import ForceOverloadError, ForceTareError, GripperBusError, GripperSafetyStop, PolicyMismatchError
+from .errors import ForceOverloadError, GripperBusError, GripperSafetyStop, PolicyMismatchError
 from .keepalive import feeding_the_bus
 from .latch import SafetyLatch
-from .recording_space import RecordingSpace, robot_dataset_features
+from .recording_space import RecordingSpace
+from .starts import EpisodeStarts, Starts
 
 logger = logging.getLogger(__name__)
 
@@ -76,32 +68,26 @@ class BlindgraspGripper(Robot):
             num_retry=config.bus_num_retry,
             latency_timer_ms=config.latency_timer_ms,
         )
-        self.force = config.force_sensor.reader()
+        self.force = config.force_reader()
         self.gate = PositionGate(
             speed_ticks_s=config.max_joint_speed_rad_s / xm430.RAD_PER_TICK,
             margin_ticks=config.plausibility_margin_rad / xm430.RAD_PER_TICK,
             backdrive_ticks=config.plausibility_backdrive_rad / xm430.RAD_PER_TICK,
             rereads=config.plausibility_rereads,
         )
-        protection = {
-            **xm430.NO_HOST_PROTECTION,
-            "Current_Limit": xm430.amps_to_current_units(config.current_limit_a),
-        }
+        current = xm430.amps_to_current_units(config.current_limit_a)
+        protection = {**xm430.NO_HOST_PROTECTION, "Current_Limit": current}
         self.registers = ServoRegisters(self.bus, self.joints, protection)
         self.health = ServoHealth(self.joints)  # OK / WARN / ERROR per servo item
         self.consistency = ConsistencyMonitor.at_p_gain(config.position_p_gain)  # tip forces against the servos
+        self.checks = PeriodChecks(self.registers, self.health, self.consistency, self.gate, config.health_every_n)
         self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no two samples closer than the contract allows
-        self.episodes = EpisodeStarts()  # lerobot-record's episode announcements (`episodes.py`)
+        self.episodes = EpisodeStarts()  # lerobot-record's episode announcements
         self.latch = SafetyLatch(str(self), self.bus, self.force, config.servo_ids, on_torque_off=self._forget_goals,
                                  on_close=self.episodes.uninstall, report=self.consistency.report)  # fmt: skip
         self.lower, self.upper = np.asarray([config.joint_lower, config.joint_upper], dtype=np.float64)
-        self.recording: RecordingSpace | None = None  # the dataset a script records, checked at each start
-        self._health_countdown = 0
-        self._last_call: float | None = None
-        self._fresh_currents: list[int] | None = (
-            None  # Present_Current of this period's health read, not yet judged
-        )
+        self.starts = Starts(self.episodes, self.timing.pause_s)  # when health is judged at the start levels
         self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
 
     # --- features (valid while disconnected) ---------------------------------------------------------------------
@@ -125,8 +111,7 @@ class BlindgraspGripper(Robot):
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
         self._check_policy()  # a policy named on the script's command line must fit, before any port opens
-        features = robot_dataset_features(self.action_features, self.observation_features)
-        self.recording = RecordingSpace.of(self.config.command_line, features)  # disk space, at each start
+        self.starts.recording = RecordingSpace.of(self.config.command_line, self.action_features, self.observation_features)  # fmt: skip
         if self.calibration_error is not None and calibrate:
             raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
         if calibrate:
@@ -135,17 +120,13 @@ class BlindgraspGripper(Robot):
         self.host_setup = realtime.prepare_host(self.config)  # before any thread starts: threads inherit it
         with self.latch.guard("connecting"):
             self._forget_goals()
-            # Both ports are taken (exclusively) before the first byte goes out: a second owner is refused here.
             force_calibration.apply(self.force, self.calibration_dir, self.id)  # <id>.force.json, if measured
-            self.force.open()
+            self.force.open()  # both ports exclusive before the first byte goes out: a second owner is refused
             self.bus.connect()  # pings all nine, with retries; names a Status_Return_Level that hides replies
             self.latch.arm()
             self.episodes.install()
-            self._check_servo_state()
-            self.health.reset()
-            self.health.set_limits(self.registers.check_setup())  # firmware, EEPROM limits, startup torque
-            self._check_health(start=True)  # before any torque: a hot servo or a weak supply refuses the start
-            self._last_call = None
+            self.checks.at_connect(self._trusted_ticks)  # state, setup; health at the start levels, before torque
+            self.starts.restart()
             if not self._bring_up(calibrate):
                 return
         self.timing.restart()
@@ -154,13 +135,16 @@ class BlindgraspGripper(Robot):
 
     def _check_policy(self) -> None:
         """The checkpoint the script runs (`command_line.policy_path`), at the rate its own flags give."""
-        cl, loop_hz = self.config.command_line, float(self.config.loop_hz)
-        if not cl.policy_path or (where := policy_contract.local_checkpoint(cl.policy_path)) is None:
-            return
+        cl, loop_hz, allow = (
+            self.config.command_line,
+            float(self.config.loop_hz),
+            self.config.allow_unverified_policy,
+        )
         fps, source = (cl.fps, f"--{cl.fps_flag}") if cl.fps is not None else (loop_hz, "the robot's loop_hz")
-        contract = policy_contract.gripper_contract(self.name, fps, source)
-        policy_contract.check(where, contract, allow_unverified=self.config.allow_unverified_policy)
-        if fps != loop_hz:
+        if (
+            policy_contract.check_named(cl.policy_path, self.name, fps, source, allow_unverified=allow)
+            and fps != loop_hz
+        ):
             raise PolicyMismatchError(f"{source}={fps:g} but the robot's loop_hz is {self.config.loop_hz:g}: set "
                                       "--robot.loop_hz to the loop's rate (it measures the loop against it).")  # fmt: skip
 
@@ -197,15 +181,7 @@ class BlindgraspGripper(Robot):
         with self.latch.guard("calibrating"):
             self._forget_goals()  # readings change frame with Drive_Mode and Homing_Offset
             self.bus.disable_torque()
-            if self.calibration:
-                answer = input(
-                    f"Press ENTER to write the calibration file of '{self.id}' to the servos, "
-                    "or type 'c' and press ENTER to calibrate again: "
-                )
-                if answer.strip().lower() != "c":
-                    self.bus.write_calibration(self.calibration)
-                    return
-            interactive.calibrate_by_hand(self)
+            interactive.calibrate(self)  # the file to the servos, or two poses by hand
 
     def configure(self) -> None:
         mode = OperatingMode[self.config.operating_mode].value
@@ -214,29 +190,13 @@ class BlindgraspGripper(Robot):
             self.registers.expected = {}
             self.bus.disable_torque()
             self.bus.configure_motors()  # Return_Delay_Time 0: status packets come back without the 500 us delay
-            if (eeprom := self.registers.restore()) is not None:  # startup torque, no-host protection
-                self.health.set_limits(eeprom)
-            for j in self.joints:
-                # A watchdog stop from the last session (the host went quiet before its stop, e.g. while a servo
-                # was losing power) outlives the torque-off and makes Goal_Current read-only: clear it first.
-                self.bus.write("Bus_Watchdog", j, 0)
-            for j in self.joints:
-                self.bus.write("Operating_Mode", j, mode)
-                self.bus.write("Current_Limit", j, current)
-                self.bus.write("Goal_Current", j, current)
-                self.bus.write("Position_P_Gain", j, self.config.position_p_gain)
-                self.bus.write("Position_I_Gain", j, self.config.position_i_gain)
-                self.bus.write("Position_D_Gain", j, self.config.position_d_gain)
-                self.bus.write("Profile_Velocity", j, self.config.profile_velocity)
+            self.checks.restore()  # startup torque, no-host protection
+            gains = {f"Position_{k}_Gain": getattr(self.config, f"position_{k.lower()}_gain") for k in "PID"}
+            settings = {"Operating_Mode": mode, "Current_Limit": current, "Goal_Current": current, **gains}
+            self.registers.write_settings({**settings, "Profile_Velocity": self.config.profile_velocity})
             self._enable_torque_holding_pose()
-            self.registers.expected = {
-                "Torque_Enable": 1,
-                "Position_P_Gain": self.config.position_p_gain,
-                "Position_I_Gain": self.config.position_i_gain,
-                "Position_D_Gain": self.config.position_d_gain,
-                "Bus_Watchdog": self.config.bus_watchdog_ms // xm430.WATCHDOG_UNIT_MS,
-                "Goal_Current": current,
-            }
+            watchdog = self.config.bus_watchdog_ms // xm430.WATCHDOG_UNIT_MS
+            self.registers.expected = {"Torque_Enable": 1, **gains, "Bus_Watchdog": watchdog, "Goal_Current": current}  # fmt: skip
 
     def _enable_torque_holding_pose(self) -> None:
         """Torque on with Goal_Position = the present pose, so nothing moves when the torque comes on."""
@@ -254,15 +214,8 @@ class BlindgraspGripper(Robot):
         if outside:
             logger.warning("Joints %s start outside their limits; actions bring them back at <= %.2f rad per step.",
                            outside, self.config.max_relative_target)  # fmt: skip
-        for j in self.joints:
-            # A watchdog error outlives the torque-off (the register keeps reading -1) and makes the goal registers
-            # read-only: clear it first, arm it once the torque is on (it only watches while the torque is on).
-            self.bus.write("Bus_Watchdog", j, 0)
-            self.bus.write("Goal_Position", j, present[j])
-        self.bus.enable_torque()
+        self.registers.torque_on_holding(present, self.config.bus_watchdog_ms // xm430.WATCHDOG_UNIT_MS)
         self.gate.goal = ticks
-        for j in self.joints:
-            self.bus.write("Bus_Watchdog", j, self.config.bus_watchdog_ms // xm430.WATCHDOG_UNIT_MS)
 
     def setup_motors(self) -> None:
         interactive.setup_motors(self)
@@ -309,7 +262,7 @@ class BlindgraspGripper(Robot):
     def check_health_before_start(self) -> None:
         """Before a trial or an episode: refuse (torque off, named error) when a servo is too close to a limit."""
         with self.latch.guard("checking servo health before a start"):
-            self._check_health(start=True)
+            self.checks.check_health(start=True)
 
     # --- control loop --------------------------------------------------------------------------------------------
     @check_if_not_connected
@@ -319,11 +272,11 @@ class BlindgraspGripper(Robot):
             started = time.monotonic()
             self.timing.tick(started)
             self._check_servo_state()  # first: a reset servo is named as such, not as an odd position
-            self._poll_health(started)
+            self.checks.poll_health(start=self.starts.pending(started))
             q = self._read_q()
             forces = self.force.read()
             self.spacing.after_read(started, time.monotonic())
-            self._check_consistency(q, forces)
+            self.checks.consistency_after(q, forces)
             over = np.abs(forces) > self.config.force_sensor.overload_n
             if over.any():
                 tips = {spec.FORCE_SENSOR_NAMES[i]: round(float(forces[i]), 2) for i in np.flatnonzero(over)}
@@ -336,10 +289,9 @@ class BlindgraspGripper(Robot):
     @check_if_not_connected
     def send_action(self, action: dict[str, float]) -> dict[str, float]:
         """Absolute joint targets (rad), clipped to the joint limits and then to +-max_relative_target around the
-        present position, sent with one sync write. Returns the targets actually sent (after tick rounding).
-
-        The step bound comes last so it holds from the first step whatever the start pose: a joint that starts
-        outside its limits is brought back at <= max_relative_target per call, never in one jump."""
+        present position, sent with one sync write; returns the targets sent (after tick rounding). The step bound
+        comes last so it holds from the first step: a joint that starts outside its limits comes back at <=
+        max_relative_target per call, never in one jump."""
         missing = [k for k in spec.ACTION_NAMES if k not in action]
         unknown = [k for k in action if k not in spec.ACTION_NAMES]
         if missing or unknown:  # an extra key is a policy or teleop trained for other joints: nothing is sent
@@ -354,7 +306,7 @@ class BlindgraspGripper(Robot):
             now = time.monotonic()
             if now - self.registers.last_check > spec.CONTROL_DT:  # no get_observation this period: stand in
                 self._check_servo_state()
-                self._poll_health(now)  # health and a pending start are judged for action-only loops too
+                self.checks.poll_health(start=self.starts.pending(now))  # for action-only loops too
             q = self._read_q()  # the trusted estimate: the bound is never centred on an unchecked reading
             bound = self.config.max_relative_target
             target = np.clip(np.clip(target, self.lower, self.upper), q - bound, q + bound)
@@ -380,58 +332,19 @@ class BlindgraspGripper(Robot):
         if self.is_connected:
             self.disconnect()
 
-    # --- what the calls above share --------------------------------------------------------------------------------
-    def _forget_goals(self) -> None:
-        """Torque off (or about to be): nothing configured is expected, no reading is trusted without a second."""
+    # --- shared by the calls above ----------------------------------------------------------------------------------
+    def _forget_goals(self) -> None:  # torque off: nothing is expected, no reading trusted without a second
         self.registers.expected = {}
         self.gate.forget()
 
     def _trusted_ticks(self, *, free: bool | None = None) -> np.ndarray:
-        """Present_Position of all nine through the plausibility gate."""
-
-        def read() -> np.ndarray:
-            raw = self.bus.sync_read("Present_Position")
-            return np.array([raw[j] for j in self.joints], dtype=np.float64)
-
+        """Present_Position of all nine through the plausibility gate (free: the torque is off)."""
+        in_order = itemgetter(*self.joints)  # the gate's readings are in joint order
+        read = lambda: np.array(in_order(self.bus.sync_read("Present_Position")), dtype=np.float64)  # noqa: E731
         return self.gate.read(read, self.joints, free=not self.registers.expected if free is None else free)
 
     def _read_q(self) -> np.ndarray:
         return np.array([ticks_to_rad(t) for t in self._trusted_ticks()])
 
     def _check_servo_state(self) -> None:
-        """The state block (`ServoRegisters.check_state`); joints the bus watchdog stopped during a pause of this
-        process hold the pose they stopped in and are re-armed."""
-        if tripped := self.registers.check_state():
-            ticks = self._trusted_ticks()
-            self.registers.rearm_watchdog(tripped, {j: int(t) for j, t in zip(self.joints, ticks)})
-            if self.gate.goal is not None:
-                for j in tripped:
-                    self.gate.goal[self.joints.index(j)] = ticks[self.joints.index(j)]
-
-    def _poll_health(self, now: float) -> None:
-        """Once per control period: the health block every `health_every_n` periods, and at once, at the start
-        levels, when a start is pending: a recording episode announced since the last call, or the first call after
-        a pause of the loop. A start also needs room on disk for the episode (`recording_space.py`)."""
-        resumed = self._last_call is not None and now - self._last_call >= self.timing.pause_s
-        self._last_call = now
-        start = self.episodes.take() or resumed
-        if start and self.recording is not None:
-            self.recording.check()
-        self._health_countdown -= 1
-        if start or self._health_countdown <= 0:
-            self._health_countdown = self.config.health_every_n
-            self._check_health(start=start)
-
-    def _check_health(self, *, start: bool = False) -> None:
-        self._fresh_currents = self.health.check(
-            self.bus, self.registers.expected.get("Goal_Current"), start=start
-        )
-
-    def _check_consistency(self, q, forces) -> None:
-        """After a period's readings, when its health read brought currents: the force and the motion checks."""
-        currents, self._fresh_currents = self._fresh_currents, None
-        if currents is None:
-            return
-        expected, goal = self.registers.expected, self.gate.goal
-        goal_q = None if goal is None or not expected else [ticks_to_rad(t) for t in goal]
-        self.consistency.assess(time.monotonic(), q, goal_q, forces, currents, expected.get("Goal_Current"))
+        self.checks.state(self._trusted_ticks)

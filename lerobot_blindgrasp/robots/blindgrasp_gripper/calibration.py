@@ -27,9 +27,8 @@ import draccus
 from lerobot.motors import MotorCalibration
 
 from lerobot_blindgrasp import durable
+from lerobot_blindgrasp.hardware.force_board import force_calibration
 from lerobot_blindgrasp.hardware.xm430 import HOMING_OFFSET_MAX, RAD_PER_TICK, TICKS_PER_REV
-
-from . import force_calibration
 
 logger = logging.getLogger(__name__)
 

@@ -26,8 +26,11 @@ from contextlib import contextmanager
 
 from lerobot_blindgrasp import compat
 from lerobot_blindgrasp.hardware.consistency import ConsistencyError
+from lerobot_blindgrasp.hardware.dynamixel.bus import PortLostError
+from lerobot_blindgrasp.hardware.force_board.reader import ForceStreamError, ForceTareError
 from lerobot_blindgrasp.hardware.loop_timing import LoopOverrunError
 from lerobot_blindgrasp.hardware.plausibility import ImplausibleReadingError
+from lerobot_blindgrasp.hardware.ports import PortAccessError, PortInUseError
 from lerobot_blindgrasp.hardware.servo_health import ServoHealthError
 from lerobot_blindgrasp.hardware.servo_registers import (
     FirmwareTooOldError,
@@ -37,10 +40,8 @@ from lerobot_blindgrasp.hardware.servo_registers import (
 )
 
 from . import signals
-from .bus import PortLostError
 from .errors import (
     ForceSensorError,
-    ForceTareError,
     GripperBusError,
     GripperConsistencyError,
     GripperFirmwareError,
@@ -54,8 +55,6 @@ from .errors import (
     GripperStateError,
     GripperTimingError,
 )
-from .force_sensor import ForceStreamError
-from .ports import PortAccessError, PortInUseError
 
 logger = logging.getLogger(__name__)
 

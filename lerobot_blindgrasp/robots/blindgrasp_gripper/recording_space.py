@@ -83,8 +83,9 @@ class RecordingSpace:
     fallback_features: dict  # the robot's own, for a dataset whose info.json is not (yet) where expected
 
     @classmethod
-    def of(cls, command_line: compat.CommandLine, robot_features: dict) -> RecordingSpace | None:
-        """The recording a script makes (its `--dataset.repo_id` given), or None (no dataset is written)."""
+    def of(cls, command_line: compat.CommandLine, action_features: dict, observation_features: dict):
+        """The recording a script makes (its `--dataset.repo_id` given) with a robot of these features, or None (no
+        dataset is written)."""
         from lerobot.configs.dataset import DatasetRecordConfig
         from lerobot.utils.constants import HF_LEROBOT_HOME
 
@@ -95,7 +96,7 @@ class RecordingSpace:
         root = command_line.dataset_root or HF_LEROBOT_HOME / repo_id
         fps = float(command_line.dataset_fps or defaults["fps"].default)
         episode_s = float(command_line.episode_time_s or defaults["episode_time_s"].default)
-        return cls(Path(root), fps, episode_s, robot_features)
+        return cls(Path(root), fps, episode_s, robot_dataset_features(action_features, observation_features))
 
     def features(self) -> dict:
         from lerobot.datasets.io_utils import load_info
