@@ -9,7 +9,7 @@ import ast
 import re
 from pathlib import Path
 
-from lerobot_blindgrasp.hardware import servo_health as health
+from lerobot_blindgrasp.hardware import servo_diagnostics as health
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = (ROOT / "docs" / "hardware.md").read_text(encoding="utf-8")

@@ -20,7 +20,7 @@ from test_policy_check import ROBOT, _checkpoint
 from lerobot_blindgrasp import policy_contract
 from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.hardware import xm430
-from lerobot_blindgrasp.hardware.servo_health import ERROR, OK, WARN, ServoHealth
+from lerobot_blindgrasp.hardware.servo_diagnostics import ERROR, OK, WARN, ServoHealth
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     ForceSensorError,

@@ -3,7 +3,7 @@ alone as in a replay script), within the bus budget:
 
 - the servos' state block, every period (`servo_registers.ServoRegisters.check_state`); joints the bus watchdog
   stopped during a pause of the host hold the pose they stopped in and are re-armed;
-- the health block every `every_n` periods, judged by `servo_health.py`; at a start (connect, a trial, a recording
+- the health block every `every_n` periods, judged by `servo_diagnostics.py`; at a start (connect, a trial, a recording
   episode, a loop resuming after a pause: the caller says when) at once, at the start levels;
 - after a period's readings, when its health read brought currents: the force and motion checks of
   `consistency.py`.
@@ -19,7 +19,7 @@ import numpy as np
 
 from .consistency import ConsistencyMonitor
 from .plausibility import PositionGate
-from .servo_health import ServoHealth
+from .servo_diagnostics import ServoHealth
 from .servo_registers import ServoRegisters
 from .xm430 import RAD_PER_TICK
 

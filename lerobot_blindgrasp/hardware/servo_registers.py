@@ -3,7 +3,7 @@ checked every control period.
 
 - At connect, before anything is written (`ServoRegisters.check_setup`): Firmware_Version(6) (Drive_Mode and
   Bus_Watchdog need v38), the EEPROM limits Temperature_Limit(31)..Shutdown(63) (handed to the health judge,
-  `servo_health.py`), Startup_Configuration(60) (v45+: a servo set to turn its torque on at power-up is set back at
+  `servo_diagnostics.py`), Startup_Configuration(60) (v45+: a servo set to turn its torque on at power-up is set back at
   configure, so a reset still shows as a dropped torque).
 - At configure, torque off (`ServoRegisters.restore`): Startup Torque On cleared, and the registers that protect a
   servo when no host watches it (`xm430.NO_HOST_PROTECTION` and Current_Limit) restored and read back: one that does

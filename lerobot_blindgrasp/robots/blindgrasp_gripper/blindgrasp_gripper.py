@@ -31,7 +31,7 @@ from lerobot_blindgrasp.hardware.force_board import ForceTareError, force_calibr
 from lerobot_blindgrasp.hardware.loop_timing import PeriodMonitor, SampleSpacing
 from lerobot_blindgrasp.hardware.period_checks import PeriodChecks
 from lerobot_blindgrasp.hardware.plausibility import PositionGate
-from lerobot_blindgrasp.hardware.servo_health import ServoHealth
+from lerobot_blindgrasp.hardware.servo_diagnostics import ServoHealth
 from lerobot_blindgrasp.hardware.servo_registers import ServoRegisters
 
 from . import calibration as calib

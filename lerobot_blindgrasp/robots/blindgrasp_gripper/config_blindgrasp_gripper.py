@@ -88,7 +88,7 @@ class BlindgraspGripperConfig(RobotConfig):
     # kernel may refuse (docs/hardware.md, "The host PC"): a refusal is a warning that says how to allow it.
     realtime_priority: int = 0
     lock_memory: bool = False
-    # Servo health (`hardware/servo_health.py`): the health block (temperature, input voltage, current) is read every this many
+    # Servo health (`hardware/servo_diagnostics.py`): the health block (temperature, input voltage, current) is read every this many
     # control periods; its levels are the datasheet's (`hardware/xm430.py`).
     health_every_n: int = 4
     # Calibration: a joint must move at least this far (rad) in the "positive" pose to read its direction.
@@ -112,10 +112,8 @@ class BlindgraspGripperConfig(RobotConfig):
         for j, lo, hi in zip(spec.JOINT_NAMES, self.joint_lower, self.joint_upper, strict=True):
             k = spec.JOINT_NAMES.index(j)
             if not spec.JOINT_LOWER[k] <= lo < hi <= spec.JOINT_UPPER[k]:
-                raise ValueError(
-                    f"{j}: limits [{lo}, {hi}] must lie inside the sim's "
-                    f"[{spec.JOINT_LOWER[k]}, {spec.JOINT_UPPER[k]}]"
-                )
+                raise ValueError(f"{j}: limits [{lo}, {hi}] must lie inside the sim's [{spec.JOINT_LOWER[k]}, "
+                                 f"{spec.JOINT_UPPER[k]}]")  # fmt: skip
         if self.baudrate not in DYNAMIXEL_BAUDRATES:
             raise ValueError(f"baudrate {self.baudrate} is not a Dynamixel rate {DYNAMIXEL_BAUDRATES}")
         if not self.port or not self.force_sensor.port:

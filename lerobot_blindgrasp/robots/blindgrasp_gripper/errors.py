@@ -50,7 +50,7 @@ class GripperTimingError(GripperSafetyStop):
 
 class GripperHealthError(GripperSafetyStop):
     """A servo's health item (temperature, input voltage, current against its limit) reached its ERROR level, or was
-    too close to its limit to start a trial or episode (`hardware/servo_health.py`): stopped before the firmware's own shutdown."""
+    too close to its limit to start a trial or episode (`hardware/servo_diagnostics.py`): stopped before the firmware's own shutdown."""
 
 
 class GripperConsistencyError(GripperSafetyStop):

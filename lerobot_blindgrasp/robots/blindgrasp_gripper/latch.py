@@ -31,7 +31,7 @@ from lerobot_blindgrasp.hardware.force_board.reader import ForceStreamError, For
 from lerobot_blindgrasp.hardware.loop_timing import LoopOverrunError
 from lerobot_blindgrasp.hardware.plausibility import ImplausibleReadingError
 from lerobot_blindgrasp.hardware.ports import PortAccessError, PortInUseError
-from lerobot_blindgrasp.hardware.servo_health import ServoHealthError
+from lerobot_blindgrasp.hardware.servo_diagnostics import ServoHealthError
 from lerobot_blindgrasp.hardware.servo_registers import (
     FirmwareTooOldError,
     ProtectionNotKeptError,

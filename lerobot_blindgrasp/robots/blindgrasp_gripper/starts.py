@@ -1,5 +1,5 @@
 """Where a start is, as the robot can tell: a start (connect, a trial, a recording episode, a loop resuming after a
-pause) is judged like a connect (`hardware/servo_health.py` at its start levels), and a recording's needs room on
+pause) is judged like a connect (`hardware/servo_diagnostics.py` at its start levels), and a recording's needs room on
 disk for the episode (`recording_space.py`).
 
 LeRobot's Robot interface has no call at an episode's start: lerobot-record goes on calling get_observation and
