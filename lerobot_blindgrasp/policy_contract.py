@@ -335,7 +335,7 @@ def facts_from_dataset(meta, source: str | None = None) -> dict:
 
 
 @dataclass
-class RecordConfig:
+class PolicyContractConfig:
     checkpoint: Path  # a pretrained_model folder (config.json, model.safetensors, ...)
     dataset_root: Path | None = None  # the training dataset (its meta/info.json is read)
     sim_demos: bool = False  # the training dataset was this project's sim demos (not on this machine)
@@ -347,7 +347,7 @@ class RecordConfig:
             raise ValueError(f"{self.checkpoint} has no config.json: not a LeRobot pretrained_model folder")
 
 
-def record(cfg: RecordConfig) -> dict:
+def record(cfg: PolicyContractConfig) -> dict:
     """Write `trained_for` into the checkpoint's config.json (atomically, LeRobot's layout of the file)."""
     where = Path(cfg.checkpoint)
     config = json.loads((where / "config.json").read_text(encoding="utf-8"))
@@ -372,7 +372,7 @@ def record(cfg: RecordConfig) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    print(json.dumps(record(parse_config(RecordConfig, argv)), indent=2))
+    print(json.dumps(record(parse_config(PolicyContractConfig, argv)), indent=2))
 
 
 if __name__ == "__main__":
