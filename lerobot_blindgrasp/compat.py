@@ -244,7 +244,7 @@ def is_episode_announcement(record: logging.LogRecord) -> bool:
     LeRobot 0.6.1: the Robot interface has no call at an episode's start. lerobot-record's loop runs
     `log_say(f"Recording episode {n}")` just before each episode (lerobot_record.py; lerobot-rollout's episodic
     strategy too), and `log_say` logs the text at INFO (`logging.info(text)`) whether or not sounds are on. The
-    robot checks itself at each start (`robots/blindgrasp_gripper/episodes.py` hands these records to it).
+    robot checks itself at each start (`robots/blindgrasp_gripper/starts.py` hands these records to it).
     """
     if record.funcName == "log_say" and isinstance(record.msg, str) and record.msg.startswith(ANNOUNCEMENT):
         _used("is_episode_announcement")
