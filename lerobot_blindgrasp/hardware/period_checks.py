@@ -14,26 +14,23 @@ Each failure raises the checking module's own error; the gripper's safety latch 
 from __future__ import annotations
 
 import time
-
-import numpy as np
+from collections.abc import Callable
 
 from .consistency import ConsistencyMonitor
 from .plausibility import PositionGate
 from .servo_diagnostics import ServoHealth
 from .servo_registers import ServoRegisters
-from .xm430 import RAD_PER_TICK
-
-ZERO_TICK = 2048  # Present_Position at q = 0 after calibration (`robots/.../calibration.py` writes it so)
 
 
 class PeriodChecks:
     """The per-period checks of the servos on `registers.bus`; `gate` is the plausibility gate their positions pass
-    (its goal follows a re-armed joint), `every_n` the health read's period in control periods."""
+    (its goal follows a re-armed joint), `every_n` the health read's period in control periods, `to_rad` the
+    calibration's map of a position in ticks to the joint's angle."""
 
     def __init__(self, registers: ServoRegisters, health: ServoHealth, consistency: ConsistencyMonitor,
-                 gate: PositionGate, every_n: int):  # fmt: skip
+                 gate: PositionGate, every_n: int, to_rad: Callable[[float], float]):  # fmt: skip
         self.registers, self.health, self.consistency, self.gate = registers, health, consistency, gate
-        self.every_n = every_n
+        self.every_n, self.to_rad = every_n, to_rad
         self._countdown = 0
         self._currents: list[int] | None = None  # Present_Current of this period's health read, not yet judged
 
@@ -77,5 +74,5 @@ class PeriodChecks:
         if currents is None:
             return
         expected, goal = self.registers.expected, self.gate.goal
-        goal_q = None if goal is None or not expected else (np.asarray(goal) - ZERO_TICK) * RAD_PER_TICK
+        goal_q = None if goal is None or not expected else [self.to_rad(t) for t in goal]
         self.consistency.assess(time.monotonic(), q, goal_q, forces, currents, expected.get("Goal_Current"))

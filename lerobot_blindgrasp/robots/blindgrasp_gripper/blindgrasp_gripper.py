@@ -80,7 +80,8 @@ class BlindgraspGripper(Robot):
         self.registers = ServoRegisters(self.bus, self.joints, protection)
         self.health = ServoHealth(self.joints)  # OK / WARN / ERROR per servo item
         self.consistency = ConsistencyMonitor.at_p_gain(config.position_p_gain)  # tip forces against the servos
-        self.checks = PeriodChecks(self.registers, self.health, self.consistency, self.gate, config.health_every_n)
+        self.checks = PeriodChecks(self.registers, self.health, self.consistency, self.gate, config.health_every_n,
+                                   to_rad=ticks_to_rad)  # fmt: skip
         self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no two samples closer than the contract allows
         self.episodes = EpisodeStarts()  # lerobot-record's episode announcements
@@ -253,8 +254,7 @@ class BlindgraspGripper(Robot):
 
     @check_if_not_connected
     def keep_alive(self) -> None:
-        """One servo state check outside the control loop (a wait for the operator): call it every
-        `keepalive.KEEPALIVE_S`, so the servos' bus watchdog stays armed and fed."""
+        """One servo state check in a wait outside the loop, every `keepalive.KEEPALIVE_S`: the watchdog stays fed."""
         with self.latch.guard("keeping the bus alive while waiting"):
             self._check_servo_state()
 
