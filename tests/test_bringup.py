@@ -19,8 +19,8 @@ from emulators.harness import BIN, Operator, cli_env
 from emulators.rig import LATENCY_TIMER_MS, GripperRig
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware.dynamixel import latency_timer
 from lerobot_blindgrasp.hardware.dynamixel.latency_timer import check_latency_timer, ensure_low_latency
-from lerobot_blindgrasp.robots.blindgrasp_gripper import latency_timer
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
 
 ROOT = Path(__file__).resolve().parents[1]
