@@ -22,8 +22,8 @@ from lerobot_blindgrasp.emulators.dynamixel import (
     EmulatedServo,
 )
 from lerobot_blindgrasp.emulators.dynamixel_wire import crc16, stuff, unstuff
+from lerobot_blindgrasp.hardware.force_board.frame_codec import FrameParser, crc16_ccitt_false, encode_frame
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import FrameParser, crc16_ccitt_false, encode_frame
 
 ADDR = {name: spec_[0] for name, spec_ in CONTROL_TABLE.items()}
 
