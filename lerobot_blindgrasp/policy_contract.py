@@ -169,7 +169,7 @@ def weight_problems(where: Path) -> list[str]:
     return [f"{sum(bad.values())} non-finite weights in {path} (in {sorted(bad)[:3]})"] if bad else []
 
 
-# --- the check -----------------------------------------------------------------------------------------------------
+# --- the check ---------------------------------------------------------------------------------------------------
 def _feature_problems(cfg: dict, where: Path, robot: RobotContract) -> list[str]:
     want = {STATE: (len(robot.state_names),), ACTION: (len(robot.action_names),)}
     bad = []
@@ -316,7 +316,7 @@ def check_named(path, robot_type: str, fps: float, fps_source: str, *, allow_unv
     return True
 
 
-# --- what a checkpoint records it was trained for -----------------------------------------------------------------
+# --- what a checkpoint records it was trained for ----------------------------------------------------------------
 def facts_from_dataset(meta, source: str | None = None) -> dict:
     """`trained_for` from a dataset's metadata (anything with `robot_type`, `fps`, `features`, `repo_id`): the
     names of `observation.state` and `action` in order, and the policy's action meaning."""

@@ -1,11 +1,11 @@
 """The real gripper: nine XM430-W350 on one Dynamixel bus plus three fingertip load cells, in lifecycle order like
 LeRobot's `koch_follower`; observation and action are `spec`'s (names, order, rad and N), as in the sim demos.
 
-It holds what checks it, each object given what it needs: bus and force reader on exclusive ports (`hardware/`); the
-plausibility `gate` of every position reading; the servos' `registers`, `health` and tip `consistency`, run each period
-by `checks`; the loop's `timing` and `spacing`; the safety `latch` (`latch.py`: any failure while connected turns the
-torque off on every servo that answers, closes the ports, raises one named error); the policy named on the script's
-command line, checked before any port opens (`policy_contract.py`).
+It holds what checks it, each object given what it needs: bus and force reader on exclusive ports (`hardware/`);
+the plausibility `gate` of every position reading; the servos' `registers`, `health` and tip `consistency`, run
+each period by `checks`; the loop's `timing` and `spacing`; the safety `latch` (`latch.py`: any failure while
+connected turns the torque off on every servo that answers, closes the ports, raises one named error); the policy
+named on the script's command line, checked before any port opens (`policy_contract.py`).
 """
 
 from __future__ import annotations
@@ -85,8 +85,9 @@ class BlindgraspGripper(Robot):
         self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no two samples closer than the contract allows
         self.episodes = EpisodeStarts()  # lerobot-record's episode announcements
-        self.latch = SafetyLatch(str(self), self.bus, self.force, config.servo_ids, on_torque_off=self._forget_goals,
-                                 on_close=self.episodes.uninstall, report=self.consistency.report)  # fmt: skip
+        self.latch = SafetyLatch(str(self), self.bus, self.force, config.servo_ids,
+                                 on_torque_off=self._forget_goals, on_close=self.episodes.uninstall,
+                                 report=self.consistency.report)  # fmt: skip
         self.lower, self.upper = np.asarray([config.joint_lower, config.joint_upper], dtype=np.float64)
         self.starts = Starts(self.episodes, self.timing.pause_s)  # when health is judged at the start levels
         self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
@@ -112,7 +113,8 @@ class BlindgraspGripper(Robot):
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
         self._check_policy()  # a policy named on the script's command line must fit, before any port opens
-        self.starts.recording = RecordingSpace.of(self.config.command_line, self.action_features, self.observation_features)  # fmt: skip
+        features = (self.action_features, self.observation_features)
+        self.starts.recording = RecordingSpace.of(self.config.command_line, *features)  # room on disk, each start
         if self.calibration_error is not None and calibrate:
             raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
         if calibrate:
@@ -136,16 +138,11 @@ class BlindgraspGripper(Robot):
 
     def _check_policy(self) -> None:
         """The checkpoint the script runs (`command_line.policy_path`), at the rate its own flags give."""
-        cl, loop_hz, allow = (
-            self.config.command_line,
-            float(self.config.loop_hz),
-            self.config.allow_unverified_policy,
-        )
+        cl, loop_hz = self.config.command_line, float(self.config.loop_hz)
         fps, source = (cl.fps, f"--{cl.fps_flag}") if cl.fps is not None else (loop_hz, "the robot's loop_hz")
-        if (
-            policy_contract.check_named(cl.policy_path, self.name, fps, source, allow_unverified=allow)
-            and fps != loop_hz
-        ):
+        allow = self.config.allow_unverified_policy
+        checked = policy_contract.check_named(cl.policy_path, self.name, fps, source, allow_unverified=allow)
+        if checked and fps != loop_hz:
             raise PolicyMismatchError(f"{source}={fps:g} but the robot's loop_hz is {self.config.loop_hz:g}: set "
                                       "--robot.loop_hz to the loop's rate (it measures the loop against it).")  # fmt: skip
 
@@ -197,7 +194,8 @@ class BlindgraspGripper(Robot):
             self.registers.write_settings({**settings, "Profile_Velocity": self.config.profile_velocity})
             self._enable_torque_holding_pose()
             watchdog = self.config.bus_watchdog_ms // xm430.WATCHDOG_UNIT_MS
-            self.registers.expected = {"Torque_Enable": 1, **gains, "Bus_Watchdog": watchdog, "Goal_Current": current}  # fmt: skip
+            expected = {"Torque_Enable": 1, **gains, "Bus_Watchdog": watchdog, "Goal_Current": current}
+            self.registers.expected = expected
 
     def _enable_torque_holding_pose(self) -> None:
         """Torque on with Goal_Position = the present pose, so nothing moves when the torque comes on."""
@@ -254,7 +252,7 @@ class BlindgraspGripper(Robot):
 
     @check_if_not_connected
     def keep_alive(self) -> None:
-        """One servo state check in a wait outside the loop, every `keepalive.KEEPALIVE_S`: the watchdog stays fed."""
+        """One servo state check in a wait outside the loop, every `KEEPALIVE_S`: the bus watchdog stays fed."""
         with self.latch.guard("keeping the bus alive while waiting"):
             self._check_servo_state()
 
@@ -332,7 +330,7 @@ class BlindgraspGripper(Robot):
         if self.is_connected:
             self.disconnect()
 
-    # --- shared by the calls above ----------------------------------------------------------------------------------
+    # --- shared by the calls above -------------------------------------------------------------------------------
     def _forget_goals(self) -> None:  # torque off: nothing is expected, no reading trusted without a second
         self.registers.expected = {}
         self.gate.forget()

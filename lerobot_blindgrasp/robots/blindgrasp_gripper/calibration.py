@@ -193,7 +193,7 @@ def save_atomic(calibration: dict[str, MotorCalibration], fpath: Path) -> None:
         draccus.dump(calibration, f, indent=4)
 
 
-# --- a missing file at connect --------------------------------------------------------------------------------------
+# --- a missing file at connect -----------------------------------------------------------------------------------
 # LeRobot's robots calibrate interactively inside `connect()` when no calibration file exists (koch_follower does).
 # That is right at a terminal, where the operator reads the prompt, and wrong when nobody can answer (`lerobot-eval`
 # under nohup, a job scheduler or a pipe): there `input()` fails with EOFError mid-calibration or waits for ever. The
