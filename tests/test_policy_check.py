@@ -210,6 +210,22 @@ def test_a_mismatch_on_the_command_line_is_refused_before_the_ports_open(rig, tm
     assert rig.dxl.instruction_counts == {} and not robot.is_connected
 
 
+def test_the_robot_checks_the_checkpoint_its_config_was_parsed_with_not_the_argv_at_connect(
+    rig, tmp_path, monkeypatch
+):
+    """The command line is read once, where the config is parsed (`compat.read_command_line`): what the process's
+    argv says by the time `connect()` runs changes nothing."""
+    ckpt = _checkpoint(tmp_path, trained_for={"fps": 10})
+    monkeypatch.setattr(sys, "argv", ["lerobot-rollout", f"--policy.path={ckpt}", "--fps=20"])
+    config = rig.robot_config(tmp_path / "cal")
+    assert (config.command_line.policy_path, config.command_line.fps) == (str(ckpt), 20.0)
+    monkeypatch.setattr(sys, "argv", ["lerobot-rollout"])
+    robot = BlindgraspGripper(config)
+    with pytest.raises(PolicyMismatchError, match=r"fps 10 in .*config.json \(trained_for"):
+        robot.connect()
+    assert rig.dxl.instruction_counts == {} and not robot.is_connected
+
+
 def test_lerobot_eval_refuses_a_mismatching_checkpoint_before_any_torque(rig, tmp_path):
     ckpt = _checkpoint(tmp_path, action_dim=8)
     cmd = [
