@@ -11,7 +11,9 @@ With --durable_side_by_side=true (default) the same collection (same seeds, so t
 this one process: first without crash checkpoints (`--checkpoint_s=0`, finalize only at the end: the behaviour
 before durable collection), then with them every `checkpoint_s` seconds (or `num_envs` episodes), so their cost is
 measured side by side: the `durable_*` keys, and `checkpoint_share_of_wall`, the time spent finalizing and
-reopening.
+reopening. With --writer_side_by_side=true (default) it also runs once more with every episode saved in the loop
+(`--writer_queue=0`, the collector before its writer thread): the `in_loop_*` keys, and `writer_throughput_ratio`,
+curated demos per wall-clock minute with the writer thread over in the loop.
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ class BenchDemosConfig(BenchConfig):
     backend: str = "batch"  # physics: batch or warp (pip install .[gpu]; a GPU if there is one, else Warp's CPU)
     durable_side_by_side: bool = True  # also run the collection with crash checkpoints, and compare
     checkpoint_s: float = 10.0  # their interval here: 6x as often as the collector's default 60 s, a worst case
+    writer_queue: int = 256  # episodes queued for the collector's writer thread (0: saved in the loop)
+    writer_side_by_side: bool = True  # also run the collection with episodes saved in the loop, and compare
 
 
 def _throwaway_teacher(tmp: Path) -> Path:
@@ -113,6 +117,8 @@ def run(cfg: BenchDemosConfig) -> dict:
         }
         if durable_run is not None:
             result.update(_durable_figures(cfg, durable_run, stats))
+        if cfg.writer_side_by_side:
+            result.update(_in_loop_figures(_collect(cfg, teacher, tmp, "demos_in_loop", 0.0, queue=0), stats))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     if not cfg.json:
@@ -122,7 +128,8 @@ def run(cfg: BenchDemosConfig) -> dict:
     return result
 
 
-def _collect(cfg: BenchDemosConfig, teacher: Path, tmp: Path, folder: str, checkpoint_s: float, on_episode=None):
+def _collect(cfg: BenchDemosConfig, teacher: Path, tmp: Path, folder: str, checkpoint_s: float, on_episode=None,
+             queue: int | None = None):  # fmt: skip
     """One collection into tmp/folder, as blindgrasp-collect-demos runs it."""
     from lerobot_blindgrasp.demos import curation
     from lerobot_blindgrasp.demos.collection import collect
@@ -141,6 +148,7 @@ def _collect(cfg: BenchDemosConfig, teacher: Path, tmp: Path, folder: str, check
         backend=cfg.backend,
         progress=False,
         checkpoint_s=checkpoint_s,
+        writer_queue=cfg.writer_queue if queue is None else queue,
     )
     with contextlib.redirect_stderr(io.StringIO()):
         return collect(c, on_episode=on_episode)
@@ -159,6 +167,7 @@ def _collection_figures(stats) -> dict:
         "curated_demos_per_cpu_minute": stats.demos_per_cpu_minute,
         "demos_per_minute": stats.demos_per_minute,
         "write_share_of_wall": stats.write_s / stats.wall_s if stats.wall_s else 0.0,
+        "writer_wait_share_of_wall": stats.writer_wait_s / stats.wall_s if stats.wall_s else 0.0,
     }
 
 
@@ -200,4 +209,16 @@ def _durable_figures(cfg: BenchDemosConfig, durable_run, stats) -> dict:
         "durable_cpu_throughput_ratio": ratio(durable_run.demos_per_cpu_minute, stats.demos_per_cpu_minute),
         "durable_throughput_ratio": ratio(durable_run.demos_per_minute, stats.demos_per_minute),
         "checkpoint_share_of_wall": durable_run.checkpoint_s / max(durable_run.wall_s, 1e-9),
+    }
+
+
+def _in_loop_figures(in_loop, stats) -> dict:
+    """The same collection with every episode saved in the loop, next to the one with the writer thread."""
+    ratio = lambda a, b: a / b if b else 0.0  # noqa: E731
+    return {
+        "in_loop_curated_demos": in_loop.kept,
+        "in_loop_wall_s": in_loop.wall_s,
+        "in_loop_demos_per_minute": in_loop.demos_per_minute,
+        "in_loop_write_share_of_wall": ratio(in_loop.write_s, in_loop.wall_s),
+        "writer_throughput_ratio": ratio(stats.demos_per_minute, in_loop.demos_per_minute),
     }

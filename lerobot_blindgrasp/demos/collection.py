@@ -129,6 +129,7 @@ def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: st
                 run.one_env(todo, stop)
             else:
                 run.stats.stop_reason = "interrupted"
+                run.note_queued()
             run.writer.flush()  # a write error ends the run here, as it would have in the loop
     except BaseException as e:
         run.stats.stop_reason = (
@@ -230,14 +231,20 @@ class _Run:
                 stale["now"] = finished >= REBUILD_WASTE_FRACTION * len(env.object_names)
         env.close()
 
+    def note_queued(self) -> None:
+        if self.writer.pending:
+            logger.warning("writing the %d queued episodes (Ctrl-C to drop them)", self.writer.pending)
+
     def finish(self, first: BaseException | None) -> None:
         """Write what is queued, finalize the dataset and record the run, however it ended; `first` is the error
         that ended it."""
         self.bar.close()
+        if isinstance(first, KeyboardInterrupt):
+            self.note_queued()
         try:
             with _cleanup("writing the queued episodes", first):
                 self.writer.close()  # an interrupted run keeps every episode it finished
-        except BaseException as e:  # only a third Ctrl-C, or a write error not raised by the loop's flush
+        except BaseException as e:  # a Ctrl-C while the queue is written, or a write error the loop did not see
             if first is None:
                 interrupted = isinstance(e, KeyboardInterrupt)
                 self.stats.stop_reason = "interrupted" if interrupted else f"error: {type(e).__name__}: {e}"

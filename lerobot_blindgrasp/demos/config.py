@@ -58,8 +58,9 @@ class CollectConfig:
     # end (a kill then loses every episode of the run).
     checkpoint_s: float = 60.0
     # Kept episodes waiting for the writer thread, which saves them off the rollout loop; the loop waits only when
-    # this many are queued (about 20 kB each). A kill loses the queued ones too. 0: save in the loop.
-    writer_queue: int = 64
+    # this many are queued (about 15 kB each). Envs finish their episodes together, so a queue as long as the kept
+    # share of num_envs never stalls the loop. A kill loses the queued ones too. 0: save in the loop.
+    writer_queue: int = 256
     progress: bool = True  # progress bar
 
     def __post_init__(self):

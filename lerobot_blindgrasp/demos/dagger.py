@@ -66,7 +66,7 @@ class DaggerConfig:
     num_envs: int = 360  # envs stepped together (episodes of all objects at once)
     seed: int = DAGGER_SEED  # first env seed, in the demo seed range
     device: str = "cpu"
-    writer_queue: int = 64  # episodes waiting for the writer thread (as blindgrasp-collect-demos); 0: in the loop
+    writer_queue: int = 256  # episodes waiting for the writer thread (as blindgrasp-collect-demos); 0: in the loop
     progress: bool = True
 
     def __post_init__(self):

@@ -4,12 +4,12 @@
 files), and in the loop it stalls the physics for as long. `EpisodeWriter` runs the writes (and anything else that
 touches the dataset or the run's records, such as a crash checkpoint) on one thread, in the order they were
 submitted, so the dataset is the same as written in the loop: episode indices, files and values. The loop only
-waits when `queue` jobs are already waiting (backpressure: memory stays bounded, about 20 kB per demo episode).
+waits when `queue` jobs are already waiting (backpressure: memory stays bounded, about 15 kB per demo episode).
 
 The first error of a job is raised in the caller's thread, by the next `submit`, `flush` or `close`; the jobs queued
-after it are dropped, so nothing is written after a failed write. `close` writes what is queued (finished episodes
-are kept when a run is interrupted) and never leaves a write half done: a Ctrl-C while it waits drops the jobs not
-started yet, lets the one in progress complete, and is raised after.
+after it are dropped, so nothing is written after a failed write. `flush` and `close` write what is queued (an
+interrupted run keeps the episodes it finished) and never leave a write half done: a Ctrl-C while they wait drops
+the jobs not started yet, lets the one in progress complete, and is raised after.
 
 With `queue=0` every job runs in the caller's thread when submitted: the loop as it was before.
 
@@ -50,24 +50,26 @@ class EpisodeWriter:
         error (then `job` is not queued)."""
         self._reap(keep=self.queue - 1 if not self._stop.is_set() else 0)  # a failed job: its error, first
         if self._stop.is_set():
-            raise RuntimeError("the episode writer stopped after an error; nothing more is written")
+            raise RuntimeError("the episode writer is stopped (an earlier job failed, or it was closed); nothing more is written")
         if self._pool is None:
             self._run(job)
         else:
             self._pending.append(self._pool.submit(self._run, job))
 
     def flush(self) -> None:
-        """Wait until every submitted job has run; raises the first error among them."""
-        self._reap(keep=0)
-
-    def close(self) -> None:
-        """Run what is queued, then stop the thread. Raises the first error not yet raised."""
+        """Wait until every submitted job has run; raises the first error among them. A Ctrl-C while it waits
+        drops the jobs not started yet: the one in progress completes, then the KeyboardInterrupt is raised."""
         try:
-            self.flush()
+            self._reap(keep=0)
         except KeyboardInterrupt:
-            self._stop.set()  # another Ctrl-C: only the write in progress completes
+            self._stop.set()
             self._wait_uninterrupted()
             raise
+
+    def close(self) -> None:
+        """`flush`, then stop the thread."""
+        try:
+            self.flush()
         finally:
             if self._pool is not None:
                 self._stop.set()
