@@ -430,15 +430,16 @@ def test_bench_demos_reports_speeds(teacher, capsys):
     cfg = parse_config(
         bench_demos.BenchDemosConfig,
         [f"--teacher={teacher}", "--num_envs=6", "--objects=medium", "--curation=false", "--episodes_per_object=1",
-         "--write_episodes=6", "--json=true"],
+         "--write_episodes=6", "--writer_pairs=1", "--json=true"],
     )  # fmt: skip
     result = bench_demos.run(cfg)
     assert result["curated_demos"] == 6 and result["rollouts"] >= 6
     assert result["curated_demos_per_cpu_minute"] > 0 and result["frames_written_per_s"] > 0
     assert result["frames_written_per_s_add_frame"] > 0 and result["writer_episodes"] == 6
     assert result["backend"] == "batch"
-    # The same collection with every episode saved in the loop, in the same run: the same demos, a ratio.
-    assert result["in_loop_curated_demos"] == 6 and result["writer_throughput_ratio"] > 0
+    # The same collection with the writer thread and in the loop, in pairs in the same run: the same demos, a ratio.
+    assert result["writer_pair_demos"] == result["writer_pair_demos_in_loop"] == 6
+    assert result["writer_throughput_ratio"] > 0 and len(result["writer_pair_ratios"]) == 1
     assert capsys.readouterr().out == ""  # --json: the dispatcher prints, run() stays quiet
 
 

@@ -11,14 +11,16 @@ With --durable_side_by_side=true (default) the same collection (same seeds, so t
 this one process: first without crash checkpoints (`--checkpoint_s=0`, finalize only at the end: the behaviour
 before durable collection), then with them every `checkpoint_s` seconds (or `num_envs` episodes), so their cost is
 measured side by side: the `durable_*` keys, and `checkpoint_share_of_wall`, the time spent finalizing and
-reopening. With --writer_side_by_side=true (default) it also runs once more with every episode saved in the loop
-(`--writer_queue=0`, the collector before its writer thread): the `in_loop_*` keys, and `writer_throughput_ratio`,
-curated demos per wall-clock minute with the writer thread over in the loop.
+reopening. With --writer_pairs=N (default 2) it then runs N pairs of the same collection, one with the writer thread
+(`--writer_queue`) and one with every episode saved in the loop (`--writer_queue=0`, the collector before its writer
+thread), alternating which goes first so that a drift in the machine's load cancels: `writer_throughput_ratio` is
+their curated demos per wall-clock minute, writer thread over in the loop, and `writer_pair_ratios` each pair's.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import shutil
 import sys
@@ -47,7 +49,7 @@ class BenchDemosConfig(BenchConfig):
     durable_side_by_side: bool = True  # also run the collection with crash checkpoints, and compare
     checkpoint_s: float = 10.0  # their interval here: 6x as often as the collector's default 60 s, a worst case
     writer_queue: int = 256  # episodes queued for the collector's writer thread (0: saved in the loop)
-    writer_side_by_side: bool = True  # also run the collection with episodes saved in the loop, and compare
+    writer_pairs: int = 2  # collections with the writer thread and in the loop, side by side (0: none)
 
 
 def _throwaway_teacher(tmp: Path) -> Path:
@@ -95,6 +97,8 @@ def run(cfg: BenchDemosConfig) -> dict:
     tmp = Path(tempfile.mkdtemp(prefix="blindgrasp-bench-demos-"))
     try:
         teacher = cfg.teacher or _throwaway_teacher(tmp)
+        if cfg.writer_pairs:  # the pairs compare only if neither pays the first collection's one-off costs
+            _collect(_one_episode(cfg), teacher, tmp, "warmup", 0.0, queue=0)
         seen = []
 
         def keep_some(ep, cut, written, stats):
@@ -117,8 +121,8 @@ def run(cfg: BenchDemosConfig) -> dict:
         }
         if durable_run is not None:
             result.update(_durable_figures(cfg, durable_run, stats))
-        if cfg.writer_side_by_side:
-            result.update(_in_loop_figures(_collect(cfg, teacher, tmp, "demos_in_loop", 0.0, queue=0), stats))
+        if cfg.writer_pairs:
+            result.update(_writer_pairs(cfg, teacher, tmp))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     if not cfg.json:
@@ -152,6 +156,18 @@ def _collect(cfg: BenchDemosConfig, teacher: Path, tmp: Path, folder: str, check
     )
     with contextlib.redirect_stderr(io.StringIO()):
         return collect(c, on_episode=on_episode)
+
+
+def _one_episode(cfg: BenchDemosConfig) -> BenchDemosConfig:
+    """A collection of one whole episode: the imports, the first env build and the first save."""
+    return dataclasses.replace(
+        cfg,
+        objects="cylinder_a_medium",
+        num_envs=1,
+        episodes_per_object=1,
+        max_rollouts_per_object=1,
+        curation=False,
+    )
 
 
 def _collection_figures(stats) -> dict:
@@ -212,13 +228,24 @@ def _durable_figures(cfg: BenchDemosConfig, durable_run, stats) -> dict:
     }
 
 
-def _in_loop_figures(in_loop, stats) -> dict:
-    """The same collection with every episode saved in the loop, next to the one with the writer thread."""
-    ratio = lambda a, b: a / b if b else 0.0  # noqa: E731
+def _writer_pairs(cfg: BenchDemosConfig, teacher: Path, tmp: Path) -> dict:
+    """The same collection with the writer thread and in the loop, in pairs (ABBA...): their throughput ratio."""
+    runs = {"thread": [], "in_loop": []}
+    for k in range(cfg.writer_pairs):
+        for name in ("thread", "in_loop") if k % 2 == 0 else ("in_loop", "thread"):
+            queue = cfg.writer_queue if name == "thread" else 0
+            runs[name].append(_collect(cfg, teacher, tmp, f"pair{k}_{name}", 0.0, queue=queue))
+    demos = {name: sum(r.kept for r in rs) for name, rs in runs.items()}
+    wall = {name: sum(r.wall_s for r in rs) for name, rs in runs.items()}
     return {
-        "in_loop_curated_demos": in_loop.kept,
-        "in_loop_wall_s": in_loop.wall_s,
-        "in_loop_demos_per_minute": in_loop.demos_per_minute,
-        "in_loop_write_share_of_wall": ratio(in_loop.write_s, in_loop.wall_s),
-        "writer_throughput_ratio": ratio(stats.demos_per_minute, in_loop.demos_per_minute),
+        "writer_pair_demos": demos["thread"],
+        "writer_pair_demos_in_loop": demos["in_loop"],
+        "writer_pair_wall_s": wall["thread"],
+        "writer_pair_wall_s_in_loop": wall["in_loop"],
+        "writer_pair_wait_share_of_wall": sum(r.writer_wait_s for r in runs["thread"]) / wall["thread"],
+        "writer_throughput_ratio": (demos["thread"] / wall["thread"]) / (demos["in_loop"] / wall["in_loop"]),
+        "writer_pair_ratios": [
+            round((a.kept / a.wall_s) / (b.kept / b.wall_s), 3)
+            for a, b in zip(runs["thread"], runs["in_loop"], strict=True)
+        ],
     }
