@@ -13,7 +13,8 @@ Output: `<output_dir>/relabelled`, a LeRobotDataset of those episodes (same sche
 10 s or until the object left the workspace; `episode.outcome` says whether the student succeeded), and
 `<output_dir>/aggregate`, the demos and the relabelled episodes merged with LeRobot's own `aggregate_datasets`:
 the dataset the next student trains on. Start states come from their own block of the demo seed range, disjoint
-from the demos' and from evaluation.
+from the demos' and from evaluation. The episodes are saved as the demo collector saves its own: by the writer
+thread (`demos/episode_writer.py`), in order, while the next batch rolls out.
 
 Label: the absolute target the env would have commanded for the teacher's action (`BatchedGraspEnv.target_for_delta`:
 clip(q + clip(a_teacher, +-0.3 rad), joint limits), in the joints' measured frame).

@@ -50,7 +50,9 @@ class EpisodeWriter:
         error (then `job` is not queued)."""
         self._reap(keep=self.queue - 1 if not self._stop.is_set() else 0)  # a failed job: its error, first
         if self._stop.is_set():
-            raise RuntimeError("the episode writer is stopped (an earlier job failed, or it was closed); nothing more is written")
+            raise RuntimeError(
+                "the episode writer is stopped (an earlier job failed, or it was closed); nothing more is written"
+            )
         if self._pool is None:
             self._run(job)
         else:
