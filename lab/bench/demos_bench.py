@@ -243,6 +243,7 @@ def _writer_pairs(cfg: BenchDemosConfig, teacher: Path, tmp: Path) -> dict:
         "writer_pair_wall_s": wall["thread"],
         "writer_pair_wall_s_in_loop": wall["in_loop"],
         "writer_pair_wait_share_of_wall": sum(r.writer_wait_s for r in runs["thread"]) / wall["thread"],
+        "writer_pair_write_share_of_wall_in_loop": sum(r.write_s for r in runs["in_loop"]) / wall["in_loop"],
         "writer_throughput_ratio": (demos["thread"] / wall["thread"]) / (demos["in_loop"] / wall["in_loop"]),
         "writer_pair_ratios": [
             round((a.kept / a.wall_s) / (b.kept / b.wall_s), 3)
