@@ -137,9 +137,11 @@ def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: st
         )
         raise
     finally:
-        if not bars_were_off:
-            datasets.enable_progress_bars()
-        run.finish(sys.exc_info()[1])  # the error that ended the run, if any: a cleanup failure must not mask it
+        try:  # the error that ended the run, if any: a cleanup failure must not mask it
+            run.finish(sys.exc_info()[1])
+        finally:  # after the queued saves
+            if not bars_were_off:
+                datasets.enable_progress_bars()
     return run.stats
 
 
