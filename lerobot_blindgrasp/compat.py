@@ -8,7 +8,8 @@ manager here, and nowhere else in the package (`tests/test_compat.py` scans for 
 - `skip_empty_image_embedding`: replaces the dataset writer's `embed_images` within a block (demo collection).
 - `atomic_lerobot_metadata`: replaces `io_utils.write_json` and `write_tasks` within a block (demo collection).
 - `is_episode_announcement`: recognises lerobot-record's `log_say` line that starts an episode (the robot).
-- `cli_policy_path`, `cli_arg`, `set_lerobot_argv`: LeRobot's command line, read or set outside its parser.
+- `read_command_line` (through `cli_policy_path`, `cli_arg`), `set_lerobot_argv`: LeRobot's command line, read or
+  set outside its parser.
 - `set_signal_handler`, `set_excepthook`: process-wide hooks the robot installs while a gripper is connected.
 
 `check()` also covers the dataset writers' private state that the demo collector reads and resets to reopen a
@@ -22,6 +23,7 @@ WARNING. A reach whose target is gone degrades to LeRobot's own behaviour, as be
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import importlib
 import importlib.metadata
@@ -242,7 +244,7 @@ def is_episode_announcement(record: logging.LogRecord) -> bool:
     LeRobot 0.6.1: the Robot interface has no call at an episode's start. lerobot-record's loop runs
     `log_say(f"Recording episode {n}")` just before each episode (lerobot_record.py; lerobot-rollout's episodic
     strategy too), and `log_say` logs the text at INFO (`logging.info(text)`) whether or not sounds are on. The
-    robot checks itself at each start (`robots/blindgrasp_gripper/episodes.py` hands these records to it).
+    robot checks itself at each start (`robots/blindgrasp_gripper/starts.py` hands these records to it).
     """
     if record.funcName == "log_say" and isinstance(record.msg, str) and record.msg.startswith(ANNOUNCEMENT):
         _used("is_episode_announcement")
@@ -273,6 +275,37 @@ def cli_arg(name: str) -> str | None:
 
     _used("cli_arg")
     return parser.parse_arg(name)
+
+
+@dataclasses.dataclass(frozen=True)
+class CommandLine:
+    """What a LeRobot script's command line says that the script never hands the robot it builds."""
+
+    policy_path: str | None = None  # --policy.path
+    fps: float | None = None  # the loop's rate, from the last of --fps, --env.fps, --dataset.fps given
+    fps_flag: str | None = None  # which flag gave it
+    dataset_repo_id: str | None = None  # --dataset.repo_id: a recording is made
+    dataset_root: str | None = None
+    dataset_fps: float | None = None
+    episode_time_s: float | None = None
+
+
+def read_command_line() -> CommandLine:
+    """The one read of this process's command line for the gripper, called where its config is parsed.
+
+    LeRobot 0.6.1: lerobot-rollout builds the robot from `--robot.*` alone and loads the policy after connecting it;
+    lerobot-record never tells its robot the dataset or the rate it records at; lerobot-eval builds the env from
+    `--env.*` before it loads `--policy.path`. Parsing is the one moment the plugin sees that command line (LeRobot's
+    own `EvalPipelineConfig.__post_init__` re-reads `--policy.path` the same way), so the robot's config takes these
+    facts there, and the robot and the real eval env check them with what they were given.
+    """
+    fps, flag = None, None
+    for name in ("fps", "env.fps", "dataset.fps"):
+        if (value := cli_arg(name)) is not None:
+            fps, flag = float(value), name
+    number = lambda name: None if (v := cli_arg(name)) is None else float(v)  # noqa: E731
+    return CommandLine(cli_policy_path(), fps, flag, cli_arg("dataset.repo_id"), cli_arg("dataset.root"),
+                       number("dataset.fps"), number("dataset.episode_time_s"))  # fmt: skip
 
 
 def set_lerobot_argv(argv: list[str]) -> None:

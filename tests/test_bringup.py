@@ -172,7 +172,7 @@ def test_no_calibration_and_no_operator_is_refused_before_a_byte_is_sent(tmp_pat
 
 
 def test_force_calibrations_in_the_folder_are_not_offered_as_robot_ids(tmp_path):
-    from lerobot_blindgrasp.robots.blindgrasp_gripper.connect_checks import calibrated_ids
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import calibrated_ids
 
     for name in ("lab_gripper.json", "lab_gripper.force.json", "spare.force.json", "old_gripper.json"):
         (tmp_path / name).write_text("{}")

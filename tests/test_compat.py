@@ -53,6 +53,22 @@ def test_another_lerobot_version_is_reported_once_with_the_check(monkeypatch, ca
     assert "what it relies on is there" in warnings[0]
 
 
+def test_the_command_line_is_read_as_lerobots_parser_reads_it(monkeypatch):
+    """What a script's flags say and LeRobot never hands the robot: the policy, the loop's rate (the last rate flag
+    given), and the dataset a recording writes."""
+    import sys
+
+    argv = ["lerobot-record", "--dataset.repo_id=me/demo", "--dataset.root=/data/demo", "--dataset.fps=30",
+            "--dataset.episode_time_s=12", "--policy.path=/ckpt"]  # fmt: skip
+    monkeypatch.setattr(sys, "argv", argv)
+    assert compat.read_command_line() == compat.CommandLine(
+        policy_path="/ckpt", fps=30.0, fps_flag="dataset.fps", dataset_repo_id="me/demo", dataset_root="/data/demo",
+        dataset_fps=30.0, episode_time_s=12.0,
+    )  # fmt: skip
+    monkeypatch.setattr(sys, "argv", ["lerobot-calibrate", "--robot.type=blindgrasp_gripper"])
+    assert compat.read_command_line() == compat.CommandLine()
+
+
 def test_lerobots_own_episode_announcement_is_recognised(caplog):
     from lerobot.utils.utils import log_say
 

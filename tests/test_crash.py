@@ -161,7 +161,7 @@ robot = BlindgraspGripper(BlindgraspGripperConfig(id="g", calibration_dir=Path({
 robot.calibration = {{j: MotorCalibration(id=i + 1, drive_mode=0, homing_offset=0, range_min=0, range_max=4095)
                      for i, j in enumerate(robot.joints)}}
 try:
-    with robot._safety("calibrating"):
+    with robot.latch.guard("calibrating"):
         robot._save_calibration()
 except Exception as e:
     print("ROBOT", type(e).__name__, e)

@@ -24,8 +24,9 @@ from emulators.rig import LATENCY_TIMER_MS
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator, free_udp_port
+from lerobot_blindgrasp.hardware import servo_registers as servo_state
 from lerobot_blindgrasp.hardware.xm430 import RAD_PER_TICK, WATCHDOG_TRIPPED
-from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, servo_state
+from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     ForceSensorError,

@@ -12,8 +12,8 @@ from emulators.fixtures import rig  # noqa: F401  (fixtures)
 from test_hw_health import _hold, _stopped
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware import consistency as c
 from lerobot_blindgrasp.hardware import xm430
-from lerobot_blindgrasp.robots.blindgrasp_gripper import consistency as c
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import GripperConsistencyError
 from lerobot_blindgrasp.sim import gripper
 

@@ -9,8 +9,8 @@ import math
 import pytest
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware.loop_timing import LoopOverrunError, PeriodMonitor
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig
-from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import LoopOverrunError, PeriodMonitor
 
 DT = spec.CONTROL_DT
 

@@ -26,7 +26,7 @@ from lerobot.utils.robot_utils import precise_sleep
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
 from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
-from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import SampleSpacing
+from lerobot_blindgrasp.hardware.loop_timing import SampleSpacing
 
 DT = spec.CONTROL_DT
 PACKAGE = Path(__file__).resolve().parents[1] / "lerobot_blindgrasp"

@@ -1,4 +1,4 @@
-"""Servo health (`robots/blindgrasp_gripper/health.py`) against the emulated XM430's temperature, supply and
+"""Servo health (`hardware/servo_diagnostics.py`) against the emulated XM430's temperature, supply and
 firmware (`emulators/servo_health.py`): warnings with joint and value, refused starts, and named stops
 with the torque off before the firmware's own shutdown. Rows of the hazard table in docs/hardware.md."""
 

@@ -1,4 +1,4 @@
-"""The policy is an input too (`robots/blindgrasp_gripper/policy_check.py`): a checkpoint trained for another robot
+"""The policy is an input too (`policy_contract.py`): a checkpoint trained for another robot
 is refused before any servo takes torque, with a message naming what differs and the file it was read from.
 
 The checkpoints are the shipped student's own files (config with its `trained_for`, processors, normalizer
@@ -18,13 +18,13 @@ import pytest
 from emulators.fixtures import rig, robot  # noqa: F401  (fixtures)
 from emulators.harness import BIN, cli_env
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import policy_contract, spec
 from lerobot_blindgrasp.demos.dataset import ROBOT_TYPE
-from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, policy_check
+from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import PolicyMismatchError
 
 SHIPPED = Path(__file__).resolve().parents[1] / "models" / "student_cpu"
-ROBOT = policy_check.gripper_contract(ROBOT_TYPE, 20, "--env.fps")
+ROBOT = policy_contract.gripper_contract(ROBOT_TYPE, 20, "--env.fps")
 
 
 def _info(root: Path, *, robot_type=ROBOT_TYPE, fps=20, state=spec.STATE_NAMES, action=spec.ACTION_NAMES) -> None:
@@ -76,8 +76,8 @@ def _checkpoint(
 
 
 def test_a_checkpoint_for_this_robot_passes(tmp_path):
-    assert policy_check.problems(_checkpoint(tmp_path), ROBOT) == ([], [])
-    assert policy_check.problems(_checkpoint(tmp_path / "old", dataset={}), ROBOT) == ([], [])
+    assert policy_contract.problems(_checkpoint(tmp_path), ROBOT) == ([], [])
+    assert policy_contract.problems(_checkpoint(tmp_path / "old", dataset={}), ROBOT) == ([], [])
 
 
 def test_another_hands_checkpoint_is_refused_naming_names_type_and_file(tmp_path):
@@ -85,7 +85,7 @@ def test_another_hands_checkpoint_is_refused_naming_names_type_and_file(tmp_path
     ckpt = _checkpoint(tmp_path, trained_for={"robot_type": "allegro_hand", "state_names": other,
                                               "action_names": other[:9]})  # fmt: skip
     with pytest.raises(PolicyMismatchError) as e:
-        policy_check.check(ckpt, ROBOT)
+        policy_contract.check(ckpt, ROBOT)
     text = str(e.value)
     assert f"robot type 'allegro_hand' in {ckpt / 'config.json'} (trained_for (the sim demo schema" in text
     assert "the robot is 'blindgrasp_gripper'" in text
@@ -95,20 +95,20 @@ def test_another_hands_checkpoint_is_refused_naming_names_type_and_file(tmp_path
 
 def test_a_state_in_another_order_is_refused(tmp_path):
     swapped = [spec.STATE_NAMES[1], spec.STATE_NAMES[0], *spec.STATE_NAMES[2:]]
-    bad, _ = policy_check.problems(_checkpoint(tmp_path, trained_for={"state_names": swapped}), ROBOT)
+    bad, _ = policy_contract.problems(_checkpoint(tmp_path, trained_for={"state_names": swapped}), ROBOT)
     assert len(bad) == 1 and bad[0].startswith(f"'observation.state' names {swapped} in ")
     assert bad[0].endswith(f"the robot's are {list(spec.STATE_NAMES)} (names and order)")
 
 
 def test_a_checkpoint_trained_at_another_rate_is_refused(tmp_path):
-    bad, _ = policy_check.problems(_checkpoint(tmp_path, trained_for={"fps": 10}), ROBOT)
+    bad, _ = policy_contract.problems(_checkpoint(tmp_path, trained_for={"fps": 10}), ROBOT)
     assert len(bad) == 1 and bad[0].startswith("fps 10 in ") and bad[0].endswith("the loop runs at 20 (--env.fps)")
-    bad, _ = policy_check.problems(_checkpoint(tmp_path / "old", dataset={"fps": 10}), ROBOT)
+    bad, _ = policy_contract.problems(_checkpoint(tmp_path / "old", dataset={"fps": 10}), ROBOT)
     assert bad == [f"fps 10 in {tmp_path / 'old/data/meta/info.json'}, the loop runs at 20 (--env.fps)"]
 
 
 def test_the_wrong_action_size_says_action(tmp_path):
-    bad, _ = policy_check.problems(_checkpoint(tmp_path, action_dim=8), ROBOT)
+    bad, _ = policy_contract.problems(_checkpoint(tmp_path, action_dim=8), ROBOT)
     assert bad == [
         f"'action' shape (8,) in {tmp_path / 'pretrained_model/config.json'} (output_features), the robot has (9,)"
     ]
@@ -119,7 +119,7 @@ def test_a_camera_input_the_robot_does_not_have_is_refused(tmp_path):
     ckpt = _checkpoint(tmp_path)
     _edit(ckpt / "config.json", lambda c: c["input_features"].update(
         {"observation.images.top": {"type": "VISUAL", "shape": [3, 96, 96]}}))  # fmt: skip
-    bad, _ = policy_check.problems(ckpt, ROBOT)
+    bad, _ = policy_contract.problems(ckpt, ROBOT)
     assert bad == [f"input_features ['observation.images.top'] in {ckpt / 'config.json'}: the robot has only "
                    "'observation.state' there (no camera)"]  # fmt: skip
 
@@ -127,7 +127,7 @@ def test_a_camera_input_the_robot_does_not_have_is_refused(tmp_path):
 def test_a_checkpoint_trained_with_another_env_is_refused(tmp_path):
     ckpt = _checkpoint(tmp_path)
     _edit(ckpt / "train_config.json", lambda t: t.update(env={"type": "aloha", "fps": 50}))
-    bad, _ = policy_check.problems(ckpt, ROBOT)
+    bad, _ = policy_contract.problems(ckpt, ROBOT)
     assert f"env type 'aloha' in {ckpt / 'train_config.json'}, this robot's envs are" in bad[0]
     assert bad[1].startswith("fps 50 in ") and len(bad) == 2
 
@@ -136,9 +136,9 @@ def test_relative_actions_sent_to_a_target_robot_are_refused(tmp_path):
     ckpt = _checkpoint(tmp_path)
     _edit(ckpt / "policy_preprocessor.json",
           lambda p: p["steps"].insert(0, {"registry_name": "relative_actions_processor", "config": {}}))  # fmt: skip
-    bad, _ = policy_check.problems(ckpt, ROBOT)
+    bad, _ = policy_contract.problems(ckpt, ROBOT)
     assert len(bad) == 1 and bad[0].startswith("'action' meaning:") and "absolute joint targets" in bad[0]
-    bad, _ = policy_check.problems(
+    bad, _ = policy_contract.problems(
         _checkpoint(tmp_path / "d", trained_for={"action_meaning": "deltas (rad)"}), ROBOT
     )
     assert len(bad) == 1 and bad[0].startswith("'action' meaning 'deltas (rad)' in ")
@@ -151,14 +151,16 @@ def test_an_unverifiable_checkpoint_is_refused_unless_overridden(tmp_path, caplo
     shutil.rmtree(tmp_path / "data")
     with pytest.raises(PolicyMismatchError, match=r"cannot be verified .* has no trained_for, and the training "
                        r"dataset's meta/info.json .* not found.*allow_unverified_policy=true"):  # fmt: skip
-        policy_check.check(ckpt, ROBOT)
+        policy_contract.check(ckpt, ROBOT)
     with caplog.at_level(logging.WARNING):
-        policy_check.check(ckpt, ROBOT, allow_unverified=True)
+        policy_contract.check(ckpt, ROBOT, allow_unverified=True)
     assert "could not verify robot type, fps and feature names" in caplog.text
 
 
 def test_dataset_metadata_without_feature_names_does_not_pass_silently(tmp_path):
-    bad, unverified = policy_check.problems(_checkpoint(tmp_path, dataset={"state": None, "action": None}), ROBOT)
+    bad, unverified = policy_contract.problems(
+        _checkpoint(tmp_path, dataset={"state": None, "action": None}), ROBOT
+    )
     info = tmp_path / "data/meta/info.json"
     assert bad == [] and unverified == [
         f"'observation.state' names: not in {info}",
@@ -187,7 +189,7 @@ def test_lerobot_train_records_what_the_policy_was_trained_for(tmp_path):
     facts = json.loads((tmp_path / "ckpt" / "config.json").read_text())["trained_for"]
     assert facts["robot_type"] == ROBOT_TYPE and facts["fps"] == 20 and facts["source"].endswith("test/tiny")
     assert facts["state_names"] == list(spec.STATE_NAMES) and facts["action_names"] == list(spec.ACTION_NAMES)
-    assert policy_check.problems(tmp_path / "ckpt", ROBOT) == ([], [])
+    assert policy_contract.problems(tmp_path / "ckpt", ROBOT) == ([], [])
 
 
 def test_send_action_refuses_unknown_keys_as_it_refuses_missing_ones(rig, robot):
@@ -204,6 +206,22 @@ def test_a_mismatch_on_the_command_line_is_refused_before_the_ports_open(rig, tm
     monkeypatch.setattr(sys, "argv", ["lerobot-rollout", f"--policy.path={ckpt}", "--fps=10"])
     robot = BlindgraspGripper(rig.robot_config(tmp_path / "cal"))
     with pytest.raises(PolicyMismatchError, match=r"--fps=10 but the robot's loop_hz is 20"):
+        robot.connect()
+    assert rig.dxl.instruction_counts == {} and not robot.is_connected
+
+
+def test_the_robot_checks_the_checkpoint_its_config_was_parsed_with_not_the_argv_at_connect(
+    rig, tmp_path, monkeypatch
+):
+    """The command line is read once, where the config is parsed (`compat.read_command_line`): what the process's
+    argv says by the time `connect()` runs changes nothing."""
+    ckpt = _checkpoint(tmp_path, trained_for={"fps": 10})
+    monkeypatch.setattr(sys, "argv", ["lerobot-rollout", f"--policy.path={ckpt}", "--fps=20"])
+    config = rig.robot_config(tmp_path / "cal")
+    assert (config.command_line.policy_path, config.command_line.fps) == (str(ckpt), 20.0)
+    monkeypatch.setattr(sys, "argv", ["lerobot-rollout"])
+    robot = BlindgraspGripper(config)
+    with pytest.raises(PolicyMismatchError, match=r"fps 10 in .*config.json \(trained_for"):
         robot.connect()
     assert rig.dxl.instruction_counts == {} and not robot.is_connected
 

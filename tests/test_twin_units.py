@@ -54,7 +54,7 @@ def test_present_velocity_and_current_have_the_sims_signs_once_calibrated():
 
 # --- the position gate ----------------------------------------------------------------------------------------------
 def test_the_position_gate_lets_a_load_push_a_torqued_joint_back_by_backdrive_ticks_and_no_further():
-    from lerobot_blindgrasp.robots.blindgrasp_gripper.plausibility import ImplausibleReadingError, PositionGate
+    from lerobot_blindgrasp.hardware.plausibility import ImplausibleReadingError, PositionGate
 
     backdrive = 0.3 / RAD_PER_TICK  # the robot's default plausibility_backdrive_rad
     gate = PositionGate(speed_ticks_s=1e6, margin_ticks=10, backdrive_ticks=backdrive, rereads=1)

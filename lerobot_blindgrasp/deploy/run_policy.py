@@ -29,8 +29,7 @@ from lerobot.utils.import_utils import register_third_party_plugins
 from lerobot.utils.process import ProcessSignalHandler
 from lerobot.utils.utils import init_logging
 
-from lerobot_blindgrasp import compat, spec
-from lerobot_blindgrasp.robots.blindgrasp_gripper import policy_check
+from lerobot_blindgrasp import compat, policy_contract, spec
 
 logger = logging.getLogger(__name__)
 
@@ -63,11 +62,10 @@ def rollout(cfg: RolloutConfig) -> None:
         logger.warning("--display_data is not supported here; run without it.")
     if cfg.policy is not None and cfg.policy.pretrained_path and cfg.robot is not None:
         # Before build_rollout_context loads the policy (its size errors never say "action") and connects the robot.
-        where = policy_check.local_checkpoint(str(cfg.policy.pretrained_path))
-        if where is not None:
-            contract = policy_check.gripper_contract(cfg.robot.type, cfg.fps, "--fps")
-            allow = getattr(cfg.robot, "allow_unverified_policy", False)
-            policy_check.check(where, contract, allow_unverified=allow)
+        allow = getattr(cfg.robot, "allow_unverified_policy", False)
+        policy_contract.check_named(
+            cfg.policy.pretrained_path, cfg.robot.type, cfg.fps, "--fps", allow_unverified=allow
+        )
     signal_handler = ProcessSignalHandler(use_threads=True, display_pid=False)
     ctx = build_rollout_context(
         cfg, signal_handler.shutdown_event, robot_observation_processor=make_robot_observation_processor()

@@ -24,7 +24,7 @@ from lerobot.configs import PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.robots.config import RobotConfig
 
-from lerobot_blindgrasp import compat, spaces, spec
+from lerobot_blindgrasp import policy_contract, spaces, spec
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig
 from lerobot_blindgrasp.sim import objects
 
@@ -109,14 +109,12 @@ class BlindGraspRealEnvConfig(EnvConfig):
     def check_policy(self) -> None:
         """lerobot-eval makes the envs before it loads the policy, and its make_policy would overwrite the
         checkpoint's output features with ours: the checkpoint's own files are checked here, before anything loads
-        or moves (`policy_check.py`). The robot checks again at connect."""
-        from lerobot_blindgrasp.robots.blindgrasp_gripper import policy_check
-
-        path = compat.cli_policy_path()
-        if path and (where := policy_check.local_checkpoint(path)) is not None:
-            contract = policy_check.gripper_contract(self.robot.type, self.fps, "--env.fps")
-            allow = getattr(self.robot, "allow_unverified_policy", False)
-            policy_check.check(where, contract, allow_unverified=allow)
+        or moves (`policy_contract.py`). Its path is the one the robot's config took from the command line
+        (`BlindgraspGripperConfig.command_line`); the robot checks it again at connect."""
+        command_line = getattr(self.robot, "command_line", None)
+        allow = getattr(self.robot, "allow_unverified_policy", False)
+        path = command_line.policy_path if command_line is not None else None
+        policy_contract.check_named(path, self.robot.type, self.fps, "--env.fps", allow_unverified=allow)
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
         from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv

@@ -34,8 +34,8 @@ import numpy as np
 from lerobot_blindgrasp import durable, spaces, spec
 from lerobot_blindgrasp.envs import real_report
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
+from lerobot_blindgrasp.hardware.loop_timing import Schedule
 from lerobot_blindgrasp.hardware.realtime import GcPause
-from lerobot_blindgrasp.robots.blindgrasp_gripper.timing import Schedule
 from lerobot_blindgrasp.sim import objects, randomization
 from lerobot_blindgrasp.sim.gym_env import start_seed
 

@@ -2,7 +2,7 @@
 control thread, memory that does not page, and Python's garbage collector kept out of a trial.
 
 Each setter says what it got and, when the kernel refuses, why and how to allow it; none raises, because the loop's
-own overrun check (`robots/blindgrasp_gripper/timing.py`) still stops a loop that cannot keep its period.
+own overrun check (`loop_timing.py`) still stops a loop that cannot keep its period.
 
 - `set_realtime_priority`: SCHED_FIFO for the calling thread (Linux: threads it starts afterwards inherit it, so call
   it before the force reader's thread and torch's worker threads start). The kernel's RT throttling

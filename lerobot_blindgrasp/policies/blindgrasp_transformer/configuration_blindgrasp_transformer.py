@@ -43,7 +43,7 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 from torch.optim import Optimizer
 from torch.optim.lr_scheduler import LambdaLR
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import policy_contract, spec
 
 # What `--policy.size` picks from; `paper` is Table IV. Defined here, with the policy, so that loading the policy
 # (plugin discovery, the real gripper) never imports the preset registry and the simulator behind it.
@@ -82,7 +82,7 @@ class ConstantThenLinearDecaySchedulerConfig(LRSchedulerConfig):
 
 # What this policy's action means once its postprocessor has run: the processors turn the dataset's absolute
 # targets into the network's deltas and back (`processor_blindgrasp_transformer.py`).
-ACTION_MEANING = "absolute joint targets (rad)"
+ACTION_MEANING = policy_contract.ACTION_MEANING
 
 
 @dataclass
@@ -90,7 +90,7 @@ class TrainedFor:
     """The robot a checkpoint was trained for, read from its training dataset's metadata (`meta/info.json`: robot
     type, fps, the names of `observation.state` and `action`, in order) and the policy's own action meaning.
     `source` says where the facts were read. The real gripper refuses a checkpoint whose facts differ from its own,
-    or that has none, before any servo takes torque (`robots/blindgrasp_gripper/policy_check.py`)."""
+    or that has none, before any servo takes torque (`policy_contract.py`)."""
 
     robot_type: str | None = None
     fps: float | None = None
@@ -102,21 +102,7 @@ class TrainedFor:
     @classmethod
     def from_dataset(cls, meta, source: str | None = None) -> TrainedFor:
         """From a `LeRobotDatasetMetadata` (or anything with `robot_type`, `fps`, `features` and `repo_id`)."""
-        features = getattr(meta, "features", None) or {}
-
-        def names(key: str) -> list[str] | None:
-            value = (features.get(key) or {}).get("names")
-            if isinstance(value, dict):  # LeRobot also writes {"axes": [...]} for some features
-                value = next(iter(value.values()), None)
-            return [str(n) for n in value] if isinstance(value, (list, tuple)) else None
-
-        return cls(
-            robot_type=getattr(meta, "robot_type", None),
-            fps=float(meta.fps) if getattr(meta, "fps", None) is not None else None,
-            state_names=names(OBS_STATE),
-            action_names=names(ACTION),
-            source=source or f"the metadata of dataset {getattr(meta, 'repo_id', '?')}",
-        )
+        return cls(**policy_contract.facts_from_dataset(meta, source))
 
 
 @PreTrainedConfig.register_subclass("blindgrasp_transformer")

@@ -1,19 +1,11 @@
-"""The real gripper: nine XM430-W350 on one Dynamixel bus plus three fingertip load cells.
+"""The real gripper: nine XM430-W350 on one Dynamixel bus plus three fingertip load cells, in lifecycle order like
+LeRobot's `koch_follower`; observation and action are `spec`'s (names, order, rad and N), as in the sim demos.
 
-Observation and action follow `spec` exactly (names, order, rad and N), so datasets recorded here have the sim
-demos' schema. Every bus transaction goes through LeRobot's `DynamixelMotorsBus`, subclassed in `bus.py` for
-retries, clean retries and raw registers: the calibration lives in the servos (Drive_Mode, Homing_Offset), so
-rad = (ticks - 2048) * 2pi/4096 needs no LeRobot normalization mode. The rest reads like LeRobot's `koch_follower`.
-
-No reading is used unchecked: every position reading passes one plausibility gate (`plausibility.py`) before
-it is returned or used to bound a goal, the force stream is checked for liveness by content (`force_sensor.py`),
-the servos' state and health are read as `servo_checks.py` says, get_observation measures the loop's period and
-spaces its samples (`timing.py`), and both ports are opened for exclusive use (`ports.py`).
-
-Safety is latched (`latch.py`): any failure while connected turns the torque off on every servo that answers,
-closes the ports and raises one error that says so. The servos' bus watchdog stops them on their own when the host
-goes quiet (`bus_watchdog_ms`; `keepalive.py` feeds it while a trial waits), and SIGTERM/SIGHUP unwind the LeRobot
-scripts like Ctrl-C (`signals.py`). The interactive calibration and motor setup are in `interactive.py`.
+It holds what checks it, each object given what it needs: bus and force reader on exclusive ports (`hardware/`);
+the plausibility `gate` of every position reading; the servos' `registers`, `health` and tip `consistency`, run
+each period by `checks`; the loop's `timing` and `spacing`; the safety `latch` (`latch.py`: any failure while
+connected turns the torque off on every servo that answers, closes the ports, raises one named error); the policy
+named on the script's command line, checked before any port opens (`policy_contract.py`).
 """
 
 from __future__ import annotations
@@ -22,6 +14,7 @@ import logging
 import time
 from contextlib import contextmanager
 from functools import cached_property
+from operator import itemgetter
 
 import numpy as np
 from lerobot.motors import Motor, MotorNormMode
@@ -29,29 +22,32 @@ from lerobot.motors.dynamixel import OperatingMode
 from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import policy_contract, spec
+from lerobot_blindgrasp.hardware import realtime, xm430
+from lerobot_blindgrasp.hardware.consistency import ConsistencyMonitor
 from lerobot_blindgrasp.hardware.dynamixel import RetryingDynamixelBus, latency_timer
 from lerobot_blindgrasp.hardware.force import force_bias_warning
-from lerobot_blindgrasp.hardware.force_board import ForceSensorReader, ForceTareError, force_calibration
-from lerobot_blindgrasp.hardware.xm430 import MODEL, RAD_PER_TICK, WATCHDOG_UNIT_MS, amps_to_current_units
+from lerobot_blindgrasp.hardware.force_board import ForceTareError, force_calibration
+from lerobot_blindgrasp.hardware.loop_timing import PeriodMonitor, SampleSpacing
+from lerobot_blindgrasp.hardware.period_checks import PeriodChecks
+from lerobot_blindgrasp.hardware.plausibility import PositionGate
+from lerobot_blindgrasp.hardware.servo_diagnostics import ServoHealth
+from lerobot_blindgrasp.hardware.servo_registers import ServoRegisters
 
 from . import calibration as calib
-from . import connect_checks, health, interactive, policy_check, signals
+from . import interactive
 from .calibration import rad_to_ticks, ticks_to_rad
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
-from .episodes import EpisodeStarts
-from .errors import ForceOverloadError, GripperBusError, GripperSafetyStop
-from .keepalive import BusKeepAlive
+from .errors import ForceOverloadError, GripperBusError, GripperSafetyStop, PolicyMismatchError
+from .keepalive import feeding_the_bus
 from .latch import SafetyLatch
-from .plausibility import PositionGate
-from .recording_space import recording_from_command_line
-from .servo_checks import ServoChecks
-from .timing import PeriodMonitor, SampleSpacing
+from .recording_space import RecordingSpace
+from .starts import EpisodeStarts, Starts
 
 logger = logging.getLogger(__name__)
 
 
-class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCalibrationFile, Robot):
+class BlindgraspGripper(Robot):
     """D'Claw-derived three-finger gripper (`--robot.type=blindgrasp_gripper`)."""
 
     config_class = BlindgraspGripperConfig
@@ -61,49 +57,40 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         self.config = config
         self.joints = list(spec.JOINT_NAMES)
         self.calibration_error: calib.CalibrationFileError | None = None
-        super().__init__(config)  # loads and validates the calibration file through _load_calibration
+        super().__init__(config)  # loads and checks the calibration file through _load_calibration
         self.bus = RetryingDynamixelBus(
             port=config.port,
-            motors={j: Motor(i, MODEL, MotorNormMode.DEGREES) for j, i in zip(self.joints, config.servo_ids)},
+            motors={
+                j: Motor(i, xm430.MODEL, MotorNormMode.DEGREES) for j, i in zip(self.joints, config.servo_ids)
+            },
             calibration=self.calibration,
             baudrate=config.baudrate,
             num_retry=config.bus_num_retry,
             latency_timer_ms=config.latency_timer_ms,
         )
-        # What configure() set, checked every control period (`servo_state.py`); empty while the torque is off.
-        self.expected: dict[str, int] = {}
-        self._last_state_check = 0.0
-        self._startup_torque_on: dict[str, int] = {}
-        self.force = self._make_force_reader(config.force_sensor)
+        self.force = config.force_reader()
         self.gate = PositionGate(
-            speed_ticks_s=config.max_joint_speed_rad_s / RAD_PER_TICK,
-            margin_ticks=config.plausibility_margin_rad / RAD_PER_TICK,
-            backdrive_ticks=config.plausibility_backdrive_rad / RAD_PER_TICK,
+            speed_ticks_s=config.max_joint_speed_rad_s / xm430.RAD_PER_TICK,
+            margin_ticks=config.plausibility_margin_rad / xm430.RAD_PER_TICK,
+            backdrive_ticks=config.plausibility_backdrive_rad / xm430.RAD_PER_TICK,
             rereads=config.plausibility_rereads,
         )
+        current = xm430.amps_to_current_units(config.current_limit_a)
+        protection = {**xm430.NO_HOST_PROTECTION, "Current_Limit": current}
+        self.registers = ServoRegisters(self.bus, self.joints, protection)
+        self.health = ServoHealth(self.joints)  # OK / WARN / ERROR per servo item
+        self.consistency = ConsistencyMonitor.at_p_gain(config.position_p_gain)  # tip forces against the servos
+        self.checks = PeriodChecks(self.registers, self.health, self.consistency, self.gate, config.health_every_n,
+                                   to_rad=ticks_to_rad)  # fmt: skip
         self.timing = PeriodMonitor(1.0 / config.loop_hz, config.max_overrun_s, what=f"{self.name} control loop")
         self.spacing = SampleSpacing(1.0 / config.loop_hz)  # no two samples closer than the contract allows
-        self.health = health.ServoHealth(self.joints)  # OK / WARN / ERROR per servo item (`health.py`)
-        self.episodes = EpisodeStarts()  # lerobot-record's episode announcements (`episodes.py`)
+        self.episodes = EpisodeStarts()  # lerobot-record's episode announcements
+        self.latch = SafetyLatch(str(self), self.bus, self.force, config.servo_ids,
+                                 on_torque_off=self._forget_goals, on_close=self.episodes.uninstall,
+                                 report=self.consistency.report)  # fmt: skip
         self.lower, self.upper = np.asarray([config.joint_lower, config.joint_upper], dtype=np.float64)
-        self._atexit = None
+        self.starts = Starts(self.episodes, self.timing.pause_s)  # when health is judged at the start levels
         self.cameras: dict = {}  # vision-free by design; lerobot-record and lerobot-rollout still read it
-
-    @staticmethod
-    def _make_force_reader(fs) -> ForceSensorReader:
-        return ForceSensorReader(
-            fs.port,
-            fs.baudrate,
-            fs.scale_n_per_count,
-            channel_map=fs.channel_map,
-            stale_timeout_s=fs.stale_timeout_s,
-            connect_timeout_s=fs.connect_timeout_s,
-            frozen_frames=fs.frozen_frames,
-            min_rate_hz=fs.min_rate_hz,
-            tare_max_std_n=fs.tare_max_std_n,
-            tare_max_shift_n=fs.tare_max_shift_n,
-            negative_fault_n=fs.negative_fault_n,
-        )
 
     # --- features (valid while disconnected) ---------------------------------------------------------------------
     @cached_property
@@ -125,31 +112,39 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
     # --- connection ----------------------------------------------------------------------------------------------
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
-        policy_check.check_cli_policy(self)  # a policy named on the command line must fit, before any port opens
-        self.recording = recording_from_command_line(self)  # disk space checked at each start (`recording_space`)
+        self._check_policy()  # a policy named on the script's command line must fit, before any port opens
+        features = (self.action_features, self.observation_features)
+        self.starts.recording = RecordingSpace.of(self.config.command_line, *features)  # room on disk, each start
         if self.calibration_error is not None and calibrate:
             raise self.calibration_error  # before the port is even opened: nothing can move on a wrong frame
         if calibrate:
-            connect_checks.refuse_unattended_calibration(self)  # no file and nobody to answer the prompts
+            calib.refuse_unattended(self.calibration, self.calibration_fpath, self.id)  # nobody to answer prompts
         latency_timer.ensure_low_latency(self.config.port, self.config.force_sensor.port)  # USB adapters at 1 ms
-        self.host_setup = connect_checks.prepare_host(self)  # before any thread starts: threads inherit it
-        with self._safety("connecting"):
-            self.expected = {}
-            self.gate.forget()
-            # Both ports are taken (exclusively) before the first byte goes out: a second owner is refused here.
+        self.host_setup = realtime.prepare_host(self.config)  # before any thread starts: threads inherit it
+        with self.latch.guard("connecting"):
+            self._forget_goals()
             force_calibration.apply(self.force, self.calibration_dir, self.id)  # <id>.force.json, if measured
-            self.force.open()
+            self.force.open()  # both ports exclusive before the first byte goes out: a second owner is refused
             self.bus.connect()  # pings all nine, with retries; names a Status_Return_Level that hides replies
-            self._guard_process()
-            signals.install(self)
+            self.latch.arm()
             self.episodes.install()
-            self._check_servo_state()
-            self._check_servo_setup()  # firmware, EEPROM limits, the start check of the servos' health
+            self.checks.at_connect(self._trusted_ticks)  # state, setup; health at the start levels, before torque
+            self.starts.restart()
             if not self._bring_up(calibrate):
                 return
         self.timing.restart()
         self.spacing.restart()
         logger.info("%s connected (force tare %s counts).", self, np.round(self.force.offset).tolist())
+
+    def _check_policy(self) -> None:
+        """The checkpoint the script runs (`command_line.policy_path`), at the rate its own flags give."""
+        cl, loop_hz = self.config.command_line, float(self.config.loop_hz)
+        fps, source = (cl.fps, f"--{cl.fps_flag}") if cl.fps is not None else (loop_hz, "the robot's loop_hz")
+        allow = self.config.allow_unverified_policy
+        checked = policy_contract.check_named(cl.policy_path, self.name, fps, source, allow_unverified=allow)
+        if checked and fps != loop_hz:
+            raise PolicyMismatchError(f"{source}={fps:g} but the robot's loop_hz is {self.config.loop_hz:g}: set "
+                                      "--robot.loop_hz to the loop's rate (it measures the loop against it).")  # fmt: skip
 
     def _bring_up(self, calibrate: bool) -> bool:
         """Calibration to the servos, the force tare, configure; False when left uncalibrated (lerobot-calibrate)."""
@@ -170,35 +165,37 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
             logger.warning(warning)
         return True
 
+    def _load_calibration(self, fpath=None) -> None:
+        ids = dict(zip(self.joints, self.config.servo_ids, strict=True))
+        fix = f"lerobot-calibrate --robot.type={self.name} --robot.id={self.id}"
+        self.calibration, self.calibration_error = calib.load_checked(
+            fpath or self.calibration_fpath, ids, self.config.joint_lower, self.config.joint_upper, fix
+        )
+
+    def _save_calibration(self, fpath=None) -> None:
+        calib.save_atomic(self.calibration, fpath or self.calibration_fpath)
+
+    def calibrate(self) -> None:
+        with self.latch.guard("calibrating"):
+            self._forget_goals()  # readings change frame with Drive_Mode and Homing_Offset
+            self.bus.disable_torque()
+            interactive.calibrate(self)  # the file to the servos, or two poses by hand
+
     def configure(self) -> None:
         mode = OperatingMode[self.config.operating_mode].value
-        current = amps_to_current_units(self.config.current_limit_a)
-        with self._safety("configuring the servos"):
-            self.expected = {}
+        current = xm430.amps_to_current_units(self.config.current_limit_a)
+        with self.latch.guard("configuring the servos"):
+            self.registers.expected = {}
             self.bus.disable_torque()
             self.bus.configure_motors()  # Return_Delay_Time 0: status packets come back without the 500 us delay
-            self._clear_startup_torque()
-            for j in self.joints:
-                # A watchdog stop from the last session (the host went quiet before its stop, e.g. while a servo
-                # was losing power) outlives the torque-off and makes Goal_Current read-only: clear it first.
-                self.bus.write("Bus_Watchdog", j, 0)
-            for j in self.joints:
-                self.bus.write("Operating_Mode", j, mode)
-                self.bus.write("Current_Limit", j, current)
-                self.bus.write("Goal_Current", j, current)
-                self.bus.write("Position_P_Gain", j, self.config.position_p_gain)
-                self.bus.write("Position_I_Gain", j, self.config.position_i_gain)
-                self.bus.write("Position_D_Gain", j, self.config.position_d_gain)
-                self.bus.write("Profile_Velocity", j, self.config.profile_velocity)
+            self.checks.restore()  # startup torque, no-host protection
+            gains = {f"Position_{k}_Gain": getattr(self.config, f"position_{k.lower()}_gain") for k in "PID"}
+            settings = {"Operating_Mode": mode, "Current_Limit": current, "Goal_Current": current, **gains}
+            self.registers.write_settings({**settings, "Profile_Velocity": self.config.profile_velocity})
             self._enable_torque_holding_pose()
-            self.expected = {
-                "Torque_Enable": 1,
-                "Position_P_Gain": self.config.position_p_gain,
-                "Position_I_Gain": self.config.position_i_gain,
-                "Position_D_Gain": self.config.position_d_gain,
-                "Bus_Watchdog": self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS,
-                "Goal_Current": current,
-            }
+            watchdog = self.config.bus_watchdog_ms // xm430.WATCHDOG_UNIT_MS
+            expected = {"Torque_Enable": 1, **gains, "Bus_Watchdog": watchdog, "Goal_Current": current}
+            self.registers.expected = expected
 
     def _enable_torque_holding_pose(self) -> None:
         """Torque on with Goal_Position = the present pose, so nothing moves when the torque comes on."""
@@ -216,77 +213,68 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         if outside:
             logger.warning("Joints %s start outside their limits; actions bring them back at <= %.2f rad per step.",
                            outside, self.config.max_relative_target)  # fmt: skip
-        for j in self.joints:
-            # A watchdog error outlives the torque-off (the register keeps reading -1) and makes the goal registers
-            # read-only: clear it first, arm it once the torque is on (it only watches while the torque is on).
-            self.bus.write("Bus_Watchdog", j, 0)
-            self.bus.write("Goal_Position", j, present[j])
-        self.bus.enable_torque()
+        self.registers.torque_on_holding(present, self.config.bus_watchdog_ms // xm430.WATCHDOG_UNIT_MS)
         self.gate.goal = ticks
-        for j in self.joints:
-            self.bus.write("Bus_Watchdog", j, self.config.bus_watchdog_ms // WATCHDOG_UNIT_MS)
-
-    @contextmanager
-    def torque_disabled(self):
-        """Torque off for the block (e.g. to move the fingers by hand), then on again holding the new pose. The
-        per-period state check knows the torque is off on purpose."""
-        expected = self.expected
-        with self._safety("turning the torque off"):
-            self.expected = {}
-            self.gate.goal = None  # free: a hand may move the joints faster than the servos
-            self.bus.disable_torque()
-        yield
-        if self.is_connected:  # a fault inside the block already stopped the gripper
-            with self._safety("turning the torque back on"):
-                self._enable_torque_holding_pose()
-                self.expected = expected
-            self.timing.restart()
-
-    def calibrate(self) -> None:
-        with self._safety("calibrating"):
-            self.expected = {}
-            self.gate.forget()  # readings change frame with Drive_Mode and Homing_Offset
-            self.bus.disable_torque()
-            if self.calibration:
-                answer = input(
-                    f"Press ENTER to write the calibration file of '{self.id}' to the servos, "
-                    "or type 'c' and press ENTER to calibrate again: "
-                )
-                if answer.strip().lower() != "c":
-                    self.bus.write_calibration(self.calibration)
-                    return
-            interactive.calibrate_by_hand(self)
 
     def setup_motors(self) -> None:
         interactive.setup_motors(self)
 
+    # --- between trials ------------------------------------------------------------------------------------------
+    @contextmanager
+    def torque_disabled(self):
+        """Torque off for the block (e.g. to move the fingers by hand), then on again holding the new pose. The
+        per-period state check knows the torque is off on purpose."""
+        expected = self.registers.expected
+        with self.latch.guard("turning the torque off"):
+            self.registers.expected = {}
+            self.gate.goal = None  # free: a hand may move the joints faster than the servos
+            self.bus.disable_torque()
+        yield
+        if self.is_connected:  # a fault inside the block already stopped the gripper
+            with self.latch.guard("turning the torque back on"):
+                self._enable_torque_holding_pose()
+                self.registers.expected = expected
+            self.timing.restart()
+
     @check_if_not_connected
     def tare_forces(self) -> None:
         """Re-zero the fingertip sensors (fingertips touching nothing), e.g. between evaluation trials: load cells
-        drift with temperature and use."""
+        drift with temperature and use. The tare outlasts the bus watchdog: the servos hear from us meanwhile."""
         refused = None
-        with self._safety("taring the force sensors"):
+        with self.latch.guard("taring the force sensors"):
             try:
-                self._tare_keeping_bus_alive()  # longer than the bus watchdog: the servos hear from us meanwhile
+                feeding_the_bus(lambda: self.force.tare(self.config.force_sensor.tare_s), self._check_servo_state)
             except ForceTareError as e:  # a refusal stops nothing: the old zero stays, the pose is held
                 refused = e
         self.timing.restart()  # the tare window is not a loop period
         if refused is not None:
             raise refused
 
+    @check_if_not_connected
+    def keep_alive(self) -> None:
+        """One servo state check in a wait outside the loop, every `KEEPALIVE_S`: the bus watchdog stays fed."""
+        with self.latch.guard("keeping the bus alive while waiting"):
+            self._check_servo_state()
+
+    @check_if_not_connected
+    def check_health_before_start(self) -> None:
+        """Before a trial or an episode: refuse (torque off, named error) when a servo is too close to a limit."""
+        with self.latch.guard("checking servo health before a start"):
+            self.checks.check_health(start=True)
+
     # --- control loop --------------------------------------------------------------------------------------------
     @check_if_not_connected
     def get_observation(self) -> dict[str, float]:
-        self.spacing.before_read()  # after a slow read, the next sample waits its turn (`timing.SampleSpacing`)
-        with self._safety("reading the gripper state"):
+        self.spacing.before_read()  # after a slow read, the next sample waits its turn (`SampleSpacing`)
+        with self.latch.guard("reading the gripper state"):
             started = time.monotonic()
             self.timing.tick(started)
             self._check_servo_state()  # first: a reset servo is named as such, not as an odd position
-            self._poll_health(started)
+            self.checks.poll_health(start=self.starts.pending(started))
             q = self._read_q()
             forces = self.force.read()
             self.spacing.after_read(started, time.monotonic())
-            self._check_consistency(q, forces)
+            self.checks.consistency_after(q, forces)
             over = np.abs(forces) > self.config.force_sensor.overload_n
             if over.any():
                 tips = {spec.FORCE_SENSOR_NAMES[i]: round(float(forces[i]), 2) for i in np.flatnonzero(over)}
@@ -299,10 +287,9 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
     @check_if_not_connected
     def send_action(self, action: dict[str, float]) -> dict[str, float]:
         """Absolute joint targets (rad), clipped to the joint limits and then to +-max_relative_target around the
-        present position, sent with one sync write. Returns the targets actually sent (after tick rounding).
-
-        The step bound comes last so it holds from the first step whatever the start pose: a joint that starts
-        outside its limits is brought back at <= max_relative_target per call, never in one jump."""
+        present position, sent with one sync write; returns the targets sent (after tick rounding). The step bound
+        comes last so it holds from the first step: a joint that starts outside its limits comes back at <=
+        max_relative_target per call, never in one jump."""
         missing = [k for k in spec.ACTION_NAMES if k not in action]
         unknown = [k for k in action if k not in spec.ACTION_NAMES]
         if missing or unknown:  # an extra key is a policy or teleop trained for other joints: nothing is sent
@@ -313,11 +300,11 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
         target = np.array([float(action[k]) for k in spec.ACTION_NAMES])
         if not np.all(np.isfinite(target)):
             raise ValueError(f"Non-finite joint target {target.tolist()}; nothing was sent.")
-        with self._safety("sending joint targets"):
+        with self.latch.guard("sending joint targets"):
             now = time.monotonic()
-            if now - self._last_state_check > spec.CONTROL_DT:  # no get_observation this period: stand in for it
+            if now - self.registers.last_check > spec.CONTROL_DT:  # no get_observation this period: stand in
                 self._check_servo_state()
-                self._poll_health(now)  # health and a pending start are judged for action-only loops too
+                self.checks.poll_health(start=self.starts.pending(now))  # for action-only loops too
             q = self._read_q()  # the trusted estimate: the bound is never centred on an unchecked reading
             bound = self.config.max_relative_target
             target = np.clip(np.clip(target, self.lower, self.upper), q - bound, q + bound)
@@ -326,25 +313,36 @@ class BlindgraspGripper(SafetyLatch, ServoChecks, BusKeepAlive, calib.CheckedCal
             self.gate.goal = np.array([ticks[j] for j in self.joints], dtype=np.float64)
         return {f"{j}.pos": ticks_to_rad(ticks[j]) for j in self.joints}
 
-    def _trusted_ticks(self, *, free: bool | None = None) -> np.ndarray:
-        """Present_Position of all nine through the plausibility gate (`plausibility.py`)."""
-
-        def read() -> np.ndarray:
-            raw = self.bus.sync_read("Present_Position")
-            return np.array([raw[j] for j in self.joints], dtype=np.float64)
-
-        return self.gate.read(read, self.joints, free=not self.expected if free is None else free)
-
-    def _read_q(self) -> np.ndarray:
-        return np.array([ticks_to_rad(t) for t in self._trusted_ticks()])
-
     @check_if_not_connected
     def disconnect(self) -> None:
         if not self.config.disable_torque_on_disconnect:
-            self._close()
+            self.latch.close()
             return
-        unconfirmed = self._stop()
+        unconfirmed = self.latch.stop()
         if unconfirmed:
             msg = f"Disconnected, but servo IDs {unconfirmed} did not confirm torque off: cut the power."
             raise GripperBusError(msg)
         logger.info("%s disconnected, torque off.", self)
+
+    def __exit__(self, exc_type, exc_value, traceback) -> None:
+        # After a latched safety stop the robot is already disconnected: LeRobot's __exit__ would raise
+        # DeviceNotConnectedError and hide the fault that stopped it. Let that fault propagate instead.
+        if self.is_connected:
+            self.disconnect()
+
+    # --- shared by the calls above -------------------------------------------------------------------------------
+    def _forget_goals(self) -> None:  # torque off: nothing is expected, no reading trusted without a second
+        self.registers.expected = {}
+        self.gate.forget()
+
+    def _trusted_ticks(self, *, free: bool | None = None) -> np.ndarray:
+        """Present_Position of all nine through the plausibility gate (free: the torque is off)."""
+        in_order = itemgetter(*self.joints)  # the gate's readings are in joint order
+        read = lambda: np.array(in_order(self.bus.sync_read("Present_Position")), dtype=np.float64)  # noqa: E731
+        return self.gate.read(read, self.joints, free=not self.registers.expected if free is None else free)
+
+    def _read_q(self) -> np.ndarray:
+        return np.array([ticks_to_rad(t) for t in self._trusted_ticks()])
+
+    def _check_servo_state(self) -> None:
+        self.checks.state(self._trusted_ticks)

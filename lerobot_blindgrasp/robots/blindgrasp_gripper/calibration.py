@@ -16,15 +16,18 @@ horn was mounted: q = (ticks - ZERO_TICK) * 2 pi / 4096.
 
 from __future__ import annotations
 
+import builtins
 import dataclasses
 import json
 import logging
+import sys
 from pathlib import Path
 
 import draccus
 from lerobot.motors import MotorCalibration
 
 from lerobot_blindgrasp import durable
+from lerobot_blindgrasp.hardware.force_board import force_calibration
 from lerobot_blindgrasp.hardware.xm430 import HOMING_OFFSET_MAX, RAD_PER_TICK, TICKS_PER_REV
 
 logger = logging.getLogger(__name__)
@@ -156,39 +159,75 @@ def problems(calibration: dict, ids: dict[str, int]) -> list[str]:
     return out
 
 
-class CheckedCalibrationFile:
-    """Mixin of `BlindgraspGripper`: LeRobot's calibration file, checked when loaded and written atomically."""
+def load_checked(
+    fpath: Path, ids: dict[str, int], lower, upper, fix: str
+) -> tuple[dict, CalibrationFileError | None]:
+    """The calibration file at `fpath`, checked by the rules `calibrate()` follows for servos `ids` (joint -> ID):
+    (calibration, None), or ({}, the error) for a bad file, which `connect()` refuses (lerobot-calibrate still works:
+    it connects with calibrate=False). `fix` is the command that replaces the file."""
+    try:
+        bad = schema_problems(read_raw(fpath))
+        if not bad:
+            with open(fpath) as f, draccus.config_type("json"):  # as LeRobot's `Robot._load_calibration` reads it
+                calibration = draccus.load(dict[str, MotorCalibration], f)
+            bad = problems(calibration, ids)
+    except Exception as e:  # unreadable: empty, truncated, not JSON, not UTF-8
+        bad = [f"unreadable ({type(e).__name__}: {e})"]
+    if bad:
+        error = CalibrationFileError(f"Calibration file {fpath} is invalid: {'; '.join(bad)}. Nothing was moved. "
+                                     f"Run {fix} to replace it.")  # fmt: skip
+        logger.error("%s", error)
+        return {}, error
+    # The position range is derived data: the config's joint limits are its authority (calibrate() builds it so).
+    return {
+        j: dataclasses.replace(calibration[j], range_min=rad_to_ticks(lo), range_max=rad_to_ticks(hi))
+        for j, lo, hi in zip(ids, lower, upper, strict=True)
+    }, None
 
-    def _load_calibration(self, fpath=None) -> None:
-        """Load and check the file by the rules `calibrate()` follows. A bad file is kept out of `self.calibration`
-        and refused by `connect()` (lerobot-calibrate still works: it connects with calibrate=False)."""
-        fpath = fpath or self.calibration_fpath
-        try:
-            bad = schema_problems(read_raw(fpath))
-            if not bad:
-                super()._load_calibration(fpath)
-                bad = problems(self.calibration, dict(zip(self.joints, self.config.servo_ids, strict=True)))
-        except Exception as e:  # unreadable: empty, truncated, not JSON, not UTF-8
-            bad = [f"unreadable ({type(e).__name__}: {e})"]
-        if bad:
-            self.calibration = {}
-            self.calibration_error = CalibrationFileError(
-                f"Calibration file {fpath} is invalid: {'; '.join(bad)}. Nothing was moved. Run "
-                f"lerobot-calibrate --robot.type={self.name} --robot.id={self.id} to replace it."
-            )
-            logger.error("%s", self.calibration_error)
-            return
-        self.calibration_error = None
-        # The position range is derived data: the config's joint limits are its authority (calibrate() builds it so).
-        cfg = self.config
-        self.calibration = {
-            j: dataclasses.replace(self.calibration[j], range_min=rad_to_ticks(lo), range_max=rad_to_ticks(hi))
-            for j, lo, hi in zip(self.joints, cfg.joint_lower, cfg.joint_upper, strict=True)
-        }
 
-    def _save_calibration(self, fpath=None) -> None:
-        """LeRobot's base class writes the file in place, so a full disk truncates the previous calibration. Written
-        atomically instead: on failure the old file is unchanged, and `durable.WriteError` (not an OSError, so the
-        safety latch does not call it a bus failure) names the file and the cause."""
-        with durable.atomic_open(fpath or self.calibration_fpath) as f, draccus.config_type("json"):
-            draccus.dump(self.calibration, f, indent=4)
+def save_atomic(calibration: dict[str, MotorCalibration], fpath: Path) -> None:
+    """LeRobot's base class writes the file in place, so a full disk truncates the previous calibration. Written
+    atomically instead: on failure the old file is unchanged, and `durable.WriteError` (not an OSError, so the
+    safety latch does not call it a bus failure) names the file and the cause."""
+    with durable.atomic_open(fpath) as f, draccus.config_type("json"):
+        draccus.dump(calibration, f, indent=4)
+
+
+# --- a missing file at connect -----------------------------------------------------------------------------------
+# LeRobot's robots calibrate interactively inside `connect()` when no calibration file exists (koch_follower does).
+# That is right at a terminal, where the operator reads the prompt, and wrong when nobody can answer (`lerobot-eval`
+# under nohup, a job scheduler or a pipe): there `input()` fails with EOFError mid-calibration or waits for ever. The
+# usual cause is a `--robot.id` other than the one calibrated, so the refusal names the ids that are calibrated.
+_BUILTIN_INPUT = builtins.input
+
+
+def operator_can_answer() -> bool:
+    """True if a prompt reaches someone: stdin is a terminal, or the program replaced `input()` with its own
+    answers (a GUI, a scripted operator)."""
+    if builtins.input is not _BUILTIN_INPUT:
+        return True
+    try:
+        return sys.stdin is not None and sys.stdin.isatty()
+    except ValueError:  # stdin closed
+        return False
+
+
+def calibrated_ids(calibration_dir: Path) -> list[str]:
+    """The robot ids with a servo calibration `<id>.json` in the folder (force calibrations `<id>.force.json`
+    share the folder and are not ids)."""
+    files = Path(calibration_dir).glob("*.json")
+    return sorted(p.stem for p in files if not force_calibration.is_force_calibration(p))
+
+
+def refuse_unattended(calibration: dict, fpath: Path, robot_id: str) -> None:
+    """Raise a CalibrationFileError if there is no `calibration` and no operator could calibrate it now."""
+    if calibration or operator_can_answer():
+        return
+    known = calibrated_ids(fpath.parent)
+    hint = (f" Calibrated ids in {fpath.parent}: {', '.join(known)}; pass the one of this gripper as "
+            "--robot.id (lerobot-eval: --env.robot.id).") if known else ""  # fmt: skip
+    raise CalibrationFileError(
+        f"No calibration file for robot id '{robot_id}' ({fpath}), and no operator at this "
+        f"terminal to calibrate it now (stdin is not a terminal). Nothing was moved.{hint} To calibrate, run "
+        f'lerobot-calibrate --robot="include robot_configs/blindgrasp_gripper.yaml" --robot.id={robot_id}'
+    )

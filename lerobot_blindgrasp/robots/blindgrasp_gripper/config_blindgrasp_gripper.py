@@ -3,6 +3,10 @@
 Defaults are the D'Claw-derived build of the paper; a site-specific file lives in `robot_configs/` and is passed to
 any LeRobot CLI with `--robot="include robot_configs/blindgrasp_gripper.yaml"` (draccus' include syntax; later
 `--robot.<field>=...` flags still override it).
+
+Parsing is also where the config takes what the script's command line says and LeRobot never hands the robot: the
+policy it will run, the loop's rate, the dataset it records (`command_line`, read once by
+`compat.read_command_line`; the robot checks them at connect).
 """
 
 from __future__ import annotations
@@ -12,8 +16,8 @@ from dataclasses import dataclass, field
 
 from lerobot.robots.config import RobotConfig
 
-from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.force_board.config_force_board import ForceSensorConfig
+from lerobot_blindgrasp import compat, spec
+from lerobot_blindgrasp.hardware.force_board import ForceSensorConfig, ForceSensorReader
 from lerobot_blindgrasp.hardware.xm430 import (
     CURRENT_LIMIT_MAX_UNITS,
     CURRENT_UNIT_A,
@@ -84,19 +88,21 @@ class BlindgraspGripperConfig(RobotConfig):
     # kernel may refuse (docs/hardware.md, "The host PC"): a refusal is a warning that says how to allow it.
     realtime_priority: int = 0
     lock_memory: bool = False
-    # Servo health (`health.py`): the health block (temperature, input voltage, current) is read every this many
+    # Servo health (`hardware/servo_diagnostics.py`): the health block (temperature, input voltage, current) is read every this many
     # control periods; its levels are the datasheet's (`hardware/xm430.py`).
     health_every_n: int = 4
     # Calibration: a joint must move at least this far (rad) in the "positive" pose to read its direction.
     calibration_min_motion_rad: float = 0.15
     disable_torque_on_disconnect: bool = True
     # A policy on the command line whose fit no file states (no `trained_for` in its config.json and no training
-    # dataset metadata on this machine) is refused before any torque (`policy_check.py`); true runs it with a warning.
+    # dataset metadata on this machine) is refused before any torque (`policy_contract.py`); true runs it with a
+    # warning.
     allow_unverified_policy: bool = False
     force_sensor: ForceSensorConfig = field(default_factory=ForceSensorConfig)
 
     def __post_init__(self):
         super().__post_init__()
+        self.command_line = compat.read_command_line()  # not a field: what the script's own flags say
         n = spec.NUM_JOINTS
         if len(self.servo_ids) != n or len(set(self.servo_ids)) != n:
             raise ValueError(f"servo_ids must be {n} distinct IDs in spec.JOINT_NAMES order, got {self.servo_ids}")
@@ -106,10 +112,8 @@ class BlindgraspGripperConfig(RobotConfig):
         for j, lo, hi in zip(spec.JOINT_NAMES, self.joint_lower, self.joint_upper, strict=True):
             k = spec.JOINT_NAMES.index(j)
             if not spec.JOINT_LOWER[k] <= lo < hi <= spec.JOINT_UPPER[k]:
-                raise ValueError(
-                    f"{j}: limits [{lo}, {hi}] must lie inside the sim's "
-                    f"[{spec.JOINT_LOWER[k]}, {spec.JOINT_UPPER[k]}]"
-                )
+                raise ValueError(f"{j}: limits [{lo}, {hi}] must lie inside the sim's [{spec.JOINT_LOWER[k]}, "
+                                 f"{spec.JOINT_UPPER[k]}]")  # fmt: skip
         if self.baudrate not in DYNAMIXEL_BAUDRATES:
             raise ValueError(f"baudrate {self.baudrate} is not a Dynamixel rate {DYNAMIXEL_BAUDRATES}")
         if not self.port or not self.force_sensor.port:
@@ -155,3 +159,19 @@ class BlindgraspGripperConfig(RobotConfig):
             raise ValueError("force_sensor.frozen_frames must be 0 (off) or >= 2")
         if len(set(fs.channel_map)) != spec.NUM_FORCES or not all(0 <= c < 8 for c in fs.channel_map):
             raise ValueError(f"force_sensor.channel_map needs distinct channels 0..7, not {fs.channel_map}")
+
+    def force_reader(self) -> ForceSensorReader:
+        fs = self.force_sensor
+        return ForceSensorReader(
+            fs.port,
+            fs.baudrate,
+            fs.scale_n_per_count,
+            channel_map=fs.channel_map,
+            stale_timeout_s=fs.stale_timeout_s,
+            connect_timeout_s=fs.connect_timeout_s,
+            frozen_frames=fs.frozen_frames,
+            min_rate_hz=fs.min_rate_hz,
+            tare_max_std_n=fs.tare_max_std_n,
+            tare_max_shift_n=fs.tare_max_shift_n,
+            negative_fault_n=fs.negative_fault_n,
+        )

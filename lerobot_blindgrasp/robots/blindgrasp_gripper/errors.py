@@ -4,6 +4,8 @@ refused tare, which stops nothing, is its reader's (`hardware/force_board/reader
 
 from __future__ import annotations
 
+from lerobot_blindgrasp.policy_contract import PolicyMismatchError  # noqa: F401  (the robot refuses a policy with it)
+
 
 class GripperSafetyStop(RuntimeError):
     """The gripper stopped itself (torque off on all servos it could reach) and the run must not go on."""
@@ -30,7 +32,7 @@ class GripperStateError(GripperSafetyStop):
 
 
 class GripperReadingError(GripperSafetyStop):
-    """Servo position readings stayed physically implausible after the re-reads (`plausibility.py`)."""
+    """Servo position readings stayed physically implausible after the re-reads (`hardware/plausibility.py`)."""
 
 
 class GripperPortBusyError(GripperSafetyStop, ConnectionError):
@@ -48,11 +50,11 @@ class GripperTimingError(GripperSafetyStop):
 
 class GripperHealthError(GripperSafetyStop):
     """A servo's health item (temperature, input voltage, current against its limit) reached its ERROR level, or was
-    too close to its limit to start a trial or episode (`health.py`): stopped before the firmware's own shutdown."""
+    too close to its limit to start a trial or episode (`hardware/servo_diagnostics.py`): stopped before the firmware's own shutdown."""
 
 
 class GripperConsistencyError(GripperSafetyStop):
-    """Two inputs that see the same physics disagree beyond what physics allows (`consistency.py`): a fingertip force
+    """Two inputs that see the same physics disagree beyond what physics allows (`hardware/consistency.py`): a fingertip force
     its finger's servos do not hold, or a servo that does not drive its joint toward the goal."""
 
 
@@ -63,8 +65,3 @@ class GripperProtectionError(GripperSafetyStop):
 
 class GripperFirmwareError(GripperSafetyStop):
     """A servo's firmware is older than a defence needs (Drive_Mode and Bus_Watchdog: v38); refused at connect."""
-
-
-class PolicyMismatchError(ValueError):
-    """The policy checkpoint was trained for another robot (feature names, shapes or order, robot type, fps, action
-    meaning): refused before any servo takes torque (`policy_check.py`)."""

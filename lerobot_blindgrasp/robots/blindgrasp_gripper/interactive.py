@@ -25,6 +25,19 @@ POSITIVE_POSE_HELP = (
 )
 
 
+def calibrate(robot) -> None:
+    """Torque off: the calibration file to the servos when the operator keeps it, else `calibrate_by_hand`."""
+    if robot.calibration:
+        answer = input(
+            f"Press ENTER to write the calibration file of '{robot.id}' to the servos, "
+            "or type 'c' and press ENTER to calibrate again: "
+        )
+        if answer.strip().lower() != "c":
+            robot.bus.write_calibration(robot.calibration)
+            return
+    calibrate_by_hand(robot)
+
+
 def calibrate_by_hand(robot) -> None:
     """Two hand-held poses (torque off): Drive_Mode from the direction each joint moved, then Homing_Offset so that
     every servo reads 2048 at q = 0; written to the servos and to the calibration file."""

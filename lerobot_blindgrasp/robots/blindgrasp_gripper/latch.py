@@ -1,14 +1,16 @@
 """The safety latch: any failure while connected turns the torque off on every servo that answers, closes both ports
 and raises one error that says so.
 
-`SafetyLatch._safety(what)` wraps every call that touches the hardware (connect, configure, get_observation,
-send_action, tares, health checks). Its causes: a bus error after the retries, a lost port, a servo hardware
-error, a servo that reset or lost its settings, an implausible reading, force overload, stale or frozen force data,
-a sustained loop overrun, a servo near a limit, an exception, Ctrl-C or SIGTERM/SIGHUP inside a call. Reconnecting
-is an explicit decision of the operator.
+`SafetyLatch.guard(what)` wraps every call of the gripper that touches the hardware (connect, configure,
+get_observation, send_action, tares, health checks). Its causes: a bus error after the retries, a lost port, a servo
+hardware error, a servo that reset or lost its settings, an implausible reading, force overload, stale or frozen
+force data, a sustained loop overrun, a servo near a limit, an exception, Ctrl-C or SIGTERM/SIGHUP inside a call. A
+failure of the layers below (`hardware/`) becomes the gripper's named error (`errors.py`). Reconnecting is an
+explicit decision of the operator.
 
-Outside the calls, the process itself is guarded: `atexit` stops a gripper left connected, and so does an uncaught
-exception before Python reports it (`sys.excepthook`). The second matters when a script's cleanup fails before its
+Outside the calls, the process itself is guarded while the latch is armed (`arm`, at connect): `atexit` stops a
+gripper left connected, and so does an uncaught exception before Python reports it (`sys.excepthook`), and
+SIGTERM/SIGHUP unwind like Ctrl-C (`signals.py`). The excepthook matters when a script's cleanup fails before its
 disconnect: lerobot-record's `finally` runs `dataset.finalize()` before `robot.disconnect()`, so a full disk there
 skips the disconnect, and an interpreter that cannot exit (a thread that never ends) would never reach `atexit`.
 """
@@ -19,25 +21,40 @@ import atexit
 import logging
 import sys
 import weakref
+from collections.abc import Callable
 from contextlib import contextmanager
 
 from lerobot_blindgrasp import compat
+from lerobot_blindgrasp.hardware.consistency import ConsistencyError
 from lerobot_blindgrasp.hardware.dynamixel.bus import PortLostError
 from lerobot_blindgrasp.hardware.force_board.reader import ForceStreamError, ForceTareError
+from lerobot_blindgrasp.hardware.loop_timing import LoopOverrunError
+from lerobot_blindgrasp.hardware.plausibility import ImplausibleReadingError
 from lerobot_blindgrasp.hardware.ports import PortAccessError, PortInUseError
+from lerobot_blindgrasp.hardware.servo_diagnostics import ServoHealthError
+from lerobot_blindgrasp.hardware.servo_registers import (
+    FirmwareTooOldError,
+    ProtectionNotKeptError,
+    ServoFaultError,
+    ServoStateChangedError,
+)
 
 from . import signals
 from .errors import (
     ForceSensorError,
     GripperBusError,
+    GripperConsistencyError,
+    GripperFirmwareError,
+    GripperHardwareError,
+    GripperHealthError,
     GripperPortAccessError,
     GripperPortBusyError,
+    GripperProtectionError,
     GripperReadingError,
     GripperSafetyStop,
+    GripperStateError,
     GripperTimingError,
 )
-from .plausibility import ImplausibleReadingError
-from .timing import LoopOverrunError
 
 logger = logging.getLogger(__name__)
 
@@ -51,48 +68,62 @@ _NAMED_STOPS = (
     (ForceTareError, None, ""),
     (PortLostError, GripperBusError, "Dynamixel port lost while {what}: "),
     (ForceStreamError, ForceSensorError, "Force sensor failure while {what}: "),
+    (FirmwareTooOldError, GripperFirmwareError, ""),
+    (ProtectionNotKeptError, GripperProtectionError, ""),
+    (ServoFaultError, GripperHardwareError, ""),
+    (ServoStateChangedError, GripperStateError, ""),
+    (ServoHealthError, GripperHealthError, ""),
+    (ConsistencyError, GripperConsistencyError, "Inputs disagree: "),
 )
 
-_connected: weakref.WeakSet = weakref.WeakSet()  # grippers to stop on an uncaught exception
+_connected: weakref.WeakSet = weakref.WeakSet()  # latches of grippers to stop on an uncaught exception
 _chained_hook = None  # the excepthook ours replaced
 
 
 def _stop_then_report(exc_type, exc, tb) -> None:
-    for robot in list(_connected):
-        if robot.is_connected:
+    for latch in list(_connected):
+        if latch.bus.is_connected:
             logger.error("%s ends the program with %s still connected (the script's cleanup did not reach its "
-                         "disconnect): turning the torque off now.", exc_type.__name__, robot)  # fmt: skip
-            robot._stop()
+                         "disconnect): turning the torque off now.", exc_type.__name__, latch.name)  # fmt: skip
+            latch.stop()
     (_chained_hook or sys.__excepthook__)(exc_type, exc, tb)
 
 
-def _guard(robot) -> None:
+def _guard(latch) -> None:
     global _chained_hook
-    _connected.add(robot)
+    _connected.add(latch)
     if sys.excepthook is not _stop_then_report:
         _chained_hook = compat.set_excepthook(_stop_then_report)
 
 
-def _unguard(robot) -> None:
+def _unguard(latch) -> None:
     global _chained_hook
-    _connected.discard(robot)
+    _connected.discard(latch)
     if not _connected and sys.excepthook is _stop_then_report:
         compat.set_excepthook(_chained_hook or sys.__excepthook__)
         _chained_hook = None
 
 
 class SafetyLatch:
-    """Mixin of `BlindgraspGripper` (it holds `bus`, `force`, `gate`, `expected`, `config`): the latched stop."""
+    """The latched stop of one gripper: its servo `bus` (torque off on `servo_ids`, then closed) and its `force`
+    reader (closed). `on_torque_off` drops what the gripper expects of torqued servos, `on_close` undoes what its
+    connect installed, `report` gives the session's margins for the log; `name` names the gripper in messages."""
+
+    def __init__(self, name: str, bus, force, servo_ids, *, on_torque_off: Callable[[], None],
+                 on_close: Callable[[], None], report: Callable[[], str]):  # fmt: skip
+        self.name, self.bus, self.force, self.servo_ids = name, bus, force, list(servo_ids)
+        self._on_torque_off, self._on_close, self._report = on_torque_off, on_close, report
+        self._atexit = None
 
     @contextmanager
-    def _safety(self, what: str):
+    def guard(self, what: str):
         try:
             yield
         except BaseException as e:
             if getattr(e, "torque_off_handled", False):
-                raise  # an inner _safety already stopped the gripper and wrote the message
+                raise  # an inner guard already stopped the gripper and wrote the message
             was_open = self.bus.is_connected
-            unconfirmed = self._stop()
+            unconfirmed = self.stop()
             if not was_open:
                 note = "The bus port was not open, so no torque was enabled by this process."
             elif unconfirmed:
@@ -120,52 +151,43 @@ class SafetyLatch:
                                    f"{note}")  # fmt: skip
         return None
 
-    def _torque_off_all(self) -> list[int]:
-        """Torque off on every servo; returns the IDs that did not confirm it."""
-        self.expected = {}
-        self.gate.forget()
-        return self.bus.torque_off_everywhere()
-
-    def _stop(self) -> list[int]:
-        """Latched stop: torque off, then close both ports."""
-        logger.info("%s %s", self, self.consistency.report())  # the margins of the consistency checks, per session
-        unconfirmed = list(self.config.servo_ids)
+    def stop(self) -> list[int]:
+        """Latched stop: torque off on every servo (returns the IDs that did not confirm it), then close both ports."""
+        logger.info("%s %s", self.name, self._report())  # the margins of the consistency checks, per session
+        unconfirmed = list(self.servo_ids)
         with signals.deferred():  # a second Ctrl-C or SIGTERM must not cut the torque-off short
             if self.bus.is_connected:
                 try:
-                    unconfirmed = self._torque_off_all()
+                    self._on_torque_off()
+                    unconfirmed = self.bus.torque_off_everywhere()
                 finally:
-                    self._close()
+                    self.close()
             else:
-                self._close()
+                self.close()
         return unconfirmed
 
-    def _close(self) -> None:
+    def close(self) -> None:
         if self.bus.is_connected:
-            self.bus.disconnect(disable_torque=False)  # the torque-off, when wanted, was _stop's
+            self.bus.disconnect(disable_torque=False)  # the torque-off, when wanted, was stop's
         self.force.disconnect()
         signals.uninstall(self)
-        self.episodes.uninstall()
+        self._on_close()
         _unguard(self)
         if self._atexit is not None:
             atexit.unregister(self._atexit)
             self._atexit = None
 
-    def _guard_process(self) -> None:
-        """While connected: stop at interpreter exit and before an uncaught exception is reported."""
+    def arm(self) -> None:
+        """While connected: stop at interpreter exit and before an uncaught exception is reported; SIGTERM and SIGHUP
+        unwind like Ctrl-C."""
         ref = weakref.ref(self)
 
         def _at_exit():
-            robot = ref()
-            if robot is not None and robot.is_connected:
-                robot._stop()
+            latch = ref()
+            if latch is not None and latch.bus.is_connected:
+                latch.stop()
 
         self._atexit = _at_exit
         atexit.register(_at_exit)
         _guard(self)
-
-    def __exit__(self, exc_type, exc_value, traceback) -> None:
-        # After a latched safety stop the robot is already disconnected: LeRobot's __exit__ would raise
-        # DeviceNotConnectedError and hide the fault that stopped it. Let that fault propagate instead.
-        if self.is_connected:
-            self.disconnect()
+        signals.install(self)

@@ -5,12 +5,12 @@ episode's metadata; a disk that fills there fails the save, and the `finalize()`
 metadata file 0 bytes long, so the episodes before are lost too (docs/upstream/dataset-crash-safety.md). Checking
 before an episode starts is the one place where refusing costs nothing: the episodes recorded so far are whole.
 
-What the robot can observe of a `lerobot-record` run: its own connect and control calls, and the process's command
-line. LeRobot creates (or resumes) the dataset before it connects the robot, so at connect the dataset's
-`meta/info.json` is on disk under `--dataset.root` (default `$HF_LEROBOT_HOME/<repo_id>`); the frames of an
-episode are `--dataset.fps` x `--dataset.episode_time_s`. These are read with LeRobot's own parser helpers, as the
-robot reads `--policy.path` (`policy_check.py`); defaults are `DatasetRecordConfig`'s. The starts are the robot's
-own (`servo_checks.ServoChecks._starting`: an announced episode, or the loop resuming after a pause).
+What the robot can observe of a `lerobot-record` run: its own connect and control calls, and the command line its
+config was parsed from (`compat.read_command_line`: lerobot-record tells its robot nothing of the dataset).
+LeRobot creates (or resumes) the dataset before it connects the robot, so at connect the dataset's `meta/info.json`
+is on disk under `--dataset.root` (default `$HF_LEROBOT_HOME/<repo_id>`); the frames of an episode are
+`--dataset.fps` x `--dataset.episode_time_s`, with `DatasetRecordConfig`'s defaults. The starts are the robot's own
+(an announced episode, or the loop resuming after a pause).
 
 The estimate is an upper bound, not a measurement: raw bytes per frame from the features' dtypes and shapes
 (images and videos at their raw size: LeRobot stages them as PNG frames), the episode's metadata row (its
@@ -83,19 +83,20 @@ class RecordingSpace:
     fallback_features: dict  # the robot's own, for a dataset whose info.json is not (yet) where expected
 
     @classmethod
-    def from_command_line(cls, robot) -> RecordingSpace | None:
-        """The recording this process makes (`--dataset.repo_id` given), or None (no dataset is written)."""
+    def of(cls, command_line: compat.CommandLine, action_features: dict, observation_features: dict):
+        """The recording a script makes (its `--dataset.repo_id` given) with a robot of these features, or None (no
+        dataset is written)."""
         from lerobot.configs.dataset import DatasetRecordConfig
         from lerobot.utils.constants import HF_LEROBOT_HOME
 
-        repo_id = compat.cli_arg("dataset.repo_id")
+        repo_id = command_line.dataset_repo_id
         if not repo_id:
             return None
         defaults = DatasetRecordConfig.__dataclass_fields__
-        root = compat.cli_arg("dataset.root") or HF_LEROBOT_HOME / repo_id
-        fps = float(compat.cli_arg("dataset.fps") or defaults["fps"].default)
-        episode_s = float(compat.cli_arg("dataset.episode_time_s") or defaults["episode_time_s"].default)
-        return cls(Path(root), fps, episode_s, _robot_features(robot))
+        root = command_line.dataset_root or HF_LEROBOT_HOME / repo_id
+        fps = float(command_line.dataset_fps or defaults["fps"].default)
+        episode_s = float(command_line.episode_time_s or defaults["episode_time_s"].default)
+        return cls(Path(root), fps, episode_s, robot_dataset_features(action_features, observation_features))
 
     def features(self) -> dict:
         from lerobot.datasets.io_utils import load_info
@@ -120,17 +121,13 @@ class RecordingSpace:
         logger.debug("Recording space: %d bytes free on %s, an episode needs up to %d.", free, where, need)
 
 
-def recording_from_command_line(robot) -> RecordingSpace | None:
-    return RecordingSpace.from_command_line(robot)
-
-
-def _robot_features(robot) -> dict:
-    """The dataset features lerobot-record derives from the robot with its default (identity) processors."""
+def robot_dataset_features(action_features: dict, observation_features: dict) -> dict:
+    """The dataset features lerobot-record derives from a robot with its default (identity) processors."""
     from lerobot.utils.constants import DEFAULT_FEATURES
     from lerobot.utils.feature_utils import hw_to_dataset_features
 
     return {
-        **hw_to_dataset_features(robot.action_features, "action"),
-        **hw_to_dataset_features(robot.observation_features, "observation"),
+        **hw_to_dataset_features(action_features, "action"),
+        **hw_to_dataset_features(observation_features, "observation"),
         **DEFAULT_FEATURES,
     }

@@ -1,11 +1,13 @@
-"""Where a recording episode starts, as the robot can tell: a start is checked like a connect (`health.py`).
+"""Where a start is, as the robot can tell: a start (connect, a trial, a recording episode, a loop resuming after a
+pause) is judged like a connect (`hardware/servo_diagnostics.py` at its start levels), and a recording's needs room on
+disk for the episode (`recording_space.py`).
 
 LeRobot's Robot interface has no call at an episode's start: lerobot-record goes on calling get_observation and
 send_action through its reset phase and into the next episode. What it does at every episode is announce it: its
 `log_say` logs a line at INFO just before the episode's loop, whether or not sounds are on
 (`compat.is_episode_announcement` recognises it), and its `init_logging` leaves the root logger at NOTSET, so the
 line reaches every root handler. `EpisodeStarts` is one: installed while the gripper is connected, it marks a
-start. The robot also counts a loop that resumes after a pause (a dataset save, an operator prompt, any script that
+start. `Starts` also counts a loop that resumes after a pause (a dataset save, an operator prompt, any script that
 waits between runs) as a start.
 """
 
@@ -14,6 +16,8 @@ from __future__ import annotations
 import logging
 
 from lerobot_blindgrasp import compat
+
+from .recording_space import RecordingSpace
 
 
 class EpisodeStarts(logging.Handler):
@@ -39,3 +43,25 @@ class EpisodeStarts(logging.Handler):
 
     def uninstall(self) -> None:
         logging.getLogger().removeHandler(self)
+
+
+class Starts:
+    """A start pending at a control period: an episode announced since the last one (`episodes`), or the first
+    period after a pause of `pause_s` or more. A start of a recording (`recording`, set at connect) checks its room
+    on disk first."""
+
+    def __init__(self, episodes: EpisodeStarts, pause_s: float):
+        self.episodes, self.pause_s = episodes, pause_s
+        self.recording: RecordingSpace | None = None
+        self._last_call: float | None = None
+
+    def restart(self) -> None:
+        self._last_call = None
+
+    def pending(self, now: float) -> bool:
+        resumed = self._last_call is not None and now - self._last_call >= self.pause_s
+        self._last_call = now
+        start = self.episodes.take() or resumed
+        if start and self.recording is not None:
+            self.recording.check()
+        return start

@@ -18,6 +18,7 @@ seconds, a stall is judged over seconds, and a sag over half a second.
 from __future__ import annotations
 
 import logging
+import time
 from collections import deque
 from dataclasses import dataclass
 
@@ -33,16 +34,10 @@ LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
 BLOCK = ("Present_Current", "Present_Temperature")  # first and last register of the health read (21 bytes)
 READ = ("Present_Current", "Present_Input_Voltage", "Present_Temperature")
 SLOPE_MIN_SPAN_S = 3.0  # a temperature trend is judged over at least this much history (whole-degree readings)
-LIMITS_BLOCK = ("Temperature_Limit", "Shutdown")  # EEPROM 31..63, read once at connect
-LIMITS_READ = (
-    "Temperature_Limit",
-    "Max_Voltage_Limit",
-    "Min_Voltage_Limit",
-    "PWM_Limit",
-    "Current_Limit",
-    "Startup_Configuration",
-    "Shutdown",
-)
+
+
+class ServoHealthError(RuntimeError):
+    """A health item reached its ERROR level, or was too close to its limit to start."""
 
 
 @dataclass(frozen=True)
@@ -77,7 +72,8 @@ class ServoHealth:
         self._sag_since.clear()
 
     def set_limits(self, eeprom: dict[str, dict[str, int]]) -> None:
-        """The servos' own Temperature_Limit (LIMITS_READ per joint), which the temperature levels are relative to."""
+        """The servos' own Temperature_Limit (`servo_registers.LIMITS_READ` per joint), which the temperature levels
+        are relative to."""
         for j, regs in eeprom.items():
             self.temperature_limit_c[j] = regs["Temperature_Limit"] * xm430.TEMPERATURE_UNIT_C
 
@@ -149,6 +145,20 @@ class ServoHealth:
             self._reported[key] = d.level
         self.latest = out
         return out
+
+    def check(self, bus, limit_units: int | None, *, start: bool = False) -> list[int]:
+        """One sync read of the health block on `bus`; ERROR raises `ServoHealthError`, and at a start anything too
+        close to its limit does. Returns each joint's signed Present_Current (register units)."""
+        block = bus.read_block(*BLOCK, READ)
+        currents = [signed16(block[j]["Present_Current"]) for j in self.joints]
+        found = self.assess(block, limit_units, time.monotonic())
+        errors = [str(d) for d in found if d.level == ERROR]
+        if start and (close := self.start_problems(block) + errors):
+            raise ServoHealthError(f"Refused to start: {'; '.join(close)}.")
+        if errors:
+            raise ServoHealthError(f"Servo health: {'; '.join(errors)}. Stopped before the firmware's own "
+                                   "shutdown would drop the object.")  # fmt: skip
+        return currents
 
     def start_problems(self, block: dict[str, dict[str, int]]) -> list[str]:
         """What is too close to a limit to start a trial or an episode (the servos at rest)."""
