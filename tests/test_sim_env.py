@@ -11,8 +11,8 @@ import pytest
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import objects, randomization, rewards
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 
 CFG = rewards.PAPER_REWARD
 

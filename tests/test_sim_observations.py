@@ -10,8 +10,8 @@ import pytest
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.sim import randomization
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.scripted import run_pinch_lift
 
 N = 3

@@ -42,7 +42,7 @@ from lerobot_blindgrasp.sim import (
     termination,
 )
 from lerobot_blindgrasp.sim.backends.batch import BatchBackend
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig, allocate_objects
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig, allocate_objects
 
 log = logging.getLogger(__name__)
 
