@@ -32,7 +32,7 @@ def pinched():
     action = np.tile(np.linspace(-0.5, 0.5, spec.NUM_JOINTS), (N, 1))  # some entries beyond the 0.3 rad bound
     env.step(action)
     env.physics.forward(np.arange(N))
-    priv = env._observe()["privileged"].astype(np.float64)
+    priv = env._observe()["privileged"].numpy().astype(np.float64)
     yield env, priv, action
     env.close()
 
