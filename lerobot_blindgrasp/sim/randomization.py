@@ -187,6 +187,13 @@ class SensorDraw:
     force_bias: torch.Tensor
     joint_offset: torch.Tensor
 
+    def rows(self, sel: slice | torch.Tensor) -> SensorDraw:
+        return SensorDraw(self.force_bias[sel], self.joint_offset[sel])
+
+    def measured(self, q: torch.Tensor, sel: slice | torch.Tensor = slice(None)) -> torch.Tensor:
+        """Joint positions of envs `sel` in the joints' measured frame: q + their calibration offset (a copy)."""
+        return q + self.joint_offset[sel]
+
 
 def _signs(u: torch.Tensor) -> torch.Tensor:
     return torch.where(u < 0.5, -1.0, 1.0).to(torch.float64)
