@@ -97,6 +97,7 @@ class BatchedGraspEnv:
         dev = self.device = self.physics.device
         f64 = {"dtype": torch.float64, "device": dev}
         self._seeds = rng.as_words(self.env_seeds, dev)
+        self._noise_key = rng.stream_key(self._seeds, rng.STREAM_OBS_NOISE)
         self.sensor_draw = randomization.draw_sensors(cfg.dr, self._seeds)
         self.sensor_index = sensors.SensorIndex.from_model(template, dev)
         self._object_body = template.body("object").id
@@ -314,7 +315,7 @@ class BatchedGraspEnv:
         """Both observations for all envs or `ids`; for all envs, also the raw quantities the rewards read."""
         sel = slice(None) if ids is None else ids
         counter = self.episode[sel] * 100_003 + self.episode_length[sel]
-        noise = rng.normal(self._seeds[sel], rng.STREAM_OBS_NOISE, counter, observations.NOISE_DIM)
+        noise = rng.normal(None, rng.STREAM_OBS_NOISE, counter, observations.NOISE_DIM, self._noise_key[sel])
         state = [x[sel] for x in (self._qpos, self._qvel, self._sensordata, self.rest_height, self.prev_action)]
         raw, obs = observations.observe(
             *state[:3], self.sensor_index, *state[3:], noise, self.cfg.dr, self.sensor_draw.rows(sel)
@@ -336,7 +337,7 @@ class BatchedGraspEnv:
 
     def fingertip_positions(self) -> np.ndarray:
         """(N, 3 fingers, xyz) world positions of the tip sites (the load cells)."""
-        return on_host(self.sensor_index.read(self._sensordata, "pos"))
+        return on_host(self.sensor_index.read(self._sensordata, "pos")).copy()
 
     def mj_model_data(self, i: int) -> tuple[mujoco.MjModel, mujoco.MjData]:
         """Env i's model and a forwarded MjData of its current state (for rendering)."""
