@@ -8,15 +8,14 @@ observations (`observations.py`). Physics runs in a backend chosen by `GraspEnvC
 are tensors sharing memory with the physics (`backends/__init__.py` has the contract).
 
 Step (paper Sec. III-B): a_t = delta-theta in R^9 is clipped to +-0.3 rad, the servo target is q_t + a_t (clipped to
-the joint limits, as the real robot does), and `substeps` physics steps cover one 50 ms control period.
-Episodes last 10 s; an episode terminates when the object leaves the 10 cm workspace. Envs auto-reset inside
-`step` (rsl-rl never calls reset); `info["final"]` describes the episodes that ended.
+the joint limits, as the real robot does), and `substeps` physics steps cover one 50 ms control period. Episodes
+last 10 s; one terminates when the object leaves the 10 cm workspace. Envs auto-reset inside `step` (rsl-rl never
+calls reset); `info["final"]` describes the episodes that ended.
 
 The factors beyond Table II (`DomainRandomization`, all off by default) act through the event terms, the sensor
 model (`observations.py`) and two places here: the torque limit is the actuators' forcerange (the current limit
 caps torque, xm430.torque_at_current_nm), and under a joint calibration offset readings are q + offset and the servo
-reaches an absolute target in that frame (`delta_for_target`, `target_for_delta`), as a real servo does with a wrong
-homing offset.
+reaches an absolute target in that frame (`delta_for_target`), as a real servo does with a wrong homing offset.
 """
 
 from __future__ import annotations
@@ -49,13 +48,11 @@ HOLD_PUSH_AFTER_STEPS = events.HOLD_PUSH_AFTER_STEPS
 
 
 class BatchedGraspEnv:
-    """N envs in one object.
-
-    reset() -> obs; step(action (N, 9)) -> (obs, reward (N,), terminated (N,), truncated (N,), info).
-    obs is a dict with "policy" (N, 12, the student's o_t) and "privileged" (N, 92, the teacher's).
+    """N envs in one object. reset() -> obs; step(action (N, 9)) -> (obs, reward (N,), terminated (N,), truncated
+    (N,), info); obs is a dict with "policy" (N, 12, the student's o_t) and "privileged" (N, 92, the teacher's).
     `reset_tensors`/`step_tensors` take and give tensors on `device` (what rsl-rl reads); `reset`/`step` are the
-    same calls with numpy on the host (what the gym env, evaluation and demo collection read: on the CPU backend
-    the arrays share memory with the tensors, so nothing is copied).
+    same calls with numpy on the host (the gym env, evaluation, demo collection: on the CPU backend the arrays
+    share memory with the tensors, so nothing is copied).
     """
 
     def __init__(self, cfg: GraspEnvConfig):
@@ -173,7 +170,7 @@ class BatchedGraspEnv:
 
     # --- step -------------------------------------------------------------------------------------------------
     def validate_action(self, action) -> torch.Tensor:
-        a = torch.as_tensor(action, dtype=torch.float64, device=self.device)
+        a = self._f64(action)
         if a.shape != (self.num_envs, spec.NUM_JOINTS):
             raise ValueError(f"action must have shape ({self.num_envs}, {spec.NUM_JOINTS}), got {tuple(a.shape)}")
         if not isinstance(action, torch.Tensor) and not (ok := np.isfinite(a.numpy()).all(axis=1)).all():
@@ -286,6 +283,9 @@ class BatchedGraspEnv:
             self.obs_latency.restart(ids, fresh)  # a new episode starts with its own observation
 
     # --- frames and targets -------------------------------------------------------------------------------------
+    def _f64(self, x) -> torch.Tensor:
+        return torch.as_tensor(x, dtype=torch.float64, device=self.device)
+
     def _measured_frame(self, q: torch.Tensor, sel: slice | torch.Tensor = slice(None)) -> torch.Tensor:
         """Absolute joint positions of envs `sel` in the joints' measured frame (a copy)."""
         return self.sensor_draw.measured(q, sel) if self.cfg.dr.joint_calibration_rad else q.clone()
@@ -295,8 +295,7 @@ class BatchedGraspEnv:
         clipped to +-0.3 rad, then the target to the joint limits (the inverse of `delta_for_target`). numpy in,
         numpy out; a tensor in, a tensor out."""
         q = self._qpos[:, observations.JOINTS]
-        step = torch.as_tensor(delta, dtype=torch.float64, device=self.device)
-        step = step.clamp(-spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
+        step = self._f64(delta).clamp(-spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
         out = self._measured_frame(torch.clamp(q + step, self._joint_lower, self._joint_upper))
         return out if isinstance(delta, torch.Tensor) else on_host(out)
 
@@ -304,9 +303,10 @@ class BatchedGraspEnv:
         """The step (n, 9) that makes the servos of all envs (or `ids`) go to absolute `target`s given in the
         joints' measured frame: target - (q + calibration offset). Without an offset, target - q. numpy in, numpy
         out; a tensor in, a tensor out."""
-        sel = slice(None) if ids is None else torch.as_tensor(ids, device=self.device)
+        sel = slice(None) if ids is None else ids
+        sel = sel if isinstance(sel, slice) else torch.as_tensor(sel, device=self.device)
         q = self._measured_frame(self._qpos[sel, observations.JOINTS], sel)
-        out = torch.as_tensor(target, dtype=torch.float64, device=self.device) - q
+        out = self._f64(target) - q
         return out if isinstance(target, torch.Tensor) else on_host(out)
 
     # --- observation --------------------------------------------------------------------------------------------
@@ -326,7 +326,7 @@ class BatchedGraspEnv:
     # --- helpers for tests, rendering and eval (numpy on the host) ---------------------------------------------
     def set_targets(self, cmd) -> None:
         """The servos' position targets (n, 9) for the next physics substep (the servo model steps substeps)."""
-        self._ctrl[:] = torch.as_tensor(cmd, dtype=torch.float64, device=self.device)
+        self._ctrl[:] = self._f64(cmd)
 
     def joint_positions(self) -> np.ndarray:
         return on_host(self._qpos[:, observations.JOINTS]).copy()
