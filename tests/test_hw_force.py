@@ -21,8 +21,8 @@ from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.hardware.force_board.frame_codec import encode_frame
 from lerobot_blindgrasp.hardware.force_board.reader import SETTLE_FRAMES, ForceSensorReader, ForceStreamError
 from lerobot_blindgrasp.sim import randomization, sensors
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 
 # (true force, the sensor's noise sample) per tip, N. Chosen away from the 0.1 N edge by more than a count (25 uN).
 CASES = [

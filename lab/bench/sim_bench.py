@@ -18,11 +18,12 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from lab.bench import BenchConfig
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.gripper import PhysicsOptions
 
 
@@ -64,7 +65,7 @@ def _measure(num_envs: int, nthread: int, steps: int, blocks: int, backend: str 
         env.physics.restore(saved)
         t = time.perf_counter()
         for target in targets:
-            ctrl[:] = target
+            ctrl[:] = torch.as_tensor(target)  # the backend's ctrl is a tensor over the physics' own rows
             env.physics.raw_step(k)  # physics only: no observation, reward or state download
         raw_t += time.perf_counter() - t
         env.physics.restore(after_env)

@@ -107,12 +107,12 @@ def _replayed_control_steps_per_s(env, start, targets: list) -> float:
 
 
 def _recording_targets(env, into: list):
-    """env.step that also keeps the joint command it left in the backend after each control step."""
-    step = type(env).step
+    """env.step_tensors that also keeps the joint command it left in the backend after each control step."""
+    step = type(env).step_tensors
 
     def recorded(*args, **kwargs):
         out = step(env, *args, **kwargs)
-        into.append(env.physics.ctrl.copy())
+        into.append(env.physics.ctrl.clone())
         return out
 
     return recorded
@@ -162,7 +162,7 @@ def _timed_iterations(runner, env, update, iterations: int) -> list[dict]:
 
     runner.alg.update = timed_update
     targets: list = []
-    env.step = _recording_targets(env, targets)  # the instance's step: what the vec env calls
+    env.step_tensors = _recording_targets(env, targets)  # the instance's step: what the vec env calls
     rows = []
     try:
         for _ in range(iterations):
@@ -184,7 +184,7 @@ def _timed_iterations(runner, env, update, iterations: int) -> list[dict]:
                 }
             )
     finally:
-        del env.step
+        del env.step_tensors
     return rows
 
 
