@@ -20,12 +20,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-pytest.importorskip("mujoco_warp")
-
-from lerobot_blindgrasp import spec  # noqa: E402
-from lerobot_blindgrasp.sim import objects, randomization  # noqa: E402
-from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
-from lerobot_blindgrasp.sim.scripted import run_pinch_lift  # noqa: E402
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim import objects, randomization
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv, GraspEnvConfig
+from lerobot_blindgrasp.sim.scripted import run_pinch_lift
 
 NO_PUSH = randomization.EVAL_DR
 
@@ -36,12 +34,18 @@ def _pair(**kw):
     return batch, warp
 
 
-def test_warp_groups_objects_by_geom_type_with_per_world_parameters():
+@pytest.fixture(scope="module")
+def pair36():
+    """Two envs per catalogue object on each backend, built once for the tests that only read or reset them."""
+    return _pair(num_envs=36, seed=5, dr=NO_PUSH)
+
+
+def test_warp_groups_objects_by_geom_type_with_per_world_parameters(pair36):
     """18 objects become 4 Warp models (box, capsule, cylinder, sphere); sizes, masses and the Table II draw are
     per-world fields equal to the batch backend's per-env MjModels."""
-    _, warp = _pair(num_envs=18, seed=5, dr=NO_PUSH)
+    _, warp = pair36
     groups = warp.physics.groups
-    assert sorted(len(g.ids) for g in groups) == [3, 3, 6, 6]
+    assert sorted(len(g.ids) for g in groups) == [6, 6, 12, 12]
     for g in groups:
         body = warp.env_model(int(g.ids[0])).body("object").id
         mass = g.model.body_mass.numpy()[:, body]
@@ -54,8 +58,8 @@ def test_warp_groups_objects_by_geom_type_with_per_world_parameters():
     assert opt.noslip_iterations == 3 and int(opt.cone) == 1 and int(opt.solver) == 2
 
 
-def test_open_loop_steps_match_before_contact():
-    batch, warp = _pair(num_envs=36, seed=5, dr=NO_PUSH)
+def test_open_loop_steps_match_before_contact(pair36):
+    batch, warp = pair36
     ob, ow = batch.reset(), warp.reset()
     np.testing.assert_array_equal(warp.joint_positions(), batch.joint_positions())  # same draws, same start
     for k in ob:  # sensors computed in float32

@@ -11,7 +11,9 @@ both backends simulate the same parameters. Fields that differ but cannot be bat
 
 State. The env reads and writes host (numpy, float64) mirrors of qpos, qvel, ctrl, xfrc_applied and sensordata;
 `step` uploads ctrl and forces, steps each group, and downloads qpos, qvel and sensordata (about 100 floats per env
-per control step). On CUDA the `nstep` substeps of each group run as one captured CUDA graph.
+per control step). The `nstep` substeps of each group run as one captured graph: a CUDA graph on a GPU, Warp's
+API capture on its CPU device (replayed natively, without the Python launch overhead of each kernel, which on CPU
+is most of a step's time; the replay is bit-identical to stepping kernel by kernel).
 
 Differences from the batch backend:
 - float32 throughout (MuJoCo Warp's `float`), against float64 on CPU;
@@ -68,7 +70,7 @@ class _Group:
     ids: np.ndarray  # env ids of this group's worlds, in world order
     model: object  # mjw.Model
     data: object  # mjw.Data
-    graph: object = None  # captured substeps (CUDA only)
+    graph: object = None  # captured substeps
     graph_nstep: int = 0
 
 
@@ -146,10 +148,9 @@ class WarpBackend:
             rows = np.stack([getattr(m, k) for m in models]).astype(ref.dtype)
             arr.assign(rows.reshape(ref.shape))
         data = mjw.make_data(base, nworld=nw, nconmax=nconmax, njmax=njmax)
-        if wp.get_device().is_cuda:
-            # Load every kernel now: a CUDA graph capture (first step) records launches but cannot compile.
-            mjw.step(model, data)
-            mjw.reset_data(model, data)
+        # Load every kernel now: a graph capture (first step) records launches but cannot compile.
+        mjw.step(model, data)
+        mjw.reset_data(model, data)
         return _Group(ids=np.asarray(ids), model=model, data=data)
 
     # --- state transfer ---------------------------------------------------------------------------------------
@@ -206,16 +207,12 @@ class WarpBackend:
                 self.sensordata[mine] = g.data.sensordata.numpy()[self._world_of[mine]]
 
     def _run(self, g: _Group, nstep: int) -> None:
-        if wp.get_device(self.device).is_cuda:
-            if g.graph is None or g.graph_nstep != nstep:
-                with wp.ScopedCapture() as cap:  # records the launches; nothing runs until capture_launch
-                    for _ in range(nstep):
-                        mjw.step(g.model, g.data)
-                g.graph, g.graph_nstep = cap.graph, nstep
-            wp.capture_launch(g.graph)
-        else:
-            for _ in range(nstep):
-                mjw.step(g.model, g.data)
+        if g.graph is None or g.graph_nstep != nstep:
+            with wp.ScopedCapture() as cap:  # records the launches; nothing runs until capture_launch
+                for _ in range(nstep):
+                    mjw.step(g.model, g.data)
+            g.graph, g.graph_nstep = cap.graph, nstep
+        wp.capture_launch(g.graph)
 
     def step(self, nstep: int) -> np.ndarray:
         overflow = np.zeros(self.num_envs, dtype=np.int64)
