@@ -17,8 +17,8 @@ import numpy as np
 
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import gripper, randomization
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
 SETTINGS = [  # (label, timestep, impratio, noslip_iterations)

@@ -113,7 +113,12 @@ PRIVILEGED_SLICES: dict[str, slice] = _slices(PRIVILEGED_LAYOUT)
 
 
 def assemble_privileged(parts: dict[str, np.ndarray]) -> np.ndarray:
-    """The (n, PRIVILEGED_DIM) vector from one (n, size) array per `PRIVILEGED_LAYOUT` name, in layout order.
+    """The (n, PRIVILEGED_DIM) vector from one (n, size) array per `PRIVILEGED_LAYOUT` name, in layout order."""
+    return np.concatenate(privileged_parts(parts), axis=1)
+
+
+def privileged_parts(parts: dict) -> list:
+    """The parts of the privileged vector in layout order (numpy arrays or the sim's tensors), to concatenate.
 
     Refuses a missing, extra or mis-sized part, so the layout cannot drift from what the sim computes."""
     if set(parts) != set(PRIVILEGED_SLICES):
@@ -121,8 +126,8 @@ def assemble_privileged(parts: dict[str, np.ndarray]) -> np.ndarray:
         raise ValueError(f"privileged parts differ from spec.PRIVILEGED_LAYOUT: missing {missing}, extra {extra}")
     for name, n in PRIVILEGED_LAYOUT:
         if parts[name].ndim != 2 or parts[name].shape[1] != n:
-            raise ValueError(f"privileged part {name!r} must be (n_envs, {n}), got {parts[name].shape}")
-    return np.concatenate([parts[name] for name, _ in PRIVILEGED_LAYOUT], axis=1)
+            raise ValueError(f"privileged part {name!r} must be (n_envs, {n}), got {tuple(parts[name].shape)}")
+    return [parts[name] for name, _ in PRIVILEGED_LAYOUT]
 
 
 # --- Task and success --------------------------------------------------------------------------------------------

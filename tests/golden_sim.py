@@ -22,8 +22,8 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import randomization, rewards
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.gym_env import start_seed
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 

@@ -11,8 +11,8 @@ import pytest
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.presets import teacher as presets
 from lerobot_blindgrasp.sim import randomization
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.teacher import blind_approach
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy, models_dir
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv

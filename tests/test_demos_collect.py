@@ -136,8 +136,8 @@ def test_demos_under_a_calibration_offset_record_it_and_act_in_the_measured_fram
 
 def _assert_replays(teacher: Path, out: Path, dr) -> None:
     from lerobot_blindgrasp.sim import rewards
+    from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
     from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-    from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 
     policy = TeacherPolicy(teacher)

@@ -12,10 +12,10 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.envs import BlindGraspEnvConfig
-from lerobot_blindgrasp.envs.sim_config import TASK_IDS, object_for_task_id, task_id
+from lerobot_blindgrasp.envs.sim_env import TASK_IDS, object_for_task_id, task_id
 from lerobot_blindgrasp.sim import gym_env, objects, randomization
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
 

@@ -17,7 +17,7 @@ import pytest
 from emulators.harness import BIN, tiny_student_train
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.envs.sim_config import task_id
+from lerobot_blindgrasp.envs.sim_env import task_id
 from lerobot_blindgrasp.sim import gym_env, objects
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 from lerobot_blindgrasp.sim.viewer import grasp_geometry

@@ -5,7 +5,7 @@ from pathlib import Path
 import av
 import numpy as np
 
-from lerobot_blindgrasp.envs.sim_config import object_for_task_id
+from lerobot_blindgrasp.envs.sim_env import object_for_task_id
 from lerobot_blindgrasp.pipeline.grasp_strips import (
     pick_per_class,
     read_frames,

@@ -25,8 +25,8 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import (
     encode_frame,
 )
 from lerobot_blindgrasp.sim import randomization, sensors
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 
 # (true force, the sensor's noise sample) per tip, N. Chosen away from the 0.1 N edge by more than a count (25 uN).
 CASES = [

@@ -11,8 +11,8 @@ import pytest
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import xm430
 from lerobot_blindgrasp.sim import objects, randomization
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import HOLD_PUSH_AFTER_STEPS, BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
 # The paper's sensor noise but no start-state randomization: the scripted pinch needs a centred object.
@@ -54,7 +54,7 @@ def test_force_gain_doubles_the_reading_of_a_held_object_and_bias_range_dead_cel
     env, e0 = _env(dr)
     obs_c, _ = _pinch(env, e0, 60)
     fc = np.array([o["policy"][0, spec.STATE_FORCE_SLICE] for o in obs_c])
-    bias = env.sensor_draw.force_bias[0]
+    bias = env.sensor_draw.force_bias[0].numpy()
     assert set(np.abs(bias)) == {2.0}
     np.testing.assert_allclose(fc[0, [0, 2]], bias[[0, 2]])  # free tips read the bias
     assert (fc[:, 1] == 0).all()  # the dead cell
@@ -106,7 +106,7 @@ def test_calibration_offset_shifts_joint_readings_not_the_true_pose():
     ref, r0 = _env(randomization.NO_DR)
     reading = o0["policy"][0, spec.STATE_JOINT_SLICE].astype(np.float64)
     np.testing.assert_allclose(np.abs(reading - off.joint_positions()[0]), 0.05, atol=1e-6)
-    assert len(set(np.sign(off.sensor_draw.joint_offset[0]))) == 2  # signs drawn per joint
+    assert len(set(np.sign(off.sensor_draw.joint_offset[0].numpy()))) == 2  # signs drawn per joint
     np.testing.assert_array_equal(off.joint_positions(), ref.joint_positions())  # same true start pose
     # Holding the pose the joints report, in their own (offset) frame, leaves the true pose where it was.
     for _ in range(10):
@@ -125,7 +125,9 @@ def test_under_a_calibration_offset_the_recorded_target_is_in_the_measured_frame
     q = env.joint_positions().copy()
     *_, info = env.step(step)
     true_target = np.clip(q + step, spec.JOINT_LOWER, spec.JOINT_UPPER)
-    np.testing.assert_allclose(info["joint_target"] - env.sensor_draw.joint_offset, true_target, atol=1e-12)
+    np.testing.assert_allclose(
+        info["joint_target"] - env.sensor_draw.joint_offset.numpy(), true_target, atol=1e-12
+    )
     twin.step(twin.delta_for_target(info["joint_target"]))  # the student's path: an absolute measured-frame target
     np.testing.assert_allclose(twin.joint_positions(), env.joint_positions(), atol=1e-9)
     plain, _ = _env(randomization.NO_DR)

@@ -8,11 +8,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import torch
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import objects, randomization, rewards
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 
 CFG = rewards.PAPER_REWARD
 
@@ -30,7 +31,9 @@ def _step(n: int, **given) -> rewards.StepQuantities:
         "tip_object_distance": np.zeros((n, 3)),
         "tip_object_force": np.zeros((n, 3)),
     }
-    return rewards.StepQuantities(**{**zeros, **given})
+    return rewards.StepQuantities(
+        **{k: torch.as_tensor(v, dtype=torch.float64) for k, v in {**zeros, **given}.items()}
+    )
 
 
 def test_r_task_hand_computed():
@@ -127,8 +130,8 @@ def test_time_out_is_reported_separately_from_termination():
 def test_object_leaving_the_workspace_terminates():
     env = BatchedGraspEnv(GraspEnvConfig(num_envs=2, seed=0, dr=randomization.NO_DR))
     env.reset()
-    qpos = env._qpos.copy()
-    qpos[0, 9:11] = [0.08, 0.08]  # 11.3 cm from the centre
+    qpos = env._qpos.clone()
+    qpos[0, 9:11] = torch.tensor([0.08, 0.08])  # 11.3 cm from the centre
     env._qpos[0] = qpos[0]
     _, _, term, trunc, info = env.step(np.zeros((2, 9)))
     np.testing.assert_array_equal(term, [True, False])
@@ -155,11 +158,11 @@ def test_domain_randomization_stays_in_table_ii_ranges():
         assert v.max() - v.min() > 0.8 * (hi - lo), f"{name} does not cover its range"
     # Gains are log-uniform: the median scale is the geometric mean.
     assert np.median(p.kp_scale) == pytest.approx(math.sqrt(0.3 * 3.0), rel=0.1)
-    q0, xy = randomization.draw_reset(dr, seeds, np.zeros(n, dtype=np.int64))
+    q0, xy = (t.numpy() for t in randomization.draw_reset(dr, seeds, np.zeros(n, dtype=np.int64)))
     off = q0 - spec.HOME_POSE
     assert np.abs(off).max() <= math.pi / 9 and np.abs(off).max() > 0.9 * math.pi / 9
     assert np.abs(xy).max() <= 0.03 and np.abs(xy).max() > 0.028
-    force, steps = randomization.draw_push(dr, seeds, np.zeros(n, dtype=np.int64))
+    force, steps = (t.numpy() for t in randomization.draw_push(dr, seeds, np.zeros(n, dtype=np.int64)))
     assert np.abs(force).max() <= 0.3
     assert steps.min() >= 1 and steps.max() <= 10 * spec.CONTROL_HZ
 
@@ -214,7 +217,7 @@ def test_physics_blow_up_resets_only_that_env_and_is_counted():
     env.reset()
     for _ in range(3):
         env.step(np.zeros((3, 9)))
-    qvel = env._qvel.copy()
+    qvel = env._qvel.clone()
     qvel[1, 9:] = 1e12  # a wild object velocity: MuJoCo flags the sim as unstable
     env._qvel[1] = qvel[1]
     before = env.joint_positions()
@@ -223,6 +226,6 @@ def test_physics_blow_up_resets_only_that_env_and_is_counted():
     np.testing.assert_array_equal(info["physics_failed"], [False, True, False])
     assert term[1] and r[1] == 0.0
     assert env.episode[1] == 1 and env.episode[0] == 0 and env.episode[2] == 0
-    assert np.isfinite(env._qpos).all()
+    assert torch.isfinite(env._qpos).all()
     # The healthy envs kept stepping from where they were.
     assert np.abs(env.joint_positions()[[0, 2]] - before[[0, 2]]).max() < 0.1

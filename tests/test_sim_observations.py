@@ -10,8 +10,8 @@ import pytest
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.sim import randomization
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.scripted import run_pinch_lift
 
 N = 3
@@ -32,7 +32,7 @@ def pinched():
     action = np.tile(np.linspace(-0.5, 0.5, spec.NUM_JOINTS), (N, 1))  # some entries beyond the 0.3 rad bound
     env.step(action)
     env.physics.forward(np.arange(N))
-    priv = env._observe()["privileged"].astype(np.float64)
+    priv = env._observe()["privileged"].numpy().astype(np.float64)
     yield env, priv, action
     env.close()
 

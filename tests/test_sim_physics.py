@@ -8,11 +8,12 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 import pytest
+import torch
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import gripper, objects, randomization, sensors
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.scripted import run_pinch_lift
 
 
@@ -95,8 +96,8 @@ def test_uniaxial_sensor_reads_a_known_load_in_newtons():
     si = sensors.SensorIndex.from_model(m)
 
     def uni():
-        sd = d.sensordata[None]
-        return sensors.uniaxial_force(si.read(sd, "contact"), si.read(sd, "zaxis"))[0]
+        sd = torch.from_numpy(d.sensordata[None])
+        return sensors.uniaxial_force(si.read(sd, "contact"), si.read(sd, "zaxis"))[0].numpy()
 
     mujoco.mj_forward(m, d)
     tip_end = d.site("ff_tipsite").xpos[2] - (0.084 - gripper.LINK_J12_TIPSITE)
@@ -111,17 +112,14 @@ def test_uniaxial_sensor_reads_a_known_load_in_newtons():
     np.testing.assert_allclose(settled, mass * 9.81, rtol=0.03)
     # The tip-on-object sensor sees the same load as a push straight down on the object: |F| = M g and
     # -F_z / |F| = 1, the direction the directional touch term (rewards.r_touch_directional) refuses to pay for.
-    sd = d.sensordata[None]
     from lerobot_blindgrasp.sim import observations
 
     raw, _ = observations.observe(
-        d.qpos[None],
-        d.qvel[None],
-        sd,
+        *(torch.from_numpy(x[None]) for x in (d.qpos, d.qvel, d.sensordata)),
         si,
-        np.zeros(1),
-        np.zeros((1, 9)),
-        np.zeros((1, observations.NOISE_DIM)),
+        torch.zeros(1, dtype=torch.float64),
+        torch.zeros((1, 9), dtype=torch.float64),
+        torch.zeros((1, observations.NOISE_DIM), dtype=torch.float64),
         randomization.NO_DR,
     )
     assert raw["tip_object_force"][0, 0] == pytest.approx(mass * 9.81, rel=0.03)

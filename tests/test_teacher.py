@@ -15,8 +15,8 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.presets import teacher as presets
 from lerobot_blindgrasp.presets import teacher_configs
 from lerobot_blindgrasp.sim import objects, randomization, rewards
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.teacher import evaluate
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv

@@ -15,8 +15,8 @@ from rsl_rl.utils import resolve_callable
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.presets import teacher as teacher_presets
 from lerobot_blindgrasp.sim import objects, scripted
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.teacher import aux_bc, scripted_demos
 
 

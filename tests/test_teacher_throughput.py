@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig, allocate_objects
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig, allocate_objects
 
 # Harder objects (small, capsules) weighted up, as tried in teacher_cpu_v2.md of the research record (docs/research.md).
 HARD_FIRST = tuple(

@@ -21,8 +21,8 @@ import numpy as np
 
 from lab.bench import BenchConfig
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.gripper import PhysicsOptions
 
 

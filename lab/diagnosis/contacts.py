@@ -54,7 +54,7 @@ def contact_directions(env: BatchedGraspEnv, obs: dict, act, steps: int, after_s
         height.append((tip_z - env.object_position()[:, None, 2])[touching])
     d, h = np.concatenate(downward), np.concatenate(height)
     return {
-        "success_rate": float(env.success.mean()),
+        "success_rate": float(env.success.double().mean()),
         "contacts": int(d.size),
         "mean_downward": float(d.mean()) if d.size else float("nan"),
         "share_pressing_down": float((d > PRESSING_DOWN).mean()) if d.size else float("nan"),

@@ -69,7 +69,7 @@ def sim_start_pose(object_name: str, eval_index: int) -> np.ndarray:
         raise ValueError(f"start_pose=sim needs an object of the sim's catalogue; {object_name!r} is not one")
     seeds = np.array([start_seed(eval_index, object_name)], dtype=np.uint64)
     q0, _ = randomization.draw_reset(randomization.EVAL_DR, seeds, np.zeros(1, dtype=np.int64))
-    return np.clip(q0[0], spec.JOINT_LOWER, spec.JOINT_UPPER)
+    return np.clip(q0[0].numpy(), spec.JOINT_LOWER, spec.JOINT_UPPER)
 
 
 def task_string(name: str) -> str:

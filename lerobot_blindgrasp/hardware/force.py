@@ -26,6 +26,7 @@ hardware applies them, for the sim's robustness factors:
 from __future__ import annotations
 
 import numpy as np
+import torch
 
 from lerobot_blindgrasp import spec
 
@@ -39,32 +40,42 @@ DEADBAND_N = spec.FORCE_THRESHOLD_N
 FORCE_BIAS_TOLERANCE_N = 1.0
 
 
-def deadband(force, threshold: float = DEADBAND_N) -> np.ndarray:
+def _array(x):
+    """The sim's torch tensors stay tensors (on their device); the robot's readings become float64 numpy."""
+    return x if isinstance(x, torch.Tensor) else np.asarray(x, dtype=np.float64)
+
+
+def _xp(x):
+    return torch if isinstance(x, torch.Tensor) else np
+
+
+def deadband(force, threshold: float = DEADBAND_N):
     """Magnitudes under the threshold read 0; the rest pass unchanged (no offset step at the threshold)."""
-    force = np.asarray(force, dtype=np.float64)
-    return np.where(np.abs(force) < threshold, 0.0, force)
+    force = _array(force)
+    return _xp(force).where(abs(force) < threshold, 0.0, force)
 
 
-def reading(true_force, noise=0.0, threshold: float = DEADBAND_N) -> np.ndarray:
-    """What a uniaxial fingertip sensor reports for `true_force` (N), given the sensor's noise sample (N).
+def reading(true_force, noise=0.0, threshold: float = DEADBAND_N):
+    """What a uniaxial fingertip sensor reports for `true_force` (N), given the sensor's noise sample (N): one
+    function for the robot (numpy) and the sim (torch over the env axis).
 
     Sim: `true_force` is the contact force projected on the tip's z axis, `noise` the drawn Gaussian sample.
     Real: the noise is already inside the measured newtons (`counts_to_newtons`), so `noise` stays 0."""
-    return deadband(np.asarray(true_force, dtype=np.float64) + noise, threshold)
+    return deadband(_array(true_force) + noise, threshold)
 
 
-def load_cell(true_force, noise=0.0, gain: float = 1.0, bias=0.0, range_n: float = 0.0) -> np.ndarray:
+def load_cell(true_force, noise=0.0, gain: float = 1.0, bias=0.0, range_n: float = 0.0):
     """The signal a load cell delivers (N) for `true_force`: its gain and bias errors, its noise sample, and
     saturation at +-`range_n` (0: none). Each error is applied only when set, so the defaults give exactly
-    true force + noise."""
-    f = np.asarray(true_force, dtype=np.float64)
+    true force + noise. A tensor `bias` is always added (testing it for zeros would wait on its device)."""
+    f = _array(true_force)
     if gain != 1.0:
         f = gain * f
-    if np.any(bias):
+    if isinstance(bias, torch.Tensor) or np.any(bias):
         f = f + bias
     f = f + noise
     if range_n > 0:
-        f = np.clip(f, -range_n, range_n)
+        f = _xp(f).clip(f, -range_n, range_n)
     return f
 
 

@@ -53,7 +53,7 @@ class StudentActor:
         from lerobot.envs.factory import make_env_pre_post_processors
         from lerobot.policies import make_policy, make_pre_post_processors
 
-        from lerobot_blindgrasp.envs.sim_config import BlindGraspEnvConfig
+        from lerobot_blindgrasp.envs.sim_env import BlindGraspEnvConfig
 
         cfg = PreTrainedConfig.from_pretrained(str(path))
         cfg.pretrained_path = Path(path)

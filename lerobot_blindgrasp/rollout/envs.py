@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import randomization
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.gym_env import start_seed
 
 

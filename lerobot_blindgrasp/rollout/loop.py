@@ -22,6 +22,7 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.host import on_host
 
 # Names of the per-episode randomization values an episode keeps (the Table II draw plus the reset's object offset).
 PHYSICS_DRAW_NAMES: tuple[str, ...] = (
@@ -179,9 +180,11 @@ def stream(
     failed, max_lift = np.zeros(env.num_envs, dtype=bool), np.zeros(env.num_envs)
     obs = env.reset()
     start_xy = env.object_position()[:, :2].copy()
-    start_episode = env.episode.copy()
+    start_episode = on_host(env.episode).copy()
     while not should_stop():
-        t = env.episode_length.copy()  # this step's index in each env's episode (the env resets it on done)
+        t = on_host(
+            env.episode_length
+        ).copy()  # this step's index in each env's episode (the env resets it on done)
         rec.before(t, obs, env)
         obs, _, _, _, info = env.step(act(obs, env))
         rec.after(t, info)
@@ -208,4 +211,4 @@ def stream(
             )
         failed[ids], max_lift[ids] = False, 0.0
         start_xy[ids] = fresh_xy
-        start_episode[ids] = env.episode[ids]
+        start_episode[ids] = on_host(env.episode)[ids]

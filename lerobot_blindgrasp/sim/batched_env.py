@@ -1,6 +1,7 @@
 """Batched blind-grasp environment: N grippers, each with one object, stepped together.
 
-This module steps, observes and resets the task, written once, numpy over the env axis (no Python loop over envs).
+This module steps, observes and resets the task, written once, torch over the env axis (no Python loop over envs),
+on the physics' device: the backend's state arrays are tensors that share memory with the physics (`backends/`).
 What it combines lives in one module each: the randomization draws and Table II's application in
 `sim/randomization.py`, the event terms (pushes, the hold push, latencies, the servo model) in `sim/events.py`, the
 reward terms in `sim/rewards.py`, success and termination in `sim/termination.py`, what the envs observe in
@@ -28,6 +29,7 @@ import logging
 
 import mujoco
 import numpy as np
+import torch
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import (
@@ -42,7 +44,8 @@ from lerobot_blindgrasp.sim import (
     termination,
 )
 from lerobot_blindgrasp.sim.backends.batch import BatchBackend
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig, allocate_objects
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig, allocate_objects
+from lerobot_blindgrasp.sim.host import on_host
 
 log = logging.getLogger(__name__)
 
@@ -50,10 +53,13 @@ HOLD_PUSH_AFTER_STEPS = events.HOLD_PUSH_AFTER_STEPS
 
 
 class BatchedGraspEnv:
-    """N envs in one object; numpy in, numpy out.
+    """N envs in one object.
 
     reset() -> obs; step(action (N, 9)) -> (obs, reward (N,), terminated (N,), truncated (N,), info).
     obs is a dict with "policy" (N, 12, the student's o_t) and "privileged" (N, 92, the teacher's).
+    `reset_tensors`/`step_tensors` take and give tensors on `device` (what rsl-rl reads); `reset`/`step` are the
+    same calls with numpy on the host (what the gym env, evaluation and demo collection read: on the CPU backend
+    the arrays share memory with the tensors, so nothing is copied).
     """
 
     def __init__(self, cfg: GraspEnvConfig):
@@ -67,8 +73,6 @@ class BatchedGraspEnv:
         self.object_index = allocate_objects(n, len(cfg.objects), cfg.object_weights)  # index into cfg.objects
         self.object_names = [cfg.objects[k] for k in self.object_index]
         obj_specs = [objects.scaled(objects.get_object(name), cfg.dr.object_size_scale) for name in cfg.objects]
-        self.rest_height = np.array([obj_specs[k].rest_height for k in self.object_index])
-        self._rest_quat = np.array([self._body_quat(o) for o in obj_specs])[self.object_index]
 
         templates = [
             gripper.compile_model(
@@ -77,8 +81,7 @@ class BatchedGraspEnv:
             for o in obj_specs
         ]
         self._templates = templates
-        self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)
-        self.sensor_draw = randomization.draw_sensors(cfg.dr, self.env_seeds)
+        self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)  # host: it builds the MjModels
         if cfg.backend == "batch":
             self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
             self.physics = BatchBackend(self.models, nthread=cfg.nthread)
@@ -90,29 +93,49 @@ class BatchedGraspEnv:
             self.physics = WarpBackend(templates, self.object_index, self.env_model, device=cfg.device)
             self.batch = None
         observations.check_state_layout(templates[0])
-        self.sensor_index = sensors.SensorIndex.from_model(templates[0])
-        self._object_body = templates[0].body("object").id
+        self._init_task_state(templates[0], obj_specs)
+
+    def _init_task_state(self, template: mujoco.MjModel, obj_specs: list[objects.ObjectSpec]) -> None:
+        """The task's per-env state, as float64/int64/bool tensors on the physics' device."""
+        cfg, n = self.cfg, self.num_envs
+        dev = self.device = self.physics.device
+        f64 = {"dtype": torch.float64, "device": dev}
+        self._seeds = rng.as_words(self.env_seeds, dev)
+        self.sensor_draw = randomization.draw_sensors(cfg.dr, self._seeds)
+        self.sensor_index = sensors.SensorIndex.from_model(template, dev)
+        self._object_body = template.body("object").id
         self._qpos = self.physics.qpos
         self._qvel = self.physics.qvel
         self._ctrl = self.physics.ctrl
         self._xfrc = self.physics.xfrc_applied
         self._sensordata = self.physics.sensordata
+        self.rest_height = torch.tensor([obj_specs[k].rest_height for k in self.object_index], **f64)
+        self._rest_quat = torch.as_tensor(
+            np.array([self._body_quat(o) for o in obj_specs])[self.object_index], **f64
+        )
+        self._joint_lower = torch.as_tensor(spec.JOINT_LOWER, **f64)
+        self._joint_upper = torch.as_tensor(spec.JOINT_UPPER, **f64)
+        self._object_index = torch.as_tensor(self.object_index, device=dev)
 
-        self.episode = np.zeros(n, dtype=np.int64)  # per-env episode counter (drives the reset draws)
-        self.episode_length = np.zeros(n, dtype=np.int64)
-        self.lifted_steps = np.zeros(n, dtype=np.int64)  # consecutive steps lifted >= SUCCESS_LIFT_M
-        self.success = np.zeros(n, dtype=bool)  # latched once held for SUCCESS_HOLD_S
-        self.prev_action = np.zeros((n, spec.NUM_JOINTS))
-        self.episode_return = np.zeros(n)
-        self.episode_terms = {k: np.zeros(n) for k in rewards.TERM_NAMES}
+        def zeros(*shape, dtype=torch.float64):
+            return torch.zeros(shape, dtype=dtype, device=dev)
+
+        self.episode = zeros(n, dtype=torch.int64)  # per-env episode counter (drives the reset draws)
+        self.episode_length = zeros(n, dtype=torch.int64)
+        self.lifted_steps = zeros(n, dtype=torch.int64)  # consecutive steps lifted >= SUCCESS_LIFT_M
+        self.success = zeros(n, dtype=torch.bool)  # latched once held for SUCCESS_HOLD_S
+        self.prev_action = zeros(n, spec.NUM_JOINTS)
+        self.episode_return = zeros(n)
+        self.episode_terms = {k: zeros(n) for k in rewards.TERM_NAMES}
         self.physics_resets = 0  # envs reset because their physics went unstable
         # The event terms (sim/events.py); all but Table II's pushes are off at their defaults.
-        self.pushes = events.Pushes(cfg.dr, self.env_seeds)
-        self.hold_push = events.HoldPush(cfg.dr, self.env_seeds)
-        self.action_latency = events.ActionLatency(cfg.dr.action_latency_steps, n)
+        self.pushes = events.Pushes(cfg.dr, self._seeds)
+        self.hold_push = events.HoldPush(cfg.dr, self._seeds)
+        self.action_latency = events.ActionLatency(cfg.dr.action_latency_steps, n, dev)
         self.obs_latency = events.ObservationLatency(cfg.dr.obs_latency_steps)
-        self.servo = events.ServoModel(cfg.dr, self.env_seeds)
-        self._raw: dict[str, np.ndarray] = {}
+        self.servo = events.ServoModel(cfg.dr, self._seeds)
+        self._all = torch.arange(n, device=dev)
+        self._raw: dict[str, torch.Tensor] = {}
 
     # --- construction ----------------------------------------------------------------------------------------
     @staticmethod
@@ -132,23 +155,22 @@ class BatchedGraspEnv:
 
     # --- reset ------------------------------------------------------------------------------------------------
     def reset(self) -> dict[str, np.ndarray]:
-        self.episode[:] = 0
-        ids = np.arange(self.num_envs)
-        self._reset_envs(ids)
+        return on_host(self.reset_tensors())
+
+    def reset_tensors(self) -> dict[str, torch.Tensor]:
+        self.episode.zero_()
+        self._reset_envs(self._all)
         obs = self._observe()
         self.obs_latency.start(obs)
         return obs
 
-    def _reset_envs(self, ids: np.ndarray) -> None:
-        if ids.size == 0:
-            return
-        seeds = self.env_seeds[ids]
-        q0, xy = randomization.draw_reset(self.cfg.dr, seeds, self.episode[ids])
-        q0 = np.clip(q0, spec.JOINT_LOWER, spec.JOINT_UPPER)
+    def _reset_envs(self, ids: torch.Tensor) -> None:
+        q0, xy = randomization.draw_reset(self.cfg.dr, self._seeds[ids], self.episode[ids])
+        q0 = q0.clamp(self._joint_lower, self._joint_upper)
         self.physics.reset(ids)  # defaults; zero velocity, warm-start and applied forces
         qpos = self._qpos[ids]
         qpos[:, observations.JOINTS] = q0
-        qpos[:, observations.OBJECT_POS] = np.column_stack([xy, self.rest_height[ids]])
+        qpos[:, observations.OBJECT_POS] = torch.cat([xy, self.rest_height[ids, None]], dim=1)
         qpos[:, observations.OBJECT_QUAT] = self._rest_quat[ids]
         self._qpos[ids] = qpos
         self._ctrl[ids] = q0
@@ -166,22 +188,28 @@ class BatchedGraspEnv:
         self.pushes.reset(ids)
 
     # --- step -------------------------------------------------------------------------------------------------
-    def validate_action(self, action) -> np.ndarray:
-        a = np.asarray(action, dtype=np.float64)
+    def validate_action(self, action) -> torch.Tensor:
+        a = torch.as_tensor(action, dtype=torch.float64, device=self.device)
         if a.shape != (self.num_envs, spec.NUM_JOINTS):
-            raise ValueError(f"action must have shape ({self.num_envs}, {spec.NUM_JOINTS}), got {a.shape}")
-        if not np.isfinite(a).all():
-            bad = np.flatnonzero(~np.isfinite(a).all(axis=1))
+            raise ValueError(f"action must have shape ({self.num_envs}, {spec.NUM_JOINTS}), got {tuple(a.shape)}")
+        if not isinstance(action, torch.Tensor) and not np.isfinite(np.asarray(action, dtype=np.float64)).all():
+            bad = np.flatnonzero(~np.isfinite(np.asarray(action, dtype=np.float64)).all(axis=1))
             raise ValueError(f"action has NaN/inf entries for envs {bad[:10].tolist()}")
         return a
 
     def step(self, action, active: np.ndarray | None = None):
-        """One control step. `active` (batch backend only): the envs to simulate; the others keep their physics
-        state, which evaluation uses for episodes whose outcome is already final (their rows are then stale)."""
-        ids = None if active is None else np.flatnonzero(active)
-        if ids is not None and self.batch is None:
+        """One control step with numpy on the host (`step_tensors` on the device). `active` (batch backend only):
+        the envs to simulate; the others keep their physics state, which evaluation uses for episodes whose
+        outcome is already final (their rows are then stale)."""
+        return on_host(self.step_tensors(action, active))
+
+    def step_tensors(self, action, active=None):
+        """One control step: tensors (N, ...) on `device` in and out; `step` says what `active` means. A tensor
+        action is not checked for NaN (that would wait on the device); a policy's NaN fails the physics instead."""
+        ids = None if active is None else np.flatnonzero(on_host(active))
+        if ids is not None and self.physics.name != "batch":
             raise NotImplementedError("stepping a subset of envs needs the batch backend")
-        a = np.clip(self.validate_action(action), -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
+        a = self.validate_action(action).clamp(-spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
         target, failed = self._actuate(a, ids)
         obs = self._observe()
         raw = self._raw
@@ -197,7 +225,7 @@ class BatchedGraspEnv:
         terminated = termination.out_of_workspace(raw["d_xy"], self.cfg.reward.workspace_radius_m) | failed
         truncated = termination.timed_out(self.episode_length, self.max_episode_steps, terminated)
         info = {
-            "success": self.success.copy(),
+            "success": self.success.clone(),
             "lift": raw["lift"],
             "n_contact": rewards.num_contacts(raw["uniaxial_clean"]),
             "uniaxial_force": raw["uniaxial_clean"],  # noise-free, after the deadband (N)
@@ -211,18 +239,16 @@ class BatchedGraspEnv:
             "physics_failed": failed,
         }
         done = terminated | truncated
-        if failed.any():
-            self.physics_resets += int(failed.sum())
-            log.warning("physics unstable in envs %s; resetting them", np.flatnonzero(failed)[:10].tolist())
-        if done.any():
-            self._end_episodes(np.flatnonzero(done), obs, info, terminated, truncated)
+        ended = done.nonzero()[:, 0]  # the one wait on the device per step: which envs restart
+        if ended.numel():
+            self._end_episodes(ended, obs, info, terminated, truncated, failed)
         return self.obs_latency(obs, done), reward, terminated, truncated, info
 
-    def _actuate(self, a: np.ndarray, ids: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    def _actuate(self, a: torch.Tensor, ids: np.ndarray | None) -> tuple[torch.Tensor, torch.Tensor]:
         """One control period of physics towards q + a: the events before it, the servos, the events after it.
         Returns the target the servos were given and the envs whose physics failed."""
         q = self._qpos[:, observations.JOINTS]
-        target = self.action_latency(np.clip(q + a, spec.JOINT_LOWER, spec.JOINT_UPPER))
+        target = self.action_latency(torch.clamp(q + a, self._joint_lower, self._joint_upper))
         self.pushes(self._xfrc, self._object_body)
         if self.servo.on:
             failed = self.servo.step(self, target, ids)
@@ -234,7 +260,7 @@ class BatchedGraspEnv:
         self.hold_push.end(self._xfrc, self._object_body)  # it lasts the one control period it was set for
         return target, failed
 
-    def _rewards(self, raw: dict, a: np.ndarray, failed: np.ndarray) -> tuple[dict, np.ndarray]:
+    def _rewards(self, raw: dict, a: torch.Tensor, failed: torch.Tensor) -> tuple[dict, torch.Tensor]:
         """The reward terms (eq. 1-6, `rewards.py`) and their weighted sum; 0 where the physics failed."""
         step = rewards.StepQuantities(
             lift=raw["lift"],
@@ -248,23 +274,26 @@ class BatchedGraspEnv:
             contact_threshold_n=self.cfg.reward.contact_threshold_n,
         )
         terms = rewards.compute_terms(step, self.cfg.reward)
-        reward = rewards.total(terms, self.cfg.reward)
-        reward[failed] = 0.0
+        reward = rewards.total(terms, self.cfg.reward).masked_fill(failed, 0.0)
         return terms, reward
 
-    def _end_episodes(self, ids: np.ndarray, obs: dict, info: dict, terminated, truncated) -> None:
+    def _end_episodes(self, ids: torch.Tensor, obs: dict, info: dict, terminated, truncated, failed) -> None:
         """Describe the episodes that ended in info["final"]; with autoreset, start their next ones (their rows of
         `obs` become the new episodes' first observations)."""
+        unstable = failed[ids]
+        if unstable.any():
+            self.physics_resets += int(unstable.sum())
+            log.warning("physics unstable in envs %s; resetting them", ids[unstable][:10].tolist())
         info["final"] = {
             "env_ids": ids,
-            "object_index": self.object_index[ids],
-            "success": self.success[ids].copy(),
-            "episode_return": self.episode_return[ids].copy(),
-            "episode_length": self.episode_length[ids].copy(),
+            "object_index": self._object_index[ids],
+            "success": self.success[ids],
+            "episode_return": self.episode_return[ids],
+            "episode_length": self.episode_length[ids],
             "terminated": terminated[ids],
             "truncated": truncated[ids],
-            "terms": {k: v[ids].copy() for k, v in self.episode_terms.items()},
-            "observation": {k: v[ids].copy() for k, v in obs.items()},
+            "terms": {k: v[ids] for k, v in self.episode_terms.items()},
+            "observation": {k: v[ids] for k, v in obs.items()},
         }
         if self.cfg.autoreset:
             self.episode[ids] += 1
@@ -275,34 +304,38 @@ class BatchedGraspEnv:
             self.obs_latency.restart(ids, fresh)  # a new episode starts with its own observation
 
     # --- frames and targets -------------------------------------------------------------------------------------
-    def _measured_frame(self, q: np.ndarray, sel: slice | np.ndarray = slice(None)) -> np.ndarray:
+    def _measured_frame(self, q: torch.Tensor, sel: slice | torch.Tensor = slice(None)) -> torch.Tensor:
         """Absolute joint positions of envs `sel` in the joints' measured frame (+ the calibration offset; a copy)."""
         if self.cfg.dr.joint_calibration_rad:
             return q + self.sensor_draw.joint_offset[sel]
-        return q.copy()
+        return q.clone()
 
-    def target_for_delta(self, delta: np.ndarray) -> np.ndarray:
+    def target_for_delta(self, delta):
         """The absolute targets (n, 9), in the joints' measured frame, that `step` commands for `delta`: the step
-        clipped to +-0.3 rad, then the target to the joint limits (the inverse of `delta_for_target`)."""
+        clipped to +-0.3 rad, then the target to the joint limits (the inverse of `delta_for_target`). numpy in,
+        numpy out; a tensor in, a tensor out."""
         q = self._qpos[:, observations.JOINTS]
-        step = np.clip(np.asarray(delta, dtype=np.float64), -spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
-        return self._measured_frame(np.clip(q + step, spec.JOINT_LOWER, spec.JOINT_UPPER))
+        step = torch.as_tensor(delta, dtype=torch.float64, device=self.device)
+        step = step.clamp(-spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
+        out = self._measured_frame(torch.clamp(q + step, self._joint_lower, self._joint_upper))
+        return out if isinstance(delta, torch.Tensor) else on_host(out)
 
-    def delta_for_target(self, target: np.ndarray, ids: slice | np.ndarray | None = None) -> np.ndarray:
+    def delta_for_target(self, target, ids: slice | np.ndarray | None = None):
         """The step (n, 9) that makes the servos of all envs (or `ids`) go to absolute `target`s given in the
-        joints' measured frame: target - (q + calibration offset). Without an offset, target - q."""
-        sel = slice(None) if ids is None else ids
-        return np.asarray(target, dtype=np.float64) - self._measured_frame(
+        joints' measured frame: target - (q + calibration offset). Without an offset, target - q. numpy in, numpy
+        out; a tensor in, a tensor out."""
+        sel = slice(None) if ids is None else torch.as_tensor(ids, device=self.device)
+        out = torch.as_tensor(target, dtype=torch.float64, device=self.device) - self._measured_frame(
             self._qpos[sel, observations.JOINTS], sel
         )
+        return out if isinstance(target, torch.Tensor) else on_host(out)
 
     # --- observation --------------------------------------------------------------------------------------------
-    def _observe(self, ids: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    def _observe(self, ids: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """Both observations for all envs or `ids`; for all envs, also the raw quantities the rewards read."""
         sel = slice(None) if ids is None else ids
-        seeds = self.env_seeds[sel]
         counter = self.episode[sel] * 100_003 + self.episode_length[sel]
-        noise = rng.normal(seeds, rng.STREAM_OBS_NOISE, counter, observations.NOISE_DIM)
+        noise = rng.normal(self._seeds[sel], rng.STREAM_OBS_NOISE, counter, observations.NOISE_DIM)
         raw, obs = observations.observe(
             self._qpos[sel],
             self._qvel[sel],
@@ -318,20 +351,20 @@ class BatchedGraspEnv:
             self._raw = raw
         return obs
 
-    # --- helpers for tests, rendering and eval ---------------------------------------------------------------
-    def set_targets(self, cmd: np.ndarray) -> None:
+    # --- helpers for tests, rendering and eval (numpy on the host) ---------------------------------------------
+    def set_targets(self, cmd) -> None:
         """The servos' position targets (n, 9) for the next physics substep (the servo model steps substeps)."""
-        self._ctrl[:] = cmd
+        self._ctrl[:] = torch.as_tensor(cmd, dtype=torch.float64, device=self.device)
 
     def joint_positions(self) -> np.ndarray:
-        return self._qpos[:, observations.JOINTS].copy()
+        return on_host(self._qpos[:, observations.JOINTS]).copy()
 
     def object_position(self) -> np.ndarray:
-        return self._qpos[:, observations.OBJECT_POS].copy()
+        return on_host(self._qpos[:, observations.OBJECT_POS]).copy()
 
     def fingertip_positions(self) -> np.ndarray:
         """(N, 3 fingers, xyz) world positions of the tip sites (the load cells)."""
-        return self.sensor_index.read(self._sensordata, "pos")
+        return on_host(self.sensor_index.read(self._sensordata, "pos"))
 
     def mj_model_data(self, i: int) -> tuple[mujoco.MjModel, mujoco.MjData]:
         """Env i's model and a forwarded MjData of its current state (for rendering)."""

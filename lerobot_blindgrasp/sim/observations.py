@@ -1,4 +1,4 @@
-"""What the sim observes each control step, for all envs at once (numpy over the env axis).
+"""What the sim observes each control step, for all envs at once (torch over the env axis, on the envs' device).
 
 - `raw`: noise-free quantities that rewards, success and demo curation read;
 - "policy": the student's o_t in R^12, measured joint positions and uniaxial force readings (`spec.STATE_NAMES`);
@@ -12,7 +12,7 @@ random number each reading gets: changing it changes every observation the shipp
 from __future__ import annotations
 
 import mujoco
-import numpy as np
+import torch
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force
@@ -49,7 +49,7 @@ def check_state_layout(m: mujoco.MjModel) -> None:
         )
 
 
-def _scaled_noise(noise: np.ndarray, dr: randomization.DomainRandomization) -> dict[str, np.ndarray]:
+def _scaled_noise(noise: torch.Tensor, dr: randomization.DomainRandomization) -> dict[str, torch.Tensor]:
     out, i = {}, 0
     for name, n in NOISE_LAYOUT:
         std = dr.joint_noise_rad if name == "joint_pos" else dr.force_noise_n
@@ -58,27 +58,27 @@ def _scaled_noise(noise: np.ndarray, dr: randomization.DomainRandomization) -> d
     return out
 
 
-def _uniaxial_reading(uni_true, noise, dr, sensor_draw) -> np.ndarray:
+def _uniaxial_reading(uni_true, noise, dr, sensor_draw) -> torch.Tensor:
     """The load cells' readings: gain, bias, noise and range (force.load_cell), a dead cell, then the deadband."""
     bias = sensor_draw.force_bias if sensor_draw is not None and dr.force_bias_n else 0.0
     signal = force.load_cell(uni_true, noise, gain=dr.force_gain, bias=bias, range_n=dr.force_range_n)
     if dr.dead_force_sensor >= 0:
-        signal = signal.copy()
+        signal = signal.clone()
         signal[:, dr.dead_force_sensor] = 0.0
     return sensors.reading(signal)
 
 
 def observe(
-    qpos: np.ndarray,
-    qvel: np.ndarray,
-    sensordata: np.ndarray,
+    qpos: torch.Tensor,
+    qvel: torch.Tensor,
+    sensordata: torch.Tensor,
     si: sensors.SensorIndex,
-    rest_height: np.ndarray,
-    prev_action: np.ndarray,
-    noise: np.ndarray,
+    rest_height: torch.Tensor,
+    prev_action: torch.Tensor,
+    noise: torch.Tensor,
     dr: randomization.DomainRandomization,
     sensor_draw: randomization.SensorDraw | None = None,
-) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
     """(raw, obs) for the envs whose state is given (rows of qpos, qvel, sensordata, ...; `sensor_draw` holds the
     same rows' force biases and joint calibration offsets, None when both are zero).
 
@@ -90,7 +90,7 @@ def observe(
     uni_true = sensors.uniaxial_force(contact, si.read(sensordata, "zaxis"))
     obj_pos = qpos[:, OBJECT_POS]
     tip_obj = si.read(sensordata, "objcontact")  # world frame, the force each tip exerts on the object
-    tip_obj_norm = np.linalg.norm(tip_obj, axis=2)
+    tip_obj_norm = tip_obj.square().sum(-1).sqrt()
     raw = {
         "q": qpos[:, JOINTS],
         "uniaxial_clean": sensors.reading(uni_true),  # noise-free reading (rewards, curation)
@@ -99,11 +99,11 @@ def observe(
         "tip_object_distance": si.read(sensordata, "objdist")[:, :, 0],
         "tip_object_force": tip_obj_norm,
         # -F_z / |F|: 1 when a tip presses the object straight down, 0 sideways (0 without contact)
-        "tip_object_downward": -tip_obj[..., 2] / np.maximum(tip_obj_norm, 1e-9),
+        "tip_object_downward": -tip_obj[..., 2] / tip_obj_norm.clamp_min(1e-9),
     }
     nz = _scaled_noise(noise, dr)
     n = qpos.shape[0]
-    wrench = np.concatenate([si.read(sensordata, "force"), si.read(sensordata, "torque")], axis=2)
+    wrench = torch.cat([si.read(sensordata, "force"), si.read(sensordata, "torque")], dim=2)
     joint_pos = raw["q"] + nz["joint_pos"]
     if sensor_draw is not None and dr.joint_calibration_rad:
         joint_pos = joint_pos + sensor_draw.joint_offset
@@ -124,7 +124,7 @@ def observe(
         "previous_action": prev_action,
     }
     obs = {
-        "policy": np.concatenate([parts["joint_pos"], parts["uniaxial_force"]], axis=1).astype(np.float32),
-        "privileged": spec.assemble_privileged(parts).astype(np.float32),
+        "policy": torch.cat([parts["joint_pos"], parts["uniaxial_force"]], dim=1).to(torch.float32),
+        "privileged": torch.cat(spec.privileged_parts(parts), dim=1).to(torch.float32),
     }
     return raw, obs

@@ -27,7 +27,7 @@ import copy
 from dataclasses import dataclass, replace
 
 import mujoco
-import numpy as np
+import torch
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import rng
@@ -135,19 +135,23 @@ ROBUSTNESS_FIELDS: tuple[str, ...] = (
 
 @dataclass
 class PhysicsDraw:
-    """Per-env physics parameters, drawn once. Arrays of shape (num_envs,)."""
+    """Per-env physics parameters, drawn once. Tensors of shape (num_envs,)."""
 
-    object_friction: np.ndarray
-    robot_friction: np.ndarray
-    object_mass_scale: np.ndarray
-    kp_scale: np.ndarray
-    kv_scale: np.ndarray
+    object_friction: torch.Tensor
+    robot_friction: torch.Tensor
+    object_mass_scale: torch.Tensor
+    kp_scale: torch.Tensor
+    kv_scale: torch.Tensor
 
     def row(self, i: int) -> dict[str, float]:
         return {k: float(getattr(self, k)[i]) for k in self.__dataclass_fields__}
 
 
-def draw_physics(dr: DomainRandomization, seeds: np.ndarray) -> PhysicsDraw:
+# The draws below are torch over the env axis, on the device of `seeds` (a uint64 array: the CPU; a tensor: its own
+# device): the resets and the per-step draws run where the physics does.
+
+
+def draw_physics(dr: DomainRandomization, seeds) -> PhysicsDraw:
     u = rng.uniform(seeds, rng.STREAM_DR, 0, 5)
     return PhysicsDraw(
         object_friction=rng.between(u[:, 0], *dr.object_friction),
@@ -158,20 +162,21 @@ def draw_physics(dr: DomainRandomization, seeds: np.ndarray) -> PhysicsDraw:
     )
 
 
-def draw_reset(dr: DomainRandomization, seeds: np.ndarray, episode: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def draw_reset(dr: DomainRandomization, seeds, episode) -> tuple[torch.Tensor, torch.Tensor]:
     """Initial joint positions (n, 9) and object xy (n, 2) for the given envs' episode counters."""
     u = rng.uniform(seeds, rng.STREAM_RESET, episode, spec.NUM_JOINTS + 2)
-    q0 = spec.HOME_POSE[None, :] + rng.between(u[:, : spec.NUM_JOINTS], -dr.joint_offset_rad, dr.joint_offset_rad)
+    home = torch.as_tensor(spec.HOME_POSE, dtype=torch.float64, device=u.device)
+    q0 = home[None, :] + rng.between(u[:, : spec.NUM_JOINTS], -dr.joint_offset_rad, dr.joint_offset_rad)
     xy = rng.between(u[:, spec.NUM_JOINTS :], -dr.object_xy_m, dr.object_xy_m)
     return q0, xy
 
 
-def draw_push(dr: DomainRandomization, seeds: np.ndarray, counter: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def draw_push(dr: DomainRandomization, seeds, counter) -> tuple[torch.Tensor, torch.Tensor]:
     """A new push force (n, 3) in N and the number of control steps until the next push (n,)."""
     u = rng.uniform(seeds, rng.STREAM_PUSH, counter, 4)
     force = rng.between(u[:, :3], -dr.push_force_n, dr.push_force_n)
     period_s = rng.between(u[:, 3], *dr.push_period_s)
-    steps = np.maximum(1, np.ceil(period_s * spec.CONTROL_HZ)).astype(np.int64)
+    steps = torch.ceil(period_s * spec.CONTROL_HZ).clamp_min(1).to(torch.int64)
     return force, steps
 
 
@@ -179,15 +184,15 @@ def draw_push(dr: DomainRandomization, seeds: np.ndarray, counter: np.ndarray) -
 class SensorDraw:
     """Per-env sensor errors, drawn once: (num_envs, 3) force bias (N) and (num_envs, 9) joint offsets (rad)."""
 
-    force_bias: np.ndarray
-    joint_offset: np.ndarray
+    force_bias: torch.Tensor
+    joint_offset: torch.Tensor
 
 
-def _signs(u: np.ndarray) -> np.ndarray:
-    return np.where(u < 0.5, -1.0, 1.0)
+def _signs(u: torch.Tensor) -> torch.Tensor:
+    return torch.where(u < 0.5, -1.0, 1.0).to(torch.float64)
 
 
-def draw_sensors(dr: DomainRandomization, seeds: np.ndarray) -> SensorDraw:
+def draw_sensors(dr: DomainRandomization, seeds) -> SensorDraw:
     """Each load cell's bias and each joint's calibration offset: the configured size, a random sign per env."""
     u = rng.uniform(seeds, rng.STREAM_SENSOR, 0, spec.NUM_FORCES + spec.NUM_JOINTS)
     return SensorDraw(
@@ -196,20 +201,18 @@ def draw_sensors(dr: DomainRandomization, seeds: np.ndarray) -> SensorDraw:
     )
 
 
-def draw_hold_push(dr: DomainRandomization, seeds: np.ndarray, episode: np.ndarray) -> np.ndarray:
+def draw_hold_push(dr: DomainRandomization, seeds, episode) -> torch.Tensor:
     """(n, 3) the hold push of each env's episode: `hold_push_n` in a uniformly random 3-D direction."""
     g = rng.normal(seeds, rng.STREAM_HOLD_PUSH, episode, 3)
-    return dr.hold_push_n * g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+    return dr.hold_push_n * g / g.square().sum(1, keepdim=True).sqrt().clamp_min(1e-12)
 
 
-def draw_jitter_substeps(
-    dr: DomainRandomization, seeds: np.ndarray, counter: np.ndarray, substeps: int
-) -> np.ndarray:
+def draw_jitter_substeps(dr: DomainRandomization, seeds, counter, substeps: int) -> torch.Tensor:
     """(n,) integer substeps by which this control step's target reaches the servos late: U[0, jitter], quantized
     to the physics timestep (the period lasts 50 ms on average; each command arrives 0..jitter late)."""
     dt = spec.CONTROL_DT / substeps
     u = rng.uniform(seeds, rng.STREAM_JITTER, counter, 1)[:, 0]
-    return np.minimum(np.floor(u * (dr.period_jitter_s / dt + 1)), substeps - 1).astype(np.int64)
+    return torch.floor(u * (dr.period_jitter_s / dt + 1)).clamp_max(substeps - 1).to(torch.int64)
 
 
 def apply_physics_draw(
@@ -218,15 +221,15 @@ def apply_physics_draw(
     """A copy of an object's model with env i's Table II draw written into it: the object's and the fingertips'
     friction, the object's mass (and inertia, so its shape's mass distribution stays), the servos' position gain kp
     and damping kv (MuJoCo's position actuator: gain kp, bias -kp q - kv qdot), and the torque limit beyond it."""
-    m = copy.copy(template)
-    m.geom_friction[m.geom("object_geom").id, 0] = draw.object_friction[i]
+    m, d = copy.copy(template), draw.row(i)
+    m.geom_friction[m.geom("object_geom").id, 0] = d["object_friction"]
     for f in spec.FINGERS:
-        m.geom_friction[m.geom(f"{f}_tipgeom").id, 0] = draw.robot_friction[i]
+        m.geom_friction[m.geom(f"{f}_tipgeom").id, 0] = d["robot_friction"]
     body = m.body("object").id
-    m.body_mass[body] *= draw.object_mass_scale[i]
-    m.body_inertia[body] *= draw.object_mass_scale[i]
-    kp = m.actuator_gainprm[:, 0] * draw.kp_scale[i]
-    kv = -m.actuator_biasprm[:, 2] * draw.kv_scale[i]
+    m.body_mass[body] *= d["object_mass_scale"]
+    m.body_inertia[body] *= d["object_mass_scale"]
+    kp = m.actuator_gainprm[:, 0] * d["kp_scale"]
+    kv = -m.actuator_biasprm[:, 2] * d["kv_scale"]
     m.actuator_gainprm[:, 0] = kp
     m.actuator_biasprm[:, 1] = -kp
     m.actuator_biasprm[:, 2] = -kv
@@ -244,33 +247,31 @@ class PushSchedule:
 
     The schedule only decides; the env writes the forces into its physics (`step` returns which envs' pushes end
     and which start, with what force). Draws are keyed on each env's own push counter, so an env's pushes are the
-    same in any batch."""
+    same in any batch. Masks over the env axis, not index lists: nothing waits on the device to count them."""
 
-    def __init__(self, dr: DomainRandomization, seeds: np.ndarray):
+    def __init__(self, dr: DomainRandomization, seeds: torch.Tensor):
         n = len(seeds)
         self.dr, self.seeds = dr, seeds
-        self.counter = np.zeros(n, dtype=np.int64)  # pushes drawn so far, per env
-        self.steps_to_push = np.zeros(n, dtype=np.int64)
-        self.pushing = np.zeros(n, dtype=bool)  # a push is being applied this control step
+        self.counter = torch.zeros(n, dtype=torch.int64, device=seeds.device)  # pushes drawn so far, per env
+        self.steps_to_push = torch.zeros(n, dtype=torch.int64, device=seeds.device)
+        self.pushing = torch.zeros(n, dtype=torch.bool, device=seeds.device)  # a push is under way this step
 
-    def reset(self, ids: np.ndarray) -> None:
+    def reset(self, ids: torch.Tensor) -> None:
         """A new episode: no push under way, and the time to the first one drawn."""
         self.pushing[ids] = False
         _, steps = draw_push(self.dr, self.seeds[ids], self.counter[ids])
         self.counter[ids] += 1
         self.steps_to_push[ids] = steps
 
-    def step(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Advance one control step. Returns (envs whose push ends now, envs whose push starts now, their forces
-        (k, 3) in N)."""
-        ended = np.flatnonzero(self.pushing)
-        self.pushing[ended] = False
+    def step(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Advance one control step. Returns (envs whose push ends now, envs whose push starts now, the forces
+        (n, 3) in N of those starting; rows of the others are not used), as masks over the envs."""
+        ended = self.pushing
         self.steps_to_push -= 1
-        due = np.flatnonzero(self.steps_to_push <= 0)
-        force = np.zeros((0, 3))
-        if due.size:
-            force, steps = draw_push(self.dr, self.seeds[due], self.counter[due])
-            self.counter[due] += 1
-            self.steps_to_push[due] = steps
-            self.pushing[due] = True
+        due = self.steps_to_push <= 0
+        # every env's next draw, kept where one is due: the same numbers an index list of the due envs would draw
+        force, steps = draw_push(self.dr, self.seeds, self.counter)
+        self.counter += due
+        self.steps_to_push = torch.where(due, steps, self.steps_to_push)
+        self.pushing = due
         return ended, due, force

@@ -1,4 +1,4 @@
-"""The paper's reward, eq. 1-7, as named terms (mjlab's manager style, in numpy over envs).
+"""The paper's reward, eq. 1-7, as named terms (mjlab's manager style: torch over the env axis, on the envs' device).
 
     r = w1 r_t + w2 r_i + w31 r_l + w32 r_a + w33 r_ar            (eq. 1, `total`)
 
@@ -28,27 +28,27 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
-import numpy as np
+import torch
 
 from lerobot_blindgrasp import spec
 
 
 @dataclass(frozen=True)
 class StepQuantities:
-    """What the reward terms read after a control step, (num_envs, ...) numpy arrays."""
+    """What the reward terms read after a control step, (num_envs, ...) float64 tensors on the envs' device."""
 
-    lift: np.ndarray  # h_o: object height above its resting height (m)
-    d_xy: np.ndarray  # eq. 2's distance of the object from the gripper centre in the table plane (m)
-    uniaxial_force: np.ndarray  # (n, 3) fingertip sensor readings, noise-free (N)
-    q: np.ndarray  # (n, 9) joint positions (rad)
-    action: np.ndarray  # (n, 9) a_t, clipped delta-theta (rad)
-    prev_action: np.ndarray  # (n, 9) a_{t-1}
-    tip_object_distance: np.ndarray  # (n, 3) each tip's end to the object's surface (m)
-    tip_object_force: np.ndarray  # (n, 3) |net force| of each tip on the object (N)
+    lift: torch.Tensor  # h_o: object height above its resting height (m)
+    d_xy: torch.Tensor  # eq. 2's distance of the object from the gripper centre in the table plane (m)
+    uniaxial_force: torch.Tensor  # (n, 3) fingertip sensor readings, noise-free (N)
+    q: torch.Tensor  # (n, 9) joint positions (rad)
+    action: torch.Tensor  # (n, 9) a_t, clipped delta-theta (rad)
+    prev_action: torch.Tensor  # (n, 9) a_{t-1}
+    tip_object_distance: torch.Tensor  # (n, 3) each tip's end to the object's surface (m)
+    tip_object_force: torch.Tensor  # (n, 3) |net force| of each tip on the object (N)
     contact_threshold_n: float = spec.FORCE_THRESHOLD_N
 
     @cached_property
-    def n_contact(self) -> np.ndarray:
+    def n_contact(self) -> torch.Tensor:
         return num_contacts(self.uniaxial_force, self.contact_threshold_n)
 
 
@@ -110,64 +110,78 @@ class RewardConfig:
         return cls(weights={k[2:]: float(v) for k, v in record.items() if k.startswith("w_")}, **params)
 
 
-def planar_distance(object_xy: np.ndarray) -> np.ndarray:
+def planar_distance(object_xy: torch.Tensor) -> torch.Tensor:
     """d_xy, eq. 2: distance in the table plane between the object and the gripper centre (the world origin)."""
-    return np.linalg.norm(object_xy, axis=-1)
+    return object_xy.square().sum(-1).sqrt()
 
 
-def num_contacts(uniaxial_force: np.ndarray, threshold: float = spec.FORCE_THRESHOLD_N) -> np.ndarray:
+def num_contacts(uniaxial_force, threshold: float = spec.FORCE_THRESHOLD_N):
     """n_contact: fingertip sensors reading more than the contact threshold (0.1 N)."""
     return (uniaxial_force > threshold).sum(axis=-1)
 
 
-def r_task(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
+def r_task(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
     """Eq. 3. Active only with >= 1 fingertip contact and the object inside the workspace; else 0.
 
     h_o is clipped at 0, so that resting penetration does not make the square root's argument exceed 1."""
     h_t = cfg.target_lift_m
-    h_o = np.clip(s.lift, 0.0, None)
-    centred = 1.0 - np.sqrt(np.clip(s.d_xy / cfg.workspace_radius_m, 0.0, 1.0))
-    height = np.where(h_o < h_t, 1.0 - np.sqrt(np.clip((h_t - h_o) / h_t, 0.0, 1.0)), 1.0)
+    h_o = s.lift.clamp_min(0.0)
+    centred = 1.0 - torch.sqrt((s.d_xy / cfg.workspace_radius_m).clamp(0.0, 1.0))
+    height = torch.where(h_o < h_t, 1.0 - torch.sqrt(((h_t - h_o) / h_t).clamp(0.0, 1.0)), 1.0)
     active = (s.n_contact >= 1) & (s.d_xy < cfg.workspace_radius_m)
-    return np.where(active, height * centred, 0.0)
+    return torch.where(active, height * centred, 0.0)
 
 
-def r_incentive(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
+def r_incentive(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
     """Eq. 4: 1 when all three fingertips sense contact."""
-    return (s.n_contact == spec.NUM_FORCES).astype(np.float64)
+    return (s.n_contact == spec.NUM_FORCES).to(torch.float64)
 
 
-def r_joint_limit(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
+def r_joint_limit(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
     """Eq. 5: summed violation (rad) of the allowed joint range over the nine joints."""
-    return (np.clip(spec.JOINT_LOWER - s.q, 0.0, None) + np.clip(s.q - spec.JOINT_UPPER, 0.0, None)).sum(axis=-1)
+    lower, upper = _joint_limits(s.q)
+    return ((lower - s.q).clamp_min(0.0) + (s.q - upper).clamp_min(0.0)).sum(-1)
 
 
-def r_action(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
+def r_action(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
     """Eq. 6: |a_t|^2, a_t = delta-theta in rad."""
-    return np.square(s.action).sum(axis=-1)
+    return s.action.square().sum(-1)
 
 
-def r_action_rate(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
+def r_action_rate(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
     """Eq. 7: |a_t - a_{t-1}|^2."""
-    return np.square(s.action - s.prev_action).sum(axis=-1)
+    return (s.action - s.prev_action).square().sum(-1)
 
 
-def r_reach(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
+def r_reach(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
     """Shaping (not in the paper): pulls fingertips toward the object surface before any contact exists. r_t is 0
     until the object lifts, so PPO on a small budget without it learns to keep still."""
-    return (1.0 - np.tanh(cfg.reach_scale * np.clip(s.tip_object_distance, 0.0, None))).mean(axis=-1)
+    return (1.0 - torch.tanh(cfg.reach_scale * s.tip_object_distance.clamp_min(0.0))).mean(-1)
 
 
-def r_touch(s: StepQuantities, cfg: RewardConfig) -> np.ndarray:
+def r_touch(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
     """Shaping (not in the paper): fraction of fingertips pressing on the *object* (any direction, > 0.1 N).
 
     Unlike n_contact it ignores pushes on the table, and unlike the uniaxial sensor it sees side contacts, so it
     rewards every touch that could become a grasp."""
-    return (s.tip_object_force > cfg.contact_threshold_n).mean(axis=-1)
+    return (s.tip_object_force > cfg.contact_threshold_n).to(torch.float64).mean(-1)
+
+
+_LIMITS: dict[torch.device, tuple[torch.Tensor, torch.Tensor]] = {}
+
+
+def _joint_limits(q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """spec's joint limits as tensors on q's device, made once per device (not on every step)."""
+    if q.device not in _LIMITS:
+        _LIMITS[q.device] = (
+            torch.as_tensor(spec.JOINT_LOWER, dtype=torch.float64, device=q.device),
+            torch.as_tensor(spec.JOINT_UPPER, dtype=torch.float64, device=q.device),
+        )
+    return _LIMITS[q.device]
 
 
 # Every term, by name, in eq. 1's order (the shaping terms last): the order `total` sums in.
-TERMS: dict[str, Callable[[StepQuantities, RewardConfig], np.ndarray]] = {
+TERMS: dict[str, Callable[[StepQuantities, RewardConfig], torch.Tensor]] = {
     "task": r_task,
     "incentive": r_incentive,
     "joint_limit": r_joint_limit,
@@ -180,12 +194,12 @@ TERM_NAMES = tuple(TERMS)
 PAPER_REWARD = RewardConfig()
 
 
-def compute_terms(s: StepQuantities, cfg: RewardConfig) -> dict[str, np.ndarray]:
+def compute_terms(s: StepQuantities, cfg: RewardConfig) -> dict[str, torch.Tensor]:
     """Every term, unweighted, by name (the env logs each one separately)."""
     return {name: fn(s, cfg) for name, fn in TERMS.items()}
 
 
-def total(terms: Mapping[str, np.ndarray], cfg: RewardConfig) -> np.ndarray:
+def total(terms: Mapping[str, torch.Tensor], cfg: RewardConfig) -> torch.Tensor:
     """Eq. 1: the weighted sum of the terms (with the shaping terms' weights, 0 in the paper)."""
     out = 0.0
     for name in TERMS:

@@ -1,18 +1,30 @@
-"""Counter-based random numbers, vectorized over envs.
+"""Counter-based random numbers, torch over the env axis, on the envs' device.
 
 Every draw is a pure function of (env seed, stream, counter, index), so env i of a batch and a single env built with
-env i's seed see exactly the same randomness, whatever the batch size or the order of resets. A per-env
-`np.random.Generator` would need a Python loop over envs on every reset; this needs none.
+env i's seed see exactly the same randomness, whatever the batch size, the order of resets or the device. A per-env
+generator would need a loop over envs on every reset; this needs none, and it runs where the physics runs.
 
-The mixer is SplitMix64 (Steele et al., 2014), applied to a key built from the inputs.
+The mixer is SplitMix64 (Steele et al., 2014), applied to a key built from the inputs. The 64-bit words are held in
+int64 tensors (torch has no arithmetic on uint64): addition, multiplication and xor wrap to the same bits as
+unsigned arithmetic, and the right shifts are made logical by masking the sign bits the arithmetic shift copies in.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import torch
 
-_M64 = np.uint64(0xFFFFFFFFFFFFFFFF)
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+
+def _signed(x: int) -> int:
+    """A 64-bit constant as the int64 with the same bits."""
+    return x - (1 << 64) if x >= 1 << 63 else x
+
+
+_GOLDEN = _signed(0x9E3779B97F4A7C15)
+_MIX1 = _signed(0xBF58476D1CE4E5B9)
+_MIX2 = _signed(0x94D049BB133111EB)
+_SEED_MUL = _signed(0xD1B54A32D192ED03)
+_COUNTER_MUL = _signed(0x8CB92BA72F3D8DD7)
 
 # Streams: one per kind of draw, so that adding a draw of one kind never shifts another.
 STREAM_DR = 1  # per-env physics parameters, drawn once
@@ -25,37 +37,50 @@ STREAM_HOLD_PUSH = 7  # direction of the push during the hold, per episode
 STREAM_JITTER = 8  # how late each control step's command reaches the servos, per step
 
 
-def _splitmix64(x: np.ndarray) -> np.ndarray:
-    with np.errstate(over="ignore"):
-        z = x + _GOLDEN
-        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-        return z ^ (z >> np.uint64(31))
+def _shr(x: torch.Tensor, k: int) -> torch.Tensor:
+    """Logical right shift of 64-bit words held as int64."""
+    return (x >> k) & ((1 << (64 - k)) - 1)
 
 
-def uniform(seeds: np.ndarray, stream: int, counter: np.ndarray | int, n: int) -> np.ndarray:
-    """U[0, 1) draws of shape (len(seeds), n), one row per env."""
-    seeds = np.asarray(seeds, dtype=np.uint64)
-    counter = np.broadcast_to(np.asarray(counter, dtype=np.uint64), seeds.shape)
-    with np.errstate(over="ignore"):
-        key = _splitmix64(seeds * np.uint64(0xD1B54A32D192ED03) + np.uint64(stream))
-        key = _splitmix64(key ^ (counter * np.uint64(0x8CB92BA72F3D8DD7)))
-        idx = np.arange(n, dtype=np.uint64)[None, :]
-        bits = _splitmix64(key[:, None] + idx * _GOLDEN)
-    return (bits >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))
+def _splitmix64(x: torch.Tensor) -> torch.Tensor:
+    z = x + _GOLDEN
+    z = (z ^ _shr(z, 30)) * _MIX1
+    z = (z ^ _shr(z, 27)) * _MIX2
+    return z ^ _shr(z, 31)
 
 
-def normal(seeds: np.ndarray, stream: int, counter: np.ndarray | int, n: int) -> np.ndarray:
+def as_words(x, device: torch.device | str | None = None) -> torch.Tensor:
+    """Seeds or counters as int64 words: a uint64 array keeps its bits; a tensor stays on its device."""
+    if isinstance(x, torch.Tensor):
+        return x.to(device=device or x.device, dtype=torch.int64)
+    a = np.asarray(x)
+    if a.dtype == np.uint64:
+        a = a.view(np.int64)
+    return torch.as_tensor(a.astype(np.int64, copy=False), device=device)
+
+
+def uniform(seeds, stream: int, counter, n: int) -> torch.Tensor:
+    """U[0, 1) float64 draws of shape (len(seeds), n), one row per env, on the seeds' device."""
+    seeds = as_words(seeds)
+    counter = as_words(counter, seeds.device).expand(seeds.shape)
+    key = _splitmix64(seeds * _SEED_MUL + stream)
+    key = _splitmix64(key ^ (counter * _COUNTER_MUL))
+    idx = torch.arange(n, dtype=torch.int64, device=seeds.device)
+    bits = _splitmix64(key[:, None] + idx * _GOLDEN)
+    return _shr(bits, 11).to(torch.float64) * (1.0 / (1 << 53))
+
+
+def normal(seeds, stream: int, counter, n: int) -> torch.Tensor:
     """Standard normal draws of shape (len(seeds), n) (Box-Muller on two uniform blocks)."""
     u = uniform(seeds, stream, counter, 2 * n)
-    u1 = np.maximum(u[:, :n], 1e-300)
-    return np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u[:, n:])
+    u1 = u[:, :n].clamp_min(1e-300)
+    return torch.sqrt(-2.0 * torch.log(u1)) * torch.cos(2.0 * np.pi * u[:, n:])
 
 
-def between(u: np.ndarray, low, high) -> np.ndarray:
-    return low + (np.asarray(high) - low) * u
+def between(u: torch.Tensor, low, high) -> torch.Tensor:
+    return low + (torch.as_tensor(high, dtype=u.dtype, device=u.device) - low) * u
 
 
-def log_uniform(u: np.ndarray, low: float, high: float) -> np.ndarray:
+def log_uniform(u: torch.Tensor, low: float, high: float) -> torch.Tensor:
     """Table II writes the gain scales as U[log a, log b]: the scale is exp of that."""
-    return np.exp(np.log(low) + (np.log(high) - np.log(low)) * u)
+    return torch.exp(np.log(low) + (np.log(high) - np.log(low)) * u)

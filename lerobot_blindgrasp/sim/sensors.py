@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+import torch
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware.force import reading  # noqa: F401  (the env reads its fingertip sensing from this module)
@@ -25,45 +26,46 @@ PER_TIP = ("contact", "objcontact", "force", "torque", "pos", "quat", "zaxis", "
 
 @dataclass(frozen=True)
 class SensorIndex:
-    """Column indices into `sensordata` for each (finger, reading), as (n_fingers, dim) integer arrays."""
+    """Column indices into `sensordata` for each (finger, reading), as (n_fingers, dim) integer tensors on the
+    device of the sensordata they index."""
 
-    cols: dict[str, np.ndarray]
+    cols: dict[str, torch.Tensor]
 
     @classmethod
-    def from_model(cls, m: mujoco.MjModel) -> SensorIndex:
+    def from_model(cls, m: mujoco.MjModel, device: torch.device | str = "cpu") -> SensorIndex:
         cols = {}
         for kind in PER_TIP:
             rows = []
             for f in spec.FINGERS:
                 s = m.sensor(f"{f}_{kind}")
                 rows.append(np.arange(s.adr[0], s.adr[0] + s.dim[0]))
-            cols[kind] = np.stack(rows)
+            cols[kind] = torch.as_tensor(np.stack(rows), device=device)
         return cls(cols)
 
-    def read(self, sensordata: np.ndarray, kind: str) -> np.ndarray:
-        """(n_envs, n_fingers, dim) view-copy of one reading for all envs."""
+    def read(self, sensordata: torch.Tensor, kind: str) -> torch.Tensor:
+        """(n_envs, n_fingers, dim) copy of one reading for all envs."""
         return sensordata[:, self.cols[kind]]
 
 
-def quat_to_mat(q: np.ndarray) -> np.ndarray:
+def quat_to_mat(q: torch.Tensor) -> torch.Tensor:
     """wxyz quaternions (..., 4) to rotation matrices (..., 3, 3)."""
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack(
+    w, x, y, z = q.unbind(-1)
+    return torch.stack(
         [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+            torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            torch.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            torch.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
         ],
         -2,
     )
 
 
-def uniaxial_force(contact_reported: np.ndarray, zaxis: np.ndarray) -> np.ndarray:
+def uniaxial_force(contact_reported: torch.Tensor, zaxis: torch.Tensor) -> torch.Tensor:
     """(n, 3 tips) true compressive force along each tip's z axis (before noise and deadband)."""
-    return np.einsum("nfi,nfi->nf", contact_reported, zaxis)
+    return (contact_reported * zaxis).sum(-1)
 
 
-def contact_force_tip_frame(contact_reported: np.ndarray, tip_quat: np.ndarray) -> np.ndarray:
-    """(n, 3 tips, 3) force on each tip, in the tip (load-cell) frame."""
-    rot = quat_to_mat(tip_quat)  # columns = tip axes in world
-    return -np.einsum("nfji,nfj->nfi", rot, contact_reported)
+def contact_force_tip_frame(contact_reported: torch.Tensor, tip_quat: torch.Tensor) -> torch.Tensor:
+    """(n, 3 tips, 3) force on each tip, in the tip (load-cell) frame: minus R^T f, R's columns the tip axes."""
+    rot = quat_to_mat(tip_quat)
+    return -(rot * contact_reported[..., :, None]).sum(-2)

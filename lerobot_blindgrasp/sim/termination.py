@@ -6,35 +6,36 @@
 - Termination (Sec. III-B): the object leaves the 10 cm workspace around the gripper's centre (`d_xy`, eq. 2), or
   its physics went unstable (the env resets it).
 - Truncation: the episode's time runs out (10 s) before it terminated.
+
+Each is a function of tensors over the env axis, written with operators alone, so that the twin's numpy state
+(`twin/physics.py`) goes through the same functions as the env's torch state.
 """
 
 from __future__ import annotations
 
-import numpy as np
-
 from lerobot_blindgrasp import spec
 
 
-def is_lifted(lift: np.ndarray) -> np.ndarray:
+def is_lifted(lift):
     """The object is at least SUCCESS_LIFT_M above its resting height."""
     return lift >= spec.SUCCESS_LIFT_M
 
 
-def held_steps(previous: np.ndarray, lift: np.ndarray) -> np.ndarray:
+def held_steps(previous, lift):
     """Consecutive control steps lifted, counting this one (0 once it is no longer lifted)."""
-    return np.where(is_lifted(lift), previous + 1, 0)
+    return (previous + 1) * is_lifted(lift)
 
 
-def is_success(held: np.ndarray) -> np.ndarray:
+def is_success(held):
     """Held lifted for SUCCESS_HOLD_S (20 control steps)."""
     return held >= spec.SUCCESS_HOLD_STEPS
 
 
-def out_of_workspace(d_xy: np.ndarray, radius_m: float = spec.WORKSPACE_RADIUS_M) -> np.ndarray:
+def out_of_workspace(d_xy, radius_m: float = spec.WORKSPACE_RADIUS_M):
     """The termination condition: the object's planar distance from the gripper centre exceeds the workspace."""
     return d_xy > radius_m
 
 
-def timed_out(episode_length: np.ndarray, max_steps: int, terminated: np.ndarray) -> np.ndarray:
+def timed_out(episode_length, max_steps: int, terminated):
     """Truncation: the episode reached its length without terminating."""
     return (episode_length >= max_steps) & ~terminated

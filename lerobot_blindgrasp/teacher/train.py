@@ -35,8 +35,8 @@ from lerobot_blindgrasp.presets.teacher import get_preset
 from lerobot_blindgrasp.presets.teacher_configs import TeacherPreset, Variant
 from lerobot_blindgrasp.rollout.envs import env_config
 from lerobot_blindgrasp.sim import objects, randomization
+from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.env_config import GraspEnvConfig
 from lerobot_blindgrasp.teacher import blind_approach, distributed
 from lerobot_blindgrasp.teacher.checkpoints import atomic_save, export, newest_loadable_checkpoint
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME, latest_checkpoint, observation_layout

@@ -6,6 +6,10 @@ when `blind_group` is given, i.e. when a preset's obs_groups read it, under that
 extras["time_outs"] marks truncations (PPO bootstraps them); extras["log"] carries, for the episodes that ended
 this step, each reward term (weighted, per second of episode), success overall and per object, and termination
 reasons. rsl-rl averages these over an iteration and writes them to TensorBoard.
+
+The env's tensors reach rsl-rl as they are (`step_tensors`, on the physics' device; moved only when rsl-rl runs on
+another device). The one host round trip left is "privileged_blind" (`BlindGroup` is numpy), for the presets
+that read it.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from tensordict import TensorDict
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.teacher.blind_approach import ActorInput, BlindGroup
+from lerobot_blindgrasp.teacher.blind_approach import GROUP, ActorInput, BlindGroup
 
 
 class RslRlGraspEnv(VecEnv):
@@ -33,7 +37,7 @@ class RslRlGraspEnv(VecEnv):
         self.step_dt = spec.CONTROL_DT  # seconds per env step; rsl-rl's RND scales its weight by it
         self.cfg = {"env": repr(env.cfg)}
         self._on_step = on_step  # e.g. a progress-bar tick
-        self._obs = self._to_td(env.reset())
+        self._obs = self._to_td(env.reset_tensors())
 
     @property
     def unwrapped(self) -> RslRlGraspEnv:
@@ -42,18 +46,19 @@ class RslRlGraspEnv(VecEnv):
 
     @property
     def episode_length_buf(self) -> torch.Tensor:
-        return torch.from_numpy(self.env.episode_length)
+        return self.env.episode_length
 
     @episode_length_buf.setter
     def episode_length_buf(self, value: torch.Tensor) -> None:
         # rsl-rl's init_at_random_ep_len spreads time-outs over an iteration
-        self.env.episode_length[:] = value.cpu().numpy()
+        self.env.episode_length[:] = value.to(self.env.device)
 
-    def _to_td(self, obs: dict[str, np.ndarray]) -> TensorDict:
+    def _to_td(self, obs: dict[str, torch.Tensor]) -> TensorDict:
         if self._blind_group is not None:
-            obs = self._blind_group(obs)
+            blind = self._blind_group({"privileged": obs["privileged"].cpu().numpy()})[GROUP]
+            obs = {**obs, GROUP: torch.from_numpy(blind)}
         return TensorDict(
-            {k: torch.from_numpy(v).to(self.device) for k, v in obs.items()},
+            {k: v.to(self.device) for k, v in obs.items()},
             batch_size=[self.num_envs],
             device=self.device,
         )
@@ -62,35 +67,32 @@ class RslRlGraspEnv(VecEnv):
         return self._obs
 
     def step(self, actions: torch.Tensor):
-        obs, reward, terminated, truncated, info = self.env.step(actions.detach().cpu().numpy())
+        obs, reward, terminated, truncated, info = self.env.step_tensors(actions.detach().to(self.env.device))
         self._obs = self._to_td(obs)
-        dones = terminated | truncated
-        extras = {"time_outs": torch.from_numpy(truncated).to(self.device), "log": self._episode_log(info)}
+        extras = {"time_outs": truncated.to(self.device), "log": self._episode_log(info)}
         if self._on_step is not None:
             self._on_step()
-        return (
-            self._obs,
-            torch.from_numpy(reward.astype(np.float32)).to(self.device),
-            torch.from_numpy(dones).to(self.device),
-            extras,
-        )
+        return self._obs, reward.to(self.device, torch.float32), (terminated | truncated).to(self.device), extras
 
-    def _episode_log(self, info: dict) -> dict[str, float]:
-        log = {"Metrics/physics_resets_total": float(self.env.physics_resets)}
-        log["Metrics/mean_lift_cm"] = float(np.clip(info["lift"], 0, None).mean() * 100.0)
-        log["Metrics/mean_contacts"] = float(info["n_contact"].mean())
+    def _episode_log(self, info: dict) -> dict[str, float | torch.Tensor]:
+        """Scalars rsl-rl averages over an iteration; tensors stay on the device (rsl-rl reads them as numbers when
+        it writes its log, once per iteration)."""
+        log: dict = {"Metrics/physics_resets_total": float(self.env.physics_resets)}
+        log["Metrics/mean_lift_cm"] = info["lift"].clamp_min(0).mean() * 100.0
+        log["Metrics/mean_contacts"] = info["n_contact"].double().mean()
         final = info.get("final")
         if final is None:
             return log
         cfg = self.env.cfg.reward
         seconds = final["episode_length"] / spec.CONTROL_HZ
         for term, sums in final["terms"].items():
-            log[f"Episode_Reward/{term}"] = float((cfg.weight(term) * sums / seconds).mean())
-        log["Episode_Termination/time_out"] = float(final["truncated"].mean())
-        log["Episode_Termination/object_out_of_reach"] = float(final["terminated"].mean())
-        log["Metrics/success"] = float(final["success"].mean())
+            log[f"Episode_Reward/{term}"] = (cfg.weight(term) * sums / seconds).mean()
+        log["Episode_Termination/time_out"] = final["truncated"].double().mean()
+        log["Episode_Termination/object_out_of_reach"] = final["terminated"].double().mean()
+        success = final["success"].double()
+        log["Metrics/success"] = success.mean()
         names = self.env.cfg.objects
-        for k in np.unique(final["object_index"]):
-            mask = final["object_index"] == k
-            log[f"Success/{names[k]}"] = float(final["success"][mask].mean())
+        index = final["object_index"].cpu().numpy()  # which objects ended: a few ints, to name the log keys
+        for k in np.unique(index):
+            log[f"Success/{names[k]}"] = success[torch.from_numpy(index == k).to(success.device)].mean()
         return log

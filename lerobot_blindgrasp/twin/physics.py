@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
+import torch
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import xm430
@@ -90,7 +91,7 @@ class TwinPhysics:
         draw = randomization.draw_physics(self.dr, seeds)
         model = randomization.apply_physics_draw(self._template(name), draw, 0, self.dr.torque_limit_scale)
         _, xy = randomization.draw_reset(self.dr, seeds, np.zeros(1, dtype=np.int64))
-        xy = xy[0] if seed is not None else np.asarray(PARK_XY)
+        xy = xy[0].numpy() if seed is not None else np.asarray(PARK_XY)
         data = mujoco.MjData(model)
         data.qpos[observations.JOINTS] = q
         data.qvel[observations.JOINTS] = qd
@@ -225,8 +226,8 @@ class TwinPhysics:
     @property
     def tip_force_n(self) -> np.ndarray:
         """The true compressive force on each fingertip's load cell (N), spec.FINGERS order."""
-        sd, si = self._sensordata[None], self.sensor_index
-        true = sensors.uniaxial_force(si.read(sd, "contact"), si.read(sd, "zaxis"))[0]
+        sd, si = torch.from_numpy(self._sensordata[None]), self.sensor_index
+        true = sensors.uniaxial_force(si.read(sd, "contact"), si.read(sd, "zaxis"))[0].numpy()
         # The pad sits on the cell: it can push on it, never pull (a side contact that tilts the tip reads 0).
         return np.maximum(true, 0.0) + self.pad_load_n
 

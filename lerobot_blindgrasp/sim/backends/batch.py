@@ -1,29 +1,41 @@
 """The CPU backend: `mujoco.batch.Batch` (MuJoCo >= 3.17), one MjModel per env, stepped in C on all cores.
 
 Every env's state is a row; the batch loads rows into a thread-local MjData and steps them with the GIL released;
-results are bit-identical at any thread count. `qpos` etc. are the batch's live bindings of those rows.
+results are bit-identical at any thread count. `qpos` etc. are float64 CPU tensors over the batch's live bindings
+of those rows (`torch.from_numpy`: the same memory, no copy; the batch's own steps and resets show in them at once).
 """
 
 from __future__ import annotations
 
+import warnings
+
 import mujoco
 import numpy as np
+import torch
 from mujoco import batch as mjbatch
+
+
+def _ids(ids) -> np.ndarray:
+    """Env ids as the batch takes them (a host index array)."""
+    return ids.cpu().numpy() if isinstance(ids, torch.Tensor) else np.asarray(ids)
 
 
 class BatchBackend:
     name = "batch"
+    device = torch.device("cpu")
 
     def __init__(self, models: list[mujoco.MjModel], nthread: int = 0):
         self.num_envs = n = len(models)
         self.models = models
         self.batch = mjbatch.Batch(models[0], nsim=n, nthread=nthread)
         self.batch.set_models(models)
-        self.qpos = self.batch.bind("qpos")
-        self.qvel = self.batch.bind("qvel")
-        self.ctrl = self.batch.bind("ctrl")
-        self.xfrc_applied = self.batch.bind("xfrc_applied")
-        self.sensordata = self.batch.bind("sensordata")
+        self.qpos = torch.from_numpy(self.batch.bind("qpos"))
+        self.qvel = torch.from_numpy(self.batch.bind("qvel"))
+        self.ctrl = torch.from_numpy(self.batch.bind("ctrl"))
+        self.xfrc_applied = torch.from_numpy(self.batch.bind("xfrc_applied"))
+        with warnings.catch_warnings():  # the binding is read-only: MuJoCo computes it, and the env only reads it
+            warnings.filterwarnings("ignore", "The given NumPy array is not writable")
+            self.sensordata = torch.from_numpy(self.batch.bind("sensordata"))
         self._warm = self.batch.bind("qacc_warmstart")
         self._warnings_seen = np.zeros(n, dtype=np.int64)
 
@@ -31,19 +43,22 @@ class BatchBackend:
     def nthread(self) -> int:
         return self.batch.nthread
 
-    def reset(self, ids: np.ndarray) -> None:
+    def reset(self, ids) -> None:
+        ids = _ids(ids)
         self.batch.reset(ids, stage=mujoco.mjtStage.mjSTAGE_NONE)
         self.qvel[ids] = 0.0
         self._warm[ids] = 0.0
         self.xfrc_applied[ids] = 0.0
 
-    def forward(self, ids: np.ndarray) -> None:
+    def forward(self, ids) -> None:
+        ids = _ids(ids)
         self.batch.forward(ids)
         # warnings raised by the reset itself are not failures of the next step
         self._warnings_seen[ids] = self.batch.warning[ids, :, 1].sum(axis=1)
 
-    def step(self, nstep: int, ids: np.ndarray | None = None) -> np.ndarray:
-        """`nstep` physics steps for all envs, or only `ids` (the others keep their state)."""
+    def step(self, nstep: int, ids: np.ndarray | None = None) -> torch.Tensor:
+        """`nstep` physics steps for all envs, or only `ids` (the others keep their state); the failed envs (bool
+        tensor)."""
         failed = np.zeros(self.num_envs, dtype=bool)
         try:
             self.batch.step(ids=ids, nstep=nstep)
@@ -51,9 +66,9 @@ class BatchBackend:
             failed[e.ids] = True
         warn = self.batch.warning[:, :, 1].sum(axis=1)
         failed |= warn > self._warnings_seen
-        failed |= ~np.isfinite(self.qpos).all(axis=1) | ~np.isfinite(self.qvel).all(axis=1)
         self._warnings_seen = warn
-        return failed
+        failed = torch.from_numpy(failed)
+        return failed | ~torch.isfinite(self.qpos).all(1) | ~torch.isfinite(self.qvel).all(1)
 
     # --- benchmarks and rendering ----------------------------------------------------------------------------
     def snapshot(self):

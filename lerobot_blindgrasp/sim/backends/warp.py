@@ -9,7 +9,8 @@ envs' randomized CPU models (the same `MjModel`s the batch backend steps: Table 
 gains, and the constants `mj_setConst` derives from them) is batched per world and filled from those models, so
 both backends simulate the same parameters. Fields that differ but cannot be batched raise at construction.
 
-State. The env reads and writes host (numpy, float64) mirrors of qpos, qvel, ctrl, xfrc_applied and sensordata;
+State. The env reads and writes host (float64) mirrors of qpos, qvel, ctrl, xfrc_applied and sensordata, as CPU
+tensors over numpy arrays (`torch.from_numpy`, shared memory; `device` is the CPU);
 `step` uploads ctrl and forces, steps each group, and downloads qpos, qvel and sensordata (about 100 floats per env
 per control step). The `nstep` substeps of each group run as one captured graph: a CUDA graph on a GPU, Warp's
 API capture on its CPU device (replayed natively, without the Python launch overhead of each kernel, which on CPU
@@ -33,6 +34,7 @@ import os
 
 import mujoco
 import numpy as np
+import torch
 
 try:
     import mujoco_warp as mjw
@@ -99,20 +101,25 @@ class WarpBackend:
     ):
         """templates: one compiled MjModel per object; object_index: object of each env; env_model(i): env i's
         randomized MjModel (the same one the batch backend would step)."""
-        self.device = device or default_device()
+        self.wp_device = device or default_device()
         self.num_envs = n = len(object_index)
         self.nthread = 0  # not applicable; kept for the benchmarks' tables
         t0 = templates[0]
-        self.qpos = np.tile(t0.qpos0, (n, 1))
-        self.qvel = np.zeros((n, t0.nv))
-        self.ctrl = np.zeros((n, t0.nu))
-        self.xfrc_applied = np.zeros((n, t0.nbody, 6))
-        self.sensordata = np.zeros((n, t0.nsensordata))
+        self._h_qpos = np.tile(t0.qpos0, (n, 1))
+        self._h_qvel = np.zeros((n, t0.nv))
+        self._h_ctrl = np.zeros((n, t0.nu))
+        self._h_xfrc_applied = np.zeros((n, t0.nbody, 6))
+        self._h_sensordata = np.zeros((n, t0.nsensordata))
+        # The backend contract (backends/__init__.py): tensors sharing memory with the state the env reads.
+        self.device = torch.device("cpu")  # where the mirrors live; Warp runs on wp_device
+        self.qpos, self.qvel = torch.from_numpy(self._h_qpos), torch.from_numpy(self._h_qvel)
+        self.ctrl, self.xfrc_applied = torch.from_numpy(self._h_ctrl), torch.from_numpy(self._h_xfrc_applied)
+        self.sensordata = torch.from_numpy(self._h_sensordata)
         self._zero_warm = np.zeros(n, dtype=bool)
 
         geom_type = np.array([tm.geom_type[tm.geom("object_geom").id] for tm in templates])
         self.groups: list[_Group] = []
-        with wp.ScopedDevice(self.device):
+        with wp.ScopedDevice(self.wp_device):
             for gt in np.unique(geom_type[object_index]):
                 ids = np.flatnonzero(geom_type[object_index] == gt)
                 self.groups.append(self._build_group(ids, [env_model(int(i)) for i in ids], nconmax, njmax))
@@ -161,8 +168,8 @@ class WarpBackend:
 
     def _push_state(self, g: _Group) -> None:
         d = g.data
-        self._upload(d.qpos, self.qpos[g.ids])
-        self._upload(d.qvel, self.qvel[g.ids])
+        self._upload(d.qpos, self._h_qpos[g.ids])
+        self._upload(d.qvel, self._h_qvel[g.ids])
         self._push_inputs(g)
         zero = self._zero_warm[g.ids]
         if zero.any():
@@ -172,20 +179,20 @@ class WarpBackend:
             self._zero_warm[g.ids] = False
 
     def _push_inputs(self, g: _Group) -> None:
-        self._upload(g.data.ctrl, self.ctrl[g.ids])
-        self._upload(g.data.xfrc_applied, self.xfrc_applied[g.ids])
+        self._upload(g.data.ctrl, self._h_ctrl[g.ids])
+        self._upload(g.data.xfrc_applied, self._h_xfrc_applied[g.ids])
 
     # --- backend interface --------------------------------------------------------------------------------------
-    def reset(self, ids: np.ndarray) -> None:
-        ids = np.asarray(ids)
-        self.qpos[ids] = self._qpos0(ids)
-        self.qvel[ids] = 0.0
-        self.ctrl[ids] = 0.0
-        self.xfrc_applied[ids] = 0.0
+    def reset(self, ids) -> None:
+        ids = np.asarray(ids.cpu() if isinstance(ids, torch.Tensor) else ids)
+        self._h_qpos[ids] = self._qpos0(ids)
+        self._h_qvel[ids] = 0.0
+        self._h_ctrl[ids] = 0.0
+        self._h_xfrc_applied[ids] = 0.0
         self._zero_warm[ids] = True
 
     def _qpos0(self, ids: np.ndarray) -> np.ndarray:
-        out = np.empty((len(ids), self.qpos.shape[1]))
+        out = np.empty((len(ids), self._h_qpos.shape[1]))
         for k, g in enumerate(self.groups):
             mask = self._group_of[ids] == k
             if mask.any():
@@ -193,9 +200,9 @@ class WarpBackend:
                 out[mask] = q0[self._world_of[ids[mask]] % q0.shape[0]]
         return out
 
-    def forward(self, ids: np.ndarray) -> None:
-        ids = np.asarray(ids)
-        with wp.ScopedDevice(self.device):
+    def forward(self, ids) -> None:
+        ids = np.asarray(ids.cpu() if isinstance(ids, torch.Tensor) else ids)
+        with wp.ScopedDevice(self.wp_device):
             for k, g in enumerate(self.groups):
                 mine = ids[self._group_of[ids] == k]
                 if mine.size == 0:
@@ -204,7 +211,7 @@ class WarpBackend:
                 # and only the reset worlds' sensors are read back (the others keep those of their last step).
                 self._push_state(g)
                 mjw.forward(g.model, g.data)
-                self.sensordata[mine] = g.data.sensordata.numpy()[self._world_of[mine]]
+                self._h_sensordata[mine] = g.data.sensordata.numpy()[self._world_of[mine]]
 
     def _run(self, g: _Group, nstep: int) -> None:
         if g.graph is None or g.graph_nstep != nstep:
@@ -214,26 +221,26 @@ class WarpBackend:
             g.graph, g.graph_nstep = cap.graph, nstep
         wp.capture_launch(g.graph)
 
-    def step(self, nstep: int) -> np.ndarray:
+    def step(self, nstep: int) -> torch.Tensor:
         overflow = np.zeros(self.num_envs, dtype=np.int64)
-        with wp.ScopedDevice(self.device):
+        with wp.ScopedDevice(self.wp_device):
             for g in self.groups:
                 self._push_inputs(g)
                 g.data.overflow.zero_()
                 self._run(g, nstep)
             for g in self.groups:  # downloads synchronize; all groups were launched first
                 d = g.data
-                self.qpos[g.ids] = d.qpos.numpy()
-                self.qvel[g.ids] = d.qvel.numpy()
-                self.sensordata[g.ids] = d.sensordata.numpy()
+                self._h_qpos[g.ids] = d.qpos.numpy()
+                self._h_qvel[g.ids] = d.qvel.numpy()
+                self._h_sensordata[g.ids] = d.sensordata.numpy()
                 overflow[g.ids] = d.overflow.numpy()
         failed = (overflow & ~_NOT_FAILURES) != 0
-        failed |= ~np.isfinite(self.qpos).all(axis=1) | ~np.isfinite(self.qvel).all(axis=1)
-        return failed
+        failed |= ~np.isfinite(self._h_qpos).all(axis=1) | ~np.isfinite(self._h_qvel).all(axis=1)
+        return torch.from_numpy(failed)
 
     # --- benchmarks and rendering ----------------------------------------------------------------------------
     def snapshot(self):
-        with wp.ScopedDevice(self.device):
+        with wp.ScopedDevice(self.wp_device):
             dev = [
                 {
                     k: wp.clone(getattr(g.data, k))
@@ -241,32 +248,32 @@ class WarpBackend:
                 }
                 for g in self.groups
             ]
-        host = {k: getattr(self, k).copy() for k in ("qpos", "qvel", "ctrl", "xfrc_applied", "sensordata")}
+        host = {k: getattr(self, f"_h_{k}").copy() for k in ("qpos", "qvel", "ctrl", "xfrc_applied", "sensordata")}
         return dev, host
 
     def restore(self, state) -> None:
         dev, host = state
-        with wp.ScopedDevice(self.device):
+        with wp.ScopedDevice(self.wp_device):
             for g, saved in zip(self.groups, dev):
                 for k, v in saved.items():
                     wp.copy(getattr(g.data, k), v)
         for k, v in host.items():
-            getattr(self, k)[:] = v
+            getattr(self, f"_h_{k}")[:] = v
 
     def raw_step(self, nstep: int) -> None:
         """Physics only: upload the commanded targets, step every group, wait; no state download."""
-        with wp.ScopedDevice(self.device):
+        with wp.ScopedDevice(self.wp_device):
             for g in self.groups:
                 self._push_inputs(g)
                 self._run(g, nstep)
-            wp.synchronize_device(self.device)
+            wp.synchronize_device(self.wp_device)
 
     def get_data(self, i: int, model: mujoco.MjModel) -> mujoco.MjData:
         """A CPU MjData holding env i's current state (for rendering)."""
         d = mujoco.MjData(model)
-        d.qpos[:] = self.qpos[i]
-        d.qvel[:] = self.qvel[i]
-        d.ctrl[:] = self.ctrl[i]
+        d.qpos[:] = self._h_qpos[i]
+        d.qvel[:] = self._h_qvel[i]
+        d.ctrl[:] = self._h_ctrl[i]
         return d
 
     def close(self) -> None:

@@ -1,0 +1,20 @@
+"""Tensors to the host: what a caller that reads numpy gets from the env's tensors on its device.
+
+On the CPU a tensor's numpy view shares its memory, so the CPU backend hands numpy callers the env's own results
+without a copy; on a GPU this is where an env step's results cross to the host, and only when a caller asks.
+"""
+
+from __future__ import annotations
+
+import torch
+
+
+def on_host(x):
+    """numpy for a tensor, recursively through dicts and tuples; anything else unchanged."""
+    if isinstance(x, torch.Tensor):
+        return x.detach().cpu().numpy()
+    if isinstance(x, dict):
+        return {k: on_host(v) for k, v in x.items()}
+    if isinstance(x, tuple):
+        return tuple(on_host(v) for v in x)
+    return x
