@@ -99,7 +99,7 @@ def _replayed_control_steps_per_s(env, start, targets: list) -> float:
     ctrl = env.physics.ctrl
     t = time.perf_counter()
     for target in targets:
-        ctrl[:] = target
+        ctrl.copy_(target)
         env.physics.raw_step(env.cfg.physics.substeps)
     wall = time.perf_counter() - t
     env.physics.restore(end)
@@ -107,12 +107,13 @@ def _replayed_control_steps_per_s(env, start, targets: list) -> float:
 
 
 def _recording_targets(env, into: list):
-    """env.step that also keeps the joint command it left in the backend after each control step."""
-    step = type(env).step
+    """env.step_tensors (what the vec env calls) that also keeps the joint command it left in the backend after each
+    control step."""
+    step = type(env).step_tensors
 
     def recorded(*args, **kwargs):
         out = step(env, *args, **kwargs)
-        into.append(env.physics.ctrl.copy())
+        into.append(env.physics.ctrl.clone())
         return out
 
     return recorded
@@ -162,7 +163,7 @@ def _timed_iterations(runner, env, update, iterations: int) -> list[dict]:
 
     runner.alg.update = timed_update
     targets: list = []
-    env.step = _recording_targets(env, targets)  # the instance's step: what the vec env calls
+    env.step_tensors = _recording_targets(env, targets)  # the instance's step: what the vec env calls
     rows = []
     try:
         for _ in range(iterations):
@@ -184,7 +185,7 @@ def _timed_iterations(runner, env, update, iterations: int) -> list[dict]:
                 }
             )
     finally:
-        del env.step
+        del env.step_tensors
     return rows
 
 
