@@ -231,3 +231,38 @@ def test_each_term_per_step_within_float32_of_the_batch_backend():
         np.testing.assert_array_equal(term_w, term_b)
         np.testing.assert_array_equal(trunc_w, trunc_b)
         np.testing.assert_array_equal(info_w["success"], info_b["success"])
+
+
+def test_shared_arrays_are_warps_own_memory_and_step_alike():
+    """`share_arrays=True` with one geometry group: the contract's tensors are the Warp arrays themselves (same
+    memory, float32), and stepping through them gives bit for bit what the copying layout gives."""
+    from lerobot_blindgrasp.sim.backends.warp import WarpBackend
+
+    env = BatchedGraspEnv(
+        GraspEnvConfig(
+            backend="warp", device="cpu", num_envs=3, seed=5, objects=("cylinder_a_medium",), dr=NO_PUSH
+        )
+    )
+    env.reset()
+    copying = env.physics
+    shared = WarpBackend(env._templates, env.object_index, env.env_model, device="cpu", share_arrays=True)
+    assert shared.shares_memory and not copying.shares_memory
+    data = shared.groups[0].data
+    for k in ("qpos", "qvel", "ctrl", "xfrc_applied", "sensordata"):
+        view = getattr(shared, k)
+        assert view.dtype == torch.float32 and view.data_ptr() == getattr(data, k).ptr, k
+    everyone = np.arange(3)
+    shared.reset(everyone)
+    for k in ("qpos", "qvel", "ctrl"):
+        getattr(shared, k)[:] = getattr(copying, k)  # the env's reset state, cast to float32 on the way
+    shared.forward(everyone)
+    np.testing.assert_array_equal(data.qpos.numpy(), shared.qpos.numpy())  # written in place, no copy
+    target = copying.ctrl + 0.1
+    for _ in range(3):
+        copying.ctrl[:] = target
+        shared.ctrl[:] = target
+        assert not copying.step(10).any() and not shared.step(10).any()
+        for k in ("qpos", "qvel", "sensordata"):
+            np.testing.assert_array_equal(
+                getattr(shared, k).numpy(), getattr(copying, k).numpy().astype(np.float32)
+            )

@@ -13,12 +13,15 @@ State. `qpos`, `qvel`, `ctrl`, `xfrc_applied` and `sensordata` are float64 tenso
 the torch name of `wp_device`), in env order; a step never copies them to the host. Each control step copies ctrl
 and xfrc_applied into the groups' Warp arrays and qpos, qvel and sensordata back, on the device (about 100 floats
 per env, cast between float64 and Warp's float32); `wp.to_torch` views of the Warp arrays (shared memory) are the
-two ends of those copies. They are not the contract's tensors themselves, for two reasons: the task's terms write
-float64 into them, which torch's indexed writes refuse into a float32 tensor, and with several groups the worlds of
-one Warp array interleave with the others' in env order. On CUDA, torch's stream is synchronized before Warp's
-launches and Warp's after them. The `nstep` substeps of each group run as one captured graph: a CUDA graph on a
-GPU, Warp's API capture on its CPU device (replayed natively, without the Python launch overhead of each kernel,
-which on CPU is most of a step's time; the replay is bit-identical to stepping kernel by kernel).
+two ends of those copies. `share_arrays=True` removes the copies where it can: with one group holding every env in
+order, the tensors ARE the Warp arrays (float32, mjlab's way). It is off by default for two reasons: the task's
+reset writes float64 rows into qpos and ctrl with indexed assignment, which torch refuses into a float32 tensor
+(casting them to the tensor's dtype there is all it takes), and with several groups (the paper's 18 objects are
+four geometry types) one tensor cannot share memory with several Warp arrays whose worlds interleave in env order:
+that needs every geometry in one model. On CUDA, torch's stream is synchronized before Warp's launches and Warp's
+after them. The `nstep` substeps of each group run as one captured graph: a CUDA graph on a GPU, Warp's API
+capture on its CPU device (replayed natively, without the Python launch overhead of each kernel, which on CPU is
+most of a step's time; the replay is bit-identical to stepping kernel by kernel).
 
 Differences from the batch backend:
 - float32 throughout (MuJoCo Warp's `float`), against float64 on CPU;
@@ -109,6 +112,7 @@ class WarpBackend:
         device: str | None = None,
         nconmax: int = NCONMAX,
         njmax: int = NJMAX,
+        share_arrays: bool = False,
     ):
         """templates: one compiled MjModel per object; object_index: object of each env; env_model(i): env i's
         randomized MjModel (the same one the batch backend would step)."""
@@ -126,14 +130,24 @@ class WarpBackend:
         for g in self.groups:
             g.ids_t = torch.as_tensor(g.ids, device=self.device)
             g.view = {k: wp.to_torch(getattr(g.data, k)) for k in (*_STATE, "qacc_warmstart", "overflow")}
+        # share_arrays: with one group holding every env in order, the contract's tensors ARE its Warp arrays
+        # (float32, no copy at all); the task's terms must then write them with their dtype (see State above).
+        self.shares_memory = (
+            share_arrays and len(self.groups) == 1 and np.array_equal(self.groups[0].ids, np.arange(n))
+        )
         for k in _STATE:
             v = self.groups[0].view[k]
-            setattr(self, k, torch.zeros((n, *v.shape[1:]), dtype=torch.float64, device=self.device))
+            if self.shares_memory:
+                setattr(self, k, v)
+            else:
+                setattr(self, k, torch.zeros((n, *v.shape[1:]), dtype=torch.float64, device=self.device))
         self._gather(_STATE)
         self._qpos0 = torch.zeros_like(self.qpos)
         for g in self.groups:
             q0 = wp.to_torch(g.model.qpos0)
-            self._qpos0[g.ids_t] = q0[torch.arange(len(g.ids), device=self.device) % q0.shape[0]].to(torch.float64)
+            self._qpos0[g.ids_t] = q0[torch.arange(len(g.ids), device=self.device) % q0.shape[0]].to(
+                self.qpos.dtype
+            )
         self._zero_warm = torch.zeros(n, dtype=torch.bool, device=self.device)
 
     def _build_group(self, ids, models: list[mujoco.MjModel], nconmax: int, njmax: int) -> _Group:
@@ -168,8 +182,8 @@ class WarpBackend:
 
     # --- state transfer (on the device) -----------------------------------------------------------------------
     def _scatter(self, fields) -> None:
-        """The env-ordered tensors into the groups' arrays."""
-        for g in self.groups:
+        """The env-ordered tensors into the groups' arrays (nothing to copy when they are the same memory)."""
+        for g in [] if self.shares_memory else self.groups:
             for k in fields:
                 g.view[k].copy_(getattr(self, k)[g.ids_t])
         if self._cuda:  # torch's writes done before Warp's stream reads them
@@ -179,7 +193,7 @@ class WarpBackend:
         """The groups' arrays into the env-ordered tensors, after Warp's work is done."""
         if self._cuda:
             wp.synchronize_device(self.wp_device)
-        for g in groups or self.groups:
+        for g in [] if self.shares_memory else groups or self.groups:
             for k in fields:
                 getattr(self, k)[g.ids_t] = g.view[k].to(torch.float64)
 
