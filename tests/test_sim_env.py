@@ -229,3 +229,23 @@ def test_physics_blow_up_resets_only_that_env_and_is_counted():
     assert torch.isfinite(env._qpos).all()
     # The healthy envs kept stepping from where they were.
     assert np.abs(env.joint_positions()[[0, 2]] - before[[0, 2]]).max() < 0.1
+
+
+# --- the backend contract -----------------------------------------------------------------------------------------
+def test_batch_backend_state_is_torch_sharing_memory_with_the_physics():
+    """qpos, qvel, ctrl, xfrc_applied and sensordata are float64 tensors over mujoco.batch's own rows: a physics
+    step shows in them without a copy, and a write into them is what the physics steps from."""
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=3, seed=0, nthread=1))
+    env.reset()
+    p = env.physics
+    for name in ("qpos", "qvel", "ctrl", "xfrc_applied", "sensordata"):
+        t, live = getattr(p, name), p.batch.bind(name)
+        assert isinstance(t, torch.Tensor) and t.dtype == torch.float64 and t.device == p.device
+        assert t.data_ptr() == live.__array_interface__["data"][0] and t.stride(0) * 8 == live.strides[0]
+    before = p.qpos.clone()
+    p.ctrl[:] = p.ctrl + 0.2  # the servos get new targets through the tensor
+    failed = p.step(10)
+    assert isinstance(failed, torch.Tensor) and not failed.any()
+    np.testing.assert_array_equal(p.qpos.numpy(), p.batch.bind("qpos"))  # the same memory, after the step
+    assert (p.qpos[:, :9] - before[:, :9]).abs().max() > 1e-3  # and the joints moved towards them
+    env.close()

@@ -99,7 +99,7 @@ def _replayed_control_steps_per_s(env, start, targets: list) -> float:
     ctrl = env.physics.ctrl
     t = time.perf_counter()
     for target in targets:
-        ctrl.copy_(target)
+        ctrl[:] = target
         env.physics.raw_step(env.cfg.physics.substeps)
     wall = time.perf_counter() - t
     env.physics.restore(end)
@@ -107,8 +107,7 @@ def _replayed_control_steps_per_s(env, start, targets: list) -> float:
 
 
 def _recording_targets(env, into: list):
-    """env.step_tensors (what the vec env calls) that also keeps the joint command it left in the backend after each
-    control step."""
+    """env.step_tensors that also keeps the joint command it left in the backend after each control step."""
     step = type(env).step_tensors
 
     def recorded(*args, **kwargs):

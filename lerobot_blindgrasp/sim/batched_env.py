@@ -1,15 +1,11 @@
 """Batched blind-grasp environment: N grippers, each with one object, stepped together.
 
 This module steps, observes and resets the task, written once, torch over the env axis (no Python loop over envs),
-on the physics' device: the backend's state arrays are tensors that share memory with the physics (`backends/`).
-What it combines lives in one module each: the randomization draws and Table II's application in
-`sim/randomization.py`, the event terms (pushes, the hold push, latencies, the servo model) in `sim/events.py`, the
-reward terms in `sim/rewards.py`, success and termination in `sim/termination.py`, what the envs observe in
-`sim/observations.py`. Physics
-runs in a backend (`sim/backends/`) chosen by `GraspEnvConfig.backend`:
-- "batch" (default): `mujoco.batch.Batch` (MuJoCo >= 3.17) on CPU threads, each env on its own MjModel copy
-  carrying its object and its domain-randomization draw (friction, mass, servo gains);
-- "warp": MuJoCo Warp (GPU, or CPU for development) with the same per-env parameters as per-world model fields.
+on the physics' device. It composes terms that live in one module each: the randomization draws (`randomization.py`),
+the event terms (`events.py`), the reward terms (`rewards.py`), success and termination (`termination.py`), the
+observations (`observations.py`). Physics runs in a backend chosen by `GraspEnvConfig.backend` ("batch":
+`mujoco.batch` on CPU threads, one MjModel per env with its Table II draw; "warp": MuJoCo Warp), whose state arrays
+are tensors sharing memory with the physics (`backends/__init__.py` has the contract).
 
 Step (paper Sec. III-B): a_t = delta-theta in R^9 is clipped to +-0.3 rad, the servo target is q_t + a_t (clipped to
 the joint limits, as the real robot does), and `substeps` physics steps cover one 50 ms control period.
@@ -81,7 +77,7 @@ class BatchedGraspEnv:
             for o in obj_specs
         ]
         self._templates = templates
-        self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)  # host: it builds the MjModels
+        self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)  # on the CPU: it builds MjModels
         if cfg.backend == "batch":
             self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
             self.physics = BatchBackend(self.models, nthread=cfg.nthread)
@@ -101,32 +97,27 @@ class BatchedGraspEnv:
         dev = self.device = self.physics.device
         f64 = {"dtype": torch.float64, "device": dev}
         self._seeds = rng.as_words(self.env_seeds, dev)
+        self._noise_key = rng.stream_key(self._seeds, rng.STREAM_OBS_NOISE)
         self.sensor_draw = randomization.draw_sensors(cfg.dr, self._seeds)
         self.sensor_index = sensors.SensorIndex.from_model(template, dev)
         self._object_body = template.body("object").id
-        self._qpos = self.physics.qpos
-        self._qvel = self.physics.qvel
-        self._ctrl = self.physics.ctrl
-        self._xfrc = self.physics.xfrc_applied
-        self._sensordata = self.physics.sensordata
+        p = self.physics  # its state tensors, read and written in place
+        self._qpos, self._qvel, self._ctrl, self._xfrc = p.qpos, p.qvel, p.ctrl, p.xfrc_applied
+        self._sensordata = p.sensordata
         self.rest_height = torch.tensor([obj_specs[k].rest_height for k in self.object_index], **f64)
-        self._rest_quat = torch.as_tensor(
-            np.array([self._body_quat(o) for o in obj_specs])[self.object_index], **f64
+        self._rest_quat = torch.tensor([obj_specs[k].rest_quat for k in self.object_index], **f64)
+        self._joint_lower, self._joint_upper = (
+            torch.as_tensor(x, **f64) for x in (spec.JOINT_LOWER, spec.JOINT_UPPER)
         )
-        self._joint_lower = torch.as_tensor(spec.JOINT_LOWER, **f64)
-        self._joint_upper = torch.as_tensor(spec.JOINT_UPPER, **f64)
         self._object_index = torch.as_tensor(self.object_index, device=dev)
-
-        def zeros(*shape, dtype=torch.float64):
-            return torch.zeros(shape, dtype=dtype, device=dev)
-
-        self.episode = zeros(n, dtype=torch.int64)  # per-env episode counter (drives the reset draws)
-        self.episode_length = zeros(n, dtype=torch.int64)
-        self.lifted_steps = zeros(n, dtype=torch.int64)  # consecutive steps lifted >= SUCCESS_LIFT_M
-        self.success = zeros(n, dtype=torch.bool)  # latched once held for SUCCESS_HOLD_S
-        self.prev_action = zeros(n, spec.NUM_JOINTS)
-        self.episode_return = zeros(n)
-        self.episode_terms = {k: zeros(n) for k in rewards.TERM_NAMES}
+        i64 = {"dtype": torch.int64, "device": dev}
+        self.episode = torch.zeros(n, **i64)  # per-env episode counter (drives the reset draws)
+        self.episode_length = torch.zeros(n, **i64)
+        self.lifted_steps = torch.zeros(n, **i64)  # consecutive steps lifted >= SUCCESS_LIFT_M
+        self.success = torch.zeros(n, dtype=torch.bool, device=dev)  # latched once held for SUCCESS_HOLD_S
+        self.prev_action = torch.zeros((n, spec.NUM_JOINTS), **f64)
+        self.episode_return = torch.zeros(n, **f64)
+        self.episode_terms = {k: torch.zeros(n, **f64) for k in rewards.TERM_NAMES}
         self.physics_resets = 0  # envs reset because their physics went unstable
         # The event terms (sim/events.py); all but Table II's pushes are off at their defaults.
         self.pushes = events.Pushes(cfg.dr, self._seeds)
@@ -138,12 +129,6 @@ class BatchedGraspEnv:
         self._raw: dict[str, torch.Tensor] = {}
 
     # --- construction ----------------------------------------------------------------------------------------
-    @staticmethod
-    def _body_quat(o: objects.ObjectSpec) -> np.ndarray:
-        q = np.zeros(4)
-        mujoco.mju_euler2Quat(q, np.asarray(o.euler, dtype=np.float64), "xyz")
-        return q
-
     def env_model(self, i: int) -> mujoco.MjModel:
         """Env i's MjModel: its object with its Table II draw (what either backend simulates for env i)."""
         if self.models is not None:
@@ -154,7 +139,7 @@ class BatchedGraspEnv:
         return randomization.apply_physics_draw(template, self.physics_draw, i, self.cfg.dr.torque_limit_scale)
 
     # --- reset ------------------------------------------------------------------------------------------------
-    def reset(self) -> dict[str, np.ndarray]:
+    def reset(self) -> dict[str, np.ndarray]:  # numpy on the host; reset_tensors on the device
         return on_host(self.reset_tensors())
 
     def reset_tensors(self) -> dict[str, torch.Tensor]:
@@ -192,15 +177,13 @@ class BatchedGraspEnv:
         a = torch.as_tensor(action, dtype=torch.float64, device=self.device)
         if a.shape != (self.num_envs, spec.NUM_JOINTS):
             raise ValueError(f"action must have shape ({self.num_envs}, {spec.NUM_JOINTS}), got {tuple(a.shape)}")
-        if not isinstance(action, torch.Tensor) and not np.isfinite(np.asarray(action, dtype=np.float64)).all():
-            bad = np.flatnonzero(~np.isfinite(np.asarray(action, dtype=np.float64)).all(axis=1))
-            raise ValueError(f"action has NaN/inf entries for envs {bad[:10].tolist()}")
+        if not isinstance(action, torch.Tensor) and not (ok := np.isfinite(a.numpy()).all(axis=1)).all():
+            raise ValueError(f"action has NaN/inf entries for envs {np.flatnonzero(~ok)[:10].tolist()}")
         return a
 
     def step(self, action, active: np.ndarray | None = None):
-        """One control step with numpy on the host (`step_tensors` on the device). `active` (batch backend only):
-        the envs to simulate; the others keep their physics state, which evaluation uses for episodes whose
-        outcome is already final (their rows are then stale)."""
+        """One control step with numpy on the host. `active` (batch backend only): the envs to simulate; the others
+        keep their physics state, which evaluation uses for episodes whose outcome is already final."""
         return on_host(self.step_tensors(action, active))
 
     def step_tensors(self, action, active=None):
@@ -305,10 +288,8 @@ class BatchedGraspEnv:
 
     # --- frames and targets -------------------------------------------------------------------------------------
     def _measured_frame(self, q: torch.Tensor, sel: slice | torch.Tensor = slice(None)) -> torch.Tensor:
-        """Absolute joint positions of envs `sel` in the joints' measured frame (+ the calibration offset; a copy)."""
-        if self.cfg.dr.joint_calibration_rad:
-            return q + self.sensor_draw.joint_offset[sel]
-        return q.clone()
+        """Absolute joint positions of envs `sel` in the joints' measured frame (a copy)."""
+        return self.sensor_draw.measured(q, sel) if self.cfg.dr.joint_calibration_rad else q.clone()
 
     def target_for_delta(self, delta):
         """The absolute targets (n, 9), in the joints' measured frame, that `step` commands for `delta`: the step
@@ -325,9 +306,8 @@ class BatchedGraspEnv:
         joints' measured frame: target - (q + calibration offset). Without an offset, target - q. numpy in, numpy
         out; a tensor in, a tensor out."""
         sel = slice(None) if ids is None else torch.as_tensor(ids, device=self.device)
-        out = torch.as_tensor(target, dtype=torch.float64, device=self.device) - self._measured_frame(
-            self._qpos[sel, observations.JOINTS], sel
-        )
+        q = self._measured_frame(self._qpos[sel, observations.JOINTS], sel)
+        out = torch.as_tensor(target, dtype=torch.float64, device=self.device) - q
         return out if isinstance(target, torch.Tensor) else on_host(out)
 
     # --- observation --------------------------------------------------------------------------------------------
@@ -335,17 +315,10 @@ class BatchedGraspEnv:
         """Both observations for all envs or `ids`; for all envs, also the raw quantities the rewards read."""
         sel = slice(None) if ids is None else ids
         counter = self.episode[sel] * 100_003 + self.episode_length[sel]
-        noise = rng.normal(self._seeds[sel], rng.STREAM_OBS_NOISE, counter, observations.NOISE_DIM)
+        noise = rng.normal(None, rng.STREAM_OBS_NOISE, counter, observations.NOISE_DIM, self._noise_key[sel])
+        state = [x[sel] for x in (self._qpos, self._qvel, self._sensordata, self.rest_height, self.prev_action)]
         raw, obs = observations.observe(
-            self._qpos[sel],
-            self._qvel[sel],
-            self._sensordata[sel],
-            self.sensor_index,
-            self.rest_height[sel],
-            self.prev_action[sel],
-            noise,
-            self.cfg.dr,
-            randomization.SensorDraw(self.sensor_draw.force_bias[sel], self.sensor_draw.joint_offset[sel]),
+            *state[:3], self.sensor_index, *state[3:], noise, self.cfg.dr, self.sensor_draw.rows(sel)
         )
         if ids is None:
             self._raw = raw
@@ -364,7 +337,7 @@ class BatchedGraspEnv:
 
     def fingertip_positions(self) -> np.ndarray:
         """(N, 3 fingers, xyz) world positions of the tip sites (the load cells)."""
-        return on_host(self.sensor_index.read(self._sensordata, "pos"))
+        return on_host(self.sensor_index.read(self._sensordata, "pos")).copy()
 
     def mj_model_data(self, i: int) -> tuple[mujoco.MjModel, mujoco.MjData]:
         """Env i's model and a forwarded MjData of its current state (for rendering)."""

@@ -16,6 +16,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 OBJECT_DENSITY = 400.0  # kg/m^3
 
 
@@ -37,6 +39,15 @@ class ObjectSpec:
         if self.mjcf_type == "cylinder":
             return self.size[1]
         return self.size[0]  # sphere; capsule lying on its side
+
+    @property
+    def rest_quat(self) -> tuple[float, float, float, float]:
+        """The spawn orientation (wxyz), from `euler` (xyz, rad) as MJCF reads it."""
+        import mujoco  # this module builds MJCF text without MuJoCo; only the env asks for quaternions
+
+        q = np.zeros(4)
+        mujoco.mju_euler2Quat(q, np.asarray(self.euler, dtype=np.float64), "xyz")
+        return tuple(q)
 
     @property
     def volume(self) -> float:

@@ -171,9 +171,9 @@ def draw_reset(dr: DomainRandomization, seeds, episode) -> tuple[torch.Tensor, t
     return q0, xy
 
 
-def draw_push(dr: DomainRandomization, seeds, counter) -> tuple[torch.Tensor, torch.Tensor]:
+def draw_push(dr: DomainRandomization, seeds, counter, key=None) -> tuple[torch.Tensor, torch.Tensor]:
     """A new push force (n, 3) in N and the number of control steps until the next push (n,)."""
-    u = rng.uniform(seeds, rng.STREAM_PUSH, counter, 4)
+    u = rng.uniform(seeds, rng.STREAM_PUSH, counter, 4, key)
     force = rng.between(u[:, :3], -dr.push_force_n, dr.push_force_n)
     period_s = rng.between(u[:, 3], *dr.push_period_s)
     steps = torch.ceil(period_s * spec.CONTROL_HZ).clamp_min(1).to(torch.int64)
@@ -186,6 +186,13 @@ class SensorDraw:
 
     force_bias: torch.Tensor
     joint_offset: torch.Tensor
+
+    def rows(self, sel: slice | torch.Tensor) -> SensorDraw:
+        return SensorDraw(self.force_bias[sel], self.joint_offset[sel])
+
+    def measured(self, q: torch.Tensor, sel: slice | torch.Tensor = slice(None)) -> torch.Tensor:
+        """Joint positions of envs `sel` in the joints' measured frame: q + their calibration offset (a copy)."""
+        return q + self.joint_offset[sel]
 
 
 def _signs(u: torch.Tensor) -> torch.Tensor:
@@ -255,6 +262,7 @@ class PushSchedule:
         self.counter = torch.zeros(n, dtype=torch.int64, device=seeds.device)  # pushes drawn so far, per env
         self.steps_to_push = torch.zeros(n, dtype=torch.int64, device=seeds.device)
         self.pushing = torch.zeros(n, dtype=torch.bool, device=seeds.device)  # a push is under way this step
+        self.key = rng.stream_key(seeds, rng.STREAM_PUSH)
 
     def reset(self, ids: torch.Tensor) -> None:
         """A new episode: no push under way, and the time to the first one drawn."""
@@ -270,7 +278,7 @@ class PushSchedule:
         self.steps_to_push -= 1
         due = self.steps_to_push <= 0
         # every env's next draw, kept where one is due: the same numbers an index list of the due envs would draw
-        force, steps = draw_push(self.dr, self.seeds, self.counter)
+        force, steps = draw_push(self.dr, self.seeds, self.counter, self.key)
         self.counter += due
         self.steps_to_push = torch.where(due, steps, self.steps_to_push)
         self.pushing = due

@@ -59,20 +59,34 @@ def as_words(x, device: torch.device | str | None = None) -> torch.Tensor:
     return torch.as_tensor(a.astype(np.int64, copy=False), device=device)
 
 
-def uniform(seeds, stream: int, counter, n: int) -> torch.Tensor:
-    """U[0, 1) float64 draws of shape (len(seeds), n), one row per env, on the seeds' device."""
-    seeds = as_words(seeds)
-    counter = as_words(counter, seeds.device).expand(seeds.shape)
-    key = _splitmix64(seeds * _SEED_MUL + stream)
+def stream_key(seeds, stream: int) -> torch.Tensor:
+    """The per-env key of one stream: what every draw of that stream starts from (an env may keep it)."""
+    return _splitmix64(as_words(seeds) * _SEED_MUL + stream)
+
+
+_OFFSETS: dict[tuple[int, torch.device], torch.Tensor] = {}
+
+
+def _offsets(n: int, device: torch.device) -> torch.Tensor:
+    """index x golden ratio for draws of n numbers, made once per (n, device)."""
+    if (n, device) not in _OFFSETS:
+        _OFFSETS[n, device] = torch.arange(n, dtype=torch.int64, device=device)[None, :] * _GOLDEN
+    return _OFFSETS[n, device]
+
+
+def uniform(seeds, stream: int, counter, n: int, key: torch.Tensor | None = None) -> torch.Tensor:
+    """U[0, 1) float64 draws of shape (len(seeds), n), one row per env, on the seeds' device. `key`: the seeds'
+    `stream_key`, when the caller keeps it."""
+    key = stream_key(seeds, stream) if key is None else key
+    counter = as_words(counter, key.device)
     key = _splitmix64(key ^ (counter * _COUNTER_MUL))
-    idx = torch.arange(n, dtype=torch.int64, device=seeds.device)
-    bits = _splitmix64(key[:, None] + idx * _GOLDEN)
+    bits = _splitmix64(key[:, None] + _offsets(n, key.device))
     return _shr(bits, 11).to(torch.float64) * (1.0 / (1 << 53))
 
 
-def normal(seeds, stream: int, counter, n: int) -> torch.Tensor:
+def normal(seeds, stream: int, counter, n: int, key: torch.Tensor | None = None) -> torch.Tensor:
     """Standard normal draws of shape (len(seeds), n) (Box-Muller on two uniform blocks)."""
-    u = uniform(seeds, stream, counter, 2 * n)
+    u = uniform(seeds, stream, counter, 2 * n, key)
     u1 = u[:, :n].clamp_min(1e-300)
     return torch.sqrt(-2.0 * torch.log(u1)) * torch.cos(2.0 * np.pi * u[:, n:])
 

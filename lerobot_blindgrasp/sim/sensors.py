@@ -27,9 +27,12 @@ PER_TIP = ("contact", "objcontact", "force", "torque", "pos", "quat", "zaxis", "
 @dataclass(frozen=True)
 class SensorIndex:
     """Column indices into `sensordata` for each (finger, reading), as (n_fingers, dim) integer tensors on the
-    device of the sensordata they index."""
+    device of the sensordata they index. `block`: (first column, columns per finger) when every finger's readings
+    sit in one block of the same layout (the gripper's scene), so that a reading is a view, not a gather."""
 
     cols: dict[str, torch.Tensor]
+    block: tuple[int, int] | None = None
+    spans: dict[str, tuple[int, int]] | None = None  # kind -> (offset in a finger's block, dim)
 
     @classmethod
     def from_model(cls, m: mujoco.MjModel, device: torch.device | str = "cpu") -> SensorIndex:
@@ -39,25 +42,46 @@ class SensorIndex:
             for f in spec.FINGERS:
                 s = m.sensor(f"{f}_{kind}")
                 rows.append(np.arange(s.adr[0], s.adr[0] + s.dim[0]))
-            cols[kind] = torch.as_tensor(np.stack(rows), device=device)
-        return cls(cols)
+            cols[kind] = np.stack(rows)
+        first = min(int(c[0, 0]) for c in cols.values())
+        width = sum(c.shape[1] for c in cols.values())
+        regular = all(np.array_equal(c - c[:1], np.arange(len(c))[:, None] * width) for c in cols.values())
+        block = (first, width) if regular and first + len(spec.FINGERS) * width <= m.nsensordata else None
+        spans = {k: (int(c[0, 0]) - first, c.shape[1]) for k, c in cols.items()}
+        return cls({k: torch.as_tensor(c, device=device) for k, c in cols.items()}, block, spans)
 
     def read(self, sensordata: torch.Tensor, kind: str) -> torch.Tensor:
-        """(n_envs, n_fingers, dim) copy of one reading for all envs."""
-        return sensordata[:, self.cols[kind]]
+        """(n_envs, n_fingers, dim) of one reading for all envs: a view of `sensordata` where the layout allows
+        (clone it to keep it past the next physics step), else a copy."""
+        if self.block is None:
+            return sensordata[:, self.cols[kind]]
+        (first, width), (off, dim) = self.block, self.spans[kind]
+        tips = sensordata[:, first : first + len(spec.FINGERS) * width].unflatten(1, (len(spec.FINGERS), width))
+        return tips[:, :, off : off + dim]
+
+
+# quat_to_mat's nine entries from the quaternion's pairwise products p = q_i q_j (wxyz; index 4 i + j):
+#   R = [[1 - 2(yy + zz), 2(xy - wz), 2(xz + wy)], [2(xy + wz), 1 - 2(xx + zz), 2(yz - wx)],
+#        [2(xz - wy), 2(yz + wx), 1 - 2(xx + yy)]]
+# as c (A + s B) + 1 on the diagonal, in a few whole-tensor ops instead of one small op per entry (each entry's
+# arithmetic is the formula's: -2 (A + B) + 1 and 2 (A - B) round exactly as 1 - 2 (A + B) and 2 (A - B)).
+_A = [10, 6, 7, 6, 5, 11, 7, 11, 5]  # yy xy xz / xy xx yz / xz yz xx
+_B = [15, 3, 2, 3, 15, 1, 2, 1, 10]  # zz wz wy / wz zz wx / wy wx yy
+_S = [1.0, -1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0]
+_C = [-2.0, 2.0, 2.0, 2.0, -2.0, 2.0, 2.0, 2.0, -2.0]
+_ROT: dict[torch.device, tuple[torch.Tensor, ...]] = {}
 
 
 def quat_to_mat(q: torch.Tensor) -> torch.Tensor:
     """wxyz quaternions (..., 4) to rotation matrices (..., 3, 3)."""
-    w, x, y, z = q.unbind(-1)
-    return torch.stack(
-        [
-            torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            torch.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            torch.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
+    if q.device not in _ROT:
+        _ROT[q.device] = tuple(
+            torch.tensor(v, device=q.device) for v in (_A, _B, _S, _C, [i in (0, 4, 8) for i in range(9)])
+        )
+    a, b, s, c, diagonal = _ROT[q.device]
+    p = (q[..., :, None] * q[..., None, :]).flatten(-2)
+    r = c * (p[..., a] + s * p[..., b])
+    return torch.where(diagonal, r + 1.0, r).unflatten(-1, (3, 3))
 
 
 def uniaxial_force(contact_reported: torch.Tensor, zaxis: torch.Tensor) -> torch.Tensor:

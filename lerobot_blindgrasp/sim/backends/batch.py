@@ -29,8 +29,8 @@ class BatchBackend:
         self.models = models
         self.batch = mjbatch.Batch(models[0], nsim=n, nthread=nthread)
         self.batch.set_models(models)
-        self.qpos = torch.from_numpy(self.batch.bind("qpos"))
-        self.qvel = torch.from_numpy(self.batch.bind("qvel"))
+        self._np_qpos, self._np_qvel = self.batch.bind("qpos"), self.batch.bind("qvel")
+        self.qpos, self.qvel = torch.from_numpy(self._np_qpos), torch.from_numpy(self._np_qvel)
         self.ctrl = torch.from_numpy(self.batch.bind("ctrl"))
         self.xfrc_applied = torch.from_numpy(self.batch.bind("xfrc_applied"))
         with warnings.catch_warnings():  # the binding is read-only: MuJoCo computes it, and the env only reads it
@@ -66,9 +66,10 @@ class BatchBackend:
             failed[e.ids] = True
         warn = self.batch.warning[:, :, 1].sum(axis=1)
         failed |= warn > self._warnings_seen
+        # numpy on the bindings themselves: a few calls, where torch would add its per-op cost at small batches
+        failed |= ~np.isfinite(self._np_qpos).all(axis=1) | ~np.isfinite(self._np_qvel).all(axis=1)
         self._warnings_seen = warn
-        failed = torch.from_numpy(failed)
-        return failed | ~torch.isfinite(self.qpos).all(1) | ~torch.isfinite(self.qvel).all(1)
+        return torch.from_numpy(failed)
 
     # --- benchmarks and rendering ----------------------------------------------------------------------------
     def snapshot(self):
