@@ -30,6 +30,12 @@ def test_the_paper_bench_runs_every_stage_and_writes_one_json(tmp_path):
     demos = stages["demos"]
     assert demos["stop_reason"] == "interrupted" and demos["exit_code"] == 130 and demos["env_steps"] > 0
     assert head["curated_demos_per_s"] == demos["kept"] / demos["collecting_s"]
+    # A second call (a machine's per-call limit) re-runs one stage into the same JSON and keeps the others.
+    again = run(BenchPaperConfig(backend="batch", num_envs=18, stages=["warmup"], output=out, json=True))
+    assert again["stages"]["loop"] == stages["loop"] and again["stages"]["demos"] == stages["demos"]
+    assert (
+        again["headline"] == head and json.loads(out.read_text())["stages"]["warmup"] == again["stages"]["warmup"]
+    )
 
 
 def test_a_stage_not_run_is_not_measured():

@@ -4,7 +4,8 @@
     python -m lab.bench --bench.type=paper --bench.num_envs=36 --bench.demo_s=20 --bench.output=smoke.json
 
 `scripts/gpu_run.sh` runs it on a GPU machine. Stages, in order, each bounded in time; the JSON at --bench.output
-is rewritten (atomically) after each, so a run killed at its limit keeps the stages it finished:
+is rewritten (atomically) after each, so a run killed at its limit keeps the stages it finished, and a later run
+with other --bench.stages (same preset, env count and backend) adds its stages to the same JSON:
 1. `warmup`: a small env of every catalogue object (with Warp: one model per object geometry type) stepped once,
    which makes Warp compile every kernel the run uses, or load it from its kernel cache (~/.cache/warp).
 2. `loop`: the preset's env and rsl-rl runner at --bench.num_envs, built once as `blindgrasp-train-teacher` builds
@@ -77,7 +78,7 @@ def run(cfg: BenchPaperConfig) -> dict:
 
     num_envs = cfg.num_envs or teacher_presets.get_preset(cfg.preset).num_envs
     result = {"preset": cfg.preset, "num_envs": num_envs, "backend": cfg.backend, "machine": machine(cfg.backend)}
-    result["stages"] = {}
+    result["stages"] = _earlier_stages(cfg, result)
     for name, stage in (("warmup", _warmup), ("loop", _loop), ("demos", _demos)):
         if name not in cfg.stages:
             continue
@@ -90,10 +91,23 @@ def run(cfg: BenchPaperConfig) -> dict:
         result["stages"][name] = out
         result["headline"] = headline(result["stages"])
         _save(cfg, result)
-    result.setdefault("headline", headline({}))
+    result.setdefault("headline", headline(result["stages"]))
     if not cfg.json:
         _print(result)
     return result
+
+
+def _earlier_stages(cfg: BenchPaperConfig, result: dict) -> dict:
+    """The stages an earlier run of the same preset, env count and backend wrote to --bench.output, less those this
+    run repeats: a run split over two calls (a machine's per-call limit) still ends in one JSON."""
+    import json
+
+    if cfg.output is None or not Path(cfg.output).is_file():
+        return {}
+    earlier = json.loads(Path(cfg.output).read_text())
+    if any(earlier.get(k) != result[k] for k in ("preset", "num_envs", "backend")):
+        return {}
+    return {k: v for k, v in earlier.get("stages", {}).items() if k not in cfg.stages}
 
 
 def _save(cfg: BenchPaperConfig, result: dict) -> None:
