@@ -12,7 +12,9 @@
 #   BLINDGRASP_LIMIT_S  the whole run's limit in seconds (default 570: one 10-minute call with room to spare)
 # Stages and their bounds at the defaults: warm-up (Warp compiles its kernels into ~/.cache/warp, or loads them),
 # the PPO loop (no iteration starts after 180 s), demo collection (60 s of collecting, counted once the collector
-# has built its env). The JSON is rewritten after each stage, so a run stopped at the limit keeps what it finished.
+# has built its env). The JSON is rewritten after each stage, so a run stopped at the limit keeps what it finished;
+# the stages it did not reach run in a second call into the same JSON, e.g.
+#   bash scripts/gpu_run.sh outputs/gpu_run/paper.json --bench.stages=[demos]
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
