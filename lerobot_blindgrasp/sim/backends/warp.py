@@ -197,13 +197,13 @@ class WarpBackend:
             for k in fields:
                 getattr(self, k)[g.ids_t] = g.view[k].to(torch.float64)
 
-    @staticmethod
-    def _ids(ids) -> np.ndarray:
-        return np.asarray(ids.cpu() if isinstance(ids, torch.Tensor) else ids)
+    def _ids(self, ids) -> torch.Tensor:
+        """Env ids as an index tensor on the device (a device tensor stays there: no wait on the device)."""
+        return ids.to(self.device) if isinstance(ids, torch.Tensor) else torch.as_tensor(ids, device=self.device)
 
     # --- backend interface --------------------------------------------------------------------------------------
     def reset(self, ids) -> None:
-        ids = torch.as_tensor(self._ids(ids), device=self.device)
+        ids = self._ids(ids)
         self.qpos[ids] = self._qpos0[ids]
         self.qvel[ids] = 0.0
         self.ctrl[ids] = 0.0
@@ -213,7 +213,7 @@ class WarpBackend:
     def forward(self, ids) -> None:
         """Sensors of `ids` at their current state. Forward runs on every world of their groups; the others keep
         the sensors of their last step (a step's sensors are those of the state it started from)."""
-        ids = torch.as_tensor(self._ids(ids), device=self.device)
+        ids = self._ids(ids)
         mine = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         mine[ids] = True
         groups = [g for g in self.groups if bool(mine[g.ids_t].any())]
