@@ -11,8 +11,8 @@
 #   BLINDGRASP_WHEELS   a folder of wheels to install the gpu extra from, without an index (a machine offline)
 #   BLINDGRASP_LIMIT_S  the whole run's limit in seconds (default 570: one 10-minute call with room to spare)
 # Stages and their bounds at the defaults: warm-up (Warp compiles its kernels into ~/.cache/warp, or loads them),
-# the PPO loop (no iteration starts after 180 s), demo collection (60 s of collecting, counted once the collector
-# has built its env). The JSON is rewritten after each stage, so a run stopped at the limit keeps what it finished;
+# the PPO loop (no timed iteration starts after 120 s of them), demo collection (60 s of collecting, counted once
+# the collector has built its env). The JSON is rewritten after each stage, so a run stopped at the limit keeps what it finished;
 # the stages it did not reach run in a second call into the same JSON, e.g.
 #   bash scripts/gpu_run.sh outputs/gpu_run/paper.json --bench.stages=[demos]
 set -euo pipefail

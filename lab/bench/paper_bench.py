@@ -11,7 +11,7 @@ with other --bench.stages (same preset, env count and backend) adds its stages t
 2. `loop`: the preset's env and rsl-rl runner at --bench.num_envs, built once as `blindgrasp-train-teacher` builds
    them. Then the env alone against raw physics replaying the same joint targets (the sim bench), and the whole PPO
    loop (the teacher bench: collection, the update, and raw physics replaying each iteration's targets right after
-   it), one iteration at a time until --bench.iterations or --bench.loop_s.
+   it), one iteration at a time until --bench.iterations, or until --bench.loop_s seconds of them have passed.
 3. `demos`: `blindgrasp-collect-demos` (the shipped teacher unless --bench.teacher) in its own process at
    --bench.demo_num_envs envs, stopped after --bench.demo_s seconds of collecting the way Ctrl-C stops it. The
    clock starts when the collector has built its env (it records the run in collection.json then): curated demos
@@ -53,7 +53,7 @@ class BenchPaperConfig(BenchConfig):
     backend: str = "warp"  # physics: warp (the GPU if there is one, else Warp's CPU device) or batch
     stages: list[str] = field(default_factory=lambda: list(STAGES))  # which of warmup, loop, demos
     iterations: int = 3  # timed PPO iterations at most (after one warm-up iteration)
-    loop_s: float = 180.0  # no new PPO iteration starts after this many seconds of the loop stage
+    loop_s: float = 120.0  # no timed PPO iteration starts after this many seconds of them
     env_steps: int = 24  # control steps per block of the env-alone timing (one PPO rollout's length)
     env_blocks: int = 2  # alternating env / raw blocks
     demo_s: float = 60.0  # seconds of demo collection, counted from the collector's built env
@@ -176,7 +176,7 @@ def _loop(cfg: BenchPaperConfig, num_envs: int) -> dict:
     t = time.perf_counter()
     runner.learn(1, init_at_random_ep_len=True)  # warm-up: allocations, first normalizer stats
     warmup_it_s = time.perf_counter() - t
-    deadline = t0 + cfg.loop_s
+    deadline = time.perf_counter() + cfg.loop_s
     rows = []
     while len(rows) < cfg.iterations and (not rows or time.perf_counter() < deadline):
         rows += teacher_bench._timed_iterations(runner, env, update, 1)
