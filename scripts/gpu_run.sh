@@ -12,8 +12,8 @@
 #   BLINDGRASP_LIMIT_S  the whole run's limit in seconds (default 570: one 10-minute call with room to spare)
 # Stages and their bounds at the defaults: warm-up (Warp compiles its kernels into ~/.cache/warp, or loads them),
 # the PPO loop (no timed iteration starts after 120 s of them), demo collection (60 s of collecting, counted once
-# the collector has built its env). The JSON is rewritten after each stage, so a run stopped at the limit keeps what it finished;
-# the stages it did not reach run in a second call into the same JSON, e.g.
+# the collector has built its env). The JSON is rewritten after each stage, so a run stopped at the limit keeps
+# what it finished; the stages it did not reach run in a second call into the same JSON, e.g.
 #   bash scripts/gpu_run.sh outputs/gpu_run/paper.json --bench.stages=[demos]
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -27,8 +27,8 @@ if [ "${1:-}" = "--smoke" ]; then
 fi
 PY="${PYTHON:-}"
 [ -n "$PY" ] || { [ -x .venv/bin/python ] && PY=.venv/bin/python; } || PY=python3
-export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}" MUJOCO_GL="${MUJOCO_GL:-egl}" HF_HUB_OFFLINE="${HF_HUB_OFFLINE:-1}"
-export OMP_WAIT_POLICY="${OMP_WAIT_POLICY:-PASSIVE}" PYTHONUNBUFFERED=1
+export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}" MUJOCO_GL="${MUJOCO_GL:-egl}"
+export HF_HUB_OFFLINE="${HF_HUB_OFFLINE:-1}" OMP_WAIT_POLICY="${OMP_WAIT_POLICY:-PASSIVE}" PYTHONUNBUFFERED=1
 
 # 1. The gpu extra (MuJoCo Warp), unless this interpreter already has it and the package's own dependencies.
 if ! "$PY" -c "import mujoco_warp, warp, rsl_rl, lerobot, lerobot_blindgrasp" >/dev/null 2>&1; then

@@ -266,7 +266,8 @@ def headline(stages: dict) -> dict:
 def _print(result: dict) -> None:
     m = result["machine"]
     print(
-        f"blindgrasp-bench paper: preset {result['preset']}, {result['num_envs']} envs, {result['backend']} on {m['device']}"
+        f"blindgrasp-bench paper: preset {result['preset']}, {result['num_envs']} envs, "
+        f"{result['backend']} on {m['device']}"
     )
     for k, v in result["headline"].items():
         print(f"{k:<34} {'not measured' if v is None else f'{v:,.3f}'}")
