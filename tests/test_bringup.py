@@ -19,9 +19,9 @@ from emulators.harness import BIN, Operator, cli_env
 from emulators.rig import LATENCY_TIMER_MS, GripperRig
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.robots.blindgrasp_gripper import latency_timer
+from lerobot_blindgrasp.hardware.dynamixel import latency_timer
+from lerobot_blindgrasp.hardware.dynamixel.latency_timer import check_latency_timer, ensure_low_latency
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
-from lerobot_blindgrasp.robots.blindgrasp_gripper.latency_timer import check_latency_timer, ensure_low_latency
 
 ROOT = Path(__file__).resolve().parents[1]
 READ_ONLY_SYSFS_INT = Path("/sys/devices/system/cpu/kernel_max")  # 0444 and no store op: root cannot write it
@@ -226,8 +226,8 @@ def test_real_report_answers_a_bare_path_and_takes_the_run_folder(tmp_path, caps
 
 
 def test_a_force_port_that_is_not_there_says_how_to_find_it(tmp_path):
-    from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import ForceSensorConfig
-    from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader, ForceStreamError
+    from lerobot_blindgrasp.hardware.force_board.config_force_board import ForceSensorConfig
+    from lerobot_blindgrasp.hardware.force_board.reader import ForceSensorReader, ForceStreamError
 
     assert ForceSensorConfig().port.startswith("/dev/ttyUSB")  # what a Nano's FT232RL or CH340 appears as
     reader = ForceSensorReader(str(tmp_path / "ttyUSB1"), 115_200, [2.5e-5] * 3)

@@ -29,7 +29,7 @@ from test_docs_commands import ALL, ROOT, SHIPPED_STUDENT, offline_in, run_in_pr
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator, free_udp_port
 from lerobot_blindgrasp.hardware.force_board import build
-from lerobot_blindgrasp.robots.blindgrasp_gripper import force_calibration as fc
+from lerobot_blindgrasp.hardware.force_board import force_calibration as fc
 
 pytestmark = pytest.mark.slow
 

@@ -1,11 +1,11 @@
-"""The force board's SEQ judged against elapsed time (`hardware/counter_clock.py`), on an emulated clock: the frame
-times are given, so every case is exact and no test depends on the machine's load. The clock is built as the force
-reader builds it (`ForceSensorReader._new_clock`, 80 frames/s, stale timeout 0.15 s)."""
+"""The force board's SEQ judged against elapsed time (`hardware/force_board/counter_clock.py`), on an emulated
+clock: the frame times are given, so every case is exact and no test depends on the machine's load. The clock is
+built as the force reader builds it (`ForceSensorReader._new_clock`, 80 frames/s, stale timeout 0.15 s)."""
 
 from __future__ import annotations
 
-from lerobot_blindgrasp.hardware.counter_clock import Verdict
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import SETTLE_FRAMES, ForceSensorReader
+from lerobot_blindgrasp.hardware.force_board.counter_clock import Verdict
+from lerobot_blindgrasp.hardware.force_board.reader import SETTLE_FRAMES, ForceSensorReader
 
 PERIOD = 1 / 80
 

@@ -14,18 +14,16 @@ import pytest
 
 from lerobot_blindgrasp.emulators.force_board_simavr import SimulatedForceBoard
 from lerobot_blindgrasp.hardware.force_board import build
-from lerobot_blindgrasp.hardware.streams import RATE_WINDOW
-from lerobot_blindgrasp.robots.blindgrasp_gripper import force_calibration as fc
-from lerobot_blindgrasp.robots.blindgrasp_gripper.calibrate_force import CalibrateForceConfig, calibrate
-from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import (
-    BlindgraspGripperConfig,
-    ForceSensorConfig,
-)
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import (
+from lerobot_blindgrasp.hardware.force_board import force_calibration as fc
+from lerobot_blindgrasp.hardware.force_board.config_force_board import ForceSensorConfig
+from lerobot_blindgrasp.hardware.force_board.force_calibration_cli import CalibrateForceConfig, calibrate
+from lerobot_blindgrasp.hardware.force_board.reader import (
     SETTLE_FRAMES,
     ForceSensorReader,
     ForceStreamError,
 )
+from lerobot_blindgrasp.hardware.streams import RATE_WINDOW
+from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import BlindgraspGripperConfig
 
 if missing := build.missing_packages():
     pytest.skip(f"force-board firmware tests need: apt-get install {' '.join(missing)}", allow_module_level=True)

@@ -13,14 +13,12 @@ from emulators.rig import GripperRig
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
+from lerobot_blindgrasp.hardware.force_board import force_calibration as fc
+from lerobot_blindgrasp.hardware.force_board.config_force_board import ForceSensorConfig
+from lerobot_blindgrasp.hardware.force_board.force_calibration_cli import CalibrateForceConfig, calibrate
+from lerobot_blindgrasp.hardware.force_board.reader import ForceSensorReader
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
-from lerobot_blindgrasp.robots.blindgrasp_gripper import force_calibration as fc
-from lerobot_blindgrasp.robots.blindgrasp_gripper.calibrate_force import CalibrateForceConfig, calibrate
-from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import (
-    BlindgraspGripperConfig,
-    ForceSensorConfig,
-)
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader
+from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import BlindgraspGripperConfig
 
 TRUE_SCALE = (3.1e-5, -2.2e-5, 2.7e-5)  # the cells as built: one bridge wired the other way round
 WEIGHT_N = 0.5 * fc.STANDARD_GRAVITY

@@ -23,12 +23,12 @@ from hypothesis import strategies as st
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.dynamixel import make_packet
 from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN
+from lerobot_blindgrasp.hardware.dynamixel.bus import LineWatchingPacketHandler
+from lerobot_blindgrasp.hardware.force_board.frame_codec import SYNC, FrameParser, encode_frame
 from lerobot_blindgrasp.hardware.xm430 import NO_LOAD_SPEED_RAD_S, RAD_PER_TICK
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
 from lerobot_blindgrasp.robots.blindgrasp_gripper import calibration as calib
-from lerobot_blindgrasp.robots.blindgrasp_gripper.bus import LineWatchingPacketHandler
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import GripperReadingError
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import SYNC, FrameParser, encode_frame
 from lerobot_blindgrasp.robots.blindgrasp_gripper.plausibility import ImplausibleReadingError, PositionGate
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError

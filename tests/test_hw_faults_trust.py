@@ -25,18 +25,17 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
 from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
+from lerobot_blindgrasp.hardware.force_board.reader import ForceSensorReader, ForceTareError
+from lerobot_blindgrasp.hardware.ports import PortInUseError
 from lerobot_blindgrasp.hardware.xm430 import RAD_PER_TICK
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     ForceSensorError,
-    ForceTareError,
     GripperPortBusyError,
     GripperReadingError,
     GripperTimingError,
 )
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader
-from lerobot_blindgrasp.robots.blindgrasp_gripper.ports import PortInUseError
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
 

@@ -18,12 +18,8 @@ from emulators.fixtures import rig, robot  # noqa: F401  (fixtures)
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.hardware import force
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import (
-    SETTLE_FRAMES,
-    ForceSensorReader,
-    ForceStreamError,
-    encode_frame,
-)
+from lerobot_blindgrasp.hardware.force_board.frame_codec import encode_frame
+from lerobot_blindgrasp.hardware.force_board.reader import SETTLE_FRAMES, ForceSensorReader, ForceStreamError
 from lerobot_blindgrasp.sim import randomization, sensors
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from dynamixel_sdk import COMM_RX_CORRUPT, COMM_RX_TIMEOUT, COMM_SUCCESS, PacketHandler, PortHandler
 from dynamixel_sdk import protocol2_packet_handler as p2
+from emulators.rig import LATENCY_TIMER_MS
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.dynamixel import (
@@ -21,8 +22,8 @@ from lerobot_blindgrasp.emulators.dynamixel import (
     EmulatedServo,
 )
 from lerobot_blindgrasp.emulators.dynamixel_wire import crc16, stuff, unstuff
+from lerobot_blindgrasp.hardware.force_board.frame_codec import FrameParser, crc16_ccitt_false, encode_frame
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
-from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import FrameParser, crc16_ccitt_false, encode_frame
 
 ADDR = {name: spec_[0] for name, spec_ in CONTROL_TABLE.items()}
 
@@ -138,7 +139,11 @@ def test_setup_motors_gives_factory_servos_their_ids_and_baud(tmp_path, monkeypa
             return ""
 
         monkeypatch.setattr("builtins.input", plug_next_servo)
-        robot = BlindgraspGripper(BlindgraspGripperConfig(id="new", port=emu.port, calibration_dir=tmp_path))
+        robot = BlindgraspGripper(
+            BlindgraspGripperConfig(
+                id="new", port=emu.port, calibration_dir=tmp_path, latency_timer_ms=LATENCY_TIMER_MS
+            )
+        )
         robot.setup_motors()
     assert [s.get("ID") for s in configured] == list(reversed(spec.SERVO_IDS))
     assert {s.get("Baud_Rate") for s in configured} == {3}  # 1 Mbps

@@ -70,7 +70,7 @@ def time_env(env: BatchedGraspEnv, steps: int, blocks: int) -> dict:
         env.physics.restore(saved)
         t = time.perf_counter()
         for target in targets:
-            ctrl.copy_(torch.as_tensor(target))
+            ctrl[:] = torch.as_tensor(target)  # the backend's ctrl is a tensor over the physics' own rows
             env.physics.raw_step(k)  # physics only: no observation, reward or state download
         raw_t += time.perf_counter() - t
         env.physics.restore(after_env)

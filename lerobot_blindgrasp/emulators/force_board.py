@@ -1,6 +1,6 @@
 """The fingertip load-cell microcontroller, emulated on a pseudo-terminal.
 
-It streams the frame format of `lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor` at `rate_hz`, with raw
+It streams the frame format of `lerobot_blindgrasp.hardware.force_board.frame_codec` at `rate_hz`, with raw
 counts = offset + gain x force / scale (+ noise), saturating at 24 bits, and can misbehave the ways a USB serial sensor does: dropped frames,
 garbage bytes between frames, frames with a bad CRC, a stalled stream, channel-fault status bits, a different
 channel count (firmware/config mismatch), an unplugged cable (`unplug`), and dead data that still arrives: the last

@@ -175,11 +175,11 @@ def _report(reader, board: SimulatedForceBoard, cfg: SimConfig) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """`python -m lerobot_blindgrasp.emulators.force_board_simavr`: the board without hardware, read by the robot's
-    reader with the robot config's defaults. Exits 1 when the reader refuses the stream (e.g. `--sps=10`)."""
+    """`python -m lerobot_blindgrasp.emulators.force_board_simavr`: the board without hardware, read by the gripper's
+    force reader with its config's defaults. Exits 1 when the reader refuses the stream (e.g. `--sps=10`)."""
     from lerobot_blindgrasp.cli import parse_config
-    from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import ForceSensorConfig
-    from lerobot_blindgrasp.robots.blindgrasp_gripper.force_sensor import ForceSensorReader, ForceStreamError
+    from lerobot_blindgrasp.hardware.force_board.config_force_board import ForceSensorConfig
+    from lerobot_blindgrasp.hardware.force_board.reader import ForceSensorReader, ForceStreamError
 
     cfg = parse_config(SimConfig, argv)
     refused = None

@@ -126,7 +126,6 @@ class BatchedGraspEnv:
         self.obs_latency = events.ObservationLatency(cfg.dr.obs_latency_steps)
         self.servo = events.ServoModel(cfg.dr, self._seeds)
         self._all = torch.arange(n, device=dev)
-        self._raw: dict[str, torch.Tensor] = {}
 
     # --- construction ----------------------------------------------------------------------------------------
     def env_model(self, i: int) -> mujoco.MjModel:
@@ -321,7 +320,7 @@ class BatchedGraspEnv:
             *state[:3], self.sensor_index, *state[3:], noise, self.cfg.dr, self.sensor_draw.rows(sel)
         )
         if ids is None:
-            self._raw = raw
+            self._raw = raw  # what this step's reward terms read (set by every full observation, reset first)
         return obs
 
     # --- helpers for tests, rendering and eval (numpy on the host) ---------------------------------------------

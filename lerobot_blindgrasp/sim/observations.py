@@ -96,7 +96,7 @@ def observe(
         "uniaxial_clean": sensors.reading(uni_true),  # noise-free reading (rewards, curation)
         "d_xy": rewards.planar_distance(obj_pos[:, :2]),
         "lift": obj_pos[:, 2] - rest_height,
-        "tip_object_distance": si.read(sensordata, "objdist")[:, :, 0].clone(),  # a view of the live state
+        "tip_object_distance": si.read(sensordata, "objdist")[:, :, 0].clone(),  # kept: `read` is a live view
         "tip_object_force": tip_obj_norm,
         # -F_z / |F|: 1 when a tip presses the object straight down, 0 sideways (0 without contact)
         "tip_object_downward": -tip_obj[..., 2] / tip_obj_norm.clamp_min(1e-9),

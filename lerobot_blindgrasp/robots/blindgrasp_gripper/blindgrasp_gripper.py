@@ -30,17 +30,17 @@ from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware.dynamixel import RetryingDynamixelBus, latency_timer
 from lerobot_blindgrasp.hardware.force import force_bias_warning
+from lerobot_blindgrasp.hardware.force_board import ForceSensorReader, ForceTareError, force_calibration
 from lerobot_blindgrasp.hardware.xm430 import MODEL, RAD_PER_TICK, WATCHDOG_UNIT_MS, amps_to_current_units
 
 from . import calibration as calib
-from . import connect_checks, force_calibration, health, interactive, latency_timer, policy_check, signals
-from .bus import RetryingDynamixelBus
+from . import connect_checks, health, interactive, policy_check, signals
 from .calibration import rad_to_ticks, ticks_to_rad
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
 from .episodes import EpisodeStarts
-from .errors import ForceOverloadError, ForceTareError, GripperBusError, GripperSafetyStop
-from .force_sensor import ForceSensorReader
+from .errors import ForceOverloadError, GripperBusError, GripperSafetyStop
 from .keepalive import BusKeepAlive
 from .latch import SafetyLatch
 from .plausibility import PositionGate

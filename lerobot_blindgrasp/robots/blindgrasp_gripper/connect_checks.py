@@ -16,8 +16,8 @@ import sys
 from pathlib import Path
 
 from lerobot_blindgrasp.hardware import realtime
+from lerobot_blindgrasp.hardware.force_board import force_calibration
 
-from . import force_calibration
 from .calibration import CalibrationFileError
 
 _BUILTIN_INPUT = builtins.input

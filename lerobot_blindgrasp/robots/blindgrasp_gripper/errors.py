@@ -1,5 +1,6 @@
 """Errors the gripper raises after a safety stop (`GripperSafetyStop` and its subclasses are all raised with the
-torque already off), and the one refusal that stops nothing (`ForceTareError`)."""
+torque already off), and the policy refusal made before any torque (`PolicyMismatchError`). The force board's
+refused tare, which stops nothing, is its reader's (`hardware/force_board/reader.py`, `ForceTareError`)."""
 
 from __future__ import annotations
 
@@ -43,11 +44,6 @@ class GripperPortAccessError(GripperSafetyStop, ConnectionError):
 class GripperTimingError(GripperSafetyStop):
     """The control loop overran its period for longer than `max_overrun_s`: the data would no longer be at the
     rate the policy and the dataset assume."""
-
-
-class ForceTareError(ValueError):
-    """A tare refused because a fingertip pad is loaded (beyond the at-rest envelope); the previous zero is kept.
-    Not a safety stop by itself: a re-tare between trials leaves the gripper holding its pose."""
 
 
 class GripperHealthError(GripperSafetyStop):

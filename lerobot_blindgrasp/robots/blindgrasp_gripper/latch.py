@@ -22,12 +22,13 @@ import weakref
 from contextlib import contextmanager
 
 from lerobot_blindgrasp import compat
+from lerobot_blindgrasp.hardware.dynamixel.bus import PortLostError
+from lerobot_blindgrasp.hardware.force_board.reader import ForceStreamError, ForceTareError
+from lerobot_blindgrasp.hardware.ports import PortAccessError, PortInUseError
 
 from . import signals
-from .bus import PortLostError
 from .errors import (
     ForceSensorError,
-    ForceTareError,
     GripperBusError,
     GripperPortAccessError,
     GripperPortBusyError,
@@ -35,9 +36,7 @@ from .errors import (
     GripperSafetyStop,
     GripperTimingError,
 )
-from .force_sensor import ForceStreamError
 from .plausibility import ImplausibleReadingError
-from .ports import PortAccessError, PortInUseError
 from .timing import LoopOverrunError
 
 logger = logging.getLogger(__name__)

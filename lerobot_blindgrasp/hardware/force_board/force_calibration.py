@@ -1,5 +1,5 @@
 """Force calibration: scale and offset per fingertip from a known weight, a wiring check, and the file the robot
-reads at connect. The command that asks the operator for the weights is `calibrate_force.py`.
+reads at connect. The command that asks the operator for the weights is `force_calibration_cli.py`.
 
 The fit, per fingertip k with stream channel c = channel_map[k]:
     offset_c = mean counts with nothing on the pads (before and after the loadings)

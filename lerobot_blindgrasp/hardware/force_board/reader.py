@@ -1,7 +1,7 @@
 """Fingertip force sensors: a microcontroller streams raw load-cell counts over a serial port.
 
 The board that ships is three HX711 on an Arduino Nano (`lerobot_blindgrasp/hardware/force_board/`, parts, wiring
-and flashing in `docs/force_board.md`). Its frames and their decoder: `hardware/force_board/frame_codec.py`.
+and flashing in `docs/force_board.md`). Its frames and their decoder: `frame_codec.py`.
 
 Between conversions nothing is sent: a frame carries a fresh sample of every channel under a new SEQ, or no frame
 goes out. "No new sample yet" is therefore never a frame and never a STATUS bit, and any STATUS bit is a real fault
@@ -12,7 +12,7 @@ fresh samples per 20 Hz control period) and calls a stream that sends fewer fres
 The host resynchronises on the next SYNC after any bad length or CRC; SEQ gaps count dropped frames; the age of
 the newest good frame detects a stalled or unplugged stream.
 
-Liveness by content (`LatestFrameStream`): the SEQ is judged against this host's clock (`hardware/counter_clock.py`).
+Liveness by content (`LatestFrameStream`): the SEQ is judged against this host's clock (`counter_clock.py`).
 A SEQ that repeats or runs backwards is a re-sent or replayed frame, dropped and counted, so a firmware stuck
 re-sending one frame goes stale like a silent one. A board that reset is not a replay: it was silent while it booted
 and its SEQ starts again near 0 (its first frame, the boot frame, says so and why). Its frames are held, never
@@ -42,19 +42,10 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force
-from lerobot_blindgrasp.hardware.counter_clock import CounterClock, Restart, Verdict
-from lerobot_blindgrasp.hardware.force_board.frame_codec import (  # noqa: F401  (the codec's home before)
-    SYNC,
-    Frame,
-    FrameParser,
-    crc16_ccitt_false,
-    encode_frame,
-    reset_cause_text,
-)
+from lerobot_blindgrasp.hardware.force_board.counter_clock import CounterClock, Restart, Verdict
+from lerobot_blindgrasp.hardware.force_board.frame_codec import Frame, FrameParser, reset_cause_text
+from lerobot_blindgrasp.hardware.ports import open_exclusive
 from lerobot_blindgrasp.hardware.streams import LatestFrameStream, StreamError
-
-from .errors import ForceTareError
-from .ports import open_exclusive
 
 logger = logging.getLogger(__name__)
 
@@ -68,6 +59,11 @@ SETTLE_FRAMES = 4
 
 class ForceStreamError(StreamError):
     """No fresh valid frame, or the microcontroller flags a channel fault."""
+
+
+class ForceTareError(ValueError):
+    """A tare refused because a fingertip pad is loaded (beyond the at-rest envelope); the previous zero is kept.
+    Not a safety stop by itself: a re-tare between trials leaves the gripper holding its pose."""
 
 
 class ForceSensorReader(LatestFrameStream[Frame]):

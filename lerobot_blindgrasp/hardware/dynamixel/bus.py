@@ -3,7 +3,7 @@
 - Every transaction is retried: `num_retry` is the floor for every read, write, sync read and sync write, including
   those LeRobot's own methods make (`read_calibration`, `disable_torque`, ...). Registers are raw by default: the
   calibration lives in the servos (Drive_Mode, Homing_Offset), so no LeRobot normalization applies.
-- The port is opened for exclusive use (`ports.py`): a second owner is refused before it sends a byte.
+- The port is opened for exclusive use (`hardware/ports.py`): a second owner is refused before it sends a byte.
 - A status packet whose length or kind does not match the request (a stray late reply of another transaction with
   the right ID and a valid CRC) is a corrupt reply, retried like a bad CRC; the SDK alone would decode its first
   bytes as the value asked for.
@@ -42,9 +42,8 @@ from lerobot.motors import Motor, MotorCalibration
 from lerobot.motors.dynamixel import DynamixelMotorsBus
 from lerobot.motors.motors_bus import get_address
 
+from lerobot_blindgrasp.hardware.ports import PortAccessError, PortInUseError, open_exclusive
 from lerobot_blindgrasp.hardware.xm430 import EXTRA_REGISTERS, MODEL
-
-from .ports import PortAccessError, PortInUseError, open_exclusive
 
 logger = logging.getLogger(__name__)
 

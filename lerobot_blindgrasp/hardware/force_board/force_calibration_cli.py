@@ -9,7 +9,7 @@ opened: the servos need no power, and a servo calibration never asks for weights
 rather than a step of `lerobot-calibrate`, which calls the robot's servo `calibrate()` and nothing else).
 
 The operator answers five prompts (ENTER each): nothing on the pads; the weight on ff_tip, then moved to mf_tip,
-then to th_tip; the weight off. The fit and the checks are `force_calibration.py`'s.
+then to th_tip; the weight off. The fit, the checks and the file are `force_calibration.py`'s.
 """
 
 import logging
@@ -23,10 +23,9 @@ from lerobot.utils.constants import HF_LEROBOT_CALIBRATION, ROBOTS
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
-
-from . import force_calibration as fc
-from .config_blindgrasp_gripper import BlindgraspGripperConfig
-from .force_sensor import ForceSensorReader, ForceStreamError
+from lerobot_blindgrasp.hardware.force_board import force_calibration as fc
+from lerobot_blindgrasp.hardware.force_board.config_force_board import ForceSensorConfig
+from lerobot_blindgrasp.hardware.force_board.reader import ForceSensorReader, ForceStreamError
 
 logger = logging.getLogger(__name__)
 
@@ -78,7 +77,7 @@ def _prompts(cfg: CalibrateForceConfig) -> list[str]:
 def calibrate(cfg: CalibrateForceConfig) -> fc.ForceCalibration:
     """Run the five steps on the robot's force board and save the result; returns it."""
     robot = cfg.robot
-    if not isinstance(robot, BlindgraspGripperConfig):
+    if not isinstance(getattr(robot, "force_sensor", None), ForceSensorConfig):  # the gripper's config carries it
         raise SystemExit(f"error: --robot.type must be blindgrasp_gripper, not {robot.type}")
     if not robot.id:
         raise SystemExit("error: --robot.id is required: it names the gripper whose calibration this is")
