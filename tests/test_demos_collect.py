@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -249,6 +250,88 @@ def test_second_ctrl_c_aborts_at_once_but_never_inside_a_save(teacher, tmp_path)
     assert saved and stop.requested == signal.SIGINT
 
 
+def _frames(root: Path, repo_id: str = "test/demos") -> tuple[dict, LeRobotDataset]:
+    ds = LeRobotDataset(repo_id, root=root, video_backend="pyav")
+    return ds.hf_dataset.with_format("numpy")[:], ds
+
+
+def test_the_writer_thread_writes_the_dataset_the_loop_writes(tmp_path):
+    """The shipped teacher, sampled (stochastic), curated as in the paper, with crash checkpoints every few
+    episodes: saved by the writer thread behind a queue of 2 (so the loop also waits on it) or in the loop, the
+    same seed gives the same dataset, read back with LeRobot's loader, the same files and the same counts."""
+    runs = {}
+    for queue in (0, 2):
+        out = tmp_path / f"queue{queue}"
+        cfg = config(None, out, curation=curation.PAPER_CURATION, objects="cylinder_a_medium,cuboid_a_medium",
+                     num_envs=2, episodes_per_object=3, max_rollouts_per_object=6, writer_queue=queue)  # fmt: skip
+        runs[queue] = (out, collection.collect(cfg))
+    (in_loop, s0), (threaded, s2) = runs[0], runs[2]
+    assert s0.kept == s2.kept >= 4 and s0.rollouts == s2.rollouts and s0.stop_reason == s2.stop_reason == "done"
+    assert s2.checkpoints == s0.checkpoints >= 1 and s2.env_builds == s0.env_builds
+    (a, ds_a), (b, ds_b) = _frames(in_loop), _frames(threaded)
+    assert ds_a.meta.total_episodes == ds_b.meta.total_episodes == s0.kept
+    assert a.keys() == b.keys()
+    for key in a:
+        np.testing.assert_array_equal(np.stack(a[key]), np.stack(b[key]), err_msg=key)
+    assert ds_a.meta.episodes["length"] == ds_b.meta.episodes["length"]
+    assert ds_a.meta.episodes["tasks"] == ds_b.meta.episodes["tasks"]
+    files = [sorted(str(p.relative_to(r)) for p in r.glob("data/**/*.parquet")) for r in (in_loop, threaded)]
+    assert files[0] == files[1] and len(files[0]) >= 2  # LeRobot starts a new data file after a checkpoint
+    assert yield_report.load_tally(in_loop).to_json() == yield_report.load_tally(threaded).to_json()
+
+
+def test_a_write_error_on_the_writer_thread_ends_the_run_in_the_loop(teacher, tmp_path, monkeypatch):
+    """The third save fails on the writer thread while the episodes after it wait in the queue: the loop raises
+    that error, nothing is written after it, and the two episodes before it stay readable."""
+    write, queued, where = demo_dataset.write_episode, threading.Event(), []
+
+    def third_fails(ds, ep, cut, **kw):
+        where.append(threading.current_thread())
+        if len(where) < 3:
+            return write(ds, ep, cut, **kw)
+        assert queued.wait(60)  # the episodes after it are in the queue now
+        raise OSError(28, "No space left on device", "episode data")
+
+    def count(ep, cut, kept, stats):
+        if stats.kept == 5:
+            queued.set()
+
+    monkeypatch.setattr(demo_dataset, "write_episode", third_fails)
+    with pytest.raises(OSError) as e:
+        collection.collect(config(teacher, tmp_path / "err", episodes_per_object=5), on_episode=count)
+    assert e.value.filename == "episode data"
+    assert len(where) == 3 and threading.main_thread() not in where  # written off the loop; none after the error
+    _, ds = _frames(tmp_path / "err")
+    assert ds.num_episodes == 2 and len(ds) == ds.meta.total_frames
+    run = provenance.load(tmp_path / "err")["runs"][-1]
+    assert run["stop_reason"].startswith("error: OSError") and run["interrupted"]
+
+
+def test_an_abort_writes_the_queued_episodes_before_finalizing(teacher, tmp_path, monkeypatch):
+    """Ctrl-C twice while six kept episodes are still queued (the writer is held before its first save): all six are
+    written, then the dataset is finalized."""
+    write, gate, on_disk = demo_dataset.write_episode, threading.Event(), []
+
+    def held(ds, ep, cut, **kw):
+        assert gate.wait(60)
+        return write(ds, ep, cut, **kw)
+
+    def abort(ep, cut, kept, stats):
+        if kept and stats.kept == 6:
+            on_disk.append(json.loads((tmp_path / "abort" / "meta" / "info.json").read_text())["total_episodes"])
+            gate.set()
+            signal.raise_signal(signal.SIGINT)
+            signal.raise_signal(signal.SIGINT)
+
+    monkeypatch.setattr(demo_dataset, "write_episode", held)
+    with pytest.raises(KeyboardInterrupt):
+        collection.collect(config(teacher, tmp_path / "abort", episodes_per_object=5), on_episode=abort)
+    _, ds = _frames(tmp_path / "abort")
+    assert on_disk == [0] and ds.num_episodes == 6 and len(ds) == ds.meta.total_frames
+    run = provenance.load(tmp_path / "abort")["runs"][-1]
+    assert run["stop_reason"] == "interrupted" and run["kept"] == 6
+
+
 @pytest.mark.slow
 def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     out = tmp_path / "sig"
@@ -347,13 +430,16 @@ def test_bench_demos_reports_speeds(teacher, capsys):
     cfg = parse_config(
         bench_demos.BenchDemosConfig,
         [f"--teacher={teacher}", "--num_envs=6", "--objects=medium", "--curation=false", "--episodes_per_object=1",
-         "--write_episodes=6", "--json=true"],
+         "--write_episodes=6", "--writer_pairs=1", "--json=true"],
     )  # fmt: skip
     result = bench_demos.run(cfg)
     assert result["curated_demos"] == 6 and result["rollouts"] >= 6
     assert result["curated_demos_per_cpu_minute"] > 0 and result["frames_written_per_s"] > 0
     assert result["frames_written_per_s_add_frame"] > 0 and result["writer_episodes"] == 6
     assert result["backend"] == "batch"
+    # The same collection with the writer thread and in the loop, in pairs in the same run: the same demos, a ratio.
+    assert result["writer_pair_demos"] == result["writer_pair_demos_in_loop"] == 6
+    assert result["writer_throughput_ratio"] > 0 and len(result["writer_pair_ratios"]) == 1
     assert capsys.readouterr().out == ""  # --json: the dispatcher prints, run() stays quiet
 
 

@@ -6,7 +6,9 @@ No teacher needed: episodes are synthetic but go through the real curation, writ
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
+import threading
 
 import numpy as np
 import pytest
@@ -18,6 +20,7 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
+from lerobot_blindgrasp.demos.episode_writer import EpisodeWriter
 from lerobot_blindgrasp.hub import push
 from lerobot_blindgrasp.rollout.loop import Episode
 from lerobot_blindgrasp.sim import objects
@@ -114,6 +117,33 @@ def test_fast_writer_path_writes_the_same_files_as_lerobots_default(tmp_path):
         assert meta_a == meta_b, f
     for name in ("info.json", "stats.json"):
         assert (roots[True] / "meta" / name).read_text() == (roots[False] / "meta" / name).read_text()
+
+
+def test_the_episode_writer_waits_when_its_queue_is_full_and_keeps_the_order(tmp_path):
+    """Backpressure: with 2 jobs waiting (the thread held by the first), a third submit waits for a free place
+    instead of growing the queue. Then every episode is saved in the order submitted."""
+    ds = demo_dataset.create(tmp_path / "w", "test/w")
+    episodes = [synthetic_episode(i, hold_start=20) for i in range(5)]
+    cut = curation.evaluate(episodes[0].task_reward, episodes[0].uniaxial_force, curation.NO_CURATION)
+    save = [functools.partial(demo_dataset.write_episode, ds, ep, cut) for ep in episodes]
+    gate, writer = threading.Event(), EpisodeWriter(queue=2)
+    writer.submit(gate.wait)  # holds the writer thread
+    writer.submit(save[0])
+    third = threading.Thread(target=writer.submit, args=(save[1],))
+    third.start()
+    third.join(0.5)
+    assert third.is_alive() and writer.pending == 2  # waiting for a free place, not queued
+    gate.set()
+    third.join(60)
+    assert not third.is_alive()
+    for job in save[2:]:
+        writer.submit(job)
+        assert writer.pending <= 2
+    writer.close()
+    ds.finalize()
+    seeds = demo_dataset.episode_table(tmp_path / "w")["env_seed"].tolist()
+    assert seeds == [ep.env_seed for ep in episodes]
+    assert LeRobotDataset("test/w", root=tmp_path / "w").num_episodes == 5
 
 
 def test_episode_table_reads_metadata_without_frames(written):

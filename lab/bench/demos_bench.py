@@ -11,12 +11,16 @@ With --durable_side_by_side=true (default) the same collection (same seeds, so t
 this one process: first without crash checkpoints (`--checkpoint_s=0`, finalize only at the end: the behaviour
 before durable collection), then with them every `checkpoint_s` seconds (or `num_envs` episodes), so their cost is
 measured side by side: the `durable_*` keys, and `checkpoint_share_of_wall`, the time spent finalizing and
-reopening.
+reopening. With --writer_pairs=N (default 2) it then runs N pairs of the same collection, one with the writer thread
+(`--writer_queue`) and one with every episode saved in the loop (`--writer_queue=0`, the collector before its writer
+thread), alternating which goes first so that a drift in the machine's load cancels: `writer_throughput_ratio` is
+their curated demos per wall-clock minute, writer thread over in the loop, and `writer_pair_ratios` each pair's.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import shutil
 import sys
@@ -44,6 +48,8 @@ class BenchDemosConfig(BenchConfig):
     backend: str = "batch"  # physics: batch or warp (pip install .[gpu]; a GPU if there is one, else Warp's CPU)
     durable_side_by_side: bool = True  # also run the collection with crash checkpoints, and compare
     checkpoint_s: float = 10.0  # their interval here: 6x as often as the collector's default 60 s, a worst case
+    writer_queue: int = 256  # episodes queued for the collector's writer thread (0: saved in the loop)
+    writer_pairs: int = 2  # collections with the writer thread and in the loop, side by side (0: none)
 
 
 def _throwaway_teacher(tmp: Path) -> Path:
@@ -91,6 +97,8 @@ def run(cfg: BenchDemosConfig) -> dict:
     tmp = Path(tempfile.mkdtemp(prefix="blindgrasp-bench-demos-"))
     try:
         teacher = cfg.teacher or _throwaway_teacher(tmp)
+        if cfg.writer_pairs:  # the pairs compare only if neither pays the first collection's one-off costs
+            _collect(_one_episode(cfg), teacher, tmp, "warmup", 0.0, queue=0)
         seen = []
 
         def keep_some(ep, cut, written, stats):
@@ -113,6 +121,8 @@ def run(cfg: BenchDemosConfig) -> dict:
         }
         if durable_run is not None:
             result.update(_durable_figures(cfg, durable_run, stats))
+        if cfg.writer_pairs:
+            result.update(_writer_pairs(cfg, teacher, tmp))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     if not cfg.json:
@@ -122,7 +132,8 @@ def run(cfg: BenchDemosConfig) -> dict:
     return result
 
 
-def _collect(cfg: BenchDemosConfig, teacher: Path, tmp: Path, folder: str, checkpoint_s: float, on_episode=None):
+def _collect(cfg: BenchDemosConfig, teacher: Path, tmp: Path, folder: str, checkpoint_s: float, on_episode=None,
+             queue: int | None = None):  # fmt: skip
     """One collection into tmp/folder, as blindgrasp-collect-demos runs it."""
     from lerobot_blindgrasp.demos import curation
     from lerobot_blindgrasp.demos.collection import collect
@@ -141,9 +152,22 @@ def _collect(cfg: BenchDemosConfig, teacher: Path, tmp: Path, folder: str, check
         backend=cfg.backend,
         progress=False,
         checkpoint_s=checkpoint_s,
+        writer_queue=cfg.writer_queue if queue is None else queue,
     )
     with contextlib.redirect_stderr(io.StringIO()):
         return collect(c, on_episode=on_episode)
+
+
+def _one_episode(cfg: BenchDemosConfig) -> BenchDemosConfig:
+    """A collection of one whole episode: the imports, the first env build and the first save."""
+    return dataclasses.replace(
+        cfg,
+        objects="cylinder_a_medium",
+        num_envs=1,
+        episodes_per_object=1,
+        max_rollouts_per_object=1,
+        curation=False,
+    )
 
 
 def _collection_figures(stats) -> dict:
@@ -159,6 +183,7 @@ def _collection_figures(stats) -> dict:
         "curated_demos_per_cpu_minute": stats.demos_per_cpu_minute,
         "demos_per_minute": stats.demos_per_minute,
         "write_share_of_wall": stats.write_s / stats.wall_s if stats.wall_s else 0.0,
+        "writer_wait_share_of_wall": stats.writer_wait_s / stats.wall_s if stats.wall_s else 0.0,
     }
 
 
@@ -200,4 +225,28 @@ def _durable_figures(cfg: BenchDemosConfig, durable_run, stats) -> dict:
         "durable_cpu_throughput_ratio": ratio(durable_run.demos_per_cpu_minute, stats.demos_per_cpu_minute),
         "durable_throughput_ratio": ratio(durable_run.demos_per_minute, stats.demos_per_minute),
         "checkpoint_share_of_wall": durable_run.checkpoint_s / max(durable_run.wall_s, 1e-9),
+    }
+
+
+def _writer_pairs(cfg: BenchDemosConfig, teacher: Path, tmp: Path) -> dict:
+    """The same collection with the writer thread and in the loop, in pairs (ABBA...): their throughput ratio."""
+    runs = {"thread": [], "in_loop": []}
+    for k in range(cfg.writer_pairs):
+        for name in ("thread", "in_loop") if k % 2 == 0 else ("in_loop", "thread"):
+            queue = cfg.writer_queue if name == "thread" else 0
+            runs[name].append(_collect(cfg, teacher, tmp, f"pair{k}_{name}", 0.0, queue=queue))
+    demos = {name: sum(r.kept for r in rs) for name, rs in runs.items()}
+    wall = {name: sum(r.wall_s for r in rs) for name, rs in runs.items()}
+    return {
+        "writer_pair_demos": demos["thread"],
+        "writer_pair_demos_in_loop": demos["in_loop"],
+        "writer_pair_wall_s": wall["thread"],
+        "writer_pair_wall_s_in_loop": wall["in_loop"],
+        "writer_pair_wait_share_of_wall": sum(r.writer_wait_s for r in runs["thread"]) / wall["thread"],
+        "writer_pair_write_share_of_wall_in_loop": sum(r.write_s for r in runs["in_loop"]) / wall["in_loop"],
+        "writer_throughput_ratio": (demos["thread"] / wall["thread"]) / (demos["in_loop"] / wall["in_loop"]),
+        "writer_pair_ratios": [
+            round((a.kept / a.wall_s) / (b.kept / b.wall_s), 3)
+            for a, b in zip(runs["thread"], runs["in_loop"], strict=True)
+        ],
     }

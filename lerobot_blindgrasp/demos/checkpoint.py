@@ -25,6 +25,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from typing import Any
 
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.demos import dataset as demo_dataset
@@ -33,11 +34,12 @@ log = logging.getLogger("blindgrasp.demos")
 
 
 class Checkpoints:
-    """Holds the open dataset (`.ds`); call `written()` after every saved episode. `on_checkpoint()` runs after
-    each finalize, before the reopen: it records the run state that goes with the episodes now on disk."""
+    """Holds the open dataset (`.ds`); call `written(state)` after every saved episode, with the run state that goes
+    with the episodes saved so far. `on_checkpoint(state)` runs after each finalize, before the reopen: it records
+    that state, now that its episodes are on disk."""
 
     def __init__(
-        self, ds, root, repo_id: str, every_s: float, every_episodes: int, on_checkpoint: Callable[[int], None]
+        self, ds, root, repo_id: str, every_s: float, every_episodes: int, on_checkpoint: Callable[[Any], None]
     ):
         self.ds, self.root, self.repo_id = ds, root, repo_id
         self.every_s, self.every_episodes = every_s, max(1, every_episodes)
@@ -53,19 +55,19 @@ class Checkpoints:
             return False
         return self.since >= self.every_episodes or time.monotonic() - self.last >= self.every_s
 
-    def written(self) -> None:
+    def written(self, state: Any = None) -> None:
         self.since += 1
         if self.due():
-            self.now()
+            self.now(state)
 
-    def now(self) -> None:
+    def now(self, state: Any = None) -> None:
         t0 = time.perf_counter()
         self.ds.finalize()  # footers written: every episode so far is readable from here on
         t_sync = time.time()
         durable.fsync_tree(self.root, since=self.synced_at - 2.0)  # 2 s: coarse file-system timestamps
         self.synced_at = t_sync
         episodes = self.ds.meta.total_episodes
-        self.on_checkpoint(episodes)
+        self.on_checkpoint(state)
         if not reopen_in_place(self.ds):
             self.ds = demo_dataset.resume(self.root, self.repo_id)
         self.since, self.last = 0, time.monotonic()

@@ -9,8 +9,9 @@ is the command line only: parse, run, print the yield table, and map outcomes to
 
 The output folder is the dataset root. Next to LeRobot's files it holds `collection.json` (provenance),
 `yield_report.json` (per-object yield) and `README.md` (the dataset card). Ctrl-C (or SIGTERM) stops after the
-current control step and finalizes the dataset; a second Ctrl-C aborts at once, still finalizing. Every written
-episode stays readable either way. `--resume=true` appends to the folder until the targets are met.
+current control step, writes the episodes still queued for the writer thread and finalizes the dataset; a second
+Ctrl-C aborts at once (or drops the queued episodes not written yet), still finalizing. Every written episode stays
+readable either way. `--resume=true` appends to the folder until the targets are met.
 """
 
 from __future__ import annotations

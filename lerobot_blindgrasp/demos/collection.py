@@ -10,16 +10,23 @@ or has used `max_rollouts_per_object` rollouts (default 20 N), so an object the 
 instead of stalling it. When a quarter of the envs hold finished objects, the env is rebuilt with the remaining
 objects (new env seeds), so physics time goes to objects that still need demos.
 
-A first SIGINT/SIGTERM stops after the current control step; a second aborts at once, still finalizing
-(`cli.GracefulStop`). The dataset is finalized and the run recorded (`demos/records.py`) however the loop ends.
-A process killed without any handler (SIGKILL, a power cut) loses at most the episodes since the last checkpoint
-(`demos/checkpoint.py`: every `checkpoint_s` seconds or `num_envs` episodes); `--resume=true` goes on from there.
+Kept episodes are written by a writer thread (`demos/episode_writer.py`), off the loop: the physics does not wait
+for `save_episode` unless `writer_queue` episodes are already waiting. The thread also takes the crash checkpoints
+and their records, in order, so each checkpoint records the counts that go with the episodes on disk. The dataset is
+the one the loop would write itself (`--writer_queue=0`): same episodes, same order.
+
+A first SIGINT/SIGTERM stops after the current control step; a second aborts at once. Either way the queued
+episodes are written, then the dataset is finalized and the run recorded (`demos/records.py`), however the loop
+ends. A process killed without any handler (SIGKILL, a power cut) loses at most the episodes since the last
+checkpoint (`demos/checkpoint.py`: every `checkpoint_s` seconds or `num_envs` episodes written) and the at most
+`writer_queue` still queued; `--resume=true` goes on from there.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import logging
 import sys
 import time
@@ -30,8 +37,9 @@ from lerobot_blindgrasp.cli import GracefulStop
 from lerobot_blindgrasp.demos import checkpoint as checkpoint_mod
 from lerobot_blindgrasp.demos import curation as curation_mod
 from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.demos import provenance, records
+from lerobot_blindgrasp.demos import provenance, records, yield_report
 from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
+from lerobot_blindgrasp.demos.episode_writer import EpisodeWriter
 from lerobot_blindgrasp.demos.records import CollectStats
 from lerobot_blindgrasp.project import REPO_ID_PATTERN
 from lerobot_blindgrasp.rollout.actors import TeacherActor
@@ -52,8 +60,8 @@ DEMO_TRACES = ("state", "action", "task_reward", "uniaxial_force")
 
 STOP_NOTE = "finishing this step and finalizing the dataset (again to abort now; written episodes stay readable)"
 
-# Called after every finished rollout with (episode, its curation result, written?, stats); the curation result
-# is None when the physics failed.
+# Called after every finished rollout with (episode, its curation result, kept?, stats); the curation result is
+# None when the physics failed. A kept episode is queued for the writer thread, on disk by the end of the run.
 EpisodeCallback = Callable[[Episode, "curation_mod.CurationResult | None", bool, CollectStats], None]
 
 
@@ -121,15 +129,19 @@ def _collect(cfg: CollectConfig, on_episode: EpisodeCallback | None, command: st
                 run.one_env(todo, stop)
             else:
                 run.stats.stop_reason = "interrupted"
+                run.note_queued()
+            run.writer.flush()  # a write error ends the run here, as it would have in the loop
     except BaseException as e:
         run.stats.stop_reason = (
             "interrupted" if isinstance(e, KeyboardInterrupt) else f"error: {type(e).__name__}: {e}"
         )
         raise
     finally:
-        if not bars_were_off:
-            datasets.enable_progress_bars()
-        run.finish(sys.exc_info()[1])  # the error that ended the run, if any: a cleanup failure must not mask it
+        try:  # the error that ended the run, if any: a cleanup failure must not mask it
+            run.finish(sys.exc_info()[1])
+        finally:  # after the queued saves
+            if not bars_were_off:
+                datasets.enable_progress_bars()
     return run.stats
 
 
@@ -159,6 +171,8 @@ class _Run:
         self.saved = checkpoint_mod.Checkpoints(
             ds, cfg.output_dir, cfg.repo_id, cfg.checkpoint_s, cfg.num_envs, self.record_checkpoint
         )
+        # Everything that touches the dataset or collection.json runs on it, in order.
+        self.writer = EpisodeWriter(cfg.writer_queue)
         torch.manual_seed(self.prov["next_env_seed"])  # the stochastic teacher's samples
         target = cfg.episodes_per_object
         self.bar = tqdm(
@@ -174,10 +188,23 @@ class _Run:
         o = self.tally.of(name)
         return o.kept >= self.cfg.episodes_per_object or o.rollouts >= self.cfg.rollout_budget
 
-    def record_checkpoint(self, episodes: int | None = None) -> None:
-        self.stats.wall_s = time.perf_counter() - self.t_wall
-        self.stats.cpu_s = time.process_time() - self.t_cpu
-        records.checkpoint_run(self.cfg, self.prov, self.run, self.tally, self.stats)
+    def snapshot(self) -> _Counts:
+        """The run's counts now: a checkpoint taken after the episodes submitted so far records these."""
+        tally = yield_report.Tally({k: dataclasses.replace(o) for k, o in self.tally.objects.items()})
+        return _Counts(dict(self.prov), tally, dataclasses.replace(self.stats, tally=tally))
+
+    def record_checkpoint(self, counts: _Counts) -> None:
+        """collection.json with the run in progress (on the writer thread, after the episodes `counts` counts)."""
+        counts.stats.wall_s = time.perf_counter() - self.t_wall
+        counts.stats.cpu_s = time.process_time() - self.t_cpu
+        records.checkpoint_run(self.cfg, counts.prov, self.run, counts.tally, counts.stats)
+
+    def write(self, ep: Episode, cut: curation_mod.CurationResult, counts: _Counts) -> None:
+        """One kept episode into the dataset (on the writer thread), then a checkpoint if one is due."""
+        t0 = time.perf_counter()
+        demo_dataset.write_episode(self.saved.ds, ep, cut)
+        self.stats.write_s += time.perf_counter() - t0
+        self.saved.written(counts)
 
     def one_env(self, todo: list[str], stop: GracefulStop) -> None:
         """Envs for the objects still short of demos, rolled out until the run stops or enough of them are done."""
@@ -186,7 +213,7 @@ class _Run:
         env = _build_env(cfg, todo, prov["next_env_seed"], self.dr, self.reward_cfg)
         prov["next_env_seed"] += cfg.num_envs  # later envs (and --resume) never repeat a draw
         # On disk before any episode of these envs is: a resume after a kill never repeats their draws.
-        self.record_checkpoint()
+        self.writer.submit(functools.partial(self.record_checkpoint, self.snapshot()))
         stats.env_builds += 1
         stale = {"now": False}
 
@@ -195,31 +222,54 @@ class _Run:
             return self.teacher(obs, env)
 
         for ep in stream(env, act, lambda: stop.requested is not None or stale["now"], record=DEMO_TRACES):
-            with stop.saving():
-                cut, written = _handle_episode(
-                    self.saved.ds, ep, cfg.curation, self.tally, stats, cfg.episodes_per_object, self.bar
-                )
-                if written:
-                    self.saved.written()
+            cut, kept = _handle_episode(ep, cfg.curation, self.tally, stats, cfg.episodes_per_object, self.bar)
+            if kept:
+                with stop.saving():  # --writer_queue=0 saves right here; a save is never cut short
+                    self.writer.submit(functools.partial(self.write, ep, cut, self.snapshot()))
             if self.on_episode is not None:
-                self.on_episode(ep, cut, written, stats)
+                self.on_episode(ep, cut, kept, stats)
             if self.done(ep.object_name):
                 finished = sum(self.done(n) for n in env.object_names)
                 stale["now"] = finished >= REBUILD_WASTE_FRACTION * len(env.object_names)
         env.close()
 
+    def note_queued(self) -> None:
+        if self.writer.pending:
+            logger.warning("writing the %d queued episodes (Ctrl-C to drop them)", self.writer.pending)
+
     def finish(self, first: BaseException | None) -> None:
-        """Finalize the dataset and record the run, however it ended; `first` is the error that ended it."""
+        """Write what is queued, finalize the dataset and record the run, however it ended; `first` is the error
+        that ended it."""
         self.bar.close()
-        with _cleanup("finalizing the dataset", first):
-            _finalize_or_abandon(
-                self.saved.ds
-            )  # closes the parquet writers: every saved episode is readable after
-        self.stats.wall_s = time.perf_counter() - self.t_wall
-        self.stats.cpu_s = time.process_time() - self.t_cpu
-        self.stats.checkpoints, self.stats.checkpoint_s = self.saved.count, self.saved.seconds
-        with _cleanup("recording the run", first):
-            records.finish_run(self.cfg, self.prov, self.run, self.tally, self.stats)
+        if isinstance(first, KeyboardInterrupt):
+            self.note_queued()
+        try:
+            with _cleanup("writing the queued episodes", first):
+                self.writer.close()  # an interrupted run keeps every episode it finished
+        except BaseException as e:  # a Ctrl-C while the queue is written, or a write error the loop did not see
+            if first is None:
+                interrupted = isinstance(e, KeyboardInterrupt)
+                self.stats.stop_reason = "interrupted" if interrupted else f"error: {type(e).__name__}: {e}"
+                first = e
+            raise
+        finally:
+            with _cleanup("finalizing the dataset", first):
+                _finalize_or_abandon(self.saved.ds)  # closes the parquet writers: every saved episode is readable
+            self.stats.wall_s = time.perf_counter() - self.t_wall
+            self.stats.cpu_s = time.process_time() - self.t_cpu
+            self.stats.checkpoints, self.stats.checkpoint_s = self.saved.count, self.saved.seconds
+            self.stats.writer_wait_s = self.writer.wait_s
+            with _cleanup("recording the run", first):
+                records.finish_run(self.cfg, self.prov, self.run, self.tally, self.stats)
+
+
+@dataclasses.dataclass
+class _Counts:
+    """A copy of the run's provenance, tally and statistics, for a checkpoint taken later on the writer thread."""
+
+    prov: dict
+    tally: yield_report.Tally
+    stats: CollectStats
 
 
 @contextlib.contextmanager
@@ -270,8 +320,8 @@ def _build_env(cfg: CollectConfig, object_names: list[str], seed: int, dr, rewar
     )
 
 
-def _handle_episode(ds, ep: Episode, cur: curation_mod.CurationConfig, tally, stats, target: int, bar):
-    """Curate, count and maybe write one episode. Returns (curation result or None, written)."""
+def _handle_episode(ep: Episode, cur: curation_mod.CurationConfig, tally, stats, target: int, bar):
+    """Curate and count one episode. Returns (curation result or None, kept: to be written)."""
     o = tally.of(ep.object_name)
     if ep.physics_failed:
         o.physics_failed += 1
@@ -285,9 +335,7 @@ def _handle_episode(ds, ep: Episode, cur: curation_mod.CurationConfig, tally, st
     o.force_sum_n_total += cut.force_sum_n
     if not cut.keep or o.kept >= target:
         return cut, False
-    t0 = time.perf_counter()
-    frames = demo_dataset.write_episode(ds, ep, cut)
-    stats.write_s += time.perf_counter() - t0
+    frames = cut.keep_steps  # what write_episode writes
     o.kept += 1
     o.frames += frames
     stats.kept += 1

@@ -57,6 +57,10 @@ class CollectConfig:
     # checkpoint_s seconds and every num_envs written episodes, so a kill loses at most that much. 0: only at the
     # end (a kill then loses every episode of the run).
     checkpoint_s: float = 60.0
+    # Kept episodes waiting for the writer thread, which saves them off the rollout loop; the loop waits only when
+    # this many are queued (about 15 kB each). Envs finish their episodes together, so a queue as long as the kept
+    # share of num_envs never stalls the loop. A kill loses the queued ones too. 0: save in the loop.
+    writer_queue: int = 256
     progress: bool = True  # progress bar
 
     def __post_init__(self):
@@ -70,6 +74,8 @@ class CollectConfig:
             raise ValueError(
                 "--joint_calibration_rad is a reading offset in rad, >= 0 and well under a joint's range"
             )
+        if self.writer_queue < 0:
+            raise ValueError("--writer_queue must be >= 0 (0: save each episode in the rollout loop)")
         if self.checkpoint_s < 0:
             raise ValueError("--checkpoint_s must be >= 0 (0: finalize only at the end)")
         if not self.curation.enabled and self.curation.trim_to_success:

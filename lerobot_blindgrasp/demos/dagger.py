@@ -13,7 +13,8 @@ Output: `<output_dir>/relabelled`, a LeRobotDataset of those episodes (same sche
 10 s or until the object left the workspace; `episode.outcome` says whether the student succeeded), and
 `<output_dir>/aggregate`, the demos and the relabelled episodes merged with LeRobot's own `aggregate_datasets`:
 the dataset the next student trains on. Start states come from their own block of the demo seed range, disjoint
-from the demos' and from evaluation.
+from the demos' and from evaluation. The episodes are saved as the demo collector saves its own: by the writer
+thread (`demos/episode_writer.py`), in order, while the next batch rolls out.
 
 Label: the absolute target the env would have commanded for the teacher's action (`BatchedGraspEnv.target_for_delta`:
 clip(q + clip(a_teacher, +-0.3 rad), joint limits), in the joints' measured frame).
@@ -21,6 +22,7 @@ clip(q + clip(a_teacher, +-0.3 rad), joint limits), in the joints' measured fram
 
 from __future__ import annotations
 
+import functools
 import json
 import shutil
 import sys
@@ -37,6 +39,7 @@ from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos.collection import _cleanup, _finalize_or_abandon
+from lerobot_blindgrasp.demos.episode_writer import EpisodeWriter
 from lerobot_blindgrasp.durable import atomic_write_json
 from lerobot_blindgrasp.rollout.actors import StudentActor, TeacherActor
 from lerobot_blindgrasp.rollout.envs import make_env
@@ -64,6 +67,7 @@ class DaggerConfig:
     num_envs: int = 360  # envs stepped together (episodes of all objects at once)
     seed: int = DAGGER_SEED  # first env seed, in the demo seed range
     device: str = "cpu"
+    writer_queue: int = 256  # episodes waiting for the writer thread (as blindgrasp-collect-demos); 0: in the loop
     progress: bool = True
 
     def __post_init__(self):
@@ -112,27 +116,27 @@ def run(cfg: DaggerConfig) -> dict:
     per_object = {name: [] for name in names}
     torch.manual_seed(0)
     bar = tqdm(total=len(todo), desc="dagger", unit="ep", disable=not cfg.progress)
+    writer = EpisodeWriter(cfg.writer_queue)  # the next batch rolls out while this one is written
     try:
         for start in range(0, len(todo), cfg.num_envs):
             batch = todo[start : start + cfg.num_envs]
             for ep in relabelled_episodes(student, teacher, batch, cfg.seed + start):
-                cut = curation.CurationResult(
-                    passed=False,
-                    keep=True,
-                    keep_steps=ep.length,
-                    longest_hold_steps=0,
-                    force_sum_n=float(ep.uniaxial_force.sum()),
-                    criteria_step=-1,
-                )
-                stats["frames"] += demo_dataset.write_episode(ds, ep, cut)
+                cut = _whole(ep)
+                writer.submit(functools.partial(demo_dataset.write_episode, ds, ep, cut))
+                stats["frames"] += cut.keep_steps
                 stats["episodes"] += 1
                 stats["student_successes"] += ep.success
                 per_object[ep.object_name].append(ep.success)
                 bar.update(1)
+        writer.flush()
     finally:
         bar.close()
-        with _cleanup("finalizing the dataset", sys.exc_info()[1]):  # never masks the error that ended the run
-            _finalize_or_abandon(ds)
+        try:
+            with _cleanup("writing the queued episodes", sys.exc_info()[1]):
+                writer.close()  # what was rolled out is written, also on Ctrl-C
+        finally:
+            with _cleanup("finalizing the dataset", sys.exc_info()[1]):  # never masks the error that ended it
+                _finalize_or_abandon(ds)
     demo_dataset.aggregate(
         [_repo_id(cfg.demos), cfg.repo_id + "_relabelled"],
         [cfg.demos, out / "relabelled"],
@@ -153,6 +157,18 @@ def run(cfg: DaggerConfig) -> dict:
     }
     atomic_write_json(out / DONE, record, indent=2)
     return record
+
+
+def _whole(ep: Episode) -> curation.CurationResult:
+    """A relabelled episode is kept whole: the student's own rollout, whatever happened."""
+    return curation.CurationResult(
+        passed=False,
+        keep=True,
+        keep_steps=ep.length,
+        longest_hold_steps=0,
+        force_sum_n=float(ep.uniaxial_force.sum()),
+        criteria_step=-1,
+    )
 
 
 def _repo_id(root: Path) -> str:

@@ -31,7 +31,8 @@ log = logging.getLogger("blindgrasp.demos")
 class CollectStats:
     wall_s: float = 0.0
     cpu_s: float = 0.0  # process CPU time, all threads (physics, torch, writer)
-    write_s: float = 0.0  # inside LeRobotDataset.save_episode
+    write_s: float = 0.0  # inside LeRobotDataset.save_episode (on the writer thread)
+    writer_wait_s: float = 0.0  # the loop waiting for the writer thread (a full queue, the final drain)
     env_steps: int = 0
     rollouts: int = 0
     kept: int = 0
