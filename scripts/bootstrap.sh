@@ -22,12 +22,11 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$VENV/bin/pip" install --quiet --upgrade pip
 fi
 # Re-install only when pyproject.toml changed since the last install (first install: ~5 min, a 4 GB torch).
-# BLINDGRASP_EXTRAS=test,gpu adds MuJoCo Warp (a 150 MB wheel) so that tests/test_sim_warp.py runs instead of being
-# skipped; off by default because Warp compiles its CPU kernels on first use (~10 min on 2 cores; cached after in
-# ~/.cache/warp, so a CI that caches that folder pays it once).
+# The test extra includes the gpu one: MuJoCo Warp (a 150 MB wheel) runs tests/test_sim_warp.py on Warp's CPU
+# device. Warp compiles its kernels on first use (about 2 min on 2 cores) into its kernel cache, ~/.cache/warp
+# (WARP_CACHE_PATH moves it), and loads them from there in later runs.
 EXTRAS="${BLINDGRASP_EXTRAS:-test}"
-STAMP="$VENV/.blindgrasp-installed"
-[ "$EXTRAS" = test ] || STAMP="$STAMP-${EXTRAS//,/-}"
+STAMP="$VENV/.blindgrasp-installed-${EXTRAS//,/-}"
 if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ]; then
   echo "installing lerobot_blindgrasp[$EXTRAS] and its dependencies into $VENV" >&2
   "$VENV/bin/pip" install --quiet -e "$ROOT[$EXTRAS]"

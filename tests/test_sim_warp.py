@@ -19,13 +19,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import torch
 
-pytest.importorskip("mujoco_warp")
-
-from lerobot_blindgrasp import spec  # noqa: E402
-from lerobot_blindgrasp.sim import objects, randomization  # noqa: E402
-from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv, GraspEnvConfig  # noqa: E402
-from lerobot_blindgrasp.sim.scripted import run_pinch_lift  # noqa: E402
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim import objects, randomization
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv, GraspEnvConfig
+from lerobot_blindgrasp.sim.scripted import run_pinch_lift
 
 NO_PUSH = randomization.EVAL_DR
 
@@ -36,12 +35,18 @@ def _pair(**kw):
     return batch, warp
 
 
-def test_warp_groups_objects_by_geom_type_with_per_world_parameters():
+@pytest.fixture(scope="module")
+def pair36():
+    """Two envs per catalogue object on each backend, built once for the tests that only read or reset them."""
+    return _pair(num_envs=36, seed=5, dr=NO_PUSH)
+
+
+def test_warp_groups_objects_by_geom_type_with_per_world_parameters(pair36):
     """18 objects become 4 Warp models (box, capsule, cylinder, sphere); sizes, masses and the Table II draw are
     per-world fields equal to the batch backend's per-env MjModels."""
-    _, warp = _pair(num_envs=18, seed=5, dr=NO_PUSH)
+    _, warp = pair36
     groups = warp.physics.groups
-    assert sorted(len(g.ids) for g in groups) == [3, 3, 6, 6]
+    assert sorted(len(g.ids) for g in groups) == [6, 6, 12, 12]
     for g in groups:
         body = warp.env_model(int(g.ids[0])).body("object").id
         mass = g.model.body_mass.numpy()[:, body]
@@ -54,8 +59,8 @@ def test_warp_groups_objects_by_geom_type_with_per_world_parameters():
     assert opt.noslip_iterations == 3 and int(opt.cone) == 1 and int(opt.solver) == 2
 
 
-def test_open_loop_steps_match_before_contact():
-    batch, warp = _pair(num_envs=36, seed=5, dr=NO_PUSH)
+def test_open_loop_steps_match_before_contact(pair36):
+    batch, warp = pair36
     ob, ow = batch.reset(), warp.reset()
     np.testing.assert_array_equal(warp.joint_positions(), batch.joint_positions())  # same draws, same start
     for k in ob:  # sensors computed in float32
@@ -141,3 +146,123 @@ def test_collect_demos_on_warp_writes_the_same_start_states(tmp_path):
         np.testing.assert_allclose(first["warp"][name], first["batch"][name], atol=1e-5)
     with pytest.raises(ValueError, match="backend"):
         CollectConfig(output_dir=tmp_path / "x", repo_id="a/b", backend="gpu")
+
+
+# Per-term tolerance, derived. Both backends start from the same state (Warp's is its float32 rounding) and step
+# the same commands through 10 physics substeps per control step. Each substep's float32 arithmetic leaves each
+# state component within a few ulps of its float64 counterpart; ULPS_PER_SUBSTEP = 8 bounds that, so after t
+# control steps the state differs by at most DRIFT(t) = 8 x 10 t x eps32 x (largest |qpos|). A term then differs by
+# its Lipschitz constant in the state times that, plus its own float32 rounding (ULPS_PER_SUBSTEP ulps of its scale):
+# joints, lift and planar distance 1; a tip-to-object distance 2 (the tip moves at most 1 m per rad of the 3 joints
+# of a 0.3 m finger, plus the object's own motion); the joint-limit penalty 9 (a sum over 9 clamped joints); r_reach
+# reach_scale x 2. Before contact the contact-driven terms (uniaxial force counts, r_task's active gate, r_incentive,
+# r_touch, success, termination) are equal, and forces agree within 1e-3 N (a link grazing an object on one
+# backend only, see the module docstring) which is far below the 0.1 N contact threshold that turns them into
+# counts. r_action and r_action_rate read only the actions, the same float64 values on both.
+# The object is not in free flight: it rests on the table from the first step, and the two collision pipelines
+# settle a capsule differently in that first step (one contact against two along its side: 1.6e-5 m apart after it,
+# converging to the joints' drift once at rest). OBJECT_SETTLE_M, that first step's difference with a 6x margin,
+# is added to the drift of everything that reads the object's position.
+ULPS_PER_SUBSTEP = 8
+OBJECT_SETTLE_M = 1e-4
+F32 = float(np.finfo(np.float32).eps)
+
+
+def _term_values(env, a, prev):
+    from lerobot_blindgrasp.sim import rewards
+
+    raw = {k: v.cpu().double() for k, v in env._raw.items()}
+    step = rewards.StepQuantities(
+        lift=raw["lift"],
+        d_xy=raw["d_xy"],
+        uniaxial_force=raw["uniaxial_clean"],
+        q=raw["q"],
+        action=torch.as_tensor(a, dtype=torch.float64),
+        prev_action=prev,
+        tip_object_distance=raw["tip_object_distance"],
+        tip_object_force=raw["tip_object_force"],
+        contact_threshold_n=env.cfg.reward.contact_threshold_n,
+    )
+    terms = rewards.compute_terms(step, env.cfg.reward)
+    return raw, {k: v.cpu().double() for k, v in terms.items()}, rewards.num_contacts(step.uniaxial_force)
+
+
+def _close(new, old, lipschitz: float, drift: float, what: str) -> None:
+    tol = lipschitz * drift + ULPS_PER_SUBSTEP * F32 * max(1.0, float(old.abs().max()))
+    err = float((new - old).abs().max())
+    assert err <= tol, f"{what}: |warp - batch| = {err:.3g} > {tol:.3g}"
+
+
+def test_each_term_per_step_within_float32_of_the_batch_backend():
+    """Every raw quantity and reward term, control step by control step, CPU (float64) against Warp (float32),
+    within the tolerance derived above; the integer and boolean terms exactly."""
+    from lerobot_blindgrasp.sim import rewards
+
+    batch, warp = _pair(num_envs=18, seed=9, dr=NO_PUSH)
+    batch.reset(), warp.reset()
+    substeps, reach_scale = batch.cfg.physics.substeps, batch.cfg.reward.reach_scale
+    rng = np.random.default_rng(1)
+    for t in range(1, 6):
+        a = rng.uniform(-0.1, 0.1, (18, spec.NUM_JOINTS))
+        prev_b, prev_w = batch.prev_action.cpu().clone(), warp.prev_action.cpu().clone()
+        _, _, term_b, trunc_b, info_b = batch.step(a)
+        _, _, term_w, trunc_w, info_w = warp.step(a)
+        qpos_b = batch.physics.qpos.cpu().numpy()
+        drift = ULPS_PER_SUBSTEP * substeps * t * F32 * max(1.0, float(np.abs(qpos_b).max()))
+        qpos_w = warp.physics.qpos.cpu().numpy()
+        np.testing.assert_allclose(qpos_w[:, :9], qpos_b[:, :9], rtol=0, atol=drift)  # the joints
+        np.testing.assert_allclose(qpos_w[:, 9:12], qpos_b[:, 9:12], rtol=0, atol=drift + OBJECT_SETTLE_M)
+        (raw_b, terms_b, n_b), (raw_w, terms_w, n_w) = (
+            _term_values(batch, a, prev_b),
+            _term_values(warp, a, prev_w),
+        )
+
+        _close(raw_w["q"], raw_b["q"], 1, drift, f"step {t} q")
+        for k, lip in (("lift", 1), ("d_xy", 1), ("tip_object_distance", 2)):
+            _close(raw_w[k], raw_b[k], lip, drift + OBJECT_SETTLE_M, f"step {t} {k}")
+        for k in ("uniaxial_clean", "tip_object_force"):
+            np.testing.assert_allclose(raw_w[k], raw_b[k], atol=1e-3, err_msg=f"step {t} {k}")
+        torch.testing.assert_close(n_w, n_b, rtol=0, atol=0)
+        _close(terms_w["joint_limit"], terms_b["joint_limit"], 9, drift, f"step {t} r_joint_limit")
+        _close(terms_w["reach"], terms_b["reach"], 2 * reach_scale, drift, f"step {t} r_reach")
+        for k in ("task", "incentive", "touch", "action", "action_rate"):
+            torch.testing.assert_close(terms_w[k], terms_b[k], rtol=0, atol=1e-12, msg=f"step {t} r_{k}")
+        assert set(terms_b) == set(rewards.TERM_NAMES)
+        np.testing.assert_array_equal(term_w, term_b)
+        np.testing.assert_array_equal(trunc_w, trunc_b)
+        np.testing.assert_array_equal(info_w["success"], info_b["success"])
+
+
+def test_shared_arrays_are_warps_own_memory_and_step_alike():
+    """`share_arrays=True` with one geometry group: the contract's tensors are the Warp arrays themselves (same
+    memory, float32), and stepping through them gives bit for bit what the copying layout gives."""
+    from lerobot_blindgrasp.sim.backends.warp import WarpBackend
+
+    env = BatchedGraspEnv(
+        GraspEnvConfig(
+            backend="warp", device="cpu", num_envs=3, seed=5, objects=("cylinder_a_medium",), dr=NO_PUSH
+        )
+    )
+    env.reset()
+    copying = env.physics
+    shared = WarpBackend(env._templates, env.object_index, env.env_model, device="cpu", share_arrays=True)
+    assert shared.shares_memory and not copying.shares_memory
+    data = shared.groups[0].data
+    for k in ("qpos", "qvel", "ctrl", "xfrc_applied", "sensordata"):
+        view = getattr(shared, k)
+        assert view.dtype == torch.float32 and view.data_ptr() == getattr(data, k).ptr, k
+    everyone = np.arange(3)
+    shared.reset(everyone)
+    for k in ("qpos", "qvel", "ctrl"):
+        getattr(shared, k)[:] = getattr(copying, k)  # the env's reset state, cast to float32 on the way
+    shared.forward(everyone)
+    np.testing.assert_array_equal(data.qpos.numpy(), shared.qpos.numpy())  # written in place, no copy
+    target = copying.ctrl + 0.1
+    for _ in range(3):
+        copying.ctrl[:] = target
+        shared.ctrl[:] = target
+        assert not copying.step(10).any() and not shared.step(10).any()
+        for k in ("qpos", "qvel", "sensordata"):
+            np.testing.assert_array_equal(
+                getattr(shared, k).numpy(), getattr(copying, k).numpy().astype(np.float32)
+            )

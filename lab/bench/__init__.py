@@ -1,4 +1,4 @@
-"""`python -m lab.bench --bench.type={sim,teacher,demos,policy,student}`: benchmarks that print one table per run (JSON
+"""`python -m lab.bench --bench.type={sim,teacher,demos,policy,student,paper}`: benchmarks that print one table per run (JSON
 with --bench.json=true).
 
     python -m lab.bench --bench.type=sim --bench.num_envs=1026 --bench.threads=[1,2]
@@ -6,7 +6,7 @@ with --bench.json=true).
 
 `--bench.type` picks the benchmark (as `--policy.type` picks a LeRobot policy); `--bench.*` are that benchmark's
 options (`--bench.type=sim --help` lists them). Each lives in its own module (`sim_bench.py`, `teacher_bench.py`,
-`demos_bench.py`, `policy_bench.py`, `student_bench.py`) that registers its `BenchConfig` subclass under its name and
+`demos_bench.py`, `policy_bench.py`, `student_bench.py`, `paper_bench.py`) that registers its `BenchConfig` subclass under its name and
 has `run(cfg) -> dict`.
 """
 
@@ -21,7 +21,7 @@ import draccus
 
 from lerobot_blindgrasp.cli import parse_config, sleeping_openmp_threads
 
-BENCHMARKS = ("sim", "teacher", "demos", "policy", "student")
+BENCHMARKS = ("sim", "teacher", "demos", "policy", "student", "paper")
 
 
 @dataclass
@@ -33,7 +33,7 @@ class BenchConfig(draccus.ChoiceRegistry):
 
 @dataclass
 class BenchCommand:
-    bench: BenchConfig  # --bench.type: sim, teacher, demos, policy or student
+    bench: BenchConfig  # --bench.type: sim, teacher, demos, policy, student or paper
 
 
 def _modules(argv: list[str]) -> tuple[str, ...]:

@@ -46,7 +46,12 @@ class BenchSimConfig(BenchConfig):
 def _measure(num_envs: int, nthread: int, steps: int, blocks: int, backend: str = "batch") -> dict:
     env = BatchedGraspEnv(GraspEnvConfig(num_envs=num_envs, seed=0, nthread=nthread, backend=backend))
     env.reset()
-    k = env.cfg.physics.substeps
+    return {"backend": backend, "threads": env.physics.nthread, **time_env(env, steps, blocks)}
+
+
+def time_env(env: BatchedGraspEnv, steps: int, blocks: int) -> dict:
+    """The env's control step against raw physics replaying its joint targets, on an env already reset."""
+    k, num_envs = env.cfg.physics.substeps, env.num_envs
     rng = np.random.default_rng(0)
     actions = rng.uniform(-0.15, 0.15, (steps, num_envs, spec.NUM_JOINTS))
     for a in actions[:5]:  # warm-up, and get fingers moving
@@ -73,8 +78,6 @@ def _measure(num_envs: int, nthread: int, steps: int, blocks: int, backend: str 
     raw_ctrl = n_ctrl / raw_t
     env_ctrl = n_ctrl / env_t
     return {
-        "backend": backend,
-        "threads": env.physics.nthread,
         "raw_physics_steps_per_s": raw_ctrl * k,
         "raw_control_steps_per_s": raw_ctrl,
         "env_control_steps_per_s": env_ctrl,

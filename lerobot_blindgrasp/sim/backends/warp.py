@@ -9,10 +9,19 @@ envs' randomized CPU models (the same `MjModel`s the batch backend steps: Table 
 gains, and the constants `mj_setConst` derives from them) is batched per world and filled from those models, so
 both backends simulate the same parameters. Fields that differ but cannot be batched raise at construction.
 
-State. The env reads and writes host (float64) mirrors of qpos, qvel, ctrl, xfrc_applied and sensordata, as CPU
-tensors over numpy arrays (`torch.from_numpy`, shared memory; `device` is the CPU);
-`step` uploads ctrl and forces, steps each group, and downloads qpos, qvel and sensordata (about 100 floats per env
-per control step). On CUDA the `nstep` substeps of each group run as one captured CUDA graph.
+State. `qpos`, `qvel`, `ctrl`, `xfrc_applied` and `sensordata` are float64 tensors on Warp's device (`device`,
+the torch name of `wp_device`), in env order; a step never copies them to the host. Each control step copies ctrl
+and xfrc_applied into the groups' Warp arrays and qpos, qvel and sensordata back, on the device (about 100 floats
+per env, cast between float64 and Warp's float32); `wp.to_torch` views of the Warp arrays (shared memory) are the
+two ends of those copies. `share_arrays=True` removes the copies where it can: with one group holding every env in
+order, the tensors ARE the Warp arrays (float32, mjlab's way). It is off by default for two reasons: the task's
+reset writes float64 rows into qpos and ctrl with indexed assignment, which torch refuses into a float32 tensor
+(casting them to the tensor's dtype there is all it takes), and with several groups (the paper's 18 objects are
+four geometry types) one tensor cannot share memory with several Warp arrays whose worlds interleave in env order:
+that needs every geometry in one model. On CUDA, torch's stream is synchronized before Warp's launches and Warp's
+after them. The `nstep` substeps of each group run as one captured graph: a CUDA graph on a GPU, Warp's API
+capture on its CPU device (replayed natively, without the Python launch overhead of each kernel, which on CPU is
+most of a step's time; the replay is bit-identical to stepping kernel by kernel).
 
 Differences from the batch backend:
 - float32 throughout (MuJoCo Warp's `float`), against float64 on CPU;
@@ -65,13 +74,20 @@ def default_device() -> str:
     return "cpu"
 
 
+_STATE = ("qpos", "qvel", "ctrl", "xfrc_applied", "sensordata")  # the contract's tensors
+_INPUTS = ("ctrl", "xfrc_applied")  # written by the env, read by a step
+_OUTPUTS = ("qpos", "qvel", "sensordata")  # written by a step
+
+
 @dataclasses.dataclass
 class _Group:
     ids: np.ndarray  # env ids of this group's worlds, in world order
     model: object  # mjw.Model
     data: object  # mjw.Data
-    graph: object = None  # captured substeps (CUDA only)
+    graph: object = None  # captured substeps
     graph_nstep: int = 0
+    ids_t: torch.Tensor | None = None  # ids on the device
+    view: dict | None = None  # the Data's state arrays as torch tensors (shared memory)
 
 
 def _array_fields(m: mujoco.MjModel) -> dict[str, np.ndarray]:
@@ -96,37 +112,43 @@ class WarpBackend:
         device: str | None = None,
         nconmax: int = NCONMAX,
         njmax: int = NJMAX,
+        share_arrays: bool = False,
     ):
         """templates: one compiled MjModel per object; object_index: object of each env; env_model(i): env i's
         randomized MjModel (the same one the batch backend would step)."""
         self.wp_device = device or default_device()
+        self.device = torch.device(wp.device_to_torch(self.wp_device))
+        self._cuda = self.device.type == "cuda"
         self.num_envs = n = len(object_index)
         self.nthread = 0  # not applicable; kept for the benchmarks' tables
-        t0 = templates[0]
-        self._h_qpos = np.tile(t0.qpos0, (n, 1))
-        self._h_qvel = np.zeros((n, t0.nv))
-        self._h_ctrl = np.zeros((n, t0.nu))
-        self._h_xfrc_applied = np.zeros((n, t0.nbody, 6))
-        self._h_sensordata = np.zeros((n, t0.nsensordata))
-        # The backend contract (backends/__init__.py): tensors sharing memory with the state the env reads.
-        self.device = torch.device("cpu")  # where the mirrors live; Warp runs on wp_device
-        self.qpos, self.qvel = torch.from_numpy(self._h_qpos), torch.from_numpy(self._h_qvel)
-        self.ctrl, self.xfrc_applied = torch.from_numpy(self._h_ctrl), torch.from_numpy(self._h_xfrc_applied)
-        self.sensordata = torch.from_numpy(self._h_sensordata)
-        self._zero_warm = np.zeros(n, dtype=bool)
-
         geom_type = np.array([tm.geom_type[tm.geom("object_geom").id] for tm in templates])
         self.groups: list[_Group] = []
         with wp.ScopedDevice(self.wp_device):
             for gt in np.unique(geom_type[object_index]):
                 ids = np.flatnonzero(geom_type[object_index] == gt)
                 self.groups.append(self._build_group(ids, [env_model(int(i)) for i in ids], nconmax, njmax))
-        # env id -> (group, world)
-        self._group_of = np.zeros(n, dtype=np.int64)
-        self._world_of = np.zeros(n, dtype=np.int64)
-        for k, g in enumerate(self.groups):
-            self._group_of[g.ids] = k
-            self._world_of[g.ids] = np.arange(len(g.ids))
+        for g in self.groups:
+            g.ids_t = torch.as_tensor(g.ids, device=self.device)
+            g.view = {k: wp.to_torch(getattr(g.data, k)) for k in (*_STATE, "qacc_warmstart", "overflow")}
+        # share_arrays: with one group holding every env in order, the contract's tensors ARE its Warp arrays
+        # (float32, no copy at all); the task's terms must then write them with their dtype (see State above).
+        self.shares_memory = (
+            share_arrays and len(self.groups) == 1 and np.array_equal(self.groups[0].ids, np.arange(n))
+        )
+        for k in _STATE:
+            v = self.groups[0].view[k]
+            if self.shares_memory:
+                setattr(self, k, v)
+            else:
+                setattr(self, k, torch.zeros((n, *v.shape[1:]), dtype=torch.float64, device=self.device))
+        self._gather(_STATE)
+        self._qpos0 = torch.zeros_like(self.qpos)
+        for g in self.groups:
+            q0 = wp.to_torch(g.model.qpos0)
+            self._qpos0[g.ids_t] = q0[torch.arange(len(g.ids), device=self.device) % q0.shape[0]].to(
+                self.qpos.dtype
+            )
+        self._zero_warm = torch.zeros(n, dtype=torch.bool, device=self.device)
 
     def _build_group(self, ids, models: list[mujoco.MjModel], nconmax: int, njmax: int) -> _Group:
         base = models[0]
@@ -153,130 +175,109 @@ class WarpBackend:
             rows = np.stack([getattr(m, k) for m in models]).astype(ref.dtype)
             arr.assign(rows.reshape(ref.shape))
         data = mjw.make_data(base, nworld=nw, nconmax=nconmax, njmax=njmax)
-        if wp.get_device().is_cuda:
-            # Load every kernel now: a CUDA graph capture (first step) records launches but cannot compile.
-            mjw.step(model, data)
-            mjw.reset_data(model, data)
+        # Load every kernel now: a graph capture (first step) records launches but cannot compile.
+        mjw.step(model, data)
+        mjw.reset_data(model, data)
         return _Group(ids=np.asarray(ids), model=model, data=data)
 
-    # --- state transfer ---------------------------------------------------------------------------------------
-    @staticmethod
-    def _upload(arr, host: np.ndarray) -> None:
-        shape = tuple(arr.shape) + tuple(getattr(arr.dtype, "_shape_", ()))
-        arr.assign(np.ascontiguousarray(host, dtype=np.float32).reshape(shape))
+    # --- state transfer (on the device) -----------------------------------------------------------------------
+    def _scatter(self, fields) -> None:
+        """The env-ordered tensors into the groups' arrays (nothing to copy when they are the same memory)."""
+        for g in [] if self.shares_memory else self.groups:
+            for k in fields:
+                g.view[k].copy_(getattr(self, k)[g.ids_t])
+        if self._cuda:  # torch's writes done before Warp's stream reads them
+            torch.cuda.current_stream(self.device).synchronize()
 
-    def _push_state(self, g: _Group) -> None:
-        d = g.data
-        self._upload(d.qpos, self._h_qpos[g.ids])
-        self._upload(d.qvel, self._h_qvel[g.ids])
-        self._push_inputs(g)
-        zero = self._zero_warm[g.ids]
-        if zero.any():
-            warm = d.qacc_warmstart.numpy().copy()
-            warm[zero] = 0.0
-            d.qacc_warmstart.assign(warm)
-            self._zero_warm[g.ids] = False
+    def _gather(self, fields, groups=None) -> None:
+        """The groups' arrays into the env-ordered tensors, after Warp's work is done."""
+        if self._cuda:
+            wp.synchronize_device(self.wp_device)
+        for g in [] if self.shares_memory else groups or self.groups:
+            for k in fields:
+                getattr(self, k)[g.ids_t] = g.view[k].to(torch.float64)
 
-    def _push_inputs(self, g: _Group) -> None:
-        self._upload(g.data.ctrl, self._h_ctrl[g.ids])
-        self._upload(g.data.xfrc_applied, self._h_xfrc_applied[g.ids])
+    def _ids(self, ids) -> torch.Tensor:
+        """Env ids as an index tensor on the device (a device tensor stays there: no wait on the device)."""
+        return ids.to(self.device) if isinstance(ids, torch.Tensor) else torch.as_tensor(ids, device=self.device)
 
     # --- backend interface --------------------------------------------------------------------------------------
     def reset(self, ids) -> None:
-        ids = np.asarray(ids.cpu() if isinstance(ids, torch.Tensor) else ids)
-        self._h_qpos[ids] = self._qpos0(ids)
-        self._h_qvel[ids] = 0.0
-        self._h_ctrl[ids] = 0.0
-        self._h_xfrc_applied[ids] = 0.0
+        ids = self._ids(ids)
+        self.qpos[ids] = self._qpos0[ids]
+        self.qvel[ids] = 0.0
+        self.ctrl[ids] = 0.0
+        self.xfrc_applied[ids] = 0.0
         self._zero_warm[ids] = True
 
-    def _qpos0(self, ids: np.ndarray) -> np.ndarray:
-        out = np.empty((len(ids), self._h_qpos.shape[1]))
-        for k, g in enumerate(self.groups):
-            mask = self._group_of[ids] == k
-            if mask.any():
-                q0 = g.model.qpos0.numpy()
-                out[mask] = q0[self._world_of[ids[mask]] % q0.shape[0]]
-        return out
-
     def forward(self, ids) -> None:
-        ids = np.asarray(ids.cpu() if isinstance(ids, torch.Tensor) else ids)
+        """Sensors of `ids` at their current state. Forward runs on every world of their groups; the others keep
+        the sensors of their last step (a step's sensors are those of the state it started from)."""
+        ids = self._ids(ids)
+        mine = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        mine[ids] = True
+        groups = [g for g in self.groups if bool(mine[g.ids_t].any())]
+        keep = self.sensordata.clone()
+        for g in groups:  # a reset world starts its solver cold, as MuJoCo's mj_resetData leaves it
+            g.view["qacc_warmstart"][self._zero_warm[g.ids_t]] = 0.0
+            self._zero_warm[g.ids_t] = False
+        self._scatter(("qpos", "qvel", *_INPUTS))
         with wp.ScopedDevice(self.wp_device):
-            for k, g in enumerate(self.groups):
-                mine = ids[self._group_of[ids] == k]
-                if mine.size == 0:
-                    continue
-                # Forward runs on all of the group's worlds; it only recomputes quantities derived from the state,
-                # and only the reset worlds' sensors are read back (the others keep those of their last step).
-                self._push_state(g)
+            for g in groups:
                 mjw.forward(g.model, g.data)
-                self._h_sensordata[mine] = g.data.sensordata.numpy()[self._world_of[mine]]
+        self._gather(("sensordata",), groups)
+        self.sensordata[~mine] = keep[~mine]
 
     def _run(self, g: _Group, nstep: int) -> None:
-        if wp.get_device(self.wp_device).is_cuda:
-            if g.graph is None or g.graph_nstep != nstep:
-                with wp.ScopedCapture() as cap:  # records the launches; nothing runs until capture_launch
-                    for _ in range(nstep):
-                        mjw.step(g.model, g.data)
-                g.graph, g.graph_nstep = cap.graph, nstep
-            wp.capture_launch(g.graph)
-        else:
-            for _ in range(nstep):
-                mjw.step(g.model, g.data)
+        if g.graph is None or g.graph_nstep != nstep:
+            with wp.ScopedCapture() as cap:  # records the launches; nothing runs until capture_launch
+                for _ in range(nstep):
+                    mjw.step(g.model, g.data)
+            g.graph, g.graph_nstep = cap.graph, nstep
+        wp.capture_launch(g.graph)
 
     def step(self, nstep: int) -> torch.Tensor:
-        overflow = np.zeros(self.num_envs, dtype=np.int64)
+        self._scatter(_INPUTS)
         with wp.ScopedDevice(self.wp_device):
             for g in self.groups:
-                self._push_inputs(g)
                 g.data.overflow.zero_()
                 self._run(g, nstep)
-            for g in self.groups:  # downloads synchronize; all groups were launched first
-                d = g.data
-                self._h_qpos[g.ids] = d.qpos.numpy()
-                self._h_qvel[g.ids] = d.qvel.numpy()
-                self._h_sensordata[g.ids] = d.sensordata.numpy()
-                overflow[g.ids] = d.overflow.numpy()
+        self._gather(_OUTPUTS)
+        overflow = torch.zeros(self.num_envs, dtype=torch.int32, device=self.device)
+        for g in self.groups:
+            overflow[g.ids_t] = g.view["overflow"].to(torch.int32)
         failed = (overflow & ~_NOT_FAILURES) != 0
-        failed |= ~np.isfinite(self._h_qpos).all(axis=1) | ~np.isfinite(self._h_qvel).all(axis=1)
-        return torch.from_numpy(failed)
+        return failed | ~torch.isfinite(self.qpos).all(1) | ~torch.isfinite(self.qvel).all(1)
 
     # --- benchmarks and rendering ----------------------------------------------------------------------------
     def snapshot(self):
         with wp.ScopedDevice(self.wp_device):
-            dev = [
-                {
-                    k: wp.clone(getattr(g.data, k))
-                    for k in ("qpos", "qvel", "qacc_warmstart", "ctrl", "xfrc_applied")
-                }
-                for g in self.groups
-            ]
-        host = {k: getattr(self, f"_h_{k}").copy() for k in ("qpos", "qvel", "ctrl", "xfrc_applied", "sensordata")}
-        return dev, host
+            dev = [{k: wp.clone(getattr(g.data, k)) for k in (*_STATE, "qacc_warmstart")} for g in self.groups]
+        return dev, {k: getattr(self, k).clone() for k in _STATE}
 
     def restore(self, state) -> None:
-        dev, host = state
+        dev, env_ordered = state
         with wp.ScopedDevice(self.wp_device):
             for g, saved in zip(self.groups, dev):
                 for k, v in saved.items():
                     wp.copy(getattr(g.data, k), v)
-        for k, v in host.items():
-            getattr(self, f"_h_{k}")[:] = v
+        for k, v in env_ordered.items():
+            getattr(self, k).copy_(v)
 
     def raw_step(self, nstep: int) -> None:
-        """Physics only: upload the commanded targets, step every group, wait; no state download."""
+        """Physics only: the commanded targets into the groups, every group stepped, wait; nothing gathered."""
+        self._scatter(_INPUTS)
         with wp.ScopedDevice(self.wp_device):
             for g in self.groups:
-                self._push_inputs(g)
                 self._run(g, nstep)
             wp.synchronize_device(self.wp_device)
 
     def get_data(self, i: int, model: mujoco.MjModel) -> mujoco.MjData:
         """A CPU MjData holding env i's current state (for rendering)."""
         d = mujoco.MjData(model)
-        d.qpos[:] = self._h_qpos[i]
-        d.qvel[:] = self._h_qvel[i]
-        d.ctrl[:] = self._h_ctrl[i]
+        d.qpos[:] = self.qpos[i].cpu().numpy()
+        d.qvel[:] = self.qvel[i].cpu().numpy()
+        d.ctrl[:] = self.ctrl[i].cpu().numpy()
         return d
 
     def close(self) -> None:
