@@ -88,7 +88,7 @@ def _mentions(module: str, *texts: str) -> list[str]:
     return [f"{module} no longer contains {text!r}" for text in texts if text not in source]
 
 
-def check() -> list[str]:
+def check_lerobot() -> list[str]:
     """What the reaches rely on that the installed LeRobot lacks: one line each; empty when all is there."""
     reader = "lerobot.datasets.dataset_reader"
     problems = _has(reader, "DatasetReader.try_load", "DatasetReader.load_and_activate", "DatasetReader.get_item")
@@ -124,7 +124,7 @@ def _used(reach: str) -> None:
     version = installed_version()
     if version == WRITTEN_FOR:
         return
-    problems = check()
+    problems = check_lerobot()
     logger.warning(
         "lerobot_blindgrasp was written for LeRobot %s, found %s (first used: %s); %s",
         WRITTEN_FOR,

@@ -278,7 +278,7 @@ def test_a_gripper_calibration_file_is_valid_or_refused_by_name(tmp_path_factory
             robot.connect()  # refused before the port is opened
     else:
         ids = dict(zip(spec.JOINT_NAMES, spec.SERVO_IDS, strict=True))
-        assert calib.problems(robot.calibration, ids) == []
+        assert calib.servo_calibration_problems(robot.calibration, ids) == []
         assert all(type(getattr(c, f)) is int for c in robot.calibration.values() for f in calib.RECORD_FIELDS)
 
 

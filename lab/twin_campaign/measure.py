@@ -39,7 +39,7 @@ from lerobot_blindgrasp import durable, shipped
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.envs.real_env import resolve_real_objects
 from lerobot_blindgrasp.twin.calibrate import TwinCalibrateConfig
-from lerobot_blindgrasp.twin.calibrate import run as calibrate
+from lerobot_blindgrasp.twin.calibrate import calibrate_twin as calibrate
 
 logger = logging.getLogger(__name__)
 BIN = Path(sys.executable).parent

@@ -34,7 +34,7 @@ import numpy as np
 from lerobot_blindgrasp import durable, spaces, spec
 from lerobot_blindgrasp.envs import real_report
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
-from lerobot_blindgrasp.hardware.loop_timing import Schedule
+from lerobot_blindgrasp.hardware.loop_timing import StepPacer
 from lerobot_blindgrasp.hardware.realtime import GcPause
 from lerobot_blindgrasp.sim import objects, randomization
 from lerobot_blindgrasp.sim.gym_env import start_seed
@@ -134,7 +134,7 @@ class RealGraspEnv(gym.Env):
         self._held = 0
         self._decided: tuple[bool, str] | None = None
         self._peak = np.zeros(spec.NUM_FORCES)
-        self._schedule = Schedule(spec.CONTROL_DT)
+        self._schedule = StepPacer(spec.CONTROL_DT)
         self._overruns_at_start = self._overruns()
         # Where each period goes: the write (send_action), the read (_observe) and, between a step's return and the
         # next call, the caller's policy (lerobot-eval: processors + select_action); logged per trial.

@@ -159,7 +159,7 @@ class SampleSpacing:
         self._last_end = ended
 
 
-class Schedule:
+class StepPacer:
     """Paces a loop we own (the eval trial): one step per period, its read spaced from the last by
     `SampleSpacing`. A step that comes late re-bases the schedule on now (never a burst of catch-up steps); a read
     held back by the spacing re-bases it on the held read, so after a slow read the loop is back at its period at

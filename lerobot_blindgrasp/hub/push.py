@@ -61,7 +61,7 @@ def prepare(
     if json.loads((root / "meta" / "info.json").read_text()).get("total_episodes", 0) == 0:
         raise PushError(f"{root} has no episodes yet; nothing to upload")
     try:
-        kwargs = card_kwargs(root, repo_id, kind, license, tags, operators, notes)
+        kwargs = push_card_kwargs(root, repo_id, kind, license, tags, operators, notes)
     except (FileNotFoundError, ValueError) as e:
         raise PushError(str(e)) from None
     card = cards.build_card(kwargs, repo_id)
@@ -77,12 +77,12 @@ def detect_kind(root: Path) -> str:
     return "sim" if dataset_card.is_collection(root) else "glove"
 
 
-def card_kwargs(
+def push_card_kwargs(
     root: Path, repo_id: str, kind=None, license=cards.DEFAULT_LICENSE, tags=None, operators=None, notes=""
 ):
     """The card's arguments for either kind of dataset (detected when not given)."""
     if (kind or detect_kind(root)) == "sim":
-        return dataset_card.card_kwargs(root, repo_id, license=license, extra_tags=tags)
+        return dataset_card.sim_card_kwargs(root, repo_id, license=license, extra_tags=tags)
     return cards.glove_card_kwargs(root, repo_id, operators, notes, license=license, extra_tags=tags)
 
 

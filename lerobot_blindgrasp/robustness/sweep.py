@@ -107,7 +107,7 @@ def point_id(point: factors.Point, context: dict) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
-def run(cfg: RobustnessConfig, command: str = "") -> dict:
+def run_sweep(cfg: RobustnessConfig, command: str = "") -> dict:
     """Run (or continue) the sweep; returns the summary it wrote. `command`: the command line, for the records."""
     import torch
 
@@ -291,7 +291,7 @@ def plot_factor(f: dict, path: Path, summary: dict) -> None:
 def main(argv=None) -> None:
     cfg = parse_config(RobustnessConfig, argv)
     try:
-        summary = run(cfg, command_line("blindgrasp-robustness", argv))
+        summary = run_sweep(cfg, command_line("blindgrasp-robustness", argv))
     except (FileNotFoundError, ValueError) as e:
         raise SystemExit(f"error: {e}") from None
     out = Path(cfg.output_dir)

@@ -179,7 +179,7 @@ class BlindgraspGripper(Robot):
         with self.latch.guard("calibrating"):
             self._forget_goals()  # readings change frame with Drive_Mode and Homing_Offset
             self.bus.disable_torque()
-            interactive.calibrate(self)  # the file to the servos, or two poses by hand
+            interactive.calibrate_servos(self)  # the file to the servos, or two poses by hand
 
     def configure(self) -> None:
         mode = OperatingMode[self.config.operating_mode].value

@@ -25,7 +25,7 @@ POSITIVE_POSE_HELP = (
 )
 
 
-def calibrate(robot) -> None:
+def calibrate_servos(robot) -> None:
     """Torque off: the calibration file to the servos when the operator keeps it, else `calibrate_by_hand`."""
     if robot.calibration:
         answer = input(
