@@ -308,7 +308,7 @@ def local_checkpoint(path: str) -> Path | None:
 
 
 def check_named(path, robot_type: str, fps: float, fps_source: str, *, allow_unverified: bool = False) -> bool:
-    """`check` the checkpoint a caller names (a folder, or a Hub id already in the cache) against the gripper at
+    """`check_checkpoint` the checkpoint a caller names (a folder, or a Hub id already in the cache) against the gripper at
     `fps`; False when there is none here to check (LeRobot downloads it later)."""
     if not path or (where := local_checkpoint(str(path))) is None:
         return False

@@ -130,7 +130,7 @@ def test_a_real_scripted_lift_passes_and_an_idle_hand_does_not():
     """The thresholds are reachable in our physics: the scripted pinch-and-lift of the medium cylinder passes once
     lifted (kept whole, hold included; trimmed before the hold when asked), a hand that never moves fails both criteria."""
     from lerobot_blindgrasp import spec
-    from lerobot_blindgrasp.demos.collection import DEMO_TRACES
+    from lerobot_blindgrasp.demos.collection_loop import DEMO_TRACES
     from lerobot_blindgrasp.rollout.envs import make_batched_env
     from lerobot_blindgrasp.rollout.loop import stream
     from lerobot_blindgrasp.sim import randomization

@@ -114,11 +114,11 @@ def recording(tmp_path_factory) -> tuple[Path, dict, int]:
 @pytest.fixture(scope="module")
 def sim_demos(tmp_path_factory) -> Path:
     """Two curated episodes of one object from the shipped teacher (blindgrasp-collect-demos, in-process)."""
-    from lerobot_blindgrasp.demos import collection
+    from lerobot_blindgrasp.demos import collection_loop
     from lerobot_blindgrasp.demos.config import CollectConfig
 
     out = tmp_path_factory.mktemp("sim") / "demos"
-    collection.collect_demos(CollectConfig(output_dir=out, repo_id="local/tiny_sim", episodes_per_object=2,
+    collection_loop.collect_demos(CollectConfig(output_dir=out, repo_id="local/tiny_sim", episodes_per_object=2,
                                objects="cylinder_a_medium", num_envs=2, threads=1, progress=False))  # fmt: skip
     return out
 

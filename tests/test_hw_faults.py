@@ -27,13 +27,13 @@ from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator, free_udp_po
 from lerobot_blindgrasp.hardware import servo_registers as servo_state
 from lerobot_blindgrasp.hardware.xm430 import RAD_PER_TICK, WATCHDOG_TRIPPED
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
-from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     ForceSensorError,
     GripperBusError,
     GripperSafetyStop,
     GripperStateError,
 )
+from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import CalibrationFileError
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import PROTO

@@ -28,7 +28,7 @@ from lerobot_blindgrasp.hardware.force_board.frame_codec import SYNC, FrameParse
 from lerobot_blindgrasp.hardware.plausibility import ImplausibleReadingError, PositionGate
 from lerobot_blindgrasp.hardware.xm430 import NO_LOAD_SPEED_RAD_S, RAD_PER_TICK
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
-from lerobot_blindgrasp.robots.blindgrasp_gripper import calibration as calib
+from lerobot_blindgrasp.robots.blindgrasp_gripper import servo_calibration as calib
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import GripperReadingError
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError

@@ -29,13 +29,13 @@ from lerobot_blindgrasp.hardware.force_board.reader import ForceSensorReader, Fo
 from lerobot_blindgrasp.hardware.ports import PortInUseError
 from lerobot_blindgrasp.hardware.xm430 import RAD_PER_TICK
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
-from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     ForceSensorError,
     GripperPortBusyError,
     GripperReadingError,
     GripperTimingError,
 )
+from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import CalibrationFileError
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
 

@@ -16,7 +16,7 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lab.diagnosis import student_diagnosis as diag
 from lab.diagnosis import student_fit
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.demos import collection, curation, dagger
+from lerobot_blindgrasp.demos import collection_loop, curation, dagger
 from lerobot_blindgrasp.demos.config import CollectConfig
 from lerobot_blindgrasp.sim import objects
 
@@ -30,7 +30,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 def demos(tmp_path_factory) -> Path:
     """Two whole uncurated episodes per object from the shipped teacher."""
     out = tmp_path_factory.mktemp("demos") / "demos"
-    collection.collect_demos(
+    collection_loop.collect_demos(
         CollectConfig(
             output_dir=out,
             repo_id="test/demos",

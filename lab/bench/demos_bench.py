@@ -65,7 +65,7 @@ def _writer_speed(episodes, root: Path, per_frame: bool, fast: bool = True) -> f
     """Frames per second through one write path, on real rollouts (whole, untrimmed)."""
     from lerobot_blindgrasp import spec
     from lerobot_blindgrasp.demos import curation, dataset
-    from lerobot_blindgrasp.demos.collection import _cleanup, _finalize_or_abandon
+    from lerobot_blindgrasp.demos.collection_loop import _cleanup, _finalize_or_abandon
 
     ds = dataset.create(root, "bench/writer")
     frames, t0 = 0, time.perf_counter()
@@ -136,7 +136,7 @@ def _collect(cfg: BenchDemosConfig, teacher: Path, tmp: Path, folder: str, check
              queue: int | None = None):  # fmt: skip
     """One collection into tmp/folder, as blindgrasp-collect-demos runs it."""
     from lerobot_blindgrasp.demos import curation
-    from lerobot_blindgrasp.demos.collection import collect_demos
+    from lerobot_blindgrasp.demos.collection_loop import collect_demos
     from lerobot_blindgrasp.demos.config import CollectConfig
 
     c = CollectConfig(

@@ -192,7 +192,7 @@ def _demos(cfg: BenchPaperConfig, num_envs: int) -> dict:
     n = cfg.demo_num_envs or num_envs
     with tempfile.TemporaryDirectory(prefix="blindgrasp-paper-demos-") as tmp:
         out = Path(tmp) / "demos"
-        cmd = [sys.executable, "-m", "lerobot_blindgrasp.demos.collect", f"--output_dir={out}"]
+        cmd = [sys.executable, "-m", "lerobot_blindgrasp.demos.collect_cli", f"--output_dir={out}"]
         cmd += ["--repo_id=bench/paper_demos", f"--num_envs={n}", f"--backend={cfg.backend}", "--progress=false"]
         cmd += ["--episodes_per_object=1000000"]  # never done: the clock stops it
         cmd += [f"--teacher={cfg.teacher}"] if cfg.teacher else []

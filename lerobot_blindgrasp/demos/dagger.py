@@ -38,7 +38,7 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.demos.collection import _cleanup, _finalize_or_abandon
+from lerobot_blindgrasp.demos.collection_loop import _cleanup, _finalize_or_abandon
 from lerobot_blindgrasp.demos.episode_writer import EpisodeWriter
 from lerobot_blindgrasp.durable import atomic_write_json
 from lerobot_blindgrasp.rollout.actors import StudentActor, TeacherActor

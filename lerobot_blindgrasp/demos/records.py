@@ -39,7 +39,7 @@ class CollectStats:
     frames: int = 0
     env_builds: int = 0
     stop_reason: str = ""  # "done" | "interrupted" | "error: ..."
-    checkpoints: int = 0  # finalize-and-reopen cycles (demos/checkpoint.py)
+    checkpoints: int = 0  # finalize-and-reopen cycles (demos/crash_checkpoints.py)
     checkpoint_s: float = 0.0  # time they took
     tally: yield_report.Tally = field(default_factory=yield_report.Tally)
 

@@ -8,7 +8,7 @@ One trial (= one lerobot-eval episode):
    alive through these waits (the robot's `keep_alive` each period, and during its tare), so the servos' bus
    watchdog stays armed for a host that dies while waiting and never trips on a person's pause.
 2. 200 steps at 20 Hz (10 s): action = absolute joint targets, through `robot.send_action` (clipped on the robot).
-   The steps keep time with a `Schedule`: after a late step (a slow policy) it re-bases on now rather than
+   The steps keep time with a `StepPacer`: after a late step (a slow policy) it re-bases on now rather than
    firing the missed steps back to back, and after a slow read (a stalled bus) the next read waits until it is at
    least 0.9 period after it, so no two samples come a few ms apart. The robot measures the period in every get_observation:
    overruns are warned, counted in the trial log, and a sustained overrun ends the run (`GripperTimingError`).

@@ -99,7 +99,7 @@ def collect_published_demos(cfg: PublishConfig, out: Path, repo_id: str) -> Path
     """A small curated demo set in `out`, made as the shipped student's demos were (`DEMO_RECIPE`); resumed when a
     previous publish left it unfinished."""
     from lerobot_blindgrasp import presets
-    from lerobot_blindgrasp.demos import collection, provenance
+    from lerobot_blindgrasp.demos import collection_loop, provenance
     from lerobot_blindgrasp.demos.config import CollectConfig
 
     recipe = presets.PRESETS[DEMO_RECIPE]
@@ -112,7 +112,7 @@ def collect_published_demos(cfg: PublishConfig, out: Path, repo_id: str) -> Path
     )  # fmt: skip
     print(f"demos: {'resuming' if collect.resume else 'collecting'} {cfg.demo_episodes} curated episodes per object ({n_objects} objects) from "
           f"{collect.teacher.name} into {out}", flush=True)  # fmt: skip
-    collection.collect_demos(collect, command=f"blindgrasp-publish (preset {DEMO_RECIPE}'s demo settings)")
+    collection_loop.collect_demos(collect, command=f"blindgrasp-publish (preset {DEMO_RECIPE}'s demo settings)")
     return out
 
 

@@ -28,10 +28,10 @@ def collect_stage(
     if stage.done(name):
         stage.skip(name, "collected")
         return root
-    from lerobot_blindgrasp.demos.collect import EXIT_EMPTY
+    from lerobot_blindgrasp.demos.collect_cli import EXIT_EMPTY
 
     # An empty curated set is handled by the caller (uncurated fallback). A collection cut short is resumed
-    # (recipe.collect adds --resume=true; the collector repairs a crashed folder first).
+    # (recipe.demos_collect adds --resume=true; the collector repairs a crashed folder first).
     stage.run(
         name,
         recipe.demos_collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra),

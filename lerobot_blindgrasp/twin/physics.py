@@ -71,7 +71,7 @@ class TwinPhysics:
         self.substeps = 0
         self.trial = 0  # placement counter; verdicts carry it
         self.judging = False
-        self.on_verdict = None  # called with a Verdict (from the physics thread, outside the lock)
+        self.on_verdict = None  # called with a TrialVerdict (from the physics thread, outside the lock)
         self.unstable_resets = 0
         self._load(park_object, None, np.zeros(spec.NUM_JOINTS), np.zeros(spec.NUM_JOINTS))
 

@@ -4,7 +4,7 @@
     blindgrasp-collect-demos --teacher=runs/teacher_cpu --output_dir=runs/demos_cpu --repo_id=me/demos_cpu
 
 The stages live in their own modules: the config (`demos/config.py`), the rollout -> curate -> write loop
-(`demos/collection.py`), the run records (`demos/records.py`: provenance, statistics, yield report, card). This module
+(`demos/collection_loop.py`), the run records (`demos/records.py`: provenance, statistics, yield report, card). This module
 is the command line only: parse, run, print the yield table, and map outcomes to exit codes.
 
 The output folder is the dataset root. Next to LeRobot's files it holds `collection.json` (provenance),
@@ -22,7 +22,7 @@ import sys
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import command_line, parse_config
 from lerobot_blindgrasp.demos import yield_report
-from lerobot_blindgrasp.demos.collection import collect_demos
+from lerobot_blindgrasp.demos.collection_loop import collect_demos
 from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
 
 EXIT_EMPTY = 3  # the collection ran but wrote no episode

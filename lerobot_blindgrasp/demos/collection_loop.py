@@ -18,7 +18,7 @@ the one the loop would write itself (`--writer_queue=0`): same episodes, same or
 A first SIGINT/SIGTERM stops after the current control step; a second aborts at once. Either way the queued
 episodes are written, then the dataset is finalized and the run recorded (`demos/records.py`), however the loop
 ends. A process killed without any handler (SIGKILL, a power cut) loses at most the episodes since the last
-checkpoint (`demos/checkpoint.py`: every `checkpoint_s` seconds or `num_envs` episodes written) and the at most
+checkpoint (`demos/crash_checkpoints.py`: every `checkpoint_s` seconds or `num_envs` episodes written) and the at most
 `writer_queue` still queued; `--resume=true` goes on from there.
 """
 
@@ -34,7 +34,7 @@ from collections.abc import Callable
 
 from lerobot_blindgrasp import compat, durable, spec
 from lerobot_blindgrasp.cli import GracefulStop
-from lerobot_blindgrasp.demos import checkpoint as checkpoint_mod
+from lerobot_blindgrasp.demos import crash_checkpoints as checkpoint_mod
 from lerobot_blindgrasp.demos import curation as curation_mod
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, records, yield_report
