@@ -29,7 +29,7 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     PolicyMismatchError,
 )
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
-from lerobot_blindgrasp.teleoperators.manus_glove import stream as stream_mod
+from lerobot_blindgrasp.teleoperators.manus_glove import receiver as stream_mod
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost
 
 JOINTS = ["ff_j10"]

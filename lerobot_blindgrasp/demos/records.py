@@ -204,9 +204,9 @@ def finish_run(cfg: CollectConfig, prov: dict, run: dict, tally: yield_report.Ta
     provenance.save_provenance(out, prov)
     _write_report(out, cfg, prov, tally)
     try:
-        from lerobot_blindgrasp.demos import dataset_card
+        from lerobot_blindgrasp.demos import collection_card
 
-        dataset_card.write(out, cfg.repo_id)
+        collection_card.write(out, cfg.repo_id)
     except Exception as e:  # noqa: BLE001  (a card problem must not mask the collection's outcome)
         log.warning("could not write the dataset card: %s", e)
 

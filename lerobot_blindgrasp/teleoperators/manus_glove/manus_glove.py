@@ -25,7 +25,7 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import read_
 from . import names
 from . import retarget as rt
 from .config_manus_glove import ManusGloveConfig
-from .stream import GloveReceiver
+from .receiver import GloveReceiver
 
 logger = logging.getLogger(__name__)
 
