@@ -192,7 +192,7 @@ def test_a_full_disk_at_finalize_keeps_the_first_error(tmp_path, monkeypatch, ca
     def write_episode(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device", "episode data")
 
-    monkeypatch.setattr(curation, "evaluate", lambda *args: None)
+    monkeypatch.setattr(curation, "judge_episode", lambda *args: None)
     monkeypatch.setattr(dataset, "create", full_disk)
     monkeypatch.setattr(dataset, "write_episode", write_episode)
     with caplog.at_level(logging.ERROR), pytest.raises(OSError) as e:
