@@ -94,7 +94,7 @@ class TrainTeacherConfig:
     threads: int = 0  # physics threads (0: all CPUs)
     torch_threads: int = 1  # torch intra-op threads while acting (the forward passes between physics steps)
     update_threads: int = 0  # torch intra-op threads for the PPO update (0: as many as the physics threads)
-    export_actor: bool = True  # TorchScript/ONNX export of the actor at the end
+    export: bool = True  # TorchScript/ONNX export of the actor at the end
     backend: str = "batch"  # physics: batch (mujoco.batch, CPU) or warp (MuJoCo Warp; pip install .[gpu])
     # torch device for PPO; None: cuda:<LOCAL_RANK> if CUDA is there, else cpu. Under torchrun (WORLD_SIZE > 1)
     # rsl-rl's multi-GPU mode runs one process per device and num_envs is split over the processes.
