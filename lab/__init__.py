@@ -2,7 +2,7 @@
 
 Not part of the wheel (setup.py packages `lerobot_blindgrasp` alone): everything here runs from a clone, at the
 repository root, as `python -m lab.<tool>`. The lab imports the package; the package never imports the lab
-(tests/test_layout.py checks both).
+(tests/repo/test_layout.py checks both).
 
     python -m lab.bench --bench.type=sim --bench.num_envs=36       # benchmarks (lab/bench/)
     python -m lab.twin_campaign.measure --output_dir=OUT           # the shipped student on the physics twin
