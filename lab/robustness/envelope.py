@@ -71,7 +71,7 @@ def describe(factor: dict, role: str = "student", criterion: str = "ci") -> str:
 
 
 def card_section(summary: dict, threshold: float = THRESHOLD) -> str:
-    """The robustness section of a student's card, from a sweep summary (`blindgrasp-robustness`'s summary.json)."""
+    """The robustness section of a student's card, from a sweep summary (`python -m lab.robustness.sweep`'s summary.json)."""
     pct = f"{100 * threshold:g} %"
     lines = [
         "## Robustness envelope (simulation)",
@@ -80,7 +80,7 @@ def card_section(summary: dict, threshold: float = THRESHOLD) -> str:
         f"success over the {len(summary['objects'])} objects ({summary['episodes_per_object']} episodes per object "
         f"and point, evaluation seeds from {summary['seed']}, the teacher on the same start states). "
         f"*Not shown below {pct}*: the 95 % Wilson interval still reaches {pct}; *>= {pct}*: the measured rate "
-        "itself. Made by `" + summary.get("command", "blindgrasp-robustness") + "`.",
+        "itself. Made by `" + summary.get("command", "python -m lab.robustness.sweep") + "`.",
         "",
         f"| factor | trained on | student: not shown below {pct} | student: >= {pct} | teacher: >= {pct} |",
         "|---|---|---|---|---|",

@@ -1,6 +1,6 @@
 """Table V (the paper's ablations) from a recipe output folder: per-object success of every row, with intervals.
 
-    python -m lerobot_blindgrasp.analysis.table_v --output_dir=OUT_DIR   # after `bash scripts/paper_recipe.sh OUT_DIR`
+    python -m lab.table_v --output_dir=OUT_DIR   # after `bash scripts/paper_recipe.sh OUT_DIR`
 
 Reads what `scripts/paper_recipe.sh` (`blindgrasp-pipeline --print_commands=STAGE`) leaves in OUT_DIR: each student
 row's lerobot-eval (`eval_<row>/eval_info.json`), the RL w/ o_t teacher's own eval (`<teacher>_eval/eval.json`,

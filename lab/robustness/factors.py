@@ -1,4 +1,4 @@
-"""The robustness sweep's presets (`blindgrasp-robustness --preset=NAME`) and its factors, as data: each factor a set of
+"""The robustness sweep's presets (`python -m lab.robustness.sweep --preset=NAME`) and its factors, as data: each factor a set of
 `DomainRandomization` field values, from inside the training range to far beyond it. No MuJoCo here.
 
 A factor is a list of points (label, magnitude, field overrides on top of `EVAL_DR`) in plot order, with the index
@@ -147,7 +147,7 @@ FACTORS: tuple[Factor, ...] = (
 
 @dataclass(frozen=True)
 class SweepPreset:
-    """What `blindgrasp-robustness --preset=NAME` runs: episodes per object and point, the objects, the factors
+    """What `python -m lab.robustness.sweep --preset=NAME` runs: episodes per object and point, the objects, the factors
     (by name; their points, a subset by index)."""
 
     episodes: int

@@ -1,11 +1,11 @@
-"""`blindgrasp-robustness`: the shipped student (and its teacher, on the same start states) one factor at a time
+"""`python -m lab.robustness.sweep`: the shipped student (and its teacher, on the same start states) one factor at a time
 beyond the training randomization, then several factors combined.
 
-    blindgrasp-robustness --output_dir=outputs/robustness                  # default: ~20 factors, 10 eps/object
-    blindgrasp-robustness --preset=smoke --output_dir=/tmp/rob             # what the tests run
-    blindgrasp-robustness --factors=obs_latency,force_gain --output_dir=... # a subset
+    python -m lab.robustness.sweep --output_dir=outputs/robustness                  # default: ~20 factors, 10 eps/object
+    python -m lab.robustness.sweep --preset=smoke --output_dir=/tmp/rob             # what the tests run
+    python -m lab.robustness.sweep --factors=obs_latency,force_gain --output_dir=... # a subset
 
-Each point (one `DomainRandomization`, see `presets/robustness.py`) runs `episodes` evaluation episodes per object for the
+Each point (one `DomainRandomization`, see `factors.py`) runs `episodes` evaluation episodes per object for the
 student and the teacher (`point.run_point`) and is saved as its own JSON under `<output_dir>/points/`, named by a
 hash of everything that decides its outcome (condition, objects, episodes, seed, both checkpoints' SHA-256, the
 sim's source fingerprint). A re-run with the same arguments skips the points already there, so a killed sweep
@@ -25,12 +25,11 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from lab.robustness import envelope, factors
+from lab.robustness.factors import SWEEPS
 from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.cli import command_line, parse_config
-from lerobot_blindgrasp.presets import robustness as factors
-from lerobot_blindgrasp.presets.robustness import SWEEPS
 from lerobot_blindgrasp.results import rates
-from lerobot_blindgrasp.robustness import envelope
 from lerobot_blindgrasp.sim import objects
 
 log = logging.getLogger(__name__)
@@ -111,7 +110,7 @@ def run(cfg: RobustnessConfig, command: str = "") -> dict:
     """Run (or continue) the sweep; returns the summary it wrote. `command`: the command line, for the records."""
     import torch
 
-    from lerobot_blindgrasp.robustness.point import run_point
+    from lab.robustness.point import run_point
     from lerobot_blindgrasp.rollout.actors import StudentActor
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
@@ -291,7 +290,7 @@ def plot_factor(f: dict, path: Path, summary: dict) -> None:
 def main(argv=None) -> None:
     cfg = parse_config(RobustnessConfig, argv)
     try:
-        summary = run(cfg, command_line("blindgrasp-robustness", argv))
+        summary = run(cfg, command_line("python -m lab.robustness.sweep", argv))
     except (FileNotFoundError, ValueError) as e:
         raise SystemExit(f"error: {e}") from None
     out = Path(cfg.output_dir)
