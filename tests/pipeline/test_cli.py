@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[2]
 # Commands run as `python -m MODULE` (no console script): what README.md and the docs show.
 MODULE_COMMANDS = (
     "lerobot_blindgrasp.results.compare",
-    "lerobot_blindgrasp.analysis.table_v",
+    "lab.table_v",
     "lerobot_blindgrasp.envs.real_report",
 )
 # The lab's commands (`python -m lab.<tool>` from a clone's root): every lab module that runs as a command, and the

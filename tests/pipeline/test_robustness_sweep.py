@@ -1,4 +1,4 @@
-"""blindgrasp-robustness end to end at the smoke preset (the real shipped student and teacher, real lerobot
+"""python -m lab.robustness.sweep end to end at the smoke preset (the real shipped student and teacher, real lerobot
 loaders), its resumption, and the envelope and connect-check functions on known numbers."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from lab.robustness import envelope
 from lerobot_blindgrasp.hardware import force
-from lerobot_blindgrasp.robustness import envelope
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -23,7 +23,7 @@ def test_smoke_sweep_end_to_end_then_a_rerun_skips_every_point(tmp_path):
     cmd = [
         sys.executable,
         "-m",
-        "lerobot_blindgrasp.robustness.sweep",
+        "lab.robustness.sweep",
         "--preset=smoke",
         f"--output_dir={out}",
         "--threads=1",

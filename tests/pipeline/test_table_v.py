@@ -3,7 +3,7 @@ teacher recipe as its run recorded it."""
 
 import json
 
-from lerobot_blindgrasp.analysis import table_v
+from lab import table_v
 from lerobot_blindgrasp.presets import TABLE_V
 from lerobot_blindgrasp.sim import objects
 

@@ -18,7 +18,7 @@ HEAVY = ("mujoco", "rsl_rl")
 UNNEEDED = (
     "lerobot_blindgrasp.analysis",
     "lerobot_blindgrasp.presets",
-    "lerobot_blindgrasp.robustness",
+    "lab.robustness",
     "lerobot_blindgrasp.teacher",
     "lerobot_blindgrasp.pipeline",
     "lerobot_blindgrasp.envs.real_trial",

@@ -26,7 +26,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("rollout",),
     ("teacher",),
     ("demos",),
-    ("analysis", "robustness", "twin"),
+    ("twin",),
     ("pipeline", "hub", "deploy"),
 )
 FLOOR = {room: k for k, rooms in enumerate(FLOORS) for room in rooms}
