@@ -40,9 +40,10 @@ from lerobot_blindgrasp.sim import (
 )
 from lerobot_blindgrasp.sim.backends.batch import BatchBackend
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig, allocate_objects
-from lerobot_blindgrasp.sim.host import on_host, one_intraop_thread
+from lerobot_blindgrasp.sim.host import on_host
 
 log = logging.getLogger(__name__)
+
 HOLD_PUSH_AFTER_STEPS = events.HOLD_PUSH_AFTER_STEPS
 
 
@@ -137,7 +138,6 @@ class BatchedGraspEnv:
     def reset(self) -> dict[str, np.ndarray]:  # numpy on the host; reset_tensors on the device
         return on_host(self.reset_tensors())
 
-    @one_intraop_thread
     def reset_tensors(self) -> dict[str, torch.Tensor]:
         self.episode.zero_()
         self._reset_envs(self._all)
@@ -182,7 +182,6 @@ class BatchedGraspEnv:
         keep their physics state, which evaluation uses for episodes whose outcome is already final."""
         return on_host(self.step_tensors(action, active))
 
-    @one_intraop_thread
     def step_tensors(self, action, active=None):
         """One control step: tensors (N, ...) on `device` in and out; `step` says what `active` means. A tensor
         action is not checked for NaN (that would wait on the device); a policy's NaN fails the physics instead."""
@@ -258,7 +257,8 @@ class BatchedGraspEnv:
         return terms, reward
 
     def _end_episodes(self, ids: torch.Tensor, obs: dict, info: dict, terminated, truncated, failed) -> None:
-        """The ended episodes, in info["final"]; with autoreset, their next ones start (and fill their obs rows)."""
+        """Describe the episodes that ended in info["final"]; with autoreset, start their next ones (their rows of
+        `obs` become the new episodes' first observations)."""
         unstable = failed[ids]
         if unstable.any():
             self.physics_resets += int(unstable.sum())
