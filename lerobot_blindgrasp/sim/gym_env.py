@@ -1,7 +1,8 @@
 """One grasping trial as a gymnasium env, for `lerobot-eval` and anything else that speaks gymnasium.
 
-A thin shell over `BatchedGraspEnv` with one env, so that eval sees exactly the physics, randomization, noise and
-success rule that teacher training and demo collection use.
+A thin shell over one row of a `BatchedGraspEnv` (its own one-env sim, or a row of a sim that a batch of these envs
+shares, see `attach`), so that eval sees exactly the physics, randomization, noise and success rule that teacher
+training and demo collection use.
 
 LeRobot-facing contract (spec.py):
 - observation `{"agent_pos": o_t}` with o_t = 9 joint positions (rad) + 3 uniaxial forces (N), float32;
