@@ -2,7 +2,7 @@
 
 A LeRobot plugin extends LeRobot through its registries (robot, teleoperator, env and policy configs). Where those
 do not reach, the plugin leans on how LeRobot works inside; each such reach is one small function or context
-manager here, and nowhere else in the package (`tests/test_compat.py` scans for strays):
+manager here, and nowhere else in the package (`tests/policies/test_compat.py` scans for strays):
 
 - `serve_dataset_readers_with`: wraps `DatasetReader.try_load` / `load_and_activate` (the student's window cache).
 - `skip_empty_image_embedding`: replaces the dataset writer's `embed_images` within a block (demo collection).

@@ -22,7 +22,7 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$VENV/bin/pip" install --quiet --upgrade pip
 fi
 # Re-install only when pyproject.toml changed since the last install (first install: ~5 min, a 4 GB torch).
-# The test extra includes the gpu one: MuJoCo Warp (a 150 MB wheel) runs tests/test_sim_warp.py on Warp's CPU
+# The test extra includes the gpu one: MuJoCo Warp (a 150 MB wheel) runs tests/sim/test_sim_warp.py on Warp's CPU
 # device. Warp compiles its kernels on first use (about 2 min on 2 cores) into its kernel cache, ~/.cache/warp
 # (WARP_CACHE_PATH moves it), and loads them from there in later runs.
 EXTRAS="${BLINDGRASP_EXTRAS:-test}"

@@ -1,6 +1,6 @@
 """Write the generated part of docs/reference.md: every console script of pyproject.toml with its config class,
 every `python -m` tool of the package and of the lab (`lab/`, from a clone), and every preset of `lerobot_blindgrasp/presets`. So the reference cannot
-drift: tests/test_docs_reference.py regenerates it and compares.
+drift: tests/repo/test_docs_reference.py regenerates it and compares.
 
     python scripts/docs_reference.py            # rewrite docs/reference.md between its markers
     python scripts/docs_reference.py --check=true    # exit 1 if it is out of date

@@ -36,5 +36,5 @@ for stage in teachers teacher_evals demos students evals; do
     fi
   done
 done
-python -m lerobot_blindgrasp.analysis.table_v --output_dir="$OUT"   # table_v.md + table_v.png: every row per object, 95 % intervals
+python -m lab.table_v --output_dir="$OUT"   # table_v.md + table_v.png: every row per object, 95 % intervals
 echo "Table V runs done under $OUT: teacher evals in *_eval/eval.json, student evals in eval_*/eval_info.json"

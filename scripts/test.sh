@@ -4,7 +4,7 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$ROOT/scripts/bootstrap.sh"
 cd "$ROOT"
-# The force board's firmware tests (tests/test_force_board_sim.py) compile it and run it in simavr. As root with
+# The force board's firmware tests (tests/hardware/test_force_board_sim.py) compile it and run it in simavr. As root with
 # apt-get (CI) the Debian packages are installed when missing; elsewhere those tests skip, and this says which.
 FIRMWARE_PACKAGES="gcc-avr avr-libc simavr libsimavr-dev make gcc"
 if ! { command -v avr-gcc && command -v make && command -v cc && [ -e /usr/include/simavr/sim_avr.h ]; } >/dev/null; then

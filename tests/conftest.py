@@ -1,4 +1,5 @@
-"""Session-wide settings: headless rendering, no network, and modest threading on small CI machines."""
+"""Session-wide settings (headless rendering, no network, modest threading on small CI machines) and the fixtures
+of the emulated gripper that tests in every folder use."""
 
 import os
 
@@ -9,6 +10,9 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 
 import pytest  # noqa: E402  (after the environment settings above)
+from emulators.rig import GripperRig  # noqa: E402
+
+from lerobot_blindgrasp import spec  # noqa: E402
 
 
 @pytest.fixture
@@ -21,3 +25,23 @@ def one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(previous)
+
+
+@pytest.fixture
+def rig():
+    with GripperRig() as r:
+        r.hand_move(spec.HOME_POSE)
+        yield r
+
+
+@pytest.fixture
+def robot(rig, tmp_path, monkeypatch):
+    """A connected, calibrated gripper on the rig (calibrated by the scripted operator)."""
+    from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
+
+    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
+    r = BlindgraspGripper(rig.robot_config(tmp_path / "calibration"))
+    r.connect()
+    yield r
+    if r.is_connected:
+        r.disconnect()

@@ -1,4 +1,4 @@
-"""The golden simulation test's key for a CPU family (tests/test_sim_golden.py, tests/golden_sim.py): what decides
+"""The golden simulation test's key for a CPU family (tests/sim/test_sim_golden.py, tests/golden_sim.py): what decides
 the last bits of the simulation's and the teacher's floats. Only the tests use it; the product records none.
 
 MuJoCo's physics (through the C library's math functions) and the teacher's matrix products (through MKL and
@@ -12,7 +12,7 @@ compares them only on the platform that made them:
     describe(p)         one line for messages
 
 `BLINDGRASP_CPU_MODEL` overrides the model name read from /proc/cpuinfo: tests use it to play a machine that no
-record has seen (tests/test_unseen_machine.py). Environment variables that can move the math libraries onto another
+record has seen (tests/repo/test_unseen_machine.py). Environment variables that can move the math libraries onto another
 code path (`MKL_CBWR`, `ATEN_CPU_CAPABILITY`, `GLIBC_TUNABLES`, ...) count as part of the platform: what each moves
 depends on the CPU (`MKL_CBWR=SSE4_2` moves every MKL product on Intel but only single-row ones on AMD;
 `ATEN_CPU_CAPABILITY=default` moves torch's kernels on both), so a record made with one set is never taken as

@@ -1,4 +1,4 @@
-"""The golden simulation record's machinery (tests/test_sim_golden.py says what it checks and why).
+"""The golden simulation record's machinery (tests/sim/test_sim_golden.py says what it checks and why).
 
     rollouts(nudge=None)      the shipped teacher, deterministic, through both settings: per-step arrays
     summary(runs, horizons)   what the record stores: digests, exact quantities, the first steps' floats

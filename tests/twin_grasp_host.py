@@ -6,7 +6,7 @@ imported once; each run makes its env, robot and policy afresh, as lerobot-eval 
                                       scale_n_per_count, object, seed, output_dir, runs>'
 
 Before each run it prints `RUN k`; after it, `ENDED` or `STOPPED <error>` when the robot's safety latch stopped it
-(tests/test_twin_faults.py injects the faults, or kills this process), then waits for a line on stdin.
+(tests/twin/test_twin_faults.py injects the faults, or kills this process), then waits for a line on stdin.
 """
 
 from __future__ import annotations

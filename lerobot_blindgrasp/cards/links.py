@@ -13,7 +13,7 @@ from __future__ import annotations
 import posixpath
 import re
 
-# [text](target) and ![alt](target); the target has no spaces (as the link checker in tests/test_repository.py).
+# [text](target) and ![alt](target); the target has no spaces (as the link checker in tests/repo/test_repository.py).
 LINK = re.compile(r"(!?)\[([^\]]*)\]\(([^)\s]+)\)")
 _ABSOLUTE = re.compile(r"^([a-z][a-z0-9+.-]*:|#|/)", re.IGNORECASE)
 CHANGELOG = "CHANGELOG.md"

@@ -1,7 +1,7 @@
 """The shipped models' cards: one "Install and use" section each, written in the source card and rewritten for the Hub.
 
 A card in `models/<name>/README.md` holds its section between `BEGIN` and `END` markers, in its local form (paths
-under `models/`, installed from a clone); `install_section(name)` makes that text and tests/test_publish.py keeps the
+under `models/`, installed from a clone); `install_section(name)` makes that text and tests/hub/test_publish.py keeps the
 source cards equal to it. `render_model_card` (`blindgrasp-publish`) swaps the section for its Hub form (the repo id,
 `project.install_line()`, the code's location) and turns every link that leaves the model's folder into an address
 built from `[project.urls]` (`links.py`), or into plain text while those are placeholders. So the card on the Hub

@@ -40,7 +40,7 @@ class CollectConfig:
     stochastic: bool = True  # sample the teacher's Gaussian; false: its mean ('w/o stochastic teacher' ablation)
     curation: curation_mod.CurationConfig = field(default_factory=curation_mod.CurationConfig)
     # Beyond the paper: roll out with every joint reading off by +-this (rad; sign per env and joint, as
-    # blindgrasp-robustness's calibration factor) so that the demos show the teacher correcting for it. The actions
+    # the robustness sweep's calibration factor) so that the demos show the teacher correcting for it. The actions
     # are recorded in the measured frame, as a gripper homed off by that much is commanded. 0: the paper's demos.
     joint_calibration_rad: float = 0.0
     num_envs: int = 180  # parallel envs (18 objects x 10)

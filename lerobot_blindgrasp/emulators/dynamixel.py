@@ -25,7 +25,6 @@ moves (`frozen_position`) and registers that acknowledge a write but keep their 
 
 from __future__ import annotations
 
-import math
 import termios
 import time
 
@@ -340,8 +339,3 @@ class DynamixelBusEmulator(PtyDevice):
         if any(name == "ID" for name, _ in touched):
             self._pending_ids.append(servo)  # answers under the new ID from the next packet on
         return 0
-
-
-def rad_to_shaft(q: float, zero: float = 2048.0, sign: int = 1) -> float:
-    """Shaft ticks of a joint at angle q for a servo mounted with `zero` ticks at q = 0 and direction `sign`."""
-    return zero + sign * q * 4096 / (2 * math.pi)

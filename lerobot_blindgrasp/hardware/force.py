@@ -33,7 +33,7 @@ from lerobot_blindgrasp import spec
 DEADBAND_N = spec.FORCE_THRESHOLD_N
 
 # Force bias (N, on any one load cell at rest) that the shipped student (models/student_cpu) is measured to
-# tolerate, with margin: in its robustness sweep (`blindgrasp-robustness`, 180 episodes a point) a bias on every
+# tolerate, with margin: in its robustness sweep (`python -m lab.robustness.sweep`, 180 episodes a point) a bias on every
 # cell (random signs) of 1 / 3 / 5 N gives it 96 / 95 / 96 %, against 96 % without; an earlier student lost 5 points
 # at 3 N on a 90-episode sweep, so the warning stays at 1 N. A reading beyond it at connect means the sensors need a
 # new tare before a policy runs.

@@ -5,7 +5,7 @@ overload held for an unpublished time, and it never drops it for a sagging suppl
 bit out) until the MCU browns out. The host reads the health items (Present_Temperature, Present_Input_Voltage,
 Present_Current against the current limit) and acts first: WARN, refuse a start, or ERROR (a named stop with the
 torque off). The levels are constants of `hardware/xm430.py`, the one place they are stated; `levels_table()`
-renders them as docs/hardware.md shows them (tests/test_hw_hazard_table.py keeps the two equal). Temperatures are relative to each servo's own Temperature_Limit(31),
+renders them as docs/hardware.md shows them (tests/robots/test_hw_hazard_table.py keeps the two equal). Temperatures are relative to each servo's own Temperature_Limit(31),
 read at connect with the rest of its EEPROM limits.
 
 Bus budget at 1 Mbps (10 bits per byte): the health block Present_Current(126)..Present_Temperature(146) is 21

@@ -113,9 +113,6 @@ class LatestFrameStream[F]:
         self._previous_content = content
 
     # --- lifecycle ----------------------------------------------------------------------------------------------
-    @property
-    def is_running(self) -> bool:
-        return self._thread is not None
 
     def start(self) -> None:
         self._open()

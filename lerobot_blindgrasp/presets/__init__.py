@@ -4,13 +4,12 @@
     TEACHER_PRESETS["paper"].runner               # teacher presets (blindgrasp-train-teacher --preset=NAME): Table III
     SIZES["paper"]                                # student sizes (lerobot-train --policy.size=NAME): Table IV
     GLOVE_PRESETS["glove"]                        # students on glove recordings (blindgrasp-train-glove --preset=NAME)
-    SWEEPS["default"]                             # robustness sweeps (blindgrasp-robustness --preset=NAME)
     TABLE_V["wo_r_i"]                             # the ablation rows (Table V)
     REGISTRY["teacher"]["cpu"], get("cpu", kind="teacher")
 
 Where each lives: the types beside the data that uses them (`stages.py` and `student.py` for the pipeline,
-`teacher_configs.py` for the teacher, `glove.py`, `robustness.py`), the data in `pipeline.py`, `teacher.py`,
-`ablations.py`, `glove.py` and `robustness.py`. The student sizes are the policy's own table (the policy, a LeRobot
+`teacher_configs.py` for the teacher, `glove.py`), the data in `pipeline.py`, `teacher.py`, `ablations.py` and
+`glove.py`. The robustness sweep's presets live with the sweep, in the lab (`lab/robustness/factors.py`). The student sizes are the policy's own table (the policy, a LeRobot
 plugin, never imports this registry); the registry names it. Nothing else restates a number, and a preset holds
 settings: what a recipe measured lives in the model cards and docs/.
 
@@ -32,7 +31,6 @@ from lerobot_blindgrasp.presets.pipeline import (
     SHIPPED_TEACHER_ITERATIONS,
     SHIPPED_TEACHER_PRESET,
 )
-from lerobot_blindgrasp.presets.robustness import SWEEPS, SweepPreset
 from lerobot_blindgrasp.presets.stages import DemoStage, EvalStage, Preset, TeacherStage, derive
 from lerobot_blindgrasp.presets.student import DaggerStage, Schedule, StudentStage, dataset_frames, schedule
 from lerobot_blindgrasp.presets.teacher import TEACHER_PRESETS
@@ -47,7 +45,6 @@ __all__ = [
     "SHIPPED_TEACHER_ITERATIONS",
     "SHIPPED_TEACHER_PRESET",
     "SIZES",
-    "SWEEPS",
     "TABLE_V",
     "TEACHERS",
     "TEACHER_PRESETS",
@@ -61,7 +58,6 @@ __all__ = [
     "Schedule",
     "ScriptedDemos",
     "StudentStage",
-    "SweepPreset",
     "TeacherPreset",
     "TeacherStage",
     "Variant",
@@ -77,7 +73,6 @@ REGISTRY: dict[str, dict] = {
     "teacher": TEACHER_PRESETS,
     "student_size": SIZES,
     "glove": GLOVE_PRESETS,
-    "robustness": SWEEPS,
     "table_v": TABLE_V,
 }
 

@@ -16,7 +16,7 @@ Where Table II lands: `apply_physics_draw` writes an env's friction, mass and se
 Beyond Table II, the same dataclass carries the conditions a real gripper may differ in (sensor gain, bias, range,
 a dead load cell, joint calibration, backlash, torque and velocity limits, latency, period jitter, object size,
 pushes during the hold). Their defaults are the paper's sim exactly, so every preset above is unchanged; the
-robustness sweep (`lerobot_blindgrasp/robustness/`) sets them one at a time, and training can set them too. Where
+robustness sweep (`lab/robustness/`) sets them one at a time, and training can set them too. Where
 each acts: the sensor model in `sim/observations.py` and `hardware/force.py`, the servo and timing model in `sim/batched_env.py`,
 the object size in `sim/objects.py`. `ROBUSTNESS_FIELDS` names them.
 """

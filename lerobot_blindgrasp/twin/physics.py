@@ -231,9 +231,6 @@ class TwinPhysics:
         # The pad sits on the cell: it can push on it, never pull (a side contact that tilts the tip reads 0).
         return np.maximum(true, 0.0) + self.pad_load_n
 
-    def object_lift_m(self) -> float:
-        return float(self.data.qpos[observations.OBJECT_POS][2] - self.rest_height)
-
     def place_weight(self, tip: int | None, mass_kg: float = 0.0, g: float = 9.80665) -> None:
         """The operator rests a calibration weight on pad `tip` alone (the gripper held so that the pad faces up: the
         whole weight bears along the cell's axis); None takes it off."""

@@ -1,9 +1,9 @@
 """What moved in the golden simulation between two runs: per setting, whether the exact quantities (successes,
 dones, lengths, shapes, physics failures) are equal, which quantities are not bit-identical, and which envs' floats
-moved, from which step on. The runs are `tests/test_sim_golden.py --dump` files, one per MuJoCo version:
+moved, from which step on. The runs are `tests/sim/test_sim_golden.py --dump` files, one per MuJoCo version:
 
-    python tests/test_sim_golden.py --dump A.npz      # under one version
-    python tests/test_sim_golden.py --dump B.npz      # under the other
+    python tests/sim/test_sim_golden.py --dump A.npz      # under one version
+    python tests/sim/test_sim_golden.py --dump B.npz      # under the other
     python docs/results/mujoco_401/golden_moved.py A.npz B.npz
 """
 

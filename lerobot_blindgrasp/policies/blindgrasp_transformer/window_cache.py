@@ -6,7 +6,7 @@ deep-copies the table's Features and converts every value through Python lists, 
 costs milliseconds, longer than the student's update. The student's frames are tiny (low-dimensional columns only),
 so, like robomimic's `SequenceDataset` with `hdf5_cache_mode="low_dim"`, this module keeps every column as one
 torch tensor per process and slices the window from it: the same keys, dtypes, shapes and values as LeRobot's
-reader, padding flags included (`tests/test_student_data_path.py` compares them).
+reader, padding flags included (`tests/policies/test_student_data_path.py` compares them).
 
 LeRobot has no hook for a dataset reader, so `install()` (run when the plugin is imported, which `lerobot-train`
 does before it builds the dataset) asks `compat.serve_dataset_readers_with` to hand it every reader that has just

@@ -21,6 +21,7 @@ from lerobot.motors import Motor, MotorNormMode
 from lerobot.motors.dynamixel import OperatingMode
 from lerobot.robots.robot import Robot
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
+from lerobot.utils.errors import DeviceNotConnectedError
 
 from lerobot_blindgrasp import policy_contract, spec
 from lerobot_blindgrasp.hardware import realtime, xm430
@@ -313,8 +314,13 @@ class BlindgraspGripper(Robot):
             self.gate.goal = np.array([ticks[j] for j in self.joints], dtype=np.float64)
         return {f"{j}.pos": ticks_to_rad(ticks[j]) for j in self.joints}
 
-    @check_if_not_connected
     def disconnect(self) -> None:
+        if not self.is_connected:
+            if self.latch.stopped_while is not None:
+                # The latch stopped and closed it. LeRobot's scripts disconnect in a `finally` (and __exit__): an
+                # error here would end the traceback on "not connected" instead of on the fault that stopped it.
+                return
+            raise DeviceNotConnectedError(f"{type(self).__name__} is not connected. Run `.connect()` first.")
         if not self.config.disable_torque_on_disconnect:
             self.latch.close()
             return
@@ -323,12 +329,6 @@ class BlindgraspGripper(Robot):
             msg = f"Disconnected, but servo IDs {unconfirmed} did not confirm torque off: cut the power."
             raise GripperBusError(msg)
         logger.info("%s disconnected, torque off.", self)
-
-    def __exit__(self, exc_type, exc_value, traceback) -> None:
-        # After a latched safety stop the robot is already disconnected: LeRobot's __exit__ would raise
-        # DeviceNotConnectedError and hide the fault that stopped it. Let that fault propagate instead.
-        if self.is_connected:
-            self.disconnect()
 
     # --- shared by the calls above -------------------------------------------------------------------------------
     def _forget_goals(self) -> None:  # torque off: nothing is expected, no reading trusted without a second

@@ -114,6 +114,7 @@ class SafetyLatch:
         self.name, self.bus, self.force, self.servo_ids = name, bus, force, list(servo_ids)
         self._on_torque_off, self._on_close, self._report = on_torque_off, on_close, report
         self._atexit = None
+        self.stopped_while: str | None = None  # what the gripper was doing when a fault stopped it, until re-armed
 
     @contextmanager
     def guard(self, what: str):
@@ -123,6 +124,7 @@ class SafetyLatch:
             if getattr(e, "torque_off_handled", False):
                 raise  # an inner guard already stopped the gripper and wrote the message
             was_open = self.bus.is_connected
+            self.stopped_while = what
             unconfirmed = self.stop()
             if not was_open:
                 note = "The bus port was not open, so no torque was enabled by this process."
@@ -181,6 +183,7 @@ class SafetyLatch:
         """While connected: stop at interpreter exit and before an uncaught exception is reported; SIGTERM and SIGHUP
         unwind like Ctrl-C."""
         ref = weakref.ref(self)
+        self.stopped_while = None
 
         def _at_exit():
             latch = ref()

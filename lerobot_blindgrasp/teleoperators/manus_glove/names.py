@@ -16,7 +16,7 @@ enum name with its side (`RightFingerIndexMCPSpread`, `ErgonomicsDataType_RightF
 prints this table; a test keeps the two equal.
 
 The table itself lives in `manus_bridge.py`, the one-file bridge a lab copies to the MANUS machine, so that
-the bridge and this receiver read the same names (tests/test_glove_standalone.py checks they are one object).
+the bridge and this receiver read the same names (tests/teleoperators/test_glove_standalone.py checks they are one object).
 """
 
 from __future__ import annotations
