@@ -90,11 +90,12 @@ class BlindGraspEnvConfig(EnvConfig):
         return kwargs
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
-        # The freeze wrapper and the lazy async vector env are what LeRobot's own multi-task benchmarks use: a
-        # finished sub-env stops simulating while the rest of the batch runs on, and only the task being evaluated
-        # has worker processes alive (18 tasks x n_envs processes otherwise).
-        from lerobot.envs.utils import _LazyAsyncVectorEnv, freeze_after_episode_end
+        # The freeze wrapper's semantics (sim_vector.py) and the lazy async vector env are what LeRobot's own
+        # multi-task benchmarks use: a finished sub-env stops simulating while the rest of the batch runs on, and
+        # only the task being evaluated has worker processes alive (18 tasks x n_envs processes otherwise).
+        from lerobot.envs.utils import _LazyAsyncVectorEnv
 
+        from lerobot_blindgrasp.envs.sim_vector import SharedSimVectorEnv
         from lerobot_blindgrasp.sim import gym_env
 
         if n_envs < 1:
@@ -111,8 +112,7 @@ class BlindGraspEnvConfig(EnvConfig):
                     dict(gym_env.BlindGraspGymEnv.metadata),
                 )
             else:
-                vec = gym.vector.SyncVectorEnv(
-                    [freeze_after_episode_end(fn) for fn in fns], autoreset_mode=gym.vector.AutoresetMode.NEXT_STEP
-                )
+                # One sim for the whole batch (sim_vector.py), with the freeze wrapper's semantics.
+                vec = SharedSimVectorEnv(fns)
             out[task_id(name)] = vec
         return {TASK_GROUP: out}

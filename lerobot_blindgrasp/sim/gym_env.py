@@ -1,7 +1,8 @@
 """One grasping trial as a gymnasium env, for `lerobot-eval` and anything else that speaks gymnasium.
 
-A thin shell over `BatchedGraspEnv` with one env, so that eval sees exactly the physics, randomization, noise and
-success rule that teacher training and demo collection use.
+A thin shell over one row of a `BatchedGraspEnv` (its own one-env sim, or a row of a sim that a batch of these envs
+shares, see `attach`), so that eval sees exactly the physics, randomization, noise and success rule that teacher
+training and demo collection use.
 
 LeRobot-facing contract (spec.py):
 - observation `{"agent_pos": o_t}` with o_t = 9 joint positions (rad) + 3 uniaxial forces (N), float32;
@@ -108,39 +109,48 @@ class BlindGraspGymEnv(gym.Env):
         self.eval_seed: int | None = None  # evaluation index of the current episode
         self.env_seed: int | None = None  # the sim's seed for it, see start_seed
         self._sim: BatchedGraspEnv | None = None
+        self._row = 0  # this env's row of `_sim`
         self._done = False
         self._renderer: mujoco.Renderer | None = None
 
     # --- gymnasium API ---------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        # `options` is accepted and ignored: lerobot-eval passes its own marker there.
+        self.begin(seed)
+        sim = make_sim(self.object.name, [self.env_seed], self.dr)
+        return self.attach(sim, 0, sim.reset())
+
+    def begin(self, seed: int | None) -> None:
+        """The seeding half of `reset`: this episode's evaluation index and sim seed (`start_seed`)."""
         if seed is not None and not (isinstance(seed, int | np.integer) and 0 <= int(seed) < _MAX_SEED):
             raise ValueError(f"seed must be an integer in [0, 2**32), got {seed!r}")
         super().reset(seed=None if seed is None else int(seed))  # seeds self.np_random when a seed is given
-        # `options` is accepted and ignored: lerobot-eval passes its own marker there.
         self.eval_seed = int(seed) if seed is not None else int(self.np_random.integers(_MAX_SEED))
         self.env_seed = start_seed(self.eval_seed, self.object.name)
-        if self._sim is not None:
+
+    def attach(self, sim: BatchedGraspEnv, row: int, obs: dict[str, np.ndarray]):
+        """Run this episode as row `row` of `sim` (reset, built with this env's `env_seed` in that row): a batch of
+        these envs can share one sim (`envs/sim_vector.py`); `obs` is the sim's reset observation."""
+        if self._sim is not None and self._sim is not sim:
             self._sim.close()
-        self._sim = BatchedGraspEnv(
-            GraspEnvConfig(
-                num_envs=1,
-                objects=(self.object.name,),
-                seed=self.env_seed,
-                dr=self.dr,
-                nthread=1,  # one env: a thread pool would only add overhead
-                autoreset=False,  # gymnasium's vector envs own resets
-            )
-        )
-        obs = self._sim.reset()
+        self._sim, self._row = sim, row
         self._done = False
         self._frame = None
-        return self._obs(obs), {"is_success": False, "eval_seed": self.eval_seed, "env_seed": self.env_seed}
+        return self._obs(obs, row), {"is_success": False, "eval_seed": self.eval_seed, "env_seed": self.env_seed}
 
     def step(self, action):
         if self._sim is None:
             raise RuntimeError("call reset() before step()")
         if self._done:
             raise RuntimeError("the episode has ended (terminated or truncated); call reset() before step()")
+        target = self.check_action(action)
+        # Targets beyond the joint limits are not rejected (a policy may overshoot a limit slightly: a command, not
+        # a bug): the sim clips the step to +-0.3 rad and the servo target to the limits, as the real gripper does.
+        delta = self._sim.delta_for_target(target[None, :])  # in the joints' measured (calibrated) frame
+        return self.row_result(self._sim.step(delta))
+
+    @staticmethod
+    def check_action(action) -> np.ndarray:
         target = np.asarray(action, dtype=np.float64)
         if target.shape != (spec.NUM_JOINTS,):
             raise ValueError(
@@ -149,31 +159,33 @@ class BlindGraspGymEnv(gym.Env):
             )
         if not np.isfinite(target).all():
             raise ValueError(f"action has NaN/inf entries: {target.tolist()}")
-        # Targets beyond the joint limits are not rejected (a policy may overshoot a limit slightly: a command, not
-        # a bug): the sim clips the step to +-0.3 rad and the servo target to the limits, as the real gripper does.
-        delta = self._sim.delta_for_target(target[None, :])[0]  # in the joints' measured (calibrated) frame
-        obs, reward, terminated, truncated, info = self._sim.step(delta[None, :])
-        success = bool(info["success"][0])
-        terminated = bool(terminated[0]) or (self.end_on_success and success)
-        truncated = bool(truncated[0]) and not terminated
+        return target
+
+    def row_result(self, out: tuple):
+        """This env's gymnasium step result from its row of the sim's step result `out`."""
+        obs, reward, terminated, truncated, info = out
+        i = self._row
+        success = bool(info["success"][i])
+        terminated = bool(terminated[i]) or (self.end_on_success and success)
+        truncated = bool(truncated[i]) and not terminated
         self._done = terminated or truncated
         step_info = {
             "is_success": success,
-            "lift_m": float(info["lift"][0]),
-            "uniaxial_force_n": info["uniaxial_force"][0].astype(np.float32),  # noise-free, after the deadband
-            "joint_target": info["joint_target"][0].astype(np.float32),  # what the servos were sent
+            "lift_m": float(info["lift"][i]),
+            "uniaxial_force_n": info["uniaxial_force"][i].astype(np.float32),  # noise-free, after the deadband
+            "joint_target": info["joint_target"][i].astype(np.float32),  # what the servos were sent
         }
-        return self._obs(obs), float(reward[0]), terminated, truncated, step_info
+        return self._obs(obs, i), float(reward[i]), terminated, truncated, step_info
 
     def render(self):
         if self.render_mode is None:
             raise RuntimeError("this env was created with render_mode=None; pass render_mode='rgb_array'")
         if self._sim is None:
             raise RuntimeError("call reset() before render()")
-        step = int(self._sim.episode_length[0])
+        step = int(self._sim.episode_length[self._row])
         if self._frame is not None and step - self._frame_step < self.render_stride:
             return self._frame
-        model, data = self._sim.mj_model_data(0)
+        model, data = self._sim.mj_model_data(self._row)
         if self._renderer is None:
             self._renderer = self._make_renderer(model)
         # The renderer was built from an earlier episode's model. Every episode of this env has the same object
@@ -193,8 +205,8 @@ class BlindGraspGymEnv(gym.Env):
 
     # --- helpers ----------------------------------------------------------------------------------------------
     @staticmethod
-    def _obs(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        return spaces.observation(obs["policy"][0])
+    def _obs(obs: dict[str, np.ndarray], row: int = 0) -> dict[str, np.ndarray]:
+        return spaces.observation(obs["policy"][row])
 
     def _make_renderer(self, model: mujoco.MjModel) -> mujoco.Renderer:
         try:
@@ -210,6 +222,21 @@ class BlindGraspGymEnv(gym.Env):
         if self._sim is None:
             raise RuntimeError("call reset() first")
         return self._sim
+
+
+def make_sim(object_name: str, env_seeds: list[int], dr: randomization.DomainRandomization) -> BatchedGraspEnv:
+    """The sim that runs episodes of `object_name` from these sim seeds (`start_seed`), one row each."""
+    return BatchedGraspEnv(
+        GraspEnvConfig(
+            num_envs=len(env_seeds),
+            objects=(object_name,),
+            seed=int(env_seeds[0]),  # what a one-env sim records as its seed
+            env_seeds=tuple(int(s) for s in env_seeds),
+            dr=dr,
+            nthread=1,  # small batches: a thread pool would only add overhead
+            autoreset=False,  # gymnasium's vector envs own resets
+        )
+    )
 
 
 def make_env(object_name: str = "cylinder_a_medium", **kwargs) -> gym.Env:

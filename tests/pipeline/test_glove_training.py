@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from emulators.glove_sender import GloveEmulator, free_udp_port
 from emulators.harness import BIN, cli_env
 from emulators.rig import LATENCY_TIMER_MS, GripperRig
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator, free_udp_port
 from lerobot_blindgrasp.pipeline import glove_train
 from lerobot_blindgrasp.presets.glove import GLOVE_PRESETS
 

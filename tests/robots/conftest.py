@@ -6,11 +6,11 @@ import json
 from unittest import mock
 
 import pytest
+from emulators.glove_sender import FIST, OPEN, free_udp_port
 from emulators.harness import cli_env
 from emulators.rig import GripperRig
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, free_udp_port
 
 
 @pytest.fixture(scope="module")

@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from emulators.glove_sender import GloveEmulator, free_udp_port
 from emulators.harness import BIN, Operator, as_from_a_terminal, cli_env, tiny_student_train
 from emulators.rig import LATENCY_TIMER_MS, MOUNT_SIGN, GripperRig
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator, free_udp_port
 
 pytestmark = pytest.mark.slow
 

@@ -8,12 +8,12 @@ import sys
 import time
 
 import pytest
+from emulators.glove_sender import GloveEmulator
 from emulators.harness import Operator
 from emulators.rig import GripperRig
 from test_hw_cli import REPO_ID, _record_cmd, _wait_for_torque
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator
 
 pytestmark = pytest.mark.slow
 

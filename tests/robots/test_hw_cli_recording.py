@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from dynamixel_sdk.robotis_def import INST_SYNC_WRITE as SYNC_WRITE
+from emulators.glove_sender import GloveEmulator
 from emulators.harness import BIN, Operator
 from emulators.rig import GripperRig
 from test_hw_cli import REPO_ID, _record_cmd, _run
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator
 from lerobot_blindgrasp.robots.blindgrasp_gripper.recording_space import episode_bytes
 
 pytestmark = pytest.mark.slow

@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 from dynamixel_sdk import COMM_SUCCESS, PortHandler
 from dynamixel_sdk import robotis_def as dx
+from emulators.glove_sender import FIST, OPEN
 from emulators.loop import as_q
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.dynamixel import make_packet
-from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN
 from lerobot_blindgrasp.hardware.dynamixel.bus import LineWatchingPacketHandler
 from lerobot_blindgrasp.hardware.force_board.frame_codec import SYNC, FrameParser, encode_frame
 from lerobot_blindgrasp.hardware.plausibility import ImplausibleReadingError, PositionGate

@@ -16,11 +16,11 @@ from pathlib import Path
 import draccus
 import numpy as np
 import pytest
+from emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot.robots.config import RobotConfig
 from lerobot.teleoperators.config import TeleoperatorConfig
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import CalibrationFileError
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
@@ -82,7 +82,7 @@ def _glove_calibration(fpath: Path, open_pose: dict, fist_pose: dict) -> None:
 
 
 def test_degenerate_glove_calibration_file_is_refused(tmp_path, monkeypatch):
-    from lerobot_blindgrasp.emulators.glove_sender import OPEN
+    from emulators.glove_sender import OPEN
 
     _no_prompt(monkeypatch)
     cfg = ManusGloveConfig(id="op", port=free_udp_port(), calibration_dir=tmp_path)
@@ -100,7 +100,7 @@ def test_degenerate_glove_calibration_file_is_refused(tmp_path, monkeypatch):
 # --- 7. streams: restarts and hostile input ------------------------------------------------------------------------
 @pytest.fixture
 def glove_teleop(tmp_path, monkeypatch):
-    from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN
+    from emulators.glove_sender import FIST, OPEN
 
     _no_prompt(monkeypatch)
     port = free_udp_port()
@@ -133,7 +133,7 @@ HOSTILE = [
 
 
 def _message(seq, value, side="right", session="hostile", sent=0.0) -> bytes:
-    from lerobot_blindgrasp.emulators.glove_sender import OPEN
+    from emulators.glove_sender import OPEN
 
     ergo = dict(OPEN)
     ergo["IndexMCPStretch"] = value

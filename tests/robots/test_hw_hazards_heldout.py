@@ -13,11 +13,11 @@ import time
 from types import SimpleNamespace
 
 import pytest
+from emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from test_hw_health import _hold
 from test_policy_check import ROBOT, _checkpoint
 
 from lerobot_blindgrasp import policy_contract
-from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.hardware import xm430
 from lerobot_blindgrasp.hardware.servo_diagnostics import ERROR, OK, WARN, ServoHealth
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper

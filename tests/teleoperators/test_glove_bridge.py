@@ -13,9 +13,9 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from emulators.glove_sender import FIST, OPEN, free_udp_port
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, free_udp_port
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, names
 from lerobot_blindgrasp.teleoperators.manus_glove.bridge import (
     BridgeError,

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, manus_bridge, names
 from lerobot_blindgrasp.teleoperators.manus_glove import retarget as rt
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender, decode

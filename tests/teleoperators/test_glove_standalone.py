@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from emulators.glove_sender import FIST, OPEN, free_udp_port
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, free_udp_port
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, bridge, names, protocol
 from lerobot_blindgrasp.teleoperators.manus_glove import manus_bridge as mb
 from lerobot_blindgrasp.teleoperators.manus_glove import retarget as rt

@@ -14,11 +14,11 @@ import time
 
 import numpy as np
 import pytest
+from emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveDatagram, GloveSender

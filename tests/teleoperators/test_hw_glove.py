@@ -8,10 +8,10 @@ from pathlib import Path
 import draccus
 import numpy as np
 import pytest
+from emulators.glove_sender import GloveEmulator, free_udp_port
 from lerobot.teleoperators.config import TeleoperatorConfig
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator, free_udp_port
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from emulators.glove_sender import GloveEmulator, free_udp_port
 from emulators.harness import BIN, Operator, cli_env, tiny_student_train
 
 from lerobot_blindgrasp import durable, spec
-from lerobot_blindgrasp.emulators.glove_sender import GloveEmulator, free_udp_port
 
 pytestmark = pytest.mark.slow
 

@@ -13,7 +13,7 @@ import pytest
 from lab import run_records as records
 from lab.twin_campaign import report
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RECORDS = sorted((ROOT / "docs" / "results").rglob("*.json"))
 PACKED = [p for p in RECORDS if set(json.loads(p.read_text())) == {"files"}]
 
