@@ -12,10 +12,10 @@ manager here, and nowhere else in the package (`tests/policies/test_compat.py` s
   set outside its parser.
 - `set_signal_handler`, `set_excepthook`: process-wide hooks the robot installs while a gripper is connected.
 
-`check()` also covers the dataset writers' private state that the demo collector reads and resets to reopen a
-finalized dataset in place (`demos/checkpoint.py`) or abandon a failed finalize (`demos/collection.py`).
+`check_lerobot()` also covers the dataset writers' private state that the demo collector reads and resets to reopen a
+finalized dataset in place (`demos/crash_checkpoints.py`) or abandon a failed finalize (`demos/collection_loop.py`).
 
-Each was written against LeRobot `WRITTEN_FOR`. `check()` lists what a reach relies on that the installed LeRobot
+Each was written against LeRobot `WRITTEN_FOR`. `check_lerobot()` lists what a reach relies on that the installed LeRobot
 no longer has; the first reach used under another LeRobot version logs the version and that list once, as a
 WARNING. A reach whose target is gone degrades to LeRobot's own behaviour, as before.
 """
@@ -88,7 +88,7 @@ def _mentions(module: str, *texts: str) -> list[str]:
     return [f"{module} no longer contains {text!r}" for text in texts if text not in source]
 
 
-def check() -> list[str]:
+def check_lerobot() -> list[str]:
     """What the reaches rely on that the installed LeRobot lacks: one line each; empty when all is there."""
     reader = "lerobot.datasets.dataset_reader"
     problems = _has(reader, "DatasetReader.try_load", "DatasetReader.load_and_activate", "DatasetReader.get_item")
@@ -107,8 +107,8 @@ def check() -> list[str]:
     problems += _mentions("lerobot.utils.utils", "logging.info(text)")
     problems += _mentions("lerobot.scripts.lerobot_record", f'log_say(f"{ANNOUNCEMENT} {{dataset.num_episodes}}"')
     problems += _has("lerobot.configs.parser", "get_path_arg", "parse_arg")
-    # The writers' private state the demo collector reads and resets (demos/checkpoint.py `reopen_in_place`,
-    # demos/collection.py `_finalize_or_abandon`); both fall back to LeRobot's own path when a field is missing.
+    # The writers' private state the demo collector reads and resets (demos/crash_checkpoints.py `reopen_in_place`,
+    # demos/collection_loop.py `_finalize_or_abandon`); both fall back to LeRobot's own path when a field is missing.
     problems += _mentions("lerobot.datasets.dataset_writer", *_WRITER_STATE)
     problems += _mentions("lerobot.datasets.dataset_metadata", *_META_STATE)
     problems += _mentions("lerobot.datasets.lerobot_dataset", "self._is_finalized =", "self.writer =")
@@ -116,7 +116,7 @@ def check() -> list[str]:
 
 
 def _used(reach: str) -> None:
-    """On a LeRobot other than `WRITTEN_FOR`, say once (the first reach used) what `check()` finds."""
+    """On a LeRobot other than `WRITTEN_FOR`, say once (the first reach used) what `check_lerobot()` finds."""
     global _warned
     if _warned:
         return
@@ -124,7 +124,7 @@ def _used(reach: str) -> None:
     version = installed_version()
     if version == WRITTEN_FOR:
         return
-    problems = check()
+    problems = check_lerobot()
     logger.warning(
         "lerobot_blindgrasp was written for LeRobot %s, found %s (first used: %s); %s",
         WRITTEN_FOR,

@@ -49,7 +49,7 @@ class WriteError(Exception):
         super().__init__(f"could not write {path}: {cause}; the previous file is unchanged")
 
 
-def describe(e: BaseException) -> str:
+def describe_write_error(e: BaseException) -> str:
     """A write failure in words: 'the disk is full (ENOSPC)' rather than an errno number."""
     code = getattr(e, "errno", None)
     if code in _CAUSES:
@@ -104,7 +104,7 @@ def atomic_path(path: str | os.PathLike, mode: int | None = None, fsync: bool = 
     try:
         tmp = _temp_name(path)
     except OSError as e:
-        raise WriteError(path, describe(e), e.errno) from e
+        raise WriteError(path, describe_write_error(e), e.errno) from e
     try:
         yield tmp
         if fsync:
@@ -113,7 +113,7 @@ def atomic_path(path: str | os.PathLike, mode: int | None = None, fsync: bool = 
         os.replace(tmp, path)
     except OSError as e:
         tmp.unlink(missing_ok=True)
-        raise WriteError(path, describe(e), e.errno) from e
+        raise WriteError(path, describe_write_error(e), e.errno) from e
     except BaseException as e:
         why = _diagnose(tmp) if isinstance(e, Exception) else None
         tmp.unlink(missing_ok=True)

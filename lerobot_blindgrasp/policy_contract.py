@@ -68,7 +68,7 @@ def gripper_contract(robot_type: str, fps: float, fps_source: str) -> RobotContr
 
 
 # --- the checkpoint's files, each fact with the file it was read from -----------------------------------------
-def load(path: Path) -> dict | None:
+def read_checkpoint_json(path: Path) -> dict | None:
     if not path.is_file():
         return None
     try:
@@ -99,7 +99,7 @@ def dataset_info(train: dict | None, where: Path) -> tuple[dict | None, str]:
 
         candidates.append(Path(HF_LEROBOT_HOME) / ds["repo_id"])
     for root in candidates:
-        info = load(root / "meta" / "info.json")
+        info = read_checkpoint_json(root / "meta" / "info.json")
         if info is not None:
             return info, str(root / "meta" / "info.json")
     return None, f"the training dataset's meta/info.json (looked in {[str(c) for c in candidates]}, from {where})"
@@ -146,7 +146,7 @@ def stats_problems(where: Path, names: dict[str, tuple[str, ...]]) -> list[str]:
     normalize (`norm_map` by feature type; IDENTITY features use none)."""
     bad = []
     for name in PROCESSORS:
-        for step in (load(where / name) or {}).get("steps", []):
+        for step in (read_checkpoint_json(where / name) or {}).get("steps", []):
             if step.get("registry_name") not in NORMALIZERS or not step.get("state_file"):
                 continue
             source = str(where / step["state_file"])
@@ -181,15 +181,15 @@ def _feature_problems(cfg: dict, where: Path, robot: RobotContract) -> list[str]
         if have != want[key]:
             bad.append(f"'{key}' shape {have} in {where / 'config.json'} ({group}), the robot has {want[key]}")
     for name in PROCESSORS:
-        for key, have in normalizer_shapes(load(where / name)).items():
+        for key, have in normalizer_shapes(read_checkpoint_json(where / name)).items():
             if key in want and have != want[key]:
                 bad.append(f"'{key}' shape {have} in {where / name} (normalizer), the robot has {want[key]}")
     return bad
 
 
 def _meaning_problems(where: Path) -> list[str]:
-    pre = step_names(load(where / "policy_preprocessor.json"))
-    post = step_names(load(where / "policy_postprocessor.json"))
+    pre = step_names(read_checkpoint_json(where / "policy_preprocessor.json"))
+    post = step_names(read_checkpoint_json(where / "policy_postprocessor.json"))
     if "relative_actions_processor" in pre and "absolute_actions_processor" not in post:
         return [
             f"'action' meaning: {where / 'policy_preprocessor.json'} makes actions relative and "
@@ -253,16 +253,16 @@ def _contract_problems(facts: dict, source: str, robot: RobotContract) -> tuple[
     return bad, unverified
 
 
-def problems(path: str | Path, robot: RobotContract) -> tuple[list[str], list[str]]:
+def checkpoint_problems(path: str | Path, robot: RobotContract) -> tuple[list[str], list[str]]:
     """(mismatches, unverified facts) of the checkpoint at `path` against the robot."""
     where = Path(path)
-    cfg = load(where / "config.json")
+    cfg = read_checkpoint_json(where / "config.json")
     if cfg is None:
         return [f"{where / 'config.json'} not found: not a LeRobot policy checkpoint directory"], []
     names = {STATE: robot.state_names, ACTION: robot.action_names}
     bad = _feature_problems(cfg, where, robot) + _meaning_problems(where)
     bad += stats_problems(where, names) + weight_problems(where)
-    train = load(where / "train_config.json")
+    train = read_checkpoint_json(where / "train_config.json")
     bad += _env_problems(train, where, robot)
     facts, source = _trained_for(cfg, train, where)
     if facts is None:
@@ -271,13 +271,13 @@ def problems(path: str | Path, robot: RobotContract) -> tuple[list[str], list[st
     return bad + mismatched, unverified
 
 
-def check(path: str | Path, robot: RobotContract, *, allow_unverified: bool = False) -> None:
+def check_checkpoint(path: str | Path, robot: RobotContract, *, allow_unverified: bool = False) -> None:
     """Refuse (`PolicyMismatchError`) a checkpoint that does not fit the robot, or whose fit no file states
     (unless `allow_unverified`: then warn)."""
     key = (str(path), robot, allow_unverified)
     if key in _checked:
         return
-    bad, unverified = problems(path, robot)
+    bad, unverified = checkpoint_problems(path, robot)
     if bad:
         raise PolicyMismatchError(
             f"The policy at {path} does not fit the {robot.robot_type} robot: {'; '.join(bad)}. Nothing was moved "
@@ -308,11 +308,11 @@ def local_checkpoint(path: str) -> Path | None:
 
 
 def check_named(path, robot_type: str, fps: float, fps_source: str, *, allow_unverified: bool = False) -> bool:
-    """`check` the checkpoint a caller names (a folder, or a Hub id already in the cache) against the gripper at
+    """`check_checkpoint` the checkpoint a caller names (a folder, or a Hub id already in the cache) against the gripper at
     `fps`; False when there is none here to check (LeRobot downloads it later)."""
     if not path or (where := local_checkpoint(str(path))) is None:
         return False
-    check(where, gripper_contract(robot_type, fps, fps_source), allow_unverified=allow_unverified)
+    check_checkpoint(where, gripper_contract(robot_type, fps, fps_source), allow_unverified=allow_unverified)
     return True
 
 

@@ -21,7 +21,7 @@ mkdir -p "$OUT"
 device_flag=()
 [ -n "${DEVICE:-}" ] && device_flag=(--device="$DEVICE")
 # The collector's exit status for "ran, but kept no episode": that row then has no student (said in the log).
-EMPTY="$(python -c 'from lerobot_blindgrasp.demos.collect import EXIT_EMPTY; print(EXIT_EMPTY)')"
+EMPTY="$(python -c 'from lerobot_blindgrasp.demos.collect_cli import EXIT_EMPTY; print(EXIT_EMPTY)')"
 
 for stage in teachers teacher_evals demos students evals; do
   cmds="$(blindgrasp-pipeline --preset="$PRESET" --output_dir="$OUT" "${device_flag[@]}" --print_commands="$stage")"

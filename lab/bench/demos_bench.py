@@ -65,13 +65,13 @@ def _writer_speed(episodes, root: Path, per_frame: bool, fast: bool = True) -> f
     """Frames per second through one write path, on real rollouts (whole, untrimmed)."""
     from lerobot_blindgrasp import spec
     from lerobot_blindgrasp.demos import curation, dataset
-    from lerobot_blindgrasp.demos.collection import _cleanup, _finalize_or_abandon
+    from lerobot_blindgrasp.demos.collection_loop import _cleanup, _finalize_or_abandon
 
     ds = dataset.create(root, "bench/writer")
     frames, t0 = 0, time.perf_counter()
     try:
         for ep in episodes:
-            cut = curation.evaluate(ep.task_reward, ep.uniaxial_force, curation.NO_CURATION)
+            cut = curation.judge_episode(ep.task_reward, ep.uniaxial_force, curation.NO_CURATION)
             if not per_frame:
                 frames += dataset.write_episode(ds, ep, cut, fast=fast)
                 continue
@@ -136,7 +136,7 @@ def _collect(cfg: BenchDemosConfig, teacher: Path, tmp: Path, folder: str, check
              queue: int | None = None):  # fmt: skip
     """One collection into tmp/folder, as blindgrasp-collect-demos runs it."""
     from lerobot_blindgrasp.demos import curation
-    from lerobot_blindgrasp.demos.collection import collect
+    from lerobot_blindgrasp.demos.collection_loop import collect_demos
     from lerobot_blindgrasp.demos.config import CollectConfig
 
     c = CollectConfig(
@@ -155,7 +155,7 @@ def _collect(cfg: BenchDemosConfig, teacher: Path, tmp: Path, folder: str, check
         writer_queue=cfg.writer_queue if queue is None else queue,
     )
     with contextlib.redirect_stderr(io.StringIO()):
-        return collect(c, on_episode=on_episode)
+        return collect_demos(c, on_episode=on_episode)
 
 
 def _one_episode(cfg: BenchDemosConfig) -> BenchDemosConfig:

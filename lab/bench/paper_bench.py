@@ -192,7 +192,7 @@ def _demos(cfg: BenchPaperConfig, num_envs: int) -> dict:
     n = cfg.demo_num_envs or num_envs
     with tempfile.TemporaryDirectory(prefix="blindgrasp-paper-demos-") as tmp:
         out = Path(tmp) / "demos"
-        cmd = [sys.executable, "-m", "lerobot_blindgrasp.demos.collect", f"--output_dir={out}"]
+        cmd = [sys.executable, "-m", "lerobot_blindgrasp.demos.collect_cli", f"--output_dir={out}"]
         cmd += ["--repo_id=bench/paper_demos", f"--num_envs={n}", f"--backend={cfg.backend}", "--progress=false"]
         cmd += ["--episodes_per_object=1000000"]  # never done: the clock stops it
         cmd += [f"--teacher={cfg.teacher}"] if cfg.teacher else []
@@ -210,7 +210,7 @@ def _demos(cfg: BenchPaperConfig, num_envs: int) -> dict:
         except subprocess.TimeoutExpired:
             proc.kill()
             _, err = proc.communicate()
-        runs = provenance.load(out)["runs"] if (out / provenance.PROVENANCE_NAME).exists() else []
+        runs = provenance.load_provenance(out)["runs"] if (out / provenance.PROVENANCE_NAME).exists() else []
     if t_ready is None or not runs:
         return {"error": f"the collector did not start collecting (exit {proc.returncode}): {err[-2000:]}"}
     run = runs[-1]
@@ -237,7 +237,7 @@ def _wait_until_collecting(proc, out: Path, deadline: float) -> float | None:
 
     while time.perf_counter() < deadline and proc.poll() is None:
         with contextlib.suppress(FileNotFoundError, ValueError, KeyError):
-            if provenance.load(out)["runs"]:
+            if provenance.load_provenance(out)["runs"]:
                 return time.perf_counter()
         time.sleep(0.2)
     return None

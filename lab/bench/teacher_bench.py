@@ -132,9 +132,9 @@ def _build(cfg: BenchTeacherConfig):
     env = BatchedGraspEnv(build_env_config(preset, num_envs, seed=1, nthread=cfg.threads, backend=cfg.backend))
     device = "cpu"
     if cfg.backend == "warp":
-        from lerobot_blindgrasp.teacher.distributed import default_device
+        from lerobot_blindgrasp.teacher.distributed import default_torch_device
 
-        device = default_device()  # the GPU if there is one: sim and learner on the same device
+        device = default_torch_device()  # the GPU if there is one: sim and learner on the same device
     vec = RslRlGraspEnv(env, device=device)
     # rsl-rl prints the models on construction; with --json=true stdout must hold only the JSON.
     with contextlib.redirect_stdout(sys.stderr):  # no log dir: nothing written

@@ -20,7 +20,7 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.rollout.envs import make_env
+from lerobot_blindgrasp.rollout.envs import make_batched_env
 from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 
@@ -68,7 +68,7 @@ def teacher_contacts(cfg: ContactsConfig) -> dict[str, dict[str, float]]:
     teacher = TeacherPolicy(cfg.teacher or default_teacher())
     out = {}
     for name in objects.resolve_objects(cfg.objects):
-        env = make_env("eval", (name,), episodes=cfg.episodes, seed=cfg.seed)
+        env = make_batched_env("eval", (name,), episodes=cfg.episodes, seed=cfg.seed)
         obs = env.reset()
         after = int(round(cfg.after_s * spec.CONTROL_HZ))
         act = lambda o: teacher(o, stochastic=False)  # noqa: E731

@@ -44,7 +44,7 @@ from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.durable import atomic_path, atomic_write_json, atomic_write_text
 from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.rollout.actors import StudentActor
-from lerobot_blindgrasp.rollout.envs import make_env
+from lerobot_blindgrasp.rollout.envs import make_batched_env
 from lerobot_blindgrasp.rollout.loop import Episode, run_batch
 from lerobot_blindgrasp.sim import objects
 
@@ -94,7 +94,9 @@ TRACES = ("state", "lift", "tip_object_force", "tip_object_downward")
 def closed_loop(student: StudentActor, object_name: str, episodes: int, seed: int) -> list[Episode]:
     """`episodes` evaluation episodes of one object (env k = evaluation index seed + k), with their traces."""
     student.reset()
-    return run_batch(make_env("eval", (object_name,), episodes=episodes, seed=seed), student, record=TRACES)
+    return run_batch(
+        make_batched_env("eval", (object_name,), episodes=episodes, seed=seed), student, record=TRACES
+    )
 
 
 def fit_preprocessor(student: StudentActor):

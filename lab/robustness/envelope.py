@@ -46,7 +46,7 @@ def envelope(
     return lo, hi
 
 
-def describe(factor: dict, role: str = "student", criterion: str = "ci") -> str:
+def describe_envelope(factor: dict, role: str = "student", criterion: str = "ci") -> str:
     """The envelope of one factor of a sweep summary in words: 'up to 2 N (fails at 3 N)', 'x0.7 (fails at x0.5)
     to x2 (all tested)', ..."""
     pts, nom = factor["points"], factor["nominal"]
@@ -90,8 +90,8 @@ def card_section(summary: dict, threshold: float = THRESHOLD) -> str:
             continue
         trained = f.get("train_label") or f["points"][f["nominal"]]["label"]
         lines.append(
-            f"| {f['title']} | {trained} | {describe(f, 'student', 'ci')} | {describe(f, 'student', 'rate')}"
-            f" | {describe(f, 'teacher', 'rate')} |"
+            f"| {f['title']} | {trained} | {describe_envelope(f, 'student', 'ci')} | {describe_envelope(f, 'student', 'rate')}"
+            f" | {describe_envelope(f, 'teacher', 'rate')} |"
         )
     first = first_to_break(summary)
     if first:

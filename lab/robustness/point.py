@@ -9,7 +9,7 @@ that `--seed` and object (`rollout.envs`: the "robustness" purpose). The student
 from __future__ import annotations
 
 from lerobot_blindgrasp.rollout.actors import SideBySide, StudentActor, TeacherActor
-from lerobot_blindgrasp.rollout.envs import make_env
+from lerobot_blindgrasp.rollout.envs import make_batched_env
 from lerobot_blindgrasp.rollout.loop import run_batch
 from lerobot_blindgrasp.sim import randomization
 
@@ -26,7 +26,7 @@ def run_point(
     """{"student": {object: [success per episode]}, "teacher": {...}} on the same start states (episode k of
     every object is evaluation index seed + k). Either policy may be None (then left out)."""
     roles = [(r, a) for r, a in (("student", student), ("teacher", teacher and TeacherActor(teacher))) if a]
-    env = make_env(
+    env = make_batched_env(
         "robustness", object_names, episodes=episodes, seed=seed, copies=len(roles), dr=dr, nthread=nthread
     )
     if student is not None:

@@ -38,8 +38,8 @@ from lab.twin_campaign import report
 from lerobot_blindgrasp import durable, shipped
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.envs.real_env import resolve_real_objects
-from lerobot_blindgrasp.twin.calibrate import TwinCalibrateConfig
-from lerobot_blindgrasp.twin.calibrate import run as calibrate
+from lerobot_blindgrasp.twin.calibration_operator import TwinCalibrateConfig
+from lerobot_blindgrasp.twin.calibration_operator import calibrate_twin as calibrate
 
 logger = logging.getLogger(__name__)
 BIN = Path(sys.executable).parent

@@ -184,9 +184,9 @@ def render(run: Path, sim: Path | None = None) -> str:
     durable.atomic_write_json(run / "eval_info.json", info, indent=1)
     parts = [f"Judged by: {info['judge']}", "", table(results), "", f"Stops by cause: {json.dumps(stops(run))}"]
     if sim is not None:
-        from lerobot_blindgrasp.results.compare import compare, load_successes
+        from lerobot_blindgrasp.results.compare import compare_rates, load_successes
 
-        paired = compare(load_successes(sim), load_successes(run), "sim", "twin")
+        paired = compare_rates(load_successes(sim), load_successes(run), "sim", "twin")
         durable.atomic_write_text(run / "compare.md", paired + "\n")
         parts += ["", "Paired with the sim env on the same start states:", "", paired]
     parts += ["", "Peak fingertip forces:", "", peak_forces(run)]

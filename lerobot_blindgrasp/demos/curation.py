@@ -87,7 +87,7 @@ def hold_run_lengths(task_reward: np.ndarray, threshold: float) -> np.ndarray:
     return np.where(above, np.arange(above.size) - last_break, 0)
 
 
-def evaluate(
+def judge_episode(
     task_reward: np.ndarray, uniaxial_force: np.ndarray, cfg: CurationConfig = PAPER_CURATION
 ) -> CurationResult:
     """Judge one episode. task_reward: (T,) r_t per step; uniaxial_force: (T, 3) noise-free forces (N) per step."""

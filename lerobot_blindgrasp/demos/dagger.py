@@ -38,11 +38,11 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.demos.collection import _cleanup, _finalize_or_abandon
+from lerobot_blindgrasp.demos.collection_loop import _cleanup, _finalize_or_abandon
 from lerobot_blindgrasp.demos.episode_writer import EpisodeWriter
 from lerobot_blindgrasp.durable import atomic_write_json
 from lerobot_blindgrasp.rollout.actors import StudentActor, TeacherActor
-from lerobot_blindgrasp.rollout.envs import make_env
+from lerobot_blindgrasp.rollout.envs import make_batched_env
 from lerobot_blindgrasp.rollout.loop import Episode, run_batch
 from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
@@ -88,7 +88,7 @@ def relabelled_episodes(
 ) -> list[Episode]:
     """One batch (env i: object names[i], seed + i) for 10 s under the student; each episode's action is what the
     env would have commanded for the teacher's mean action on the states the student visited."""
-    env = make_env("dagger", tuple(dict.fromkeys(names)), num_envs=len(names), seed=seed)
+    env = make_batched_env("dagger", tuple(dict.fromkeys(names)), num_envs=len(names), seed=seed)
     if list(env.object_names) != list(names):
         raise RuntimeError("object allocation differs from the requested batch")
     label = TeacherActor(teacher).target
@@ -97,7 +97,7 @@ def relabelled_episodes(
     return done
 
 
-def run(cfg: DaggerConfig) -> dict:
+def run_dagger(cfg: DaggerConfig) -> dict:
     out = cfg.output_dir
     if (out / DONE).is_file():
         return json.loads((out / DONE).read_text())
@@ -178,7 +178,7 @@ def _repo_id(root: Path) -> str:
 
 def main(argv=None) -> None:
     cfg = parse_config(DaggerConfig, argv)
-    record = run(cfg)
+    record = run_dagger(cfg)
     print(
         f"relabelled {record['episodes']} student episodes ({record['frames']} frames; the student succeeded in "
         f"{record['student_successes']}) in {record['wall_s']:.0f} s; training set: {record['aggregate']}"

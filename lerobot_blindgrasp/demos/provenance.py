@@ -19,12 +19,12 @@ FORMAT = "blindgrasp-demos/1"
 _MUST_MATCH = ("teacher_sha256", "stochastic", "curation", "randomization", "objects")
 
 
-def path(root: Path) -> Path:
+def provenance_path(root: Path) -> Path:
     return Path(root) / PROVENANCE_NAME
 
 
-def load(root: Path) -> dict:
-    p = path(root)
+def load_provenance(root: Path) -> dict:
+    p = provenance_path(root)
     if not p.is_file():
         raise FileNotFoundError(f"{root} has no {PROVENANCE_NAME}; it was not written by blindgrasp-collect-demos")
     data = json.loads(p.read_text())
@@ -33,8 +33,8 @@ def load(root: Path) -> dict:
     return data
 
 
-def save(root: Path, data: dict) -> None:
-    durable.atomic_write_json(path(root), data, indent=2)
+def save_provenance(root: Path, data: dict) -> None:
+    durable.atomic_write_json(provenance_path(root), data, indent=2)
 
 
 def mismatches(old: dict, new: dict) -> list[str]:

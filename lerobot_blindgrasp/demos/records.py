@@ -39,7 +39,7 @@ class CollectStats:
     frames: int = 0
     env_builds: int = 0
     stop_reason: str = ""  # "done" | "interrupted" | "error: ..."
-    checkpoints: int = 0  # finalize-and-reopen cycles (demos/checkpoint.py)
+    checkpoints: int = 0  # finalize-and-reopen cycles (demos/crash_checkpoints.py)
     checkpoint_s: float = 0.0  # time they took
     tally: yield_report.Tally = field(default_factory=yield_report.Tally)
 
@@ -102,9 +102,9 @@ def open_dataset(cfg: CollectConfig, prov_new: dict):
             )
             shutil.rmtree(out)
         ds = demo_dataset.create(out, cfg.repo_id)
-        provenance.save(out, prov_new)
+        provenance.save_provenance(out, prov_new)
         return ds, prov_new, yield_report.Tally()
-    prov = provenance.load(out)
+    prov = provenance.load_provenance(out)
     bad = provenance.mismatches(prov, prov_new)
     if bad:
         raise CollectError(f"--resume: {out} was collected with different {', '.join(bad)}; use a new output_dir")
@@ -119,14 +119,18 @@ def open_dataset(cfg: CollectConfig, prov_new: dict):
         last["stop_reason"], last["interrupted"] = "killed (resumed from its last checkpoint)", True
         if "tally" in last:
             tally = yield_report.Tally.from_json(last.pop("tally"))
-        provenance.save(out, prov)
+        provenance.save_provenance(out, prov)
     _existing_counts(out, tally)
     return ds, prov, tally
 
 
 def empty_leftover(out: Path) -> bool:
     """A folder that a collection killed while starting left behind: no collection.json, no data file."""
-    return out.is_dir() and not provenance.path(out).is_file() and not any((out / "data").rglob("*.parquet"))
+    return (
+        out.is_dir()
+        and not provenance.provenance_path(out).is_file()
+        and not any((out / "data").rglob("*.parquet"))
+    )
 
 
 def _repair(out: Path) -> None:
@@ -174,7 +178,7 @@ def checkpoint_run(
 ) -> None:
     """Save collection.json with this run in progress and the tally that goes with the dataset on disk now."""
     record = {**_run_outcome(run, stats, RUNNING), "tally": tally.to_json()}
-    provenance.save(cfg.output_dir, {**prov, "runs": [*prov["runs"], record]})
+    provenance.save_provenance(cfg.output_dir, {**prov, "runs": [*prov["runs"], record]})
 
 
 def _run_outcome(run: dict, stats: CollectStats, stop_reason: str) -> dict:
@@ -197,12 +201,12 @@ def finish_run(cfg: CollectConfig, prov: dict, run: dict, tally: yield_report.Ta
     out = cfg.output_dir
     run.update(_run_outcome(run, stats, stats.stop_reason))
     prov["runs"].append(run)
-    provenance.save(out, prov)
+    provenance.save_provenance(out, prov)
     _write_report(out, cfg, prov, tally)
     try:
-        from lerobot_blindgrasp.demos import dataset_card
+        from lerobot_blindgrasp.demos import collection_card
 
-        dataset_card.write(out, cfg.repo_id)
+        collection_card.write(out, cfg.repo_id)
     except Exception as e:  # noqa: BLE001  (a card problem must not mask the collection's outcome)
         log.warning("could not write the dataset card: %s", e)
 
@@ -212,7 +216,7 @@ def _write_report(out: Path, cfg: CollectConfig, prov: dict, tally: yield_report
     wall = sum(r["wall_s"] for r in runs)
     cpu = sum(r["cpu_s"] for r in runs)
     kept_now = sum(r["kept"] for r in runs)
-    return yield_report.write_report(
+    return yield_report.write_yield_report(
         out,
         tally,
         {

@@ -211,7 +211,9 @@ def repair(root: str | Path, dry_run: bool = False) -> RepairReport:
     import pyarrow.parquet as pq
 
     root = Path(root)
-    demos = provenance.path(root).is_file()  # a demo collection resumes from its checkpoint (`records.py`)
+    demos = provenance.provenance_path(
+        root
+    ).is_file()  # a demo collection resumes from its checkpoint (`records.py`)
     rebuilt = None if demos else rebuild_meta.rebuild(root, dry_run=dry_run)
     if rebuilt and dry_run:
         return RepairReport(root, kept_episodes=rebuilt.episodes, kept_frames=rebuilt.frames, rebuilt=rebuilt)

@@ -89,7 +89,7 @@ def format_table(tally: Tally, order: list[str] | None = None) -> str:
     return "\n".join(lines)
 
 
-def write_report(root: Path, tally: Tally, extra: dict) -> Path:
+def write_yield_report(root: Path, tally: Tally, extra: dict) -> Path:
     path = Path(root) / REPORT_NAME
     durable.atomic_write_json(path, {**extra, **tally.to_json()}, indent=2)
     return path

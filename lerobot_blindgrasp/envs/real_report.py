@@ -102,7 +102,7 @@ class RealReportConfig:
     trial_log: Path | None = None
 
 
-def load(path: Path) -> dict:
+def load_eval_info(path: Path) -> dict:
     path = Path(path)
     if path.is_dir():
         path = path / "eval_info.json"
@@ -120,7 +120,7 @@ def main(argv: list[str] | None = None) -> None:
         typed = USAGE.replace("outputs/eval/<run>/eval_info.json", args[0])
         raise SystemExit(f"error: named flags only; type\n    {typed}")
     cfg = parse_config(RealReportConfig, args)
-    info = load(cfg.eval_info)
+    info = load_eval_info(cfg.eval_info)
     try:
         table = success_table(info)
     except ValueError as e:

@@ -8,7 +8,7 @@ One trial (= one lerobot-eval episode):
    alive through these waits (the robot's `keep_alive` each period, and during its tare), so the servos' bus
    watchdog stays armed for a host that dies while waiting and never trips on a person's pause.
 2. 200 steps at 20 Hz (10 s): action = absolute joint targets, through `robot.send_action` (clipped on the robot).
-   The steps keep time with a `Schedule`: after a late step (a slow policy) it re-bases on now rather than
+   The steps keep time with a `StepPacer`: after a late step (a slow policy) it re-bases on now rather than
    firing the missed steps back to back, and after a slow read (a stalled bus) the next read waits until it is at
    least 0.9 period after it, so no two samples come a few ms apart. The robot measures the period in every get_observation:
    overruns are warned, counted in the trial log, and a sustained overrun ends the run (`GripperTimingError`).
@@ -34,7 +34,7 @@ import numpy as np
 from lerobot_blindgrasp import durable, spaces, spec
 from lerobot_blindgrasp.envs import real_report
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
-from lerobot_blindgrasp.hardware.loop_timing import Schedule
+from lerobot_blindgrasp.hardware.loop_timing import StepPacer
 from lerobot_blindgrasp.hardware.realtime import GcPause
 from lerobot_blindgrasp.sim import objects, randomization
 from lerobot_blindgrasp.sim.gym_env import start_seed
@@ -134,7 +134,7 @@ class RealGraspEnv(gym.Env):
         self._held = 0
         self._decided: tuple[bool, str] | None = None
         self._peak = np.zeros(spec.NUM_FORCES)
-        self._schedule = Schedule(spec.CONTROL_DT)
+        self._schedule = StepPacer(spec.CONTROL_DT)
         self._overruns_at_start = self._overruns()
         # Where each period goes: the write (send_action), the read (_observe) and, between a step's return and the
         # next call, the caller's policy (lerobot-eval: processors + select_action); logged per trial.

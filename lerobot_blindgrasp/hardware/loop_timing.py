@@ -13,7 +13,7 @@ operator prompt), not an overrun: it ends a streak.
 `SampleSpacing` keeps any loop's samples at least 0.9 period apart: the robot holds a read back when the previous
 one ended too recently (after a slow read), so no loop takes two samples a few ms apart for two periods.
 
-`Schedule` paces a loop we own (the real eval env's trial). It sleeps to the next tick; when a step comes late it
+`StepPacer` paces a loop we own (the real eval env's trial). It sleeps to the next tick; when a step comes late it
 re-bases the schedule on now, so after a stall the loop goes on at its period instead of firing the missed ticks
 back to back, and it spaces its reads as `SampleSpacing` does.
 """
@@ -159,7 +159,7 @@ class SampleSpacing:
         self._last_end = ended
 
 
-class Schedule:
+class StepPacer:
     """Paces a loop we own (the eval trial): one step per period, its read spaced from the last by
     `SampleSpacing`. A step that comes late re-bases the schedule on now (never a burst of catch-up steps); a read
     held back by the spacing re-bases it on the held read, so after a slow read the loop is back at its period at

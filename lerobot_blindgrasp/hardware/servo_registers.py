@@ -78,7 +78,7 @@ class ServoReport:
     watchdog_tripped: list[str]  # joints whose bus watchdog stopped them (torque still on, goals refused)
 
 
-def compare(state: dict[str, dict[str, int]], expected: dict[str, int]) -> ServoReport:
+def compare_registers(state: dict[str, dict[str, int]], expected: dict[str, int]) -> ServoReport:
     """What the block read (`read_block(*BLOCK, READ)`) says against what was set."""
     hw = {j: s["Hardware_Error_Status"] for j, s in state.items() if s["Hardware_Error_Status"]}
     changed: dict[str, list[str]] = {}
@@ -187,9 +187,9 @@ class ServoRegisters:
     def check_state(self) -> list[str]:
         """One sync read of the state block: hardware errors, then anything configure set that changed (a reset);
         returns the joints whose watchdog stopped them during a pause of this process."""
-        report = compare(self.bus.read_block(*BLOCK, READ), self.expected)
+        report = compare_registers(self.bus.read_block(*BLOCK, READ), self.expected)
         if report.changed:  # read again before stopping: one corrupt reply with a valid CRC must not stop it
-            report = compare(self.bus.read_block(*BLOCK, READ), self.expected)
+            report = compare_registers(self.bus.read_block(*BLOCK, READ), self.expected)
         self.last_check = time.monotonic()
         bad = {j: v for j, v in report.hardware_error.items() if self._confirm_hardware_error(j)}
         if bad:

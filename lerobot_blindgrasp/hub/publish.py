@@ -95,11 +95,11 @@ class PublishConfig:
         self.demos = Path(self.demos).expanduser() if self.demos is not None else None
 
 
-def collect_demos(cfg: PublishConfig, out: Path, repo_id: str) -> Path:
+def collect_published_demos(cfg: PublishConfig, out: Path, repo_id: str) -> Path:
     """A small curated demo set in `out`, made as the shipped student's demos were (`DEMO_RECIPE`); resumed when a
     previous publish left it unfinished."""
     from lerobot_blindgrasp import presets
-    from lerobot_blindgrasp.demos import collection, provenance
+    from lerobot_blindgrasp.demos import collection_loop, provenance
     from lerobot_blindgrasp.demos.config import CollectConfig
 
     recipe = presets.PRESETS[DEMO_RECIPE]
@@ -108,11 +108,11 @@ def collect_demos(cfg: PublishConfig, out: Path, repo_id: str) -> Path:
         teacher=shipped.path(recipe.teacher.shipped_folder), output_dir=out, repo_id=repo_id,
         episodes_per_object=cfg.demo_episodes, objects=cfg.demo_objects,
         joint_calibration_rad=recipe.demos.joint_calibration_rad,
-        num_envs=min(recipe.demos.num_envs, _ENVS_PER_OBJECT * n_objects), resume=provenance.path(out).is_file(),
+        num_envs=min(recipe.demos.num_envs, _ENVS_PER_OBJECT * n_objects), resume=provenance.provenance_path(out).is_file(),
     )  # fmt: skip
     print(f"demos: {'resuming' if collect.resume else 'collecting'} {cfg.demo_episodes} curated episodes per object ({n_objects} objects) from "
           f"{collect.teacher.name} into {out}", flush=True)  # fmt: skip
-    collection.collect(collect, command=f"blindgrasp-publish (preset {DEMO_RECIPE}'s demo settings)")
+    collection_loop.collect_demos(collect, command=f"blindgrasp-publish (preset {DEMO_RECIPE}'s demo settings)")
     return out
 
 
@@ -133,7 +133,7 @@ def publish(cfg: PublishConfig) -> dict[str, str]:
     ids = repo_ids(cfg.namespace)
     staging = Path(cfg.staging_dir or tempfile.mkdtemp(prefix="blindgrasp_publish_"))
     staged = {name: stage_model(name, rid, staging) for name, (kind, rid) in ids.items() if kind == "model"}
-    demos = cfg.demos or collect_demos(cfg, staging / "demos", ids["demos"][1])
+    demos = cfg.demos or collect_published_demos(cfg, staging / "demos", ids["demos"][1])
     ds, ds_kwargs, plan = push.prepare(demos, ids["demos"][1])
     for name, folder in staged.items():
         print(f"{name}: {folder} -> https://huggingface.co/{ids[name][1]}")

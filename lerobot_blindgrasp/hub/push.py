@@ -21,7 +21,7 @@ from pathlib import Path
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.demos import dataset_card
+from lerobot_blindgrasp.demos import collection_card
 from lerobot_blindgrasp.project import REPO_ID_PATTERN
 
 # Not uploaded by LeRobot's push_to_hub (it ignores images/; state-only datasets have none anyway).
@@ -61,7 +61,7 @@ def prepare(
     if json.loads((root / "meta" / "info.json").read_text()).get("total_episodes", 0) == 0:
         raise PushError(f"{root} has no episodes yet; nothing to upload")
     try:
-        kwargs = card_kwargs(root, repo_id, kind, license, tags, operators, notes)
+        kwargs = push_card_kwargs(root, repo_id, kind, license, tags, operators, notes)
     except (FileNotFoundError, ValueError) as e:
         raise PushError(str(e)) from None
     card = cards.build_card(kwargs, repo_id)
@@ -74,15 +74,15 @@ def prepare(
 
 def detect_kind(root: Path) -> str:
     """'sim' for folders written by blindgrasp-collect-demos, else 'glove' (a lerobot-record dataset)."""
-    return "sim" if dataset_card.is_collection(root) else "glove"
+    return "sim" if collection_card.is_collection(root) else "glove"
 
 
-def card_kwargs(
+def push_card_kwargs(
     root: Path, repo_id: str, kind=None, license=cards.DEFAULT_LICENSE, tags=None, operators=None, notes=""
 ):
     """The card's arguments for either kind of dataset (detected when not given)."""
     if (kind or detect_kind(root)) == "sim":
-        return dataset_card.card_kwargs(root, repo_id, license=license, extra_tags=tags)
+        return collection_card.sim_card_kwargs(root, repo_id, license=license, extra_tags=tags)
     return cards.glove_card_kwargs(root, repo_id, operators, notes, license=license, extra_tags=tags)
 
 

@@ -14,7 +14,7 @@ from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.pipeline.stage import Stage
 
 
-def collect(
+def collect_stage(
     stage: Stage,
     preset: presets.Preset,
     teacher: Path,
@@ -28,13 +28,13 @@ def collect(
     if stage.done(name):
         stage.skip(name, "collected")
         return root
-    from lerobot_blindgrasp.demos.collect import EXIT_EMPTY
+    from lerobot_blindgrasp.demos.collect_cli import EXIT_EMPTY
 
     # An empty curated set is handled by the caller (uncurated fallback). A collection cut short is resumed
-    # (recipe.collect adds --resume=true; the collector repairs a crashed folder first).
+    # (recipe.demos_collect adds --resume=true; the collector repairs a crashed folder first).
     stage.run(
         name,
-        recipe.collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra),
+        recipe.demos_collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra),
         ok=(0, EXIT_EMPTY),
     )
     return root
@@ -56,7 +56,7 @@ def targeted_demos(
     roots, repos = [demos], [repo]
     for k, (name, n) in enumerate(preset.demos.extra_episodes):
         root, extra_repo = out / f"{demos.name}_{name}", f"{repo}_{name}"
-        collect(
+        collect_stage(
             stage,
             preset,
             teacher,

@@ -31,7 +31,7 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.presets import student as student_presets
-from lerobot_blindgrasp.presets.glove import GlovePreset, get
+from lerobot_blindgrasp.presets.glove import GlovePreset, glove_preset
 
 ROBOT_TYPE = "blindgrasp_gripper"  # = demos.dataset.ROBOT_TYPE and the robot's LeRobot name
 
@@ -55,7 +55,7 @@ class GloveTrainConfig:
     dry_run: bool = False
 
     def __post_init__(self):
-        p = get(self.preset)
+        p = glove_preset(self.preset)
         if not self.glove:
             raise ValueError("--glove needs at least one lerobot-record dataset folder, e.g. --glove=[data/glove]")
         if self.output_dir is None:
@@ -71,7 +71,7 @@ class GloveTrainConfig:
             )
 
 
-def schema_problems(root: Path, extra_ok: tuple[str, ...] = ()) -> list[str]:
+def merge_schema_problems(root: Path, extra_ok: tuple[str, ...] = ()) -> list[str]:
     """Why `root` cannot join a merge with the shared schema ([] if it can), from its meta/info.json."""
     info_path = Path(root) / "meta" / "info.json"
     if not info_path.is_file():
@@ -147,15 +147,15 @@ def train_command(
     return [str(exe) if exe.exists() else cmd[0], *cmd[1:]]
 
 
-def run(cfg: GloveTrainConfig) -> Path:
+def train_on_glove(cfg: GloveTrainConfig) -> Path:
     """Merge and train; returns the student's checkpoint folder (`.../pretrained_model`)."""
-    p = get(cfg.preset)
+    p = glove_preset(cfg.preset)
     out = Path(cfg.output_dir)
-    problems = [q for g in cfg.glove for q in schema_problems(g)]
+    problems = [q for g in cfg.glove for q in merge_schema_problems(g)]
     if cfg.sim_demos is not None:
         from lerobot_blindgrasp.demos.dataset import METADATA_FEATURE_NAMES
 
-        problems += schema_problems(cfg.sim_demos, extra_ok=METADATA_FEATURE_NAMES)
+        problems += merge_schema_problems(cfg.sim_demos, extra_ok=METADATA_FEATURE_NAMES)
     if problems:
         raise SystemExit("error: cannot merge:\n  " + "\n  ".join(problems))
     student = out / "student"
@@ -194,7 +194,7 @@ def run(cfg: GloveTrainConfig) -> Path:
 
 
 def main(argv: list[str] | None = None) -> None:
-    print(run(parse_config(GloveTrainConfig, argv)))
+    print(train_on_glove(parse_config(GloveTrainConfig, argv)))
 
 
 if __name__ == "__main__":

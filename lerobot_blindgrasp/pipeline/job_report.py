@@ -54,7 +54,7 @@ def _teacher_lines(record: dict) -> list[str]:
     ]
 
 
-def write_report(out: Path, record: dict, bigger: str) -> Path:
+def write_job_report(out: Path, record: dict, bigger: str) -> Path:
     """report.md with its figures, from what each stage left in the output folder."""
     figs = out / "figures"
     figs.mkdir(exist_ok=True)

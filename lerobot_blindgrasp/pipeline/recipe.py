@@ -72,7 +72,7 @@ def teacher_eval(p: presets.Preset, teacher_dir: Path, dest: Path, eval_seed: in
     ]
 
 
-def collect(
+def demos_collect(
     p: presets.Preset,
     teacher: Path,
     root: Path,
@@ -283,7 +283,7 @@ def table_v(
         repo = f"local/blindgrasp_{p.name}_{row.name}"
         if stage == "demos" and not demos_collected(root):
             cmds.append(
-                collect(
+                demos_collect(
                     p,
                     teacher_dir(row.teacher),
                     root,

@@ -119,9 +119,9 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
         stage.run(
             "student_eval", recipe.student_eval(preset, ckpt, out / "student_eval", eval_seed, device), env=env1
         )
-    from lerobot_blindgrasp.pipeline.job_report import write_report  # matplotlib, only now
+    from lerobot_blindgrasp.pipeline.job_report import write_job_report  # matplotlib, only now
 
-    report = write_report(out, record, BIGGER)
+    report = write_job_report(out, record, BIGGER)
     print(f"[pipeline] report: {report}", flush=True)
     return report
 
@@ -142,7 +142,7 @@ def _demos(
     preset's extra episodes merged in. Returns the dataset and its repo id."""
     record = stage.record
     repo = f"local/blindgrasp_{preset.name}"
-    demos = demo_stages.collect(stage, preset, teacher_dir, out / "demos", repo, demo_seed, curate=True)
+    demos = demo_stages.collect_stage(stage, preset, teacher_dir, out / "demos", repo, demo_seed, curate=True)
     train_set = demos
     record["student_dataset"] = "curated"
     if (k := demo_stages.kept(demos)) < preset.demos.min_curated_episodes:
@@ -153,7 +153,7 @@ def _demos(
         )
         repo = f"local/blindgrasp_{preset.name}_uncurated"
         uncurated_seed = demo_seed + DEMO_SEED_BLOCK // 2
-        train_set = demo_stages.collect(
+        train_set = demo_stages.collect_stage(
             stage, preset, teacher_dir, out / "demos_uncurated", repo, uncurated_seed, curate=False
         )
         record["student_dataset"] = "uncurated (too few curated episodes)"

@@ -7,7 +7,7 @@
     TABLE_V["wo_r_i"]                             # the ablation rows (Table V)
     REGISTRY["teacher"]["cpu"], get("cpu", kind="teacher")
 
-Where each lives: the types beside the data that uses them (`stages.py` and `student.py` for the pipeline,
+Where each lives: the types beside the data that uses them (`stage_configs.py` and `student.py` for the pipeline,
 `teacher_configs.py` for the teacher, `glove.py`), the data in `pipeline.py`, `teacher.py`, `ablations.py` and
 `glove.py`. The robustness sweep's presets live with the sweep, in the lab (`lab/robustness/factors.py`). The student sizes are the policy's own table (the policy, a LeRobot
 plugin, never imports this registry); the registry names it. Nothing else restates a number, and a preset holds
@@ -31,7 +31,7 @@ from lerobot_blindgrasp.presets.pipeline import (
     SHIPPED_TEACHER_ITERATIONS,
     SHIPPED_TEACHER_PRESET,
 )
-from lerobot_blindgrasp.presets.stages import DemoStage, EvalStage, Preset, TeacherStage, derive
+from lerobot_blindgrasp.presets.stage_configs import DemoStage, EvalStage, Preset, TeacherStage, derive
 from lerobot_blindgrasp.presets.student import DaggerStage, Schedule, StudentStage, dataset_frames, schedule
 from lerobot_blindgrasp.presets.teacher import TEACHER_PRESETS
 from lerobot_blindgrasp.presets.teacher_configs import ActorInput, ScriptedDemos, TeacherPreset, Variant

@@ -84,7 +84,7 @@ GLOVE_PRESETS: dict[str, GlovePreset] = {
 }
 
 
-def get(name: str) -> GlovePreset:
+def glove_preset(name: str) -> GlovePreset:
     if name not in GLOVE_PRESETS:
         raise ValueError(f"unknown glove preset {name!r}; choose one of {sorted(GLOVE_PRESETS)}")
     return GLOVE_PRESETS[name]

@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from lerobot_blindgrasp.presets import ablations, teacher
-from lerobot_blindgrasp.presets.stages import DemoStage, EvalStage, Preset, TeacherStage, derive
+from lerobot_blindgrasp.presets.stage_configs import DemoStage, EvalStage, Preset, TeacherStage, derive
 from lerobot_blindgrasp.presets.student import DaggerStage, StudentStage
 
 # The shipped default teacher (models/teacher_cpu_bc) is iterations 0..2099 of `blindgrasp-train-teacher

@@ -53,7 +53,9 @@ def load_successes(path: str | Path, mode: str | None = None) -> dict[str, list[
     return {o: [bool(x) for x in r["successes"]] for o, r in modes[mode]["per_object"].items()}
 
 
-def compare(a: dict[str, list[bool]], b: dict[str, list[bool]], label_a: str = "A", label_b: str = "B") -> str:
+def compare_rates(
+    a: dict[str, list[bool]], b: dict[str, list[bool]], label_a: str = "A", label_b: str = "B"
+) -> str:
     """Markdown: per object, both rates and the discordant pairs; then all objects pooled, with the McNemar p."""
     names = [o for o in objects.CATALOGUE if o in a and o in b]  # Table I order, then the everyday set
     if not names:
@@ -92,7 +94,7 @@ class CompareConfig:
 
 def main(argv: list[str] | None = None) -> None:
     cfg = parse_config(CompareConfig, argv)
-    print(compare(load_successes(cfg.a), load_successes(cfg.b), cfg.a_label, cfg.b_label))
+    print(compare_rates(load_successes(cfg.a), load_successes(cfg.b), cfg.a_label, cfg.b_label))
 
 
 if __name__ == "__main__":

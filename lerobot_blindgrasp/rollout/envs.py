@@ -1,9 +1,9 @@
 """The one env factory: a purpose, the objects and the seeds in; the batched env with the randomization and the seed
 range that purpose has (`spec.SEED_RANGES`) out.
 
-    make_env("eval", ("capsule_small",), episodes=20, seed=1000)     # lerobot-eval's start states, k = seed + i
-    make_env("demos", objects, num_envs=180, seed=spec.DEMO_SEED)   # auto-resetting teacher rollouts
-    make_env("train", objects, num_envs=1026, seed=1, dr=...)        # PPO
+    make_batched_env("eval", ("capsule_small",), episodes=20, seed=1000)  # lerobot-eval's start states (seed + i)
+    make_batched_env("demos", objects, num_envs=180, seed=spec.DEMO_SEED)  # auto-resetting teacher rollouts
+    make_batched_env("train", objects, num_envs=1026, seed=1, dr=...)  # PPO
 
 | purpose | seeds | randomization | episodes |
 |---|---|---|---|
@@ -91,6 +91,6 @@ def env_config(
     )
 
 
-def make_env(purpose: str, object_names: tuple[str, ...], **kwargs) -> BatchedGraspEnv:
+def make_batched_env(purpose: str, object_names: tuple[str, ...], **kwargs) -> BatchedGraspEnv:
     """`BatchedGraspEnv(env_config(purpose, object_names, **kwargs))`."""
     return BatchedGraspEnv(env_config(purpose, object_names, **kwargs))

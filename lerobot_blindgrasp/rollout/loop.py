@@ -1,7 +1,7 @@
 """The one episode loop, and its one outcome record (`Episode`).
 
-    for ep in run_batch(make_env("eval", names, episodes=20, seed=1000), actor): ...     # one episode per env
-    for ep in stream(make_env("demos", names, num_envs=180, seed=s), actor, stop): ...  # auto-reset, until stop()
+    for ep in run_batch(make_batched_env("eval", names, episodes=20, seed=1000), actor): ...  # one episode per env
+    for ep in stream(make_batched_env("demos", names, num_envs=180, seed=s), actor, stop): ...  # until stop()
 
 An actor maps the env's observation dict to the step it sends (`actors.py`: the teacher's delta-theta, or the
 student's absolute targets turned into deltas by the env). Each step the loop can record per-env quantities

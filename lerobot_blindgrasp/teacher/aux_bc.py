@@ -28,7 +28,7 @@ from rsl_rl.algorithms import PPO
 from tensordict import TensorDict
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.teacher.scripted_demos import ScriptedDemos, collect
+from lerobot_blindgrasp.teacher.scripted_demos import ScriptedDemos, collect_scripted_demos
 
 log = logging.getLogger("blindgrasp.teacher")
 
@@ -40,7 +40,7 @@ class PPOWithScriptedDemos(PPO):
     def __init__(self, actor, critic, storage, *, scripted_demos: dict, **kwargs):
         super().__init__(actor, critic, storage, **kwargs)
         self.demo_cfg = ScriptedDemos(**{**scripted_demos, "objects": tuple(scripted_demos["objects"])})
-        data = collect(self.demo_cfg)
+        data = collect_scripted_demos(self.demo_cfg)
         if len(data["actions"]) == 0:
             raise ValueError(f"the side-grasp script lifted none of {self.demo_cfg.objects}: no demonstrations")
         log.info("scripted demos: %d pairs; script success %s", len(data["actions"]), data["success"])

@@ -54,7 +54,7 @@ def newest_loadable_checkpoint(run_dir: Path) -> Path | None:
     return None
 
 
-def export(runner, path: Path) -> None:
+def export_actor(runner, path: Path) -> None:
     """TorchScript and ONNX of the actor's mean (the deterministic teacher), via rsl-rl's exporters."""
     # rsl-rl's exporters write in place; they write temp files here that are renamed once complete.
     with durable.atomic_path(path / "teacher.pt") as tmp:

@@ -21,7 +21,7 @@ def world() -> tuple[int, int, int]:
     return int(os.getenv("WORLD_SIZE", "1")), int(os.getenv("RANK", "0")), int(os.getenv("LOCAL_RANK", "0"))
 
 
-def default_device() -> str:
+def default_torch_device() -> str:
     """One process per GPU: cuda:<LOCAL_RANK> when CUDA is there, else the CPU."""
     return f"cuda:{world()[2]}" if torch.cuda.is_available() else "cpu"
 

@@ -26,7 +26,7 @@ from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.rollout.actors import TeacherActor
-from lerobot_blindgrasp.rollout.envs import make_env
+from lerobot_blindgrasp.rollout.envs import make_batched_env
 from lerobot_blindgrasp.rollout.loop import run_batch
 from lerobot_blindgrasp.sim import objects, rewards
 from lerobot_blindgrasp.sim.gym_env import start_seed
@@ -63,12 +63,12 @@ class EvalTeacherConfig:
 
 def _run_object(teacher: TeacherPolicy, name: str, episodes: int, seed: int, mode: str, reward_cfg) -> tuple:
     """One object's episodes in one batch, on evaluation indices seed .. seed + episodes - 1, as the gym env."""
-    env = make_env("eval", (name,), episodes=episodes, seed=seed, reward=reward_cfg)
+    env = make_batched_env("eval", (name,), episodes=episodes, seed=seed, reward=reward_cfg)
     done = run_batch(env, TeacherActor(teacher, stochastic=mode == "stochastic"))
     return np.array([e.success for e in done]), np.array([e.max_lift for e in done])
 
 
-def evaluate(cfg: EvalTeacherConfig) -> tuple[dict, Path]:
+def evaluate_and_write(cfg: EvalTeacherConfig) -> tuple[dict, Path]:
     """Load the teacher, evaluate it, write eval.json/md/png. Returns (results, output folder).
     Raises TeacherError for a teacher that does not load."""
     teacher = TeacherPolicy(cfg.teacher or default_teacher())
@@ -167,45 +167,25 @@ def markdown_table(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def bar_chart(results: dict, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = results["objects"]
-    x = np.arange(len(names))
-    modes = list(results["modes"])
-    width = 0.8 / len(modes)
-    fig, ax = plt.subplots(figsize=(max(6, 0.55 * len(names) + 2), 4))
-    for i, m in enumerate(modes):
-        vals = [results["modes"][m]["per_object"][o]["success_rate"] * 100 for o in names]
-        ax.bar(x + (i - (len(modes) - 1) / 2) * width, vals, width, label=m)
-    ax.set_xticks(x, [n.replace("_", " ") for n in names], rotation=60, ha="right", fontsize=8)
-    ax.set_ylabel("success (%)")
-    ax.set_ylim(0, 100)
-    ax.set_title(
-        f"Teacher success, {results['episodes_per_object']} episodes per object (iteration {results['iteration']})"
-    )
-    ax.legend()
-    fig.tight_layout()
-    with durable.atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-
-
 def write_outputs(results: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     # eval.json last: it is what marks the evaluation as done (the pipeline skips a stage that has it).
     durable.atomic_write_text(out / "eval.md", markdown_table(results))
-    bar_chart(results, out / "eval.png")
+    from lerobot_blindgrasp.results.plots import bar_chart  # matplotlib only when a chart is drawn
+
+    names, modes = results["objects"], results["modes"]
+    series = {m: [modes[m]["per_object"][o]["success_rate"] * 100 for o in names] for m in modes}
+    title = (
+        f"Teacher success, {results['episodes_per_object']} episodes per object (iteration {results['iteration']})"
+    )
+    bar_chart(out / "eval.png", names, series, title, "success (%)")
     durable.atomic_write_json(out / "eval.json", results, indent=2)
 
 
 def main(argv=None) -> None:
     cfg = parse_config(EvalTeacherConfig, argv)
     try:
-        results, out = evaluate(cfg)
+        results, out = evaluate_and_write(cfg)
     except (TeacherError, ValueError) as e:
         raise SystemExit(f"error: {e}") from None
     print(markdown_table(results))

@@ -43,7 +43,7 @@ class ExportTeacherConfig:
             raise ValueError("--output_dir is required (the teacher folder to write)")
 
 
-def export(cfg: ExportTeacherConfig) -> Path:
+def export_and_push(cfg: ExportTeacherConfig) -> Path:
     """Export, then push if asked (printing what it wrote). Returns the teacher folder."""
     out = export_teacher(cfg.source, cfg.output_dir, cfg.overwrite_card)
     print(f"wrote {out / policy.WEIGHTS_NAME}, {out / policy.CONFIG_NAME}, {out / CARD_NAME}")
@@ -137,7 +137,7 @@ def push_teacher(folder: str | Path, repo_id: str, private: bool | None = None) 
 def main(argv=None) -> None:
     cfg = parse_config(ExportTeacherConfig, argv)
     try:
-        export(cfg)
+        export_and_push(cfg)
     except policy.TeacherError as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None

@@ -12,19 +12,19 @@ from lerobot_blindgrasp.presets.teacher_configs import ScriptedDemos
 from lerobot_blindgrasp.sim import objects, randomization
 
 
-def collect(cfg: ScriptedDemos) -> dict:
+def collect_scripted_demos(cfg: ScriptedDemos) -> dict:
     """Roll the side-grasp script out once per env from training start states; keep the successful episodes.
 
     Returns {"obs": {"privileged": (M, 92), "policy": (M, 12)}, "actions": (M, 9), "success": {object: rate}},
     float32. Both observation groups are kept so that an actor reading either (the teacher's privileged one, or the
     "RL w/ o_t" row's student one) can be cloned."""
     # MuJoCo only when demos are collected, not when a preset names them
-    from lerobot_blindgrasp.rollout.envs import make_env
+    from lerobot_blindgrasp.rollout.envs import make_batched_env
     from lerobot_blindgrasp.sim import scripted
 
     n = cfg.episodes_per_object * len(cfg.objects)
     dr = randomization.PAPER_DR if cfg.pushes else randomization.EVAL_DR  # as train.build_env_config chooses
-    env = make_env("scripts", cfg.objects, num_envs=n, seed=cfg.seed, dr=dr, nthread=1)
+    env = make_batched_env("scripts", cfg.objects, num_envs=n, seed=cfg.seed, dr=dr, nthread=1)
     obs = env.reset()
     script = scripted.SideGraspScript(
         env.joint_positions(), env.object_position(), [objects.get_object(name) for name in env.object_names]
@@ -71,7 +71,7 @@ def main(argv=None) -> None:
         steps_per_episode=1,
         pushes=cfg.pushes,
     )
-    rates = collect(demos)["success"]
+    rates = collect_scripted_demos(demos)["success"]
     print(
         f"side-grasp script, {cfg.episodes_per_object} episodes per object from seed {demos.seed}, "
         f"pushes={cfg.pushes}\n\n| object | success |\n|---|---:|"

@@ -38,7 +38,7 @@ from lerobot_blindgrasp.sim import objects, randomization
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 from lerobot_blindgrasp.teacher import blind_approach, distributed
-from lerobot_blindgrasp.teacher.checkpoints import atomic_save, export, newest_loadable_checkpoint
+from lerobot_blindgrasp.teacher.checkpoints import atomic_save, export_actor, newest_loadable_checkpoint
 from lerobot_blindgrasp.teacher.policy import CONFIG_NAME, latest_checkpoint, observation_layout
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
@@ -120,7 +120,7 @@ def _train_one(cfg: TrainTeacherConfig, preset: TeacherPreset, num_envs: int, it
     spec.check_seeds("teacher_train", cfg.seed, num_envs)
     out = cfg.output_dir
     out.mkdir(parents=True, exist_ok=True)
-    device = cfg.device or distributed.default_device()
+    device = cfg.device or distributed.default_torch_device()
     rank_envs, rank_seed = distributed.split_envs(num_envs, cfg.seed)  # (num_envs, seed) outside torchrun
     lead = distributed.world()[1] == 0  # only rank 0 writes files (rsl-rl already logs and saves on rank 0 only)
     torch.manual_seed(cfg.seed + distributed.world()[1])
@@ -141,7 +141,7 @@ def _train_one(cfg: TrainTeacherConfig, preset: TeacherPreset, num_envs: int, it
     if not lead:
         return final
     if cfg.export:
-        export(runner, out / "exported")
+        export_actor(runner, out / "exported")
     write_learning_curve(out)
     steps = (completed - done_its) * preset.runner["num_steps_per_env"] * num_envs
     summary = {

@@ -76,7 +76,7 @@ class TwinConfig:
     load_cell: LoadCellConfig = field(default_factory=LoadCellConfig)
 
 
-def serve(cfg: TwinConfig, stop: threading.Event) -> dict:
+def serve_twin(cfg: TwinConfig, stop: threading.Event) -> dict:
     """Run the twin until `stop` is set; returns its final status."""
     from lerobot_blindgrasp.twin.runner import Twin  # MuJoCo: only in the twin's process
 
@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> None:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         compat.set_signal_handler(sig, lambda *_: stop.set())
-    serve(cfg, stop)
+    serve_twin(cfg, stop)
 
 
 if __name__ == "__main__":

@@ -48,7 +48,7 @@ class ServoCommand:
 
 
 @dataclass
-class Verdict:
+class TrialVerdict:
     trial: int
     success: bool
     reason: str
@@ -71,7 +71,7 @@ class TwinPhysics:
         self.substeps = 0
         self.trial = 0  # placement counter; verdicts carry it
         self.judging = False
-        self.on_verdict = None  # called with a Verdict (from the physics thread, outside the lock)
+        self.on_verdict = None  # called with a TrialVerdict (from the physics thread, outside the lock)
         self.unstable_resets = 0
         self._load(park_object, None, np.zeros(spec.NUM_JOINTS), np.zeros(spec.NUM_JOINTS))
 
@@ -195,18 +195,18 @@ class TwinPhysics:
         self.data.qpos[:] = qpos
         mujoco.mj_forward(self.model, self.data)
 
-    def _judge(self) -> Verdict | None:
+    def _judge(self) -> TrialVerdict | None:
         lift = np.array([self.data.qpos[observations.OBJECT_POS][2] - self.rest_height])
         self.peak_lift = max(self.peak_lift, float(lift[0]))
         self._held = termination.held_steps(self._held, lift)
         if termination.is_success(self._held)[0]:
             self.judging = False
             rule = f"lifted >= {spec.SUCCESS_LIFT_M * 100:.1f} cm for {spec.SUCCESS_HOLD_S} s"
-            return Verdict(self.trial, True, rule)
+            return TrialVerdict(self.trial, True, rule)
         d_xy = np.linalg.norm(self.data.qpos[observations.OBJECT_POS][:2])
         if termination.out_of_workspace(np.array([d_xy]))[0]:
             self.judging = False
-            return Verdict(self.trial, False, "object left the workspace")
+            return TrialVerdict(self.trial, False, "object left the workspace")
         return None
 
     def verdict_now(self) -> bool:

@@ -18,7 +18,7 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.cli import GracefulStop, parse_config
-from lerobot_blindgrasp.demos import collect, collection, curation, provenance, yield_report
+from lerobot_blindgrasp.demos import collect_cli, collection_loop, curation, provenance, yield_report
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos.config import CollectConfig
 from lerobot_blindgrasp.hub import push
@@ -61,7 +61,7 @@ def config(teacher: Path, out: Path, **kw) -> CollectConfig:
 def tiny(teacher, tmp_path_factory):
     """One whole episode per object from the deterministic teacher (so a reference rollout can replay it)."""
     out = tmp_path_factory.mktemp("tiny") / "demos"
-    stats = collection.collect(config(teacher, out, stochastic=False))
+    stats = collection_loop.collect_demos(config(teacher, out, stochastic=False))
     return out, stats
 
 
@@ -104,7 +104,7 @@ def test_tiny_collection_loads_back(tiny):
     assert set(rep["objects"]) == set(objects.PAPER_OBJECTS)
     assert all(row["kept"] == 1 for row in rep["objects"].values())
     assert rep["total"]["kept"] == n_obj and rep["demos_per_minute"] > 0
-    prov = provenance.load(out)
+    prov = provenance.load_provenance(out)
     assert prov["runs"][0]["stop_reason"] == "done" and prov["teacher_sha256"] == prov["teacher"]["sha256"]
     card = (out / cards.CARD_NAME).read_text()
     cards.validate(card)
@@ -127,7 +127,7 @@ def test_demos_under_a_calibration_offset_record_it_and_act_in_the_measured_fram
     from lerobot_blindgrasp.sim import randomization
 
     out = tmp_path / "demos"
-    collection.collect(config(teacher, out, stochastic=False, joint_calibration_rad=0.05))
+    collection_loop.collect_demos(config(teacher, out, stochastic=False, joint_calibration_rad=0.05))
     assert json.loads((out / "collection.json").read_text())["randomization"]["joint_calibration_rad"] == 0.05
     assert "joint_calibration_rad" in (out / "README.md").read_text()
     _assert_replays(teacher, out, replace(randomization.EVAL_DR, joint_calibration_rad=0.05))
@@ -197,12 +197,12 @@ def test_bad_inputs_are_refused_and_touch_nothing(teacher, tiny, tmp_path, capsy
     ]
     for argv, message in cases:
         with pytest.raises(SystemExit) as exc:
-            collect.main([*argv, "--repo_id=test/demos", "--progress=false"])
+            collect_cli.main([*argv, "--repo_id=test/demos", "--progress=false"])
         assert exc.value.code == 2
         assert message in capsys.readouterr().err
         assert not fresh.exists()
     with pytest.raises(SystemExit):
-        collect.main([f"--teacher={teacher}", f"--output_dir={fresh}", "--repo_id=no-slash"])
+        collect_cli.main([f"--teacher={teacher}", f"--output_dir={fresh}", "--repo_id=no-slash"])
     assert "USER/NAME" in capsys.readouterr().err and not fresh.exists()
     assert snapshot(out) == before
 
@@ -216,11 +216,11 @@ def test_exception_mid_collection_leaves_finished_episodes_readable(teacher, tmp
             raise RuntimeError("injected failure")
 
     with pytest.raises(RuntimeError, match="injected failure"):
-        collection.collect(config(teacher, out, episodes_per_object=5), on_episode=explode)
+        collection_loop.collect_demos(config(teacher, out, episodes_per_object=5), on_episode=explode)
     ds = LeRobotDataset("test/demos", root=out, video_backend="pyav")
     assert ds.num_episodes == 3 and len(ds) == ds.meta.total_frames
     ds[len(ds) - 1]  # the last frame of the last episode reads back
-    run = provenance.load(out)["runs"][-1]
+    run = provenance.load_provenance(out)["runs"][-1]
     assert run["stop_reason"].startswith("error: RuntimeError") and run["kept"] == 3
     assert json.loads((out / yield_report.REPORT_NAME).read_text())["total"]["kept"] == 3
 
@@ -235,10 +235,10 @@ def test_second_ctrl_c_aborts_at_once_but_never_inside_a_save(teacher, tmp_path)
 
     before = signal.getsignal(signal.SIGINT)  # default_int_handler; SIG_IGN under a shell's background `&`
     with pytest.raises(KeyboardInterrupt):
-        collection.collect(config(teacher, out, episodes_per_object=5), on_episode=double_ctrl_c)
+        collection_loop.collect_demos(config(teacher, out, episodes_per_object=5), on_episode=double_ctrl_c)
     assert signal.getsignal(signal.SIGINT) is before  # handlers restored
     ds = LeRobotDataset("test/demos", root=out, video_backend="pyav")
-    assert ds.num_episodes == 2 and provenance.load(out)["runs"][-1]["stop_reason"] == "interrupted"
+    assert ds.num_episodes == 2 and provenance.load_provenance(out)["runs"][-1]["stop_reason"] == "interrupted"
 
     # A second Ctrl-C that lands while an episode is being saved waits for the save to complete.
     with GracefulStop() as stop, pytest.raises(KeyboardInterrupt):
@@ -264,7 +264,7 @@ def test_the_writer_thread_writes_the_dataset_the_loop_writes(tmp_path):
         out = tmp_path / f"queue{queue}"
         cfg = config(None, out, curation=curation.PAPER_CURATION, objects="cylinder_a_medium,cuboid_a_medium",
                      num_envs=2, episodes_per_object=3, max_rollouts_per_object=6, writer_queue=queue)  # fmt: skip
-        runs[queue] = (out, collection.collect(cfg))
+        runs[queue] = (out, collection_loop.collect_demos(cfg))
     (in_loop, s0), (threaded, s2) = runs[0], runs[2]
     assert s0.kept == s2.kept >= 4 and s0.rollouts == s2.rollouts and s0.stop_reason == s2.stop_reason == "done"
     assert s2.checkpoints == s0.checkpoints >= 1 and s2.env_builds == s0.env_builds
@@ -298,12 +298,12 @@ def test_a_write_error_on_the_writer_thread_ends_the_run_in_the_loop(teacher, tm
 
     monkeypatch.setattr(demo_dataset, "write_episode", third_fails)
     with pytest.raises(OSError) as e:
-        collection.collect(config(teacher, tmp_path / "err", episodes_per_object=5), on_episode=count)
+        collection_loop.collect_demos(config(teacher, tmp_path / "err", episodes_per_object=5), on_episode=count)
     assert e.value.filename == "episode data"
     assert len(where) == 3 and threading.main_thread() not in where  # written off the loop; none after the error
     _, ds = _frames(tmp_path / "err")
     assert ds.num_episodes == 2 and len(ds) == ds.meta.total_frames
-    run = provenance.load(tmp_path / "err")["runs"][-1]
+    run = provenance.load_provenance(tmp_path / "err")["runs"][-1]
     assert run["stop_reason"].startswith("error: OSError") and run["interrupted"]
 
 
@@ -325,10 +325,10 @@ def test_an_abort_writes_the_queued_episodes_before_finalizing(teacher, tmp_path
 
     monkeypatch.setattr(demo_dataset, "write_episode", held)
     with pytest.raises(KeyboardInterrupt):
-        collection.collect(config(teacher, tmp_path / "abort", episodes_per_object=5), on_episode=abort)
+        collection_loop.collect_demos(config(teacher, tmp_path / "abort", episodes_per_object=5), on_episode=abort)
     _, ds = _frames(tmp_path / "abort")
     assert on_disk == [0] and ds.num_episodes == 6 and len(ds) == ds.meta.total_frames
-    run = provenance.load(tmp_path / "abort")["runs"][-1]
+    run = provenance.load_provenance(tmp_path / "abort")["runs"][-1]
     assert run["stop_reason"] == "interrupted" and run["kept"] == 6
 
 
@@ -339,7 +339,7 @@ def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     cmd = [
         sys.executable,
         "-m",
-        "lerobot_blindgrasp.demos.collect",
+        "lerobot_blindgrasp.demos.collect_cli",
         "--teacher",
         str(teacher),
         "--output_dir",
@@ -370,14 +370,14 @@ def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     assert "finalizing" in err and "--resume" in err
 
     ds = LeRobotDataset("test/sig", root=out, video_backend="pyav")
-    prov = provenance.load(out)
+    prov = provenance.load_provenance(out)
     assert prov["runs"][0]["interrupted"] and ds.num_episodes == prov["runs"][0]["kept"] >= 1
     ds[len(ds) - 1]
     first_episode = ds.hf_dataset.with_format("numpy")[: ds.meta.episodes[0]["length"]][spec.ACTION_KEY]
     old_seeds = set(demo_dataset.episode_table(out).env_seed)
 
     # --resume appends until every object has 2 episodes, with env seeds no earlier run used.
-    stats = collection.collect(
+    stats = collection_loop.collect_demos(
         config(teacher, out, repo_id="test/sig", episodes_per_object=2, seed=spec.DEMO_SEED + 11, resume=True)
     )
     assert stats.stop_reason == "done" and stats.kept >= 1
@@ -390,7 +390,7 @@ def test_sigint_finalizes_and_resume_appends(teacher, tmp_path):
     np.testing.assert_array_equal(
         ds2.hf_dataset.with_format("numpy")[: len(first_episode)][spec.ACTION_KEY], first_episode
     )
-    runs = provenance.load(out)["runs"]
+    runs = provenance.load_provenance(out)["runs"]
     assert len(runs) == 2 and runs[1]["seed_start"] > runs[0]["seed_start"]
 
 
@@ -416,7 +416,7 @@ def test_push_prepares_everything_then_stops_at_the_network(tiny, monkeypatch, c
     assert {"LeRobot", "unit-test", "simulation"} <= set(meta["tags"])
     assert meta["task_categories"] == ["robotics"] and meta["license"] == "apache-2.0"
     assert "test/pushed" in text and "Yield per object" in text and "@article{lee2025blindgrasping" in text
-    assert provenance.load(out)["teacher_sha256"] in text
+    assert provenance.load_provenance(out)["teacher_sha256"] in text
     assert "18 episodes" in captured.out and "files" in captured.out
 
     with pytest.raises(SystemExit) as exc:
@@ -448,7 +448,7 @@ def test_an_empty_curated_collection_is_a_one_line_error(teacher, tmp_path, caps
     that LeRobot later fails to load with an unrelated Hub error."""
     out = tmp_path / "empty"
     with pytest.raises(SystemExit) as exc:
-        collect.main(
+        collect_cli.main(
             [
                 f"--teacher={teacher}",
                 f"--output_dir={out}",
@@ -459,7 +459,7 @@ def test_an_empty_curated_collection_is_a_one_line_error(teacher, tmp_path, caps
                 "--progress=false",
             ]
         )
-    assert exc.value.code == collect.EXIT_EMPTY
+    assert exc.value.code == collect_cli.EXIT_EMPTY
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
     assert len(err) == 1 and "is empty" in err[0] and "--curation.enabled=false" in err[0]
     assert (

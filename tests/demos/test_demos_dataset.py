@@ -61,7 +61,7 @@ def written(tmp_path_factory):
     episodes, cuts = [], []
     for i in range(6):
         ep = synthetic_episode(i, hold_start=20 + 5 * i)
-        cut = curation.evaluate(ep.task_reward, ep.uniaxial_force, TRIMMED)
+        cut = curation.judge_episode(ep.task_reward, ep.uniaxial_force, TRIMMED)
         assert cut.keep
         demo_dataset.write_episode(ds, ep, cut)
         episodes.append(ep)
@@ -103,7 +103,9 @@ def test_fast_writer_path_writes_the_same_files_as_lerobots_default(tmp_path):
         ds = demo_dataset.create(root, "test/fast")
         for i in range(3):
             ep = synthetic_episode(i, hold_start=20)
-            demo_dataset.write_episode(ds, ep, curation.evaluate(ep.task_reward, ep.uniaxial_force), fast=fast)
+            demo_dataset.write_episode(
+                ds, ep, curation.judge_episode(ep.task_reward, ep.uniaxial_force), fast=fast
+            )
         ds.finalize()
     assert dataset_writer.embed_images is original  # the skip is scoped to the write
     files = sorted(p.relative_to(roots[True]) for p in roots[True].rglob("*.parquet"))
@@ -124,7 +126,7 @@ def test_the_episode_writer_waits_when_its_queue_is_full_and_keeps_the_order(tmp
     instead of growing the queue. Then every episode is saved in the order submitted."""
     ds = demo_dataset.create(tmp_path / "w", "test/w")
     episodes = [synthetic_episode(i, hold_start=20) for i in range(5)]
-    cut = curation.evaluate(episodes[0].task_reward, episodes[0].uniaxial_force, curation.NO_CURATION)
+    cut = curation.judge_episode(episodes[0].task_reward, episodes[0].uniaxial_force, curation.NO_CURATION)
     save = [functools.partial(demo_dataset.write_episode, ds, ep, cut) for ep in episodes]
     gate, writer = threading.Event(), EpisodeWriter(queue=2)
     writer.submit(gate.wait)  # holds the writer thread
@@ -207,7 +209,9 @@ def test_sim_demos_merge_with_glove_schema_after_dropping_metadata(written, tmp_
     assert set(merged.meta.features) == set(glove.meta.features)
     # ...and the glove card renders from a lerobot-record style dataset.
     text = str(
-        cards.build_card(push.card_kwargs(tmp_path / "glove", "test/glove", operators=["alice"]), "test/glove")
+        cards.build_card(
+            push.push_card_kwargs(tmp_path / "glove", "test/glove", operators=["alice"]), "test/glove"
+        )
     )
     meta = cards.validate(text)
     assert "teleoperation" in meta["tags"] and "LeRobot" in meta["tags"]

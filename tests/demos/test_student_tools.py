@@ -16,7 +16,7 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lab.diagnosis import student_diagnosis as diag
 from lab.diagnosis import student_fit
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.demos import collection, curation, dagger
+from lerobot_blindgrasp.demos import collection_loop, curation, dagger
 from lerobot_blindgrasp.demos.config import CollectConfig
 from lerobot_blindgrasp.sim import objects
 
@@ -30,7 +30,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 def demos(tmp_path_factory) -> Path:
     """Two whole uncurated episodes per object from the shipped teacher."""
     out = tmp_path_factory.mktemp("demos") / "demos"
-    collection.collect(
+    collection_loop.collect_demos(
         CollectConfig(
             output_dir=out,
             repo_id="test/demos",
@@ -102,13 +102,13 @@ def test_dagger_labels_are_the_targets_the_env_commands_for_the_teachers_action(
     from dataclasses import replace
 
     from lerobot_blindgrasp.rollout.actors import TeacherActor
-    from lerobot_blindgrasp.rollout.envs import make_env
+    from lerobot_blindgrasp.rollout.envs import make_batched_env
     from lerobot_blindgrasp.sim.randomization import EVAL_DR
     from lerobot_blindgrasp.teacher.policy import TeacherPolicy, default_teacher
 
     teacher = TeacherActor(TeacherPolicy(default_teacher()))
     dr = replace(EVAL_DR, joint_calibration_rad=calibration_rad)
-    env = make_env("dagger", ("sphere_small",), num_envs=2, seed=spec.DEMO_SEED + 5, dr=dr)
+    env = make_batched_env("dagger", ("sphere_small",), num_envs=2, seed=spec.DEMO_SEED + 5, dr=dr)
     obs = env.reset()
     for _ in range(15):
         a = teacher(obs) * 3.0  # beyond the 0.3 rad bound somewhere, so both clips matter

@@ -16,7 +16,7 @@ from lerobot_blindgrasp.emulators.force_board_simavr import SimulatedForceBoard
 from lerobot_blindgrasp.hardware.force_board import build
 from lerobot_blindgrasp.hardware.force_board import force_calibration as fc
 from lerobot_blindgrasp.hardware.force_board.config_force_board import ForceSensorConfig
-from lerobot_blindgrasp.hardware.force_board.force_calibration_cli import CalibrateForceConfig, calibrate
+from lerobot_blindgrasp.hardware.force_board.force_calibration_cli import CalibrateForceConfig, calibrate_force
 from lerobot_blindgrasp.hardware.force_board.reader import (
     SETTLE_FRAMES,
     ForceSensorReader,
@@ -206,13 +206,13 @@ def test_force_calibration_on_the_simulated_board(build_dir, tmp_path, monkeypat
         id="lab", calibration_dir=tmp_path, force_sensor=ForceSensorConfig(port=board.port)
     )
     try:
-        cal = calibrate(CalibrateForceConfig(robot=robot, mass_kg=0.5, settle_s=0.2, window_s=0.4))
+        cal = calibrate_force(CalibrateForceConfig(robot=robot, mass_kg=0.5, settle_s=0.2, window_s=0.4))
     finally:
         board.stop()
     assert len(prompts) == 5 and "ff_tip" in prompts[1] and "th_tip" in prompts[3]
     np.testing.assert_allclose(cal.scales(), SCALE, rtol=3e-3)
     np.testing.assert_allclose(cal.offsets(), OFFSET, atol=60)
-    assert fc.load(tmp_path / "lab.force.json").scales() == cal.scales()
+    assert fc.load_force_calibration(tmp_path / "lab.force.json").scales() == cal.scales()
 
 
 # What the harness reports for a build that breaks each HX711 timing (T2 cannot be seen on the pins: its cost is

@@ -15,7 +15,7 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.hardware.force_board import force_calibration as fc
 from lerobot_blindgrasp.hardware.force_board.config_force_board import ForceSensorConfig
-from lerobot_blindgrasp.hardware.force_board.force_calibration_cli import CalibrateForceConfig, calibrate
+from lerobot_blindgrasp.hardware.force_board.force_calibration_cli import CalibrateForceConfig, calibrate_force
 from lerobot_blindgrasp.hardware.force_board.reader import ForceSensorReader
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 from lerobot_blindgrasp.robots.blindgrasp_gripper.config_blindgrasp_gripper import BlindgraspGripperConfig
@@ -42,7 +42,7 @@ def test_the_command_calibrates_each_fingertip_and_the_robot_uses_it(tmp_path, m
         assert f"Saved {cal_dir / 'rig.force.json'}" in op.text
         saved = json.loads((cal_dir / "rig.force.json").read_text())
         assert saved["format"] == fc.FORMAT and saved["channel_map"] == [0, 1, 2] and saved["mass_kg"] == 0.5
-        cal = fc.load(cal_dir / "rig.force.json")
+        cal = fc.load_force_calibration(cal_dir / "rig.force.json")
         np.testing.assert_allclose(cal.scales(), TRUE_SCALE, rtol=5e-3)
         np.testing.assert_allclose(cal.offsets(), rig.force.offset, atol=150)  # 300 counts of noise, ~40 frames
 
@@ -92,7 +92,7 @@ def _calibrate_on(emu: ForceSensorEmulator, tmp_path, monkeypatch, loads, channe
     monkeypatch.setattr("builtins.input", operator)
     fs = ForceSensorConfig(port=emu.port, channel_map=list(channel_map))
     robot = BlindgraspGripperConfig(id="lab", calibration_dir=tmp_path, force_sensor=fs)
-    return calibrate(CalibrateForceConfig(robot=robot, settle_s=0.1, window_s=0.3))
+    return calibrate_force(CalibrateForceConfig(robot=robot, settle_s=0.1, window_s=0.3))
 
 
 def test_a_swapped_cable_is_caught_and_names_both_fingers(tmp_path, monkeypatch):
@@ -116,7 +116,7 @@ def test_the_robot_refuses_a_calibration_made_with_another_channel_map(tmp_path,
         cal.channel_map = [1, 0, 2]
         for name, channel in zip(spec.FORCE_SENSOR_NAMES, cal.channel_map):
             cal.fingers[name].channel = channel
-        fc.save(cal, tmp_path / "rig.force.json")
+        fc.save_force_calibration(cal, tmp_path / "rig.force.json")
         monkeypatch.setattr("builtins.input", rig.calibration_inputs())
         robot = BlindgraspGripper(rig.robot_config(tmp_path))
         with pytest.raises(

@@ -29,7 +29,7 @@ def demos(tmp_path_factory) -> Path:
     publish.main(["--namespace=you", "--dry_run=true", "--demo_episodes=1",
                   "--demo_objects=sphere_medium,capsule_medium", f"--staging_dir={stage}"])  # fmt: skip
     out = stage / "demos"
-    prov = provenance.load(out)
+    prov = provenance.load_provenance(out)
     assert prov["objects"] == ["sphere_medium", "capsule_medium"] and prov["curation"]["enabled"]
     recipe = presets.PRESETS[publish.DEMO_RECIPE]
     assert prov["randomization"]["joint_calibration_rad"] == recipe.demos.joint_calibration_rad > 0

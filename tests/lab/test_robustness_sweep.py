@@ -67,9 +67,9 @@ def test_envelope_grows_from_nominal_and_stops_at_the_first_failure():
     assert envelope.envelope(f["points"], 1, criterion="rate") == (1, 2)
     # 88/100: Wilson upper 93 % still reaches 90 %; 70/100 does not.
     assert envelope.envelope(f["points"], 1, criterion="ci") == (1, 4)
-    assert envelope.describe(f, criterion="rate") == "m1 (fails at m0) to m2 (fails at m3)"
+    assert envelope.describe_envelope(f, criterion="rate") == "m1 (fails at m0) to m2 (fails at m3)"
     # passing out to both ends: the edges name the smallest and the largest point tested
-    assert envelope.describe(_factor([95, 95, 95], nominal=1), criterion="rate") == (
+    assert envelope.describe_envelope(_factor([95, 95, 95], nominal=1), criterion="rate") == (
         "m0 (smallest tested) to m2 (largest tested)"
     )
     assert envelope.envelope(_factor([80, 99], 0)["points"], 0, criterion="rate") == (None, None)

@@ -56,7 +56,7 @@ def test_unpairable_or_missing_evaluations_are_clear_errors(tmp_path):
     _teacher_eval(tmp_path / "t", {"sphere_small": [True, False]}, mode="stochastic")
     a = compare.load_successes(tmp_path / "a")
     with pytest.raises(ValueError, match="2 vs 3 episodes"):
-        compare.compare(a, compare.load_successes(tmp_path / "b"))
+        compare.compare_rates(a, compare.load_successes(tmp_path / "b"))
     with pytest.raises(ValueError, match="not 'deterministic'"):
         compare.load_successes(tmp_path / "t")
     assert compare.load_successes(f"{tmp_path / 't'}:stochastic") == {"sphere_small": [True, False]}

@@ -247,7 +247,7 @@ def test_demo_collection_killed_at_random_instants_loses_at_most_one_batch_and_r
     cmd = [
         sys.executable,
         "-m",
-        "lerobot_blindgrasp.demos.collect",
+        "lerobot_blindgrasp.demos.collect_cli",
         f"--teacher={teacher}",
         f"--output_dir={root}",
         "--repo_id=test/crash",

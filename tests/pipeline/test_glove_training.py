@@ -114,11 +114,11 @@ def recording(tmp_path_factory) -> tuple[Path, dict, int]:
 @pytest.fixture(scope="module")
 def sim_demos(tmp_path_factory) -> Path:
     """Two curated episodes of one object from the shipped teacher (blindgrasp-collect-demos, in-process)."""
-    from lerobot_blindgrasp.demos import collection
+    from lerobot_blindgrasp.demos import collection_loop
     from lerobot_blindgrasp.demos.config import CollectConfig
 
     out = tmp_path_factory.mktemp("sim") / "demos"
-    collection.collect(CollectConfig(output_dir=out, repo_id="local/tiny_sim", episodes_per_object=2,
+    collection_loop.collect_demos(CollectConfig(output_dir=out, repo_id="local/tiny_sim", episodes_per_object=2,
                                objects="cylinder_a_medium", num_envs=2, threads=1, progress=False))  # fmt: skip
     return out
 
@@ -126,7 +126,7 @@ def sim_demos(tmp_path_factory) -> Path:
 def _train(cfg: glove_train.GloveTrainConfig, env: dict, monkeypatch) -> Path:
     for k, v in env.items():  # lerobot-train inherits the offline, isolated environment
         monkeypatch.setenv(k, v)
-    return glove_train.run(cfg)
+    return glove_train.train_on_glove(cfg)
 
 
 def _loads_as_a_policy(checkpoint: Path) -> None:
@@ -149,7 +149,7 @@ def test_the_presets_name_what_they_train_on():
 
 def test_glove_recording_trains_a_student(recording, tmp_path, monkeypatch):
     root, env, _ = recording
-    assert glove_train.schema_problems(root) == []
+    assert glove_train.merge_schema_problems(root) == []
     cfg = glove_train.GloveTrainConfig(preset="glove_smoke", glove=[root], output_dir=tmp_path / "glove")
     checkpoint = _train(cfg, env, monkeypatch)
     _loads_as_a_policy(checkpoint)
@@ -183,7 +183,7 @@ def test_a_folder_of_another_schema_is_named_before_anything_is_written(recordin
     cfg = glove_train.GloveTrainConfig(preset="glove_smoke", glove=[root, tmp_path / "nothing"],
                                        output_dir=tmp_path / "out")  # fmt: skip
     with pytest.raises(SystemExit, match="nothing is not a LeRobotDataset folder"):
-        glove_train.run(cfg)
+        glove_train.train_on_glove(cfg)
     assert not (tmp_path / "out").exists()
 
 

@@ -135,8 +135,8 @@ def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_pa
     )
     # only the teacher, the demos' calibration offset (the teacher's training one) and the student stage differ
     assert b.demos == dataclasses.replace(q.demos, joint_calibration_rad=0.05) and b.evaluation == q.evaluation
-    assert "--joint_calibration_rad=0.05" in recipe.collect(b, folder, tmp_path / "d", "x/y", 1)
-    assert not any("calibration" in c for c in recipe.collect(q, folder, tmp_path / "d", "x/y", 1))
+    assert "--joint_calibration_rad=0.05" in recipe.demos_collect(b, folder, tmp_path / "d", "x/y", 1)
+    assert not any("calibration" in c for c in recipe.demos_collect(q, folder, tmp_path / "d", "x/y", 1))
     monkeypatch.delenv("BLINDGRASP_TEACHER", raising=False)
     path, about = teacher_source.teacher_for_run(pipeline.Stage(tmp_path, {}), b, tmp_path, 1, given=None)
     assert path == folder and about["source"] == "shipped" and about["preset"] == b.teacher.settings.name
@@ -174,7 +174,7 @@ def test_the_shipped_students_preset_aims_demos_and_dagger_at_the_small_capsule(
     assert {"--steps=1200", "--policy.scheduler_constant_steps=600", "--policy.optimizer_lr=0.0005"} <= set(cmd)
     # The extra collection: one object, the collector's default budget, start states of its own.
     teacher = tmp_path / "teacher"
-    extra = recipe.collect(
+    extra = recipe.demos_collect(
         t, teacher, tmp_path / "e", "x/e", recipe.extra_demo_seed(1, 0), extra=("capsule_small", 240)
     )
     assert {
@@ -183,7 +183,7 @@ def test_the_shipped_students_preset_aims_demos_and_dagger_at_the_small_capsule(
         "--max_rollouts_per_object=4800",
         "--joint_calibration_rad=0.05",
     } <= set(extra)
-    main = recipe.collect(t, teacher, tmp_path / "d", "x/d", recipe.demo_seed(1))
+    main = recipe.demos_collect(t, teacher, tmp_path / "d", "x/d", recipe.demo_seed(1))
     assert not any(c.startswith("--objects") for c in main) and "--episodes_per_object=40" in main
     starts = [
         recipe.demo_seed(1),

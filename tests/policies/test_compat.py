@@ -29,7 +29,7 @@ ALLOWED = {
 
 def test_the_installed_lerobot_has_what_every_reach_relies_on():
     assert compat.installed_version() is not None
-    assert compat.check() == []
+    assert compat.check_lerobot() == []
 
 
 def test_check_names_what_a_changed_lerobot_no_longer_has(monkeypatch):
@@ -37,7 +37,7 @@ def test_check_names_what_a_changed_lerobot_no_longer_has(monkeypatch):
     from lerobot.datasets import dataset_writer
 
     monkeypatch.delattr(dataset_writer, "embed_images")
-    problems = compat.check()
+    problems = compat.check_lerobot()
     assert problems == ["lerobot.datasets.dataset_writer.embed_images is gone"]
 
 

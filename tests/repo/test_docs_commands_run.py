@@ -128,7 +128,7 @@ def test_the_documented_force_calibrations(lab):
         saved.unlink(missing_ok=True)
         out = lab.run(argv + lab.robot_args() + ["--settle_s=0.1", "--window_s=0.3"], operator=operator)
         assert f"Saved {saved}" in out, out[-2000:]
-        np.testing.assert_allclose(fc.load(saved).scales(), lab.rig.force.scale, rtol=5e-3)
+        np.testing.assert_allclose(fc.load_force_calibration(saved).scales(), lab.rig.force.scale, rtol=5e-3)
     lab.rig.force.forces_n = np.zeros(3)
 
 

@@ -1,5 +1,5 @@
 """The package's layout holds as the README's Layout section draws it: imports run down the floors, modules and
-functions stay small, and no two modules are named alike for different things. The lab (`lab/`, outside the wheel)
+functions stay small, no two public classes or functions share a name, and no two modules are named alike. The lab (`lab/`, outside the wheel)
 is the floor above everything: it may import the package, the package never imports it.
 
 Read from the code itself (every `import` and `from ... import`, lazy ones inside functions included), so a new arrow
@@ -8,11 +8,13 @@ up the floors fails here with the file that draws it."""
 from __future__ import annotations
 
 import ast
-from collections import Counter
+import tomllib
+from collections import defaultdict
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / "lerobot_blindgrasp"
+PLUGIN_FACE = ROOT / "lerobot_policy_blindgrasp"  # the module LeRobot's plugin discovery imports
 LAB = ROOT / "lab"  # benchmarks, the twin's measurement campaign, research diagnosis: not in the wheel
 
 # Floors, bottom first: a folder (or top-level module) may import only from floors below its own.
@@ -46,6 +48,10 @@ LONG_MODULES: dict[str, tuple[int, str]] = {
 }
 # Modules that share a name on purpose: the same role in parallel folders.
 SAME_NAME_OK = {"__init__.py", "__main__.py"}
+# The one public name many modules define: `main`, a program's entry, which `[project.scripts]` names as
+# `module:main` and `python -m` runs under `if __name__ == "__main__"` (LeRobot's `lerobot_train.main` and every CLI
+# do the same). Nothing imports it by its bare name, so it never stands for two concepts in one reader's head.
+ENTRY_POINT = "main"
 
 
 def _room(module: str) -> str | None:
@@ -119,10 +125,45 @@ def test_modules_and_functions_are_small():
     assert not big, "over the size limits:\n" + "\n".join(big)
 
 
+def _public_defs(path: Path, tree: ast.Module):
+    for node in tree.body:
+        if isinstance(node, ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef) and not node.name.startswith(
+            "_"
+        ):
+            yield node.name
+
+
+def test_no_two_public_classes_or_functions_share_a_name():
+    """A name says one concept: two public top-level classes or functions named alike in two modules (two
+    `Schedule`s, four `collect`s) make every reader, and every `from ... import`, ask which one."""
+    homes = defaultdict(list)
+    for path, tree in _sources(PACKAGE, PLUGIN_FACE):
+        for name in _public_defs(path, tree):
+            homes[name].append(str(path.relative_to(ROOT)))
+    twice = {name: where for name, where in homes.items() if len(where) > 1 and name != ENTRY_POINT}
+    assert not twice, f"public classes or functions named alike: {twice}"
+
+
+def test_every_main_is_a_programs_entry():
+    """`main` may repeat only as a program's entry point: a console script, or a module run with `python -m`."""
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"].values()
+    entries = {s.removesuffix(":main") for s in scripts if s.endswith(":main")}
+    stray = []
+    for path, tree in _sources(PACKAGE, PLUGIN_FACE):
+        if ENTRY_POINT in _public_defs(path, tree):
+            module = ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+            if module not in entries and '__name__ == "__main__"' not in path.read_text():
+                stray.append(module)
+    assert not stray, f"`main` defined where no program starts: {stray}"
+
+
 def test_no_two_modules_are_named_alike():
+    """Alike up to a plural `s` too (`checkpoint.py` and `checkpoints.py` are one name to a reader)."""
     files = [p for root in (PACKAGE, LAB) for p in root.rglob("*.py") if p.name not in SAME_NAME_OK]
-    names = Counter(p.name for p in files)
-    twice = {n: sorted(str(p.relative_to(ROOT)) for p in files if p.name == n) for n, c in names.items() if c > 1}
+    homes = defaultdict(list)
+    for p in files:
+        homes[p.stem.removesuffix("s")].append(str(p.relative_to(ROOT)))
+    twice = {stem: sorted(where) for stem, where in homes.items() if len(where) > 1}
     assert not twice, f"modules named alike: {twice}"
 
 

@@ -21,7 +21,7 @@ from emulators.rig import LATENCY_TIMER_MS, GripperRig
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware.dynamixel import latency_timer
 from lerobot_blindgrasp.hardware.dynamixel.latency_timer import check_latency_timer, ensure_low_latency
-from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
+from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import CalibrationFileError
 
 ROOT = Path(__file__).resolve().parents[2]
 READ_ONLY_SYSFS_INT = Path("/sys/devices/system/cpu/kernel_max")  # 0444 and no store op: root cannot write it
@@ -172,7 +172,7 @@ def test_no_calibration_and_no_operator_is_refused_before_a_byte_is_sent(tmp_pat
 
 
 def test_force_calibrations_in_the_folder_are_not_offered_as_robot_ids(tmp_path):
-    from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import calibrated_ids
+    from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import calibrated_ids
 
     for name in ("lab_gripper.json", "lab_gripper.force.json", "spare.force.json", "old_gripper.json"):
         (tmp_path / name).write_text("{}")

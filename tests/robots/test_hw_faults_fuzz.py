@@ -28,7 +28,7 @@ from lerobot_blindgrasp.hardware.force_board.frame_codec import SYNC, FrameParse
 from lerobot_blindgrasp.hardware.plausibility import ImplausibleReadingError, PositionGate
 from lerobot_blindgrasp.hardware.xm430 import NO_LOAD_SPEED_RAD_S, RAD_PER_TICK
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
-from lerobot_blindgrasp.robots.blindgrasp_gripper import calibration as calib
+from lerobot_blindgrasp.robots.blindgrasp_gripper import servo_calibration as calib
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import GripperReadingError
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
@@ -278,7 +278,7 @@ def test_a_gripper_calibration_file_is_valid_or_refused_by_name(tmp_path_factory
             robot.connect()  # refused before the port is opened
     else:
         ids = dict(zip(spec.JOINT_NAMES, spec.SERVO_IDS, strict=True))
-        assert calib.problems(robot.calibration, ids) == []
+        assert calib.servo_calibration_problems(robot.calibration, ids) == []
         assert all(type(getattr(c, f)) is int for c in robot.calibration.values() for f in calib.RECORD_FIELDS)
 
 

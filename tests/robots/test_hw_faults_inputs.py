@@ -22,7 +22,7 @@ from lerobot.teleoperators.config import TeleoperatorConfig
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
-from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import CalibrationFileError
+from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import CalibrationFileError
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import PROTO

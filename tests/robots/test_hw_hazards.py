@@ -154,7 +154,7 @@ def test_no_short_step_after_a_stall_in_the_eval_trial(rig, tmp_path, monkeypatc
         for step[0] in range(24):
             env.step(spec.HOME_POSE)
         _assert_spaced(times)
-        # The trial spaces its reads itself (`Schedule`, re-based on the held read), and the loop keeps its rate.
+        # The trial spaces its reads itself (`StepPacer`, re-based on the held read), and the loop keeps its rate.
         assert env._schedule.spacing.waits >= len(STALLS_MS)
         assert np.median(np.diff(times)) <= 1.5 * DT
     finally:
@@ -190,7 +190,7 @@ def test_a_full_disk_at_finalize_keeps_the_first_error(tmp_path, monkeypatch, ca
     def write_episode(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device", "episode data")
 
-    monkeypatch.setattr(curation, "evaluate", lambda *args: None)
+    monkeypatch.setattr(curation, "judge_episode", lambda *args: None)
     monkeypatch.setattr(dataset, "create", full_disk)
     monkeypatch.setattr(dataset, "write_episode", write_episode)
     with caplog.at_level(logging.ERROR), pytest.raises(OSError) as e:
@@ -218,7 +218,7 @@ def test_a_second_failure_during_cleanup_never_masks_the_first_or_aborts(tmp_pat
         cmd = [
             sys.executable,
             "-m",
-            "lerobot_blindgrasp.demos.collect",
+            "lerobot_blindgrasp.demos.collect_cli",
             f"--output_dir={disk / 'demos'}",
             "--repo_id=test/full",
             "--episodes_per_object=4",

@@ -28,7 +28,7 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     PolicyMismatchError,
 )
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
-from lerobot_blindgrasp.teleoperators.manus_glove import stream as stream_mod
+from lerobot_blindgrasp.teleoperators.manus_glove import receiver as stream_mod
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost
 
 JOINTS = ["ff_j10"]
@@ -107,7 +107,7 @@ def test_normalizer_stats_fitted_on_another_state_are_refused(tmp_path):
     pre = json.loads((ckpt / "policy_preprocessor.json").read_text())
     pre["steps"][-1]["config"]["features"]["observation.state"]["shape"] = [10]
     (ckpt / "policy_preprocessor.json").write_text(json.dumps(pre))
-    bad, _ = policy_contract.problems(ckpt, ROBOT)
+    bad, _ = policy_contract.checkpoint_problems(ckpt, ROBOT)
     assert bad == [
         f"'observation.state' shape (10,) in {ckpt / 'policy_preprocessor.json'} (normalizer), the robot has (12,)"
     ]
@@ -117,7 +117,7 @@ def test_a_truncated_checkpoint_config_is_refused_before_anything_moves(tmp_path
     ckpt = _checkpoint(tmp_path)
     (ckpt / "config.json").write_text((ckpt / "config.json").read_text()[:40])
     with pytest.raises(PolicyMismatchError, match=r"config.json is unreadable \(JSONDecodeError"):
-        policy_contract.check(ckpt, ROBOT)
+        policy_contract.check_checkpoint(ckpt, ROBOT)
 
 
 # --- glove, force stream, files and the OS -----------------------------------------------------------------------
@@ -225,7 +225,7 @@ def test_a_policy_with_nan_or_zero_normalizer_stats_is_refused(tmp_path):
     stats["observation.state.std"][10] = 0.0
     stats["observation.state.mean"][0] = float("nan")
     save_file(stats, str(path))
-    bad, _ = policy_contract.problems(ckpt, ROBOT)
+    bad, _ = policy_contract.checkpoint_problems(ckpt, ROBOT)
     assert bad == [f"observation.state.mean not finite at ['observation.state[0] (ff_j10.pos)'] in {path}",
                    f"observation.state.std is 0 at ['observation.state[10] (mf_tip.force)'] in {path}: any change "
                    "of that input would reach the network multiplied by 1/eps"]  # fmt: skip
@@ -239,7 +239,7 @@ def test_a_policy_with_nan_weights_is_refused(tmp_path):
     name = sorted(weights)[0]
     weights[name].view(-1)[:3] = float("nan")
     save_file(weights, str(ckpt / "model.safetensors"))
-    bad, _ = policy_contract.problems(ckpt, ROBOT)
+    bad, _ = policy_contract.checkpoint_problems(ckpt, ROBOT)
     assert bad == [f"3 non-finite weights in {ckpt / 'model.safetensors'} (in ['{name}'])"]
 
 

@@ -30,13 +30,13 @@ from lerobot_blindgrasp.hardware.xm430 import (
     torque_at_current_nm,
 )
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
-from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import rad_to_ticks
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
     ForceOverloadError,
     ForceSensorError,
     GripperBusError,
     GripperHardwareError,
 )
+from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import rad_to_ticks
 
 ROOT = Path(__file__).resolve().parents[2]
 TICK = RAD_PER_TICK

@@ -75,8 +75,8 @@ def _checkpoint(
 
 
 def test_a_checkpoint_for_this_robot_passes(tmp_path):
-    assert policy_contract.problems(_checkpoint(tmp_path), ROBOT) == ([], [])
-    assert policy_contract.problems(_checkpoint(tmp_path / "old", dataset={}), ROBOT) == ([], [])
+    assert policy_contract.checkpoint_problems(_checkpoint(tmp_path), ROBOT) == ([], [])
+    assert policy_contract.checkpoint_problems(_checkpoint(tmp_path / "old", dataset={}), ROBOT) == ([], [])
 
 
 def test_another_hands_checkpoint_is_refused_naming_names_type_and_file(tmp_path):
@@ -84,7 +84,7 @@ def test_another_hands_checkpoint_is_refused_naming_names_type_and_file(tmp_path
     ckpt = _checkpoint(tmp_path, trained_for={"robot_type": "allegro_hand", "state_names": other,
                                               "action_names": other[:9]})  # fmt: skip
     with pytest.raises(PolicyMismatchError) as e:
-        policy_contract.check(ckpt, ROBOT)
+        policy_contract.check_checkpoint(ckpt, ROBOT)
     text = str(e.value)
     assert f"robot type 'allegro_hand' in {ckpt / 'config.json'} (trained_for (the sim demo schema" in text
     assert "the robot is 'blindgrasp_gripper'" in text
@@ -94,20 +94,22 @@ def test_another_hands_checkpoint_is_refused_naming_names_type_and_file(tmp_path
 
 def test_a_state_in_another_order_is_refused(tmp_path):
     swapped = [spec.STATE_NAMES[1], spec.STATE_NAMES[0], *spec.STATE_NAMES[2:]]
-    bad, _ = policy_contract.problems(_checkpoint(tmp_path, trained_for={"state_names": swapped}), ROBOT)
+    bad, _ = policy_contract.checkpoint_problems(
+        _checkpoint(tmp_path, trained_for={"state_names": swapped}), ROBOT
+    )
     assert len(bad) == 1 and bad[0].startswith(f"'observation.state' names {swapped} in ")
     assert bad[0].endswith(f"the robot's are {list(spec.STATE_NAMES)} (names and order)")
 
 
 def test_a_checkpoint_trained_at_another_rate_is_refused(tmp_path):
-    bad, _ = policy_contract.problems(_checkpoint(tmp_path, trained_for={"fps": 10}), ROBOT)
+    bad, _ = policy_contract.checkpoint_problems(_checkpoint(tmp_path, trained_for={"fps": 10}), ROBOT)
     assert len(bad) == 1 and bad[0].startswith("fps 10 in ") and bad[0].endswith("the loop runs at 20 (--env.fps)")
-    bad, _ = policy_contract.problems(_checkpoint(tmp_path / "old", dataset={"fps": 10}), ROBOT)
+    bad, _ = policy_contract.checkpoint_problems(_checkpoint(tmp_path / "old", dataset={"fps": 10}), ROBOT)
     assert bad == [f"fps 10 in {tmp_path / 'old/data/meta/info.json'}, the loop runs at 20 (--env.fps)"]
 
 
 def test_the_wrong_action_size_says_action(tmp_path):
-    bad, _ = policy_contract.problems(_checkpoint(tmp_path, action_dim=8), ROBOT)
+    bad, _ = policy_contract.checkpoint_problems(_checkpoint(tmp_path, action_dim=8), ROBOT)
     assert bad == [
         f"'action' shape (8,) in {tmp_path / 'pretrained_model/config.json'} (output_features), the robot has (9,)"
     ]
@@ -118,7 +120,7 @@ def test_a_camera_input_the_robot_does_not_have_is_refused(tmp_path):
     ckpt = _checkpoint(tmp_path)
     _edit(ckpt / "config.json", lambda c: c["input_features"].update(
         {"observation.images.top": {"type": "VISUAL", "shape": [3, 96, 96]}}))  # fmt: skip
-    bad, _ = policy_contract.problems(ckpt, ROBOT)
+    bad, _ = policy_contract.checkpoint_problems(ckpt, ROBOT)
     assert bad == [f"input_features ['observation.images.top'] in {ckpt / 'config.json'}: the robot has only "
                    "'observation.state' there (no camera)"]  # fmt: skip
 
@@ -126,7 +128,7 @@ def test_a_camera_input_the_robot_does_not_have_is_refused(tmp_path):
 def test_a_checkpoint_trained_with_another_env_is_refused(tmp_path):
     ckpt = _checkpoint(tmp_path)
     _edit(ckpt / "train_config.json", lambda t: t.update(env={"type": "aloha", "fps": 50}))
-    bad, _ = policy_contract.problems(ckpt, ROBOT)
+    bad, _ = policy_contract.checkpoint_problems(ckpt, ROBOT)
     assert f"env type 'aloha' in {ckpt / 'train_config.json'}, this robot's envs are" in bad[0]
     assert bad[1].startswith("fps 50 in ") and len(bad) == 2
 
@@ -135,9 +137,9 @@ def test_relative_actions_sent_to_a_target_robot_are_refused(tmp_path):
     ckpt = _checkpoint(tmp_path)
     _edit(ckpt / "policy_preprocessor.json",
           lambda p: p["steps"].insert(0, {"registry_name": "relative_actions_processor", "config": {}}))  # fmt: skip
-    bad, _ = policy_contract.problems(ckpt, ROBOT)
+    bad, _ = policy_contract.checkpoint_problems(ckpt, ROBOT)
     assert len(bad) == 1 and bad[0].startswith("'action' meaning:") and "absolute joint targets" in bad[0]
-    bad, _ = policy_contract.problems(
+    bad, _ = policy_contract.checkpoint_problems(
         _checkpoint(tmp_path / "d", trained_for={"action_meaning": "deltas (rad)"}), ROBOT
     )
     assert len(bad) == 1 and bad[0].startswith("'action' meaning 'deltas (rad)' in ")
@@ -150,14 +152,14 @@ def test_an_unverifiable_checkpoint_is_refused_unless_overridden(tmp_path, caplo
     shutil.rmtree(tmp_path / "data")
     with pytest.raises(PolicyMismatchError, match=r"cannot be verified .* has no trained_for, and the training "
                        r"dataset's meta/info.json .* not found.*allow_unverified_policy=true"):  # fmt: skip
-        policy_contract.check(ckpt, ROBOT)
+        policy_contract.check_checkpoint(ckpt, ROBOT)
     with caplog.at_level(logging.WARNING):
-        policy_contract.check(ckpt, ROBOT, allow_unverified=True)
+        policy_contract.check_checkpoint(ckpt, ROBOT, allow_unverified=True)
     assert "could not verify robot type, fps and feature names" in caplog.text
 
 
 def test_dataset_metadata_without_feature_names_does_not_pass_silently(tmp_path):
-    bad, unverified = policy_contract.problems(
+    bad, unverified = policy_contract.checkpoint_problems(
         _checkpoint(tmp_path, dataset={"state": None, "action": None}), ROBOT
     )
     info = tmp_path / "data/meta/info.json"
@@ -188,7 +190,7 @@ def test_lerobot_train_records_what_the_policy_was_trained_for(tmp_path):
     facts = json.loads((tmp_path / "ckpt" / "config.json").read_text())["trained_for"]
     assert facts["robot_type"] == ROBOT_TYPE and facts["fps"] == 20 and facts["source"].endswith("test/tiny")
     assert facts["state_names"] == list(spec.STATE_NAMES) and facts["action_names"] == list(spec.ACTION_NAMES)
-    assert policy_contract.problems(tmp_path / "ckpt", ROBOT) == ([], [])
+    assert policy_contract.checkpoint_problems(tmp_path / "ckpt", ROBOT) == ([], [])
 
 
 def test_send_action_refuses_unknown_keys_as_it_refuses_missing_ones(rig, robot):

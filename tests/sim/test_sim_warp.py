@@ -110,7 +110,7 @@ def test_collect_demos_on_warp_writes_the_same_start_states(tmp_path):
     (same env seeds, same draws; trajectories part ways only through contact, see above)."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from lerobot_blindgrasp.demos import collection, curation, provenance
+    from lerobot_blindgrasp.demos import collection_loop, curation, provenance
     from lerobot_blindgrasp.demos import dataset as demo_dataset
     from lerobot_blindgrasp.demos.config import CollectConfig
 
@@ -131,9 +131,9 @@ def test_collect_demos_on_warp_writes_the_same_start_states(tmp_path):
             backend=backend,
             threads=1,
         )
-        stats = collection.collect(cfg)
+        stats = collection_loop.collect_demos(cfg)
         assert stats.kept == 4 and stats.stop_reason == "done"
-        assert provenance.load(out)["runs"][0]["backend"] == backend
+        assert provenance.load_provenance(out)["runs"][0]["backend"] == backend
         ds = LeRobotDataset("test/warp_demos", root=out, video_backend="pyav")
         frames = ds.hf_dataset.with_format("numpy")
         state = np.stack(frames[spec.STATE_KEY])

@@ -58,7 +58,7 @@ def test_scripted_demos_keep_only_successful_episodes_and_refuse_bad_settings():
     cfg = scripted_demos.ScriptedDemos(
         objects=("capsule_small", "cuboid_a_large"), episodes_per_object=2, steps_per_episode=10
     )
-    data = scripted_demos.collect(cfg)
+    data = scripted_demos.collect_scripted_demos(cfg)
     # The script cannot lift the large cuboid (measured 0/4): only capsule episodes become demonstrations.
     assert data["success"]["cuboid_a_large"] == 0.0 and data["success"]["capsule_small"] > 0
     kept = round(data["success"]["capsule_small"] * 2)

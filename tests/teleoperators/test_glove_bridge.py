@@ -22,7 +22,7 @@ from lerobot_blindgrasp.teleoperators.manus_glove.bridge import (
     GloveBridge,
     GloveBridgeConfig,
     ergonomics_from_message,
-    run,
+    run_bridge,
 )
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender
 
@@ -119,7 +119,7 @@ def test_a_message_without_the_index_spread_is_warned_about_by_name(teleop, capl
 def test_without_ros2_the_command_says_what_to_source(monkeypatch):
     monkeypatch.setitem(sys.modules, "rclpy", None)  # as on a machine without ROS 2, even if one is installed
     with pytest.raises(BridgeError, match=r"rclpy is not importable.*source /opt/ros/<distro>/setup.bash"):
-        run(GloveBridgeConfig(source_port=0))
+        run_bridge(GloveBridgeConfig(source_port=0))
 
 
 def test_the_console_script_parses_its_config(capsys):

@@ -252,7 +252,7 @@ def test_the_teleoperator_reads_the_bridges_own_names_and_datagram():
     assert protocol.encode is mb.encode and protocol.GloveSender is mb.GloveSender and protocol.PROTO is mb.PROTO
     assert protocol.SESSION_RE is mb.SESSION_RE
     assert mb.USED_CHANNELS == rt.REQUIRED_KEYS  # what the bridge warns about is what the retargeting reads
-    assert bridge.GloveBridgeConfig is mb.BridgeConfig and bridge.run is mb.run
+    assert bridge.GloveBridgeConfig is mb.BridgeConfig and bridge.run_bridge is mb.run_bridge
 
 
 def test_the_bridge_imports_only_the_standard_library_and_ros2():

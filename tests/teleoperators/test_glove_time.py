@@ -22,8 +22,8 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveDatagram, GloveSender
+from lerobot_blindgrasp.teleoperators.manus_glove.receiver import OFFSET_LEAK, GloveReceiver
 from lerobot_blindgrasp.teleoperators.manus_glove.retarget import REQUIRED_KEYS
-from lerobot_blindgrasp.teleoperators.manus_glove.stream import OFFSET_LEAK, GloveReceiver
 
 ERGO = dict.fromkeys(REQUIRED_KEYS, 1.0)
 

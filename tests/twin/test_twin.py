@@ -41,7 +41,7 @@ def _run(cmd: list[str], env: dict, timeout: int) -> subprocess.CompletedProcess
 
 
 def test_the_twin_command_prints_and_writes_its_ports_and_stops_on_sigterm(tmp_path):
-    from lerobot_blindgrasp.twin.calibrate import request
+    from lerobot_blindgrasp.twin.calibration_operator import request
 
     ports_json, sock = tmp_path / "ports.json", tmp_path / "twin.sock"
     cmd = [sys.executable, "-m", "lerobot_blindgrasp.twin.command", f"--ports_json={ports_json}", f"--socket={sock}",

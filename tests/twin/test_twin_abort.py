@@ -13,7 +13,7 @@ import pytest
 
 from lerobot_blindgrasp.envs.operator import SocketOperator
 from lerobot_blindgrasp.twin.command import TwinConfig
-from lerobot_blindgrasp.twin.physics import Verdict
+from lerobot_blindgrasp.twin.physics import TrialVerdict
 from lerobot_blindgrasp.twin.runner import Twin
 
 
@@ -48,12 +48,14 @@ def test_a_trial_the_host_left_is_an_aborted_failure(twin, tmp_path, verdict_bef
     verdict the physics reaches afterwards changes nothing."""
     host, trial = _start_trial(twin, 0)
     if verdict_before_leaving:
-        twin.server._on_verdict(Verdict(trial, True, "lifted"))
+        twin.server._on_verdict(TrialVerdict(trial, True, "lifted"))
         assert host.wait_for({"s", "f"}, timeout_s=30) == "s"
     host.stop()
     (record,) = _records(tmp_path / "trials.jsonl", 1)
     assert not twin.physics.judging  # stopped as soon as the host was gone
-    twin.server._on_verdict(Verdict(trial, True, "lifted"))  # the physics thread's late verdict: no new record
+    twin.server._on_verdict(
+        TrialVerdict(trial, True, "lifted")
+    )  # the physics thread's late verdict: no new record
     assert len(_records(tmp_path / "trials.jsonl", 1)) == 1
     assert record["trial"] == trial and record["aborted"] is True and record["success"] is False
     assert ("physics verdict: success" in record["reason"]) == verdict_before_leaving
@@ -61,7 +63,7 @@ def test_a_trial_the_host_left_is_an_aborted_failure(twin, tmp_path, verdict_bef
 
 def test_a_trial_the_host_ended_keeps_the_physics_verdict(twin, tmp_path):
     host, trial = _start_trial(twin, 1)
-    twin.server._on_verdict(Verdict(trial, True, "lifted"))
+    twin.server._on_verdict(TrialVerdict(trial, True, "lifted"))
     assert host.wait_for({"s", "f"}, timeout_s=30) == "s"
     host.clear()  # the host's trial is over: "end"
     (record,) = _records(tmp_path / "trials.jsonl", 1)

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 HISTORY = 17  # counted frames the counter's own rate is judged over (16 intervals, as the arrival rate)
 
 
-class Verdict(enum.Enum):
+class FrameVerdict(enum.Enum):
     LIVE = "live"  # the counter advanced with time: a fresh frame
     HOLD = "hold"  # a restarted counter not yet confirmed: keep the frame, it is not fresh
     REPEAT = "repeat"  # the same counter again: re-sent
@@ -88,7 +88,7 @@ class CounterClock:
     def allowed_step(self, dt: float) -> float:
         return 1 + self.max_rate_hz * (dt + self.slack_s)
 
-    def judge(self, seq: int, now: float, boot: bool = False, cause: str = "") -> Verdict:
+    def judge(self, seq: int, now: float, boot: bool = False, cause: str = "") -> FrameVerdict:
         """The verdict on a frame with counter `seq` that arrived at `now` (this host's monotonic clock); `boot`: the
         device marks it as its first frame after a reset, with `cause`. `confirmed` is then the restart this frame
         confirmed, if any."""
@@ -96,7 +96,7 @@ class CounterClock:
         self.confirmed = None
         if self._ref is None:  # the first frame of the stream (a boot frame at connect is just that)
             self._count(0, seq, now)
-            return Verdict.LIVE
+            return FrameVerdict.LIVE
         if self._held is not None:
             verdict = self._judge_held(seq, now, boot, silence, cause)
             if verdict is not None:
@@ -105,13 +105,13 @@ class CounterClock:
         if boot or step == 0 or step > self.modulus // 2:
             if self._restarted(seq, now, boot, silence, self._ref):
                 self._hold(seq, now, self._ref[0], boot, cause)
-                return Verdict.HOLD
-            return Verdict.REPEAT if step == 0 else Verdict.BACKWARD
+                return FrameVerdict.HOLD
+            return FrameVerdict.REPEAT if step == 0 else FrameVerdict.BACKWARD
         if step > self.allowed_step(now - self._ref[1]):
-            return Verdict.AHEAD
+            return FrameVerdict.AHEAD
         self.lost += step - 1
         self._count(step, seq, now)
-        return Verdict.LIVE
+        return FrameVerdict.LIVE
 
     def _restarted(self, seq: int, now: float, boot: bool, silence: float, since: tuple[int, float]) -> bool:
         """A counter restarted from 0 after the frame `since` was sent can be at most what the time allows, and the
@@ -124,7 +124,7 @@ class CounterClock:
         self.restarts.append(Restart(last_seq, seq, silence, boot, cause))
         self._held, self._held_count = (seq, now), 0
 
-    def _judge_held(self, seq: int, now: float, boot: bool, silence: float, cause: str) -> Verdict | None:
+    def _judge_held(self, seq: int, now: float, boot: bool, silence: float, cause: str) -> FrameVerdict | None:
         """A frame while a restart is being confirmed; None: judge it against the old counter (the restart was a
         stray frame, and this one continues the old counter)."""
         held_seq, held_t = self._held
@@ -132,13 +132,13 @@ class CounterClock:
         if not boot and 0 < step <= self.modulus // 2 and step <= self.allowed_step(now - held_t):
             self._held, self._held_count = (seq, now), self._held_count + 1
             if self._held_count < self.confirm_frames:
-                return Verdict.HOLD
+                return FrameVerdict.HOLD
             self.restarts[-1].confirmed_seq = seq
             self.confirmed = self.restarts[-1]
             self._held = None
             self._history.clear()
             self._count(0, seq, now)
-            return Verdict.LIVE
+            return FrameVerdict.LIVE
         old = (seq - self._ref[0]) % self.modulus
         if not boot and 0 < old <= self.modulus // 2 and old <= self.allowed_step(now - self._ref[1]):
             self.restarts.pop()
@@ -149,5 +149,9 @@ class CounterClock:
         ):
             self.restarts.pop()
             self._hold(seq, now, self._ref[0], boot, cause)
-            return Verdict.HOLD
-        return Verdict.REPEAT if step == 0 else (Verdict.AHEAD if step <= self.modulus // 2 else Verdict.BACKWARD)
+            return FrameVerdict.HOLD
+        return (
+            FrameVerdict.REPEAT
+            if step == 0
+            else (FrameVerdict.AHEAD if step <= self.modulus // 2 else FrameVerdict.BACKWARD)
+        )

@@ -183,12 +183,12 @@ def missing_warning(path, robot_id: str, scales) -> str:
     )
 
 
-def save(calibration: ForceCalibration, path) -> Path:
+def save_force_calibration(calibration: ForceCalibration, path) -> Path:
     record = {"format": FORMAT, "version": VERSION, **dataclasses.asdict(calibration)}
     return durable.atomic_write_json(path, record, indent=2)
 
 
-def load(path) -> ForceCalibration:
+def load_force_calibration(path) -> ForceCalibration:
     """The calibration in `path`; ForceCalibrationError naming the file and the problem when it is unusable."""
     try:
         raw = json.loads(Path(path).read_text(encoding="utf-8"))
@@ -220,7 +220,7 @@ def apply(reader, calibration_dir, robot_id: str) -> ForceCalibration | None:
     if not path.is_file():
         logger.warning(missing_warning(path, robot_id, reader.scale))
         return None
-    cal = load(path)
+    cal = load_force_calibration(path)
     if list(reader.channel_map) != cal.channel_map:
         raise ForceCalibrationError(
             f"Force calibration {path} was measured with channel_map {cal.channel_map}, but the config has "

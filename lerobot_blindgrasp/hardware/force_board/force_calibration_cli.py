@@ -74,7 +74,7 @@ def _prompts(cfg: CalibrateForceConfig) -> list[str]:
     return out
 
 
-def calibrate(cfg: CalibrateForceConfig) -> fc.ForceCalibration:
+def calibrate_force(cfg: CalibrateForceConfig) -> fc.ForceCalibration:
     """Run the five steps on the robot's force board and save the result; returns it."""
     robot = cfg.robot
     if not isinstance(getattr(robot, "force_sensor", None), ForceSensorConfig):  # the gripper's config carries it
@@ -101,7 +101,7 @@ def calibrate(cfg: CalibrateForceConfig) -> fc.ForceCalibration:
         reader.disconnect()
     cal = fc.fit(fs.channel_map, windows[0], windows[1:-1], windows[-1], cfg.mass_kg, cfg.g, min_snr=cfg.min_snr,
                  max_crosstalk=cfg.max_crosstalk, max_zero_shift_n=cfg.max_zero_shift_n)  # fmt: skip
-    path = fc.save(cal, fc.path_for(calibration_dir, robot.id))
+    path = fc.save_force_calibration(cal, fc.path_for(calibration_dir, robot.id))
     for name, f in cal.fingers.items():
         print(f"{name}: channel {f.channel}, scale {f.scale_n_per_count:.5g} N/count, zero {f.offset_counts:.0f} "
               f"counts, at-rest noise {f.noise_n:.3f} N")  # fmt: skip
@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     cfg = parse_config(CalibrateForceConfig, argv)
     try:
-        calibrate(cfg)
+        calibrate_force(cfg)
     except (fc.ForceCalibrationError, ForceStreamError) as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(1) from None

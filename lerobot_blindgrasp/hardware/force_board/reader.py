@@ -42,7 +42,7 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force
-from lerobot_blindgrasp.hardware.force_board.counter_clock import CounterClock, Restart, Verdict
+from lerobot_blindgrasp.hardware.force_board.counter_clock import CounterClock, FrameVerdict, Restart
 from lerobot_blindgrasp.hardware.force_board.frame_codec import Frame, FrameParser, reset_cause_text
 from lerobot_blindgrasp.hardware.ports import open_exclusive
 from lerobot_blindgrasp.hardware.streams import LatestFrameStream, StreamError
@@ -176,13 +176,13 @@ class ForceSensorReader(LatestFrameStream[Frame]):
     def _keep(self, frame: Frame, now: float) -> bool:
         cause = reset_cause_text(frame.reset_cause)
         verdict = self.clock.judge(frame.seq, now, frame.reset_cause is not None, cause)
-        if verdict is Verdict.LIVE:
+        if verdict is FrameVerdict.LIVE:
             if self.clock.confirmed is not None:
                 self._resynchronised(self.clock.confirmed)
             return True
-        if verdict is Verdict.AHEAD:
+        if verdict is FrameVerdict.AHEAD:
             self.seq_ahead += 1
-        elif verdict is not Verdict.HOLD:  # re-sent or replayed: a serial line never reorders frames
+        elif verdict is not FrameVerdict.HOLD:  # re-sent or replayed: a serial line never reorders frames
             self.counter_faults += 1
         return False
 

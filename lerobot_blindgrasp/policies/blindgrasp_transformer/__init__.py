@@ -7,7 +7,7 @@ student's data path (`window_cache`: LeRobotDataset windows of low-dimensional d
 from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
 from .modeling_blindgrasp_transformer import BlindgraspTransformerPolicy
 from .processor_blindgrasp_transformer import make_blindgrasp_transformer_pre_post_processors
-from .window_cache import install as _install_window_cache
+from .window_cache import install_window_cache as _install_window_cache
 
 _install_window_cache()
 

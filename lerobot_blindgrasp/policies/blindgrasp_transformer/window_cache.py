@@ -173,7 +173,7 @@ def _choose(reader: DatasetReader) -> type[DatasetReader] | None:
     return None
 
 
-def install() -> None:
+def install_window_cache() -> None:
     """From now on in this process, servable readers of this plugin's datasets loaded while `enabled()` are served
     from the cache."""
     compat.serve_dataset_readers_with(_choose)

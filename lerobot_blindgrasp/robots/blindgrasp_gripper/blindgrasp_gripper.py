@@ -35,14 +35,14 @@ from lerobot_blindgrasp.hardware.plausibility import PositionGate
 from lerobot_blindgrasp.hardware.servo_diagnostics import ServoHealth
 from lerobot_blindgrasp.hardware.servo_registers import ServoRegisters
 
-from . import calibration as calib
 from . import interactive
-from .calibration import rad_to_ticks, ticks_to_rad
+from . import servo_calibration as calib
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
 from .errors import ForceOverloadError, GripperBusError, GripperSafetyStop, PolicyMismatchError
 from .keepalive import feeding_the_bus
 from .latch import SafetyLatch
 from .recording_space import RecordingSpace
+from .servo_calibration import rad_to_ticks, ticks_to_rad
 from .starts import EpisodeStarts, Starts
 
 logger = logging.getLogger(__name__)
@@ -180,7 +180,7 @@ class BlindgraspGripper(Robot):
         with self.latch.guard("calibrating"):
             self._forget_goals()  # readings change frame with Drive_Mode and Homing_Offset
             self.bus.disable_torque()
-            interactive.calibrate(self)  # the file to the servos, or two poses by hand
+            interactive.calibrate_servos(self)  # the file to the servos, or two poses by hand
 
     def configure(self) -> None:
         mode = OperatingMode[self.config.operating_mode].value

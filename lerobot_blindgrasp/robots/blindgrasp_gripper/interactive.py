@@ -9,8 +9,8 @@ from lerobot.motors.dynamixel import OperatingMode
 
 from lerobot_blindgrasp.hardware.xm430 import MODEL
 
-from . import calibration as calib
-from .calibration import ticks_to_rad
+from . import servo_calibration as calib
+from .servo_calibration import ticks_to_rad
 
 logger = logging.getLogger(__name__)
 
@@ -25,7 +25,7 @@ POSITIVE_POSE_HELP = (
 )
 
 
-def calibrate(robot) -> None:
+def calibrate_servos(robot) -> None:
     """Torque off: the calibration file to the servos when the operator keeps it, else `calibrate_by_hand`."""
     if robot.calibration:
         answer = input(

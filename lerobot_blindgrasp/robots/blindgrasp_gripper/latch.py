@@ -193,4 +193,4 @@ class SafetyLatch:
         self._atexit = _at_exit
         atexit.register(_at_exit)
         _guard(self)
-        signals.install(self)
+        signals.install_termination_handlers(self)

@@ -41,7 +41,7 @@ def _in_main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
 
 
-def install(owner: object) -> None:
+def install_termination_handlers(owner: object) -> None:
     global _exiting
     if not _in_main_thread():
         return

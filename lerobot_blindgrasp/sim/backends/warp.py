@@ -66,7 +66,7 @@ NCONMAX = 48
 NJMAX = 224
 
 
-def default_device() -> str:
+def default_warp_device() -> str:
     """The GPU of this process (torchrun's LOCAL_RANK) if CUDA is there, else the CPU."""
     wp.init()
     if wp.is_cuda_available():
@@ -116,7 +116,7 @@ class WarpBackend:
     ):
         """templates: one compiled MjModel per object; object_index: object of each env; env_model(i): env i's
         randomized MjModel (the same one the batch backend would step)."""
-        self.wp_device = device or default_device()
+        self.wp_device = device or default_warp_device()
         self.device = torch.device(wp.device_to_torch(self.wp_device))
         self._cuda = self.device.type == "cuda"
         self.num_envs = n = len(object_index)

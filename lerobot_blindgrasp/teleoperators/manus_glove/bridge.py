@@ -9,14 +9,14 @@ from __future__ import annotations
 
 from lerobot_blindgrasp.cli import parse_config
 
-from .manus_bridge import BridgeConfig, BridgeError, GloveBridge, ergonomics_from_message, run, serve
+from .manus_bridge import BridgeConfig, BridgeError, GloveBridge, ergonomics_from_message, run_bridge, serve_bridge
 
 GloveBridgeConfig = BridgeConfig  # the name this command's config had before the bridge became one file
-__all__ = ["BridgeError", "GloveBridge", "GloveBridgeConfig", "ergonomics_from_message", "main", "run"]
+__all__ = ["BridgeError", "GloveBridge", "GloveBridgeConfig", "ergonomics_from_message", "main", "run_bridge"]
 
 
 def main(argv: list[str] | None = None) -> None:
-    serve(parse_config(BridgeConfig, argv))
+    serve_bridge(parse_config(BridgeConfig, argv))
 
 
 if __name__ == "__main__":

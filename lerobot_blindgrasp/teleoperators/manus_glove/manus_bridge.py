@@ -309,7 +309,7 @@ def run_ros2(cfg: BridgeConfig, bridge: GloveBridge) -> None:
             rclpy.shutdown()
 
 
-def run(cfg: BridgeConfig) -> None:
+def run_bridge(cfg: BridgeConfig) -> None:
     """Forward until interrupted (KeyboardInterrupt, or the ROS 2 context shut down)."""
     if cfg.source == "ros2":
         _import_ros()  # before the socket: a machine without ROS 2 gets the message that says what to source
@@ -581,12 +581,12 @@ def _sigterm_as_interrupt():
         signal.signal(signal.SIGTERM, previous)
 
 
-def serve(cfg: BridgeConfig) -> None:
+def serve_bridge(cfg: BridgeConfig) -> None:
     """Run `cfg` as a program: log to stderr, stop cleanly on SIGINT/SIGTERM, exit 2 with the reason on an error."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
     try:
         with _sigterm_as_interrupt():
-            run(cfg)
+            run_bridge(cfg)
     except KeyboardInterrupt:
         logger.info("Stopped.")
     except BridgeError as e:
@@ -595,7 +595,7 @@ def serve(cfg: BridgeConfig) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    serve(parse_args(argv))
+    serve_bridge(parse_args(argv))
 
 
 if __name__ == "__main__":

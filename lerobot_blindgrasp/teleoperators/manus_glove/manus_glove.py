@@ -20,12 +20,12 @@ from lerobot.utils.decorators import check_if_already_connected, check_if_not_co
 from lerobot.utils.errors import DeviceNotConnectedError
 
 from lerobot_blindgrasp import durable, spec
-from lerobot_blindgrasp.robots.blindgrasp_gripper.calibration import read_raw as read_json
+from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import read_raw as read_json
 
 from . import names
 from . import retarget as rt
 from .config_manus_glove import ManusGloveConfig
-from .stream import GloveReceiver
+from .receiver import GloveReceiver
 
 logger = logging.getLogger(__name__)
 

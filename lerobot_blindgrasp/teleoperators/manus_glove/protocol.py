@@ -9,7 +9,7 @@
   datagrams newer than the newest it has used: a late or duplicated one never steps the pose back.
 - `sent`: the bridge's send time in seconds on its machine's system-wide monotonic clock (`time.monotonic()`,
   `std::chrono::steady_clock`, CLOCK_MONOTONIC): never wall time, which NTP may step, nor a counter of the bridge
-  process, which a restart would set back. The receiver ages poses by this clock (see `stream.py`); the two
+  process, which a restart would set back. The receiver ages poses by this clock (see `receiver.py`); the two
   machines' clocks need not agree, only tick at about the same rate.
 - `side`: "left" | "right"; datagrams for the other hand are ignored (two gloves may share a port).
 - `ergonomics`: MANUS SDK ergonomics values in degrees, keyed by the names of `names.py` (the SDK's enum names,

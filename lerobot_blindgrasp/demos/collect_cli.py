@@ -4,7 +4,7 @@
     blindgrasp-collect-demos --teacher=runs/teacher_cpu --output_dir=runs/demos_cpu --repo_id=me/demos_cpu
 
 The stages live in their own modules: the config (`demos/config.py`), the rollout -> curate -> write loop
-(`demos/collection.py`), the run records (`demos/records.py`: provenance, statistics, yield report, card). This module
+(`demos/collection_loop.py`), the run records (`demos/records.py`: provenance, statistics, yield report, card). This module
 is the command line only: parse, run, print the yield table, and map outcomes to exit codes.
 
 The output folder is the dataset root. Next to LeRobot's files it holds `collection.json` (provenance),
@@ -22,7 +22,7 @@ import sys
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import command_line, parse_config
 from lerobot_blindgrasp.demos import yield_report
-from lerobot_blindgrasp.demos.collection import collect
+from lerobot_blindgrasp.demos.collection_loop import collect_demos
 from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
 
 EXIT_EMPTY = 3  # the collection ran but wrote no episode
@@ -35,7 +35,7 @@ def main(argv=None) -> None:
     cfg = parse_config(CollectConfig, argv)
     command = command_line("blindgrasp-collect-demos", argv)
     try:
-        stats = collect(cfg, command=command)
+        stats = collect_demos(cfg, command=command)
     except CollectError as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
@@ -44,7 +44,7 @@ def main(argv=None) -> None:
         raise SystemExit(130) from None
     except (durable.WriteError, OSError) as e:  # a full disk, a quota: a clean message, not a traceback
         print(
-            f"error: {e if isinstance(e, durable.WriteError) else durable.describe(e)}. Free space, then run the "
+            f"error: {e if isinstance(e, durable.WriteError) else durable.describe_write_error(e)}. Free space, then run the "
             f"same command with --resume=true: the episodes written before it are kept.",
             file=sys.stderr,
         )

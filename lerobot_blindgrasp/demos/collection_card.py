@@ -14,11 +14,11 @@ from lerobot_blindgrasp.sim import objects
 
 def is_collection(root: Path) -> bool:
     """Whether `root` was written by blindgrasp-collect-demos (its collection.json), not by lerobot-record."""
-    return provenance.path(root).is_file()
+    return provenance.provenance_path(root).is_file()
 
 
 def sim_context(root: Path, repo_id: str, meta) -> dict:
-    prov = provenance.load(root)
+    prov = provenance.load_provenance(root)
     tally = yield_report.load_tally(root)
     rows = []
     for name in prov["objects"]:
@@ -44,7 +44,7 @@ def sim_context(root: Path, repo_id: str, meta) -> dict:
     }
 
 
-def card_kwargs(root: Path, repo_id: str, **kw) -> dict:
+def sim_card_kwargs(root: Path, repo_id: str, **kw) -> dict:
     """`dataset_cards.card_kwargs` of the collection in `root`."""
     from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 
@@ -54,4 +54,4 @@ def card_kwargs(root: Path, repo_id: str, **kw) -> dict:
 
 def write(root: Path, repo_id: str) -> Path:
     """The collection's card as root/README.md."""
-    return dataset_cards.write_card(root, repo_id, card_kwargs(root, repo_id))
+    return dataset_cards.write_card(root, repo_id, sim_card_kwargs(root, repo_id))

@@ -125,7 +125,7 @@ def play(cmd: list[str], answer: Callable[[str], str | None], timeout_s: float) 
             proc.kill()
 
 
-def run(cfg: TwinCalibrateConfig) -> int:
+def calibrate_twin(cfg: TwinCalibrateConfig) -> int:
     ports = json.loads(cfg.ports_json.read_text())
     sock = ports["operator_socket"]
     flags = robot_flags(cfg, ports)
@@ -143,7 +143,7 @@ def run(cfg: TwinCalibrateConfig) -> int:
 
 
 def main(argv: list[str] | None = None) -> None:
-    sys.exit(run(parse_config(TwinCalibrateConfig, argv)))
+    sys.exit(calibrate_twin(parse_config(TwinCalibrateConfig, argv)))
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ the one the loop would write itself (`--writer_queue=0`): same episodes, same or
 A first SIGINT/SIGTERM stops after the current control step; a second aborts at once. Either way the queued
 episodes are written, then the dataset is finalized and the run recorded (`demos/records.py`), however the loop
 ends. A process killed without any handler (SIGKILL, a power cut) loses at most the episodes since the last
-checkpoint (`demos/checkpoint.py`: every `checkpoint_s` seconds or `num_envs` episodes written) and the at most
+checkpoint (`demos/crash_checkpoints.py`: every `checkpoint_s` seconds or `num_envs` episodes written) and the at most
 `writer_queue` still queued; `--resume=true` goes on from there.
 """
 
@@ -34,7 +34,7 @@ from collections.abc import Callable
 
 from lerobot_blindgrasp import compat, durable, spec
 from lerobot_blindgrasp.cli import GracefulStop
-from lerobot_blindgrasp.demos import checkpoint as checkpoint_mod
+from lerobot_blindgrasp.demos import crash_checkpoints as checkpoint_mod
 from lerobot_blindgrasp.demos import curation as curation_mod
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, records, yield_report
@@ -43,7 +43,7 @@ from lerobot_blindgrasp.demos.episode_writer import EpisodeWriter
 from lerobot_blindgrasp.demos.records import CollectStats
 from lerobot_blindgrasp.project import REPO_ID_PATTERN
 from lerobot_blindgrasp.rollout.actors import TeacherActor
-from lerobot_blindgrasp.rollout.envs import make_env
+from lerobot_blindgrasp.rollout.envs import make_batched_env
 from lerobot_blindgrasp.rollout.loop import Episode, stream
 from lerobot_blindgrasp.sim import randomization
 
@@ -87,7 +87,7 @@ def _check_inputs(cfg: CollectConfig):
     if cfg.resume:
         if not out.is_dir():
             raise CollectError(f"--resume: {out} does not exist; drop --resume to start a new dataset")
-        if not provenance.path(out).is_file() and not records.empty_leftover(out):
+        if not provenance.provenance_path(out).is_file() and not records.empty_leftover(out):
             raise CollectError(f"--resume: {out} was not written by blindgrasp-collect-demos (no collection.json)")
     elif out.exists():
         raise CollectError(f"{out} already exists; pass --resume=true to append to it, or a new --output_dir")
@@ -103,7 +103,7 @@ def _check_inputs(cfg: CollectConfig):
     return teacher, object_names
 
 
-def collect(
+def collect_demos(
     cfg: CollectConfig, on_episode: EpisodeCallback | None = None, *, command: str | None = None
 ) -> CollectStats:
     """Run a collection. Raises CollectError (nothing touched) for bad inputs; any later exception propagates
@@ -281,7 +281,9 @@ def _cleanup(what: str, first: BaseException | None):
     except Exception as e:
         if first is None:
             raise
-        logger.error("%s also failed (%s); the first error stands.", what.capitalize(), durable.describe(e))
+        logger.error(
+            "%s also failed (%s); the first error stands.", what.capitalize(), durable.describe_write_error(e)
+        )
 
 
 def _finalize_or_abandon(ds) -> None:
@@ -307,7 +309,7 @@ def _finalize_or_abandon(ds) -> None:
 
 def _build_env(cfg: CollectConfig, object_names: list[str], seed: int, dr, reward_cfg):
     """Envs with autoreset for the objects that still need demos, env i seeded seed + i."""
-    return make_env(
+    return make_batched_env(
         "demos",
         tuple(object_names),
         num_envs=cfg.num_envs,
@@ -326,7 +328,7 @@ def _handle_episode(ep: Episode, cur: curation_mod.CurationConfig, tally, stats,
     if ep.physics_failed:
         o.physics_failed += 1
         return None, False
-    cut = curation_mod.evaluate(ep.task_reward, ep.uniaxial_force, cur)
+    cut = curation_mod.judge_episode(ep.task_reward, ep.uniaxial_force, cur)
     stats.rollouts += 1
     o.rollouts += 1
     o.passed += cut.passed

@@ -99,7 +99,7 @@ class CalibrationFileError(ValueError):
 RECORD_FIELDS = tuple(f.name for f in dataclasses.fields(MotorCalibration))
 
 
-def schema_problems(raw: object) -> list[str]:
+def servo_calibration_schema_problems(raw: object) -> list[str]:
     """The file's shape, checked on the raw JSON before anything converts it: an object of joint -> record, each
     record exactly LeRobot's `MotorCalibration` fields, each an integer (not a bool, a float or a string that a
     lenient decoder would coerce)."""
@@ -134,7 +134,7 @@ def read_raw(fpath: Path) -> object:
         raise ValueError(f"not complete JSON (truncated or corrupt): {e}") from e
 
 
-def problems(calibration: dict, ids: dict[str, int]) -> list[str]:
+def servo_calibration_problems(calibration: dict, ids: dict[str, int]) -> list[str]:
     """What is wrong with a loaded calibration, by the rules `calibrate()` builds it with: one record per joint under
     the configured servo ID, Drive_Mode 0 or 1 (reverse), a Homing_Offset the
     firmware accepts, and a position range 0 <= min < max <= 4095."""
@@ -166,11 +166,11 @@ def load_checked(
     (calibration, None), or ({}, the error) for a bad file, which `connect()` refuses (lerobot-calibrate still works:
     it connects with calibrate=False). `fix` is the command that replaces the file."""
     try:
-        bad = schema_problems(read_raw(fpath))
+        bad = servo_calibration_schema_problems(read_raw(fpath))
         if not bad:
             with open(fpath) as f, draccus.config_type("json"):  # as LeRobot's `Robot._load_calibration` reads it
                 calibration = draccus.load(dict[str, MotorCalibration], f)
-            bad = problems(calibration, ids)
+            bad = servo_calibration_problems(calibration, ids)
     except Exception as e:  # unreadable: empty, truncated, not JSON, not UTF-8
         bad = [f"unreadable ({type(e).__name__}: {e})"]
     if bad:
