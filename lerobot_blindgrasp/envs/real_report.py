@@ -20,7 +20,6 @@ from __future__ import annotations
 import atexit
 import json
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -66,14 +65,17 @@ def stamp_judge_at_exit(judge: str, argv: list[str] | None = None) -> Path | Non
     out = parse_arg("output_dir", sys.argv[1:] if argv is None else argv)
     if not out:
         return None
-    path, since = Path(out) / "eval_info.json", time.time()
+    path = Path(out) / "eval_info.json"
     if path in _STAMPED:  # every per-object env closes the one session
         return path
     _STAMPED.add(path)
+    # What is there now is another run's. Compared by identity, not by time: the kernel stamps files from a coarse
+    # clock that may lag time.time() by a tick, so a file written right after this call can look older than it.
+    before = _identity(path)
 
     def stamp() -> None:
         try:
-            if path.is_file() and path.stat().st_mtime >= since:
+            if path.is_file() and _identity(path) != before:
                 info = json.loads(path.read_text())
                 durable.atomic_write_json(path, {"judge": judge, **info}, indent=2)
         except (OSError, ValueError):
@@ -81,6 +83,14 @@ def stamp_judge_at_exit(judge: str, argv: list[str] | None = None) -> Path | Non
 
     atexit.register(stamp)
     return path
+
+
+def _identity(path: Path) -> tuple[int, int, int] | None:
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_ino, st.st_mtime_ns, st.st_size
 
 
 def judged_by(eval_info: dict, trial_log: Path | None) -> str:

@@ -124,6 +124,15 @@ def test_lerobot_evals_eval_info_names_the_judge_when_the_output_dir_is_given(tm
     assert json.loads((tmp_path / "eval_info.json").read_text()) == {"judge": "operator", "per_task": []}
 
 
+def test_another_runs_eval_info_is_left_as_it_was(tmp_path):
+    """A file that is there when the envs close and that this run does not rewrite is another run's: no judge."""
+    (tmp_path / "eval_info.json").write_text('{"per_task": []}')
+    code = ("from lerobot_blindgrasp.envs import real_report; "
+            f"real_report.stamp_judge_at_exit('operator', ['--output_dir={tmp_path}'])")  # fmt: skip
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, timeout=120)
+    assert (tmp_path / "eval_info.json").read_text() == '{"per_task": []}'
+
+
 # --- the overload limit: one number in the yaml, the robot's defaults and the docs ---------------------------------
 SITE_SPECIFIC = {"type", "id", "port", "force_sensor.port"}  # what a lab sets for its own gripper
 
