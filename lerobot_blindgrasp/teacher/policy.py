@@ -1,17 +1,12 @@
-"""Loading a trained teacher for inference (evaluation, demo collection), in either of its two forms.
+"""Loading a trained teacher for inference (evaluation, demo collection), from either of its two forms, without
+unpickling anything:
 
-- A shipped teacher: a folder with `teacher.safetensors` (the actor's state dict: MLP, Gaussian std and the
-  observation normalizer) and `teacher_config.json` (what the trainer wrote, plus a `weights` block). Nothing is
-  unpickled. `export_teacher` (CLI `blindgrasp-export-teacher --source=RUN_DIR --output_dir=OUT_DIR`) makes one
-  from a training run.
-- A training run directory: rsl-rl's `model_<it>.pt` checkpoints next to `teacher_config.json`. The latest one is
-  used (or a given file); it is read with `torch.load(weights_only=True)`, so it too runs no pickled code.
+- a shipped teacher: `teacher.safetensors` (the actor's state dict) and `teacher_config.json` (what the trainer
+  wrote, plus a `weights` block), as `blindgrasp-export-teacher` writes them;
+- a training run: rsl-rl's `model_<it>.pt` next to `teacher_config.json`, read with `weights_only=True`.
 
-The actor is rebuilt with rsl-rl's own `MLPModel` from the config and run deterministically (mean) or
-stochastically (sampled from its Gaussian), which demo collection needs; the JIT/ONNX exports only carry the mean.
-
-`default_teacher()` is the teacher every command uses when none is given: `models/<SHIPPED_TEACHER>` (the
-repository's folder, or the wheel's copy of it), or the folder in $BLINDGRASP_TEACHER.
+The actor is rsl-rl's `MLPModel` rebuilt from the config, run on its mean or sampled from its Gaussian (demos need
+both; the JIT/ONNX exports carry only the mean).
 """
 
 from __future__ import annotations
@@ -33,8 +28,7 @@ from lerobot_blindgrasp.teacher import blind_approach
 CONFIG_NAME = "teacher_config.json"
 WEIGHTS_NAME = "teacher.safetensors"
 FORMAT = "blindgrasp-teacher/1"
-# The shipped default teacher: a folder under the repository's models/. A better teacher dropped there in the same
-# format (teacher.safetensors + teacher_config.json) becomes the default by changing this one name.
+# The default teacher of every command: a folder under the shipped models/ (or $BLINDGRASP_TEACHER).
 SHIPPED_TEACHER = "teacher_cpu_bc"
 TEACHER_ENV_VAR = "BLINDGRASP_TEACHER"
 
@@ -112,11 +106,8 @@ def _refuse_student(p: Path) -> None:
 
 
 def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
     with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+        return hashlib.file_digest(f, "sha256").hexdigest()
 
 
 def observation_layout() -> dict:
@@ -176,8 +167,7 @@ class TeacherPolicy:
                 f"{self.checkpoint} does not fit its config or this observation layout ({first})"
             ) from None
         self.actor.to(device).eval()
-        # A blind-approach teacher computes its actor's group itself from the env's "privileged" vector, with the
-        # per-env touch counts of the batch it is stepping (blind_approach.BlindGroup).
+        # A blind-approach teacher computes its actor's group itself from the env's "privileged" vector.
         self.actor_input = blind_approach.ActorInput.from_record(self.config.get("actor_input"))
         self._blind = (
             blind_approach.BlindGroup(self.actor_input)

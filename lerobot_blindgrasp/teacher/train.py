@@ -2,15 +2,10 @@
 
     blindgrasp-train-teacher --output_dir=runs/teacher   # the shipped teacher's recipe, --preset=cpu_bc_capsule
 
-The run directory gets TensorBoard logs (reward terms, success per object, fps, collection/learning time),
-`model_<it>.pt` checkpoints every `save_interval` iterations, and `teacher_config.json`. Re-running the same
-command resumes from the newest checkpoint that loads; Ctrl-C saves one before exiting. At the end the actor is
-exported to TorchScript and ONNX (`exported/`), and `train_summary.json` is written last: it marks a finished run.
-
-Crash safety: every checkpoint is written to a temporary file and renamed into place (`durable.atomic_path`), so a
-kill during a save leaves the previous checkpoints and no `model_<it>.pt` that is cut short. A newest checkpoint
-that does not load all the same (a copy gone wrong, a disk error) is renamed `*.corrupt` with a warning naming it,
-and the run resumes from the one before. A kill costs at most the iterations since the last save (`save_interval`).
+The run directory gets TensorBoard logs, `model_<it>.pt` every `save_interval` iterations, `teacher_config.json`,
+the actor's TorchScript/ONNX export (`exported/`) and, last, `train_summary.json`, which marks a finished run.
+Re-running the same command resumes from the newest checkpoint that loads (a corrupt one is set aside as
+`*.corrupt`); Ctrl-C saves one first. Checkpoints are written atomically, so a kill costs at most `save_interval`.
 """
 
 from __future__ import annotations
@@ -84,9 +79,8 @@ class TrainTeacherConfig:
     # first cloning stage), cpu_bc_blind_approach (beyond the paper: it, fine-tuned with the object hidden from
     # the actor until a touch), paper (Table III), cpu, quick
     preset: str = SHIPPED_TEACHER_PRESET.name
-    seed: int = (
-        spec.TEACHER_TRAIN_SEED
-    )  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
+    # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); the torch seed
+    seed: int = spec.TEACHER_TRAIN_SEED
     iterations: int | None = None  # override the preset's max iterations
     num_envs: int | None = None  # override the preset's number of envs
     no_incentive: bool = False  # 'Student w/o r_i' teacher: every contact-paying reward term at 0
