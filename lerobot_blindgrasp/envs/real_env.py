@@ -4,20 +4,16 @@
         --env.robot="include robot_configs/blindgrasp_gripper.yaml" \\
         --env.task=medium --eval.n_episodes=10 --eval.batch_size=1 --eval.use_async_envs=false
 
-Why lerobot-eval and not lerobot-rollout: the paper reports a success rate per object over 10 trials of 10 s, which
-is exactly lerobot-eval's model (tasks x episodes, `info["is_success"]`, `pc_success` per task group), with the
-policy's own pre/post-processors and no extra code path. lerobot-rollout runs a policy on a robot but has no notion
-of trials, resets or success. So the gripper is wrapped as a gymnasium env, one task group per object:
-`eval_info.json` -> `per_group[<object>].pc_success` is the per-object success table
-(`python -m lerobot_blindgrasp.envs.real_report --eval_info=PATH` prints it as markdown).
-The trial itself (reset to the start pose, 200 steps at 20 Hz, who decides success) is `real_trial.py`.
+The paper's success rate per object over 10 trials is lerobot-eval's model (one task group per object,
+`info["is_success"]`, the policy's own processors); lerobot-rollout has no trials, resets or success. The trial
+itself is `real_trial.py`; `python -m lerobot_blindgrasp.envs.real_report` prints the per-object table.
 """
 
 from __future__ import annotations
 
 import functools
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import gymnasium as gym
 from lerobot.configs import PolicyFeature
@@ -86,25 +82,11 @@ class BlindGraspRealEnvConfig(EnvConfig):
         return {}
 
     def trial_settings(self):
-        """The trial's part of this config, as `real_trial.TrialSettings`."""
+        """The trial's part of this config (its fields are documented here), as `real_trial.TrialSettings`."""
         # Imported here: the trial is needed only when envs are made, and it never imports this module back.
         from lerobot_blindgrasp.envs.real_trial import TrialSettings
 
-        return TrialSettings(
-            robot=self.robot,
-            episode_s=self.episode_s,
-            success_mode=self.success_mode,
-            hold_force_n=self.hold_force_n,
-            min_contacts=self.min_contacts,
-            home_tolerance_rad=self.home_tolerance_rad,
-            home_timeout_s=self.home_timeout_s,
-            unattended_reset_s=self.unattended_reset_s,
-            tare_each_trial=self.tare_each_trial,
-            start_pose=self.start_pose,
-            trial_log=self.trial_log,
-            operator_socket=self.operator_socket,
-            pause_gc=self.pause_gc,
-        )
+        return TrialSettings(**{f.name: getattr(self, f.name) for f in fields(TrialSettings)})
 
     def check_policy(self) -> None:
         """lerobot-eval makes the envs before it loads the policy, and its make_policy would overwrite the

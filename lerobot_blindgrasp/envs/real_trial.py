@@ -1,24 +1,14 @@
-"""One real-gripper trial as a gym env (`RealGraspEnv`), on the one gripper its `GripperSession` holds.
+"""One real-gripper trial (= one lerobot-eval episode) as a gym env (`RealGraspEnv`), on the one gripper its
+`GripperSession` holds.
 
-One trial (= one lerobot-eval episode):
-1. reset: the gripper drives to the paper's start pose (0, pi/3, 0) at <= 0.3 rad per 20 Hz step (`start_pose=sim`:
-   to the sim env's start pose for the same evaluation index and object, its drawn joint offsets included); the operator
-   places the object at the claw centre and presses ENTER (unattended force mode: waits `unattended_reset_s`);
-   the fingertip sensors are tared (fingers in free air). Torque stays on, holding the pose, and the bus stays
-   alive through these waits (the robot's `keep_alive` each period, and during its tare), so the servos' bus
-   watchdog stays armed for a host that dies while waiting and never trips on a person's pause.
-2. 200 steps at 20 Hz (10 s): action = absolute joint targets, through `robot.send_action` (clipped on the robot).
-   The steps keep time with a `StepPacer`: after a late step (a slow policy) it re-bases on now rather than
-   firing the missed steps back to back, and after a slow read (a stalled bus) the next read waits until it is at
-   least 0.9 period after it, so no two samples come a few ms apart. The robot measures the period in every get_observation:
-   overruns are warned, counted in the trial log, and a sustained overrun ends the run (`GripperTimingError`).
-3. success, "lifted and held >= 1 s within 10 s", decided by
-   - `success_mode=operator` (the paper's protocol): the operator presses `s` as soon as the object has been held
-     off the table for 1 s (ends the trial, success) or `f` (ends it, failure); at 10 s without a key the env asks
-     `y`/`n`. Keys come from LeRobot's keyboard listener (pynput, or the terminal when headless).
-   - `success_mode=force` (unattended proxy): at least `min_contacts` fingertips read more than `hold_force_n`
-     continuously for `spec.SUCCESS_HOLD_S`. It sees a sustained grasp, not the lift itself: use it for smoke tests
-     and dry runs, and report operator-mode numbers.
+1. reset: drive to the start pose (`start_pose`: the paper's (0, pi/3, 0), or the sim env's for the same evaluation
+   index and object), wait for the operator's ENTER (unattended: `unattended_reset_s`), tare the fingertips. Torque
+   stays on and the robot's `keep_alive` runs every period, so the bus watchdog stays armed through a person's pause.
+2. 200 steps at 20 Hz of absolute joint targets (`robot.send_action` clips them), paced by a `StepPacer`, which
+   re-bases after a late step instead of firing missed ones back to back. Overruns go to the trial log.
+3. success, "lifted and held >= 1 s within 10 s": `success_mode=operator` (the paper's protocol) takes `s`/`f`
+   during the trial or `y`/`n` at its end; `success_mode=force` (an unattended proxy for dry runs: it sees a
+   sustained grasp, not the lift) needs `min_contacts` tips above `hold_force_n` for `spec.SUCCESS_HOLD_S`.
 """
 
 from __future__ import annotations
@@ -44,8 +34,7 @@ logger = logging.getLogger(__name__)
 
 @dataclass(frozen=True, kw_only=True)
 class TrialSettings:
-    """What a trial needs from `--env.*`: `BlindGraspRealEnvConfig.trial_settings()` makes it, and its fields (and
-    their defaults) are documented there."""
+    """What a trial needs from `--env.*` (`BlindGraspRealEnvConfig.trial_settings()`, which documents the fields)."""
 
     robot: object  # a LeRobot RobotConfig: `make_robot_from_config` builds the one robot of the session from it
     episode_s: float
