@@ -5,7 +5,7 @@
 
 The same code and flags as `lerobot-rollout` (`RolloutConfig`, `build_rollout_context`, `create_strategy`) but for
 the robot observation processor: LeRobot 0.6.1's `build_rollout_context` keeps only `*.pos`/`*.vel` features, so
-plain `lerobot-rollout` would feed a 9-d state to a policy trained on 12. `DeclareForceFeatures` declares the forces
+plain `lerobot-rollout` feeds a 9-d state to a policy trained on 12. `DeclareForceFeatures` declares the forces
 again, so `observation.state` is built from exactly `spec.STATE_NAMES`, as in every dataset.
 """
 

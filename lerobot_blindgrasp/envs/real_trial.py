@@ -3,7 +3,7 @@
 
 1. reset: drive to the start pose (`start_pose`: the paper's (0, pi/3, 0), or the sim env's for the same evaluation
    index and object), wait for the operator's ENTER (unattended: `unattended_reset_s`), tare the fingertips. Torque
-   stays on and the robot's `keep_alive` runs every period, so the bus watchdog stays armed through a person's pause.
+   stays on and the robot's `keep_alive` runs every period: the bus watchdog stays armed through a person's pause.
 2. 200 steps at 20 Hz of absolute joint targets (`robot.send_action` clips them), paced by a `StepPacer`, which
    re-bases after a late step instead of firing missed ones back to back. Overruns go to the trial log.
 3. success, "lifted and held >= 1 s within 10 s": `success_mode=operator` (the paper's protocol) takes `s`/`f`
@@ -34,7 +34,7 @@ logger = logging.getLogger(__name__)
 
 @dataclass(frozen=True, kw_only=True)
 class TrialSettings:
-    """What a trial needs from `--env.*` (`BlindGraspRealEnvConfig.trial_settings()`, which documents the fields)."""
+    """What a trial needs from `--env.*` (`BlindGraspRealEnvConfig.trial_settings()` documents the fields)."""
 
     robot: object  # a LeRobot RobotConfig: `make_robot_from_config` builds the one robot of the session from it
     episode_s: float

@@ -2,8 +2,8 @@
 
 The `cpu` teacher alone presses the small capsule into the table, and no reward or exploration change moved it off
 that local optimum; `sim.scripted.SideGraspScript` lifts it under the paper's randomization. As in DAPG (Rajeswaran
-et al. 2018), the script's successful (privileged observation, delta-theta) pairs are collected before training, and
-the weighted MSE of the actor's mean against them joins PPO's loss in each minibatch step. The weight decays
+et al. 2018), the script's successful (privileged observation, delta-theta) pairs are collected before training,
+and the weighted MSE of the actor's mean against them joins PPO's loss in each minibatch step. The weight decays
 linearly to 0, after which the optimum is the paper's reward alone. The std and the critic are untouched.
 
 Wired in through rsl-rl's `class_name` (`ScriptedDemos.runner_cfg`), so the settings are recorded in

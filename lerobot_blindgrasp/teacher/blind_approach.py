@@ -1,6 +1,6 @@
 """The blind-approach teacher's actor input: the privileged vector with what the student cannot know hidden.
 
-The student sees nothing of the object before a fingertip touches it, so a teacher steering by the object's pose asks
+The student sees nothing of the object before a fingertip touches it; a teacher steering by the object's pose asks
 for actions the student cannot infer. The actor of a blind-approach teacher reads the group `privileged_blind`: the
 object's pose, velocities and planar distance read 0 until a load cell reads above `TOUCH_N` (for more than
 `ActorInput.reveal_delay_steps` consecutive steps); with `fingertips_from_joints` the fingertip poses are the

@@ -1,7 +1,7 @@
 """torchrun launches for rsl-rl's multi-GPU mode (on when WORLD_SIZE > 1): which device and envs a process gets.
 
 rsl-rl's `OnPolicyRunner._configure_multi_gpu` hard-codes CUDA and NCCL; on a machine without GPUs `runner_class`
-returns a subclass that does the same bookkeeping with gloo on the CPU. What is synchronized, and when, stays rsl-rl's.
+returns a subclass doing the same bookkeeping with gloo on the CPU. What is synchronized, and when, stays rsl-rl's.
 """
 
 from __future__ import annotations

@@ -4,9 +4,9 @@
     blindgrasp-eval-teacher --teacher=runs/teacher_cpu --episodes=20
 
 Deterministic (mean) and stochastic (sampled) episodes on the evaluation start states, without pushes; writes
-`eval.json`, `eval.md` (95 % Wilson intervals) and `eval.png`. Episode k on an object is evaluation index `--seed` + k
-(`spec.eval_env_seed`), as in lerobot-eval's `blindgrasp` env: `--seed=S --episodes=N` pairs with `lerobot-eval
---seed=S --eval.n_episodes=N`, on start states no training or demo collection used.
+`eval.json`, `eval.md` (95 % Wilson intervals) and `eval.png`. Episode k on an object is evaluation index
+`--seed` + k (`spec.eval_env_seed`), as in lerobot-eval's `blindgrasp` env: `--seed=S --episodes=N` pairs with
+`lerobot-eval --seed=S --eval.n_episodes=N`, on start states no training or demo collection used.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """rsl-rl-lib 5.x `VecEnv` adapter over the batched blind-grasp env, which auto-resets inside `step`.
 
-Observation groups: "policy" (the student's 12-d o_t), "privileged" (the teacher's 92-d vector) and, when
-`blind_group` is given, "privileged_blind" (`blind_approach.py`, the one host round trip). extras["time_outs"] marks
+Observation groups: "policy" (the student's 12-d o_t), "privileged" (the teacher's 92-d vector) and, with
+`blind_group`, "privileged_blind" (`blind_approach.py`, the one host round trip). extras["time_outs"] marks
 truncations; extras["log"] carries, for the episodes that ended this step, each weighted reward term per second,
 success overall and per object, and termination reasons, which rsl-rl averages into TensorBoard.
 """
