@@ -7,22 +7,13 @@ Network (robomimic `TransformerActorNetwork` + `GPT_Backbone`, deterministic hea
     n_layers x pre-LN block: x + Attn(LN(x)), x + MLP(LN(x))      fused qkv (no bias), GELU MLP 4x
     final LayerNorm -> MLP head [1024, 1024] on the LAST token -> A -> tanh
 
-The network's inputs and outputs are normalized: `observation.state` is z-scored and the prediction is delta-theta /
-0.3 in [-1, 1]; the preprocessor turns the dataset's absolute targets into that, and `select_action` returns the
-absolute target q_now + 0.3 * prediction, with the raw q_now the preprocessor passes along (see the processor module).
-
-Padding. LeRobot pads a window that starts before the episode by repeating the episode's first frame and flags
-those steps in `observation.state_is_pad`. Padded keys are masked out of attention, so they cannot reach the real
-tokens (each padded query still sees itself, which keeps its softmax row finite). At inference the rolling context
-does the same: it starts as n_obs_steps copies of the first observation, all but the newest flagged as padding, so
-step t of an episode sees exactly what training saw for frame t.
-
-Two forward paths compute the same function:
-- `BlindgraspGPT.forward` (training and inference): fused attention (`F.scaled_dot_product_attention`), and in the
-  last layer only the keys/values of all tokens plus the query, output projection and MLP of the last token, the
-  only token the head reads. Exact, also with dropout, because the loss only uses the last token.
-- `BlindgraspGPT.forward_reference`: the plain path, every token through every layer with explicit softmax
-  attention. Kept to check the fast path (tests, `python -m lab.bench --bench.type=policy`).
+Padding: LeRobot pads a window that starts before its episode with copies of the first frame, flagged in
+`observation.state_is_pad`; padded keys are masked out of attention (a padded query still sees itself). At
+inference the rolling context starts the same way, so step t of an episode sees exactly what training saw for frame
+t.
+ `BlindgraspGPT.forward` computes only the last token in the last layer (the only one the head and the loss read)
+with
+fused attention; `forward_reference`, every token through explicit softmax attention, is kept to check it.
 """
 
 from __future__ import annotations
@@ -66,11 +57,8 @@ lerobot-eval --policy.path={{repo_id}} --env.type=blindgrasp --env.task=all --ev
 
 
 def padding_attention_mask(is_pad: Tensor) -> Tensor:
-    """(B, T) padding flags -> (B, 1, T, T) boolean mask, True where query i may attend to key j.
-
-    Causal, with padded keys removed; the diagonal stays open so a padded query (which only has padded keys
-    before it) keeps one finite score.
-    """
+    """(B, T) padding flags -> (B, 1, T, T) boolean mask, True where query i may attend to key j: causal, padded
+    keys removed, the diagonal open so that a padded query keeps one finite score."""
     t = is_pad.shape[-1]
     causal = torch.ones(t, t, dtype=torch.bool, device=is_pad.device).tril()
     eye = torch.eye(t, dtype=torch.bool, device=is_pad.device)
@@ -261,12 +249,8 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         self._context_is_pad: deque[Tensor] = deque(maxlen=self.config.n_obs_steps)
 
     def _push_observation(self, state: Tensor) -> tuple[Tensor, Tensor | None]:
-        """Append one (B, 12) observation to the rolling context; return (B, T, 12) states and padding flags.
-
-        Like robomimic's FrameStackWrapper and LeRobot diffusion's `populate_queues`, the first observation of an
-        episode fills the context with copies of itself; the copies are flagged as padding, as LeRobot flags the
-        repeated first frame in a training window.
-        """
+        """Append one (B, 12) observation to the rolling context (the first of an episode fills it with copies of
+        itself, flagged as padding); return (B, T, 12) states and padding flags."""
         real = torch.zeros(state.shape[0], dtype=torch.bool, device=state.device)
         if not self._context:
             for _ in range(self.config.n_obs_steps - 1):
@@ -286,11 +270,8 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
 
     @torch.no_grad()
     def predict_normalized_delta(self, batch: dict[str, Tensor]) -> Tensor:
-        """(B, 9) prediction delta / 0.3, bounded: what the network is trained to output.
-
-        A (B, 12) `observation.state` is one new observation: it goes into the rolling context (like
-        `select_action`). A (B, T, 12) one is a full window (with optional `observation.state_is_pad`), used as is.
-        """
+        """(B, 9) prediction delta / 0.3, bounded, from one new (B, 12) observation (into the rolling context, as
+        `select_action`) or a full (B, T, 12) window (with optional `observation.state_is_pad`)."""
         state = batch[OBS_STATE]
         if state.ndim == 3:
             return self._bounded(self.model(state, batch.get(STATE_IS_PAD)))
