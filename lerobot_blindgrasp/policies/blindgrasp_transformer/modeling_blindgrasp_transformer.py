@@ -8,12 +8,11 @@ Network (robomimic `TransformerActorNetwork` + `GPT_Backbone`, deterministic hea
     final LayerNorm -> MLP head [1024, 1024] on the LAST token -> A -> tanh
 
 Padding: LeRobot pads a window that starts before its episode with copies of the first frame, flagged in
-`observation.state_is_pad`; padded keys are masked out of attention (a padded query still sees itself). At
-inference the rolling context starts the same way, so step t of an episode sees exactly what training saw for frame
-t.
- `BlindgraspGPT.forward` computes only the last token in the last layer (the only one the head and the loss read)
-with
-fused attention; `forward_reference`, every token through explicit softmax attention, is kept to check it.
+`observation.state_is_pad`; padded keys are masked out of attention (a padded query still sees itself). The rolling
+inference context starts the same way, so step t of an episode sees exactly what training saw for frame t.
+
+`BlindgraspGPT.forward` runs the last layer for the last token only (the one the head reads), with fused attention;
+`forward_reference` (every token, explicit softmax attention) is kept to check it.
 """
 
 from __future__ import annotations
@@ -85,11 +84,9 @@ class CausalSelfAttention(nn.Module):
     def forward(self, x: Tensor, mask: Tensor | None) -> Tensor:
         q, k, v = (self._heads(p) for p in self.qkv(x).split(self.embed_dim, dim=-1))
         p = self.attn_dropout if self.training else 0.0
-        if mask is None:
-            y = F.scaled_dot_product_attention(q, k, v, dropout_p=p, is_causal=True)
-        else:
-            y = F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=p)
-        return self._merge(y)
+        return self._merge(
+            F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=p, is_causal=mask is None)
+        )
 
     def forward_last_query(self, x: Tensor, key_mask: Tensor | None) -> Tensor:
         """Attention output of the last token only: (B, T, D) -> (B, 1, D). key_mask: (B, 1, 1, T) or None."""
@@ -196,11 +193,9 @@ class BlindgraspGPT(nn.Module):
     def forward_reference(self, states: Tensor, is_pad: Tensor | None = None) -> Tensor:
         """The plain path: every token through every layer, explicit softmax attention. Same result as forward."""
         x = self._tokens(states)
-        t = x.shape[1]
-        if is_pad is None:
-            mask = torch.ones(t, t, dtype=torch.bool, device=x.device).tril()[None, None]
-        else:
-            mask = padding_attention_mask(is_pad)
+        mask = padding_attention_mask(
+            torch.zeros(x.shape[:2], dtype=torch.bool, device=x.device) if is_pad is None else is_pad
+        )
         for block in self.blocks:
             x = block.forward_reference(x, mask)
         return self._decode(x[:, -1])
@@ -253,9 +248,8 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         itself, flagged as padding); return (B, T, 12) states and padding flags."""
         real = torch.zeros(state.shape[0], dtype=torch.bool, device=state.device)
         if not self._context:
-            for _ in range(self.config.n_obs_steps - 1):
-                self._context.append(state)
-                self._context_is_pad.append(~real)
+            self._context.extend([state] * (self.config.n_obs_steps - 1))
+            self._context_is_pad.extend([~real] * (self.config.n_obs_steps - 1))
         self._context.append(state)
         self._context_is_pad.append(real)
         states, is_pad = self.current_context()
@@ -273,9 +267,7 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         """(B, 9) prediction delta / 0.3, bounded, from one new (B, 12) observation (into the rolling context, as
         `select_action`) or a full (B, T, 12) window (with optional `observation.state_is_pad`)."""
         state = batch[OBS_STATE]
-        if state.ndim == 3:
-            return self._bounded(self.model(state, batch.get(STATE_IS_PAD)))
-        states, is_pad = self._push_observation(state)
+        states, is_pad = (state, batch.get(STATE_IS_PAD)) if state.ndim == 3 else self._push_observation(state)
         return self._bounded(self.model(states, is_pad))
 
     @torch.no_grad()
