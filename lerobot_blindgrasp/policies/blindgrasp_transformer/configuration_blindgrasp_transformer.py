@@ -70,10 +70,6 @@ class ConstantThenLinearDecaySchedulerConfig(LRSchedulerConfig):
         return LambdaLR(optimizer, lr_lambda, -1)
 
 
-# What this policy's action means once its postprocessor has run.
-ACTION_MEANING = policy_contract.ACTION_MEANING
-
-
 @dataclass
 class TrainedFor:
     """The robot a checkpoint was trained for, from its training dataset's metadata (robot type, fps, the state and
@@ -84,7 +80,7 @@ class TrainedFor:
     fps: float | None = None
     state_names: list[str] | None = None  # None: the dataset's metadata named no features
     action_names: list[str] | None = None
-    action_meaning: str = ACTION_MEANING
+    action_meaning: str = policy_contract.ACTION_MEANING  # what the action means once postprocessed
     source: str | None = None
 
     @classmethod
@@ -114,10 +110,7 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
 
     # Action: IDENTITY, since the target->delta processor step scales it by the 0.3 rad bound (checked below).
     normalization_mapping: dict[str, NormalizationMode] = field(
-        default_factory=lambda: {
-            "STATE": NormalizationMode.MEAN_STD,
-            "ACTION": NormalizationMode.IDENTITY,
-        }
+        default_factory=lambda: {"STATE": NormalizationMode.MEAN_STD, "ACTION": NormalizationMode.IDENTITY}
     )
 
     # Training (Table IV). The batch size of 256 is lerobot-train's `--batch_size=256`.
