@@ -134,7 +134,10 @@ def _train_one(cfg: TrainTeacherConfig, preset: TeacherPreset, num_envs: int, it
         return final
     if cfg.export:
         export_actor(runner, out / "exported")
-    write_learning_curve(out)
+    from lerobot_blindgrasp.results.plots import plot_curves, teacher_curves
+
+    if curves := teacher_curves(out):  # from the run's TensorBoard scalars
+        plot_curves(out / "learning_curve.png", curves, f"Teacher PPO ({out.name})")
     steps = (completed - done_its) * preset.runner["num_steps_per_env"] * num_envs
     summary = {
         "checkpoint": str(final),
@@ -279,15 +282,6 @@ def _copy_checkpoint(ckpt: Path, folder: Path) -> None:
         # The next stage's gloo runner keeps this process group (reopening it raced in CI); rsl-rl's NCCL runner
         # would open a second one, so staged presets stay CPU recipes.
         torch.distributed.barrier()
-
-
-def write_learning_curve(run_dir: Path) -> None:
-    """learning_curve.png in the run directory, from its TensorBoard scalars."""
-    from lerobot_blindgrasp.results.plots import plot_curves, teacher_curves
-
-    curves = teacher_curves(run_dir)
-    if curves:
-        plot_curves(run_dir / "learning_curve.png", curves, f"Teacher PPO ({run_dir.name})")
 
 
 def main(argv=None) -> None:

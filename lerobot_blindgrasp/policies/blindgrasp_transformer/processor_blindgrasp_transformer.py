@@ -38,13 +38,6 @@ from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
 Q_NOW = "observation.blindgrasp_q_now"
 
 
-def current_joints_from_state(state: Tensor) -> Tensor:
-    """Raw `observation.state` -> q_now: (B, T, 12) window -> its last frame's joints; (B, 12) -> its joints."""
-    if state.ndim == 3:
-        state = state[:, -1]
-    return state[..., spec.STATE_JOINT_SLICE]
-
-
 def target_to_normalized_delta(target: Tensor, q_now: Tensor, bound: float = spec.ACTION_BOUND_RAD) -> Tensor:
     """Absolute joint target (rad) -> delta / bound, clipped to [-1, 1] (the robot clips |delta| <= bound too)."""
     q_now = q_now.to(target)
@@ -80,7 +73,7 @@ class TargetToNormalizedDeltaStep(ProcessorStep):
         state = observation.get(OBS_STATE)
         if state is None:
             raise KeyError(f"blindgrasp_target_to_delta needs '{OBS_STATE}' to know the current joint positions")
-        q_now = current_joints_from_state(state)
+        q_now = (state[:, -1] if state.ndim == 3 else state)[..., spec.STATE_JOINT_SLICE]  # a window's last frame
         new_transition = transition.copy()
         new_transition[TransitionKey.OBSERVATION] = {**observation, Q_NOW: q_now}
         action = transition.get(TransitionKey.ACTION)
