@@ -48,8 +48,7 @@ class _KeyQueue:
 
 
 class OperatorKeys(_KeyQueue):
-    """Key presses as a queue; `listener_factory` has the signature of LeRobot's `create_key_listener`
-    (the default)."""
+    """Key presses as a queue; `listener_factory` is LeRobot's `create_key_listener` or one like it."""
 
     HELP = "ENTER=start trial, s/y=success, f/n=failure"
 
@@ -70,9 +69,8 @@ class OperatorKeys(_KeyQueue):
 
 
 class SocketOperator(_KeyQueue):
-    """The operator at the other end of a Unix socket. Each trial is announced (`announce_trial`) with its object
-    and evaluation seed; the operator answers ENTER once the object is placed, and one outcome key. Keys carry
-    their trial's token, so a late key of a finished trial is dropped, never counted for the next one."""
+    """The operator at the other end of a Unix socket: told each trial's object and seed, it answers ENTER once the
+    object is placed, then one outcome key. Keys carry their trial's token: a late key is never counted."""
 
     def __init__(self, path: str, connect_timeout_s: float = 10.0):
         super().__init__()

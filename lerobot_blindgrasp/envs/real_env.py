@@ -55,9 +55,8 @@ class BlindGraspRealEnvConfig(EnvConfig):
     home_timeout_s: float = 5.0
     unattended_reset_s: float = 5.0
     tare_each_trial: bool = True
-    # Where each trial starts: "home", the paper's start pose (0, pi/3, 0) on every finger; or "sim", the sim env's
-    # start pose for the same evaluation index and object (the start pose plus its drawn joint offsets, within
-    # +-20 deg), so that a run beside `--env.type=blindgrasp` (the physics twin's) starts like for like.
+    # Where each trial starts: "home", the paper's (0, pi/3, 0) on every finger; or "sim", the sim env's start pose
+    # for the same evaluation index and object, so that a run beside `--env.type=blindgrasp` starts like for like.
     start_pose: str = "home"
     # Python's garbage collector off during each trial's 200 steps and run once after it (`hardware/realtime.py`).
     pause_gc: bool = True
@@ -89,10 +88,8 @@ class BlindGraspRealEnvConfig(EnvConfig):
         return TrialSettings(**{f.name: getattr(self, f.name) for f in fields(TrialSettings)})
 
     def check_policy(self) -> None:
-        """lerobot-eval makes the envs before it loads the policy, and its make_policy would overwrite the
-        checkpoint's output features with ours: the checkpoint's own files are checked here, before anything loads
-        or moves (`policy_contract.py`). Its path is the one the robot's config took from the command line
-        (`BlindgraspGripperConfig.command_line`); the robot checks it again at connect."""
+        """The checkpoint's own files against the robot (`policy_contract.py`) before lerobot-eval loads it (its
+        make_policy would overwrite the output features with ours) or anything moves; the robot checks again."""
         command_line = getattr(self.robot, "command_line", None)
         allow = getattr(self.robot, "allow_unverified_policy", False)
         path = command_line.policy_path if command_line is not None else None

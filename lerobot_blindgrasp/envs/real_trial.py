@@ -125,8 +125,7 @@ class RealGraspEnv(gym.Env):
         self._peak = np.zeros(spec.NUM_FORCES)
         self._schedule = StepPacer(spec.CONTROL_DT)
         self._overruns_at_start = self._overruns()
-        # Where each period goes: the write (send_action), the read (_observe) and, between a step's return and the
-        # next call, the caller's policy (lerobot-eval: processors + select_action); logged per trial.
+        # Where each period goes, logged per trial; "policy" is the caller's time between a step and the next.
         self._step_s: dict[str, list[float]] = {"read": [], "policy": [], "write": []}
         self._returned_at: float | None = None
 
@@ -194,9 +193,8 @@ class RealGraspEnv(gym.Env):
         return obs, {"is_success": False}
 
     def _wait_keeping_bus_alive(self, keys: set[str] | None, duration_s: float = 0.0) -> str | None:
-        """Wait for one of `keys` (None: for `duration_s`) with the torque on, holding the pose: the robot's
-        `keep_alive` runs every control period, so its servos' bus watchdog stays armed and fed (a dead host is
-        still stopped by it) instead of tripping on a person's pause."""
+        """Wait for one of `keys` (None: for `duration_s`) holding the pose, with `keep_alive` every period: the bus
+        watchdog stays armed for a dead host instead of tripping on a person's pause."""
         keep_alive = getattr(self.robot, "keep_alive", None)
         deadline = time.monotonic() + duration_s
         while True:

@@ -5,13 +5,10 @@ head predicting delta-theta / 0.3 in [-1, 1] from the last token (the processors
 
 Table IV -> field:
     batch size 256                      -> lerobot-train `--batch_size=256` (a training-loop setting)
-    number of epochs 2000               -> lerobot-train `--steps` = 2000 * ceil(num_frames / batch_size), computed
-                                           from the collected dataset (`lerobot_blindgrasp.presets.student`)
+    number of epochs 2000               -> lerobot-train `--steps`, from the collected dataset (`presets.student`)
     optimizer AdamW, lr 1e-4            -> `optimizer_lr`
     L2 regularization 0.01              -> `optimizer_weight_decay`
-    lr schedule: linear decay after
-      100 epochs                        -> `scheduler_constant_steps` (= 100 epochs' worth of steps),
-                                           `scheduler_end_factor`
+    linear lr decay after 100 epochs    -> `scheduler_constant_steps` (100 epochs' steps), `scheduler_end_factor`
     loss: MSE                           -> `BlindgraspTransformerPolicy.forward`
     Transformer layers 6                -> `n_layers`   (via `size="paper"`)
     embedding dimension 512             -> `embed_dim`  (via `size="paper"`)
