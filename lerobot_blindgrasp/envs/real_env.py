@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import functools
 import logging
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 import gymnasium as gym
 from lerobot.configs import PolicyFeature
@@ -80,13 +80,6 @@ class BlindGraspRealEnvConfig(EnvConfig):
     def gym_kwargs(self) -> dict:
         return {}
 
-    def trial_settings(self):
-        """The trial's part of this config (its fields are documented here), as `real_trial.TrialSettings`."""
-        # Imported here: the trial is needed only when envs are made, and it never imports this module back.
-        from lerobot_blindgrasp.envs.real_trial import TrialSettings
-
-        return TrialSettings(**{f.name: getattr(self, f.name) for f in fields(TrialSettings)})
-
     def check_policy(self) -> None:
         """The checkpoint's own files against the robot (`policy_contract.py`) before lerobot-eval loads it (its
         make_policy would overwrite the output features with ours) or anything moves; the robot checks again."""
@@ -96,12 +89,13 @@ class BlindGraspRealEnvConfig(EnvConfig):
         policy_contract.check_named(path, self.robot.type, self.fps, "--env.fps", allow_unverified=allow)
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
+        # Imported here: the trial is needed only when envs are made.
         from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 
         self.check_policy()
         if n_envs != 1 or use_async_envs:
             logger.warning("One physical gripper: evaluating with one synchronous env (asked n_envs=%s).", n_envs)
-        session = GripperSession(self.trial_settings())
+        session = GripperSession(self)
         out = {}
         for name in self.objects:
             env_fn = functools.partial(RealGraspEnv, session, name)

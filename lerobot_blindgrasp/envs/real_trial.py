@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import logging
 import time
-from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
@@ -30,25 +29,6 @@ from lerobot_blindgrasp.sim import objects, randomization
 from lerobot_blindgrasp.sim.gym_env import start_seed
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True, kw_only=True)
-class TrialSettings:
-    """What a trial needs from `--env.*` (`BlindGraspRealEnvConfig.trial_settings()` documents the fields)."""
-
-    robot: object  # a LeRobot RobotConfig: `make_robot_from_config` builds the one robot of the session from it
-    episode_s: float
-    success_mode: str  # "operator" | "force"
-    hold_force_n: float
-    min_contacts: int
-    home_tolerance_rad: float
-    home_timeout_s: float
-    unattended_reset_s: float
-    tare_each_trial: bool
-    trial_log: str | None
-    start_pose: str = "home"  # "home" | "sim": the sim env's start pose for (evaluation index, object)
-    operator_socket: str | None = None  # None: the keyboard; else an unattended operator there (envs/operator.py)
-    pause_gc: bool = True  # no garbage collection inside a trial; one after it
 
 
 def sim_start_pose(object_name: str, eval_index: int) -> np.ndarray:
@@ -71,7 +51,8 @@ class GripperSession:
     """The one robot (one serial bus) shared by the per-object envs: connected at the first reset, disconnected
     once at the end (or on any error, by the robot's own latched stop)."""
 
-    def __init__(self, cfg: TrialSettings, keys: OperatorKeys | None = None):
+    def __init__(self, cfg, keys: OperatorKeys | None = None):
+        """`cfg`: the `--env.*` config (`BlindGraspRealEnvConfig`, which documents the trial's settings)."""
         from lerobot.robots.utils import make_robot_from_config
 
         self.cfg = cfg
