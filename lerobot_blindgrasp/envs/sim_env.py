@@ -2,7 +2,7 @@
 
     lerobot-eval --policy.path=<checkpoint> --env.type=blindgrasp --env.task=all --eval.n_episodes=10
 
-A task_id is the object's index in the catalogue (`TASK_IDS`), whichever objects are evaluated. lerobot-eval's
+A task_id is the object's index in the catalogue (`objects.task_id`), whichever objects are evaluated. lerobot-eval's
 `--seed` + episode number is mapped per object into the evaluation seed range (`sim/gym_env.start_seed`), so
 `blindgrasp-eval-teacher --seed S` runs the same start states. Imported at plugin discovery: MuJoCo loads lazily.
 """
@@ -18,14 +18,10 @@ from lerobot.envs.configs import EnvConfig
 
 from lerobot_blindgrasp import spaces, spec
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp.sim.objects import object_for_task_id, task_id  # noqa: F401  (lerobot-eval task ids)
+from lerobot_blindgrasp.sim.objects import task_id
 
 TASK_GROUP = "blindgrasp"
 RENDER_STRIDE_REST = spec.CONTROL_HZ  # one video frame a second for the episodes past `render_episodes`
-
-
-# The 18 paper objects; OOD objects registered later get the next ids (see `task_id`).
-TASK_IDS: dict[int, str] = {task_id(n): n for n in objects.PAPER_OBJECTS}
 
 
 @EnvConfig.register_subclass("blindgrasp")
