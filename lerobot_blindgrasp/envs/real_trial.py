@@ -32,8 +32,7 @@ logger = logging.getLogger(__name__)
 
 
 def sim_start_pose(object_name: str, eval_index: int) -> np.ndarray:
-    """The joints where `--env.type=blindgrasp` starts evaluation index `eval_index` on `object_name`: its own draw
-    (`randomization.draw_reset` of the eval randomization, first episode of the env seed), clipped to the limits."""
+    """The joints where `--env.type=blindgrasp` starts evaluation index `eval_index` on `object_name`, clipped."""
     if object_name not in objects.CATALOGUE:
         raise ValueError(f"start_pose=sim needs an object of the sim's catalogue; {object_name!r} is not one")
     seeds = np.array([start_seed(eval_index, object_name)], dtype=np.uint64)
@@ -174,8 +173,8 @@ class RealGraspEnv(gym.Env):
         return obs, {"is_success": False}
 
     def _wait_keeping_bus_alive(self, keys: set[str] | None, duration_s: float = 0.0) -> str | None:
-        """Wait for one of `keys` (None: for `duration_s`) holding the pose, with `keep_alive` every period: the bus
-        watchdog stays armed for a dead host instead of tripping on a person's pause."""
+        """Wait for one of `keys` (None: for `duration_s`) holding the pose, with `keep_alive` every period: the
+        bus watchdog stays armed for a dead host instead of tripping on a person's pause."""
         keep_alive = getattr(self.robot, "keep_alive", None)
         deadline = time.monotonic() + duration_s
         while True:

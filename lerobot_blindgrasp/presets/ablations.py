@@ -48,9 +48,8 @@ def _scripted_demos(settings: TeacherPreset) -> dict | None:
 
 
 def has_scripted_cloning(settings: TeacherPreset) -> bool:
-    """Whether training with `settings` clones scripted grasps into the actor at any stage: the PPO algorithm is
-    replaced (`runner["algorithm"]["class_name"]`) or carries a scripted-demos entry, here or in a preset it
-    continues."""
+    """Whether training with `settings` clones scripted grasps at any stage: the PPO algorithm is replaced or
+    carries a scripted-demos entry, here or in a preset it continues."""
     return any(
         s.runner["algorithm"]["class_name"] != "PPO" or _scripted_demos(s) is not None for s in _stages(settings)
     )

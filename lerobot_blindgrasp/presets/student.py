@@ -61,9 +61,8 @@ class StudentStage:
 @dataclass(frozen=True, kw_only=True)
 class DaggerStage:
     """DAgger-style relabelling, beyond the paper (`blindgrasp-dagger`): `rounds` times, the latest student drives
-    `episodes_per_object` episodes per object, the teacher's mean action labels every state it visits, and the
-    student is fine-tuned from its own weights for `steps` on everything aggregated so far. `objects` aims it at the
-    objects the student trails on."""
+    `episodes_per_object` episodes per object of `objects`, the teacher's mean action labels every state it visits,
+    and the student is fine-tuned for `steps` on everything aggregated so far."""
 
     episodes_per_object: int
     steps: int

@@ -98,9 +98,8 @@ def cloning_loss(mean: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 
 class _JointCloningOptimizer:
-    """PPO's optimizer, whose `step` first adds the cloning gradient: the joint loss without rewriting
-    `PPO.update` (which calls zero_grad, backward, clip, step once per minibatch). Everything else is delegated, so
-    learning-rate schedules and checkpoints see the wrapped optimizer itself."""
+    """PPO's optimizer, whose `step` first adds the cloning gradient (a joint loss without rewriting PPO.update);
+    everything else is delegated, so schedules and checkpoints see the wrapped optimizer itself."""
 
     def __init__(self, inner: torch.optim.Optimizer, alg: PPOWithScriptedDemos):
         self._inner = inner

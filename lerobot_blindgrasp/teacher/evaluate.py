@@ -35,8 +35,7 @@ MODES = ("deterministic", "stochastic")
 class EvalTeacherConfig:
     """Per-object success of a PPO teacher on the evaluation start states, deterministic and stochastic."""
 
-    # teacher folder (teacher.safetensors, or a run directory: its latest model_<it>.pt) or a checkpoint file;
-    # default: the shipped teacher
+    # a teacher folder (shipped, or a run: its latest model_<it>.pt) or checkpoint; default: the shipped one
     teacher: Path | None = None
     episodes: int = 20  # episodes per object and mode
     objects: str = "all"  # "all", "medium", or a comma-separated list of catalogue names

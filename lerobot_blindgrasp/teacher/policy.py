@@ -45,8 +45,7 @@ def models_dir() -> Path:
 
 
 def default_teacher(folder: str | None = None) -> Path:
-    """The teacher a command uses when none is given: $BLINDGRASP_TEACHER, else the shipped one (`folder`: another
-    shipped teacher under models/, as a pipeline preset may name)."""
+    """The teacher a command uses when none is given: $BLINDGRASP_TEACHER, else the shipped `folder` of models/."""
     if os.environ.get(TEACHER_ENV_VAR):
         return Path(os.environ[TEACHER_ENV_VAR])
     d = models_dir() / (folder or SHIPPED_TEACHER)
@@ -130,11 +129,8 @@ def load_actor_state(ckpt: Path) -> tuple[dict[str, torch.Tensor], int | None]:
 
 
 class TeacherPolicy:
-    """Numpy-in, numpy-out teacher: obs dict (N, ...) -> delta-theta actions (N, 9).
-
-    A blind-approach teacher keeps per-env state (touch counts) for the batch it steps: one instance per env batch,
-    called once per control step (a repeated call on the same observation does not advance it).
-    """
+    """Numpy-in, numpy-out teacher: obs dict (N, ...) -> delta-theta actions (N, 9). A blind-approach teacher keeps
+    per-env touch counts: one instance per env batch, called once per control step."""
 
     def __init__(self, checkpoint: str | Path, device: str = "cpu"):
         self.checkpoint = resolve_checkpoint(checkpoint)

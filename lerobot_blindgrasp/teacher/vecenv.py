@@ -69,8 +69,7 @@ class RslRlGraspEnv(VecEnv):
         return self._obs, reward.to(self.device, torch.float32), (terminated | truncated).to(self.device), extras
 
     def _episode_log(self, info: dict) -> dict[str, float | torch.Tensor]:
-        """Scalars rsl-rl averages over an iteration; tensors stay on the device (rsl-rl reads them as numbers when
-        it writes its log, once per iteration)."""
+        """Scalars rsl-rl averages over an iteration; tensors stay on the device until rsl-rl writes its log."""
         log: dict = {"Metrics/physics_resets_total": float(self.env.physics_resets)}
         log["Metrics/mean_lift_cm"] = info["lift"].clamp_min(0).mean() * 100.0
         log["Metrics/mean_contacts"] = info["n_contact"].double().mean()

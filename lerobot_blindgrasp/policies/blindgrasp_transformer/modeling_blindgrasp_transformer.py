@@ -31,8 +31,7 @@ from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig, T
 from .processor_blindgrasp_transformer import Q_NOW, normalized_delta_to_target
 
 STATE_IS_PAD = f"{OBS_STATE}_is_pad"
-# The distribution that registers this policy type with LeRobot; without it `--policy.path=<hub id>` cannot
-# resolve `type: blindgrasp_transformer`, so the model card says to install it.
+# The distribution that registers this policy type with LeRobot: the model card says to install it.
 PACKAGE = "lerobot_policy_blindgrasp"
 CARD_INSTALL = f"""
 ## Install first

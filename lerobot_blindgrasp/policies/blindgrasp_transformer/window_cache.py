@@ -161,6 +161,5 @@ def _choose(reader: DatasetReader) -> type[DatasetReader] | None:
 
 
 def install_window_cache() -> None:
-    """From now on in this process, servable readers of this plugin's datasets loaded while `enabled()` are served
-    from the cache."""
+    """From now on in this process, serve the servable readers of this plugin's datasets from the cache."""
     compat.serve_dataset_readers_with(_choose)
