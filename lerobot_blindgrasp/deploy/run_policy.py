@@ -3,10 +3,8 @@
     blindgrasp-rollout --strategy.type=base \\
         --policy.path=<checkpoint> --robot="include robot_configs/blindgrasp_gripper.yaml" --fps=20 --duration=10
 
-The same code and flags as `lerobot-rollout` (`RolloutConfig`, `build_rollout_context`, `create_strategy`) but for
-the robot observation processor: LeRobot 0.6.1's `build_rollout_context` keeps only `*.pos`/`*.vel` features, so
-plain `lerobot-rollout` feeds a 9-d state to a policy trained on 12. `DeclareForceFeatures` declares the forces
-again, so `observation.state` is built from exactly `spec.STATE_NAMES`, as in every dataset.
+`lerobot-rollout`'s own code and flags, but LeRobot 0.6.1 keeps only `*.pos`/`*.vel` robot features, which would
+feed a 9-d state to a policy trained on 12: `DeclareForceFeatures` declares the forces again.
 """
 
 # No `from __future__ import annotations`: LeRobot's parser.wrap reads the config class from the real annotation.

@@ -1,12 +1,10 @@
-"""`--env.type=blindgrasp_real`: the paper's real-gripper protocol as a lerobot-eval env.
+"""`--env.type=blindgrasp_real`: the paper's real-gripper protocol (success per object over 10 trials) as a
+lerobot-eval env, one task group per object; lerobot-rollout has no trials, resets or success. The trial itself is
+`real_trial.py`.
 
     lerobot-eval --policy.path=<checkpoint> --env.type=blindgrasp_real \\
         --env.robot="include robot_configs/blindgrasp_gripper.yaml" \\
         --env.task=medium --eval.n_episodes=10 --eval.batch_size=1 --eval.use_async_envs=false
-
-The paper's success rate per object over 10 trials is lerobot-eval's model (one task group per object,
-`info["is_success"]`, the policy's own processors); lerobot-rollout has no trials, resets or success. The trial
-itself is `real_trial.py`; `python -m lerobot_blindgrasp.envs.real_report` prints the per-object table.
 """
 
 from __future__ import annotations

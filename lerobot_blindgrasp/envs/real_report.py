@@ -1,11 +1,7 @@
-"""Per-object success table of a real-gripper evaluation, from lerobot-eval's `eval_info.json`.
+"""Per-object success table of a real-gripper evaluation, from lerobot-eval's `eval_info.json`. Each rate comes
+with its 95 % Wilson interval, under a first line naming who judged the trials.
 
-    python -m lerobot_blindgrasp.envs.real_report --eval_info=outputs/eval/<run>/eval_info.json
-
-`--eval_info` also takes the run's folder. Each object is its own task group (`per_task[i].task_group`), and each
-rate comes with its 95 % Wilson interval (10 trials pin little down). The first line names who judged the trials:
-the env stamps it into `eval_info.json` ("judge", `stamp_judge_at_exit`) when lerobot-eval has an `--output_dir`;
-otherwise `--trial_log` tells it from each trial's `decided_by`.
+    python -m lerobot_blindgrasp.envs.real_report --eval_info=outputs/eval/<run>/eval_info.json   # or its folder
 """
 
 from __future__ import annotations

@@ -1,14 +1,8 @@
 """One real-gripper trial (= one lerobot-eval episode) as a gym env (`RealGraspEnv`), on the one gripper its
-`GripperSession` holds.
-
-1. reset: drive to the start pose (`start_pose`: the paper's (0, pi/3, 0), or the sim env's for the same evaluation
-   index and object), wait for the operator's ENTER (unattended: `unattended_reset_s`), tare the fingertips. Torque
-   stays on and the robot's `keep_alive` runs every period: the bus watchdog stays armed through a person's pause.
-2. 200 steps at 20 Hz of absolute joint targets (`robot.send_action` clips them), paced by a `StepPacer`, which
-   re-bases after a late step instead of firing missed ones back to back. Overruns go to the trial log.
-3. success, "lifted and held >= 1 s within 10 s": `success_mode=operator` (the paper's protocol) takes `s`/`f`
-   during the trial or `y`/`n` at its end; `success_mode=force` (an unattended proxy for dry runs: it sees a
-   sustained grasp, not the lift) needs `min_contacts` tips above `hold_force_n` for `spec.SUCCESS_HOLD_S`.
+`GripperSession` holds: reset to the start pose, the operator's ENTER (unattended: a wait) and a tare, torque on
+and the bus watchdog fed all along; then 200 steps at 20 Hz paced by a `StepPacer`; success (lifted and held for
+1 s) decided by the operator's keys (the paper's protocol) or, unattended, by `min_contacts` tips above
+`hold_force_n` for `spec.SUCCESS_HOLD_S` (a proxy that sees a sustained grasp, not the lift).
 """
 
 from __future__ import annotations

@@ -1,14 +1,11 @@
-"""The one preset registry: every preset of every command, as data.
+"""The one preset registry: every preset of every command, as data. `paper` is exactly the paper's tables; every
+recipe beyond it is a named preset that says so in its deviations.
 
-    PRESETS["quick"]            pipeline presets (blindgrasp-pipeline --preset=NAME; `pipeline.py`)
-    TEACHER_PRESETS["paper"]    teacher presets (blindgrasp-train-teacher --preset=NAME; `teacher.py`): Table III
-    SIZES["paper"]              student sizes (lerobot-train --policy.size=NAME; the policy's own table): Table IV
-    GLOVE_PRESETS["glove"]      students on glove recordings (blindgrasp-train-glove --preset=NAME; `glove.py`)
+    PRESETS["quick"]            blindgrasp-pipeline --preset=NAME (`pipeline.py`)
+    TEACHER_PRESETS["paper"]    blindgrasp-train-teacher --preset=NAME (`teacher.py`): Table III
+    SIZES["paper"]              lerobot-train --policy.size=NAME (the policy's own table): Table IV
+    GLOVE_PRESETS["glove"]      blindgrasp-train-glove --preset=NAME (`glove.py`)
     TABLE_V["wo_r_i"]           the ablation rows (Table V; `ablations.py`)
-    get("cpu", kind="teacher")
-
-`paper` is exactly the paper's tables; every recipe beyond it is a named preset that says so in its deviations. A
-preset holds settings; what a recipe measured lives in the model cards and docs/.
 """
 
 from __future__ import annotations

@@ -1,12 +1,8 @@
-"""The student part of the preset registry: each stage's size (a `SIZES` entry; `paper` is Table IV) and length.
+"""The student part of the preset registry: each stage's size (a `SIZES` entry) and length. Table IV's epochs are
+passes over the collected dataset's frames (LeRobot's reading; robomimic's template counts 100 steps, and the paper
+does not say which), so the steps exist only after the demo stage (`schedule`):
 
-Table IV's 2000 epochs at batch 256, LR constant for 100 epochs, count passes over the collected dataset's frames
-(LeRobot's reading; robomimic's template, which the paper trained with, defines an epoch as 100 steps, and the
-paper does not say which it used), so the step counts exist only after the demo stage:
-
-    steps_per_epoch = ceil(total_frames / batch_size)          total_frames: <dataset>/meta/info.json
-    --steps                         = epochs * steps_per_epoch
-    --policy.scheduler_constant_steps = constant_lr_epochs * steps_per_epoch
+    --steps = epochs * ceil(total_frames / batch_size)      --policy.scheduler_constant_steps likewise
 """
 
 from __future__ import annotations

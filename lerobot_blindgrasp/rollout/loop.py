@@ -1,11 +1,5 @@
-"""The one episode loop, and its one outcome record (`Episode`).
-
-    for ep in run_batch(make_batched_env("eval", names, episodes=20, seed=1000), actor): ...  # one episode per env
-    for ep in stream(make_batched_env("demos", names, num_envs=180, seed=s), actor, stop): ...  # until stop()
-
-Each step the loop can record per-env quantities (`TRACES`, and `labels` the caller computes from the observation
-before the step); they come back cut to each episode's length in `Episode.traces`. With `skip_final`, `run_batch`
-stops simulating envs whose success has latched: the same successes, but their lift and traces end there.
+"""The one episode loop (`run_batch`: one episode per env; `stream`: auto-resetting envs, until stopped) and its
+outcome record, `Episode`, whose `traces` hold what was recorded at each step (`TRACES`, and the caller's labels).
 """
 
 from __future__ import annotations

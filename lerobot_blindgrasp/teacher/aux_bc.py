@@ -1,13 +1,8 @@
-"""Scripted side grasps cloned into the PPO actor: how the shipped teacher learned to lift the small capsule.
-
-The `cpu` teacher alone presses the small capsule into the table, and no reward or exploration change moved it off
-that local optimum; `sim.scripted.SideGraspScript` lifts it under the paper's randomization. As in DAPG (Rajeswaran
-et al. 2018), the script's successful (privileged observation, delta-theta) pairs are collected before training,
-and the weighted MSE of the actor's mean against them joins PPO's loss in each minibatch step. The weight decays
-linearly to 0, after which the optimum is the paper's reward alone. The std and the critic are untouched.
-
-Wired in through rsl-rl's `class_name` (`ScriptedDemos.runner_cfg`), so the settings are recorded in
-`teacher_config.json` and checked on resume like every PPO setting.
+"""Scripted side grasps cloned into the PPO actor, as in DAPG (Rajeswaran et al. 2018): how the shipped teacher
+learned to lift the small capsule, which `cpu` alone presses into the table whatever the reward or exploration. The
+weighted MSE of the actor's mean against the script's successful (observation, delta-theta) pairs joins PPO's loss
+in each minibatch step, its weight decaying linearly to 0, after which the optimum is the paper's reward alone.
+Wired in through rsl-rl's `class_name` (`ScriptedDemos.runner_cfg`), so it is recorded and checked on resume.
 """
 
 from __future__ import annotations

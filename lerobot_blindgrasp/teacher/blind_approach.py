@@ -1,14 +1,10 @@
-"""The blind-approach teacher's actor input: the privileged vector with what the student cannot know hidden.
+"""The blind-approach teacher's actor input (group `privileged_blind`): the privileged vector with the object's
+pose, velocities and planar distance read as 0 until a load cell has read above `TOUCH_N` (for more than
+`reveal_delay_steps`), and optionally the fingertip poses from the measured joints. A teacher steering by what the
+student cannot see asks it for actions it cannot infer; the critic still reads everything.
 
-The student sees nothing of the object before a fingertip touches it; a teacher steering by the object's pose asks
-for actions the student cannot infer. The actor of a blind-approach teacher reads the group `privileged_blind`: the
-object's pose, velocities and planar distance read 0 until a load cell reads above `TOUCH_N` (for more than
-`ActorInput.reveal_delay_steps` consecutive steps); with `fingertips_from_joints` the fingertip poses are the
-kinematics of the measured joints, not the true ones. The critic reads everything (asymmetric actor-critic).
-
-`BlindGroup` keeps per-env touch counts, so one instance belongs to one env batch. An episode's start is recognised
-by the privileged previous action being exactly 0 on all 9 joints (the env zeroes it on reset; a policy's action
-never is), so it works in every loop that resets envs without telling the policy.
+`BlindGroup` keeps per-env touch counts (one instance per env batch); an episode starts where the privileged
+previous action is exactly 0 on all joints (the env zeroes it on reset), so no loop needs to tell it of resets.
 """
 
 from __future__ import annotations

@@ -1,12 +1,8 @@
-"""`blindgrasp-eval-teacher`: per-object success table of a trained teacher.
+"""`blindgrasp-eval-teacher`: per-object success table of a trained teacher, deterministic and stochastic, on the
+evaluation start states: `--seed=S --episodes=N` runs the episodes `lerobot-eval --seed=S --eval.n_episodes=N`
+runs. Writes `eval.json`, `eval.md` (95 % Wilson intervals) and `eval.png`.
 
-    blindgrasp-eval-teacher --episodes=20 --output_dir=outputs/teacher_eval     # the shipped default teacher
-    blindgrasp-eval-teacher --teacher=runs/teacher_cpu --episodes=20
-
-Deterministic (mean) and stochastic (sampled) episodes on the evaluation start states, without pushes; writes
-`eval.json`, `eval.md` (95 % Wilson intervals) and `eval.png`. Episode k on an object is evaluation index
-`--seed` + k (`spec.eval_env_seed`), as in lerobot-eval's `blindgrasp` env: `--seed=S --episodes=N` pairs with
-`lerobot-eval --seed=S --eval.n_episodes=N`, on start states no training or demo collection used.
+    blindgrasp-eval-teacher --teacher=runs/teacher_cpu --episodes=20   # default: the shipped teacher
 """
 
 from __future__ import annotations

@@ -1,11 +1,8 @@
-"""`blindgrasp-export-teacher`: a training checkpoint as a shippable teacher (no pickle).
+"""`blindgrasp-export-teacher`: a training checkpoint as a shippable teacher (no pickle): `teacher.safetensors`
+(the actor only), `teacher_config.json` (the run's config plus a `weights` block) and a `README.md` card, which a
+card already there survives unless `--overwrite_card=true`.
 
-    blindgrasp-export-teacher --source=runs/teacher_cpu --output_dir=models/teacher_cpu \
-        [--push_to_hub=you/blindgrasp_teacher]
-
-Writes `teacher.safetensors` (the actor only: critic and optimizer stay behind), `teacher_config.json` (the run's
-config plus a `weights` block: source checkpoint, sha256, iteration, observation layout) and a `README.md` card,
-which a card already there (hand-written, with results) survives unless `--overwrite_card=true`.
+    blindgrasp-export-teacher --source=runs/teacher_cpu --output_dir=models/teacher_cpu [--push_to_hub=you/name]
 """
 
 from __future__ import annotations

@@ -1,12 +1,7 @@
-"""Loading a trained teacher for inference (evaluation, demo collection), from either of its two forms, without
-unpickling anything:
-
-- a shipped teacher: `teacher.safetensors` (the actor's state dict) and `teacher_config.json` (what the trainer
-  wrote, plus a `weights` block), as `blindgrasp-export-teacher` writes them;
-- a training run: rsl-rl's `model_<it>.pt` next to `teacher_config.json`, read with `weights_only=True`.
-
-The actor is rsl-rl's `MLPModel` rebuilt from the config, run on its mean or sampled from its Gaussian (demos need
-both; the JIT/ONNX exports carry only the mean).
+"""Loading a trained teacher for inference (evaluation, demo collection) without unpickling anything: a shipped
+folder (`teacher.safetensors` + `teacher_config.json`, as `blindgrasp-export-teacher` writes them) or a training
+run (rsl-rl's `model_<it>.pt`, read with `weights_only=True`). The actor is rsl-rl's `MLPModel` rebuilt from the
+config, run on its mean or sampled from its Gaussian (demos need both; the JIT/ONNX exports carry only the mean).
 """
 
 from __future__ import annotations

@@ -2,10 +2,8 @@
 
     blindgrasp-train-teacher --output_dir=runs/teacher   # the shipped teacher's recipe, --preset=cpu_bc_capsule
 
-The run directory gets TensorBoard logs, `model_<it>.pt` every `save_interval` iterations, `teacher_config.json`,
-the actor's TorchScript/ONNX export (`exported/`) and, last, `train_summary.json`, which marks a finished run.
-Re-running the same command resumes from the newest checkpoint that loads (a corrupt one is set aside as
-`*.corrupt`); Ctrl-C saves one first. Checkpoints are written atomically, so a kill costs at most `save_interval`.
+Re-running resumes from the newest checkpoint that loads; checkpoints are atomic, Ctrl-C saves one, and
+`train_summary.json`, written last, marks a finished run.
 """
 
 from __future__ import annotations

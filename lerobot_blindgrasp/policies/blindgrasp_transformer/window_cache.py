@@ -1,15 +1,9 @@
-"""The student's data path: LeRobotDataset windows served from an in-memory low-dimensional cache.
-
-LeRobot's `DatasetReader` indexes the `datasets` table once per windowed key, converting through Python lists, so a
-30-frame window of 12 floats costs milliseconds, longer than the student's update. Like robomimic's
-`hdf5_cache_mode="low_dim"`, this module keeps each column as one torch tensor per process and slices windows from
-it, giving the same keys, dtypes, shapes, values and padding flags (`tests/policies/test_student_data_path.py`).
-
-LeRobot has no reader hook: `install_window_cache()` (run at plugin import) asks
-`compat.serve_dataset_readers_with` for each reader that has just loaded a table. A reader of this plugin's schema
-(`ours`) that the cache reproduces exactly (`servable`: training windows, no cameras, language or index remapping,
-numeric columns) becomes a `LowDimWindowReader`; every other dataset keeps LeRobot's path. Each loader process
-builds its own cache on its first sample. `BLINDGRASP_LOW_DIM_CACHE=0` at load time keeps LeRobot's path.
+"""The student's data path: LeRobotDataset windows sliced from one in-memory tensor per column (as robomimic's
+`hdf5_cache_mode="low_dim"`), with the same items as LeRobot's `DatasetReader`, which converts each window through
+Python lists at a cost above the student's update. `install_window_cache()` (at plugin import) asks
+`compat.serve_dataset_readers_with` for each reader that loads a table: one of this plugin's schema (`ours`) that
+the cache reproduces exactly (`servable`) becomes a `LowDimWindowReader`, every other keeps LeRobot's path.
+`BLINDGRASP_LOW_DIM_CACHE=0` at load time keeps LeRobot's path.
 """
 
 from __future__ import annotations
