@@ -1,18 +1,14 @@
-"""The `blindgrasp_transformer` student: robomimic's BC-Transformer over o_t = (9 joint positions, 3 forces).
+"""The `blindgrasp_transformer` student: robomimic's BC-Transformer (`TransformerActorNetwork` + `GPT_Backbone`,
+deterministic head) over o_t = (9 joint positions, 3 forces). B batch, T context (30), D embed_dim, A = 9 joints:
 
-Shapes: B batch, T context (n_obs_steps = 30), D embed_dim, A = 9 joints.
-
-Network (robomimic `TransformerActorNetwork` + `GPT_Backbone`, deterministic head):
     token_t = Dropout(LayerNorm(Linear(12 -> D)(o_t) + pos[t]))      learned pos = nn.Parameter(1, T, D), zeros
     n_layers x pre-LN block: x + Attn(LN(x)), x + MLP(LN(x))      fused qkv (no bias), GELU MLP 4x
     final LayerNorm -> MLP head [1024, 1024] on the LAST token -> A -> tanh
 
-Padding: LeRobot pads a window that starts before its episode with copies of the first frame, flagged in
-`observation.state_is_pad`; padded keys are masked out of attention (a padded query still sees itself). The rolling
-inference context starts the same way, so step t of an episode sees exactly what training saw for frame t.
-
-`BlindgraspGPT.forward` runs the last layer for the last token only (the one the head reads), with fused attention;
-`forward_reference` (every token, explicit softmax attention) is kept to check it.
+A window that starts before its episode repeats the first frame, flagged in `observation.state_is_pad` (LeRobot's
+padding); padded keys are masked out of attention, and the rolling inference context starts the same way, so step t
+sees exactly what training saw for frame t. `forward` runs the last layer for the last token only (the one the head
+reads); `forward_reference`, every token with explicit softmax attention, is kept to check it.
 """
 
 from __future__ import annotations

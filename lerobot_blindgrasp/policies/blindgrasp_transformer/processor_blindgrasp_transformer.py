@@ -1,7 +1,5 @@
 """Pre/post processors of `blindgrasp_transformer`: state z-scoring and the absolute-target <-> delta conversion.
-
-A LeRobot `action` is the ABSOLUTE joint target in radians (`spec.ACTION_NAMES`), target = q_now + delta, while the
-network predicts delta / 0.3 in [-1, 1]. The pipelines saved with the checkpoint make it self-contained:
+A LeRobot `action` is the ABSOLUTE joint target (rad), target = q_now + delta; the network predicts delta / 0.3.
 
     preprocessor   rename -> add batch dim -> device -> [blindgrasp_sensor_augment, training only]
                    -> blindgrasp_target_to_delta   q_now := the raw joints of observation.state's last frame,
@@ -10,12 +8,10 @@ network predicts delta / 0.3 in [-1, 1]. The pipelines saved with the checkpoint
     select_action  action := q_now + 0.3 * pred, with the q_now that came with the observation
     postprocessor  unnormalizer (identity for the action; kept for lerobot-train's overrides) -> device(cpu)
 
-The clip is of training targets: actions are bounded by the model (tanh) and by the env or robot, not here.
-
-Why the policy, not the postprocessor, turns its prediction into a target: LeRobot calls `postprocessor(action)`
-with the policy's output alone, so q_now travels with the observation and nothing is remembered between calls.
-LeRobot's `RelativeActionsProcessorStep` takes the whole state (not a window's last frame), does no bound scaling,
-and is refused by lerobot-rollout's sync engine, which assumes action chunks.
+The policy, not the postprocessor, makes the target: LeRobot's postprocessor sees only the policy's output, so
+q_now travels with the observation and nothing is remembered between calls. The clip is of training targets;
+actions are bounded by the model (tanh) and by the env or robot. LeRobot's `RelativeActionsProcessorStep` takes the
+whole state, does no bound scaling, and is refused by lerobot-rollout's sync engine.
 """
 
 from __future__ import annotations
