@@ -74,7 +74,7 @@ class BatchedGraspEnv:
             for o in obj_specs
         ]
         self._templates = templates
-        self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)  # on the CPU: it builds MjModels
+        self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)  # (n,) on the CPU
         if cfg.backend == "batch":
             self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
             self.physics = BatchBackend(self.models, nthread=cfg.nthread)
@@ -82,8 +82,10 @@ class BatchedGraspEnv:
         else:
             from lerobot_blindgrasp.sim.backends.warp import WarpBackend  # optional dependency
 
-            self.models = None  # per-world fields on the device; env_model(i) rebuilds env i's MjModel on demand
-            self.physics = WarpBackend(templates, self.object_index, self.env_model, device=cfg.device)
+            self.models = None  # per-world fields on the device; env_model(i) builds env i's MjModel on demand
+            self.physics = WarpBackend(
+                templates, self.object_index, self.physics_draw, cfg.dr.torque_limit_scale, device=cfg.device
+            )
             self.batch = None
         observations.check_state_layout(templates[0])
         self._init_task_state(templates[0], obj_specs)
