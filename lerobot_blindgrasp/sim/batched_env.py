@@ -66,14 +66,8 @@ class BatchedGraspEnv:
         self.object_index = allocate_objects(n, len(cfg.objects), cfg.object_weights)  # index into cfg.objects
         self.object_names = [cfg.objects[k] for k in self.object_index]
         obj_specs = [objects.scaled(objects.get_object(name), cfg.dr.object_size_scale) for name in cfg.objects]
-
-        templates = [
-            gripper.compile_model(
-                objects.object_mjcf(o, gripper.OBJECT_CONTYPE, gripper.OBJECT_CONAFFINITY), cfg.physics
-            )
-            for o in obj_specs
-        ]
-        self._templates = templates
+        mjcf = [objects.object_mjcf(o, gripper.OBJECT_CONTYPE, gripper.OBJECT_CONAFFINITY) for o in obj_specs]
+        self._templates = templates = [gripper.compile_model(xml, cfg.physics) for xml in mjcf]
         self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)  # (n,) on the CPU
         if cfg.backend == "batch":
             self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
@@ -156,7 +150,7 @@ class BatchedGraspEnv:
         qpos[:, observations.OBJECT_POS] = torch.cat([xy, self.rest_height[ids, None]], dim=1)
         qpos[:, observations.OBJECT_QUAT] = self._rest_quat[ids]
         self._qpos[ids] = qpos
-        self._ctrl[ids] = q0
+        self._ctrl[ids] = q0.to(self._ctrl.dtype)  # float32 where the tensor is Warp's own array (share_arrays)
         self.action_latency.reset(ids, q0)
         self.servo.reset(ids, q0)
         self.hold_push.reset(ids)

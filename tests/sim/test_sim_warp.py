@@ -264,30 +264,39 @@ def test_each_term_per_step_within_float32_of_the_batch_backend():
         np.testing.assert_array_equal(info_w["success"], info_b["success"])
 
 
-def test_shared_arrays_are_warps_own_memory_and_step_alike():
-    """`share_arrays=True` with one geometry group: the contract's tensors are the Warp arrays themselves (same
-    memory, float32), and stepping through them gives bit for bit what the copying layout gives."""
+def test_one_group_shares_warps_own_memory_and_steps_as_the_copying_layout(pair36):
+    """With one geometry group (the default `share_arrays`), the contract's tensors are the Warp arrays themselves
+    (same memory, float32): the task resets and steps through them, auto-reset included, and stepping them gives
+    bit for bit what the copying layout gives. With several groups they cannot be, and are copies."""
     from lerobot_blindgrasp.sim.backends.warp import WarpBackend
 
+    assert not pair36[1].physics.shares_memory  # four groups
     env = BatchedGraspEnv(
         GraspEnvConfig(
-            backend="warp", device="cpu", num_envs=3, seed=5, objects=("cylinder_a_medium",), dr=NO_PUSH
+            backend="warp",
+            device="cpu",
+            num_envs=3,
+            seed=5,
+            objects=("cylinder_a_medium",),
+            dr=NO_PUSH,
+            episode_s=4 / spec.CONTROL_HZ,
         )
     )
-    env.reset()
-    copying = env.physics
-    shared = WarpBackend(env._templates, env.object_index, env.physics_draw, device="cpu", share_arrays=True)
-    assert shared.shares_memory and not copying.shares_memory
+    shared = env.physics
+    assert shared.shares_memory
     data = shared.groups[0].data
     for k in ("qpos", "qvel", "ctrl", "xfrc_applied", "sensordata"):
         view = getattr(shared, k)
         assert view.dtype == torch.float32 and view.data_ptr() == getattr(data, k).ptr, k
-    everyone = np.arange(3)
-    shared.reset(everyone)
-    for k in ("qpos", "qvel", "ctrl"):
-        getattr(shared, k)[:] = getattr(copying, k)  # the env's reset state, cast to float32 on the way
-    shared.forward(everyone)
+    env.reset()  # the task's reset writes its float64 draws into the float32 arrays
     np.testing.assert_array_equal(data.qpos.numpy(), shared.qpos.numpy())  # written in place, no copy
+    copying = WarpBackend(env._templates, env.object_index, env.physics_draw, device="cpu", share_arrays=False)
+    assert not copying.shares_memory and copying.qpos.dtype == torch.float64
+    everyone = np.arange(3)
+    copying.reset(everyone)
+    for k in ("qpos", "qvel", "ctrl"):
+        getattr(copying, k)[:] = getattr(shared, k)  # the env's reset state
+    copying.forward(everyone)
     target = copying.ctrl + 0.1
     for _ in range(3):
         copying.ctrl[:] = target
@@ -297,3 +306,9 @@ def test_shared_arrays_are_warps_own_memory_and_step_alike():
             np.testing.assert_array_equal(
                 getattr(shared, k).numpy(), getattr(copying, k).numpy().astype(np.float32)
             )
+    ended = 0
+    for _ in range(5):  # the 4-step episodes end and auto-reset through the shared arrays
+        obs, reward, _, truncated, info = env.step(np.zeros((3, spec.NUM_JOINTS)))
+        ended += int(truncated.sum())
+        assert np.isfinite(obs["privileged"]).all() and np.isfinite(reward).all()
+    assert ended == 3 and (env.episode_length.numpy() == 1).all()

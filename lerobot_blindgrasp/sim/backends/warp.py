@@ -4,22 +4,28 @@ Layout. MuJoCo Warp steps `nworld` copies of one model; model fields whose spec 
 per world (`put_model(mjm, batch_sizes={field: nworld})`, indexed `worldid % rows` in every kernel). Objects of the
 same geom type (box, cylinder, capsule, sphere) compile to models of identical structure that differ only in such
 fields (geom size and bounds, mass, inertia, rest pose), so envs are grouped by the object's geom type: one Warp
-model and one Data per group, each with its share of worlds. Within a group every field that differs between the
-envs' randomized CPU models (the same `MjModel`s the batch backend steps: Table II friction, mass, inertia, servo
-gains, and the constants `mj_setConst` derives from them) is batched per world and filled from those models, so
-both backends simulate the same parameters. Fields that differ but cannot be batched raise at construction.
+model and one Data per group, each with its share of worlds.
 
-State. `qpos`, `qvel`, `ctrl`, `xfrc_applied` and `sensordata` are float64 tensors on Warp's device (`device`,
-the torch name of `wp_device`), in env order; a step never copies them to the host. Each control step copies ctrl
-and xfrc_applied into the groups' Warp arrays and qpos, qvel and sensordata back, on the device (about 100 floats
-per env, cast between float64 and Warp's float32); `wp.to_torch` views of the Warp arrays (shared memory) are the
-two ends of those copies. `share_arrays=True` removes the copies where it can: with one group holding every env in
-order, the tensors ARE the Warp arrays (float32, mjlab's way). It is off by default for two reasons: the task's
-reset writes float64 rows into qpos and ctrl with indexed assignment, which torch refuses into a float32 tensor
-(casting them to the tensor's dtype there is all it takes), and with several groups (the paper's 18 objects are
-four geometry types) one tensor cannot share memory with several Warp arrays whose worlds interleave in env order:
-that needs every geometry in one model. On CUDA, torch's stream is synchronized before Warp's launches and Warp's
-after them. The `nstep` substeps of each group run as one captured graph: a CUDA graph on a GPU, Warp's API
+Per-world randomization, written on the device. A group's Warp model is built from ONE MjModel, its first object's
+(not one randomized MjModel per env, as the batch backend steps). Per world, on the device: the fields that differ
+between the group's objects are gathered from the objects' models (a handful), Table II's draw is written into them
+by `randomization.write_physics_draw` (the same torch code that writes an env's MjModel for the batch backend, run
+in float64 over the worlds, then cast once into Warp's float32 arrays), and `mjw.set_const` recomputes what
+`mj_setConst` derives from them (subtree masses and centres of mass, the inverse weights of bodies and dofs; every
+field it writes has one row per world). The draws are made once per env at construction (paper, Sec. III-B), so
+resets write no model fields. Fields that differ between objects but cannot be batched raise at construction.
+`tests/sim/test_sim_warp.py` checks every per-world field against the batch backend's per-env MjModels.
+
+State. `qpos`, `qvel`, `ctrl`, `xfrc_applied` and `sensordata` are tensors on Warp's device (`device`, the torch
+name of `wp_device`), in env order; a step never copies them to the host. With one group holding every env in
+order (`share_arrays`, the default where it holds: an env of one object geometry), they ARE the group's Warp arrays
+(float32, mjlab's way) and nothing is copied; the task writes them with their dtype. With several groups (the
+paper's 18 objects are four geometry types) one tensor cannot share memory with several Warp arrays whose worlds
+interleave in env order (that needs every geometry in one model), so the tensors are float64 copies: each control
+step copies ctrl and xfrc_applied into the groups' Warp arrays and qpos, qvel and sensordata back, on the device
+(about 100 floats per env, cast between float64 and Warp's float32); `wp.to_torch` views of the Warp arrays (shared
+memory) are the two ends of those copies. On CUDA, torch's stream is synchronized before Warp's launches and
+Warp's after them. The `nstep` substeps of each group run as one captured graph: a CUDA graph on a GPU, Warp's API
 capture on its CPU device (replayed natively, without the Python launch overhead of each kernel, which on CPU is
 most of a step's time; the replay is bit-identical to stepping kernel by kernel).
 
@@ -143,10 +149,11 @@ class WarpBackend:
         device: str | None = None,
         nconmax: int = NCONMAX,
         njmax: int = NJMAX,
-        share_arrays: bool = False,
+        share_arrays: bool = True,
     ):
         """templates: one compiled MjModel per object; object_index: object of each env; draw: every env's Table II
-        draw (`randomization.draw_physics`), written into the worlds' rows on the device."""
+        draw (`randomization.draw_physics`), written into the worlds' rows on the device; share_arrays: the state
+        tensors are the Warp arrays themselves where that is possible (one group), else copies."""
         self.wp_device = device or default_warp_device()
         self.device = torch.device(wp.device_to_torch(self.wp_device))
         self._cuda = self.device.type == "cuda"
@@ -163,7 +170,7 @@ class WarpBackend:
             g.ids_t = torch.as_tensor(g.ids, device=self.device)
             g.view = {k: wp.to_torch(getattr(g.data, k)) for k in (*_STATE, "qacc_warmstart", "overflow")}
         # share_arrays: with one group holding every env in order, the contract's tensors ARE its Warp arrays
-        # (float32, no copy at all); the task's terms must then write them with their dtype (see State above).
+        # (float32, no copy at all); the task's terms write them with their dtype (see State above).
         self.shares_memory = (
             share_arrays and len(self.groups) == 1 and np.array_equal(self.groups[0].ids, np.arange(n))
         )
