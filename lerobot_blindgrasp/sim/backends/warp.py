@@ -220,6 +220,7 @@ class WarpBackend:
         randomization.write_physics_draw(
             rows, randomization.DrawTargets.of(base), w.draw.rows(torch.as_tensor(w.ids), dev), w.torque_scale
         )
+        wp.synchronize_device(self.wp_device)  # put_model's uploads done before torch reads and writes them
         for k in written:
             view = wp.to_torch(getattr(model, k)).view(nw, -1)
             # put_model copies these fields verbatim from MjModel; check it, so that writing rows is equivalent
@@ -227,6 +228,8 @@ class WarpBackend:
             if not np.allclose(ref, fields0[k].reshape(-1).astype(ref.dtype), rtol=1e-6, atol=0):
                 raise NotImplementedError(f"Warp's {k} is not MjModel's {k}; per-world values cannot be written")
             view.copy_(rows[k].reshape(nw, -1))
+        if self._cuda:  # torch's writes done before Warp's stream reads them
+            torch.cuda.current_stream(dev).synchronize()
         data = mjw.make_data(base, nworld=nw, nconmax=nconmax, njmax=njmax)
         # The constants MuJoCo derives from mass and inertia (mj_setConst's), per world, on the device.
         mjw.set_const(model, data)
