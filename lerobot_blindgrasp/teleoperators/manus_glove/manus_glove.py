@@ -22,9 +22,9 @@ from lerobot.utils.errors import DeviceNotConnectedError
 from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import read_raw as read_json
 
-from . import names
 from . import retarget as rt
 from .config_manus_glove import ManusGloveConfig
+from .manus_bridge import canonical
 from .receiver import GloveReceiver
 
 logger = logging.getLogger(__name__)
@@ -89,9 +89,9 @@ def calibration_problems(open_pose: dict, fist_pose: dict, min_flex_range_deg: f
 
 
 def _by_channel(cal: GloveCalibration, side: str) -> tuple[GloveCalibration, list[str]]:
-    """The calibration keyed by channel name (names.py), whichever accepted name the file used (files written before
-    the names table keyed the spreads by the ROS 2 strings, e.g. IndexSpread)."""
-    (open_pose, p1), (fist_pose, p2) = names.canonical(cal.open, side), names.canonical(cal.fist, side)
+    """The calibration keyed by channel name, whichever accepted name the file used (a file may key the spreads by
+    the ROS 2 strings, e.g. IndexSpread)."""
+    (open_pose, p1), (fist_pose, p2) = canonical(cal.open, side), canonical(cal.fist, side)
     return GloveCalibration(open=open_pose, fist=fist_pose), p1 + p2
 
 
@@ -163,9 +163,9 @@ class ManusGlove(Teleoperator):
     def connect(self, calibrate: bool = True) -> None:
         if self.calibration_error is not None and calibrate:
             raise self.calibration_error
-        self.receiver.open()
+        self.receiver.start()
         if not self.receiver.wait_frames(1, self.config.connect_timeout_s):
-            self.receiver.close()
+            self.receiver.stop()
             raise ConnectionError(
                 f"No glove data on udp://{self.config.host}:{self.config.port} for the {self.config.side} hand "
                 f"within {self.config.connect_timeout_s:.1f} s: {self.receiver.diagnosis()}."
@@ -237,5 +237,5 @@ class ManusGlove(Teleoperator):
 
     @check_if_not_connected
     def disconnect(self) -> None:
-        self.receiver.close()
+        self.receiver.stop()
         logger.info("%s disconnected.", self)
