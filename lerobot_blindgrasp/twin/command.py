@@ -2,13 +2,11 @@
 
     blindgrasp-twin --ports_json=outputs/twin/ports.json --trial_log=outputs/twin/trials.jsonl
 
-It prints the two port paths and the operator socket, writes them to `--ports_json` (atomically, for scripts),
-and serves until Ctrl-C / SIGTERM, printing its real-time status every `--status_every_s`. Point the real stack at
-it as at a real gripper:
+It prints the two port paths and the operator socket, writes them to `--ports_json`, and serves until Ctrl-C or
+SIGTERM. Point the real stack at it as at a real gripper (`--env.robot.latency_timer_ms=60` on a shared machine:
+the emulators are Python threads):
 
     --env.robot.port=<dynamixel_port> --env.robot.force_sensor.port=<force_port> --env.operator_socket=<socket>
-
-`--env.robot.latency_timer_ms=60` is advisable on a shared machine (the emulators are Python threads).
 """
 
 from __future__ import annotations

@@ -167,11 +167,8 @@ class OperatorServer:
         success, reason = self._verdicts.get(placement["trial"], (False, "host ended the trial first"))
         aborted = token in self._aborted
         if aborted:  # never a success, whatever the physics judged: the host's protocol did not finish the trial
-            verdict = (
-                f"{'success' if success else 'failure'} ({reason})"
-                if placement["trial"] in self._verdicts
-                else None
-            )
+            judged = placement["trial"] in self._verdicts
+            verdict = f"{'success' if success else 'failure'} ({reason})" if judged else None
             success, reason = False, f"host aborted the trial (left without ending it); physics verdict: {verdict}"
         record = {
             **placement,

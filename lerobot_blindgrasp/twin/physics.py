@@ -1,20 +1,12 @@
 """The twin's MuJoCo side: one gripper and one object, stepped one 5 ms substep at a time, in real time.
 
-Model and draws are the sim env's own, not copies of them: the scene is `sim.gripper.compile_model` with the
-object's MJCF; a placement from (seed, object) takes the env seed `sim.gym_env.start_seed(seed, object)` and draws
-the physics (friction, mass, the servos' kp/kv) with `randomization.draw_physics` and the object's start position
-with `randomization.draw_reset`, both under the eval randomization, as `--env.type=blindgrasp` does for the same
-`--seed`. The joints are wherever the host left them: it drives them to its start pose before asking for the
-object, the paper's home pose by default, or with `--env.start_pose=sim` the sim env's own start pose for the same
-(seed, object) (`envs/real_trial.sim_start_pose`, within the host's home tolerance), which makes the start state the
-sim's whole. The sensors are the real ones (encoder ticks, a load cell).
+Model and draws are the sim env's own: `sim.gripper.compile_model` with the object's MJCF, and for a placement from
+(seed, object) the env seed `sim.gym_env.start_seed` and the eval randomization's `draw_physics` and `draw_reset`,
+as `--env.type=blindgrasp` draws them for the same `--seed`. The joints stay wherever the host left them.
 
-The servos are the sim's XM430 model (a position actuator with back-EMF damping and a torque limit); what the
-host wrote into each servo's registers sets its target, gain (Position_P_Gain / 800 x the drawn kp), torque limit
-(Current_Limit, or Goal_Current in current-based position mode) and whether it exerts torque at all.
-
-Success is the sim's rule (`sim/termination.py`), evaluated every 50 ms of physics time from the placement on:
-lifted >= 1.5 cm for 20 consecutive control steps; the object leaving the 10 cm workspace is a failure.
+The servos' registers set each joint's target, gain (Position_P_Gain / 800 x the drawn kp), torque limit
+(Current_Limit, or Goal_Current in current-based position mode) and torque on/off. Success is the sim's rule
+(`sim/termination.py`), judged every control period from the placement on.
 """
 
 from __future__ import annotations

@@ -1,11 +1,9 @@
 """The twin assembled: servo bus and force board on pseudo-terminals, MuJoCo behind them in real time, the operator
 socket beside them.
 
-Real time: one thread steps the physics one 5 ms substep at a time against the monotonic clock. Before each
-substep it reads the servos' registers into the joint command; the emulators' own threads read the physics'
-latest state when the host asks. When the host process starves the twin of CPU and the physics falls more than
-`max_lag_s` behind the clock, the twin skips ahead (the world pauses, as it cannot run faster) and counts it: a
-run whose `behind_s` is not ~0 did not keep real time, and its status says so.
+One thread steps the physics one substep at a time against the monotonic clock, reading the servos' registers
+first. A physics more than `max_lag_s` behind the clock (a starved process) skips ahead and counts it: a run whose
+`behind_s` is not ~0 did not keep real time.
 """
 
 from __future__ import annotations
@@ -56,8 +54,7 @@ def make_realtime(threads: dict[str, threading.Thread], priority: int) -> str:
 
 
 class Twin:
-    def __init__(self, cfg):
-        """`cfg`: a `twin.command.TwinConfig`."""
+    def __init__(self, cfg):  # a twin.command.TwinConfig
         self.cfg = cfg
         self.physics = TwinPhysics(park_object=cfg.park_object)
         self.ids = list(spec.SERVO_IDS)
