@@ -14,6 +14,7 @@ Joint conventions (the sim's zero is the hardware calibration target, see `robot
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -77,8 +78,8 @@ def dataset_features() -> dict:
 
 
 # --- Privileged observation (teacher only) -----------------------------------------------------------------------
-# (name, size) in order. `assemble_privileged` is the only way the sim builds the vector (`sim/observations.py`),
-# and a shipped teacher's checkpoint records this layout, so a change here is refused at load time.
+# (name, size) in order. `privileged_parts` is the only way the sim builds the vector (`sim/observations.py`), and a
+# shipped teacher's checkpoint records this layout, so a change here is refused at load time.
 PRIVILEGED_LAYOUT: tuple[tuple[str, int], ...] = (
     ("joint_pos", NUM_JOINTS),  # measured: with joint noise
     ("joint_vel", NUM_JOINTS),
@@ -101,24 +102,15 @@ PRIVILEGED_LAYOUT: tuple[tuple[str, int], ...] = (
 PRIVILEGED_DIM = sum(n for _, n in PRIVILEGED_LAYOUT)  # 92 (the paper reports 95 without a breakdown)
 
 
-def _slices(layout: tuple[tuple[str, int], ...]) -> dict[str, slice]:
-    out, i = {}, 0
-    for name, n in layout:
-        out[name] = slice(i, i + n)
-        i += n
-    return out
-
-
-PRIVILEGED_SLICES: dict[str, slice] = _slices(PRIVILEGED_LAYOUT)
-
-
-def assemble_privileged(parts: dict[str, np.ndarray]) -> np.ndarray:
-    """The (n, PRIVILEGED_DIM) vector from one (n, size) array per `PRIVILEGED_LAYOUT` name, in layout order."""
-    return np.concatenate(privileged_parts(parts), axis=1)
+PRIVILEGED_SLICES: dict[str, slice] = {
+    name: slice(end - n, end)
+    for (name, n), end in zip(PRIVILEGED_LAYOUT, itertools.accumulate(n for _, n in PRIVILEGED_LAYOUT))
+}
 
 
 def privileged_parts(parts: dict) -> list:
-    """The parts of the privileged vector in layout order (numpy arrays or the sim's tensors), to concatenate.
+    """The parts of the privileged vector in layout order (numpy arrays or the sim's tensors), to concatenate; one
+    (n, size) array per `PRIVILEGED_LAYOUT` name.
 
     Refuses a missing, extra or mis-sized part, so the layout cannot drift from what the sim computes."""
     if set(parts) != set(PRIVILEGED_SLICES):

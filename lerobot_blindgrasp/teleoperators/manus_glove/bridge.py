@@ -1,5 +1,8 @@
-"""`blindgrasp-glove-bridge`: the program of `manus_bridge.py` as this package's command, its flags parsed by draccus
-like every `blindgrasp-*` command. On the MANUS machine the same program runs as `python3 manus_bridge.py`."""
+"""`blindgrasp-glove-bridge`: MANUS's ROS 2 publisher or the MANUS SDK -> the glove receiver's UDP datagrams.
+
+The program of `manus_bridge.py` as this package's command, its flags parsed by draccus like every `blindgrasp-*`
+command. On the MANUS machine the same program runs as `python3 manus_bridge.py` (docs/glove.md).
+"""
 
 from __future__ import annotations
 
