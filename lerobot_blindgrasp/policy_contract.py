@@ -51,8 +51,6 @@ class RobotContract:
     action_names: tuple[str, ...]
     fps: float
     fps_source: str
-    action_meaning: str = ACTION_MEANING
-    env_types: tuple[str, ...] = ENV_TYPES
 
 
 def gripper_contract(robot_type: str, fps: float, fps_source: str) -> RobotContract:
@@ -194,8 +192,8 @@ def _env_problems(train: dict | None, where: Path, robot: RobotContract) -> list
     env = (train or {}).get("env") or {}
     source = where / "train_config.json"
     bad = []
-    if env.get("type") is not None and env["type"] not in robot.env_types:
-        bad.append(f"env type {env['type']!r} in {source}, this robot's envs are {list(robot.env_types)}")
+    if env.get("type") is not None and env["type"] not in ENV_TYPES:
+        bad.append(f"env type {env['type']!r} in {source}, this robot's envs are {list(ENV_TYPES)}")
     if env.get("fps") is not None and float(env["fps"]) != robot.fps:
         bad.append(f"fps {env['fps']} in {source} (env), the loop runs at {robot.fps:g} ({robot.fps_source})")
     return bad
@@ -240,8 +238,8 @@ def _contract_problems(facts: dict, source: str, robot: RobotContract) -> tuple[
         elif tuple(names) != tuple(want):
             bad.append(f"'{key}' names {list(names)} in {source}, the robot's are {list(want)} (names and order)")
     meaning = facts.get("action_meaning")
-    if meaning is not None and meaning != robot.action_meaning:
-        bad.append(f"'action' meaning {meaning!r} in {source}, the robot takes {robot.action_meaning}")
+    if meaning is not None and meaning != ACTION_MEANING:
+        bad.append(f"'action' meaning {meaning!r} in {source}, the robot takes {ACTION_MEANING}")
     return bad, unverified
 
 

@@ -340,14 +340,10 @@ class ErgonomicsStream(C.Structure):  # publishTime is a ManusTimestamp: struct 
     _fields_ = [("publishTime", C.c_uint64), ("data", ErgonomicsData * 32), ("dataCount", C.c_uint32)]
 
 
-class Version(C.Structure):
-    _fields_ = [(n, C.c_uint32) for n in ("major", "minor", "patch")] + [
-        (n, C.c_char * 16) for n in ("label", "sha", "tag")
-    ]
-
-
-class ManusHost(C.Structure):
-    _fields_ = [("hostName", C.c_char * 256), ("ipAddress", C.c_char * 40), ("manusCoreVersion", Version)]
+class ManusHost(
+    C.Structure
+):  # manusCoreVersion (never read): Version { uint32 major, minor, patch; char[16] x 3 }
+    _fields_ = [("hostName", C.c_char * 256), ("ipAddress", C.c_char * 40), ("manusCoreVersion", C.c_uint32 * 15)]
 
 
 class CoordinateSystemVUH(C.Structure):  # AxisView, AxisPolarity, Side (C enums: int), unit scale in m

@@ -6,14 +6,13 @@ The action is q_glove, the retargeted hand pose, under the robot's action keys. 
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
-from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
-import draccus
 import numpy as np
 from lerobot.teleoperators.teleoperator import Teleoperator
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
@@ -30,7 +29,7 @@ from .receiver import GloveReceiver
 logger = logging.getLogger(__name__)
 
 
-@dataclass
+@dataclasses.dataclass
 class GloveCalibration:
     """Glove ergonomics (deg) of one operator in the two reference poses, per ergonomics channel."""
 
@@ -133,11 +132,10 @@ class ManusGlove(Teleoperator):
         lerobot-calibrate (connect(calibrate=False), then calibrate()) replaces it."""
         fpath = fpath or self.calibration_fpath
         try:
-            bad = calibration_schema_problems(read_json(fpath))
+            raw = read_json(fpath)
+            bad = calibration_schema_problems(raw)
             if not bad:
-                with open(fpath) as f, draccus.config_type("json"):
-                    cal = draccus.load(GloveCalibration, f)
-                cal, bad = _by_channel(cal, self.config.side)
+                cal, bad = _by_channel(GloveCalibration(**raw), self.config.side)
                 bad = bad or calibration_problems(
                     cal.open, cal.fist, self.config.min_flex_range_deg, self.required
                 )
@@ -156,8 +154,7 @@ class ManusGlove(Teleoperator):
 
     def _save_calibration(self, fpath: Path | None = None) -> None:
         # Atomic: a failed save (a full disk) keeps the previous calibration and says why (durable.WriteError).
-        with durable.atomic_open(fpath or self.calibration_fpath) as f, draccus.config_type("json"):
-            draccus.dump(self.calibration, f, indent=4)
+        durable.atomic_write_json(fpath or self.calibration_fpath, dataclasses.asdict(self.calibration), indent=4)
 
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
