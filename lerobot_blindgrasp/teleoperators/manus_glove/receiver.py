@@ -45,8 +45,7 @@ class GloveFrame:
     seq: int
     side: str
     ergonomics: dict[str, float]
-    received: float  # this host's monotonic clock
-    sent_local: float  # the bridge's send time mapped to this host's monotonic clock (<= received)
+    sent_local: float  # the bridge's send time mapped to this host's monotonic clock (<= its arrival)
 
 
 class GloveReceiver(LatestFrameStream[GloveFrame]):
@@ -183,12 +182,8 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             self.foreign += 1
             if addr not in self._warned_senders:
                 self._warned_senders.add(addr)
-                logger.warning(
-                    "Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. Another bridge or "
-                    "sender on the port? Reconnect to change the sender.",
-                    *addr,
-                    *self.bound,
-                )
+                logger.warning("Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. Another "
+                               "bridge or sender on the port? Reconnect to change the sender.", *addr, *self.bound)  # fmt: skip
             return False
         return True
 
@@ -230,7 +225,7 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
                 self._stale_run, self._stale_max * 1e3, self.max_latency_s * 1e3,
             )  # fmt: skip
             self._stale_run, self._stale_max = 0, 0.0
-        return GloveFrame(d.session, d.seq, d.side, d.ergonomics, arrival, d.sent + self._offset)
+        return GloveFrame(d.session, d.seq, d.side, d.ergonomics, d.sent + self._offset)
 
     def _clock_stepped(self, d: GloveDatagram) -> None:
         if not self.clock_steps:
@@ -256,12 +251,8 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
         if self.session is not None:
             self.restarts += 1
             self._retired.append(self.session)
-            logger.warning(
-                "Glove bridge restarted (session %s -> %s, its counter starts again): following the new session; "
-                "late datagrams of the old one are dropped.",
-                self.session,
-                session,
-            )
+            logger.warning("Glove bridge restarted (session %s -> %s, its counter starts again): following the new "
+                           "session; late datagrams of the old one are dropped.", self.session, session)  # fmt: skip
         # self._sent stays: the restarted bridge's clock is the same machine's, and it must move on from there.
         self.session, self._seq, self._offset = session, 0, None
 
