@@ -93,19 +93,17 @@ class TwinPhysics:
         data.qpos[observations.OBJECT_QUAT] = quat
         data.ctrl[:] = q
         mujoco.mj_forward(model, data)
-        self.model, self.data, self.object_name, self.rest_height = model, data, name, obj.rest_height
+        self.model, self.data, self.rest_height = model, data, obj.rest_height
         self.base_kp = model.actuator_gainprm[:, 0].copy()
         self.base_kv = -model.actuator_biasprm[:, 2].copy()
         self.sensor_index = sensors.SensorIndex.from_model(model)
         self._applied = None  # the command whose gains and limits are written into `model`
-        self._placed_state = (q.copy(), np.zeros_like(qd), data.qpos.copy())
+        self._placed_qpos = data.qpos.copy()
         self._held = np.zeros(1, dtype=np.int64)
         self.peak_lift = 0.0
         self._publish()
-        # The true squeeze since the placement (the trial record): its instantaneous peak, which a short impact
-        # between two of the host's 20 Hz reads can set, and the largest force held for two control periods: a
-        # read late in such a window gets a board frame from inside it (frames are well under a period old). The
-        # host's peak reading lies between the two.
+        # The true squeeze since the placement (the trial record): its instantaneous peak, and the largest force
+        # held for two control periods, which any host read in that window sees. The host's peak lies between them.
         self.peak_tip_force_n = np.zeros(spec.NUM_FORCES)
         self.held_tip_force_n = np.zeros(spec.NUM_FORCES)
         self.q_at_peak = q.copy()  # until a first squeeze: a trial that ends before any substep still has a record
@@ -182,9 +180,8 @@ class TwinPhysics:
         """Unstable physics (the sim env resets such an env too): back to the placement, joints at rest."""
         self.unstable_resets += 1
         logger.warning("twin physics went unstable; restoring the placement state")
-        q, qd, qpos = self._placed_state
-        mujoco.mj_resetData(self.model, self.data)
-        self.data.qpos[:] = qpos
+        mujoco.mj_resetData(self.model, self.data)  # joints at rest (qvel 0)
+        self.data.qpos[:] = self._placed_qpos
         mujoco.mj_forward(self.model, self.data)
 
     def _judge(self) -> TrialVerdict | None:

@@ -86,8 +86,7 @@ class Twin:
 
     # --- lifecycle --------------------------------------------------------------------------------------------
     def start(self) -> Twin:
-        # The emulators' threads answer the host's packets; the physics thread must not hold them off for
-        # Python's default 5 ms GIL switch interval (a reply window is a few ms on a real bus).
+        # The physics thread must not hold the emulators' threads off for Python's default 5 ms GIL switch interval.
         sys.setswitchinterval(0.0005)
         self._t0_wall, self._t0_cpu = time.monotonic(), time.process_time()
         self._thread.start()
