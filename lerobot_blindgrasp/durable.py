@@ -80,12 +80,11 @@ def _temp_name(path: Path) -> Path:
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike, mode: int | None = None, fsync: bool = True) -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike, fsync: bool = True) -> Iterator[Path]:
     """Yield a temporary path beside `path`; once the block ends normally, the temp file is fsynced and renamed
-    over `path`. On any error the temp file is removed and `path` is untouched. `mode`: the new file's permissions
-    (default: the old file's, else 0o644 less the umask). fsync=False: still atomic against a killed process (the
-    page cache outlives it), not against a power cut; for files rewritten many times a second whose caller fsyncs
-    at its own checkpoints (`fsync_tree`)."""
+    over `path` (with the old file's permissions, else 0o666 less the umask). On any error the temp file is removed
+    and `path` is untouched. fsync=False: still atomic against a killed process, not against a power cut; for files
+    rewritten many times a second whose caller fsyncs at its own checkpoints (`fsync_tree`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
@@ -96,7 +95,7 @@ def atomic_path(path: str | os.PathLike, mode: int | None = None, fsync: bool = 
         yield tmp
         if fsync:
             _fsync_file(tmp)
-        os.chmod(tmp, mode if mode is not None else _mode_for(path))
+        os.chmod(tmp, _mode_for(path))
         os.replace(tmp, path)
     except OSError as e:
         tmp.unlink(missing_ok=True)
@@ -112,9 +111,9 @@ def atomic_path(path: str | os.PathLike, mode: int | None = None, fsync: bool = 
 
 
 @contextlib.contextmanager
-def atomic_open(path: str | os.PathLike, mode: str = "w", encoding: str | None = "utf-8") -> Iterator[io.IOBase]:
-    """A file object for writers that want one (json.dump, draccus.dump); replaced atomically on success."""
-    with atomic_path(path) as tmp, open(tmp, mode, encoding=None if "b" in mode else encoding) as f:
+def atomic_open(path: str | os.PathLike) -> Iterator[io.TextIOBase]:
+    """A text file object for writers that want one (draccus.dump); replaced atomically on success."""
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
         yield f
 
 

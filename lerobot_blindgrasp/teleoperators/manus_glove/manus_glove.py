@@ -87,13 +87,6 @@ def calibration_problems(open_pose: dict, fist_pose: dict, min_flex_range_deg: f
     return out
 
 
-def _by_channel(cal: GloveCalibration, side: str) -> tuple[GloveCalibration, list[str]]:
-    """The calibration keyed by channel name, whichever accepted name the file used (a file may key the spreads by
-    the ROS 2 strings, e.g. IndexSpread)."""
-    (open_pose, p1), (fist_pose, p2) = canonical(cal.open, side), canonical(cal.fist, side)
-    return GloveCalibration(open=open_pose, fist=fist_pose), p1 + p2
-
-
 class ManusGlove(Teleoperator):
     config_class = ManusGloveConfig
     name = "manus_glove"
@@ -134,8 +127,9 @@ class ManusGlove(Teleoperator):
         try:
             raw = read_json(fpath)
             bad = calibration_schema_problems(raw)
-            if not bad:
-                cal, bad = _by_channel(GloveCalibration(**raw), self.config.side)
+            if not bad:  # keyed by channel, whichever accepted name the file used (e.g. the ROS 2 IndexSpread)
+                (open_pose, p1), (fist_pose, p2) = (canonical(raw[k], self.config.side) for k in ("open", "fist"))
+                cal, bad = GloveCalibration(open_pose, fist_pose), p1 + p2
                 bad = bad or calibration_problems(
                     cal.open, cal.fist, self.config.min_flex_range_deg, self.required
                 )
