@@ -282,10 +282,8 @@ def _import_ros():
 
 def run_ros2(cfg: BridgeConfig, bridge: GloveBridge) -> None:
     rclpy, glove_msg, qos = _import_ros()
-    try:
-        from rclpy.executors import ExternalShutdownException as shutdown
-    except ImportError:  # rclpy before Humble
-        shutdown = KeyboardInterrupt
+    from rclpy.executors import ExternalShutdownException  # ROS 2 Humble or later
+
     rclpy.init()
     node = rclpy.create_node("blindgrasp_glove_bridge")
     try:
@@ -296,7 +294,7 @@ def run_ros2(cfg: BridgeConfig, bridge: GloveBridge) -> None:
         logger.info("Bridging %s (%s hand) to udp://%s:%d, session %s.", cfg.topics, cfg.side, cfg.host, cfg.port,
                     bridge.sender.session)  # fmt: skip
         rclpy.spin(node)
-    except shutdown:  # Ctrl-C or SIGTERM seen by rclpy's own handler: its context is already shut down
+    except ExternalShutdownException:  # Ctrl-C or SIGTERM seen by rclpy's own handler: its context is shut down
         pass
     finally:
         node.destroy_node()
