@@ -1,15 +1,8 @@
-"""Every place the plugin reaches into LeRobot's internals or installs a process-wide hook, as one set; nowhere else in
-the package does (`tests/policies/test_compat.py` scans for strays):
-
-- `serve_dataset_readers_with`: wraps `DatasetReader.try_load` / `load_and_activate` (the student's window cache).
-- `skip_empty_image_embedding`: replaces the dataset writer's `embed_images` within a block (demo collection).
-- `atomic_lerobot_metadata`: replaces `io_utils.write_json` and `write_tasks` within a block (demo collection).
-- `is_episode_announcement`: recognises lerobot-record's `log_say` line that starts an episode (the robot).
-- `read_command_line` (through `cli_policy_path`, `cli_arg`), `set_lerobot_argv`: LeRobot's command line, read or
-  set outside its parser.
-- `set_signal_handler`, `set_excepthook`: process-wide hooks the robot installs while a gripper is connected.
-- the dataset writers' private state that the demo collector reads and resets (`demos/crash_checkpoints.py`,
-  `demos/collection_loop.py`), checked by `check_lerobot()` only.
+"""Every place the plugin reaches into LeRobot's internals or installs a process-wide hook, and nowhere else
+(`tests/policies/test_compat.py` scans the package for strays): LeRobot's dataset reader and writers
+(`serve_dataset_readers_with`, `skip_empty_image_embedding`, `atomic_lerobot_metadata`, and the writers' private
+state the demo collector resets), lerobot-record's episode announcement (`is_episode_announcement`), LeRobot's
+command line (`read_command_line`, `set_lerobot_argv`), and the process's signal handlers and excepthook.
 
 Each was read against LeRobot `WRITTEN_FOR`. Under another version the first reach used logs, once, what
 `check_lerobot()` finds missing; a reach whose target is gone leaves LeRobot's own behaviour in place.
@@ -93,8 +86,7 @@ def check_lerobot() -> list[str]:
     problems += _mentions("lerobot.utils.utils", "logging.info(text)")
     problems += _mentions("lerobot.scripts.lerobot_record", f'log_say(f"{ANNOUNCEMENT} {{dataset.num_episodes}}"')
     problems += _has("lerobot.configs.parser", "get_path_arg", "parse_arg")
-    # The writers' private state the demo collector reads and resets (demos/crash_checkpoints.py `reopen_in_place`,
-    # demos/collection_loop.py `_finalize_or_abandon`); both fall back to LeRobot's own path when a field is missing.
+    # The writers' private state that demos/crash_checkpoints.py and demos/collection_loop.py read and reset.
     problems += _mentions(writer, *(f"self.{a} =" for a in ("_finalized", "_pq_writer", "_latest_episode")))
     problems += _mentions(
         meta, *(f"self.{a} =" for a in ("_finalized", "_pq_writer", "latest_episode", "episodes"))

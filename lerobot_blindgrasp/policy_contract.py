@@ -5,12 +5,8 @@ env and blindgrasp-rollout before the policy loads, the robot at connect (docs/h
 `check_checkpoint(path, robot)` reads the checkpoint's own files without loading the policy (LeRobot's
 `make_policy` overwrites its output features with the env's) and names the file each fact came from. A fact that
 differs refuses the run (`PolicyMismatchError`); a fact no file holds refuses it too, unless `allow_unverified`.
-
 `python -m lerobot_blindgrasp.policy_contract` records `trained_for` in a checkpoint trained before lerobot-train
-wrote it, from its dataset or from this project's sim demo schema; running it again writes the same file:
-
-    python -m lerobot_blindgrasp.policy_contract --checkpoint=<checkpoint> --dataset_root=<dataset root>
-    python -m lerobot_blindgrasp.policy_contract --checkpoint=models/student_cpu --sim_demos=true
+wrote it, from its dataset (`--dataset_root`) or this project's sim demo schema (`--sim_demos=true`).
 """
 
 from __future__ import annotations

@@ -1,12 +1,9 @@
 """The twin's MuJoCo side: one gripper and one object, stepped one 5 ms substep at a time, in real time.
 
-Model and draws are the sim env's own: `sim.gripper.compile_model` with the object's MJCF, and for a placement from
-(seed, object) the env seed `sim.gym_env.start_seed` and the eval randomization's `draw_physics` and `draw_reset`,
-as `--env.type=blindgrasp` draws them for the same `--seed`. The joints stay wherever the host left them.
-
-The servos' registers set each joint's target, gain (Position_P_Gain / 800 x the drawn kp), torque limit
-(Current_Limit, or Goal_Current in current-based position mode) and torque on/off. Success is the sim's rule
-(`sim/termination.py`), judged every control period from the placement on.
+Model and draws are the sim env's own: a placement from (seed, object) takes the env seed and the eval
+randomization's physics and start position as `--env.type=blindgrasp` draws them for the same `--seed`. The
+servos' registers set each joint's target, gain (Position_P_Gain / 800 x the drawn kp), torque limit and torque
+on/off. Success is the sim's rule (`sim/termination.py`), judged every control period from the placement on.
 """
 
 from __future__ import annotations
