@@ -24,7 +24,7 @@ from lerobot_blindgrasp.cli import parse_config
 
 logger = logging.getLogger(__name__)
 
-STATE, ACTION = "observation.state", "action"
+STATE, ACTION = spec.STATE_KEY, spec.ACTION_KEY
 ACTION_MEANING = "absolute joint targets (rad)"  # what the gripper's `send_action` takes
 POLICY_TYPE = "blindgrasp_transformer"  # the policy whose checkpoints `record` stamps
 ROBOT_TYPE = "blindgrasp_gripper"  # the gripper's LeRobot name, which the sim demos' datasets carry too
