@@ -117,11 +117,8 @@ def _used(reach: str) -> None:
 
 def serve_dataset_readers_with(choose: Callable) -> None:
     """From now on in this process, after `DatasetReader.try_load` or `load_and_activate` loads a table,
-    `choose(reader)` may return a `DatasetReader` subclass the reader becomes (None: it stays as it is).
-
-    LeRobot 0.6.1 has no hook to choose a dataset's reader (docs/upstream/low-dimensional-cache.md): the window
-    cache calls this at plugin import, before `lerobot-train` builds the dataset. Wrapping twice is a no-op.
-    """
+    `choose(reader)` may return a `DatasetReader` subclass the reader becomes (None: it stays as it is). LeRobot
+    0.6.1 has no hook to choose a dataset's reader (docs/upstream/low-dimensional-cache.md). Idempotent."""
     try:
         from lerobot.datasets.dataset_reader import DatasetReader
     except ImportError:
@@ -148,10 +145,8 @@ def _choose_after(load: Callable, choose: Callable) -> Callable:
 @contextlib.contextmanager
 def skip_empty_image_embedding() -> Iterator[None]:
     """Within the block, the dataset writer's `embed_images` returns a dataset unchanged when `datasets`'
-    `require_storage_embed` says no column needs embedding, and defers to LeRobot's otherwise.
-
-    LeRobot 0.6.1's `DatasetWriter._save_episode_data` runs the per-row embedding pass even for state-only datasets,
-    where it rebuilds each row unchanged (docs/upstream/skip-image-embedding.md). The written files are identical.
+    `require_storage_embed` says no column needs embedding: LeRobot 0.6.1 runs this per-row pass even for state-only
+    datasets, rebuilding each row unchanged (docs/upstream/skip-image-embedding.md). The files written are identical.
     """
     try:
         from datasets.features.features import require_storage_embed
@@ -179,11 +174,9 @@ def skip_empty_image_embedding() -> Iterator[None]:
 
 @contextlib.contextmanager
 def atomic_lerobot_metadata() -> Iterator[None]:
-    """Within the block, LeRobot's dataset metadata writers write atomically (temp name + rename, not fsynced).
-
-    LeRobot 0.6.1 rewrites info.json and stats.json (`io_utils.write_json`) and tasks.parquet (`write_tasks`) in
-    place after every episode: a kill during one leaves a truncated file, and a repair cannot re-derive info.json.
-    """
+    """Within the block, LeRobot's dataset metadata writers write atomically (temp name + rename, not fsynced):
+    LeRobot 0.6.1 rewrites info.json, stats.json (`io_utils.write_json`) and tasks.parquet (`write_tasks`) in place
+    after every episode, so a kill during one leaves a truncated file, and a repair cannot re-derive info.json."""
     try:
         from lerobot.datasets import dataset_metadata, io_utils
     except ImportError:
@@ -211,12 +204,9 @@ def atomic_lerobot_metadata() -> Iterator[None]:
 
 
 def is_episode_announcement(record: logging.LogRecord) -> bool:
-    """Whether a log record is lerobot-record announcing the episode about to start.
-
-    LeRobot 0.6.1's Robot interface has no call at an episode's start, but lerobot-record (and lerobot-rollout's
-    episodic strategy) runs `log_say(f"Recording episode {n}")` before each, which logs the text at INFO whether or
-    not sounds are on. The robot checks itself at each start (`robots/blindgrasp_gripper/starts.py`).
-    """
+    """Whether a log record is lerobot-record announcing the episode about to start. LeRobot 0.6.1's Robot
+    interface has no call at an episode's start, but lerobot-record (and lerobot-rollout's episodic strategy) runs
+    `log_say(f"Recording episode {n}")` before each, which logs the text at INFO whether or not sounds are on."""
     if record.funcName == "log_say" and isinstance(record.msg, str) and record.msg.startswith(ANNOUNCEMENT):
         _used("is_episode_announcement")
         return True
@@ -253,12 +243,9 @@ class CommandLine:
 
 
 def read_command_line() -> CommandLine:
-    """The one read of this process's command line for the gripper, called where its config is parsed.
-
-    LeRobot 0.6.1's scripts build the robot (lerobot-eval: the env) before they load `--policy.path`, and never tell
-    it the dataset or the rate they record at. So the robot's config takes these facts at parsing (as LeRobot's own
-    `EvalPipelineConfig.__post_init__` re-reads `--policy.path`), and the robot checks the policy, disk and rate.
-    """
+    """The one read of this process's command line for the gripper, called where its config is parsed: LeRobot
+    0.6.1's scripts build the robot (lerobot-eval: the env) before they load `--policy.path`, and never tell it the
+    dataset or the rate they record at (LeRobot's own `EvalPipelineConfig` re-reads `--policy.path` the same way)."""
     fps, flag = None, None
     for name in ("fps", "env.fps", "dataset.fps"):
         if (value := cli_arg(name)) is not None:
@@ -275,11 +262,8 @@ def set_lerobot_argv(argv: list[str]) -> None:
 
 
 def set_signal_handler(signum: int, handler) -> object:
-    """Install `handler` for `signum` (main thread only, as Python requires); returns the previous handler.
-
-    The robot's SIGTERM/SIGHUP handlers, while a gripper is connected, make a scheduler's stop unwind through the
-    script's cleanup (torque off); the twin's end its serving.
-    """
+    """Install `handler` for `signum` (main thread only, as Python requires); returns the previous handler. The
+    robot's, while a gripper is connected, make a scheduler's stop unwind through the script's cleanup (torque off)."""
     return signal.signal(signum, handler)
 
 

@@ -107,9 +107,7 @@ PRIVILEGED_SLICES: dict[str, slice] = {
 
 
 def privileged_parts(parts: dict) -> list:
-    """The parts of the privileged vector in layout order (numpy arrays or the sim's tensors), to concatenate; one
-    (n, size) array per `PRIVILEGED_LAYOUT` name.
-
+    """The parts of the privileged vector in layout order (numpy arrays or the sim's tensors), to concatenate.
     Refuses a missing, extra or mis-sized part, so the layout cannot drift from what the sim computes."""
     if set(parts) != set(PRIVILEGED_SLICES):
         missing, extra = set(PRIVILEGED_SLICES) - set(parts), set(parts) - set(PRIVILEGED_SLICES)

@@ -62,12 +62,7 @@ def path(name: str) -> Path:
 @dataclass
 class ShippedPathConfig:
     """Print the installed path of a shipped model folder or robot config (for `--policy.path=` and draccus'
-    `include`), or list them all.
-
-        blindgrasp-path --name=student_cpu              # a model folder
-        lerobot-calibrate --robot="include $(blindgrasp-path --name=blindgrasp_gripper)" --robot.id=lab_gripper
-        blindgrasp-path                                 # lists every name
-    """
+    `include`), or list them all."""
 
     name: str | None = None  # a model folder (student_cpu, teacher_cpu_bc) or a robot config (blindgrasp_gripper)
 
