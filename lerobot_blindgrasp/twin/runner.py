@@ -32,12 +32,8 @@ def percentiles_ms(values) -> dict[str, float]:
     v = np.asarray(list(values), dtype=np.float64) * 1e3
     if v.size == 0:
         return {"n": 0}
-    return {
-        "n": int(v.size),
-        "p50_ms": round(float(np.percentile(v, 50)), 3),
-        "p99_ms": round(float(np.percentile(v, 99)), 3),
-        "max_ms": round(float(v.max()), 3),
-    }
+    p50, p99, top = (round(float(x), 3) for x in (*np.percentile(v, [50, 99]), v.max()))
+    return {"n": int(v.size), "p50_ms": p50, "p99_ms": p99, "max_ms": top}
 
 
 def make_realtime(threads: dict[str, threading.Thread], priority: int) -> str:
