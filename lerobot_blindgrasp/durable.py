@@ -67,14 +67,6 @@ def fsync_dir(folder: Path) -> None:
         _fsync_file(folder)
 
 
-def _temp_name(path: Path) -> Path:
-    # Hidden, in the same folder, and ending in the target's suffix: writers that pick a format from the name
-    # (savefig, torch exporters) still do, and globs such as model_*.pt never match a temp file.
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}{TEMP_MARK}", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    return Path(name)
-
-
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, fsync: bool = True) -> Iterator[Path]:
     """Yield a temporary path beside `path`; once the block ends normally, the temp file is fsynced and renamed
@@ -83,10 +75,12 @@ def atomic_path(path: str | os.PathLike, fsync: bool = True) -> Iterator[Path]:
     rewritten many times a second whose caller fsyncs at its own checkpoints (`fsync_tree`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        tmp = _temp_name(path)
+    try:  # hidden, with the target's suffix: writers pick their format from it; globs like *.pt never match it
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}{TEMP_MARK}", suffix=path.suffix, dir=path.parent)
+        os.close(fd)
     except OSError as e:
         raise WriteError(path, describe_write_error(e), e.errno) from e
+    tmp = Path(name)
     try:
         yield tmp
         if fsync:

@@ -522,18 +522,12 @@ def from_sdk(cfg: BridgeConfig, bridge: GloveBridge) -> None:
 
 
 # --- the command line --------------------------------------------------------------------------------------------
-def _help() -> dict[str, str]:
-    """Each BridgeConfig field's comment (the one text, for draccus and for argparse)."""
-    try:
-        found = re.findall(r"# (.+)\n\s+(\w+):", inspect.getsource(BridgeConfig))
-    except OSError:  # no source to read (a frozen or byte-compiled copy): help without the texts
-        found = []
-    return {name: text for text, name in found}
-
-
 def parse_args(argv: list[str] | None = None) -> BridgeConfig:
     p = argparse.ArgumentParser(prog="manus_bridge.py", description=(__doc__ or "").split("\n\n")[0])
-    helps = _help()
+    try:  # each BridgeConfig field's comment is its help, for draccus and for argparse alike
+        helps = {name: text for text, name in re.findall(r"# (.+)\n\s+(\w+):", inspect.getsource(BridgeConfig))}
+    except OSError:  # no source to read (a frozen or byte-compiled copy): help without the texts
+        helps = {}
     for f in fields(BridgeConfig):
         default = f.default_factory() if callable(f.default_factory) else f.default
         kind = (
