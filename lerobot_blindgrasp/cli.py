@@ -82,7 +82,7 @@ def interrupts_as_keyboard_interrupt() -> Iterator[None]:
 
 class GracefulStop:
     """Two-stage Ctrl-C for loops that can stop between steps (demo collection). First SIGINT/SIGTERM: `requested`
-    is set and the loop stops after its current step. Second: KeyboardInterrupt right away, except inside `saving()`:
+    is set and the loop stops after its current step. Second: KeyboardInterrupt at once, except inside `saving()`:
     an episode half-saved would leave rows the metadata does not list, so the abort waits until it is complete."""
 
     def __init__(self, note: str = "stopping after this step (again to abort now)"):

@@ -145,8 +145,8 @@ def _choose_after(load: Callable, choose: Callable) -> Callable:
 @contextlib.contextmanager
 def skip_empty_image_embedding() -> Iterator[None]:
     """Within the block, the dataset writer's `embed_images` returns a dataset unchanged when `datasets`'
-    `require_storage_embed` says no column needs embedding: LeRobot 0.6.1 runs this per-row pass even for state-only
-    datasets, rebuilding each row unchanged (docs/upstream/skip-image-embedding.md). The files written are identical.
+    `require_storage_embed` says no column needs embedding: LeRobot 0.6.1 runs this per-row pass even for
+    state-only datasets, rebuilding each row unchanged (docs/upstream/skip-image-embedding.md). Same files written.
     """
     try:
         from datasets.features.features import require_storage_embed
@@ -245,7 +245,7 @@ class CommandLine:
 def read_command_line() -> CommandLine:
     """The one read of this process's command line for the gripper, called where its config is parsed: LeRobot
     0.6.1's scripts build the robot (lerobot-eval: the env) before they load `--policy.path`, and never tell it the
-    dataset or the rate they record at (LeRobot's own `EvalPipelineConfig` re-reads `--policy.path` the same way)."""
+    dataset or the rate they record at (LeRobot's `EvalPipelineConfig` re-reads `--policy.path` the same way)."""
     fps, flag = None, None
     for name in ("fps", "env.fps", "dataset.fps"):
         if (value := cli_arg(name)) is not None:
@@ -263,12 +263,13 @@ def set_lerobot_argv(argv: list[str]) -> None:
 
 def set_signal_handler(signum: int, handler) -> object:
     """Install `handler` for `signum` (main thread only, as Python requires); returns the previous handler. The
-    robot's, while a gripper is connected, make a scheduler's stop unwind through the script's cleanup (torque off)."""
+    robot's, while a gripper is connected, make a scheduler's stop unwind through the script's cleanup (torque
+    off)."""
     return signal.signal(signum, handler)
 
 
 def set_excepthook(hook: Callable) -> Callable:
-    """Make `hook` the process's `sys.excepthook`; returns the one it replaced. The robot's hook stops the servos of
-    a script whose cleanup never reaches its `disconnect`, which would otherwise exit with them torqued."""
+    """Make `hook` the process's `sys.excepthook`; returns the one it replaced. The robot's hook stops the servos
+    of a script whose cleanup never reaches its `disconnect`, which would otherwise exit with them torqued."""
     previous, sys.excepthook = sys.excepthook, hook
     return previous

@@ -76,8 +76,8 @@ def dataset_features() -> dict:
 
 
 # --- Privileged observation (teacher only) -----------------------------------------------------------------------
-# (name, size) in order. `privileged_parts` is the only way the sim builds the vector (`sim/observations.py`), and a
-# shipped teacher's checkpoint records this layout, so a change here is refused at load time.
+# (name, size) in order. `privileged_parts` is the only way the sim builds the vector (`sim/observations.py`),
+# and a shipped teacher's checkpoint records this layout, so a change here is refused at load time.
 PRIVILEGED_LAYOUT: tuple[tuple[str, int], ...] = (
     ("joint_pos", NUM_JOINTS),  # measured: with joint noise
     ("joint_vel", NUM_JOINTS),
@@ -144,9 +144,9 @@ SEED_RANGES: dict[str, range] = {
 }
 TEACHER_TRAIN_SEED = 1  # blindgrasp-train-teacher's default --seed: env seeds 1..num_envs
 DEMO_SEED = SEED_RANGES["demos"].start  # blindgrasp-collect-demos' default --seed
-# Evaluation seeds are lerobot-eval's per-episode indices (--seed, +1 per episode). The envs and the teacher eval map
-# (index, object) into the eval range, one block of EVAL_TASK_STRIDE per object (task id = catalogue index), so no
-# two objects share a draw and both tools evaluate on the same start states for the same --seed.
+# Evaluation seeds are lerobot-eval's per-episode indices (--seed, +1 per episode). The envs and the teacher eval
+# map (index, object) into the eval range, one block of EVAL_TASK_STRIDE per object (task id = catalogue index), so
+# no two objects share a draw and both tools evaluate on the same start states for the same --seed.
 EVAL_TASK_STRIDE = 1 << 32
 EVAL_SEED = 1000  # lerobot-eval's own default --seed
 

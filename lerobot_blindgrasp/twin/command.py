@@ -30,8 +30,8 @@ CELL_SCALE_N_PER_COUNT = 9.80665 * 10 / (5.0 * 2**23 / 19.53)
 @dataclass
 class LoadCellConfig:
     """Each fingertip's load cell and ADC as the force board's emulator models them: counts = offset + gain x F /
-    scale + noise. `scale_n_per_count` is the datasheet scale (what ports.json publishes); `gain` is each cell's own
-    error against it (typically +-10 %), which only `blindgrasp-calibrate-force` finds."""
+    scale + noise. `scale_n_per_count` is the datasheet scale (what ports.json publishes); `gain` is each cell's
+    own error against it (typically +-10 %), which only `blindgrasp-calibrate-force` finds."""
 
     scale_n_per_count: list[float] = field(default_factory=lambda: [CELL_SCALE_N_PER_COUNT] * 3)
     offset_counts: list[float] = field(default_factory=lambda: [81_000.0, -52_000.0, 12_000.0])
@@ -64,8 +64,8 @@ class TwinConfig:
     # The physics falling behind the clock by more than this skips ahead (counted in the status as behind_s).
     max_lag_s: float = 0.05
     status_every_s: float = 30.0  # 0: quiet
-    # > 0: the servo bus, force board and physics threads run SCHED_FIFO at this priority (root or CAP_SYS_NICE), as
-    # the gripper's own processors answer within microseconds: on a loaded machine a Python thread may miss the
+    # > 0: the servo bus, force board and physics threads run SCHED_FIFO at this priority (root or CAP_SYS_NICE),
+    # as the gripper's own processors answer within microseconds: on a loaded machine a Python thread may miss the
     # host's reply window, and the real stack stops on a timeout no gripper would cause.
     realtime_priority: int = 0
     load_cell: LoadCellConfig = field(default_factory=LoadCellConfig)
@@ -85,7 +85,7 @@ def serve_twin(cfg: TwinConfig, stop: threading.Event) -> dict:
             f"operator socket {ports['operator_socket']}. Ctrl-C stops.",
             flush=True,
         )
-        # Short waits: a signal's Python handler runs only when the main thread runs, which an endless wait never does.
+        # Short waits: a signal's Python handler runs only when the main thread runs; an endless wait never does.
         last = time.monotonic()
         while not stop.wait(0.5):
             if cfg.status_every_s and time.monotonic() - last >= cfg.status_every_s:

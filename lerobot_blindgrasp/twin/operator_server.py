@@ -97,8 +97,8 @@ class OperatorServer:
         timer.start()
 
     def _host_left(self, conn: socket.socket) -> None:
-        """The host left without ending its trial (SIGTERM, a safety stop, a crash). Judging stops now, so a lift the
-        physics completes after the host let go can never become a success."""
+        """The host left without ending its trial (SIGTERM, a safety stop, a crash). Judging stops now, so a lift
+        the physics completes after the host let go can never become a success."""
         with self._lock:
             active = self._active if self._active is not None and self._active[0] is conn else None
             if active is not None:

@@ -82,7 +82,7 @@ class Twin:
 
     # --- lifecycle --------------------------------------------------------------------------------------------
     def start(self) -> Twin:
-        # The physics thread must not hold the emulators' threads off for Python's default 5 ms GIL switch interval.
+        # The physics thread must not hold the emulators' threads off for Python's default 5 ms GIL switch.
         sys.setswitchinterval(0.0005)
         self._t0_wall, self._t0_cpu = time.monotonic(), time.process_time()
         self._thread.start()

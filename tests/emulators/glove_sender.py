@@ -1,7 +1,7 @@
 """The glove bridge, emulated: datagrams of `teleoperators/manus_glove/protocol.py` at `rate_hz`, sent by the
 bridge's own `GloveSender` (session id, sequence number, send time on its monotonic clock).
 
-The hand is one operator's: per ergonomics channel (manus_bridge.CHANNELS) an open-hand and a fist value (deg), blended by
+The hand is one operator's: per ergonomics channel (`CHANNELS`) an open-hand and a fist value (deg), blended by
 `closure` (0 open .. 1 fist), or by `closure_fn(t)` for scripted motions. `keys` picks the names it sends:
 "sdk" (the SDK enum names without side, the receiver's channels), "ros2" (the MANUS ROS 2 publisher's strings).
 

@@ -371,9 +371,9 @@ SIGNATURES = {
 
 
 class ManusSdk:
-    """The SDK session (ManusSDK.h): initialise, register the callbacks, set a coordinate system, connect, then hand
-    each ergonomics stream to the poll loop. The SDK calls back on its own threads: the callbacks only copy and
-    flag; the main thread does the sending."""
+    """The SDK session (ManusSDK.h): initialise, register the callbacks, set a coordinate system, connect, then
+    hand each ergonomics stream to the poll loop. The SDK calls back on its own threads: the callbacks only copy
+    and flag; the main thread does the sending."""
 
     def __init__(self, cfg: BridgeConfig):
         self.cfg = cfg

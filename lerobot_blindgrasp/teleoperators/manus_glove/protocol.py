@@ -1,5 +1,5 @@
-"""The glove datagram (`blindgrasp-glove/2`): one UDP datagram per glove frame, UTF-8 JSON, from a bridge next to the
-MANUS SDK. docs/glove.md, "The datagram", defines each field and what is checked:
+"""The glove datagram (`blindgrasp-glove/2`): one UDP datagram per glove frame, UTF-8 JSON, from a bridge next to
+the MANUS SDK. docs/glove.md, "The datagram", defines each field and what is checked:
 
     {"proto": "blindgrasp-glove/2", "session": "9f1c2a7d03b4e8aa", "seq": 1234, "sent": 81234.5678,
      "side": "right", "ergonomics": {"ThumbMCPSpread": 25.0, "IndexMCPSpread": 2.0, "IndexMCPStretch": 5.0, ...}}

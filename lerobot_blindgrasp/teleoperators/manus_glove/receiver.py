@@ -1,12 +1,12 @@
 """The glove receiver: the newest pose for one hand from the bridge's UDP datagrams (`protocol.py`), ordered and
 aged by the bridge's own `seq` and `sent` clock, not by arrival (docs/glove.md, "Time by the bridge's clock").
 
-- Order: within a session only a `seq` above the newest used is kept (`late`); a new session is a restarted bridge,
-  followed at once unless its `sent` is behind the newest pose used (`retired`, as are the old session's datagrams).
+- Order: within a session only a `seq` above the newest used is kept (`late`); a new session is a restarted
+  bridge, followed at once unless its `sent` is behind the newest pose used (`retired`, as are the old session's).
 - Age: a loopback bridge shares this host's monotonic clock (age = arrival - sent). Elsewhere the minimum of
   arrival - sent estimates the clocks' offset, leaking upwards by `OFFSET_LEAK` s per s; a datagram queued longer
-  than `max_latency_s` beyond it is dropped (`stale`), so a backlog is never replayed. A `sent` stepping back within
-  a session is dropped (`clock_steps`). Arrival is the kernel's receive stamp.
+  than `max_latency_s` beyond it is dropped (`stale`), so a backlog is never replayed. A `sent` stepping back
+  within a session is dropped (`clock_steps`). Arrival is the kernel's receive stamp.
 - One sender: the configured `sender`, else the first valid one; every other is dropped (`foreign`).
 """
 
@@ -27,8 +27,8 @@ from .protocol import DatagramError, GloveDatagram, decode
 
 logger = logging.getLogger(__name__)
 
-# Linux's SO_TIMESTAMPNS (asm-generic/socket.h; not named by Python's socket module): the kernel's arrival stamp, so
-# time spent in the socket buffer while this process waits for a CPU is not taken for queueing on the network.
+# Linux's SO_TIMESTAMPNS (asm-generic/socket.h; not named by Python's socket module): the kernel's arrival stamp,
+# so time spent in the socket buffer while this process waits for a CPU is not taken for queueing on the network.
 _SO_TIMESTAMPNS = 35
 _TIMESPEC = struct.Struct("@ll")
 # Upward drift allowed to the clock-offset estimate (s per s): 1000 ppm, over ten times a quartz clock's rate error.
@@ -182,8 +182,9 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             self.foreign += 1
             if addr not in self._warned_senders:
                 self._warned_senders.add(addr)
-                logger.warning("Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. Another "
-                               "bridge or sender on the port? Reconnect to change the sender.", *addr, *self.bound)  # fmt: skip
+                logger.warning("Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. "
+                               "Another bridge or sender on the port? Reconnect to change the sender.",
+                               *addr, *self.bound)  # fmt: skip
             return False
         return True
 
@@ -251,8 +252,9 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
         if self.session is not None:
             self.restarts += 1
             self._retired.append(self.session)
-            logger.warning("Glove bridge restarted (session %s -> %s, its counter starts again): following the new "
-                           "session; late datagrams of the old one are dropped.", self.session, session)  # fmt: skip
+            logger.warning("Glove bridge restarted (session %s -> %s, its counter starts again): following the "
+                           "new session; late datagrams of the old one are dropped.", self.session,
+                           session)  # fmt: skip
         # self._sent stays: the restarted bridge's clock is the same machine's, and it must move on from there.
         self.session, self._seq, self._offset = session, 0, None
 

@@ -1,6 +1,6 @@
 """Human hand -> gripper joints (docs/hardware.md, "Retargeting"). Flexion maps linearly from the operator's
-[open hand, fist] onto [open_pose, closed_pose], clipped to that segment (a hand cannot over-drive the claw); spread
-maps relative to the open hand with a gain in rad/rad, since neither pose pins spread.
+[open hand, fist] onto [open_pose, closed_pose], clipped to that segment (a hand cannot over-drive the claw);
+spread maps relative to the open hand with a gain in rad/rad, since neither pose pins spread.
 """
 
 from __future__ import annotations
