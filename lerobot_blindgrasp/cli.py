@@ -10,12 +10,9 @@ import os
 import signal
 import sys
 import threading
-import typing
 from collections.abc import Callable, Iterator, Sequence
 
 import draccus
-
-T = typing.TypeVar("T")
 
 
 def parse_config[T](cls: type[T], argv: list[str] | None = None) -> T:
