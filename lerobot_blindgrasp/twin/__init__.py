@@ -1,5 +1,4 @@
 """The physics twin of the gripper (`blindgrasp-twin`): the package's serial emulators on pseudo-terminals with
-MuJoCo behind them, and an operator socket that places and judges each trial (docs/hardware.md, "The physics
-twin").
-Importing this package imports no MuJoCo: only the twin's process loads `physics.py`.
+MuJoCo behind them, and an operator socket that places and judges each trial (docs/hardware.md). Importing this
+package imports no MuJoCo: only the twin's process loads `physics.py`.
 """
