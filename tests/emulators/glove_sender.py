@@ -21,10 +21,12 @@ Faults:
 
 from __future__ import annotations
 
+import json
 import random
 import socket
 import threading
 import time
+from pathlib import Path
 
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_bridge import CHANNELS
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender
@@ -39,6 +41,20 @@ for _c in CHANNELS:
         OPEN[_c.name] = {"MCPStretch": 5.0, "PIPStretch": 3.0, "DIPStretch": 2.0}[_c.motion]
         FIST[_c.name] = {"MCPStretch": 85.0, "PIPStretch": 95.0, "DIPStretch": 60.0}[_c.motion]
 FIST.update({"ThumbMCPStretch": 45.0, "ThumbPIPStretch": 50.0, "ThumbDIPStretch": 40.0})
+
+
+def write_glove_calibration(fpath: Path, open_pose: dict = OPEN, fist_pose: dict = FIST) -> None:
+    """A glove calibration file as `lerobot-calibrate --teleop.type=manus_glove` writes it: the two poses."""
+    fpath.parent.mkdir(parents=True, exist_ok=True)
+    fpath.write_text(json.dumps({"open": open_pose, "fist": fist_pose}))
+
+
+def calibrated_glove(calibration_dir: Path, port: int, **config):
+    """A glove teleoperator of operator "op", this hand's calibration in `calibration_dir`, listening on `port`."""
+    from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
+
+    write_glove_calibration(calibration_dir / "op.json")
+    return ManusGlove(ManusGloveConfig(id="op", port=port, calibration_dir=calibration_dir, **config))
 
 
 def free_udp_port() -> int:
