@@ -12,11 +12,6 @@ from lerobot_blindgrasp.demos import provenance, yield_report
 from lerobot_blindgrasp.sim import objects
 
 
-def is_collection(root: Path) -> bool:
-    """Whether `root` was written by blindgrasp-collect-demos (its collection.json), not by lerobot-record."""
-    return provenance.provenance_path(root).is_file()
-
-
 def sim_context(root: Path, repo_id: str, meta) -> dict:
     prov = provenance.load_provenance(root)
     tally = yield_report.load_tally(root)

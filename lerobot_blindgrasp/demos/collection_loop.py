@@ -87,7 +87,7 @@ def _check_inputs(cfg: CollectConfig):
     if cfg.resume:
         if not out.is_dir():
             raise CollectError(f"--resume: {out} does not exist; drop --resume to start a new dataset")
-        if not provenance.provenance_path(out).is_file() and not records.empty_leftover(out):
+        if not provenance.is_collection(out) and not records.empty_leftover(out):
             raise CollectError(f"--resume: {out} was not written by blindgrasp-collect-demos (no collection.json)")
     elif out.exists():
         raise CollectError(f"{out} already exists; pass --resume=true to append to it, or a new --output_dir")

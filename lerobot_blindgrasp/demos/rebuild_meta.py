@@ -1,20 +1,12 @@
 """A LeRobot recording's metadata rebuilt from its data files, for the episodes whose frames are all there.
 
-LeRobot 0.6.1 writes a recording's episode rows to meta/episodes only every `metadata_buffer_size` (10) episodes
-or at `finalize()`, and keeps its data parquet file open (no footer) until then. A `lerobot-record` killed after
-its first episode therefore leaves that episode's frames in a footerless data file and no episode row at all; one
-that meets a full disk leaves a 0-byte meta/episodes file besides (its `finalize()` opens the file, then the write
-fails). The prefix repair (`repair.py`) finds no episode row there and would keep nothing.
-
-`rebuild(root)` instead starts from the data: every complete row group of every data file (`parquet_salvage`),
-cut to the longest prefix whose episodes are whole (global `index` contiguous from 0, episode indices 0, 1, ...,
-each episode's `frame_index` 0..n-1). The metadata is then written by LeRobot's own `LeRobotDatasetMetadata`
-(episode rows, stats per episode with `compute_episode_stats`, aggregated stats, totals) into a staging folder and
-moved in file by file, each atomically, `info.json` last, so the result is what LeRobot itself would have
-written. Files that held anything else (a footerless data file, the cut episode's partial bytes, an unreadable
-metadata file) are moved, not deleted, to `<root>.set-aside/` and named in the report.
-
-It applies only where the data can say everything: no image or video features (their files are not in the data).
+LeRobot 0.6.1 writes episode rows to meta/episodes only every `metadata_buffer_size` (10) episodes or at
+`finalize()`, and keeps its data file footerless until then: a killed `lerobot-record` leaves saved frames and no
+episode row (a full disk also leaves a 0-byte meta/episodes file), where the prefix repair (`repair.py`) would keep
+nothing. `rebuild(root)` starts from the data instead: every complete row group (`parquet_salvage`), cut to the
+longest prefix of whole episodes, fed to LeRobot's own `LeRobotDatasetMetadata` in a staging folder and moved in
+file by file, atomically, `info.json` last. Files it replaces are moved to `<root>.set-aside/`, not deleted. Only
+for datasets without image or video features (their frames are not in the data files).
 """
 
 from __future__ import annotations
@@ -76,14 +68,20 @@ def _template(features: dict):
     return datasets.Dataset.from_dict(row, features=hf).with_format("arrow")[:]
 
 
-def _footer_ok(path: Path) -> bool:
+def footer_ok(path: Path) -> bool:
+    """Whether pyarrow opens the parquet file (False without a footer, or unreadable for any other reason)."""
     import pyarrow.parquet as pq
 
     try:
         pq.ParquetFile(path)
         return True
-    except Exception:  # noqa: BLE001  (no footer, or unreadable: either way the pages are what is left)
+    except Exception:  # noqa: BLE001  (ArrowInvalid for a missing footer, OSError for I/O: unreadable either way)
         return False
+
+
+def chunk_file(path: Path) -> tuple[int, int]:
+    """(chunk index, file index) of `.../chunk-CCC/file-FFF.parquet`."""
+    return int(path.parent.name.split("-")[-1]), int(path.stem.split("-")[-1])
 
 
 def read_data(root: Path, features: dict) -> list[tuple[Path, object, bool, int]]:
@@ -94,7 +92,7 @@ def read_data(root: Path, features: dict) -> list[tuple[Path, object, bool, int]
 
     template, out = None, []
     for p in sorted((root / "data").glob("chunk-*/file-*.parquet")):
-        if _footer_ok(p):
+        if footer_ok(p):
             out.append((p, pq.read_table(p), True, 0))
             continue
         template = _template(features) if template is None else template
@@ -112,9 +110,8 @@ def whole_prefix(files: list) -> tuple[list[dict], int]:
         for e in dict.fromkeys(ep.tolist()):
             rows = np.flatnonzero(ep == e)
             n = len(rows)
-            if e != len(episodes) or not np.array_equal(idx[rows], np.arange(next_index, next_index + n)):
-                return episodes, next_index
-            if not np.array_equal(fi[rows], np.arange(n)):
+            in_order = e == len(episodes) and np.array_equal(idx[rows], np.arange(next_index, next_index + n))
+            if not (in_order and np.array_equal(fi[rows], np.arange(n))):
                 return episodes, next_index
             episodes.append({"index": int(e), "length": n, "file": path, "rows": rows, "from": next_index})
             next_index += n
@@ -129,7 +126,7 @@ def needed(root: Path, files: list, n_whole: int) -> bool:
         return True
     rows = set()
     for p in sorted((root / EPISODES).glob("chunk-*/file-*.parquet")):
-        if not _footer_ok(p):
+        if not footer_ok(p):
             return True
         rows |= set(pq.read_table(p, columns=["episode_index"])["episode_index"].to_pylist())
     return not set(range(n_whole)) <= rows
@@ -180,7 +177,7 @@ def _stage(root: Path, staging: Path, info, files: list, episodes: list, tasks: 
         table = tables[e["file"]]
         rows = e["rows"]
         task_of = sorted({tasks[i] for i in table["task_index"].take(rows).to_pylist()})
-        chunk, file = (int(x.split("-")[-1]) for x in (e["file"].parent.name, e["file"].stem))
+        chunk, file = chunk_file(e["file"])
         where = {"data/chunk_index": chunk, "data/file_index": file}
         where.update(dataset_from_index=e["from"], dataset_to_index=e["from"] + e["length"])
         meta.save_episode(e["index"], e["length"], task_of, _stats(table, rows, info.features), where)

@@ -1,13 +1,9 @@
 """The run records of a demo collection: provenance (`collection.json`), statistics, the yield report and card.
 
-A collection is one or more runs (`--resume=true` adds one) into one dataset folder. `open_dataset` starts or
-reopens the folder and its provenance; `start_run` and `finish_run` bracket each run, so `collection.json` lists
-every run with its outcome, however it ended, and `yield_report.json` and the card always describe the whole
-dataset. `yield_report.json` is written only when a run ends: it marks a finished collection.
-
-A run that is killed cannot record its end. `checkpoint_run` keeps `collection.json` current instead (the run in
-progress with its tally, and the next env seed before any episode of those envs is written), and `open_dataset`
-with --resume repairs the folder to its last checkpoint (`repair.py`), marks that run as killed and takes its tally.
+A collection is one or more runs (`--resume=true` adds one) into one folder. `start_run` and `finish_run` bracket
+each run, so `collection.json` lists every run however it ended; `yield_report.json` (written when a run ends) and
+the card describe the whole dataset. A killed run cannot record its end: `checkpoint_run` keeps `collection.json`
+current instead, and `open_dataset` with --resume repairs the folder to that checkpoint and takes its tally.
 """
 
 from __future__ import annotations
@@ -126,11 +122,7 @@ def open_dataset(cfg: CollectConfig, prov_new: dict):
 
 def empty_leftover(out: Path) -> bool:
     """A folder that a collection killed while starting left behind: no collection.json, no data file."""
-    return (
-        out.is_dir()
-        and not provenance.provenance_path(out).is_file()
-        and not any((out / "data").rglob("*.parquet"))
-    )
+    return out.is_dir() and not provenance.is_collection(out) and not any((out / "data").rglob("*.parquet"))
 
 
 def _repair(out: Path) -> None:
@@ -213,9 +205,7 @@ def finish_run(cfg: CollectConfig, prov: dict, run: dict, tally: yield_report.Ta
 
 def _write_report(out: Path, cfg: CollectConfig, prov: dict, tally: yield_report.Tally) -> Path:
     runs = prov["runs"]
-    wall = sum(r["wall_s"] for r in runs)
-    cpu = sum(r["cpu_s"] for r in runs)
-    kept_now = sum(r["kept"] for r in runs)
+    wall, cpu, kept = (sum(r[k] for r in runs) for k in ("wall_s", "cpu_s", "kept"))
     return yield_report.write_yield_report(
         out,
         tally,
@@ -229,8 +219,8 @@ def _write_report(out: Path, cfg: CollectConfig, prov: dict, tally: yield_report
             "runs": len(runs),
             "wall_s": wall,
             "cpu_s": cpu,
-            "demos_per_minute": 60.0 * kept_now / wall if wall else 0.0,
-            "demos_per_cpu_minute": 60.0 * kept_now / cpu if cpu else 0.0,
+            "demos_per_minute": 60.0 * kept / wall if wall else 0.0,
+            "demos_per_cpu_minute": 60.0 * kept / cpu if cpu else 0.0,
             "object_order": list(prov["objects"]),
         },
     )

@@ -3,30 +3,19 @@
     blindgrasp-repair-dataset --root=runs/demos_cpu            # repair in place, say what was kept and lost
     blindgrasp-repair-dataset --root=runs/demos_cpu --dry_run=true
 
-A LeRobot v3 dataset that is being written keeps its parquet writers open; their footers are written only by
-`finalize()`. A process that dies without it (SIGKILL, the out-of-memory killer, a power cut) leaves footerless
-files that no reader opens, metadata for up to `metadata_buffer_size` episodes that never reached meta/episodes
-(a full disk leaves that file 0 bytes long), and `info.json` / `stats.json` counting episodes whose frames are
-gone. LeRobot then refuses the folder ("Parquet magic bytes not found in footer").
-
-First, when the data holds finished episodes that meta/episodes lacks, the metadata is rebuilt from the data
-(`rebuild_meta`: footerless files read to their last complete row group, the cut bytes set aside in
-`<root>.set-aside/`). Not for a demo collection (it has collection.json): it resumes from its last checkpoint,
-whose tally and seeds describe the dataset as it was then. Then the repair keeps episodes 0..k-1, the longest
-prefix in which every episode has its meta/episodes row, all its frames (exactly `length` rows with the right
-global indices) in a readable data file, and its video files. Then: unreadable parquet files and killed writers'
-temp files are removed; readable files that also hold later episodes are rewritten without them; tasks.parquet
-is rebuilt from the data if unreadable; stats.json is re-aggregated from the kept episodes' own stats (LeRobot's
-`aggregate_stats`, as `lerobot-edit-dataset` does); `info.json` is written last. Every rewrite is atomic
-(`durable`), so a repair killed half-way is simply run again; on a consistent dataset it changes nothing. What it
-cannot check: the content of video files (only that they exist).
-
-`blindgrasp-collect-demos --resume=true` runs the same repair before it appends. After a crashed `lerobot-record`,
-run it, then record on with `lerobot-record ... --resume=true`.
+A LeRobot v3 writer that dies before `finalize()` leaves footerless parquet files, episode rows that never reached
+meta/episodes, and counts in `info.json` / `stats.json` for frames that are gone; LeRobot then refuses the folder.
+When the data holds finished episodes that meta/episodes lacks, the metadata is first rebuilt from the data
+(`rebuild_meta`), except in a demo collection (collection.json), which resumes from its last checkpoint. Then the
+repair keeps episodes 0..k-1, the longest prefix whose metadata row, frames and video files agree (video content is
+not checked), rewrites or removes the files holding later ones, and re-derives tasks.parquet (if unreadable),
+stats.json (LeRobot's `aggregate_stats` of the kept episodes' stats) and `info.json`, last. Every write is atomic:
+a repair killed half-way is run again; on a consistent dataset it changes nothing.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import sys
@@ -39,12 +28,10 @@ from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cli import parse_config
 
 from . import provenance, rebuild_meta
-
-log = logging.getLogger("blindgrasp.repair")
+from .rebuild_meta import TASKS, chunk_file, footer_ok
 
 INFO = Path("meta/info.json")
 STATS = Path("meta/stats.json")
-TASKS = Path("meta/tasks.parquet")
 
 
 class RepairError(Exception):
@@ -84,36 +71,15 @@ class RepairReport:
 
 
 def _ranges(indices: list[int]) -> str:
-    if not indices:
-        return ""
-    out, start, prev = [], indices[0], indices[0]
-    for i in [*indices[1:], None]:
-        if i is not None and i == prev + 1:
-            prev = i
-            continue
-        out.append(f"{start}" if start == prev else f"{start}-{prev}")
-        if i is not None:
-            start = prev = i
-    return "[" + ", ".join(out) + "]"
-
-
-def _readable(path: Path):
-    """The parquet file's metadata, or None when it has no footer or is otherwise unreadable."""
-    import pyarrow.parquet as pq
-
-    try:
-        return pq.ParquetFile(path).metadata
-    except Exception:  # noqa: BLE001  (ArrowInvalid for a missing footer, OSError for I/O: unreadable either way)
-        return None
-
-
-def _chunk_file(path: Path) -> tuple[int, int]:
-    return int(path.parent.name.split("-")[-1]), int(path.stem.split("-")[-1])
+    """[0, 1, 2, 5] -> "[0-2, 5]"."""
+    step = itertools.count()
+    runs = [list(g) for _, g in itertools.groupby(indices, lambda i: i - next(step))]
+    return "[" + ", ".join(str(r[0]) if len(r) == 1 else f"{r[0]}-{r[-1]}" for r in runs) + "]"
 
 
 def inspect(root: Path) -> tuple[dict, RepairReport, dict]:
-    """Find the verified prefix without changing anything. Returns (info, report, plan) where plan holds the files
-    to remove and the files to rewrite (path -> keep episodes below k)."""
+    """Find the verified prefix without changing anything. Returns (info, report, plan): the files to remove and
+    the files to rewrite without the episodes from k on."""
     root = Path(root)
     try:
         info = json.loads((root / INFO).read_text())
@@ -135,19 +101,18 @@ def inspect(root: Path) -> tuple[dict, RepairReport, dict]:
     frames: dict[tuple[int, int], dict[int, np.ndarray]] = {}
     for p, table in data_tables.items():
         ep, idx = table["episode_index"].to_numpy(), table["index"].to_numpy()
-        frames[_chunk_file(p)] = {int(e): idx[ep == e] for e in np.unique(ep)}
+        frames[chunk_file(p)] = {int(e): idx[ep == e] for e in np.unique(ep)}
     k, next_from = _verified_prefix(root, info, features, episodes, frames, report)
     report.kept_episodes, report.kept_frames = k, next_from
     seen = set(episodes) | {e for per_file in frames.values() for e in per_file}
     report.lost_episodes = sorted(e for e in seen | set(range(report.episodes_claimed)) if e >= k)
-    rewrite: dict[Path, str] = {}
-    for tables, what in ((meta_tables, "meta"), (data_tables, "data")):
-        for p, table in tables.items():
-            ep = table["episode_index"].to_numpy()
-            if (ep >= k).all():
-                remove.append(p)
-            elif (ep >= k).any():
-                rewrite[p] = what
+    rewrite: list[Path] = []
+    for p, table in [*meta_tables.items(), *data_tables.items()]:
+        lost = table["episode_index"].to_numpy() >= k
+        if lost.all():
+            remove.append(p)
+        elif lost.any():
+            rewrite.append(p)
     return info, report, {"remove": remove, "rewrite": rewrite}
 
 
@@ -157,7 +122,7 @@ def _read_tables(folder: Path, columns: list[str] | None, unreadable: list[Path]
 
     tables = {}
     for p in sorted(folder.glob("chunk-*/file-*.parquet")):
-        if _readable(p) is None:
+        if not footer_ok(p):
             unreadable.append(p)
         else:
             tables[p] = pq.read_table(p, columns=columns)
@@ -174,7 +139,8 @@ def _verified_prefix(
     while True:
         row = episodes.get(k)
         if row is None:
-            beyond = k < report.episodes_claimed or _beyond(k, episodes, frames)
+            later = itertools.chain(episodes, *frames.values())  # every episode index seen anywhere
+            beyond = k < report.episodes_claimed or any(e >= k for e in later)
             report.first_problem = f"episode {k} has no readable meta/episodes row" if beyond else ""
             return k, next_from
         idx = frames.get((int(row["data/chunk_index"]), int(row["data/file_index"])), {}).get(k)
@@ -201,20 +167,14 @@ def _video_file(root: Path, info: dict, row: dict, key: str) -> Path:
     )
 
 
-def _beyond(k: int, episodes: dict, frames: dict) -> bool:
-    return any(e >= k for e in episodes) or any(e >= k for f in frames.values() for e in f)
-
-
 def repair(root: str | Path, dry_run: bool = False) -> RepairReport:
     """Repair `root` in place (see the module docstring); with dry_run, only say what would change."""
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
 
     root = Path(root)
-    demos = provenance.provenance_path(
-        root
-    ).is_file()  # a demo collection resumes from its checkpoint (`records.py`)
-    rebuilt = None if demos else rebuild_meta.rebuild(root, dry_run=dry_run)
+    # A demo collection resumes from its last checkpoint (`records.py`): its metadata is not rebuilt.
+    rebuilt = None if provenance.is_collection(root) else rebuild_meta.rebuild(root, dry_run=dry_run)
     if rebuilt and dry_run:
         return RepairReport(root, kept_episodes=rebuilt.episodes, kept_frames=rebuilt.frames, rebuilt=rebuilt)
     info, report, plan = inspect(root)
@@ -223,7 +183,7 @@ def repair(root: str | Path, dry_run: bool = False) -> RepairReport:
     rel = lambda p: str(Path(p).relative_to(root))  # noqa: E731
     report.removed = [rel(p) for p in plan["remove"]]
     report.rewritten = [rel(p) for p in plan["rewrite"]]
-    tasks_ok = (root / TASKS).is_file() and _readable(root / TASKS) is not None
+    tasks_ok = (root / TASKS).is_file() and footer_ok(root / TASKS)
     stats_ok = _json_ok(root / STATS) if k else not (root / STATS).exists()
     counts = (info.get("total_episodes"), info.get("total_frames"))
     needs_meta = report.changed or counts != (k, report.kept_frames) or not tasks_ok or not stats_ok
@@ -232,7 +192,7 @@ def repair(root: str | Path, dry_run: bool = False) -> RepairReport:
     if dry_run or not needs_meta:
         return report
 
-    for p, _ in plan["rewrite"].items():
+    for p in plan["rewrite"]:
         table = pq.read_table(p)
         kept = table.filter(pc.less(table["episode_index"], k))
         with durable.atomic_path(p) as tmp:

@@ -108,7 +108,7 @@ def collect_published_demos(cfg: PublishConfig, out: Path, repo_id: str) -> Path
         teacher=shipped.path(recipe.teacher.shipped_folder), output_dir=out, repo_id=repo_id,
         episodes_per_object=cfg.demo_episodes, objects=cfg.demo_objects,
         joint_calibration_rad=recipe.demos.joint_calibration_rad,
-        num_envs=min(recipe.demos.num_envs, _ENVS_PER_OBJECT * n_objects), resume=provenance.provenance_path(out).is_file(),
+        num_envs=min(recipe.demos.num_envs, _ENVS_PER_OBJECT * n_objects), resume=provenance.is_collection(out),
     )  # fmt: skip
     print(f"demos: {'resuming' if collect.resume else 'collecting'} {cfg.demo_episodes} curated episodes per object ({n_objects} objects) from "
           f"{collect.teacher.name} into {out}", flush=True)  # fmt: skip

@@ -21,7 +21,7 @@ from pathlib import Path
 from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.demos import collection_card
+from lerobot_blindgrasp.demos import collection_card, provenance
 from lerobot_blindgrasp.project import REPO_ID_PATTERN
 
 # Not uploaded by LeRobot's push_to_hub (it ignores images/; state-only datasets have none anyway).
@@ -74,7 +74,7 @@ def prepare(
 
 def detect_kind(root: Path) -> str:
     """'sim' for folders written by blindgrasp-collect-demos, else 'glove' (a lerobot-record dataset)."""
-    return "sim" if collection_card.is_collection(root) else "glove"
+    return "sim" if provenance.is_collection(root) else "glove"
 
 
 def push_card_kwargs(
