@@ -30,13 +30,10 @@ def collect_stage(
         return root
     from lerobot_blindgrasp.demos.collect_cli import EXIT_EMPTY
 
-    # An empty curated set is handled by the caller (uncurated fallback). A collection cut short is resumed
+    # An empty curated set is the caller's (the uncurated fallback). A collection cut short is resumed
     # (recipe.demos_collect adds --resume=true; the collector repairs a crashed folder first).
-    stage.run(
-        name,
-        recipe.demos_collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra),
-        ok=(0, EXIT_EMPTY),
-    )
+    cmd = recipe.demos_collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra)
+    stage.run(name, cmd, ok=(0, EXIT_EMPTY))
     return root
 
 
@@ -56,16 +53,8 @@ def targeted_demos(
     roots, repos = [demos], [repo]
     for k, (name, n) in enumerate(preset.demos.extra_episodes):
         root, extra_repo = out / f"{demos.name}_{name}", f"{repo}_{name}"
-        collect_stage(
-            stage,
-            preset,
-            teacher,
-            root,
-            extra_repo,
-            recipe.extra_demo_seed(seed, k, curated),
-            curate=curated,
-            extra=(name, n),
-        )
+        first_seed = recipe.extra_demo_seed(seed, k, curated)
+        collect_stage(stage, preset, teacher, root, extra_repo, first_seed, curate=curated, extra=(name, n))
         if kept(root):  # an object the teacher never solved adds nothing (its yield report says so)
             roots.append(root)
             repos.append(extra_repo)

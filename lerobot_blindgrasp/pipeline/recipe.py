@@ -115,13 +115,6 @@ def demos_collect(
     return cmd
 
 
-def student_train(
-    p: presets.Preset, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
-) -> tuple[list[str], presets.Schedule]:
-    """lerobot-train of the preset's student; the step count (and LR schedule) follows from the dataset's frames."""
-    return lerobot_train(p.student, dataset, repo_id, out, seed, device)
-
-
 def lerobot_train(
     s: presets.StudentStage, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
 ) -> tuple[list[str], presets.Schedule]:
@@ -129,31 +122,46 @@ def lerobot_train(
     schedule) follows from the dataset's frames once it is complete."""
     frames = presets.dataset_frames(dataset) if (dataset / "meta" / "info.json").exists() else None
     sched = presets.schedule(s, frames)
-    cmd = [
+    extra = []
+    if sched.constant_lr_steps is not None:
+        extra.append(f"--policy.scheduler_constant_steps={sched.constant_lr_steps}")
+    if s.lr is not None:
+        extra.append(f"--policy.optimizer_lr={s.lr}")
+    policy = ["--policy.type=blindgrasp_transformer", f"--policy.size={s.size}"]
+    cmd = _lerobot_train(s, policy, dataset, repo_id, out, sched.steps, seed, device, [*extra, *s.policy_flags])
+    return cmd, sched
+
+
+def _lerobot_train(
+    s: presets.StudentStage,
+    policy: list[str],
+    dataset: Path,
+    repo_id: str,
+    out: Path,
+    steps: int,
+    seed: int,
+    device: str | None,
+    extra: list[str],
+) -> list[str]:
+    """The lerobot-train command both trainings share: `policy` says where the policy starts, `extra` follows the
+    batch size."""
+    return [
         "lerobot-train",
-        "--policy.type=blindgrasp_transformer",
-        f"--policy.size={s.size}",
+        *policy,
         f"--dataset.repo_id={repo_id}",
         f"--dataset.root={dataset}",
         f"--output_dir={out}",
-        f"--steps={sched.steps}",
+        f"--steps={steps}",
         f"--batch_size={s.batch_size}",
-    ]
-    if sched.constant_lr_steps is not None:
-        cmd.append(f"--policy.scheduler_constant_steps={sched.constant_lr_steps}")
-    if s.lr is not None:
-        cmd.append(f"--policy.optimizer_lr={s.lr}")
-    cmd += s.policy_flags
-    cmd += [
-        f"--save_freq={sched.steps}",
-        f"--log_freq={max(1, sched.steps // 50)}",
+        *extra,
+        f"--save_freq={steps}",
+        f"--log_freq={max(1, steps // 50)}",
         "--policy.push_to_hub=false",
         f"--policy.device={device or s.device}",
         f"--num_workers={s.num_workers}",
         "--wandb.enable=false",
         f"--seed={seed}",
     ]
-    return cmd, sched
 
 
 def dagger_seed(seed: int, round_: int) -> int:
@@ -192,23 +200,8 @@ def student_finetune(
     p: presets.Preset, init: Path, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
 ) -> list[str]:
     """lerobot-train from a student's weights (DAgger's retraining on the aggregate), `p.dagger.steps` steps."""
-    s, steps = p.student, p.dagger.steps
-    return [
-        "lerobot-train",
-        f"--policy.path={init}",
-        f"--dataset.repo_id={repo_id}",
-        f"--dataset.root={dataset}",
-        f"--output_dir={out}",
-        f"--steps={steps}",
-        f"--batch_size={s.batch_size}",
-        f"--save_freq={steps}",
-        f"--log_freq={max(1, steps // 50)}",
-        "--policy.push_to_hub=false",
-        f"--policy.device={device or s.device}",
-        f"--num_workers={s.num_workers}",
-        "--wandb.enable=false",
-        f"--seed={seed}",
-    ]
+    steps = p.dagger.steps
+    return _lerobot_train(p.student, [f"--policy.path={init}"], dataset, repo_id, out, steps, seed, device, [])
 
 
 def student_eval(
@@ -302,7 +295,7 @@ def table_v(
                 raise ValueError(f"{root} is not collected yet: run the demos stage first")
             if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
                 cmds.append(["mv", str(student), str(out / f"student_{row.name}_interrupted_{int(time.time())}")])
-            cmds.append(student_train(p, root, repo, student, seed, device)[0])
+            cmds.append(lerobot_train(p.student, root, repo, student, seed, device)[0])
         if stage == "evals" and not (out / f"eval_{row.name}" / "eval_info.json").exists():
             cmds.append(student_eval(p, checkpoint(student), out / f"eval_{row.name}", eval_seed, device))
     return cmds

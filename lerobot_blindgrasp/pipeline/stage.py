@@ -54,6 +54,13 @@ class Stage:
         print(f"[pipeline] {name} done in {wall:.0f} s", flush=True)
         return proc.returncode
 
+    def once(self, name: str, done_note: str, cmd: list[str], **kw) -> None:
+        """`run`, unless the stage is marked completed (then it says so, with `done_note`)."""
+        if self.done(name):
+            self.skip(name, done_note)
+        else:
+            self.run(name, cmd, **kw)
+
     def skip(self, name: str, why: str) -> None:
         print(f"[pipeline] {name}: skipped ({why})", flush=True)
 

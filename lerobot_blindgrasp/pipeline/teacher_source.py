@@ -24,27 +24,21 @@ def teacher_for_run(
         shipped = "shipped" if preset.teacher.shipped_folder else "shipped default"
         stage.skip("teacher", f"using {'the given' if given is not None else 'the ' + shipped} teacher {path}")
         source = "given (--teacher)" if given is not None else shipped
-        return path, {
-            "source": source,
-            "path": str(path),
-            "file": t.name,
-            "sha256": t.sha256,
-            "iteration": t.iteration,
-            "preset": t.config.get("preset"),
-        }
-    teacher_dir = out / "teacher"
-    if stage.done("teacher"):
-        stage.skip("teacher", "trained")
+        preset_name = t.config.get("preset")
     else:
-        spec.check_seeds("teacher_train", seed, preset.teacher.num_envs or preset.teacher.settings.num_envs)
-        stage.run("teacher", recipe.teacher_train(preset, teacher_dir, seed))
-    t = TeacherPolicy(teacher_dir)
-    name = preset.teacher.settings.name
-    return teacher_dir, {
-        "source": f"trained from scratch in this run (teacher preset `{name}`)",
-        "path": str(teacher_dir),
+        path, preset_name = out / "teacher", preset.teacher.settings.name
+        source = f"trained from scratch in this run (teacher preset `{preset_name}`)"
+        if stage.done("teacher"):
+            stage.skip("teacher", "trained")
+        else:
+            spec.check_seeds("teacher_train", seed, preset.teacher.num_envs or preset.teacher.settings.num_envs)
+            stage.run("teacher", recipe.teacher_train(preset, path, seed))
+        t = TeacherPolicy(path)
+    return path, {
+        "source": source,
+        "path": str(path),
         "file": t.name,
         "sha256": t.sha256,
         "iteration": t.iteration,
-        "preset": name,
+        "preset": preset_name,
     }
