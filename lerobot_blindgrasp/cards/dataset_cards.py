@@ -1,13 +1,11 @@
 """Dataset cards for blindgrasp datasets, from the templates in `card_templates/` (package data, read through
-importlib.resources, so a non-editable install writes cards too; the top-level `datasets_cards/` points here).
+importlib.resources, so a non-editable install writes cards too).
 
-A card is LeRobot's own (`create_lerobot_dataset_card`: LeRobot template, `task_categories: robotics`, the
-`configs` entry the Hub viewer needs, info.json) with our body as its `dataset_description`, our tags, the license
-and the paper's citation. `push_to_hub` builds the card from the same arguments, so the README.md we write next to
-the data is exactly what lands on the Hub. Two bodies:
-- `sim_teacher_demos.md`: filled from `collection.json` and `yield_report.json` (object set, curation thresholds,
-  randomization, teacher checkpoint hash, yield);
-- `glove_teleop_demos.md`: for `lerobot-record` datasets of the real gripper, filled from the dataset's metadata.
+A card is LeRobot's own (`create_lerobot_dataset_card`: its template, `task_categories: robotics`, the `configs`
+entry the Hub viewer needs) with our body as `dataset_description`, our tags, the license and the paper's citation.
+`push_to_hub` builds the card from the same arguments, so the README.md written next to the data is what lands on
+the Hub. Bodies: `sim_teacher_demos.md` (from `collection.json` and `yield_report.json`) and
+`glove_teleop_demos.md` (from a `lerobot-record` dataset's metadata).
 """
 
 from __future__ import annotations

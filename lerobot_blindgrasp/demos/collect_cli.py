@@ -1,5 +1,7 @@
-"""`blindgrasp-collect-demos` (`CollectConfig`): run the collection loop, print the yield table, map outcomes to exit
-codes. Beside LeRobot's files the dataset folder holds `collection.json`, `yield_report.json` and the card."""
+"""`blindgrasp-collect-demos`: roll out a trained teacher, curate its episodes and write a LeRobotDataset.
+
+The command line of `collection_loop`: print the yield table, map outcomes to exit codes. Beside LeRobot's files the
+dataset folder holds `collection.json`, `yield_report.json` and the card (README.md)."""
 
 from __future__ import annotations
 

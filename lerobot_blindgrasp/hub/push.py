@@ -1,14 +1,9 @@
 """`blindgrasp-push-dataset`: upload a blindgrasp dataset folder to the Hugging Face Hub with its card.
 
-    blindgrasp-push-dataset --root=runs/demos_cpu --repo_id=me/blindgrasp_demos_cpu
-    blindgrasp-push-dataset --root=~/glove_demos --repo_id=me/blindgrasp_glove --kind=glove --operators=[alice]
-
-Works for sim teacher demos (`blindgrasp-collect-demos` output, detected by its collection.json) and for glove
-teleoperation datasets recorded with `lerobot-record` (record them with `--dataset.push_to_hub=false`, then push
-them with this command to get the glove card). Everything is prepared locally first: the dataset is loaded (so a
-broken folder fails here, not half-way through an upload) and its card is written to README.md. Then LeRobot's own
-`LeRobotDataset.push_to_hub` uploads the folder, pushes the same card and tags the `v3.0` revision.
-`--dry_run=true` stops before the network.
+Sim teacher demos (known by their collection.json) or a glove recording from `lerobot-record` (record with
+`--dataset.push_to_hub=false`, then push with this for the glove card). Everything is prepared locally first: the
+dataset is loaded, so a broken folder fails here and not half-way through an upload, and its card is written to
+README.md; then LeRobot's `push_to_hub` uploads the folder with the same card and tags the `v3.0` revision.
 """
 
 from __future__ import annotations
@@ -18,7 +13,6 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.demos import collection_card, provenance
@@ -64,9 +58,7 @@ def prepare(
         kwargs = push_card_kwargs(root, repo_id, kind, license, tags, operators, notes)
     except (FileNotFoundError, ValueError) as e:
         raise PushError(str(e)) from None
-    card = cards.build_card(kwargs, repo_id)
-    cards.validate(str(card))
-    durable.atomic_write_text(root / cards.CARD_NAME, str(card))  # DatasetCard.save's text, atomically
+    cards.write_card(root, repo_id, kwargs)
     ds = LeRobotDataset(repo_id, root=root, video_backend="pyav")  # reads local files only
     push_kwargs = {k: v for k, v in kwargs.items() if not k.startswith("_")}
     return ds, push_kwargs, upload_plan(root)

@@ -4,17 +4,12 @@
     blindgrasp-train-glove --preset=sim_plus_glove --glove=[data/glove_s1] --sim_demos=runs/demos \\
         --output_dir=outputs/sim_plus_glove
 
-The presets are `lerobot_blindgrasp/presets/glove.py`. What runs, in order, each step with LeRobot's own tools:
-1. every source is checked for the shared schema (`spec.dataset_features()`, robot type, 20 fps), so a wrong
-   folder is named before anything is written;
-2. sim demos (`sim_plus_glove*`): their `episode.*` metadata features are removed (`dataset_tools.remove_feature`,
-   what `lerobot-edit-dataset --operation.type remove_feature` runs) into `<output_dir>/sim_schema`;
-3. two or more sources are merged (`aggregate_datasets`, what `lerobot-edit-dataset --operation.type merge` runs,
-   through `demos.dataset.aggregate`, which keeps the result mergeable) into `<output_dir>/dataset`;
-4. `lerobot-train --policy.type=blindgrasp_transformer` with the preset's size and schedule into
-   `<output_dir>/student`.
-Each dataset is written to a temporary folder and renamed when complete, so a re-run after a crash reuses what is
-finished and redoes the rest. `--dry_run=true` prints the plan and the lerobot-train command and runs nothing.
+With LeRobot's own tools, in order: every source is checked for the shared schema (`spec.dataset_features()`, robot
+type, 20 fps) before anything is written; sim demos lose their `episode.*` features (`remove_feature`) into
+`<output_dir>/sim_schema`; several sources are merged (`demos.dataset.aggregate`) into `<output_dir>/dataset`; and
+`lerobot-train` trains the preset's student (`presets/glove.py`) into `<output_dir>/student`. Each dataset is
+written to a temporary folder and renamed when complete, so a re-run reuses what is finished. `--dry_run=true`
+prints the plan and the lerobot-train command and runs nothing.
 """
 
 from __future__ import annotations
@@ -23,13 +18,13 @@ import json
 import shlex
 import shutil
 import subprocess
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.pipeline import recipe
+from lerobot_blindgrasp.pipeline.stage import console_script
 from lerobot_blindgrasp.presets import student as student_presets
 from lerobot_blindgrasp.presets.glove import GlovePreset, glove_preset
 
@@ -143,8 +138,7 @@ def train_command(
 ) -> list[str]:
     """lerobot-train of the preset's student on the merged recordings (the venv's lerobot-train, as run here)."""
     cmd, _ = recipe.lerobot_train(p.student, dataset, repo_id, out, seed, device)
-    exe = Path(sys.executable).parent / cmd[0]
-    return [str(exe) if exe.exists() else cmd[0], *cmd[1:]]
+    return [console_script(cmd[0]), *cmd[1:]]
 
 
 def train_on_glove(cfg: GloveTrainConfig) -> Path:

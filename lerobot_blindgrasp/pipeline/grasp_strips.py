@@ -1,10 +1,8 @@
-"""Frame strips of successful student grasps, one row per object class, from lerobot-eval's own videos.
+"""Frame strips of successful student grasps, one row per object shape, from lerobot-eval's own videos.
 
-lerobot-eval renders the first episodes of every task to `videos/<group>_<task_id>/eval_episode_<k>.mp4` and lists
-them per task in `eval_info.json` (`video_paths`, in episode order, next to `successes`). A reader of the report
-would rather see a grasp than a number, so for each shape (cuboid, capsule, cylinder, sphere) this picks one
-successful rendered episode, preferring the medium size, and lays out a few frames from it across the episode.
-Decoding uses PyAV, which LeRobot's dataset extra already installs.
+lerobot-eval renders the first episodes of every task and lists them in `eval_info.json` (`video_paths` beside
+`successes`, in episode order). For each shape this picks one successful rendered episode, medium size first, and
+lays a few of its frames across the episode. Decoding uses PyAV, which LeRobot's dataset extra installs.
 """
 
 from __future__ import annotations

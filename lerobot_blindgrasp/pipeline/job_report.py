@@ -1,10 +1,7 @@
-"""The pipeline report: markdown plus PNG plots, from what each stage left in the output folder.
-
-Sources: teacher `eval.json` (blindgrasp-eval-teacher), its TensorBoard scalars, the demos' `yield_report.json`,
-the student's `lerobot-train` log (loss lines) and lerobot-eval's `eval_info.json` (per task = per object).
-
-Teacher and student are evaluated on the same start states (episode k of object o is evaluation index seed + k in
-both tools), so the report pairs them episode by episode. Every rate carries its 95 % Wilson interval.
+"""The pipeline report: markdown plus PNG plots, from what each stage left in the output folder (the teacher's
+`eval.json` and TensorBoard scalars, the demos' `yield_report.json`, the student's `lerobot-train` log and
+lerobot-eval's `eval_info.json`). Teacher and student ran the same start states, so the report pairs them episode by
+episode; every rate carries its 95 % Wilson interval.
 """
 
 from __future__ import annotations

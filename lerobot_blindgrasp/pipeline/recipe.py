@@ -1,11 +1,10 @@
 """The command line of every stage, built from a registry preset: one definition for `blindgrasp-pipeline` and for
-`scripts/paper_recipe.sh` (Table V at the preset's sizes).
+`scripts/paper_recipe.sh`, which runs Table V at the preset's sizes stage by stage:
 
     blindgrasp-pipeline --preset=paper --output_dir=outputs/paper --print_commands=demos
 
-prints, one shell line each, the commands of that Table V stage that are not done yet (the stages run in the
-order of STAGES; a re-run continues). Student steps come from the collected dataset (`presets.student`), so the
-`students` stage can only be printed once the demos exist.
+prints the commands of that stage not done yet, one shell line each (stages in the order of STAGES). Student steps
+come from the collected dataset (`presets.student`), so `students` can only be printed once the demos exist.
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ class Stage:
         (out / "logs").mkdir(parents=True, exist_ok=True)
 
     def run(self, name: str, cmd: list[str], env: dict | None = None, ok: tuple[int, ...] = (0,)) -> int:
-        cmd = [_bin(cmd[0]), *cmd[1:]]
+        cmd = [console_script(cmd[0]), *cmd[1:]]
         log_path = self.out / "logs" / f"{name}.log"
         print(f"[pipeline] {name}: {shlex.join(cmd)}", flush=True)
         t = time.time()
@@ -88,7 +88,7 @@ def _die_with_parent() -> None:
         ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
 
 
-def _bin(name: str) -> str:
+def console_script(name: str) -> str:
     """The console script next to this interpreter (the venv's), so subprocesses use the same install."""
     cand = Path(sys.executable).parent / name
     return str(cand) if cand.exists() else name
