@@ -21,15 +21,15 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp import presets, spec
+from lerobot_blindgrasp import durable, presets, spec
 from lerobot_blindgrasp.cli import parse_config, sleeping_openmp_threads
-from lerobot_blindgrasp.pipeline import demo_stages, recipe
+from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.pipeline.stage import COMPLETED, Stage
-from lerobot_blindgrasp.pipeline.teacher_source import teacher_for_run
 
 BIGGER = """\
 Go bigger (same command, another preset):
@@ -132,6 +132,41 @@ def _train(stage: Stage, name: str, student: Path, cmd: list[str], env: dict) ->
     return recipe.checkpoint(student)
 
 
+def teacher_for_run(
+    stage: Stage, preset: presets.Preset, out: Path, seed: int, given: Path | None
+) -> tuple[Path, dict]:
+    """The teacher folder for this run and what the report says about it."""
+    from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, default_teacher
+
+    if given is not None or preset.teacher.shipped:
+        try:
+            path = Path(given) if given is not None else default_teacher(preset.teacher.shipped_folder)
+            t = TeacherPolicy(path)
+        except TeacherError as e:
+            raise SystemExit(f"[pipeline] error: {e}") from None
+        shipped = "shipped" if preset.teacher.shipped_folder else "shipped default"
+        stage.skip("teacher", f"using {'the given' if given is not None else 'the ' + shipped} teacher {path}")
+        source = "given (--teacher)" if given is not None else shipped
+        preset_name = t.config.get("preset")
+    else:
+        path, preset_name = out / "teacher", preset.teacher.settings.name
+        source = f"trained from scratch in this run (teacher preset `{preset_name}`)"
+        if stage.done("teacher"):
+            stage.skip("teacher", "trained")
+        else:
+            spec.check_seeds("teacher_train", seed, preset.teacher.num_envs or preset.teacher.settings.num_envs)
+            stage.run("teacher", recipe.teacher_train(preset, path, seed))
+        t = TeacherPolicy(path)
+    return path, {
+        "source": source,
+        "path": str(path),
+        "file": t.name,
+        "sha256": t.sha256,
+        "iteration": t.iteration,
+        "preset": preset_name,
+    }
+
+
 def _demos(
     stage: Stage, preset: presets.Preset, teacher_dir: Path, out: Path, seed: int, demo_seed: int
 ) -> tuple[Path, str]:
@@ -139,10 +174,10 @@ def _demos(
     preset's extra episodes merged in. Returns the dataset and its repo id."""
     record = stage.record
     repo = f"local/blindgrasp_{preset.name}"
-    demos = demo_stages.collect_stage(stage, preset, teacher_dir, out / "demos", repo, demo_seed, curate=True)
+    demos = _collect_stage(stage, preset, teacher_dir, out / "demos", repo, demo_seed, curate=True)
     train_set = demos
     record["student_dataset"] = "curated"
-    if (k := demo_stages.kept(demos)) < preset.demos.min_curated_episodes:
+    if (k := _kept(demos)) < preset.demos.min_curated_episodes:
         print(
             f"[pipeline] only {k} curated episodes (< {preset.demos.min_curated_episodes}); also collecting the "
             "uncurated set and training the student on it",
@@ -150,24 +185,97 @@ def _demos(
         )
         repo = f"local/blindgrasp_{preset.name}_uncurated"
         uncurated_seed = demo_seed + recipe.DEMO_SEED_BLOCK // 2
-        train_set = demo_stages.collect_stage(
+        train_set = _collect_stage(
             stage, preset, teacher_dir, out / "demos_uncurated", repo, uncurated_seed, curate=False
         )
         record["student_dataset"] = "uncurated (too few curated episodes)"
-    if demo_stages.kept(train_set) == 0:
+    if _kept(train_set) == 0:
         raise SystemExit(
             f"[pipeline] error: the demo dataset {train_set} has no episodes, so there is nothing to "
             "train the student on; use a better teacher (--teacher) or more rollouts"
         )
     if preset.demos.extra_episodes:
         curated = train_set == demos
-        train_set, repo = demo_stages.targeted_demos(
-            stage, preset, teacher_dir, out, train_set, repo, seed, curated
-        )
+        train_set, repo = _targeted_demos(stage, preset, teacher_dir, out, train_set, repo, seed, curated)
         record["student_dataset"] += ", with " + ", ".join(
             f"{n} more episodes of {name}" for name, n in preset.demos.extra_episodes
         )
     return train_set, repo
+
+
+def _collect_stage(
+    stage: Stage,
+    preset: presets.Preset,
+    teacher: Path,
+    root: Path,
+    repo_id: str,
+    first_seed: int,
+    curate: bool,
+    extra: tuple[str, int] | None = None,
+) -> Path:
+    name = root.name if extra else "demos" if curate else "demos_uncurated"
+    if stage.done(name):
+        stage.skip(name, "collected")
+        return root
+    from lerobot_blindgrasp.demos.collect_cli import EXIT_EMPTY
+
+    # An empty curated set is the caller's (the uncurated fallback). A collection cut short is resumed
+    # (recipe.demos_collect adds --resume=true; the collector repairs a crashed folder first).
+    cmd = recipe.demos_collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra)
+    stage.run(name, cmd, ok=(0, EXIT_EMPTY))
+    return root
+
+
+def _targeted_demos(
+    stage: Stage,
+    preset: presets.Preset,
+    teacher: Path,
+    out: Path,
+    demos: Path,
+    repo: str,
+    seed: int,
+    curated: bool,
+) -> tuple[Path, str]:
+    """Beyond the paper: the preset's extra episodes of the objects it names (one collection each, curated or not
+    as the set the student trains on), merged with that set by LeRobot's `aggregate_datasets`. Returns the merged
+    dataset and its repo id."""
+    roots, repos = [demos], [repo]
+    for k, (name, n) in enumerate(preset.demos.extra_episodes):
+        root, extra_repo = out / f"{demos.name}_{name}", f"{repo}_{name}"
+        first_seed = recipe.extra_demo_seed(seed, k, curated)
+        _collect_stage(stage, preset, teacher, root, extra_repo, first_seed, curate=curated, extra=(name, n))
+        if _kept(root):  # an object the teacher never solved adds nothing (its yield report says so)
+            roots.append(root)
+            repos.append(extra_repo)
+    name = f"{demos.name}_targeted"
+    merged, merged_repo = out / name, f"{repo}_merged"
+    if stage.done(name):
+        stage.skip(name, "merged")
+        return merged, merged_repo
+    from lerobot_blindgrasp.demos.dataset import aggregate
+
+    # Merged beside the destination, then renamed: a kill mid-merge leaves no folder that looks finished.
+    tmp = out / f".{name}{durable.TEMP_MARK}merge"
+    shutil.rmtree(tmp, ignore_errors=True)
+    t = time.time()
+    aggregate(repos, roots, merged_repo, tmp)
+    durable.fsync_tree(tmp)
+    shutil.rmtree(merged, ignore_errors=True)
+    os.replace(tmp, merged)
+    durable.fsync_dir(out)
+    stage.record["stages"][name] = {
+        "command": f"aggregate_datasets({repos})",
+        "wall_s": time.time() - t,
+        "roots": [str(r) for r in roots],
+    }
+    stage.complete(name)
+    print(f"[pipeline] {name}: merged {len(roots)} datasets into {merged}", flush=True)
+    return merged, merged_repo
+
+
+def _kept(root: Path) -> int:
+    report = json.loads((root / "yield_report.json").read_text())
+    return int(report["total"]["kept"])
 
 
 def main(argv=None) -> None:

@@ -13,7 +13,7 @@ import pytest
 
 from lerobot_blindgrasp import presets
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.pipeline import recipe, teacher_source
+from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.pipeline import run as pipeline
 from lerobot_blindgrasp.policies.blindgrasp_transformer import configuration_blindgrasp_transformer as student_cfg
 from lerobot_blindgrasp.presets import ablations, teacher_configs
@@ -137,10 +137,10 @@ def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_pa
     assert "--joint_calibration_rad=0.05" in recipe.demos_collect(b, folder, tmp_path / "d", "x/y", 1)
     assert not any("calibration" in c for c in recipe.demos_collect(q, folder, tmp_path / "d", "x/y", 1))
     monkeypatch.delenv("BLINDGRASP_TEACHER", raising=False)
-    path, about = teacher_source.teacher_for_run(pipeline.Stage(tmp_path, {}), b, tmp_path, 1, given=None)
+    path, about = pipeline.teacher_for_run(pipeline.Stage(tmp_path, {}), b, tmp_path, 1, given=None)
     assert path == folder and about["source"] == "shipped" and about["preset"] == b.teacher.settings.name
     assert (
-        teacher_source.teacher_for_run(pipeline.Stage(tmp_path, {}), q, tmp_path, 1, given=None)[0].name
+        pipeline.teacher_for_run(pipeline.Stage(tmp_path, {}), q, tmp_path, 1, given=None)[0].name
         == "teacher_cpu_bc"
     )
     cmd, sched = recipe.lerobot_train(b.student, tmp_path / "demos", "local/x", tmp_path / "student", seed=1)
