@@ -40,11 +40,10 @@ def main(argv=None) -> None:
         raise SystemExit(EXIT_WRITE) from None
     tally = yield_report.load_tally(cfg.output_dir)
     print(yield_report.format_table(tally, list(cfg.object_names)))
-    s = stats.summary()
     print(
-        f"\n{s['kept']} episodes written ({s['frames']} frames) from {s['rollouts']} rollouts in "
-        f"{s['wall_s'] / 60:.1f} min: {s['demos_per_minute']:.1f} demos/min, "
-        f"{s['demos_per_cpu_minute']:.1f} demos/CPU-min; dataset: {cfg.output_dir}"
+        f"\n{stats.kept} episodes written ({stats.frames} frames) from {stats.rollouts} rollouts in "
+        f"{stats.wall_s / 60:.1f} min: {stats.demos_per_minute:.1f} demos/min, "
+        f"{stats.demos_per_cpu_minute:.1f} demos/CPU-min; dataset: {cfg.output_dir}"
     )
     if tally.total().kept == 0 and stats.stop_reason != "interrupted":
         # LeRobot cannot load a dataset without episodes (it then tries the Hub), so stop anything downstream here.

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.demos import collection_card, provenance
+from lerobot_blindgrasp.demos import provenance, records
 from lerobot_blindgrasp.project import REPO_ID_PATTERN
 
 # Not uploaded by LeRobot's push_to_hub (it ignores images/; state-only datasets have none anyway).
@@ -74,7 +74,7 @@ def push_card_kwargs(
 ):
     """The card's arguments for either kind of dataset (detected when not given)."""
     if (kind or detect_kind(root)) == "sim":
-        return collection_card.sim_card_kwargs(root, repo_id, license=license, extra_tags=tags)
+        return records.sim_card_kwargs(root, repo_id, license=license, extra_tags=tags)
     return cards.glove_card_kwargs(root, repo_id, operators, notes, license=license, extra_tags=tags)
 
 
