@@ -13,6 +13,9 @@ glove demos needs the three removed first (`MERGE_HINT`).
 from __future__ import annotations
 
 import contextlib
+import os
+import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -183,27 +186,38 @@ def aggregate(repo_ids: list[str], roots: list[Path], repo_id: str, dest: Path) 
     LeRobot 0.6.1 appends every source's episode rows to the destination's current meta/episodes file but offsets
     each row's `meta/episodes/{chunk,file}_index` from the source's own, so a source with several episodes files
     (one per collector checkpoint) leaves rows naming files that do not exist, and the next merge of the result
-    fails with FileNotFoundError. Each row is set to the file that holds it.
+    fails with FileNotFoundError. Each row is set to the file that holds it. Built beside `dest` (`built_beside`).
     """
     import pyarrow as pa
     import pyarrow.parquet as pq
     from lerobot.datasets.aggregate import aggregate_datasets
 
-    from lerobot_blindgrasp import durable
     from lerobot_blindgrasp.demos.rebuild_meta import chunk_file
 
-    aggregate_datasets(list(repo_ids), repo_id, roots=[Path(r) for r in roots], aggr_root=Path(dest))
-    for f in sorted(Path(dest, "meta", "episodes").glob("chunk-*/file-*.parquet")):
-        table = pq.read_table(f)  # pyarrow, not pandas: the rest of the schema goes back unchanged
-        where = dict(zip(("chunk_index", "file_index"), chunk_file(f), strict=True))
-        if all(set(table[f"meta/episodes/{k}"].to_pylist()) == {v} for k, v in where.items()):
-            continue
-        for k, v in where.items():
-            col = f"meta/episodes/{k}"
-            table = table.set_column(
-                table.schema.get_field_index(col),
-                table.schema.field(col),
-                pa.array([v] * table.num_rows, table.schema.field(col).type),
-            )
-        with durable.atomic_path(f) as tmp:
-            pq.write_table(table, tmp)
+    with built_beside(Path(dest)) as out:
+        aggregate_datasets(list(repo_ids), repo_id, roots=[Path(r) for r in roots], aggr_root=out)
+        for f in sorted(Path(out, "meta", "episodes").glob("chunk-*/file-*.parquet")):
+            table = pq.read_table(f)  # pyarrow, not pandas: the rest of the schema goes back unchanged
+            where = dict(zip(("chunk_index", "file_index"), chunk_file(f), strict=True))
+            if all(set(table[f"meta/episodes/{k}"].to_pylist()) == {v} for k, v in where.items()):
+                continue
+            for k, v in where.items():
+                col = f"meta/episodes/{k}"
+                column = pa.array([v] * table.num_rows, table.schema.field(col).type)
+                table = table.set_column(table.schema.get_field_index(col), table.schema.field(col), column)
+            pq.write_table(table, f)
+
+
+@contextlib.contextmanager
+def built_beside(dest: Path) -> Iterator[Path]:
+    """A fresh folder beside `dest` that replaces it, fsynced, once the block ends without an error: a kill midway
+    leaves no folder that looks finished, and the next try starts over."""
+    from lerobot_blindgrasp import durable
+
+    tmp = dest.with_name(f".{dest.name}{durable.TEMP_MARK}build")
+    shutil.rmtree(tmp, ignore_errors=True)
+    yield tmp
+    durable.fsync_tree(tmp)
+    shutil.rmtree(dest, ignore_errors=True)
+    os.replace(tmp, dest)
+    durable.fsync_dir(dest.parent)

@@ -8,7 +8,7 @@ With LeRobot's own tools, in order: every source is checked for the shared schem
 type, 20 fps) before anything is written; sim demos lose their `episode.*` features (`remove_feature`) into
 `<output_dir>/sim_schema`; several sources are merged (`demos.dataset.aggregate`) into `<output_dir>/dataset`; and
 `lerobot-train` trains the preset's student (`presets/glove.py`) into `<output_dir>/student`. Each dataset is
-written to a temporary folder and renamed when complete, so a re-run reuses what is finished. `--dry_run=true`
+built in a temporary folder and renamed when complete, so a re-run reuses what is finished. `--dry_run=true`
 prints the plan and the lerobot-train command and runs nothing.
 """
 
@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import json
 import shlex
-import shutil
 import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -92,20 +91,12 @@ def _complete(root: Path) -> bool:
     return (root / "meta" / "info.json").is_file()
 
 
-def _fresh_tmp(dest: Path) -> Path:
-    tmp = dest.with_name(dest.name + ".partial")
-    if tmp.exists():
-        print(f"[glove-train] setting aside an unfinished {tmp} from an earlier run")
-        shutil.rmtree(tmp)
-    return tmp
-
-
 def sim_without_metadata(sim_root: Path, dest: Path) -> Path:
     """The sim demos without their `episode.*` features (LeRobot's remove_feature), written once."""
     from lerobot.datasets import LeRobotDataset
     from lerobot.datasets.dataset_tools import remove_feature
 
-    from lerobot_blindgrasp.demos.dataset import METADATA_FEATURE_NAMES
+    from lerobot_blindgrasp.demos.dataset import METADATA_FEATURE_NAMES, built_beside
 
     if _complete(dest):
         return dest
@@ -113,9 +104,8 @@ def sim_without_metadata(sim_root: Path, dest: Path) -> Path:
     names = [n for n in METADATA_FEATURE_NAMES if n in ds.meta.features]
     if not names:
         return Path(sim_root)  # already in the shared schema
-    tmp = _fresh_tmp(dest)
-    remove_feature(ds, names, output_dir=tmp, repo_id=f"local/{dest.name}")
-    tmp.rename(dest)
+    with built_beside(dest) as tmp:
+        remove_feature(ds, names, output_dir=tmp, repo_id=f"local/{dest.name}")
     return dest
 
 
@@ -127,9 +117,7 @@ def merged(sources: list[Path], dest: Path, repo_id: str) -> Path:
         return sources[0]
     if _complete(dest):
         return dest
-    tmp = _fresh_tmp(dest)
-    aggregate([f"local/{p.name}_{k}" for k, p in enumerate(sources)], sources, repo_id, tmp)
-    tmp.rename(dest)
+    aggregate([f"local/{p.name}_{k}" for k, p in enumerate(sources)], sources, repo_id, dest)
     return dest
 
 

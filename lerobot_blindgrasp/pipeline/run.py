@@ -21,12 +21,11 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from lerobot_blindgrasp import durable, presets, spec
+from lerobot_blindgrasp import presets, spec
 from lerobot_blindgrasp.cli import parse_config, sleeping_openmp_threads
 from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.pipeline.stage import COMPLETED, Stage
@@ -254,15 +253,8 @@ def _targeted_demos(
         return merged, merged_repo
     from lerobot_blindgrasp.demos.dataset import aggregate
 
-    # Merged beside the destination, then renamed: a kill mid-merge leaves no folder that looks finished.
-    tmp = out / f".{name}{durable.TEMP_MARK}merge"
-    shutil.rmtree(tmp, ignore_errors=True)
     t = time.time()
-    aggregate(repos, roots, merged_repo, tmp)
-    durable.fsync_tree(tmp)
-    shutil.rmtree(merged, ignore_errors=True)
-    os.replace(tmp, merged)
-    durable.fsync_dir(out)
+    aggregate(repos, roots, merged_repo, merged)  # built beside `merged`: a kill leaves no finished-looking folder
     stage.record["stages"][name] = {
         "command": f"aggregate_datasets({repos})",
         "wall_s": time.time() - t,
