@@ -112,18 +112,14 @@ def dataset_fields(repo_id: str, meta) -> dict:
     }
 
 
-def glove_context(root: Path, repo_id: str, meta, operators: list[str], notes: str) -> dict:
-    import pandas as pd
-
-    files = sorted(Path(root, "meta", "episodes").glob("chunk-*/file-*.parquet"))
+def glove_context(repo_id: str, meta, operators: list[str], notes: str) -> dict:
     per_task: dict[str, dict] = {}
-    if files:
-        eps = pd.concat([pd.read_parquet(f, columns=["tasks", "length"]) for f in files], ignore_index=True)
-        for tasks, length in zip(eps["tasks"], eps["length"], strict=True):
-            for task in tasks:
-                row = per_task.setdefault(task, {"task": task, "episodes": 0, "frames": 0})
-                row["episodes"] += 1
-                row["frames"] += int(length)
+    episodes = meta.episodes or {"tasks": [], "length": []}  # LeRobot loads none for an empty dataset
+    for tasks, length in zip(episodes["tasks"], episodes["length"], strict=True):
+        for task in tasks:
+            row = per_task.setdefault(task, {"task": task, "episodes": 0, "frames": 0})
+            row["episodes"] += 1
+            row["frames"] += int(length)
     return {
         **dataset_fields(repo_id, meta),
         "tasks": list(per_task.values()),
@@ -165,9 +161,7 @@ def glove_card_kwargs(root: Path, repo_id: str, operators: list[str] | None = No
     from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 
     meta = LeRobotDatasetMetadata(repo_id, root=Path(root))
-    return card_kwargs(
-        repo_id, "glove", glove_context(Path(root), repo_id, meta, operators or [], notes), meta, **kw
-    )
+    return card_kwargs(repo_id, "glove", glove_context(repo_id, meta, operators or [], notes), meta, **kw)
 
 
 def build_card(kwargs: dict, repo_id: str):
