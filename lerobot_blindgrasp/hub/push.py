@@ -18,21 +18,16 @@ from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.demos import provenance, records
 from lerobot_blindgrasp.project import REPO_ID_PATTERN
 
-# Not uploaded by LeRobot's push_to_hub (it ignores images/; state-only datasets have none anyway).
-_IGNORED_DIRS = ("images",)
-
 
 class PushError(Exception):
     pass
 
 
 def upload_plan(root: Path) -> dict:
-    """What the upload will send: file count and size, for the user and for tests."""
-    files = [p for p in root.rglob("*") if p.is_file() and p.relative_to(root).parts[0] not in _IGNORED_DIRS]
-    return {
-        "files": sorted(str(p.relative_to(root)) for p in files),
-        "bytes": sum(p.stat().st_size for p in files),
-    }
+    """What the upload will send (LeRobot's push_to_hub ignores images/): file count and size."""
+    files = sorted(p.relative_to(root) for p in root.rglob("*") if p.is_file())
+    files = [p for p in files if p.parts[0] != "images"]
+    return {"files": [str(p) for p in files], "bytes": sum((root / p).stat().st_size for p in files)}
 
 
 def prepare(

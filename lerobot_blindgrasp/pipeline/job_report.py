@@ -31,11 +31,8 @@ def parse_step(s: str) -> float:
 
 
 def student_loss_curve(log_text: str) -> tuple[list[float], list[float]]:
-    steps, losses = [], []
-    for m in _LOSS_LINE.finditer(log_text):
-        steps.append(parse_step(m.group(1)))
-        losses.append(float(m.group(2)))
-    return steps, losses
+    matches = list(_LOSS_LINE.finditer(log_text))
+    return [parse_step(m.group(1)) for m in matches], [float(m.group(2)) for m in matches]
 
 
 def _teacher_lines(record: dict) -> list[str]:

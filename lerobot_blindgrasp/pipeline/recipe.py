@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from lerobot_blindgrasp import presets, spec
+from lerobot_blindgrasp.sim import objects
 
 STAGES = ("teachers", "teacher_evals", "demos", "students", "evals")
 # Each pipeline --seed gets its own block of demo env seeds, so reruns with another seed are new draws.
@@ -32,12 +33,6 @@ def extra_demo_seed(seed: int, k: int, curated: bool = True) -> int:
     if not 0 <= k < 4:
         raise ValueError(f"at most 4 objects get extra episodes, not {k + 1}")
     return demo_seed(seed) + (1 if curated else 3) * DEMO_SEED_BLOCK // 4 + k * (DEMO_SEED_BLOCK // 16)
-
-
-def objects_of(task: str) -> tuple[str, ...]:
-    from lerobot_blindgrasp.sim import objects
-
-    return objects.resolve_objects(task)
 
 
 def teacher_train(
@@ -64,7 +59,7 @@ def teacher_eval(p: presets.Preset, teacher_dir: Path, dest: Path, eval_seed: in
         "blindgrasp-eval-teacher",
         f"--teacher={teacher_dir}",
         f"--episodes={e.episodes_per_object}",
-        f"--objects={','.join(objects_of(e.task))}",
+        f"--objects={','.join(objects.resolve_objects(e.task))}",
         f"--seed={eval_seed}",
         f"--modes={','.join(e.teacher_modes)}",
         f"--output_dir={dest}",

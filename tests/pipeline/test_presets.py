@@ -18,7 +18,7 @@ from lerobot_blindgrasp.pipeline import run as pipeline
 from lerobot_blindgrasp.policies.blindgrasp_transformer import configuration_blindgrasp_transformer as student_cfg
 from lerobot_blindgrasp.presets import ablations, teacher_configs
 from lerobot_blindgrasp.presets import teacher as teacher_presets
-from lerobot_blindgrasp.sim import rewards
+from lerobot_blindgrasp.sim import objects, rewards
 from lerobot_blindgrasp.teacher.train import TrainTeacherConfig
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -55,11 +55,11 @@ def test_every_entry_is_complete():
         assert p.student.size in presets.SIZES
         assert p.demos.max_rollouts_per_object >= p.demos.episodes_per_object
         assert p.evaluation.episodes_per_object >= (20 if name != "smoke" else 1)  # the evaluation protocol
-        assert recipe.objects_of(p.evaluation.task)
+        assert objects.resolve_objects(p.evaluation.task)
         for obj, _ in p.demos.extra_episodes:
-            assert recipe.objects_of(obj) == (obj,), name
+            assert objects.resolve_objects(obj) == (obj,), name
         if p.dagger is not None:
-            assert recipe.objects_of(p.dagger.objects), name
+            assert objects.resolve_objects(p.dagger.objects), name
         assert p.all_deviations and all(isinstance(d, str) and d for d in p.all_deviations), name
 
 
@@ -90,7 +90,7 @@ def test_paper_is_tables_iii_and_iv():
     s = p.student
     assert (s.size, s.batch_size, s.epochs, s.constant_lr_epochs, s.steps) == ("paper", 256, 2000, 100, None)
     # Table V is on the six medium (in-distribution) shapes.
-    assert recipe.objects_of(p.evaluation.task) == recipe.objects_of("medium")
+    assert objects.resolve_objects(p.evaluation.task) == objects.resolve_objects("medium")
 
 
 def test_quick_and_cpu_pipeline_numbers_are_unchanged():
