@@ -27,8 +27,6 @@ from lerobot_blindgrasp.pipeline.stage import console_script
 from lerobot_blindgrasp.presets import student as student_presets
 from lerobot_blindgrasp.presets.glove import GlovePreset, glove_preset
 
-ROBOT_TYPE = "blindgrasp_gripper"  # = demos.dataset.ROBOT_TYPE and the robot's LeRobot name
-
 
 @dataclass
 class GloveTrainConfig:
@@ -70,20 +68,14 @@ def merge_schema_problems(root: Path, extra_ok: tuple[str, ...] = ()) -> list[st
     info_path = Path(root) / "meta" / "info.json"
     if not info_path.is_file():
         return [f"{root} is not a LeRobotDataset folder (no meta/info.json)"]
+    from lerobot_blindgrasp.demos.dataset import check_schema
+
     info = json.loads(info_path.read_text())
-    problems = []
-    for key, ft in spec.dataset_features().items():
-        have = info["features"].get(key)
-        if have is None or list(have["shape"]) != list(ft["shape"]) or list(have["names"]) != ft["names"]:
-            problems.append(f"{key} is not the shared {ft['shape'][0]}-d {key} of spec.dataset_features()")
+    problems = check_schema(info["features"], info.get("fps"), info.get("robot_type"), spec.dataset_features())
     extra = [k for k, ft in info["features"].items() if k.startswith(("observation.", "action")) and
              k not in spec.dataset_features() and k not in extra_ok]  # fmt: skip
     if extra:
         problems.append(f"extra policy features {extra} (cameras?) that the other sources lack")
-    if info.get("robot_type") != ROBOT_TYPE:
-        problems.append(f"robot_type {info.get('robot_type')!r}, not {ROBOT_TYPE!r}")
-    if info.get("fps") != spec.CONTROL_HZ:
-        problems.append(f"fps {info.get('fps')}, not {spec.CONTROL_HZ}")
     return [f"{root}: {p}" for p in problems]
 
 
