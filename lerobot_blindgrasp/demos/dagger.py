@@ -127,7 +127,7 @@ def run_dagger(cfg: DaggerConfig) -> dict:
             with _cleanup("finalizing the dataset", sys.exc_info()[1]):  # never masks the error that ended it
                 _finalize_or_abandon(ds)
     demo_dataset.aggregate(
-        [_repo_id(cfg.demos), cfg.repo_id + "_relabelled"],
+        [f"local/{cfg.demos.name}", cfg.repo_id + "_relabelled"],  # info.json keeps no repo id
         [cfg.demos, out / "relabelled"],
         cfg.repo_id,
         out / "aggregate",
@@ -158,11 +158,6 @@ def _whole(ep: Episode) -> curation.CurationResult:
         force_sum_n=float(ep.uniaxial_force.sum()),
         criteria_step=-1,
     )
-
-
-def _repo_id(root: Path) -> str:
-    info = json.loads((Path(root) / "meta" / "info.json").read_text())
-    return info.get("repo_id") or f"local/{Path(root).name}"
 
 
 def main(argv=None) -> None:
