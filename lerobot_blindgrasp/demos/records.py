@@ -116,11 +116,11 @@ def empty_leftover(out: Path) -> bool:
 
 def _repair(out: Path) -> None:
     """A crashed collection's folder back to its last checkpoint, saying what was kept and lost."""
-    from lerobot_blindgrasp.demos import repair
+    from lerobot_blindgrasp.demos import rebuild_meta, repair
 
     try:
         result = repair.repair(out)
-    except repair.RepairError as e:
+    except rebuild_meta.RebuildError as e:
         raise CollectError(f"--resume: {e}") from None
     if result.changed:
         log.warning("--resume: the dataset was left unfinished by a crash; repaired it:\n%s", result.summary())
