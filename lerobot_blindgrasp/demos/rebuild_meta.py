@@ -136,9 +136,11 @@ def episode_rows(root: Path) -> tuple[list[int], bool]:
 
 def _needed(root: Path, info, files: list, done: Rebuilt) -> bool:
     """False when the dataset already says exactly `done`'s episodes: every data file whole and holding only them,
-    one episode row each, info.json's counts, a readable stats.json."""
+    one episode row each, info.json's counts, a readable tasks.parquet and stats.json."""
     if any(not ok or cut for _, _, ok, cut in files) or sum(t.num_rows for _, t, _, _ in files) != done.frames:
         return True
+    if done.episodes and not footer_ok(root / TASKS):
+        return True  # `_tasks` then says why it cannot be rebuilt
     rows, readable = episode_rows(root)
     counts = (info.total_episodes, info.total_frames)
     if not readable or sorted(rows) != list(range(done.episodes)) or counts != (done.episodes, done.frames):
