@@ -1,2 +1,2 @@
-"""The main job (`run`, behind `blindgrasp-pipeline`), the commands it runs (`recipe`), its report (`job_report`),
-and the glove student (`glove_train`)."""
+"""The main job (`run`, behind `blindgrasp-pipeline`), the commands it runs (`recipe`), its report with the grasp
+strips (`job_report`), and the glove student (`glove_train`)."""
