@@ -87,7 +87,9 @@ def chunk_file(path: Path) -> tuple[int, int]:
     return int(path.parent.name.split("-")[-1]), int(path.stem.split("-")[-1])
 
 
-def read_data(root: Path, features: dict) -> list[tuple[Path, object, bool, int]]:
+def read_data(
+    root: Path, features: dict, columns: list[str] | None = None
+) -> list[tuple[Path, object, bool, int]]:
     """(path, complete rows, had a footer, bytes after the last complete row group) for each data file."""
     import io
 
@@ -96,12 +98,13 @@ def read_data(root: Path, features: dict) -> list[tuple[Path, object, bool, int]
     template, out = None, []
     for p in sorted((root / "data").glob("chunk-*/file-*.parquet")):
         if footer_ok(p):
-            out.append((p, pq.read_table(p), True, 0))
+            out.append((p, pq.read_table(p, columns=columns), True, 0))
             continue
         template = _template(features) if template is None else template
         buf = p.read_bytes()
         fixed, _, cut = salvage(buf, template) if buf[:4] == MAGIC else (None, 0, len(buf))
-        out.append((p, pq.read_table(io.BytesIO(fixed)) if fixed else template.slice(0, 0), False, cut))
+        table = pq.read_table(io.BytesIO(fixed)) if fixed else template.slice(0, 0)
+        out.append((p, table.select(columns or table.column_names), False, cut))
     return out
 
 
@@ -246,7 +249,7 @@ def rebuild(root: str | Path, dry_run: bool = False, limit: int | None = None) -
     info = _info(root)
     if any(ft["dtype"] in ("image", "video") for ft in info.features.values()):
         raise RebuildError(f"{root} has image or video features, whose frames are not in the data files")
-    files = read_data(root, info.features)
+    files = read_data(root, info.features, ["episode_index", "index", "frame_index"])  # all a check needs
     episodes = whole_prefix(files)[:limit]
     done = Rebuilt(len(episodes), sum(e["length"] for e in episodes), info.total_episodes)
     done.changed = _needed(root, info, files, done)
@@ -257,6 +260,7 @@ def rebuild(root: str | Path, dry_run: bool = False, limit: int | None = None) -
     shutil.rmtree(staging, ignore_errors=True)
     try:
         if not dry_run:  # first: a failure here has changed nothing
+            files = read_data(root, info.features)
             _stage(root, staging, info, files, episodes, tasks)
         _rewrite_data(root, files, episodes, done, dry_run)
         for p in sorted((root / EPISODES).glob("chunk-*/file-*.parquet")):
