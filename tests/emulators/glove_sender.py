@@ -1,7 +1,7 @@
 """The glove bridge, emulated: datagrams of `teleoperators/manus_glove/protocol.py` at `rate_hz`, sent by the
 bridge's own `GloveSender` (session id, sequence number, send time on its monotonic clock).
 
-The hand is one operator's: per ergonomics channel (names.py) an open-hand and a fist value (deg), blended by
+The hand is one operator's: per ergonomics channel (`CHANNELS`) an open-hand and a fist value (deg), blended by
 `closure` (0 open .. 1 fist), or by `closure_fn(t)` for scripted motions. `keys` picks the names it sends:
 "sdk" (the SDK enum names without side, the receiver's channels), "ros2" (the MANUS ROS 2 publisher's strings).
 
@@ -28,13 +28,13 @@ import threading
 import time
 from pathlib import Path
 
-from lerobot_blindgrasp.teleoperators.manus_glove import names
+from lerobot_blindgrasp.teleoperators.manus_glove.manus_bridge import CHANNELS
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender
 
 # This operator's hand (deg), by channel: open hand and fist. Spread barely changes; flexion changes a lot.
 OPEN: dict[str, float] = {}
 FIST: dict[str, float] = {}
-for _c in names.CHANNELS:
+for _c in CHANNELS:
     if _c.motion == "MCPSpread":
         OPEN[_c.name], FIST[_c.name] = (25.0, 15.0) if _c.finger == "Thumb" else (2.0, -3.0)
     else:
@@ -101,7 +101,7 @@ class GloveEmulator:
 
     def pose(self, closure: float) -> dict[str, float]:
         out = {}
-        for c in names.CHANNELS:
+        for c in CHANNELS:
             v = OPEN[c.name] + closure * (FIST[c.name] - OPEN[c.name])
             out[c.ros2 if self.keys == "ros2" else c.name] = v + (self.spread_offset_deg if c.motion == "MCPSpread"
                                                                    else 0.0)  # fmt: skip

@@ -5,7 +5,7 @@ from pathlib import Path
 import av
 import numpy as np
 
-from lerobot_blindgrasp.pipeline.grasp_strips import (
+from lerobot_blindgrasp.pipeline.job_report import (
     pick_per_class,
     read_frames,
     successful_videos,
