@@ -1,7 +1,7 @@
 """Every place the plugin reaches into LeRobot's internals or installs a process-wide hook, and nowhere else
 (`tests/policies/test_compat.py` scans the package for strays): LeRobot's dataset reader and writers
 (`serve_dataset_readers_with`, `skip_empty_image_embedding`, `atomic_lerobot_metadata`, and the writers' private
-state the demo collector resets), lerobot-record's episode announcement (`is_episode_announcement`), LeRobot's
+state the demo collector resets: `reopen_finalized`, `finalize_or_abandon`), lerobot-record's episode announcement (`is_episode_announcement`), LeRobot's
 command line (`read_command_line`, `set_lerobot_argv`), and the process's signal handlers and excepthook.
 
 Each was read against LeRobot `WRITTEN_FOR`. Under another version the first reach used logs, once, what
@@ -273,3 +273,59 @@ def set_excepthook(hook: Callable) -> Callable:
     of a script whose cleanup never reaches its `disconnect`, which would otherwise exit with them torqued."""
     previous, sys.excepthook = sys.excepthook, hook
     return previous
+
+
+# The dataset writers' private state (LeRobotDataset, DatasetWriter, LeRobotDatasetMetadata; check_lerobot names it).
+_WRITER_FIELDS = ("_finalized", "_latest_episode", "_pq_writer")
+_META_FIELDS = ("_finalized", "latest_episode", "episodes", "_pq_writer", "_metadata_buffer")
+
+
+def reopen_finalized(ds) -> bool:
+    """Make a finalized LeRobotDataset accept episodes again, as `LeRobotDataset.resume` would leave it: both
+    writers closed, no latest episode, and `meta.episodes[-1]` naming the last episode's files and frame range, so
+    that the next episode goes to the next data and meta/episodes files. Resume re-reads these from meta/episodes
+    (seconds on a large dataset); LeRobot holds them in memory. False (nothing changed) when LeRobot's internals
+    are not as expected or the dataset is not finalized."""
+    w, m = getattr(ds, "writer", None), getattr(ds, "meta", None)
+    expected = ((ds, ("_is_finalized",)), (w, _WRITER_FIELDS), (m, _META_FIELDS))  # None has none of them
+    if not all(hasattr(obj, f) for obj, names in expected for f in names):
+        return False
+    if w._pq_writer is not None or m._pq_writer is not None or m._metadata_buffer:
+        return False  # not finalized
+    if m.latest_episode is None or w._latest_episode is None:
+        return w._latest_episode is None and m.latest_episode is None and _unfinalize(ds)  # nothing written yet
+    last = {
+        "meta/episodes/chunk_index": int(m.latest_episode["meta/episodes/chunk_index"][0]),
+        "meta/episodes/file_index": int(m.latest_episode["meta/episodes/file_index"][0]),
+        "dataset_to_index": int(m.latest_episode["dataset_to_index"][0]),
+        "data/chunk_index": int(w._latest_episode["data/chunk_index"]),
+        "data/file_index": int(w._latest_episode["data/file_index"]),
+    }
+    m.episodes, m.latest_episode, w._latest_episode = [last], None, None
+    return _unfinalize(ds)
+
+
+def _unfinalize(ds) -> bool:
+    ds.meta._finalized = ds.writer._finalized = ds._is_finalized = False
+    return True
+
+
+def finalize_or_abandon(ds) -> None:
+    """LeRobot's finalize; if it fails, its writers are abandoned: their garbage-collection safety net would
+    retry the write at interpreter shutdown, where pyarrow aborts the process (exit 134) instead of raising. The
+    files left without a footer are what `--resume` / `blindgrasp-repair-dataset` set aside."""
+    try:
+        ds.finalize()
+    except BaseException:
+        for part in (ds.writer, ds.meta):
+            if part is None:
+                continue
+            with contextlib.suppress(Exception):
+                writer = getattr(part, "_pq_writer", None)
+                if writer is not None:
+                    writer.is_open = False  # pyarrow's __del__ would try the footer write again
+                part._pq_writer = None
+                getattr(part, "_metadata_buffer", []).clear()
+            part._finalized = True
+        ds._is_finalized = True
+        raise

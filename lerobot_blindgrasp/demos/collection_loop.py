@@ -252,7 +252,9 @@ class _Run:
             raise
         finally:
             with _cleanup("finalizing the dataset", first):
-                _finalize_or_abandon(self.saved.ds)  # closes the parquet writers: every saved episode is readable
+                compat.finalize_or_abandon(
+                    self.saved.ds
+                )  # closes the parquet writers: every saved episode is readable
             self.stats.wall_s = time.perf_counter() - self.t_wall
             self.stats.cpu_s = time.process_time() - self.t_cpu
             self.stats.checkpoints, self.stats.checkpoint_s = self.saved.count, self.saved.seconds
@@ -282,27 +284,6 @@ def _cleanup(what: str, first: BaseException | None):
         logger.error(
             "%s also failed (%s); the first error stands.", what.capitalize(), durable.describe_write_error(e)
         )
-
-
-def _finalize_or_abandon(ds) -> None:
-    """LeRobot's finalize; if it fails, its writers are abandoned: their garbage-collection safety net would
-    retry the write at interpreter shutdown, where pyarrow aborts the process (exit 134) instead of raising. The
-    files left without a footer are what `--resume` / `blindgrasp-repair-dataset` set aside."""
-    try:
-        ds.finalize()
-    except BaseException:
-        for part in (ds.writer, ds.meta):
-            if part is None:
-                continue
-            with contextlib.suppress(Exception):
-                writer = getattr(part, "_pq_writer", None)
-                if writer is not None:
-                    writer.is_open = False  # pyarrow's __del__ would try the footer write again
-                part._pq_writer = None
-                getattr(part, "_metadata_buffer", []).clear()
-            part._finalized = True
-        ds._is_finalized = True
-        raise
 
 
 def _handle_episode(ep: Episode, cur: curation_mod.CurationConfig, tally, stats, target: int, bar):

@@ -3,8 +3,8 @@
 LeRobot's writer writes its parquet footers only in `finalize()`, so a killed collector's open files are
 unreadable. `Checkpoints` finalizes every `checkpoint_s` seconds or `num_envs` written episodes and reopens the
 dataset as `LeRobotDataset.resume` would (the next episode starts fresh files); `--resume=true` repairs the folder
-to the last checkpoint (`repair.py`). `reopen_in_place` sets the few fields resume would re-read from meta/episodes
-(seconds on a large dataset) from what LeRobot holds in memory, and falls back to resume when they are not there.
+to the last checkpoint (`repair.py`). `compat.reopen_finalized` sets the few fields resume would re-read from meta/episodes
+(seconds on a large dataset) from what LeRobot holds in memory, and resume is the fallback when they are not there.
 Each checkpoint fsyncs what changed since the last (not per episode: two fsyncs cost more than an episode), so a
 power cut loses at most the episodes since the last checkpoint too.
 """
@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from lerobot_blindgrasp import durable
+from lerobot_blindgrasp import compat, durable
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 
 log = logging.getLogger("blindgrasp.demos")
@@ -53,42 +53,9 @@ class Checkpoints:
         self.synced_at = t_sync
         episodes = self.ds.meta.total_episodes
         self.on_checkpoint(state)
-        if not reopen_in_place(self.ds):
+        if not compat.reopen_finalized(self.ds):
             self.ds = demo_dataset.resume(self.root, self.repo_id)
         self.since, self.last = 0, time.monotonic()
         self.count += 1
         self.seconds += time.perf_counter() - t0
         log.info("checkpoint: %d episodes durable in %s", episodes, self.root)
-
-
-_WRITER_FIELDS = ("_finalized", "_latest_episode", "_pq_writer")
-_META_FIELDS = ("_finalized", "latest_episode", "episodes", "_pq_writer", "_metadata_buffer")
-
-
-def reopen_in_place(ds) -> bool:
-    """Make a finalized LeRobotDataset accept episodes again, as `LeRobotDataset.resume` would leave it: both
-    writers closed, no latest episode, and `meta.episodes[-1]` naming the last episode's files and frame range, so
-    that the next episode goes to the next data and meta/episodes files. False (nothing changed) when LeRobot's
-    internals are not as expected or the dataset is not finalized."""
-    w, m = getattr(ds, "writer", None), getattr(ds, "meta", None)
-    expected = ((ds, ("_is_finalized",)), (w, _WRITER_FIELDS), (m, _META_FIELDS))  # None has none of them
-    if not all(hasattr(obj, f) for obj, names in expected for f in names):
-        return False
-    if w._pq_writer is not None or m._pq_writer is not None or m._metadata_buffer:
-        return False  # not finalized
-    if m.latest_episode is None or w._latest_episode is None:
-        return w._latest_episode is None and m.latest_episode is None and _unfinalize(ds)  # nothing written yet
-    last = {
-        "meta/episodes/chunk_index": int(m.latest_episode["meta/episodes/chunk_index"][0]),
-        "meta/episodes/file_index": int(m.latest_episode["meta/episodes/file_index"][0]),
-        "dataset_to_index": int(m.latest_episode["dataset_to_index"][0]),
-        "data/chunk_index": int(w._latest_episode["data/chunk_index"]),
-        "data/file_index": int(w._latest_episode["data/file_index"]),
-    }
-    m.episodes, m.latest_episode, w._latest_episode = [last], None, None
-    return _unfinalize(ds)
-
-
-def _unfinalize(ds) -> bool:
-    ds.meta._finalized = ds.writer._finalized = ds._is_finalized = False
-    return True

@@ -24,11 +24,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import compat, spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.demos.collection_loop import _cleanup, _finalize_or_abandon
+from lerobot_blindgrasp.demos.collection_loop import _cleanup
 from lerobot_blindgrasp.demos.episode_writer import EpisodeWriter
 from lerobot_blindgrasp.durable import atomic_write_json
 from lerobot_blindgrasp.rollout.actors import StudentActor, TeacherActor
@@ -125,7 +125,7 @@ def run_dagger(cfg: DaggerConfig) -> dict:
                 writer.close()  # what was rolled out is written, also on Ctrl-C
         finally:
             with _cleanup("finalizing the dataset", sys.exc_info()[1]):  # never masks the error that ended it
-                _finalize_or_abandon(ds)
+                compat.finalize_or_abandon(ds)
     demo_dataset.aggregate(
         [f"local/{cfg.demos.name}", cfg.repo_id + "_relabelled"],  # info.json keeps no repo id
         [cfg.demos, out / "relabelled"],

@@ -266,7 +266,7 @@ def test_a_policy_with_nan_weights_is_refused(tmp_path):
 
 # --- dataset files written --------------------------------------------------------------------------------------
 def test_no_cleanup_finalizes_a_dataset_bare():
-    """Every `finalize()` in a `finally` of the package goes through demos/loop.py's `_finalize_or_abandon` inside
+    """Every `finalize()` in a `finally` of the package goes through `compat.finalize_or_abandon` inside
     `_cleanup`: a second failure there (a full disk fails the footer write too) is logged, never raised over the
     first, and the writers are abandoned so that pyarrow does not abort at exit."""
     bare = []
