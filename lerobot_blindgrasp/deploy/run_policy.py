@@ -3,17 +3,8 @@
     blindgrasp-rollout --strategy.type=base \\
         --policy.path=<checkpoint> --robot="include robot_configs/blindgrasp_gripper.yaml" --fps=20 --duration=10
 
-(`python -m lerobot_blindgrasp.deploy.run_policy` is the same.) It is a draccus CLI already:
-LeRobot's own `parser.wrap` over `RolloutConfig`, so `--help`, `--config_path` and dotted flags work as in
-`lerobot-rollout`.
-
-Same arguments and behaviour as `lerobot-rollout` (strategies, inference engines, datasets, Ctrl-C handling),
-because it is the same code: `RolloutConfig`, `build_rollout_context`, `create_strategy`. The one difference is
-the robot observation processor. In LeRobot 0.6.1 `build_rollout_context` keeps only scalar observation features
-named `*.pos` or `*.vel` (rollout/context.py, "features + action-key reconciliation"), so plain `lerobot-rollout`
-drops `ff_tip.force`, `mf_tip.force`, `th_tip.force` and feeds a 9-d state to a policy trained on 12 (it fails with
-"size of tensor a (9) must match ... (12)", after a safe teardown). The processor step below declares the force
-features again, so `observation.state` is built with exactly `spec.STATE_NAMES`, as in every dataset.
+`lerobot-rollout`'s own code and flags, but LeRobot 0.6.1 keeps only `*.pos`/`*.vel` robot features, which would
+feed a 9-d state to a policy trained on 12: `DeclareForceFeatures` declares the forces again.
 """
 
 # No `from __future__ import annotations`: LeRobot's parser.wrap reads the config class from the real annotation.
@@ -47,14 +38,6 @@ class DeclareForceFeatures(ObservationProcessorStep):
         return {**features, PipelineFeatureType.OBSERVATION: obs}
 
 
-def make_robot_observation_processor() -> RobotProcessorPipeline:
-    return RobotProcessorPipeline(
-        steps=[DeclareForceFeatures()],
-        to_transition=observation_to_transition,
-        to_output=transition_to_observation,
-    )
-
-
 @parser.wrap()
 def rollout(cfg: RolloutConfig) -> None:
     init_logging()
@@ -67,9 +50,12 @@ def rollout(cfg: RolloutConfig) -> None:
             cfg.policy.pretrained_path, cfg.robot.type, cfg.fps, "--fps", allow_unverified=allow
         )
     signal_handler = ProcessSignalHandler(use_threads=True, display_pid=False)
-    ctx = build_rollout_context(
-        cfg, signal_handler.shutdown_event, robot_observation_processor=make_robot_observation_processor()
+    processor = RobotProcessorPipeline(
+        steps=[DeclareForceFeatures()],
+        to_transition=observation_to_transition,
+        to_output=transition_to_observation,
     )
+    ctx = build_rollout_context(cfg, signal_handler.shutdown_event, robot_observation_processor=processor)
     strategy = create_strategy(cfg.strategy)
     try:
         strategy.setup(ctx)

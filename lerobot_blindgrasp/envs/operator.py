@@ -1,15 +1,12 @@
-"""The operator's keys during a real-gripper evaluation: ENTER starts a trial, s/y or f/n decides it.
-
-Two sources, one interface (a queue of keys):
-- `OperatorKeys`: a person; key presses come from LeRobot's own listener (pynput, or the controlling terminal when
-  headless). Its verdicts are recorded as decided by "operator".
-- `SocketOperator`: an unattended operator on a Unix socket, e.g. the physics twin (`blindgrasp-twin`), which
-  places the object the trial names and judges the trial by its own rule; its verdicts are recorded under the
-  name it gives (`judge`). Protocol: `lerobot_blindgrasp/twin/operator_server.py`.
+"""The operator's keys during a real-gripper evaluation (ENTER starts a trial, s/y or f/n decides it), as a queue:
+from a person (`OperatorKeys`, LeRobot's key listener) or from an unattended operator on a Unix socket
+(`SocketOperator`, e.g. `blindgrasp-twin`, which places the object and judges by its own rule; protocol:
+`twin/operator_server.py`). The trial log records who decided (`judge`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import queue
 import socket
@@ -51,8 +48,7 @@ class _KeyQueue:
 
 
 class OperatorKeys(_KeyQueue):
-    """Key presses as a queue; `listener_factory` has the signature of LeRobot's `create_key_listener`
-    (the default)."""
+    """Key presses as a queue; `listener_factory` is LeRobot's `create_key_listener` or one like it."""
 
     HELP = "ENTER=start trial, s/y=success, f/n=failure"
 
@@ -73,9 +69,8 @@ class OperatorKeys(_KeyQueue):
 
 
 class SocketOperator(_KeyQueue):
-    """The operator at the other end of a Unix socket. Each trial is announced (`announce_trial`) with its object
-    and evaluation seed; the operator answers ENTER once the object is placed, and one outcome key. Keys carry
-    their trial's token, so a late key of a finished trial is dropped, never counted for the next one."""
+    """The operator at the other end of a Unix socket: told each trial's object and seed, it answers ENTER once the
+    object is placed, then one outcome key. Keys carry their trial's token: a late key is never counted."""
 
     def __init__(self, path: str, connect_timeout_s: float = 10.0):
         super().__init__()
@@ -96,7 +91,6 @@ class SocketOperator(_KeyQueue):
         self.judge = str(json.loads(self._lines.readline())["judge"])
         self._token = 0
         self._asked = False
-        self.last_placement: dict | None = None
         self._reader = threading.Thread(target=self._read, name="socket-operator", daemon=True)
         self._reader.start()
 
@@ -110,8 +104,6 @@ class SocketOperator(_KeyQueue):
             for line in self._lines:
                 msg = json.loads(line)
                 if msg.get("token") == self._token and "key" in msg:
-                    if "placement" in msg:
-                        self.last_placement = msg["placement"]
                     self.queue.put(msg["key"])
         except (OSError, ValueError):
             pass
@@ -120,14 +112,8 @@ class SocketOperator(_KeyQueue):
     def announce_trial(self, object_name: str, trial: int, seed: int | None) -> None:
         self._token += 1
         self._asked = False
-        self._send(
-            {
-                "op": "place",
-                "object": object_name,
-                "seed": trial - 1 if seed is None else int(seed),
-                "token": self._token,
-            }
-        )
+        seed = trial - 1 if seed is None else int(seed)
+        self._send({"op": "place", "object": object_name, "seed": seed, "token": self._token})
 
     def wait_for(self, keys: set[str], timeout_s: float | None = None) -> str | None:
         if keys & (SUCCESS_KEYS | FAILURE_KEYS) and not self._asked and self.queue.empty():
@@ -144,14 +130,11 @@ class SocketOperator(_KeyQueue):
             self._send({"op": "end", "token": self._token})
 
     def stop(self) -> None:
-        try:  # shut down first: the reader thread's file object would keep the connection open past close()
+        # Shut down first: the reader thread's file object would keep the connection open past close().
+        with contextlib.suppress(OSError):
             self._sock.shutdown(socket.SHUT_RDWR)
-        except OSError:
-            pass
-        try:
+        with contextlib.suppress(OSError):
             self._sock.close()
-        except OSError:
-            pass
 
 
 def make_operator(socket_path: str | None) -> _KeyQueue:

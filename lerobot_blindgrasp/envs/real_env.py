@@ -1,16 +1,10 @@
-"""`--env.type=blindgrasp_real`: the paper's real-gripper protocol as a lerobot-eval env.
+"""`--env.type=blindgrasp_real`: the paper's real-gripper protocol (success per object over 10 trials) as a
+lerobot-eval env, one task group per object; lerobot-rollout has no trials, resets or success. The trial itself is
+`real_trial.py`.
 
     lerobot-eval --policy.path=<checkpoint> --env.type=blindgrasp_real \\
         --env.robot="include robot_configs/blindgrasp_gripper.yaml" \\
         --env.task=medium --eval.n_episodes=10 --eval.batch_size=1 --eval.use_async_envs=false
-
-Why lerobot-eval and not lerobot-rollout: the paper reports a success rate per object over 10 trials of 10 s, which
-is exactly lerobot-eval's model (tasks x episodes, `info["is_success"]`, `pc_success` per task group), with the
-policy's own pre/post-processors and no extra code path. lerobot-rollout runs a policy on a robot but has no notion
-of trials, resets or success. So the gripper is wrapped as a gymnasium env, one task group per object:
-`eval_info.json` -> `per_group[<object>].pc_success` is the per-object success table
-(`python -m lerobot_blindgrasp.envs.real_report --eval_info=PATH` prints it as markdown).
-The trial itself (reset to the start pose, 200 steps at 20 Hz, who decides success) is `real_trial.py`.
 """
 
 from __future__ import annotations
@@ -59,9 +53,8 @@ class BlindGraspRealEnvConfig(EnvConfig):
     home_timeout_s: float = 5.0
     unattended_reset_s: float = 5.0
     tare_each_trial: bool = True
-    # Where each trial starts: "home", the paper's start pose (0, pi/3, 0) on every finger; or "sim", the sim env's
-    # start pose for the same evaluation index and object (the start pose plus its drawn joint offsets, within
-    # +-20 deg), so that a run beside `--env.type=blindgrasp` (the physics twin's) starts like for like.
+    # Where each trial starts: "home", the paper's (0, pi/3, 0) on every finger; or "sim", the sim env's start pose
+    # for the same evaluation index and object, so that a run beside `--env.type=blindgrasp` starts like for like.
     start_pose: str = "home"
     # Python's garbage collector off during each trial's 200 steps and run once after it (`hardware/realtime.py`).
     pause_gc: bool = True
@@ -85,44 +78,22 @@ class BlindGraspRealEnvConfig(EnvConfig):
     def gym_kwargs(self) -> dict:
         return {}
 
-    def trial_settings(self):
-        """The trial's part of this config, as `real_trial.TrialSettings`."""
-        # Imported here: the trial is needed only when envs are made, and it never imports this module back.
-        from lerobot_blindgrasp.envs.real_trial import TrialSettings
-
-        return TrialSettings(
-            robot=self.robot,
-            episode_s=self.episode_s,
-            success_mode=self.success_mode,
-            hold_force_n=self.hold_force_n,
-            min_contacts=self.min_contacts,
-            home_tolerance_rad=self.home_tolerance_rad,
-            home_timeout_s=self.home_timeout_s,
-            unattended_reset_s=self.unattended_reset_s,
-            tare_each_trial=self.tare_each_trial,
-            start_pose=self.start_pose,
-            trial_log=self.trial_log,
-            operator_socket=self.operator_socket,
-            pause_gc=self.pause_gc,
-        )
-
     def check_policy(self) -> None:
-        """lerobot-eval makes the envs before it loads the policy, and its make_policy would overwrite the
-        checkpoint's output features with ours: the checkpoint's own files are checked here, before anything loads
-        or moves (`policy_contract.py`). Its path is the one the robot's config took from the command line
-        (`BlindgraspGripperConfig.command_line`); the robot checks it again at connect."""
+        """The checkpoint's own files against the robot (`policy_contract.py`) before lerobot-eval loads it (its
+        make_policy would overwrite the output features with ours) or anything moves; the robot checks again."""
         command_line = getattr(self.robot, "command_line", None)
         allow = getattr(self.robot, "allow_unverified_policy", False)
         path = command_line.policy_path if command_line is not None else None
         policy_contract.check_named(path, self.robot.type, self.fps, "--env.fps", allow_unverified=allow)
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
+        # Imported here: the trial is needed only when envs are made.
         from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 
         self.check_policy()
         if n_envs != 1 or use_async_envs:
             logger.warning("One physical gripper: evaluating with one synchronous env (asked n_envs=%s).", n_envs)
-        session = GripperSession(self.trial_settings())
+        session = GripperSession(self)
         out = {}
         for name in self.objects:
             env_fn = functools.partial(RealGraspEnv, session, name)

@@ -1,18 +1,7 @@
-"""Per-object success table of a real-gripper evaluation, from lerobot-eval's `eval_info.json`.
+"""Per-object success table of a real-gripper evaluation, from lerobot-eval's `eval_info.json`. Each rate comes
+with its 95 % Wilson interval, under a first line naming who judged the trials.
 
-    python -m lerobot_blindgrasp.envs.real_report --eval_info=outputs/eval/<run>/eval_info.json
-
-`--eval_info` also takes the run's folder (lerobot-eval's `--output_dir`). Named flags only, as every command of the
-package (`lerobot_blindgrasp/cli.py`); a bare path is answered with the command to type.
-
-`--env.type=blindgrasp_real` makes each object its own task group, so `per_task[i].task_group` names the object of
-each task's trials. Each rate comes with its 95 % Wilson interval (10 trials per object is the paper's protocol;
-the interval says how little that pins down).
-
-Who judged the trials (an operator at the keyboard, the physics twin by the sim's rule, or the force criterion) is
-the first line. The real env names it in `eval_info.json` ("judge") when lerobot-eval was given `--output_dir`
-(`stamp_judge_at_exit`: lerobot-eval writes the file after it has closed the envs); otherwise `--trial_log` (the
-env's `--env.trial_log`) tells it from each trial's `decided_by`.
+    python -m lerobot_blindgrasp.envs.real_report --eval_info=outputs/eval/<run>/eval_info.json   # or its folder
 """
 
 from __future__ import annotations

@@ -1,24 +1,8 @@
-"""One real-gripper trial as a gym env (`RealGraspEnv`), on the one gripper its `GripperSession` holds.
-
-One trial (= one lerobot-eval episode):
-1. reset: the gripper drives to the paper's start pose (0, pi/3, 0) at <= 0.3 rad per 20 Hz step (`start_pose=sim`:
-   to the sim env's start pose for the same evaluation index and object, its drawn joint offsets included); the operator
-   places the object at the claw centre and presses ENTER (unattended force mode: waits `unattended_reset_s`);
-   the fingertip sensors are tared (fingers in free air). Torque stays on, holding the pose, and the bus stays
-   alive through these waits (the robot's `keep_alive` each period, and during its tare), so the servos' bus
-   watchdog stays armed for a host that dies while waiting and never trips on a person's pause.
-2. 200 steps at 20 Hz (10 s): action = absolute joint targets, through `robot.send_action` (clipped on the robot).
-   The steps keep time with a `StepPacer`: after a late step (a slow policy) it re-bases on now rather than
-   firing the missed steps back to back, and after a slow read (a stalled bus) the next read waits until it is at
-   least 0.9 period after it, so no two samples come a few ms apart. The robot measures the period in every get_observation:
-   overruns are warned, counted in the trial log, and a sustained overrun ends the run (`GripperTimingError`).
-3. success, "lifted and held >= 1 s within 10 s", decided by
-   - `success_mode=operator` (the paper's protocol): the operator presses `s` as soon as the object has been held
-     off the table for 1 s (ends the trial, success) or `f` (ends it, failure); at 10 s without a key the env asks
-     `y`/`n`. Keys come from LeRobot's keyboard listener (pynput, or the terminal when headless).
-   - `success_mode=force` (unattended proxy): at least `min_contacts` fingertips read more than `hold_force_n`
-     continuously for `spec.SUCCESS_HOLD_S`. It sees a sustained grasp, not the lift itself: use it for smoke tests
-     and dry runs, and report operator-mode numbers.
+"""One real-gripper trial (= one lerobot-eval episode) as a gym env (`RealGraspEnv`), on the one gripper its
+`GripperSession` holds: reset to the start pose, the operator's ENTER (unattended: a wait) and a tare, torque on
+and the bus watchdog fed all along; then 200 steps at 20 Hz paced by a `StepPacer`; success (lifted and held for
+1 s) decided by the operator's keys (the paper's protocol) or, unattended, by `min_contacts` tips above
+`hold_force_n` for `spec.SUCCESS_HOLD_S` (a proxy that sees a sustained grasp, not the lift).
 """
 
 from __future__ import annotations
@@ -26,7 +10,6 @@ from __future__ import annotations
 import json
 import logging
 import time
-from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
@@ -42,29 +25,8 @@ from lerobot_blindgrasp.sim.gym_env import start_seed
 logger = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True, kw_only=True)
-class TrialSettings:
-    """What a trial needs from `--env.*`: `BlindGraspRealEnvConfig.trial_settings()` makes it, and its fields (and
-    their defaults) are documented there."""
-
-    robot: object  # a LeRobot RobotConfig: `make_robot_from_config` builds the one robot of the session from it
-    episode_s: float
-    success_mode: str  # "operator" | "force"
-    hold_force_n: float
-    min_contacts: int
-    home_tolerance_rad: float
-    home_timeout_s: float
-    unattended_reset_s: float
-    tare_each_trial: bool
-    trial_log: str | None
-    start_pose: str = "home"  # "home" | "sim": the sim env's start pose for (evaluation index, object)
-    operator_socket: str | None = None  # None: the keyboard; else an unattended operator there (envs/operator.py)
-    pause_gc: bool = True  # no garbage collection inside a trial; one after it
-
-
 def sim_start_pose(object_name: str, eval_index: int) -> np.ndarray:
-    """The joints where `--env.type=blindgrasp` starts evaluation index `eval_index` on `object_name`: its own draw
-    (`randomization.draw_reset` of the eval randomization, first episode of the env seed), clipped to the limits."""
+    """The joints where `--env.type=blindgrasp` starts evaluation index `eval_index` on `object_name`, clipped."""
     if object_name not in objects.CATALOGUE:
         raise ValueError(f"start_pose=sim needs an object of the sim's catalogue; {object_name!r} is not one")
     seeds = np.array([start_seed(eval_index, object_name)], dtype=np.uint64)
@@ -82,7 +44,8 @@ class GripperSession:
     """The one robot (one serial bus) shared by the per-object envs: connected at the first reset, disconnected
     once at the end (or on any error, by the robot's own latched stop)."""
 
-    def __init__(self, cfg: TrialSettings, keys: OperatorKeys | None = None):
+    def __init__(self, cfg, keys: OperatorKeys | None = None):
+        """`cfg`: the `--env.*` config (`BlindGraspRealEnvConfig`, which documents the trial's settings)."""
         from lerobot.robots.utils import make_robot_from_config
 
         self.cfg = cfg
@@ -136,8 +99,7 @@ class RealGraspEnv(gym.Env):
         self._peak = np.zeros(spec.NUM_FORCES)
         self._schedule = StepPacer(spec.CONTROL_DT)
         self._overruns_at_start = self._overruns()
-        # Where each period goes: the write (send_action), the read (_observe) and, between a step's return and the
-        # next call, the caller's policy (lerobot-eval: processors + select_action); logged per trial.
+        # Where each period goes, logged per trial; "policy" is the caller's time between a step and the next.
         self._step_s: dict[str, list[float]] = {"read": [], "policy": [], "write": []}
         self._returned_at: float | None = None
 
@@ -205,9 +167,8 @@ class RealGraspEnv(gym.Env):
         return obs, {"is_success": False}
 
     def _wait_keeping_bus_alive(self, keys: set[str] | None, duration_s: float = 0.0) -> str | None:
-        """Wait for one of `keys` (None: for `duration_s`) with the torque on, holding the pose: the robot's
-        `keep_alive` runs every control period, so its servos' bus watchdog stays armed and fed (a dead host is
-        still stopped by it) instead of tripping on a person's pause."""
+        """Wait for one of `keys` (None: for `duration_s`) holding the pose, with `keep_alive` every period: the
+        bus watchdog stays armed for a dead host instead of tripping on a person's pause."""
         keep_alive = getattr(self.robot, "keep_alive", None)
         deadline = time.monotonic() + duration_s
         while True:

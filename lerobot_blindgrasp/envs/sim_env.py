@@ -2,17 +2,9 @@
 
     lerobot-eval --policy.path=<checkpoint> --env.type=blindgrasp --env.task=all --eval.n_episodes=10
 
-`create_envs` returns `{"blindgrasp": {task_id: VectorEnv}}` with one task per object, so `eval_info.json` has one
-`per_task` entry per object. A task_id is the object's index in the object catalogue (Table I order, see
-`TASK_IDS`), the same whether one object or all 18 are evaluated; `object_for_task_id` maps it back to the name.
-
-Start states: lerobot-eval seeds every task's envs with the same `--seed` + episode numbers; the gym env maps
-(seed, object) into the evaluation seed range (`sim/gym_env.start_seed`, `spec.eval_env_seed`), so each object gets
-its own draws, none of them used in teacher training or demo collection, and `blindgrasp-eval-teacher --seed S`
-runs the same start states as `lerobot-eval --seed=S`.
-
-This module is imported when LeRobot discovers the plugin, so it must stay light: MuJoCo and the gym env are
-imported inside `create_envs`.
+A task_id is the object's index in the catalogue (`objects.task_id`), whichever objects are evaluated. lerobot-eval's
+`--seed` + episode number is mapped per object into the evaluation seed range (`sim/gym_env.start_seed`), so
+`blindgrasp-eval-teacher --seed S` runs the same start states. Imported at plugin discovery: MuJoCo loads lazily.
 """
 
 from __future__ import annotations
@@ -26,14 +18,10 @@ from lerobot.envs.configs import EnvConfig
 
 from lerobot_blindgrasp import spaces, spec
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp.sim.objects import object_for_task_id, task_id  # noqa: F401  (lerobot-eval task ids)
+from lerobot_blindgrasp.sim.objects import task_id
 
 TASK_GROUP = "blindgrasp"
 RENDER_STRIDE_REST = spec.CONTROL_HZ  # one video frame a second for the episodes past `render_episodes`
-
-
-# The 18 paper objects; OOD objects registered later get the next ids (see `task_id`).
-TASK_IDS: dict[int, str] = {task_id(n): n for n in objects.PAPER_OBJECTS}
 
 
 @EnvConfig.register_subclass("blindgrasp")
@@ -50,13 +38,11 @@ class BlindGraspEnvConfig(EnvConfig):
     render_shadows: bool = False
     # A new video frame every N control steps (repeated in between): N x cheaper videos, motion at 20/N Hz.
     render_stride: int = 1
-    # lerobot-eval always records the first 10 episodes of each object (hard-coded). Only the first N of them get
-    # `render_stride`; the others get a new frame once a second (RENDER_STRIDE_REST), a slideshow at 1/20 of the
-    # cost. With a software renderer video otherwise dominates a CPU evaluation.
+    # lerobot-eval records the first 10 episodes of each object; only the first N get `render_stride`, the others
+    # a frame a second (RENDER_STRIDE_REST): with a software renderer, video dominates a CPU evaluation.
     render_episodes: int = 10
-    # End an episode at the step its success latches (nothing after it can change the outcome; the rates are the
-    # same). lerobot-eval's freeze wrapper then stops simulating it while the rest of the batch runs on. false:
-    # every episode runs its full 10 s (videos that show the whole hold).
+    # End an episode when its success latches (the rates are the same; the batch runs on without it). false: every
+    # episode runs its full 10 s, for videos of the whole hold.
     end_on_success: bool = True
     features: dict[str, PolicyFeature] = field(default_factory=spaces.env_features)
     features_map: dict[str, str] = field(default_factory=spaces.env_features_map)
@@ -90,9 +76,8 @@ class BlindGraspEnvConfig(EnvConfig):
         return kwargs
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
-        # The freeze wrapper's semantics (sim_vector.py) and the lazy async vector env are what LeRobot's own
-        # multi-task benchmarks use: a finished sub-env stops simulating while the rest of the batch runs on, and
-        # only the task being evaluated has worker processes alive (18 tasks x n_envs processes otherwise).
+        # As LeRobot's multi-task benchmarks: finished sub-envs freeze (sim_vector.py), and only the task being
+        # evaluated has async worker processes alive.
         from lerobot.envs.utils import _LazyAsyncVectorEnv
 
         from lerobot_blindgrasp.envs.sim_vector import SharedSimVectorEnv
@@ -112,7 +97,6 @@ class BlindGraspEnvConfig(EnvConfig):
                     dict(gym_env.BlindGraspGymEnv.metadata),
                 )
             else:
-                # One sim for the whole batch (sim_vector.py), with the freeze wrapper's semantics.
                 vec = SharedSimVectorEnv(fns)
             out[task_id(name)] = vec
         return {TASK_GROUP: out}

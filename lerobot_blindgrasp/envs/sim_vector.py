@@ -1,19 +1,10 @@
-"""lerobot-eval's vector env for one object: its gym envs share ONE `BatchedGraspEnv`, stepped once per batch step.
+"""lerobot-eval's vector env for one object: its gym envs share ONE `BatchedGraspEnv`, stepped once per batch step,
+instead of paying the per-step torch work once per sub-env. Each row is seeded as its sub-env alone would be.
 
-A `SyncVectorEnv` of `BlindGraspGymEnv`s, each wrapped in LeRobot's `FreezeAfterEpisodeEnd`, steps one one-env sim
-per sub-env, so every batch step pays the task's per-step cost (the torch ops of observation, rewards and
-termination) once per sub-env. Here `reset` builds one sim with a row per sub-env, each row seeded as that sub-env
-alone would seed its own (`gym_env.make_sim`; the task's randomness is a function of the env seed only, and
-`mujoco.batch` steps each row as a single env), and `step` steps the rows whose episodes are still running.
-
-What lerobot-eval sees is what the sync vector env of frozen sub-envs gives, step for step:
-- a sub-env whose episode ended holds its last observation and info, with reward 0 (`FreezeAfterEpisodeEnd`); its
-  row is no longer simulated (`BatchedGraspEnv.step`'s `active`);
-- gymnasium's next-step autoreset of such a sub-env returns the held observation with terminated and truncated
-  false, and the step after it the held result again, alternately, as the wrapper's replay does;
-- gym.make's 200-step `TimeLimit` truncates at the episode's 200th step, also when that step terminates.
-The sub-envs themselves stay reachable (`envs[i].render()`, `call("task_description")`), each on its row, without
-gym.make's wrappers (this class owns the reset-before-step order and the time limit).
+What lerobot-eval sees is, step for step, a `SyncVectorEnv` of sub-envs in LeRobot's `FreezeAfterEpisodeEnd`: an
+ended sub-env holds its last observation and info with reward 0 (its row is no longer simulated), gymnasium's
+next-step autoreset alternates that held observation (not done) with the held result, and the 200-step time limit
+truncates at the 200th step. The sub-envs stay reachable (`envs[i].render()`), without gym.make's wrappers.
 """
 
 from __future__ import annotations

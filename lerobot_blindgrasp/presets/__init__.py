@@ -1,68 +1,40 @@
-"""The one preset registry: every preset of every command, as data, and the types they are made of.
+"""The one preset registry: every preset of every command, as data. `paper` is exactly the paper's tables; every
+recipe beyond it is a named preset that says so in its deviations.
 
-    PRESETS["quick"].demos.episodes_per_object    # pipeline presets (blindgrasp-pipeline --preset=NAME)
-    TEACHER_PRESETS["paper"].runner               # teacher presets (blindgrasp-train-teacher --preset=NAME): Table III
-    SIZES["paper"]                                # student sizes (lerobot-train --policy.size=NAME): Table IV
-    GLOVE_PRESETS["glove"]                        # students on glove recordings (blindgrasp-train-glove --preset=NAME)
-    TABLE_V["wo_r_i"]                             # the ablation rows (Table V)
-    REGISTRY["teacher"]["cpu"], get("cpu", kind="teacher")
-
-Where each lives: the types beside the data that uses them (`stage_configs.py` and `student.py` for the pipeline,
-`teacher_configs.py` for the teacher, `glove.py`), the data in `pipeline.py`, `teacher.py`, `ablations.py` and
-`glove.py`. The robustness sweep's presets live with the sweep, in the lab (`lab/robustness/factors.py`). The student sizes are the policy's own table (the policy, a LeRobot
-plugin, never imports this registry); the registry names it. Nothing else restates a number, and a preset holds
-settings: what a recipe measured lives in the model cards and docs/.
-
-- `paper` is exactly the paper's tables; `cpu` the largest that is useful on a 2-core machine; `quick` the paper's
-  student recipe on the shipped teacher (minutes); `smoke` CI plumbing.
-- Every recipe beyond the paper is a named preset that says so in its deviations, and in every report and card
-  (`Preset.student_recipe`).
+    PRESETS["quick"]            blindgrasp-pipeline --preset=NAME (`pipeline.py`)
+    TEACHER_PRESETS["paper"]    blindgrasp-train-teacher --preset=NAME (`teacher.py`): Table III
+    SIZES["paper"]              lerobot-train --policy.size=NAME (the policy's own table): Table IV
+    GLOVE_PRESETS["glove"]      blindgrasp-train-glove --preset=NAME (`glove.py`)
+    TABLE_V["wo_r_i"]           the ablation rows (Table V; `ablations.py`)
 """
 
 from __future__ import annotations
 
 from lerobot_blindgrasp.policies.blindgrasp_transformer.configuration_blindgrasp_transformer import SIZES
-from lerobot_blindgrasp.presets.ablations import TABLE_V, TEACHERS, Ablation
-from lerobot_blindgrasp.presets.glove import GLOVE_PRESETS, GlovePreset
-from lerobot_blindgrasp.presets.pipeline import (
-    ABLATION_TEACHER,
-    PRESETS,
-    SHIPPED_BLIND_TEACHER,
-    SHIPPED_TEACHER_ITERATIONS,
-    SHIPPED_TEACHER_PRESET,
-)
-from lerobot_blindgrasp.presets.stage_configs import DemoStage, EvalStage, Preset, TeacherStage, derive
+from lerobot_blindgrasp.presets.ablations import TABLE_V, TEACHERS
+from lerobot_blindgrasp.presets.glove import GLOVE_PRESETS
+from lerobot_blindgrasp.presets.pipeline import PRESETS, SHIPPED_TEACHER_ITERATIONS, SHIPPED_TEACHER_PRESET
+from lerobot_blindgrasp.presets.stage_configs import Preset, TeacherStage
 from lerobot_blindgrasp.presets.student import DaggerStage, Schedule, StudentStage, dataset_frames, schedule
 from lerobot_blindgrasp.presets.teacher import TEACHER_PRESETS
-from lerobot_blindgrasp.presets.teacher_configs import ActorInput, ScriptedDemos, TeacherPreset, Variant
+from lerobot_blindgrasp.presets.teacher_configs import Variant
 
 __all__ = [
-    "ABLATION_TEACHER",
-    "GLOVE_PRESETS",
     "PRESETS",
     "REGISTRY",
-    "SHIPPED_BLIND_TEACHER",
     "SHIPPED_TEACHER_ITERATIONS",
     "SHIPPED_TEACHER_PRESET",
     "SIZES",
     "TABLE_V",
     "TEACHERS",
     "TEACHER_PRESETS",
-    "Ablation",
-    "ActorInput",
     "DaggerStage",
-    "DemoStage",
-    "EvalStage",
-    "GlovePreset",
     "Preset",
     "Schedule",
-    "ScriptedDemos",
     "StudentStage",
-    "TeacherPreset",
     "TeacherStage",
     "Variant",
     "dataset_frames",
-    "derive",
     "get",
     "schedule",
 ]

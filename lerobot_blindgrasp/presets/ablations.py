@@ -1,16 +1,9 @@
-"""The Table V rows as named entries: which teacher, which demos, whether a student is distilled, and why.
+"""The Table V rows as named entries: which teacher, which demos, whether a student is distilled, and why (`doc`).
 
-Every preset runs the same rows at its own sizes: the student rows share the preset's demo budget (episodes per
-object and rollout cap), student size and steps or epochs, and seed, and every row is evaluated on the preset's
-eval start states. What differs between rows is only what the paper varies (Sec. IV-A); each row's `doc` says what.
-
-Two teachers serve the rows. The proposed row and the two rows that change only the demos use the preset's own
-teacher (`Preset.teacher`; in `quick` the shipped one). The two rows that change the teacher (w/o r_i, RL w/ o_t)
-train a teacher with one switch flipped, on the preset's ablation teacher (`Preset.ablation_teacher`): a recipe
-with no scripted-grasp cloning. The scripts cloned by the shipped recipe read the object's pose and make contact by
-design, so an RL w/ o_t teacher that cloned them would inherit privileged information, and a w/o r_i teacher would
-inherit the contact-making grasps its row is meant to lack. `has_scripted_cloning` is the check, and every preset
-is refused at definition if its ablation teacher fails it.
+Every row of a preset shares its demo budget, student, seed and eval start states; only what the paper varies
+(Sec. IV-A) differs. The rows that change the teacher (w/o r_i, RL w/ o_t) train it with one switch flipped on the
+preset's ablation teacher (`Preset.ablation_teacher`), which clones no scripted grasps: the scripts read the
+object's pose and make contact by design, which those two rows must lack. `has_scripted_cloning` is the check.
 """
 
 from __future__ import annotations
@@ -32,8 +25,7 @@ class Ablation:
     doc: str = ""
 
 
-# The teachers the rows need, by folder name, and the training switches that make each. The one without a switch
-# is the preset's own teacher; every other one is a teacher ablation, trained on the preset's ablation teacher.
+# The teachers the rows need, by folder name, and the switches that make each (none: the preset's own teacher).
 TEACHERS: dict[str, Variant] = {
     "teacher": Variant(),
     "teacher_no_ri": Variant(no_incentive=True),
@@ -56,9 +48,8 @@ def _scripted_demos(settings: TeacherPreset) -> dict | None:
 
 
 def has_scripted_cloning(settings: TeacherPreset) -> bool:
-    """Whether training with `settings` clones scripted grasps into the actor at any stage: the PPO algorithm is
-    replaced (`runner["algorithm"]["class_name"]`) or carries a scripted-demos entry, here or in a preset it
-    continues."""
+    """Whether training with `settings` clones scripted grasps at any stage: the PPO algorithm is replaced or
+    carries a scripted-demos entry, here or in a preset it continues."""
     return any(
         s.runner["algorithm"]["class_name"] != "PPO" or _scripted_demos(s) is not None for s in _stages(settings)
     )

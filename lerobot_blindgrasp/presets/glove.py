@@ -1,19 +1,10 @@
-"""Student presets for glove recordings (`lerobot-record` on the real gripper), alone or merged with sim demos.
+"""Student presets for glove recordings (`lerobot-record` on the real gripper), alone or merged with sim demos, for
+`blindgrasp-train-glove --preset=NAME`; the `*_smoke` ones are the same plumbing at CI size. Settings only: no real
+glove recordings exist in this repository.
 
-    GLOVE_PRESETS["glove"]            a student on glove recordings only
-    GLOVE_PRESETS["sim_plus_glove"]   a student on sim demos merged with glove recordings
-    GLOVE_PRESETS["glove_smoke"], GLOVE_PRESETS["sim_plus_glove_smoke"]   the same plumbing at CI size
-
-`blindgrasp-train-glove --preset=NAME` (`lerobot_blindgrasp/pipeline/glove_train.py`) runs one: it merges the
-sources with LeRobot's own dataset tools (`remove_feature` for the sim demos' `episode.*` metadata, then
-`aggregate_datasets`, the code behind `lerobot-edit-dataset --operation.type merge`) and trains with `lerobot-train`.
-These presets hold settings only; nothing here was measured on real glove recordings (none exist in this repository).
-
-Why these sizes. Glove data is scarce: 20 ten-second episodes per object at 20 Hz are 4000 frames, against the
-quick sim preset's 72,000 (40 curated episodes of 100 frames per object, 18 objects). So `glove` counts in passes
-over the data (epochs, as Table IV does) at the `cpu` architecture, the shipped student's (`models/student_cpu`);
-`sim_plus_glove` trains the `cpu` preset's fixed 5000 steps on the union, where the sim demos dominate
-and the glove episodes teach the real sensors' noise and the real servos' lag.
+Why these sizes: 20 ten-second episodes per object are 4000 frames, against the quick sim preset's 72,000. So
+`glove` counts passes over the data (epochs, as Table IV) at the shipped student's `cpu` size, and `sim_plus_glove`
+trains the `cpu` preset's 5000 steps on the union, where the glove episodes teach the real sensors and servos.
 """
 
 from __future__ import annotations

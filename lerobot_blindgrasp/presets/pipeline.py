@@ -1,14 +1,6 @@
-"""The pipeline presets (`blindgrasp-pipeline --preset=NAME`): every stage's sizes for `smoke`, `quick`, `cpu` and
-`paper`, and the named recipes beyond the paper.
-
-- `paper` is exactly Tables III and IV; its only deviations are where the paper measured on the real robot.
-- `cpu` is the largest that is useful on a 2-core machine (hours); `quick` is the paper's student recipe on the
-  shipped teacher (minutes); `smoke` checks the plumbing in CI (seconds per stage).
-- Beyond the paper, each named so: `quick_blind` (the README's main job: the calibration-blind teacher's demos),
-  `quick_blind_targeted` (the shipped student's recipe: quick_blind plus extra demos and DAgger on the small
-  capsule), `quick_dagger` and `cpu_dagger`.
-
-What each recipe measured is in the model cards and docs/results.md, not here.
+"""The pipeline presets (`blindgrasp-pipeline --preset=NAME`): `paper` is exactly Tables III and IV (deviating only
+where the paper measured on the real robot); `cpu` is the largest useful on 2 cores (hours); `quick` the paper's
+student recipe on the shipped teacher (minutes); `smoke` CI plumbing. The recipes beyond the paper are named so.
 """
 
 from __future__ import annotations
@@ -23,10 +15,8 @@ from lerobot_blindgrasp.presets.student import DaggerStage, StudentStage
 # --preset=cpu_bc_capsule --seed=1`.
 SHIPPED_TEACHER_PRESET = teacher.CPU_BC_CAPSULE
 SHIPPED_TEACHER_ITERATIONS = 2100
-# The Table V teacher ablations of `cpu` and `quick`: the shipped recipe up to where its cloning begins. Those
-# iterations are the `cpu` preset exactly (nothing of the cloning touches PPO, its random numbers or the normalizer
-# before then), so each ablated teacher differs from the shipped teacher's own PPO-only prefix by its one switch,
-# and none clones a script.
+# The Table V teacher ablations of `cpu` and `quick`: the shipped recipe up to where its cloning begins, which is
+# the `cpu` preset exactly, so each differs from the shipped teacher's PPO-only prefix by its one switch.
 ABLATION_TEACHER = TeacherStage(settings=teacher.CPU, iterations=ablations.cloning_start(SHIPPED_TEACHER_PRESET))
 # The main job's teacher: the shipped calibration-blind teacher (models/teacher_cpu_bc_calib).
 SHIPPED_BLIND_TEACHER = "teacher_cpu_bc_calib"
@@ -42,9 +32,8 @@ _DAGGER = (
 PAPER = Preset(
     name="paper",
     teacher=TeacherStage(settings=teacher.PAPER),
-    # 5000 per object for the paper's 89,500 curated demonstrations (18 x ~4972). The paper gives no rollout cap,
-    # only that start states the teacher does not solve are dropped; 20 x the target (the collector's default) lets
-    # a 5 %-yield object still reach it.
+    # 5000 per object for the paper's 89,500 (18 x ~4972); it gives no rollout cap: 20 x lets a 5 %-yield object
+    # still reach it.
     demos=DemoStage(
         episodes_per_object=5000, max_rollouts_per_object=100_000, num_envs=9000, min_curated_episodes=1000
     ),
@@ -66,8 +55,7 @@ CPU = Preset(
     # The shipped teacher's recipe from scratch (a staged preset: cpu, then two cloning stages).
     teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET),
     ablation_teacher=ABLATION_TEACHER,
-    # 100 per object rather than quick's 40, so that 5000 steps at batch 256 are a few passes over the data rather
-    # than many; collection is minutes, training the hour.
+    # 100 per object, so that 5000 steps at batch 256 are a few passes over the data rather than many.
     demos=DemoStage(episodes_per_object=100, max_rollouts_per_object=1000, num_envs=720, min_curated_episodes=90),
     student=StudentStage(size="cpu", batch_size=256, steps=5_000, threads=1, num_workers=1),
     evaluation=EvalStage(episodes_per_object=20, render_stride=4, render_episodes=2),
@@ -82,8 +70,7 @@ CPU = Preset(
 
 QUICK = Preset(
     name="quick",
-    # Shipped: the proposed rows train no teacher. The Table V teacher ablations (w/o r_i, RL w/ o_t) train the
-    # shipped recipe's PPO-only prefix with their switch flipped.
+    # Shipped: only the Table V teacher ablations train a teacher.
     teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET, shipped=True, iterations=SHIPPED_TEACHER_ITERATIONS),
     ablation_teacher=ABLATION_TEACHER,
     demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720, min_curated_episodes=18),
@@ -102,8 +89,7 @@ QUICK = Preset(
     },
 )
 
-# A tiny teacher trained from scratch, so CI exercises the teacher stage too; and every stage the main job and the
-# shipped student's recipe run (targeted demos and DAgger included), at plumbing size.
+# Every stage at plumbing size for CI, a teacher trained from scratch, targeted demos and DAgger included.
 SMOKE = Preset(
     name="smoke",
     teacher=TeacherStage(settings=teacher.QUICK, iterations=2, num_envs=36),
@@ -127,10 +113,8 @@ CPU_DAGGER = derive(
     CPU, "cpu_dagger", {"dagger": _DAGGER}, dagger=DaggerStage(episodes_per_object=20, steps=2000, rounds=2)
 )
 
-# The main job (README command 1), beyond the paper: the shipped calibration-blind teacher (teacher preset
-# cpu_bc_calib_blind), whose actor sees nothing of the object until 0.3 s of touch and reads its fingertips from the
-# measured joints; its demos are collected with every joint reading off by +-0.05 rad, so they show it grasping
-# through a calibration error the student can be taught to forgive. A shorter student stage at a 5x learning rate,
+# The main job (README command 1), beyond the paper (its deviations say how): the shipped calibration-blind
+# teacher's demos under a +-0.05 rad joint calibration error, and a shorter student stage at a 5x learning rate,
 # chosen by side-by-side runs (same demos, same seed), with two loader processes next to one torch thread.
 QUICK_BLIND = derive(
     QUICK,
@@ -158,9 +142,8 @@ QUICK_BLIND = derive(
     student=replace(QUICK.student, steps=700, lr=5e-4, constant_lr_steps=350, num_workers=2),
 )
 
-# The shipped student's recipe (models/student_cpu), beyond the paper: quick_blind at a 1200-step student stage,
-# aimed at the object its student trailed its teacher on (the small capsule): more of its demos, each collection on
-# its own start states, and DAgger on it alone. The fine-tuning inherits the student's own settings.
+# The shipped student's recipe (models/student_cpu), beyond the paper: quick_blind at 1200 steps, with more demos
+# of the object its student trailed its teacher on (the small capsule) and DAgger on it alone.
 _TARGETED = (("capsule_small", 240),)  # object, extra curated episodes (7x its 40 in the main set)
 QUICK_BLIND_TARGETED = derive(
     QUICK_BLIND,

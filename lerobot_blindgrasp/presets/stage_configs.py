@@ -1,9 +1,6 @@
-"""The pipeline's config types: a preset (`Preset`) is one stage config per stage of the main job (teacher, demos,
-student, DAgger, evaluation), its deviations from the paper, and the words every report and card uses for its
-recipe. The presets themselves are data, in `presets/pipeline.py`.
-
-Deviations are keyed by what they concern ("teacher", "demos", "student.size", ...): a preset derived from another
-states its own text for a key it changes (`derive`), and keeps the others as they are, word for word.
+"""The pipeline's config types: a `Preset` is one config per stage of the main job, its deviations from the paper
+(keyed by what they concern: "teacher", "demos", "student.size", ...; `derive` restates only the keys it changes),
+and the words every report and card uses for its recipe.
 """
 
 from __future__ import annotations
@@ -31,15 +28,12 @@ class DemoStage:
     episodes_per_object: int
     max_rollouts_per_object: int
     num_envs: int
-    # Below this many curated episodes the student cannot learn anything; the pipeline then also collects the
-    # uncurated ("w/o curation") set and trains on it, and says so in the report.
+    # Below this many curated episodes the pipeline trains on the uncurated set instead, and says so.
     min_curated_episodes: int
-    # Beyond the paper: roll out with every joint reading off by +-this (rad; blindgrasp-collect-demos
-    # --joint_calibration_rad), so that the demos show a calibration-blind teacher grasping through it. 0: the paper.
+    # Beyond the paper (0: the paper): every joint reading off by +-this (rad) while rolling out.
     joint_calibration_rad: float = 0.0
-    # Beyond the paper: more curated episodes of the objects the student trails on, ((object, episodes), ...). Each is
-    # its own collection (`--objects=NAME`, its own start states) merged with the main set before the student trains.
-    # (): the paper, the same count for every object.
+    # Beyond the paper (): more curated episodes of the objects the student trails on, ((object, episodes), ...),
+    # each its own collection on its own start states, merged with the main set.
     extra_episodes: tuple[tuple[str, int], ...] = ()
 
     def __post_init__(self):
@@ -55,14 +49,11 @@ class DemoStage:
 class EvalStage:
     episodes_per_object: int  # student and teacher alike: paired episode by episode on the same start states
     task: str = "all"  # lerobot-eval --env.task and the teacher eval's objects
-    # The paired comparison is the deterministic teacher's; the stochastic one (what demos come from) costs as much
-    # again and is also in the teacher's own card.
+    # The paired comparison is the deterministic teacher's; the stochastic one costs as much again.
     teacher_modes: tuple[str, ...] = ("deterministic", "stochastic")
     async_envs: bool = False  # lerobot-eval worker processes: worth it only with many cores
-    # lerobot-eval renders 10 episodes per task at every step; a new frame every N steps makes that N x cheaper
-    # (~12 ms a frame with a software renderer was ~80 % of the quick preset's eval)
+    # lerobot-eval's video: a new frame every N steps, on the first `render_episodes` (the rest one a second)
     render_stride: int = 1
-    # Of the 10 episodes per object lerobot-eval records, how many get `render_stride`; the rest one frame a second.
     render_episodes: int = 10
 
 
@@ -77,8 +68,8 @@ class Preset:
     deviations: dict[str, str] = field(default_factory=dict)
     # DAgger-style relabelling after the first student (beyond the paper); None: the paper's offline recipe.
     dagger: DaggerStage | None = None
-    # What the Table V teacher ablations (w/o r_i, RL w/ o_t) train with their switch flipped: a recipe without
-    # scripted-grasp cloning (ablations.py says why). None: `teacher` itself, which then must have no cloning.
+    # What the Table V teacher ablations train with their switch flipped: a recipe without scripted-grasp cloning
+    # (ablations.py says why). None: `teacher` itself, which then must have no cloning.
     ablation_teacher: TeacherStage | None = None
 
     def __post_init__(self):

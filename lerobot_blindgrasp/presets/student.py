@@ -1,21 +1,8 @@
-"""The student part of the preset registry: the size and the training length of each preset's student.
+"""The student part of the preset registry: each stage's size (a `SIZES` entry) and length. Table IV's epochs are
+passes over the collected dataset's frames (LeRobot's reading; robomimic's template counts 100 steps, and the paper
+does not say which), so the steps exist only after the demo stage (`schedule`):
 
-Each stage names a `SIZES` entry of the `blindgrasp_transformer` policy (`--policy.size`); `paper` is Table IV.
-
-Training length. Table IV gives 2000 epochs at batch 256 with the LR constant for 100 epochs, then decaying. An
-epoch here is one pass over the frames of the dataset actually collected (lerobot-train draws one sample per
-frame, with its 30-step context), so the step counts exist only after the demo stage:
-
-    steps_per_epoch = ceil(total_frames / batch_size)          total_frames: <dataset>/meta/info.json
-    --steps                         = epochs * steps_per_epoch
-    --policy.scheduler_constant_steps = constant_lr_epochs * steps_per_epoch
-
-The paper's "89,500" curated demonstrations are episodes by its own wording ("demonstrations", 18 objects x ~5000
-rollouts of 5 s); nothing here assumes either reading, the collected dataset decides. What that costs: 5000 whole
-100-step episodes per object are ~9 M frames, 35,157 steps per epoch and ~70 M steps for 2000 epochs, far beyond
-the paper's "about 3 hours" on one RTX 5080. robomimic, which the paper trained with, defines an epoch as a fixed
-100 steps in its BC-Transformer template (`epoch_every_n_steps`; 2000 epochs = 200 k steps, which would fit 3 h);
-the paper does not say which it used. We follow the pass-over-the-data reading, LeRobot's, and say so here.
+    --steps = epochs * ceil(total_frames / batch_size)      --policy.scheduler_constant_steps likewise
 """
 
 from __future__ import annotations
@@ -25,7 +12,6 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-# The architecture sizes are the policy's own table; the stages below name one of them.
 from lerobot_blindgrasp.policies.blindgrasp_transformer.configuration_blindgrasp_transformer import SIZES
 
 
@@ -38,18 +24,13 @@ class StudentStage:
     steps: int | None = None  # fixed optimizer steps (small presets: a measured wall-clock budget)
     epochs: int | None = None  # passes over the collected dataset (paper); steps then follow from its frames
     constant_lr_epochs: int | None = None  # LR constant this many epochs, then linear decay (Table IV)
-    constant_lr_steps: int | None = (
-        None  # the same for a fixed-step stage: LR constant this many steps, then decay
-    )
+    constant_lr_steps: int | None = None  # the same for a fixed-step stage, in steps
     lr: float | None = None  # AdamW learning rate; None: the policy's (Table IV's 1e-4)
     threads: int = 1  # OMP threads of lerobot-train (nothing else runs during that stage)
-    # lerobot-train's data-loader processes. Reading a 30-frame window costs ~2.8 ms a sample here, longer than the
-    # cpu-size update: one loader process next to one torch thread overlaps the two, 1.5x faster than loading
-    # in the training process with 2 torch threads on 2 cores (same loss curve).
+    # lerobot-train's data-loader processes: one next to one torch thread overlaps loading with the update.
     num_workers: int = 0
     device: str = "cpu"  # student training and eval; the pipeline's --device overrides
-    # Training-time sensor errors (beyond the paper; 0: off): the policy's augment_* settings, passed as
-    # --policy.augment_force_gain etc. (see the policy configuration).
+    # Training-time sensor errors (beyond the paper; 0: off): the policy's --policy.augment_* settings.
     augment_force_gain: float = 0.0
     augment_force_bias_n: float = 0.0
     augment_joint_offset_rad: float = 0.0
@@ -76,9 +57,8 @@ class StudentStage:
 @dataclass(frozen=True, kw_only=True)
 class DaggerStage:
     """DAgger-style relabelling, beyond the paper (`blindgrasp-dagger`): `rounds` times, the latest student drives
-    `episodes_per_object` episodes per object, the teacher's mean action labels every state it visits, and the
-    student is fine-tuned from its own weights for `steps` on everything aggregated so far. `objects` aims it at the
-    objects the student trails on."""
+    `episodes_per_object` episodes per object of `objects`, the teacher's mean action labels every state it visits,
+    and the student is fine-tuned for `steps` on everything aggregated so far."""
 
     episodes_per_object: int
     steps: int

@@ -1,10 +1,7 @@
 """The teacher presets (`blindgrasp-train-teacher --preset=NAME`): `paper` is exactly Table III; `cpu` and `quick`
-are sized for a 2-core machine; the `cpu_bc_*` presets are the shipped teachers' staged recipes.
-
-Every deviation from the paper is stated in the preset that makes it, with its reason, in `deviations` (which the
-report and the teacher's card print). A training run records the preset it used in `teacher_config.json`, and
-resuming refuses a run whose preset values differ, so a preset's numbers change only under a new name. What each
-recipe measured is in the teachers' cards and in docs/, not here.
+are sized for 2 cores; the `cpu_bc_*` presets are the shipped teachers' staged recipes. Every deviation from the
+paper is stated with its reason in `deviations`. A run records its preset and resuming refuses different values, so
+a preset's numbers change only under a new name.
 """
 
 from __future__ import annotations
@@ -47,6 +44,7 @@ _NO_PUSHES = (
     "no random pushes: 27 % of episodes in which the fingers never move end with a sphere or capsule rolled out of "
     "the workspace, which only adds reward noise on 2 cores (demos and eval run without pushes anyway)"
 )
+_SHAPING = (_REACH, _TOUCH, _INIT_STD, _OBS_NORM)
 _CPU_REWARD = replace(rewards.PAPER_REWARD.with_weights(reach=0.5, touch=0.5), reach_scale=20.0)
 # PPO settings the cpu and quick presets share (their deviations say why each differs from Table III).
 _SMALL_PPO = {"num_steps_per_env": 24, "init_std": 0.5, "obs_normalization": True, "num_mini_batches": 4}
@@ -57,7 +55,7 @@ CPU = TeacherPreset(
     max_iterations=3000,
     runner=ppo_config(hidden_dims=[256, 128, 64], save_interval=25, **_SMALL_PPO),
     reward=_CPU_REWARD,
-    deviations=(_REACH, _TOUCH, _INIT_STD, _OBS_NORM, _CPU_ENVS, _CPU_MLP, _NO_PUSHES),
+    deviations=(*_SHAPING, _CPU_ENVS, _CPU_MLP, _NO_PUSHES),
     external_force=False,
 )
 
@@ -67,21 +65,11 @@ QUICK = TeacherPreset(
     max_iterations=30,
     runner=ppo_config(hidden_dims=[128, 64], save_interval=10, **_SMALL_PPO),
     reward=_CPU_REWARD,
-    deviations=(
-        _REACH,
-        _TOUCH,
-        _INIT_STD,
-        _OBS_NORM,
-        _NO_PUSHES,
-        "144 envs, MLP [128, 64], 30 iterations: minutes, for the pipeline and CI",
-    ),
+    deviations=(*_SHAPING, _NO_PUSHES, "144 envs, MLP [128, 64], 30 iterations: minutes, for the pipeline and CI"),
     external_force=False,
 )
 
-# Scripted-grasp cloning into `cpu` (teacher/aux_bc.py): the side-grasp script reads where the object stands, as
-# the teacher's privileged observation does, and its grasps of the small objects and the medium capsule are cloned
-# into the actor once `cpu` grasps. Iterations 0..1397 are exactly `cpu`: nothing of the cloning touches PPO, its
-# random numbers or the normalizer before then.
+# Scripted-grasp cloning into `cpu` (teacher/aux_bc.py) once it grasps; iterations 0..1397 are exactly `cpu`.
 CPU_BC_JOINT = replace(
     CPU,
     name="cpu_bc_joint",
@@ -98,9 +86,7 @@ CPU_BC_JOINT = replace(
     ),
 )
 
-# The shipped teacher (models/teacher_cpu_bc): a second cloning stage aimed at the small capsule alone, from
-# cpu_bc_joint's iteration 1745, with 4x the small capsule's share of training envs so that PPO sees its rare lifts
-# often enough to keep them.
+# The shipped teacher (models/teacher_cpu_bc): a second cloning stage aimed at the small capsule alone.
 CPU_BC_CAPSULE = replace(
     CPU_BC_JOINT,
     name="cpu_bc_capsule",
@@ -123,16 +109,14 @@ CPU_BC_CAPSULE = replace(
     ),
 )
 
-# Beyond the paper: the shipped teacher fine-tuned to approach blind (teacher/blind_approach.py). Its actor reads the
-# object's state as 0 until a fingertip load cell reads a touch; the critic reads everything. PPO with the `cpu`
-# settings and the capsule stage's object weights, from the shipped teacher's last iteration.
+# Beyond the paper: the shipped teacher fine-tuned to approach blind (teacher/blind_approach.py).
 _BLIND_RUNNER = CPU.runner_cfg()
 _BLIND_RUNNER["obs_groups"] = {"actor": ["privileged_blind"], "critic": ["privileged"]}
 CPU_BC_BLIND_APPROACH = replace(
     CPU_BC_CAPSULE,
     name="cpu_bc_blind_approach",
     max_iterations=2350,
-    stages=(("cpu_bc_joint", 1746), ("cpu_bc_capsule", 2100)),
+    stages=(*CPU_BC_CAPSULE.stages, ("cpu_bc_capsule", 2100)),
     runner=_BLIND_RUNNER,
     deviations=CPU_BC_CAPSULE.deviations
     + (
@@ -143,13 +127,12 @@ CPU_BC_BLIND_APPROACH = replace(
     ),
 )
 
-# Beyond the paper: the object revealed only after 6 control steps (0.3 s) of touch, so that the teacher, like its
-# student, can tell the small capsule from the small sphere only after a touch, not at it.
+# Beyond the paper: the object revealed only after 6 control steps (0.3 s) of touch.
 CPU_BC_BLIND_REVEAL6 = replace(
     CPU_BC_BLIND_APPROACH,
     name="cpu_bc_blind_reveal6",
     max_iterations=2550,
-    stages=(("cpu_bc_joint", 1746), ("cpu_bc_capsule", 2100), ("cpu_bc_blind_approach", 2350)),
+    stages=(*CPU_BC_BLIND_APPROACH.stages, ("cpu_bc_blind_approach", 2350)),
     actor_input=ActorInput(reveal_delay_steps=6),
     deviations=CPU_BC_BLIND_APPROACH.deviations
     + (
@@ -159,20 +142,13 @@ CPU_BC_BLIND_REVEAL6 = replace(
     ),
 )
 
-# Beyond the paper: the teacher that made models/student_cpu (shipped as models/teacher_cpu_bc_calib). Its actor
-# reads the fingertip poses as the kinematics of the measured joint angles, and PPO fine-tunes it under every joint
-# reading off by +-0.05 rad, so that its corrections for a calibration offset are ones the blind student can
-# observe and copy.
+# Beyond the paper: the teacher that made models/student_cpu (shipped as models/teacher_cpu_bc_calib), fine-tuned
+# to read its fingertips from the measured joints under a +-0.05 rad calibration error.
 CPU_BC_CALIB_BLIND = replace(
     CPU_BC_BLIND_REVEAL6,
     name="cpu_bc_calib_blind",
     max_iterations=2950,
-    stages=(
-        ("cpu_bc_joint", 1746),
-        ("cpu_bc_capsule", 2100),
-        ("cpu_bc_blind_approach", 2350),
-        ("cpu_bc_blind_reveal6", 2550),
-    ),
+    stages=(*CPU_BC_BLIND_REVEAL6.stages, ("cpu_bc_blind_reveal6", 2550)),
     actor_input=ActorInput(reveal_delay_steps=6, fingertips_from_joints=True),
     joint_calibration_rad=0.05,
     deviations=CPU_BC_BLIND_REVEAL6.deviations

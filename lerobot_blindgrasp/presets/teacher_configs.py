@@ -1,9 +1,6 @@
-"""The teacher's config types: rsl-rl's PPO settings (`ppo_config`, Table III's values unless overridden), a teacher
-preset (`TeacherPreset`), the Table V teacher switches (`Variant`), what a blind-approach actor reads
+"""The teacher's config types, which the presets (`presets/teacher.py`) are made of and `teacher/` reads: rsl-rl's
+PPO settings (`ppo_config`), `TeacherPreset`, the Table V switches (`Variant`), what a blind-approach actor reads
 (`ActorInput`) and the scripted grasps a recipe clones into its actor (`ScriptedDemos`).
-
-The teacher presets (`presets/teacher.py`) are made of these, and `teacher/` reads them: the presets never import
-`teacher/`.
 """
 
 from __future__ import annotations
@@ -92,8 +89,7 @@ def reads_blind_group(obs_groups: dict[str, list[str]]) -> bool:
     return any(BLIND_GROUP in groups for groups in obs_groups.values())
 
 
-# Script rollouts draw their start states from the teacher-training seed range, far above the env seeds of any
-# training run (seed + env index), so that they never share a start state with evaluation or demo collection.
+# Script rollouts' start states: in the teacher-training seed range, far above any training run's env seeds.
 SCRIPT_SEED = 1 << 32
 # The rsl-rl algorithm that clones them, as the runner config names it (resolved by rsl-rl when the run starts).
 ALGORITHM_CLASS = "lerobot_blindgrasp.teacher.aux_bc:PPOWithScriptedDemos"
@@ -103,9 +99,7 @@ HARD_OBJECTS: tuple[str, ...] = (*(n for n in objects.PAPER_OBJECTS if n.endswit
 
 @dataclass(frozen=True)
 class ScriptedDemos:
-    """Which script grasps are cloned, and how strongly: the cloning loss, weighted by `coef`, joins PPO's loss in
-    every PPO minibatch step (one optimizer, one gradient; DAPG's form), from `start_iteration`, its weight decaying
-    linearly to 0 over `decay_iterations`. `teacher/scripted_demos.py` collects them, `teacher/aux_bc.py` clones."""
+    """Which script grasps are cloned (`teacher/aux_bc.py`), and how strongly (`weight_at`)."""
 
     objects: tuple[str, ...] = HARD_OBJECTS
     episodes_per_object: int = 64  # script rollouts per object; the successful ones are kept
@@ -159,12 +153,10 @@ class TeacherPreset:
     external_force: bool = True  # Table II random pushes during training
     # Share of training envs per object (order of objects.PAPER_OBJECTS); None: even, as the paper.
     object_weights: tuple[float, ...] | None = None
-    # A staged recipe: the presets trained before this one, in order, each with the iteration it stops at. A fresh
-    # run trains each in <output_dir>/stages/<name>, starting from the previous stage's last checkpoint, then this
-    # preset from the last stage's. (): this preset starts from scratch.
+    # A staged recipe: the presets trained before this one, in order, each with the iteration it stops at, each
+    # starting from the previous one's last checkpoint. (): this preset starts from scratch.
     stages: tuple[tuple[str, int], ...] = ()
-    # What a blind-approach actor is denied beyond the object before a touch; only read when its obs_groups read
-    # the blind group.
+    # What a blind-approach actor is denied (read only when its obs_groups read the blind group).
     actor_input: ActorInput = ActorInput()
     # Training envs draw every joint's reading off by +-this (rad, sign per env and joint; beyond Table II).
     joint_calibration_rad: float = 0.0
@@ -173,8 +165,7 @@ class TeacherPreset:
         return copy.deepcopy(self.runner)
 
 
-# The reward terms a "w/o r_i" teacher loses: every term that pays for fingertip contact. Why these, and why reach
-# and r_t stay: the row's doc, ablations.TABLE_V["wo_r_i"].
+# The reward terms a "w/o r_i" teacher loses: every term that pays for contact (why: ablations.TABLE_V["wo_r_i"]).
 CONTACT_REWARD_TERMS = ("incentive", "touch")
 
 

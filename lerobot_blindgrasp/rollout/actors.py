@@ -1,10 +1,6 @@
-"""The actors the episode loop runs: the student as lerobot-eval runs it, and the teacher. Each maps the env's
-observation dict to the step the env takes (delta-theta, (n, 9)).
-
-The student outputs absolute joint targets, LeRobot's action; `StudentActor` turns them into steps in one place,
-through the env's calibration-aware conversion (`BatchedGraspEnv.delta_for_target`: a target in the joints'
-measured frame, under a calibration offset too), exactly as the lerobot-eval gym env does. The teacher outputs
-steps already.
+"""The actors the episode loop runs: each maps the env's observation dict to the env's step (delta-theta, (n, 9)).
+The teacher outputs steps; the student's absolute joint targets (LeRobot's action) become steps through the env's
+calibration-aware `BatchedGraspEnv.delta_for_target`, as in the lerobot-eval gym env.
 """
 
 from __future__ import annotations

@@ -1,21 +1,9 @@
-"""The one env factory: a purpose, the objects and the seeds in; the batched env with the randomization and the seed
-range that purpose has (`spec.SEED_RANGES`) out.
+"""The one env factory: a purpose (`PURPOSES`: its seed range, randomization and resets), the objects and the seeds
+in; the batched env out. Env i of a training purpose has seed + i; env i of an evaluation purpose runs evaluation
+index seed + i // n on object i % n, the start state `lerobot-eval --seed` gives it (`sim.gym_env.start_seed`).
 
-    make_batched_env("eval", ("capsule_small",), episodes=20, seed=1000)  # lerobot-eval's start states (seed + i)
+    make_batched_env("eval", ("capsule_small",), episodes=20, seed=1000)  # lerobot-eval's start states
     make_batched_env("demos", objects, num_envs=180, seed=spec.DEMO_SEED)  # auto-resetting teacher rollouts
-    make_batched_env("train", objects, num_envs=1026, seed=1, dr=...)  # PPO
-
-| purpose | seeds | randomization | episodes |
-|---|---|---|---|
-| train | `teacher_train` range: env i has seed + i | Table II with pushes (`PAPER_DR`), or as given | auto-reset |
-| scripts | `teacher_train` range: env i has seed + i | `EVAL_DR`, or as given | one per env |
-| demos | `demos` range: env i has seed + i | Table II without pushes (`EVAL_DR`), or as given | auto-reset |
-| dagger | `demos` range: env i has seed + i | `EVAL_DR` | one per env |
-| eval | evaluation indices: env i is index seed + i // n on object i % n | `EVAL_DR` | one per env |
-| robustness | as eval | the condition under test (required) | one per env |
-
-An evaluation env runs exactly the start state that `lerobot-eval --seed` gives the same object and index
-(`sim.gym_env.start_seed`), so every tool that evaluates pairs with lerobot-eval episode by episode.
 """
 
 from __future__ import annotations
@@ -67,9 +55,8 @@ def env_config(
     dr: randomization.DomainRandomization | None = None,
     **options,
 ) -> GraspEnvConfig:
-    """The `GraspEnvConfig` of `purpose` (module docstring). Evaluation purposes take `episodes` per object (and
-    `copies` of the batch); the others `num_envs`, env i seeded seed + i. `dr` replaces the purpose's
-    randomization; `options` are further GraspEnvConfig fields (reward, nthread, backend, episode_s, ...)."""
+    """The `GraspEnvConfig` of `purpose`: `episodes` per object (and `copies` of the batch) for evaluation, else
+    `num_envs`. `dr` replaces the purpose's randomization; `options` are further GraspEnvConfig fields."""
     if purpose not in PURPOSES:
         raise ValueError(f"unknown purpose {purpose!r}; choose from {', '.join(PURPOSES)}")
     p = PURPOSES[purpose]

@@ -1,16 +1,5 @@
-"""The one episode loop, and its one outcome record (`Episode`).
-
-    for ep in run_batch(make_batched_env("eval", names, episodes=20, seed=1000), actor): ...  # one episode per env
-    for ep in stream(make_batched_env("demos", names, num_envs=180, seed=s), actor, stop): ...  # until stop()
-
-An actor maps the env's observation dict to the step it sends (`actors.py`: the teacher's delta-theta, or the
-student's absolute targets turned into deltas by the env). Each step the loop can record per-env quantities
-(`TRACES`, plus any the caller computes from the observation before the step, e.g. a teacher's labels): they come
-back cut to each episode's length in `Episode.traces`.
-
-`run_batch` steps an env without auto-reset until every episode has ended. With `skip_final`, envs whose outcome is
-final (success latches) are no longer simulated: the same successes, much less physics, but their lift and traces
-stop where their outcome was decided. `stream` runs an auto-resetting env and yields each episode as it finishes.
+"""The one episode loop (`run_batch`: one episode per env; `stream`: auto-resetting envs, until stopped) and its
+outcome record, `Episode`, whose `traces` hold what was recorded at each step (`TRACES`, and the caller's labels).
 """
 
 from __future__ import annotations
@@ -34,8 +23,8 @@ PHYSICS_DRAW_NAMES: tuple[str, ...] = (
 )
 RANDOMIZATION_NAMES: tuple[str, ...] = PHYSICS_DRAW_NAMES + ("object_x", "object_y")
 
-# What the loop can record at every step: name -> (width, dtype, how it is read). "state" is o_t before the step;
-# the others are read from the step's info.
+# What the loop can record at every step: name -> (width, dtype). "state" is o_t before the step; the others are
+# read from the step's info (_FROM_INFO).
 TRACES: dict[str, tuple[int, type]] = {
     "state": (spec.STATE_DIM, np.float32),  # o_t before each step, what the student sees
     "action": (spec.ACTION_DIM, np.float32),  # absolute joint targets the env commanded (the LeRobot action)
@@ -182,9 +171,7 @@ def stream(
     start_xy = env.object_position()[:, :2].copy()
     start_episode = on_host(env.episode).copy()
     while not should_stop():
-        t = on_host(
-            env.episode_length
-        ).copy()  # this step's index in each env's episode (the env resets it on done)
+        t = on_host(env.episode_length).copy()  # this step's index in each env's episode
         rec.before(t, obs, env)
         obs, _, _, _, info = env.step(act(obs, env))
         rec.after(t, info)

@@ -1,22 +1,8 @@
-"""Scripted side grasps as auxiliary demonstrations for the PPO actor: how the shipped teacher learned to lift the
-small capsule.
-
-Why: the `cpu` teacher alone never lifts the small capsule. It closes its tips on top of it and presses it into the
-table, and neither reward changes (a directional touch term) nor exploration aids (rsl-rl's RND bonus, pre-grasp
-start states) moved it off that local optimum. `sim.scripted.SideGraspScript`, which reads where the object stands
-as the teacher's privileged observation does, lifts it from the paper's start pose under the paper's randomization.
-So the actor is shown that grasp directly.
-
-How (the demo-augmented policy gradient idea, Rajeswaran et al. 2018, "DAPG"): before training, the script is rolled
-out on the listed objects from training start states; the successful episodes' (92-d privileged observation,
-delta-theta) pairs are kept, and the mean-squared error of the actor's mean against them, weighted, is added to
-PPO's loss in each of PPO's minibatch steps. The weight decays linearly to 0 over `decay_iterations`; once it is 0
-the actor optimizes the paper's reward alone, so the optimum is the paper's. Only the mean is cloned; the action
-std stays PPO's. The critic is untouched.
-
-Wired into rsl-rl without changing its runner: the algorithm's `class_name` names `PPOWithScriptedDemos` and its
-config carries a `scripted_demos` dict (`ScriptedDemos.runner_cfg`), so it is recorded in the run's
-`teacher_config.json` and checked on resume like every PPO setting.
+"""Scripted side grasps cloned into the PPO actor, as in DAPG (Rajeswaran et al. 2018): how the shipped teacher
+learned to lift the small capsule, which `cpu` alone presses into the table whatever the reward or exploration. The
+weighted MSE of the actor's mean against the script's successful (observation, delta-theta) pairs joins PPO's loss
+in each minibatch step, its weight decaying linearly to 0, after which the optimum is the paper's reward alone.
+Wired in through rsl-rl's `class_name` (`ScriptedDemos.runner_cfg`), so it is recorded and checked on resume.
 """
 
 from __future__ import annotations
@@ -34,8 +20,7 @@ log = logging.getLogger("blindgrasp.teacher")
 
 
 class PPOWithScriptedDemos(PPO):
-    """rsl-rl's PPO plus behaviour cloning of scripted demonstrations (module docstring): a loss term that
-    `_JointCloningOptimizer` adds to each of PPO's own optimizer steps."""
+    """rsl-rl's PPO plus the cloning loss, which `_JointCloningOptimizer` adds to each of PPO's optimizer steps."""
 
     def __init__(self, actor, critic, storage, *, scripted_demos: dict, **kwargs):
         super().__init__(actor, critic, storage, **kwargs)
@@ -44,9 +29,7 @@ class PPOWithScriptedDemos(PPO):
         if len(data["actions"]) == 0:
             raise ValueError(f"the side-grasp script lifted none of {self.demo_cfg.objects}: no demonstrations")
         log.info("scripted demos: %d pairs; script success %s", len(data["actions"]), data["success"])
-        self.demo_success = data["success"]
-        # Both observation groups are kept: the actor reads whichever its obs_groups name (privileged, or o_t for
-        # "RL w/ o_t").
+        # Both observation groups: the actor reads whichever its obs_groups name.
         self.demo_obs = TensorDict(
             {k: torch.from_numpy(v) for k, v in data["obs"].items()},
             batch_size=[len(data["actions"])],
@@ -110,9 +93,8 @@ def cloning_loss(mean: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 
 class _JointCloningOptimizer:
-    """PPO's optimizer, whose `step` first adds the cloning gradient: the joint loss without rewriting
-    `PPO.update` (which calls zero_grad, backward, clip, step once per minibatch). Everything else is delegated, so
-    learning-rate schedules and checkpoints see the wrapped optimizer itself."""
+    """PPO's optimizer, whose `step` first adds the cloning gradient (a joint loss without rewriting PPO.update);
+    everything else is delegated, so schedules and checkpoints see the wrapped optimizer itself."""
 
     def __init__(self, inner: torch.optim.Optimizer, alg: PPOWithScriptedDemos):
         self._inner = inner

@@ -1,27 +1,10 @@
-"""The blind-approach teacher's actor input: the privileged vector with what the student cannot know hidden.
+"""The blind-approach teacher's actor input (group `privileged_blind`): the privileged vector with the object's
+pose, velocities and planar distance read as 0 until a load cell has read above `TOUCH_N` (for more than
+`reveal_delay_steps`), and optionally the fingertip poses from the measured joints. A teacher steering by what the
+student cannot see asks it for actions it cannot infer; the critic still reads everything.
 
-The student cannot see where the object stands, nor which object it is, before a fingertip touches it. A teacher
-that steers its approach by those asks its student for actions that depend on what it never observes. A
-blind-approach teacher's actor therefore reads the observation group `privileged_blind`: the privileged vector with
-the object's pose, velocities and planar distance set to 0 until a fingertip load cell has read above `TOUCH_N`. Its
-critic reads the full vector (asymmetric actor-critic). The trigger is the student's own uniaxial reading, so the
-teacher learns of the object when the student could.
-
-Two later teachers hide more (`ActorInput`, stored as "actor_input" in their teacher_config.json):
-- `reveal_delay_steps`: the object appears only once a load cell has read a touch for more than that many
-  consecutive control steps. At 0 (the first blind teacher) it appears at the touch; a lost contact hides it again.
-  A later reveal keeps the teacher's first touching steps independent of which object it is, as the student's are.
-- `fingertips_from_joints`: the fingertip positions and orientations are the forward kinematics of the *measured*
-  joint angles, not the true poses. Under a joint calibration offset the true poses would tell the teacher what
-  the student can never compute; the kinematics of the readings are exactly what it could.
-
-`BlindGroup` computes the group for one batch of envs. It keeps a count of touching steps per env, so one instance
-belongs to one env batch: the rsl-rl adapter and each `TeacherPolicy` own theirs. An episode's start is recognised
-by the privileged previous action being exactly 0 on all 9 joints: the env zeroes it on every reset (and writes each
-action into it one observation late, so an episode's first two observations carry 0), and an action drawn from a
-policy is never exactly 0 on all of them. The fingers start clear of the object, so a count restarted on the second
-observation too loses nothing. That works unchanged in every loop that auto-resets or rebuilds its envs without
-telling the policy (training, demo collection, evaluation); the tests check it against the env's own resets.
+`BlindGroup` keeps per-env touch counts (one instance per env batch); an episode starts where the privileged
+previous action is exactly 0 on all joints (the env zeroes it on reset), so no loop needs to tell it of resets.
 """
 
 from __future__ import annotations
@@ -43,18 +26,13 @@ _HIDDEN_COLUMNS = np.concatenate([np.arange(spec.PRIVILEGED_DIM)[spec.PRIVILEGED
 
 
 def first_steps(priv: np.ndarray) -> np.ndarray:
-    """(n,) bool: the rows that are one of an episode's first two observations (previous action exactly 0; module
-    docstring)."""
+    """(n,) bool: the rows that are one of an episode's first two observations (previous action exactly 0)."""
     return (priv[:, _PREVIOUS_ACTION] == 0.0).all(axis=1)
 
 
 class MeasuredKinematics:
-    """Fingertip site poses in the world frame, as the env's framepos/framequat sensors give them, computed from the
-    joint angles in a privileged vector (the measured ones) with MuJoCo's own kinematics.
-
-    One MjData stepped through the batch, 20-30 us an env: MuJoCo has no batched kinematics call in Python, and
-    a hand-written numpy chain would be a second model of the finger to keep in sync with the MJCF.
-    """
+    """Fingertip site poses in the world frame, as the env's framepos/framequat sensors give them, from the joint
+    angles of a privileged vector, with MuJoCo's own kinematics (a numpy chain would be a second finger model)."""
 
     def __init__(self):
         import mujoco

@@ -17,8 +17,7 @@ log = logging.getLogger("blindgrasp.teacher")
 
 
 def atomic_save(save):
-    """rsl-rl's `OnPolicyRunner.save(path, infos)` (a plain torch.save, in place) made atomic: it writes a temp file
-    beside `path`, which is renamed over `path` once complete."""
+    """rsl-rl's `OnPolicyRunner.save(path, infos)` (an in-place torch.save) made atomic: temp file, then rename."""
 
     def save_atomically(path, infos=None):
         with durable.atomic_path(path) as tmp:
@@ -28,9 +27,8 @@ def atomic_save(save):
 
 
 def newest_loadable_checkpoint(run_dir: Path) -> Path | None:
-    """The newest model_<it>.pt that torch can read. Newer ones that cannot be read are renamed `<name>.corrupt`
-    (kept for inspection, out of the way of every later resume) with a warning; killed saves' temp files go.
-    Under torchrun only rank 0 renames or deletes; the other ranks skip the same files."""
+    """The newest model_<it>.pt that torch can read. Newer unreadable ones are set aside as `<name>.corrupt` with a
+    warning, and killed saves' temp files go (by rank 0 only; the other ranks skip the same files)."""
     lead = distributed.world()[1] == 0
     if lead:
         for stale in durable.remove_stale_temps(run_dir):

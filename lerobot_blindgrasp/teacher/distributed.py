@@ -1,12 +1,7 @@
-"""torchrun launches for rsl-rl's multi-GPU mode: which device and envs this process gets.
+"""torchrun launches for rsl-rl's multi-GPU mode (on when WORLD_SIZE > 1): which device and envs a process gets.
 
-rsl-rl (5.x) turns multi-GPU on when WORLD_SIZE > 1: `OnPolicyRunner._configure_multi_gpu` reads LOCAL_RANK/RANK,
-requires the runner's device to be `cuda:<LOCAL_RANK>`, initializes the NCCL process group, and from then on PPO
-broadcasts rank 0's parameters, all-reduces gradients, KL and normalizer statistics, and only rank 0 logs and saves.
-
-That method hard-codes CUDA (the device check, `backend="nccl"`, `torch.cuda.set_device`). On a machine without
-GPUs, `runner_class` returns a subclass whose `_configure_multi_gpu` does the same bookkeeping with the gloo
-backend and the CPU device; everything else (what is synchronized, and when) stays rsl-rl's own.
+rsl-rl's `OnPolicyRunner._configure_multi_gpu` hard-codes CUDA and NCCL; on a machine without GPUs `runner_class`
+returns a subclass doing the same bookkeeping with gloo on the CPU. What is synchronized, and when, stays rsl-rl's.
 """
 
 from __future__ import annotations
@@ -44,11 +39,6 @@ def runner_class(device: str):
 
     if device.startswith("cuda") or world()[0] <= 1:
         return OnPolicyRunner
-    return _gloo_runner()
-
-
-def _gloo_runner():
-    from rsl_rl.runners import OnPolicyRunner
 
     class _GlooOnPolicyRunner(OnPolicyRunner):
         """rsl-rl's multi-GPU mode on CPU processes (gloo): same cfg["multi_gpu"], same ranks; no CUDA calls."""

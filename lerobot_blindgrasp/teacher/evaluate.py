@@ -1,16 +1,8 @@
-"""`blindgrasp-eval-teacher`: per-object success table of a trained teacher.
+"""`blindgrasp-eval-teacher`: per-object success table of a trained teacher, deterministic and stochastic, on the
+evaluation start states: `--seed=S --episodes=N` runs the episodes `lerobot-eval --seed=S --eval.n_episodes=N`
+runs. Writes `eval.json`, `eval.md` (95 % Wilson intervals) and `eval.png`.
 
-    blindgrasp-eval-teacher --episodes=20 --output_dir=outputs/teacher_eval     # the shipped default teacher
-    blindgrasp-eval-teacher --teacher=runs/teacher_cpu --episodes=20
-
-Runs N episodes per object (10 s each, the paper's randomization and observation noise, external forces off as in
-evaluation and demo collection), deterministic (mean action) and stochastic (sampled), and writes
-`eval.json`, `eval.md` (markdown table, each rate with its 95 % Wilson interval) and `eval.png` (bar chart).
-
-Start states: episode k on object o is evaluation index `--seed` + k, mapped into the evaluation seed range by
-`spec.eval_env_seed(index, o)`, exactly as the `blindgrasp` lerobot-eval env maps lerobot-eval's seeds. So
-`blindgrasp-eval-teacher --seed=S --episodes=N` and `lerobot-eval --seed=S --eval.n_episodes=N` run the same start
-states (paired), and none of them was used in teacher training or demo collection (`spec.SEED_RANGES`).
+    blindgrasp-eval-teacher --teacher=runs/teacher_cpu --episodes=20   # default: the shipped teacher
 """
 
 from __future__ import annotations
@@ -39,8 +31,7 @@ MODES = ("deterministic", "stochastic")
 class EvalTeacherConfig:
     """Per-object success of a PPO teacher on the evaluation start states, deterministic and stochastic."""
 
-    # teacher folder (teacher.safetensors, or a run directory: its latest model_<it>.pt) or a checkpoint file;
-    # default: the shipped teacher
+    # a teacher folder (shipped, or a run: its latest model_<it>.pt) or checkpoint; default: the shipped one
     teacher: Path | None = None
     episodes: int = 20  # episodes per object and mode
     objects: str = "all"  # "all", "medium", or a comma-separated list of catalogue names
@@ -66,19 +57,6 @@ def _run_object(teacher: TeacherPolicy, name: str, episodes: int, seed: int, mod
     env = make_batched_env("eval", (name,), episodes=episodes, seed=seed, reward=reward_cfg)
     done = run_batch(env, TeacherActor(teacher, stochastic=mode == "stochastic"))
     return np.array([e.success for e in done]), np.array([e.max_lift for e in done])
-
-
-def evaluate_and_write(cfg: EvalTeacherConfig) -> tuple[dict, Path]:
-    """Load the teacher, evaluate it, write eval.json/md/png. Returns (results, output folder).
-    Raises TeacherError for a teacher that does not load."""
-    teacher = TeacherPolicy(cfg.teacher or default_teacher())
-    results = evaluate_teacher(
-        teacher, objects.resolve_objects(cfg.objects), cfg.episodes, cfg.seed, cfg.mode_names, cfg.progress
-    )
-    # The shipped teacher's folder is part of the repository: never write into it unasked.
-    out = cfg.output_dir or (teacher.checkpoint.parent / "eval" if cfg.teacher else Path("outputs/teacher_eval"))
-    write_outputs(results, out)
-    return results, out
 
 
 def evaluate_teacher(
@@ -138,14 +116,8 @@ def _pooled(per_object: dict, names) -> float:
 
 def markdown_table(results: dict) -> str:
     modes = list(results["modes"])
-    head = (
-        "| object | "
-        + " | ".join(f"{m} success [95 % CI]" for m in modes)
-        + " | "
-        + " | ".join(f"{m} max lift (cm)" for m in modes)
-        + " |"
-    )
-    lines = [head, "|---|" + "---:|" * (2 * len(modes))]
+    columns = [f"{m} success [95 % CI]" for m in modes] + [f"{m} max lift (cm)" for m in modes]
+    lines = ["| object | " + " | ".join(columns) + " |", "|---|" + "---:|" * len(columns)]
     for o in results["objects"]:
         s = [rates.format_rate(*rates.count(results["modes"][m]["per_object"][o]["successes"])) for m in modes]
         lift = [f"{results['modes'][m]['per_object'][o]['mean_max_lift_cm']:.1f}" for m in modes]
@@ -185,7 +157,14 @@ def write_outputs(results: dict, out: Path) -> None:
 def main(argv=None) -> None:
     cfg = parse_config(EvalTeacherConfig, argv)
     try:
-        results, out = evaluate_and_write(cfg)
+        teacher = TeacherPolicy(cfg.teacher or default_teacher())
+        names = objects.resolve_objects(cfg.objects)
+        results = evaluate_teacher(teacher, names, cfg.episodes, cfg.seed, cfg.mode_names, cfg.progress)
+        # The shipped teacher's folder is part of the repository: never write into it unasked.
+        out = cfg.output_dir or (
+            teacher.checkpoint.parent / "eval" if cfg.teacher else Path("outputs/teacher_eval")
+        )
+        write_outputs(results, out)
     except (TeacherError, ValueError) as e:
         raise SystemExit(f"error: {e}") from None
     print(markdown_table(results))

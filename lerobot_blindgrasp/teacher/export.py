@@ -1,14 +1,8 @@
-"""`blindgrasp-export-teacher`: a training checkpoint as a shippable teacher (no pickle).
+"""`blindgrasp-export-teacher`: a training checkpoint as a shippable teacher (no pickle): `teacher.safetensors`
+(the actor only), `teacher_config.json` (the run's config plus a `weights` block) and a `README.md` card, which a
+card already there survives unless `--overwrite_card=true`.
 
-    blindgrasp-export-teacher --source=runs/teacher_cpu --output_dir=models/teacher_cpu
-    blindgrasp-export-teacher --source=runs/teacher_cpu/model_618.pt --output_dir=models/teacher_cpu \
-        --push_to_hub=you/blindgrasp_teacher
-
-The output folder gets `teacher.safetensors` (the actor's state dict: MLP weights, Gaussian std, observation
-normalizer; critic and optimizer are training state and stay behind), `teacher_config.json` (the run's config plus
-a `weights` block: source checkpoint, its sha256, iteration, and the observation layout it was trained on) and a
-`README.md` card. `TeacherPolicy(output_dir)` loads it; a `README.md` already there is kept (a hand-written card
-with results), pass --overwrite_card=true to replace it. `--push_to_hub` uploads the folder to a Hub model repo.
+    blindgrasp-export-teacher --source=runs/teacher_cpu --output_dir=models/teacher_cpu [--push_to_hub=you/name]
 """
 
 from __future__ import annotations
@@ -41,15 +35,6 @@ class ExportTeacherConfig:
             raise ValueError("--source is required (a training run directory or checkpoint file)")
         if self.output_dir is None:
             raise ValueError("--output_dir is required (the teacher folder to write)")
-
-
-def export_and_push(cfg: ExportTeacherConfig) -> Path:
-    """Export, then push if asked (printing what it wrote). Returns the teacher folder."""
-    out = export_teacher(cfg.source, cfg.output_dir, cfg.overwrite_card)
-    print(f"wrote {out / policy.WEIGHTS_NAME}, {out / policy.CONFIG_NAME}, {out / CARD_NAME}")
-    if cfg.push_to_hub:
-        print(f"pushed: {push_teacher(out, cfg.push_to_hub, cfg.private or None)}")
-    return out
 
 
 def export_teacher(source: str | Path, out_dir: str | Path, overwrite_card: bool = False) -> Path:
@@ -137,7 +122,10 @@ def push_teacher(folder: str | Path, repo_id: str, private: bool | None = None) 
 def main(argv=None) -> None:
     cfg = parse_config(ExportTeacherConfig, argv)
     try:
-        export_and_push(cfg)
+        out = export_teacher(cfg.source, cfg.output_dir, cfg.overwrite_card)
+        print(f"wrote {out / policy.WEIGHTS_NAME}, {out / policy.CONFIG_NAME}, {out / CARD_NAME}")
+        if cfg.push_to_hub:
+            print(f"pushed: {push_teacher(out, cfg.push_to_hub, cfg.private or None)}")
     except policy.TeacherError as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(2) from None

@@ -1,17 +1,7 @@
-"""Loading a trained teacher for inference (evaluation, demo collection), in either of its two forms.
-
-- A shipped teacher: a folder with `teacher.safetensors` (the actor's state dict: MLP, Gaussian std and the
-  observation normalizer) and `teacher_config.json` (what the trainer wrote, plus a `weights` block). Nothing is
-  unpickled. `export_teacher` (CLI `blindgrasp-export-teacher --source=RUN_DIR --output_dir=OUT_DIR`) makes one
-  from a training run.
-- A training run directory: rsl-rl's `model_<it>.pt` checkpoints next to `teacher_config.json`. The latest one is
-  used (or a given file); it is read with `torch.load(weights_only=True)`, so it too runs no pickled code.
-
-The actor is rebuilt with rsl-rl's own `MLPModel` from the config and run deterministically (mean) or
-stochastically (sampled from its Gaussian), which demo collection needs; the JIT/ONNX exports only carry the mean.
-
-`default_teacher()` is the teacher every command uses when none is given: `models/<SHIPPED_TEACHER>` (the
-repository's folder, or the wheel's copy of it), or the folder in $BLINDGRASP_TEACHER.
+"""Loading a trained teacher for inference (evaluation, demo collection) without unpickling anything: a shipped
+folder (`teacher.safetensors` + `teacher_config.json`, as `blindgrasp-export-teacher` writes them) or a training
+run (rsl-rl's `model_<it>.pt`, read with `weights_only=True`). The actor is rsl-rl's `MLPModel` rebuilt from the
+config, run on its mean or sampled from its Gaussian (demos need both; the JIT/ONNX exports carry only the mean).
 """
 
 from __future__ import annotations
@@ -33,8 +23,7 @@ from lerobot_blindgrasp.teacher import blind_approach
 CONFIG_NAME = "teacher_config.json"
 WEIGHTS_NAME = "teacher.safetensors"
 FORMAT = "blindgrasp-teacher/1"
-# The shipped default teacher: a folder under the repository's models/. A better teacher dropped there in the same
-# format (teacher.safetensors + teacher_config.json) becomes the default by changing this one name.
+# The default teacher of every command: a folder under the shipped models/ (or $BLINDGRASP_TEACHER).
 SHIPPED_TEACHER = "teacher_cpu_bc"
 TEACHER_ENV_VAR = "BLINDGRASP_TEACHER"
 
@@ -51,8 +40,7 @@ def models_dir() -> Path:
 
 
 def default_teacher(folder: str | None = None) -> Path:
-    """The teacher a command uses when none is given: $BLINDGRASP_TEACHER, else the shipped one (`folder`: another
-    shipped teacher under models/, as a pipeline preset may name)."""
+    """The teacher a command uses when none is given: $BLINDGRASP_TEACHER, else the shipped `folder` of models/."""
     if os.environ.get(TEACHER_ENV_VAR):
         return Path(os.environ[TEACHER_ENV_VAR])
     d = models_dir() / (folder or SHIPPED_TEACHER)
@@ -112,11 +100,8 @@ def _refuse_student(p: Path) -> None:
 
 
 def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
     with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+        return hashlib.file_digest(f, "sha256").hexdigest()
 
 
 def observation_layout() -> dict:
@@ -139,11 +124,8 @@ def load_actor_state(ckpt: Path) -> tuple[dict[str, torch.Tensor], int | None]:
 
 
 class TeacherPolicy:
-    """Numpy-in, numpy-out teacher: obs dict (N, ...) -> delta-theta actions (N, 9).
-
-    A blind-approach teacher keeps per-env state (touch counts) for the batch it steps: one instance per env batch,
-    called once per control step (a repeated call on the same observation does not advance it).
-    """
+    """Numpy-in, numpy-out teacher: obs dict (N, ...) -> delta-theta actions (N, 9). A blind-approach teacher keeps
+    per-env touch counts: one instance per env batch, called once per control step."""
 
     def __init__(self, checkpoint: str | Path, device: str = "cpu"):
         self.checkpoint = resolve_checkpoint(checkpoint)
@@ -176,8 +158,7 @@ class TeacherPolicy:
                 f"{self.checkpoint} does not fit its config or this observation layout ({first})"
             ) from None
         self.actor.to(device).eval()
-        # A blind-approach teacher computes its actor's group itself from the env's "privileged" vector, with the
-        # per-env touch counts of the batch it is stepping (blind_approach.BlindGroup).
+        # A blind-approach teacher computes its actor's group itself from the env's "privileged" vector.
         self.actor_input = blind_approach.ActorInput.from_record(self.config.get("actor_input"))
         self._blind = (
             blind_approach.BlindGroup(self.actor_input)

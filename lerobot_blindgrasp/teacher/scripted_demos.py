@@ -13,11 +13,8 @@ from lerobot_blindgrasp.sim import objects, randomization
 
 
 def collect_scripted_demos(cfg: ScriptedDemos) -> dict:
-    """Roll the side-grasp script out once per env from training start states; keep the successful episodes.
-
-    Returns {"obs": {"privileged": (M, 92), "policy": (M, 12)}, "actions": (M, 9), "success": {object: rate}},
-    float32. Both observation groups are kept so that an actor reading either (the teacher's privileged one, or the
-    "RL w/ o_t" row's student one) can be cloned."""
+    """Roll the side-grasp script out once per env from training start states; keep the successful episodes:
+    {"obs": {"privileged": (M, 92), "policy": (M, 12)}, "actions": (M, 9), "success": {object: rate}}, float32."""
     # MuJoCo only when demos are collected, not when a preset names them
     from lerobot_blindgrasp.rollout.envs import make_batched_env
     from lerobot_blindgrasp.sim import scripted

@@ -2,15 +2,8 @@
 
     blindgrasp-train-teacher --output_dir=runs/teacher   # the shipped teacher's recipe, --preset=cpu_bc_capsule
 
-The run directory gets TensorBoard logs (reward terms, success per object, fps, collection/learning time),
-`model_<it>.pt` checkpoints every `save_interval` iterations, and `teacher_config.json`. Re-running the same
-command resumes from the newest checkpoint that loads; Ctrl-C saves one before exiting. At the end the actor is
-exported to TorchScript and ONNX (`exported/`), and `train_summary.json` is written last: it marks a finished run.
-
-Crash safety: every checkpoint is written to a temporary file and renamed into place (`durable.atomic_path`), so a
-kill during a save leaves the previous checkpoints and no `model_<it>.pt` that is cut short. A newest checkpoint
-that does not load all the same (a copy gone wrong, a disk error) is renamed `*.corrupt` with a warning naming it,
-and the run resumes from the one before. A kill costs at most the iterations since the last save (`save_interval`).
+Re-running resumes from the newest checkpoint that loads; checkpoints are atomic, Ctrl-C saves one, and
+`train_summary.json`, written last, marks a finished run.
 """
 
 from __future__ import annotations
@@ -80,13 +73,11 @@ class TrainTeacherConfig:
     """PPO teacher training (paper Sec. III-B, Table III)."""
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
-    # cpu_bc_capsule (the shipped teacher's staged recipe: cpu, then two cloning stages; cpu_bc_joint is its
-    # first cloning stage), cpu_bc_blind_approach (beyond the paper: it, fine-tuned with the object hidden from
-    # the actor until a touch), paper (Table III), cpu, quick
+    # a teacher preset (docs/reference.md): cpu_bc_capsule (the shipped teacher's staged recipe), paper (Table III),
+    # cpu, quick, and the cpu_bc_* stages and fine-tunings
     preset: str = SHIPPED_TEACHER_PRESET.name
-    seed: int = (
-        spec.TEACHER_TRAIN_SEED
-    )  # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); torch seed
+    # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); the torch seed
+    seed: int = spec.TEACHER_TRAIN_SEED
     iterations: int | None = None  # override the preset's max iterations
     num_envs: int | None = None  # override the preset's number of envs
     no_incentive: bool = False  # 'Student w/o r_i' teacher: every contact-paying reward term at 0
@@ -124,8 +115,7 @@ def _train_one(cfg: TrainTeacherConfig, preset: TeacherPreset, num_envs: int, it
     rank_envs, rank_seed = distributed.split_envs(num_envs, cfg.seed)  # (num_envs, seed) outside torchrun
     lead = distributed.world()[1] == 0  # only rank 0 writes files (rsl-rl already logs and saves on rank 0 only)
     torch.manual_seed(cfg.seed + distributed.world()[1])
-    # While acting, torch runs small forward passes between physics steps: OpenMP threads that spin there while
-    # MuJoCo's threads hold the cores made collection 2-3x slower on a busy 2-core machine, so acting keeps one.
+    # One thread while acting: OpenMP threads spinning beside MuJoCo's made collection 2-3x slower on 2 cores.
     torch.set_num_threads(cfg.torch_threads)
     _check_or_write_config(out, _run_config(cfg, preset, num_envs, iterations), lead)
     env = BatchedGraspEnv(build_env_config(preset, rank_envs, rank_seed, cfg.threads, cfg.backend))
@@ -142,7 +132,10 @@ def _train_one(cfg: TrainTeacherConfig, preset: TeacherPreset, num_envs: int, it
         return final
     if cfg.export:
         export_actor(runner, out / "exported")
-    write_learning_curve(out)
+    from lerobot_blindgrasp.results.plots import plot_curves, teacher_curves
+
+    if curves := teacher_curves(out):  # from the run's TensorBoard scalars
+        plot_curves(out / "learning_curve.png", curves, f"Teacher PPO ({out.name})")
     steps = (completed - done_its) * preset.runner["num_steps_per_env"] * num_envs
     summary = {
         "checkpoint": str(final),
@@ -224,15 +217,13 @@ def _runner(cfg: TrainTeacherConfig, preset: TeacherPreset, env: BatchedGraspEnv
 
 
 def _learn(runner, out: Path, remaining: int, lead: bool, bar) -> bool:
-    """`remaining` PPO iterations, rsl-rl's per-iteration table going to the console log. Returns whether it was
-    interrupted (SIGINT, SIGTERM, SIGHUP: a checkpoint is saved first)."""
+    """`remaining` PPO iterations, rsl-rl's table going to the console log. Returns whether it was interrupted
+    (SIGINT, SIGTERM, SIGHUP: a checkpoint is saved first)."""
     console = open(out / ("train_console.log" if lead else f"train_console_rank{distributed.world()[1]}.log"), "a")
     try:
-        # SIGTERM/SIGHUP (a job scheduler, a closed terminal) behave like Ctrl-C: save and exit.
         with interrupts_as_keyboard_interrupt(), contextlib.redirect_stdout(console):
             if remaining > 0:
-                # Random episode lengths on resume too: otherwise every env restarts at step 0 and, for a few
-                # iterations, all of them are in the same phase of the episode (dips in the training curve).
+                # Random episode lengths, on resume too: envs all in one phase of the episode dip the curve.
                 runner.learn(remaining, init_at_random_ep_len=True)
     except KeyboardInterrupt:
         if lead:
@@ -245,15 +236,14 @@ def _learn(runner, out: Path, remaining: int, lead: bool, bar) -> bool:
 
 
 def update_thread_count(cfg, env) -> int:
-    """Torch threads for the PPO update: `cfg.update_threads`, else as many as the physics threads (the cores
-    collection just used), else the acting count (MuJoCo Warp has no CPU physics threads: `nthread` 0)."""
+    """Torch threads for the PPO update: `cfg.update_threads`, else the physics threads (the cores collection just
+    used), else the acting count (MuJoCo Warp has no CPU physics threads)."""
     return cfg.update_threads or env.physics.nthread or cfg.torch_threads
 
 
 def with_torch_threads(update, threads: int):
-    """`update` run with `threads` torch intra-op threads, then back to the acting count. Collection and update
-    alternate, so the update may use the cores the physics threads use while collecting: on an idle 2-core
-    machine two threads make the `cpu` preset's update 1.8x faster (`python -m lab.bench --bench.type=teacher`)."""
+    """`update` run with `threads` torch threads, then back to the acting count: collection and update alternate, so
+    the update may use the physics threads' cores."""
 
     def threaded(*args, **kwargs):
         acting = torch.get_num_threads()
@@ -267,9 +257,8 @@ def with_torch_threads(update, threads: int):
 
 
 def _train_stages(cfg: TrainTeacherConfig, stages: tuple[tuple[str, int], ...]) -> None:
-    """A staged preset starts from its last stage's checkpoint (`TeacherPreset.stages`): train each stage in order,
-    with the same seed, envs and variant, in <output_dir>/stages/<name> (which resumes like any run), each from the
-    previous stage's last checkpoint; then start this run from the last one's."""
+    """Train each stage of a staged preset in order (same seed, envs and variant) in <output_dir>/stages/<name>, each
+    from the previous one's last checkpoint; this run then starts from the last one's."""
     previous = None
     for name, iterations in stages:
         folder = cfg.output_dir / "stages" / name
@@ -282,26 +271,15 @@ def _train_stages(cfg: TrainTeacherConfig, stages: tuple[tuple[str, int], ...]) 
 
 
 def _copy_checkpoint(ckpt: Path, folder: Path) -> None:
-    """`ckpt` into `folder`, where the next stage resumes from it. Under torchrun one rank copies; the others must
-    not read a half-written file (a kill mid-copy leaves no half checkpoint either)."""
+    """`ckpt` into `folder`, atomically, by one rank: the next stage resumes from it."""
     if distributed.world()[1] == 0:
         folder.mkdir(parents=True, exist_ok=True)
         with durable.atomic_path(folder / ckpt.name) as tmp:
             shutil.copy2(ckpt, tmp)
     if torch.distributed.is_initialized():
-        # The next stage's runner keeps this process group (distributed.runner_class's gloo runner does not open a
-        # second one). Closing and reopening it raced in CI. rsl-rl's own NCCL runner would try to open a second
-        # one, so staged presets stay CPU recipes.
+        # The next stage's gloo runner keeps this process group (reopening it raced in CI); rsl-rl's NCCL runner
+        # would open a second one, so staged presets stay CPU recipes.
         torch.distributed.barrier()
-
-
-def write_learning_curve(run_dir: Path) -> None:
-    """learning_curve.png in the run directory, from its TensorBoard scalars."""
-    from lerobot_blindgrasp.results.plots import plot_curves, teacher_curves
-
-    curves = teacher_curves(run_dir)
-    if curves:
-        plot_curves(run_dir / "learning_curve.png", curves, f"Teacher PPO ({run_dir.name})")
 
 
 def main(argv=None) -> None:

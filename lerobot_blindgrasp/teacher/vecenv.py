@@ -1,15 +1,9 @@
-"""rsl-rl-lib 5.x `VecEnv` adapter over the batched blind-grasp env.
+"""rsl-rl-lib 5.x `VecEnv` adapter over the batched blind-grasp env, which auto-resets inside `step`.
 
-Observation groups (TensorDict): "policy" = the student's 12-d o_t, "privileged" = the teacher's 92-d vector,
-"privileged_blind" = that vector with the object hidden until a touch (`teacher/blind_approach.py`; computed only
-when `blind_group` is given, i.e. when a preset's obs_groups read it, under that preset's `ActorInput`). Presets pick which group the actor and critic read (`obs_groups`). The env auto-resets inside `step`.
-extras["time_outs"] marks truncations (PPO bootstraps them); extras["log"] carries, for the episodes that ended
-this step, each reward term (weighted, per second of episode), success overall and per object, and termination
-reasons. rsl-rl averages these over an iteration and writes them to TensorBoard.
-
-The env's tensors reach rsl-rl as they are (`step_tensors`, on the physics' device; moved only when rsl-rl runs on
-another device). The one host round trip left is "privileged_blind" (`BlindGroup` is numpy), for the presets
-that read it.
+Observation groups: "policy" (the student's 12-d o_t), "privileged" (the teacher's 92-d vector) and, with
+`blind_group`, "privileged_blind" (`blind_approach.py`, the one host round trip). extras["time_outs"] marks
+truncations; extras["log"] carries, for the episodes that ended this step, each weighted reward term per second,
+success overall and per object, and termination reasons, which rsl-rl averages into TensorBoard.
 """
 
 from __future__ import annotations
@@ -75,8 +69,7 @@ class RslRlGraspEnv(VecEnv):
         return self._obs, reward.to(self.device, torch.float32), (terminated | truncated).to(self.device), extras
 
     def _episode_log(self, info: dict) -> dict[str, float | torch.Tensor]:
-        """Scalars rsl-rl averages over an iteration; tensors stay on the device (rsl-rl reads them as numbers when
-        it writes its log, once per iteration)."""
+        """Scalars rsl-rl averages over an iteration; tensors stay on the device until rsl-rl writes its log."""
         log: dict = {"Metrics/physics_resets_total": float(self.env.physics_resets)}
         log["Metrics/mean_lift_cm"] = info["lift"].clamp_min(0).mean() * 100.0
         log["Metrics/mean_contacts"] = info["n_contact"].double().mean()

@@ -35,7 +35,7 @@ def main(argv: list[str]) -> None:
                                     force_sensor=fs, latency_timer_ms=args["latency_timer_ms"],
                                     bus_watchdog_ms=args["bus_watchdog_ms"])  # fmt: skip
     cfg = BlindGraspRealEnvConfig(robot=robot, task="sphere_medium")
-    env = RealGraspEnv(GripperSession(cfg.trial_settings(), OperatorKeys(SilentKeyboard)), "sphere_medium")
+    env = RealGraspEnv(GripperSession(cfg, OperatorKeys(SilentKeyboard)), "sphere_medium")
     try:
         env.reset()
     finally:

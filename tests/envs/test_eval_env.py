@@ -12,10 +12,10 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.envs import BlindGraspEnvConfig
-from lerobot_blindgrasp.envs.sim_env import TASK_IDS, object_for_task_id, task_id
 from lerobot_blindgrasp.sim import gym_env, objects, randomization
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.objects import object_for_task_id, task_id
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
 
@@ -233,8 +233,9 @@ def test_env_config_is_registered_with_the_state_and_action_features():
 
 
 def test_task_ids_are_stable_catalogue_indices():
-    assert list(TASK_IDS) == list(range(18)) and tuple(TASK_IDS.values()) == objects.PAPER_OBJECTS
-    for tid, name in TASK_IDS.items():
+    task_ids = {task_id(n): n for n in objects.PAPER_OBJECTS}
+    assert list(task_ids) == list(range(18)) and tuple(task_ids.values()) == objects.PAPER_OBJECTS
+    for tid, name in task_ids.items():
         assert task_id(name) == tid and object_for_task_id(tid) == name
     with pytest.raises(ValueError):
         object_for_task_id(999)

@@ -79,7 +79,7 @@ def test_force_mode_trials_through_the_vector_env(rig, calibrated, tmp_path):
 def test_operator_mode_decides_with_keys(rig, calibrated):
     cfg = BlindGraspRealEnvConfig(robot=calibrated, task="sphere_medium", episode_s=0.5)
     keys = OperatorKeys(listener_factory=ScriptedKeyboard)
-    session = GripperSession(cfg.trial_settings(), keys)
+    session = GripperSession(cfg, keys)
     env = RealGraspEnv(session, "sphere_medium")
     press = keys.listener.press
     try:
@@ -106,7 +106,7 @@ def test_operator_mode_decides_with_keys(rig, calibrated):
 def test_operator_mode_without_a_keyboard_is_refused(calibrated):
     cfg = BlindGraspRealEnvConfig(robot=calibrated, task="sphere_medium")
     no_keyboard = OperatorKeys(listener_factory=lambda dispatch, controls_help="": None)
-    session = GripperSession(cfg.trial_settings(), no_keyboard)
+    session = GripperSession(cfg, no_keyboard)
     with pytest.raises(RuntimeError, match="success_mode=force"):
         session.ensure_connected()
 

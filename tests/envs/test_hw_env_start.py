@@ -32,7 +32,7 @@ def test_a_real_trial_starts_at_the_sim_start_pose(rig, robot):
     cfg = BlindGraspRealEnvConfig(robot=robot.config, task=OBJECT, success_mode="force", start_pose="sim",
                                   unattended_reset_s=0.0, episode_s=0.1)  # fmt: skip
     no_keyboard = OperatorKeys(listener_factory=lambda dispatch, controls_help="": None)
-    env = RealGraspEnv(GripperSession(cfg.trial_settings(), no_keyboard), OBJECT)
+    env = RealGraspEnv(GripperSession(cfg, no_keyboard), OBJECT)
     try:
         obs, _ = env.reset(seed=7)
     finally:

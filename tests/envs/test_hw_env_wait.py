@@ -48,7 +48,7 @@ def test_an_operator_slower_than_the_watchdog_trips_nothing(rig, robot, caplog):
     pause_s = 2 * WATCHDOG_MS / 1e3
     cfg = BlindGraspRealEnvConfig(robot=robot.config, task="sphere_medium", episode_s=0.1)
     keys = OperatorKeys(listener_factory=ScriptedKeyboard)
-    env = RealGraspEnv(GripperSession(cfg.trial_settings(), keys), "sphere_medium")
+    env = RealGraspEnv(GripperSession(cfg, keys), "sphere_medium")
     caplog.set_level(logging.WARNING)
     try:
         threading.Timer(pause_s, keys.listener.press, ["enter"]).start()
@@ -75,7 +75,7 @@ def test_unattended_waits_and_tares_trip_nothing(rig, robot, caplog):
     cfg = BlindGraspRealEnvConfig(robot=robot.config, task="sphere_medium", success_mode="force",
                                   unattended_reset_s=2 * WATCHDOG_MS / 1e3, episode_s=0.1)  # fmt: skip
     no_keyboard = OperatorKeys(listener_factory=lambda dispatch, controls_help="": None)  # headless: unattended
-    env = RealGraspEnv(GripperSession(cfg.trial_settings(), no_keyboard), "sphere_medium")
+    env = RealGraspEnv(GripperSession(cfg, no_keyboard), "sphere_medium")
     caplog.set_level(logging.WARNING)
     try:
         env.reset()

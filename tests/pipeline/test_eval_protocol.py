@@ -48,7 +48,8 @@ def test_every_eval_seed_of_every_object_is_in_the_eval_range_and_objects_never_
 
 def test_lerobot_eval_seeds_reach_the_env_as_per_object_eval_seeds():
     """The blindgrasp env config builds envs that map lerobot-eval's seeds per object (no two tasks alike)."""
-    from lerobot_blindgrasp.envs.sim_env import BlindGraspEnvConfig, object_for_task_id
+    from lerobot_blindgrasp.envs.sim_env import BlindGraspEnvConfig
+    from lerobot_blindgrasp.sim.objects import object_for_task_id
 
     cfg = BlindGraspEnvConfig(task="cuboid_a_large,sphere_small")
     envs = cfg.create_envs(n_envs=2)["blindgrasp"]

@@ -5,7 +5,6 @@ from pathlib import Path
 import av
 import numpy as np
 
-from lerobot_blindgrasp.envs.sim_env import object_for_task_id
 from lerobot_blindgrasp.pipeline.job_report import (
     pick_per_class,
     read_frames,
@@ -13,6 +12,7 @@ from lerobot_blindgrasp.pipeline.job_report import (
     write_grasp_strips,
 )
 from lerobot_blindgrasp.sim import objects
+from lerobot_blindgrasp.sim.objects import object_for_task_id
 
 
 def _video(path: Path, n: int, value_of_frame) -> Path:

@@ -220,7 +220,7 @@ def test_no_short_step_after_a_stall_in_the_eval_trial(rig, tmp_path, monkeypatc
     monkeypatch.setattr("builtins.input", rig.calibration_inputs())
     cfg = BlindGraspRealEnvConfig(robot=rig.robot_config(tmp_path / "cal"), task="foam_brick", success_mode="force",
                                   unattended_reset_s=0.0, episode_s=5.0)  # fmt: skip
-    env = RealGraspEnv(GripperSession(cfg.trial_settings()), "foam_brick")
+    env = RealGraspEnv(GripperSession(cfg), "foam_brick")
     try:
         env.reset(seed=0)
         times, step = _sample_times(env.robot), [0]
@@ -239,7 +239,7 @@ def test_the_trial_rebases_after_a_stall_instead_of_bursting(rig, tmp_path, monk
     monkeypatch.setattr("builtins.input", rig.calibration_inputs())
     cfg = BlindGraspRealEnvConfig(robot=rig.robot_config(tmp_path / "cal"), task="foam_brick", success_mode="force",
                                   unattended_reset_s=0.0, episode_s=5.0)  # fmt: skip
-    env = RealGraspEnv(GripperSession(cfg.trial_settings()), "foam_brick")
+    env = RealGraspEnv(GripperSession(cfg), "foam_brick")
     try:
         env.reset(seed=0)
         timing = env.robot.timing

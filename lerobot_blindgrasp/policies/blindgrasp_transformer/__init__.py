@@ -1,7 +1,5 @@
-"""`blindgrasp_transformer`: the paper's transformer student as a LeRobot policy (config, model, processors).
-
-Importing this package registers `--policy.type=blindgrasp_transformer` and its processor steps, and installs the
-student's data path (`window_cache`: LeRobotDataset windows of low-dimensional datasets from an in-memory cache).
+"""`blindgrasp_transformer`: the paper's transformer student as a LeRobot policy. Importing this package registers
+`--policy.type=blindgrasp_transformer` and its processor steps, and installs its data path (`window_cache`).
 """
 
 from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig

@@ -1,20 +1,14 @@
 """Configuration of the `blindgrasp_transformer` student policy (paper Sec. III-B, Table IV).
 
-The student is robomimic's BC-Transformer as the paper uses it: one token per 20 Hz step built from
-o_t = 9 joint positions + 3 uniaxial forces, a causal GPT over the last 30 steps, and an MLP head that predicts
-delta-theta / 0.3 in [-1, 1] from the last token. The preprocessor turns the dataset's absolute targets into those
-and `select_action` turns the prediction back into a target (`processor_blindgrasp_transformer.py`), so the network
-only ever sees normalized deltas.
+robomimic's BC-Transformer as the paper uses it: a causal GPT over the last 30 o_t (9 joints + 3 forces) and an MLP
+head predicting delta-theta / 0.3 in [-1, 1] from the last token (the processors convert absolute targets).
 
 Table IV -> field:
     batch size 256                      -> lerobot-train `--batch_size=256` (a training-loop setting)
-    number of epochs 2000               -> lerobot-train `--steps` = 2000 * ceil(num_frames / batch_size), computed
-                                           from the collected dataset (`lerobot_blindgrasp.presets.student`)
+    number of epochs 2000               -> lerobot-train `--steps`, from the collected dataset (`presets.student`)
     optimizer AdamW, lr 1e-4            -> `optimizer_lr`
     L2 regularization 0.01              -> `optimizer_weight_decay`
-    lr schedule: linear decay after
-      100 epochs                        -> `scheduler_constant_steps` (= 100 epochs' worth of steps),
-                                           `scheduler_end_factor`
+    linear lr decay after 100 epochs    -> `scheduler_constant_steps` (100 epochs' steps), `scheduler_end_factor`
     loss: MSE                           -> `BlindgraspTransformerPolicy.forward`
     Transformer layers 6                -> `n_layers`   (via `size="paper"`)
     embedding dimension 512             -> `embed_dim`  (via `size="paper"`)
@@ -24,12 +18,8 @@ Table IV -> field:
     activation GELU                     -> the transformer MLP (fixed)
     MLP head [1024, 1024]               -> `head_hidden_dims` (via `size="paper"`)
 
-Sizes. `size` picks the architecture from `SIZES` below (the preset registry's student stages name these
-sizes); any of `n_layers`, `embed_dim`, `n_heads`, `head_hidden_dims` given
-explicitly wins over the preset. The resolved numbers are what `config.json` stores, so a
-checkpoint reloads with the exact architecture it was trained with.
-    --policy.size=paper   (default) Table IV, ~1.1 GFLOP per control step; `cpu` and `quick` are smaller
-    e.g. `--policy.size=cpu --policy.n_layers=2` for a cpu-size model with 2 layers.
+`--policy.size` (default `paper`, Table IV) picks the architecture from `SIZES`; an explicit `n_layers`,
+`embed_dim`, `n_heads` or `head_hidden_dims` wins. `config.json` stores the resolved numbers.
 """
 
 from __future__ import annotations
@@ -45,8 +35,7 @@ from torch.optim.lr_scheduler import LambdaLR
 
 from lerobot_blindgrasp import policy_contract, spec
 
-# What `--policy.size` picks from; `paper` is Table IV. Defined here, with the policy, so that loading the policy
-# (plugin discovery, the real gripper) never imports the preset registry and the simulator behind it.
+# Defined with the policy, so that loading it never imports the preset registry and the simulator behind it.
 SIZES: dict[str, dict] = {
     "paper": {"n_layers": 6, "embed_dim": 512, "n_heads": 8, "head_hidden_dims": [1024, 1024]},  # Table IV
     "cpu": {"n_layers": 3, "embed_dim": 128, "n_heads": 4, "head_hidden_dims": [256, 256]},
@@ -57,10 +46,8 @@ SIZES: dict[str, dict] = {
 @LRSchedulerConfig.register_subclass("blindgrasp_constant_then_linear")
 @dataclass
 class ConstantThenLinearDecaySchedulerConfig(LRSchedulerConfig):
-    """lr x 1 for `num_constant_steps`, then linear down to lr x `end_factor` at the last training step.
-
-    LeRobot ships no such schedule. Built by lerobot-train with `num_training_steps = --steps`.
-    """
+    """lr x 1 for `num_constant_steps`, then linear down to lr x `end_factor` at the last step (`--steps`); LeRobot
+    ships no such schedule."""
 
     num_warmup_steps: int | None = None  # base-class field; the paper uses no warmup
     num_constant_steps: int | None = None  # None: constant for the whole run
@@ -80,23 +67,17 @@ class ConstantThenLinearDecaySchedulerConfig(LRSchedulerConfig):
         return LambdaLR(optimizer, lr_lambda, -1)
 
 
-# What this policy's action means once its postprocessor has run: the processors turn the dataset's absolute
-# targets into the network's deltas and back (`processor_blindgrasp_transformer.py`).
-ACTION_MEANING = policy_contract.ACTION_MEANING
-
-
 @dataclass
 class TrainedFor:
-    """The robot a checkpoint was trained for, read from its training dataset's metadata (`meta/info.json`: robot
-    type, fps, the names of `observation.state` and `action`, in order) and the policy's own action meaning.
-    `source` says where the facts were read. The real gripper refuses a checkpoint whose facts differ from its own,
-    or that has none, before any servo takes torque (`policy_contract.py`)."""
+    """The robot a checkpoint was trained for, from its training dataset's metadata (robot type, fps, the state and
+    action names, in order): the real gripper refuses a checkpoint whose facts differ from its own, or that has
+    none, before any servo takes torque (`policy_contract.py`)."""
 
     robot_type: str | None = None
     fps: float | None = None
     state_names: list[str] | None = None  # None: the dataset's metadata named no features
     action_names: list[str] | None = None
-    action_meaning: str = ACTION_MEANING
+    action_meaning: str = policy_contract.ACTION_MEANING  # what the action means once postprocessed
     source: str | None = None
 
     @classmethod
@@ -124,13 +105,9 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     # robomimic's deterministic BC-Transformer squashes the action output with tanh (targets lie in [-1, 1]).
     tanh_output: bool = True
 
-    # State: z-scored with dataset stats. Action: IDENTITY here because the action is scaled by the 0.3 rad bound
-    # in the blindgrasp target->delta processor step, not by dataset stats (must stay IDENTITY, see validation).
+    # Action: IDENTITY, since the target->delta processor step scales it by the 0.3 rad bound (checked below).
     normalization_mapping: dict[str, NormalizationMode] = field(
-        default_factory=lambda: {
-            "STATE": NormalizationMode.MEAN_STD,
-            "ACTION": NormalizationMode.IDENTITY,
-        }
+        default_factory=lambda: {"STATE": NormalizationMode.MEAN_STD, "ACTION": NormalizationMode.IDENTITY}
     )
 
     # Training (Table IV). The batch size of 256 is lerobot-train's `--batch_size=256`.
@@ -140,26 +117,18 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     optimizer_weight_decay: float = 0.01
     # Not in the paper; LeRobot's AdamW default. 0 disables clipping.
     optimizer_grad_clip_norm: float = 10.0
-    # "Linear decay after 100 epochs": constant lr for this many optimizer steps, then linear decay to
-    # `scheduler_end_factor` x lr at the last step (`--steps`). An epoch's steps depend on the dataset, so there is
-    # no fixed default: None keeps the lr constant for the whole run, and `blindgrasp-pipeline --preset=paper`
-    # passes 100 * ceil(num_frames / batch_size) of the dataset it collected (`lerobot_blindgrasp.presets.student`).
-    # End factor 0.1 is robomimic's LinearLR end factor in its BC-Transformer template.
+    # "Linear decay after 100 epochs": constant lr for this many steps (None: the whole run; epochs depend on the
+    # dataset, `presets.student`), then linear to end_factor x lr (0.1: robomimic's BC-Transformer template).
     scheduler_constant_steps: int | None = None
     scheduler_end_factor: float = 0.1
 
-    # Training-time sensor errors (beyond the paper; 0 = off, the paper's recipe), per sample over its window, in the
-    # preprocessor's `blindgrasp_sensor_augment` step: force gain error (g in [1/(1+x), 1+x]), force offset (+-N)
-    # and joint calibration offset (+-rad per joint). They teach the student the real sensors' errors the sim's
-    # Gaussian noise does not have. The step is built with the processors: `--policy.path` fine-tuning reuses the
-    # checkpoint's saved processors, so it keeps the augmentation its checkpoint was trained with and cannot add one.
+    # Training-time sensor errors (beyond the paper; 0 = off): the preprocessor's `blindgrasp_sensor_augment` step.
+    # `--policy.path` fine-tuning reuses the checkpoint's saved processors, so it cannot add or drop one.
     augment_force_gain: float = 0.0
     augment_force_bias_n: float = 0.0
     augment_joint_offset_rad: float = 0.0
 
-    # The robot this policy was trained for (`TrainedFor`), filled from the training dataset's metadata when
-    # lerobot-train builds the policy (`make_policy` hands the policy the dataset's metadata; fine-tuning on another
-    # dataset replaces it) and saved in config.json. None: not recorded (a checkpoint from before it was).
+    # Filled from the training dataset's metadata when lerobot-train builds the policy. None: not recorded.
     trained_for: TrainedFor | None = None
 
     @property

@@ -1,28 +1,14 @@
-"""The `blindgrasp_transformer` student: robomimic's BC-Transformer over o_t = (9 joint positions, 3 forces).
+"""The `blindgrasp_transformer` student: robomimic's BC-Transformer (`TransformerActorNetwork` + `GPT_Backbone`,
+deterministic head) over o_t = (9 joint positions, 3 forces). B batch, T context (30), D embed_dim, A = 9 joints:
 
-Shapes: B batch, T context (n_obs_steps = 30), D embed_dim, A = 9 joints.
-
-Network (robomimic `TransformerActorNetwork` + `GPT_Backbone`, deterministic head):
     token_t = Dropout(LayerNorm(Linear(12 -> D)(o_t) + pos[t]))      learned pos = nn.Parameter(1, T, D), zeros
     n_layers x pre-LN block: x + Attn(LN(x)), x + MLP(LN(x))      fused qkv (no bias), GELU MLP 4x
     final LayerNorm -> MLP head [1024, 1024] on the LAST token -> A -> tanh
 
-The network's inputs and outputs are normalized: `observation.state` is z-scored and the prediction is delta-theta /
-0.3 in [-1, 1]; the preprocessor turns the dataset's absolute targets into that, and `select_action` returns the
-absolute target q_now + 0.3 * prediction, with the raw q_now the preprocessor passes along (see the processor module).
-
-Padding. LeRobot pads a window that starts before the episode by repeating the episode's first frame and flags
-those steps in `observation.state_is_pad`. Padded keys are masked out of attention, so they cannot reach the real
-tokens (each padded query still sees itself, which keeps its softmax row finite). At inference the rolling context
-does the same: it starts as n_obs_steps copies of the first observation, all but the newest flagged as padding, so
-step t of an episode sees exactly what training saw for frame t.
-
-Two forward paths compute the same function:
-- `BlindgraspGPT.forward` (training and inference): fused attention (`F.scaled_dot_product_attention`), and in the
-  last layer only the keys/values of all tokens plus the query, output projection and MLP of the last token, the
-  only token the head reads. Exact, also with dropout, because the loss only uses the last token.
-- `BlindgraspGPT.forward_reference`: the plain path, every token through every layer with explicit softmax
-  attention. Kept to check the fast path (tests, `python -m lab.bench --bench.type=policy`).
+A window that starts before its episode repeats the first frame, flagged in `observation.state_is_pad` (LeRobot's
+padding); padded keys are masked out of attention, and the rolling inference context starts the same way, so step t
+sees exactly what training saw for frame t. `forward` runs the last layer for the last token only (the one the head
+reads); `forward_reference`, every token with explicit softmax attention, is kept to check it.
 """
 
 from __future__ import annotations
@@ -41,8 +27,7 @@ from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig, T
 from .processor_blindgrasp_transformer import Q_NOW, normalized_delta_to_target
 
 STATE_IS_PAD = f"{OBS_STATE}_is_pad"
-# The distribution that registers this policy type with LeRobot; without it `--policy.path=<hub id>` cannot
-# resolve `type: blindgrasp_transformer`, so the model card says to install it.
+# The distribution that registers this policy type with LeRobot: the model card says to install it.
 PACKAGE = "lerobot_policy_blindgrasp"
 CARD_INSTALL = f"""
 ## Install first
@@ -66,11 +51,8 @@ lerobot-eval --policy.path={{repo_id}} --env.type=blindgrasp --env.task=all --ev
 
 
 def padding_attention_mask(is_pad: Tensor) -> Tensor:
-    """(B, T) padding flags -> (B, 1, T, T) boolean mask, True where query i may attend to key j.
-
-    Causal, with padded keys removed; the diagonal stays open so a padded query (which only has padded keys
-    before it) keeps one finite score.
-    """
+    """(B, T) padding flags -> (B, 1, T, T) boolean mask, True where query i may attend to key j: causal, padded
+    keys removed, the diagonal open so that a padded query keeps one finite score."""
     t = is_pad.shape[-1]
     causal = torch.ones(t, t, dtype=torch.bool, device=is_pad.device).tril()
     eye = torch.eye(t, dtype=torch.bool, device=is_pad.device)
@@ -97,11 +79,9 @@ class CausalSelfAttention(nn.Module):
     def forward(self, x: Tensor, mask: Tensor | None) -> Tensor:
         q, k, v = (self._heads(p) for p in self.qkv(x).split(self.embed_dim, dim=-1))
         p = self.attn_dropout if self.training else 0.0
-        if mask is None:
-            y = F.scaled_dot_product_attention(q, k, v, dropout_p=p, is_causal=True)
-        else:
-            y = F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=p)
-        return self._merge(y)
+        return self._merge(
+            F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=p, is_causal=mask is None)
+        )
 
     def forward_last_query(self, x: Tensor, key_mask: Tensor | None) -> Tensor:
         """Attention output of the last token only: (B, T, D) -> (B, 1, D). key_mask: (B, 1, 1, T) or None."""
@@ -208,11 +188,9 @@ class BlindgraspGPT(nn.Module):
     def forward_reference(self, states: Tensor, is_pad: Tensor | None = None) -> Tensor:
         """The plain path: every token through every layer, explicit softmax attention. Same result as forward."""
         x = self._tokens(states)
-        t = x.shape[1]
-        if is_pad is None:
-            mask = torch.ones(t, t, dtype=torch.bool, device=x.device).tril()[None, None]
-        else:
-            mask = padding_attention_mask(is_pad)
+        mask = padding_attention_mask(
+            torch.zeros(x.shape[:2], dtype=torch.bool, device=x.device) if is_pad is None else is_pad
+        )
         for block in self.blocks:
             x = block.forward_reference(x, mask)
         return self._decode(x[:, -1])
@@ -261,17 +239,12 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         self._context_is_pad: deque[Tensor] = deque(maxlen=self.config.n_obs_steps)
 
     def _push_observation(self, state: Tensor) -> tuple[Tensor, Tensor | None]:
-        """Append one (B, 12) observation to the rolling context; return (B, T, 12) states and padding flags.
-
-        Like robomimic's FrameStackWrapper and LeRobot diffusion's `populate_queues`, the first observation of an
-        episode fills the context with copies of itself; the copies are flagged as padding, as LeRobot flags the
-        repeated first frame in a training window.
-        """
+        """Append one (B, 12) observation to the rolling context (the first of an episode fills it with copies of
+        itself, flagged as padding); return (B, T, 12) states and padding flags."""
         real = torch.zeros(state.shape[0], dtype=torch.bool, device=state.device)
         if not self._context:
-            for _ in range(self.config.n_obs_steps - 1):
-                self._context.append(state)
-                self._context_is_pad.append(~real)
+            self._context.extend([state] * (self.config.n_obs_steps - 1))
+            self._context_is_pad.extend([~real] * (self.config.n_obs_steps - 1))
         self._context.append(state)
         self._context_is_pad.append(real)
         states, is_pad = self.current_context()
@@ -286,15 +259,10 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
 
     @torch.no_grad()
     def predict_normalized_delta(self, batch: dict[str, Tensor]) -> Tensor:
-        """(B, 9) prediction delta / 0.3, bounded: what the network is trained to output.
-
-        A (B, 12) `observation.state` is one new observation: it goes into the rolling context (like
-        `select_action`). A (B, T, 12) one is a full window (with optional `observation.state_is_pad`), used as is.
-        """
+        """(B, 9) prediction delta / 0.3, bounded, from one new (B, 12) observation (into the rolling context, as
+        `select_action`) or a full (B, T, 12) window (with optional `observation.state_is_pad`)."""
         state = batch[OBS_STATE]
-        if state.ndim == 3:
-            return self._bounded(self.model(state, batch.get(STATE_IS_PAD)))
-        states, is_pad = self._push_observation(state)
+        states, is_pad = (state, batch.get(STATE_IS_PAD)) if state.ndim == 3 else self._push_observation(state)
         return self._bounded(self.model(states, is_pad))
 
     @torch.no_grad()

@@ -1,52 +1,27 @@
 """Pre/post processors of `blindgrasp_transformer`: state z-scoring and the absolute-target <-> delta conversion.
+A LeRobot `action` is the ABSOLUTE joint target (rad), target = q_now + delta; the network predicts delta / 0.3.
 
-The action contract (`spec.ACTION_NAMES`): a LeRobot `action` is the ABSOLUTE joint target in radians, target = q_now +
-delta, while the paper's network predicts delta / 0.3 in [-1, 1]. The pipelines saved with the checkpoint prepare
-both directions, so a checkpoint is self-contained:
+    preprocessor   rename -> add batch dim -> device -> [blindgrasp_sensor_augment, training only]
+                   -> blindgrasp_target_to_delta   q_now := the raw joints of observation.state's last frame,
+                                                   passed on as `Q_NOW`; action := clip((target - q_now) / 0.3)
+                   -> normalizer                   observation.state z-scored (MEAN_STD); q_now never is
+    select_action  action := q_now + 0.3 * pred, with the q_now that came with the observation
+    postprocessor  unnormalizer (identity for the action; kept for lerobot-train's overrides) -> device(cpu)
 
-    preprocessor  (training batch or one observation -> model input)
-        rename -> add batch dim -> device
-        -> blindgrasp_target_to_delta   q_now := the raw joints of observation.state, passed on as `Q_NOW`;
-                                        action (training) := clip((target - q_now) / 0.3, -1, 1)
-        -> normalizer                   observation.state z-scored with dataset stats (MEAN_STD)
-    policy.select_action                action := q_now + 0.3 * pred, with the q_now that came with the observation
-    postprocessor (policy output -> action for the robot / sim env)
-        -> unnormalizer                 identity for the action (kept so lerobot-train's fine-tuning overrides,
-                                        which address `unnormalizer_processor`, find their step)
-        -> device(cpu)
-
-q_now is the current step's 9 joint positions, raw radians, from `observation.state`: its last frame for a training
-window (B, T, 12), the observation itself at inference (B, 12). The target->delta step reads it before the
-normalizer, so it is never z-scored.
-
-Why the policy, not the postprocessor, turns its prediction into a target: LeRobot calls `postprocessor(action)`
-with nothing but the policy's output tensor, and loads the two pipelines of a checkpoint independently of each
-other, so a postprocessor step could only learn q_now through state shared behind LeRobot's back. The observation
-does reach the policy, so q_now travels with it (`Q_NOW`) and nothing is remembered between calls: any number of
-policies and pipelines can run interleaved in one process.
-
-The action is bounded once per layer: the model's output mapping keeps pred in [-1, 1] (tanh), and the env or the
-robot clips the step to +-0.3 rad around the joints it measures and the target to the joint limits. This module adds
-no third bound; the clip in the target -> delta step is of training targets, not of actions.
-
-Why not LeRobot's own `RelativeActionsProcessorStep` / `AbsoluteActionsProcessorStep`: they take the whole state
-(not the last frame of a window), do no bound scaling, and lerobot-rollout's sync engine refuses any pipeline that
-contains an enabled `RelativeActionsProcessorStep` (it assumes action chunks); this policy acts one step at a time.
+The policy, not the postprocessor, makes the target: LeRobot's postprocessor sees only the policy's output, so
+q_now travels with the observation and nothing is remembered between calls. The clip is of training targets;
+actions are bounded by the model (tanh) and by the env or robot. LeRobot's `RelativeActionsProcessorStep` takes the
+whole state, does no bound scaling, and is refused by lerobot-rollout's sync engine.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import torch
-from lerobot.configs import PipelineFeatureType, PolicyFeature
 from lerobot.lerobot_types import EnvTransition, PolicyAction, TransitionKey
-from lerobot.processor import (
-    PolicyProcessorPipeline,
-    ProcessorStep,
-    ProcessorStepRegistry,
-)
+from lerobot.processor import PolicyProcessorPipeline, ProcessorStep, ProcessorStepRegistry
 from lerobot.processor.factory import make_default_policy_processor_steps, make_policy_processor_pipelines
 from lerobot.utils.constants import OBS_STATE
 from torch import Tensor
@@ -57,13 +32,6 @@ from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig
 
 # The raw joint positions (B, 9) of the observation being acted on, added to the batch by the preprocessor.
 Q_NOW = "observation.blindgrasp_q_now"
-
-
-def current_joints_from_state(state: Tensor) -> Tensor:
-    """Raw `observation.state` -> q_now: (B, T, 12) window -> its last frame's joints; (B, 12) -> its joints."""
-    if state.ndim == 3:
-        state = state[:, -1]
-    return state[..., spec.STATE_JOINT_SLICE]
 
 
 def target_to_normalized_delta(target: Tensor, q_now: Tensor, bound: float = spec.ACTION_BOUND_RAD) -> Tensor:
@@ -85,19 +53,15 @@ def normalized_delta_to_target(pred: Tensor, q_now: Tensor, bound: float = spec.
 @ProcessorStepRegistry.register("blindgrasp_target_to_delta")
 @dataclass
 class TargetToNormalizedDeltaStep(ProcessorStep):
-    """Passes q_now on to the policy (`Q_NOW`) and turns an absolute-target action into delta / bound.
-
-    Runs on raw (not yet normalized) state. Observations without an action (inference) only get `Q_NOW`.
-    """
+    """Passes q_now (from the raw state) on to the policy as `Q_NOW`, and turns an absolute-target action, if any,
+    into delta / bound."""
 
     action_bound: float = spec.ACTION_BOUND_RAD
 
     def get_config(self) -> dict[str, Any]:
-        return {"action_bound": self.action_bound}
+        return asdict(self)
 
-    def transform_features(
-        self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
-    ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
+    def transform_features(self, features):
         return features  # `Q_NOW` is the policy's input only, never a dataset feature; `action` changes meaning
 
     def __call__(self, transition: EnvTransition) -> EnvTransition:
@@ -105,7 +69,7 @@ class TargetToNormalizedDeltaStep(ProcessorStep):
         state = observation.get(OBS_STATE)
         if state is None:
             raise KeyError(f"blindgrasp_target_to_delta needs '{OBS_STATE}' to know the current joint positions")
-        q_now = current_joints_from_state(state)
+        q_now = (state[:, -1] if state.ndim == 3 else state)[..., spec.STATE_JOINT_SLICE]  # a window's last frame
         new_transition = transition.copy()
         new_transition[TransitionKey.OBSERVATION] = {**observation, Q_NOW: q_now}
         action = transition.get(TransitionKey.ACTION)
@@ -117,15 +81,11 @@ class TargetToNormalizedDeltaStep(ProcessorStep):
 @ProcessorStepRegistry.register("blindgrasp_sensor_augment")
 @dataclass
 class SensorAugmentStep(ProcessorStep):
-    """Training-time sensor errors, drawn once per sample and held over its whole window (beyond the paper).
-
-    What a real gripper adds that the simulation's noise does not: a force gain error (g, log-uniform in
-    [1/(1+force_gain), 1+force_gain]), a force offset (b, uniform in +-force_bias_n) and a joint calibration offset
-    (d, uniform in +-joint_offset_rad per joint). The observation becomes (q + d, g f + b); the action target moves
-    by the same d, so the commanded step target - q is unchanged, as on a gripper whose encoders are off by d.
-
-    Acts only on training batches: a (B, T, 12) window that comes with an action. Inference observations (B, 12)
-    and evaluation windows pass through unchanged. Placed before the target->delta step and the normalizer.
+    """Training-time sensor errors, drawn once per sample and held over its window (beyond the paper): a force gain
+    g (log-uniform in [1/(1+force_gain), 1+force_gain]), a force offset b (+-force_bias_n) and a joint calibration
+    offset d (+-joint_offset_rad per joint). The observation becomes (q + d, g f + b) and the target moves by d, so
+    the commanded step is unchanged, as on a gripper whose encoders are off by d. Only (B, T, 12) windows that come
+    with an action (training batches) are changed.
     """
 
     force_gain: float = 0.0
@@ -134,12 +94,7 @@ class SensorAugmentStep(ProcessorStep):
     enabled: bool = True
 
     def get_config(self) -> dict[str, Any]:
-        return {
-            "force_gain": self.force_gain,
-            "force_bias_n": self.force_bias_n,
-            "joint_offset_rad": self.joint_offset_rad,
-            "enabled": self.enabled,
-        }
+        return asdict(self)
 
     def transform_features(self, features):
         return features
@@ -177,19 +132,14 @@ def make_blindgrasp_transformer_pre_post_processors(
 ]:
     """The policy's pipeline pair (see the module docstring); LeRobot finds it by name for `lerobot-train`."""
     s = make_default_policy_processor_steps(config, dataset_stats)
-    to_delta = TargetToNormalizedDeltaStep(action_bound=spec.ACTION_BOUND_RAD)
-    augment = (
-        []
-        if not config.augmentation_active
-        else [
+    steps = [s.rename_observations, s.add_batch_dim, s.to_device]
+    if config.augmentation_active:
+        steps.append(
             SensorAugmentStep(
                 force_gain=config.augment_force_gain,
                 force_bias_n=config.augment_force_bias_n,
                 joint_offset_rad=config.augment_joint_offset_rad,
             )
-        ]
-    )
-    return make_policy_processor_pipelines(
-        input_steps=[s.rename_observations, s.add_batch_dim, s.to_device, *augment, to_delta, s.normalize],
-        output_steps=[s.unnormalize, s.to_cpu],
-    )
+        )
+    steps += [TargetToNormalizedDeltaStep(action_bound=spec.ACTION_BOUND_RAD), s.normalize]
+    return make_policy_processor_pipelines(input_steps=steps, output_steps=[s.unnormalize, s.to_cpu])

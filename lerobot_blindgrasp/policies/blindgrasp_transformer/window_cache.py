@@ -1,24 +1,9 @@
-"""The student's data path: LeRobotDataset windows served from an in-memory low-dimensional cache.
-
-lerobot-train reads each training sample through `LeRobotDataset.__getitem__`, whose reader (LeRobot's private
-`DatasetReader`) indexes the `datasets` table once for the frame and once per windowed key; each such access
-deep-copies the table's Features and converts every value through Python lists, so a 30-frame window of 12 floats
-costs milliseconds, longer than the student's update. The student's frames are tiny (low-dimensional columns only),
-so, like robomimic's `SequenceDataset` with `hdf5_cache_mode="low_dim"`, this module keeps every column as one
-torch tensor per process and slices the window from it: the same keys, dtypes, shapes and values as LeRobot's
-reader, padding flags included (`tests/policies/test_student_data_path.py` compares them).
-
-LeRobot has no hook for a dataset reader, so `install()` (run when the plugin is imported, which `lerobot-train`
-does before it builds the dataset) asks `compat.serve_dataset_readers_with` to hand it every reader that has just
-loaded a table: one that has loaded a dataset of this plugin's schema (`ours`: the `observation.state` and `action`
-names of `spec.dataset_features()`, which every blindgrasp dataset, sim or real, carries) that the cache can serve
-exactly becomes a `LowDimWindowReader`. No LeRobot file changes, and every other dataset keeps LeRobot's path,
-whatever policy trains on it. Served: only readers asked for delta-timestamp windows (training), over datasets with
-no cameras, no language columns and no index remapping, whose columns are all integers, floats or booleans
-(scalars or fixed-length vectors); anything else keeps LeRobot's path. The reader's class travels with the dataset into lerobot-train's spawned loader
-processes, and each process builds its cache on its first sample (loader workers persist, so once per run).
-`BLINDGRASP_LOW_DIM_CACHE=0` in the environment when a dataset is loaded keeps LeRobot's path for it, e.g. to time
-the two side by side.
+"""The student's data path: LeRobotDataset windows sliced from one in-memory tensor per column (as robomimic's
+`hdf5_cache_mode="low_dim"`), with the same items as LeRobot's `DatasetReader`, which converts each window through
+Python lists at a cost above the student's update. `install_window_cache()` (at plugin import) asks
+`compat.serve_dataset_readers_with` for each reader that loads a table: one of this plugin's schema (`ours`) that
+the cache reproduces exactly (`servable`) becomes a `LowDimWindowReader`, every other keeps LeRobot's path.
+`BLINDGRASP_LOW_DIM_CACHE=0` at load time keeps LeRobot's path.
 """
 
 from __future__ import annotations
@@ -138,10 +123,6 @@ class LowDimWindowReader(DatasetReader):
             cache = self.__dict__[_CACHE_ATTR] = LowDimCache(self)
         return cache.item(int(idx))
 
-    def get_item_reference(self, idx) -> dict:
-        """LeRobot's own path, for side-by-side checks and timing."""
-        return DatasetReader.get_item(self, idx)
-
     def __getstate__(self) -> dict:
         # Each loader process builds its own cache from the (memory-mapped) table instead of receiving a copy.
         state = dict(self.__dict__)
@@ -174,6 +155,5 @@ def _choose(reader: DatasetReader) -> type[DatasetReader] | None:
 
 
 def install_window_cache() -> None:
-    """From now on in this process, servable readers of this plugin's datasets loaded while `enabled()` are served
-    from the cache."""
+    """From now on in this process, serve the servable readers of this plugin's datasets from the cache."""
     compat.serve_dataset_readers_with(_choose)
