@@ -20,7 +20,7 @@ from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.rollout.actors import TeacherActor
 from lerobot_blindgrasp.rollout.envs import make_batched_env
 from lerobot_blindgrasp.rollout.loop import run_batch
-from lerobot_blindgrasp.sim import objects, rewards
+from lerobot_blindgrasp.sim import backends, objects, rewards
 from lerobot_blindgrasp.sim.gym_env import start_seed
 from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, default_teacher
 
@@ -40,8 +40,11 @@ class EvalTeacherConfig:
     # output folder (default: <run dir>/eval, or outputs/teacher_eval for the shipped teacher)
     output_dir: Path | None = None
     progress: bool = True  # progress bar
+    # physics: "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp on this process's GPU, else Warp's CPU device)
+    backend: str = "batch"
 
     def __post_init__(self):
+        backends.check_backend(self.backend)
         bad = set(self.mode_names) - set(MODES)
         if bad:
             raise ValueError(f"unknown mode(s) {sorted(bad)}; choose from {MODES}")
@@ -52,9 +55,11 @@ class EvalTeacherConfig:
         return tuple(m.strip() for m in self.modes.split(",") if m.strip())
 
 
-def _run_object(teacher: TeacherPolicy, name: str, episodes: int, seed: int, mode: str, reward_cfg) -> tuple:
+def _run_object(
+    teacher: TeacherPolicy, name: str, episodes: int, seed: int, mode: str, reward_cfg, backend
+) -> tuple:
     """One object's episodes in one batch, on evaluation indices seed .. seed + episodes - 1, as the gym env."""
-    env = make_batched_env("eval", (name,), episodes=episodes, seed=seed, reward=reward_cfg)
+    env = make_batched_env("eval", (name,), episodes=episodes, seed=seed, reward=reward_cfg, backend=backend)
     done = run_batch(env, TeacherActor(teacher, stochastic=mode == "stochastic"))
     return np.array([e.success for e in done]), np.array([e.max_lift for e in done])
 
@@ -66,6 +71,7 @@ def evaluate_teacher(
     seed: int = spec.EVAL_SEED,
     modes: tuple[str, ...] = MODES,
     progress: bool = True,
+    backend: str = "batch",
 ) -> dict:
     """Success (with per-episode flags) and mean lift per object and mode, on the paired start states."""
     spec.eval_env_seed(seed + episodes_per_object - 1, 0)  # raises if the indices leave the eval block
@@ -74,6 +80,7 @@ def evaluate_teacher(
         "objects": list(object_names),
         "episodes_per_object": episodes_per_object,
         "seed": seed,
+        "backend": backend,
         "seeds": f"evaluation indices {seed}..{seed + episodes_per_object - 1} per object (spec.eval_env_seed)",
         "modes": {},
     }
@@ -81,7 +88,7 @@ def evaluate_teacher(
         torch.manual_seed(seed)
         per_object = {}
         for name in tqdm(object_names, desc=f"eval {mode}", disable=not progress, leave=False):
-            success, max_lift = _run_object(teacher, name, episodes_per_object, seed, mode, reward_cfg)
+            success, max_lift = _run_object(teacher, name, episodes_per_object, seed, mode, reward_cfg, backend)
             per_object[name] = {
                 "success_rate": float(success.mean()),
                 "successes": [bool(x) for x in success],
@@ -159,7 +166,9 @@ def main(argv=None) -> None:
     try:
         teacher = TeacherPolicy(cfg.teacher or default_teacher())
         names = objects.resolve_objects(cfg.objects)
-        results = evaluate_teacher(teacher, names, cfg.episodes, cfg.seed, cfg.mode_names, cfg.progress)
+        results = evaluate_teacher(
+            teacher, names, cfg.episodes, cfg.seed, cfg.mode_names, cfg.progress, cfg.backend
+        )
         # The shipped teacher's folder is part of the repository: never write into it unasked.
         out = cfg.output_dir or (
             teacher.checkpoint.parent / "eval" if cfg.teacher else Path("outputs/teacher_eval")
