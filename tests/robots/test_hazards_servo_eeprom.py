@@ -26,9 +26,9 @@ from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
 )
 
 
-def _refused(rig, tmp_path, monkeypatch, error, match: str) -> None:
+def _refused(rig, tmp_path, monkeypatch, error, match: str, **config) -> None:
     monkeypatch.setattr("builtins.input", rig.calibration_inputs())
-    robot = BlindgraspGripper(rig.robot_config(tmp_path / "cal"))
+    robot = BlindgraspGripper(rig.robot_config(tmp_path / "cal", **config))
     with pytest.raises(error, match=match):
         robot.connect()
     assert stopped(rig, robot)
@@ -52,7 +52,10 @@ def test_a_bus_at_another_baud_rate_is_refused_naming_the_register(rig, tmp_path
     """Servos still at the factory 57 600 bps (Baud_Rate(8) = 1) on a 1 Mbps host: none answers."""
     for servo in rig.dxl.servos.values():
         servo.set("Baud_Rate", 1)
-    _refused(rig, tmp_path, monkeypatch, GripperBusError, r"missing IDs \[10, 11, 12, 20.*Baud_Rate register")
+    # No servo answers at all, so no reply can miss the window: the config's default latency timer instead of the
+    # rig's long one, which every one of the handshake's unanswered reads and pings would wait out.
+    _refused(rig, tmp_path, monkeypatch, GripperBusError, r"missing IDs \[10, 11, 12, 20.*Baud_Rate register",
+             latency_timer_ms=BlindgraspGripperConfig.latency_timer_ms)  # fmt: skip
 
 
 def test_the_firmware_voltage_flag_stops_the_gripper(rig, tmp_path, monkeypatch):
