@@ -179,15 +179,12 @@ def main(argv: list[str] | None = None) -> None:
     force reader with its config's defaults. Exits 1 when the reader refuses the stream (e.g. `--sps=10`)."""
     from lerobot_blindgrasp.cli import parse_config
     from lerobot_blindgrasp.hardware.force_board.config_force_board import ForceSensorConfig
-    from lerobot_blindgrasp.hardware.force_board.reader import ForceSensorReader, ForceStreamError
+    from lerobot_blindgrasp.hardware.force_board.reader import ForceStreamError
 
     cfg = parse_config(SimConfig, argv)
     refused = None
     with SimulatedForceBoard(sps=cfg.sps, build_dir=cfg.build_dir) as board:
-        fs = ForceSensorConfig(port=board.port)
-        reader = ForceSensorReader(board.port, fs.baudrate, board.scale.tolist(), stale_timeout_s=fs.stale_timeout_s,
-                                   connect_timeout_s=fs.connect_timeout_s, frozen_frames=fs.frozen_frames,
-                                   min_rate_hz=fs.min_rate_hz)  # fmt: skip
+        reader = ForceSensorConfig(port=board.port).reader(board.scale.tolist())
         reader.connect()
         try:
             _report(reader, board, cfg)

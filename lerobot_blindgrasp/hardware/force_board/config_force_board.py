@@ -1,15 +1,16 @@
-"""The force board's settings on the host (`--robot.force_sensor.*` of the gripper): its port, the scales until a
-calibration file replaces them, and the thresholds its reader (`reader.py`) stops on."""
+"""The force board's settings on the host (`--robot.force_sensor.*` of the gripper)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from .reader import ForceSensorReader
+
 
 @dataclass
 class ForceSensorConfig:
-    """The fingertip load-cell microcontroller (its reader: `reader.py`; its wire protocol: `frame_codec.py` and
-    `docs/force_board.md`)."""
+    """The fingertip load-cell board: its port, the scales until a calibration file replaces them, and the thresholds
+    its reader (`reader.py`) stops on."""
 
     # The Nano's USB-serial chip (FT232RL or CH340) makes it a /dev/ttyUSBn; with the U2D2 (`port`, /dev/ttyUSB0)
     # plugged in first it is ttyUSB1. robot_configs/blindgrasp_gripper.yaml uses the udev name /dev/blindgrasp_force.
@@ -44,3 +45,12 @@ class ForceSensorConfig:
     tare_max_shift_n: float = 1.0
     # A compressive-only load cell reading below -this (N) is a fault (stop), not a value.
     negative_fault_n: float = 1.0
+
+    def reader(self, scale_n_per_count=None) -> ForceSensorReader:
+        """The board's reader with these settings (`scale_n_per_count` replaces the config's when given)."""
+        scale = self.scale_n_per_count if scale_n_per_count is None else scale_n_per_count
+        return ForceSensorReader(self.port, self.baudrate, scale, channel_map=self.channel_map,
+                                 stale_timeout_s=self.stale_timeout_s, connect_timeout_s=self.connect_timeout_s,
+                                 frozen_frames=self.frozen_frames, min_rate_hz=self.min_rate_hz,
+                                 tare_max_std_n=self.tare_max_std_n, tare_max_shift_n=self.tare_max_shift_n,
+                                 negative_fault_n=self.negative_fault_n)  # fmt: skip

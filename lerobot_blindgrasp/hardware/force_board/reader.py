@@ -1,36 +1,11 @@
-"""Fingertip force sensors: a microcontroller streams raw load-cell counts over a serial port.
+"""The force board's reader on the host: its serial stream as tared, scaled, deadbanded newtons.
 
-The board that ships is three HX711 on an Arduino Nano (`lerobot_blindgrasp/hardware/force_board/`, parts, wiring
-and flashing in `docs/force_board.md`). Its frames and their decoder: `frame_codec.py`.
-
-Between conversions nothing is sent: a frame carries a fresh sample of every channel under a new SEQ, or no frame
-goes out. "No new sample yet" is therefore never a frame and never a STATUS bit, and any STATUS bit is a real fault
-that stops the gripper. The HX711 board sends ~80 frames/s; the host needs `min_rate_hz` (40/s by default, two
-fresh samples per 20 Hz control period) and calls a stream that sends fewer fresh frames "slow", apart from
-"stale" (no fresh frame for `stale_timeout_s`).
-
-The host resynchronises on the next SYNC after any bad length or CRC; SEQ gaps count dropped frames; the age of
-the newest good frame detects a stalled or unplugged stream.
-
-Liveness by content (`LatestFrameStream`): the SEQ is judged against this host's clock (`counter_clock.py`).
-A SEQ that repeats or runs backwards is a re-sent or replayed frame, dropped and counted, so a firmware stuck
-re-sending one frame goes stale like a silent one. A board that reset is not a replay: it was silent while it booted
-and its SEQ starts again near 0 (its first frame, the boot frame, says so and why). Its frames are held, never
-fresh, until `SETTLE_FRAMES` more advance with time, then the stream is live again with a WARNING naming the reset.
-The tare is kept: the HX711s keep their bridges' offset and gain 128 through a reset, and a tare taken now would
-zero whatever presses on the pads. A SEQ further ahead than the time since the last frame allows (a stray frame
-from garbage, a corrupted counter) is dropped and counted, so one stray frame never locks the stream out. A
-channel whose counts stay identical bit for bit for `frozen_frames` frames is frozen (a 24-bit ADC's noise never
-repeats that long), and the stream goes stale too. `dropped_frames` counts only forward SEQ gaps.
-
-A tare is trusted only at rest (`tare`): the samples must vary no more than an unloaded pad does, and a re-tare
-must not move the zero by more than drift explains; otherwise it is refused and the old zero kept. A load cell
-in a fingertip is compressive only, so a reading clearly below zero is a fault (a tare taken under load, a
-damaged cell, a wrong scale sign), never a value.
-
-Host side: counts -> newtons with a tare (mean counts over `tare_s` at connect, fingers in free air) and a
-per-channel scale in N/count from the robot config, then the sensor pipeline the sim uses too
-(`lerobot_blindgrasp.hardware.force.reading`: the measured newtons already hold the sensor's noise; |f| < 0.1 N reads 0).
+The board sends a frame per fresh sample and nothing in between, so any STATUS bit is a real fault. The SEQ is
+judged against this host's clock (`counter_clock.py`): re-sent, replayed or impossible frames are dropped and
+counted, and a board reset is held until `SETTLE_FRAMES` frames advance with time, keeping the tare (the HX711s keep
+their offset). A tare is taken only at rest, and a compressive load cell reading clearly below zero is a fault.
+What the host checks and why: docs/force_board.md. Counts become newtons by `force.counts_to_newtons`, then the
+sim's own `force.reading`.
 """
 
 from __future__ import annotations

@@ -69,7 +69,7 @@ class BlindgraspGripper(Robot):
             num_retry=config.bus_num_retry,
             latency_timer_ms=config.latency_timer_ms,
         )
-        self.force = config.force_reader()
+        self.force = config.force_sensor.reader()
         self.gate = PositionGate(
             speed_ticks_s=config.max_joint_speed_rad_s / xm430.RAD_PER_TICK,
             margin_ticks=config.plausibility_margin_rad / xm430.RAD_PER_TICK,

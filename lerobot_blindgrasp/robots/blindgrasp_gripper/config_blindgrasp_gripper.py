@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from lerobot.robots.config import RobotConfig
 
 from lerobot_blindgrasp import compat, spec
-from lerobot_blindgrasp.hardware.force_board import ForceSensorConfig, ForceSensorReader
+from lerobot_blindgrasp.hardware.force_board import ForceSensorConfig
 from lerobot_blindgrasp.hardware.xm430 import (
     CURRENT_LIMIT_MAX_UNITS,
     CURRENT_UNIT_A,
@@ -159,19 +159,3 @@ class BlindgraspGripperConfig(RobotConfig):
             raise ValueError("force_sensor.frozen_frames must be 0 (off) or >= 2")
         if len(set(fs.channel_map)) != spec.NUM_FORCES or not all(0 <= c < 8 for c in fs.channel_map):
             raise ValueError(f"force_sensor.channel_map needs distinct channels 0..7, not {fs.channel_map}")
-
-    def force_reader(self) -> ForceSensorReader:
-        fs = self.force_sensor
-        return ForceSensorReader(
-            fs.port,
-            fs.baudrate,
-            fs.scale_n_per_count,
-            channel_map=fs.channel_map,
-            stale_timeout_s=fs.stale_timeout_s,
-            connect_timeout_s=fs.connect_timeout_s,
-            frozen_frames=fs.frozen_frames,
-            min_rate_hz=fs.min_rate_hz,
-            tare_max_std_n=fs.tare_max_std_n,
-            tare_max_shift_n=fs.tare_max_shift_n,
-            negative_fault_n=fs.negative_fault_n,
-        )
