@@ -1,26 +1,8 @@
-"""A Dynamixel Protocol 2.0 bus of XM430-W350 servos, emulated on a pseudo-terminal.
-
-What it implements (ROBOTIS e-Manual, "DYNAMIXEL Protocol 2.0" and the XM430-W350 control table):
-- packets, CRC-16 and byte stuffing (`dynamixel_wire.py`); PING (unicast and broadcast), READ, WRITE, SYNC READ,
-  SYNC WRITE, REBOOT; status packets (INST 0x55) with the error byte (instruction error codes 1..7 and the 0x80
-  hardware-alert bit);
-- the control table (`control_table.py`) with EEPROM write protection while torque is on, read-only registers,
-  data range and limit checks, Status Return Level (0: only PING answers, 1: PING and READ), and the bus baud
-  rate (a servo answers only when the port's termios speed matches its Baud_Rate register, like a real bus at the
-  wrong speed);
-- each servo (`dynamixel_servo.py`): Homing_Offset and Drive_Mode as the firmware applies them, first-order
-  dynamics or a plugged-in `ShaftDynamics`, the Bus Watchdog (98), a reboot with Startup_Configuration(60);
-- bring-up: factory-fresh servos (`factory_servo`: ID 1, 57 600 bps) plugged onto the cable one at a time (`plug`).
-
-Fault injection (what the tests use): a missing ID, dropped status packets (timeouts), corrupted status CRCs,
-wrong positions with a valid CRC (`position_glitch`), stray late status packets (`stray_replies`), slow replies
-(`reply_delay_s`), hardware-error status bits (the firmware then drops torque per the Shutdown register and raises
-the alert bit), a servo reset (brown-out: RAM back to factory values, torque off, no error bit), two servos on one
-ID (`add_twin`: their replies collide on the line), from `PtyDevice`, an unplugged USB adapter, and
-(`servo_health.py`, one model per servo and one `supply` per bus) a hot servo, a heating servo, a weak or sagging
-supply and the firmware's overheating, voltage and overload errors; per servo (`dynamixel_servo.py`), a stripped
-gear (`stripped`), a current reported with its sign flipped (`current_sign`), a Present_Position frozen while the shaft
-moves (`frozen_position`) and registers that acknowledge a write but keep their value (`unwritable`).
+"""A Dynamixel Protocol 2.0 bus of XM430-W350 servos, emulated on a pseudo-terminal (ROBOTIS e-Manual): PING, READ,
+WRITE, SYNC READ, SYNC WRITE and REBOOT with status packets and their error byte, over the wire format of
+`dynamixel_wire.py`, the control table of `control_table.py` and the servos of `dynamixel_servo.py`. A servo answers
+only when the port's termios speed matches its Baud_Rate, as on a real bus. What it speaks and the faults it injects
+are listed in docs/hardware.md, "Emulators and tests".
 """
 
 from __future__ import annotations
@@ -34,8 +16,6 @@ from dynamixel_sdk import robotis_def as dx
 from lerobot_blindgrasp.emulators.control_table import (  # noqa: F401  (re-exported for the tests)
     BAUD_REGISTER,
     CONTROL_TABLE,
-    HW_ELECTRICAL_SHOCK,
-    HW_ENCODER,
     HW_INPUT_VOLTAGE,
     HW_OVERHEATING,
     HW_OVERLOAD,
@@ -86,9 +66,7 @@ class DynamixelBusEmulator(PtyDevice):
         # Stray late status packets: (id, n data bytes) sent, with that servo's registers from Torque_Enable on,
         # right before the replies to the next sync read (a reply of an earlier transaction arriving late).
         self.stray_replies: list[tuple[int, int]] = []
-        # Observability for tests.
-        self.instruction_counts: dict[int, int] = {}
-        self.rx_crc_errors = 0
+        self.instruction_counts: dict[int, int] = {}  # for the tests
 
     # -- fault injection --
     def set_hardware_error(self, dxl_id: int, bits: int) -> None:
@@ -209,7 +187,6 @@ class DynamixelBusEmulator(PtyDevice):
     def _handle_packet(self, pkt: bytes) -> None:
         dxl_id, inst = pkt[4], pkt[7]
         if not crc_ok(pkt):
-            self.rx_crc_errors += 1
             servo = self._alive(dxl_id)
             if servo is not None:
                 self._status(servo, p2.ERRNUM_CRC)

@@ -1,11 +1,6 @@
 """The real gripper: nine XM430-W350 on one Dynamixel bus plus three fingertip load cells, in lifecycle order like
-LeRobot's `koch_follower`; observation and action are `spec`'s (names, order, rad and N), as in the sim demos.
-
-It holds what checks it, each object given what it needs: bus and force reader on exclusive ports (`hardware/`);
-the plausibility `gate` of every position reading; the servos' `registers`, `health` and tip `consistency`, run
-each period by `checks`; the loop's `timing` and `spacing`; the safety `latch` (`latch.py`: any failure while
-connected turns the torque off on every servo that answers, closes the ports, raises one named error); the policy
-named on the script's command line, checked before any port opens (`policy_contract.py`).
+LeRobot's `koch_follower`; observation and action are `spec`'s (names, order, rad and N), as in the sim demos. It
+holds the objects that check it (`hardware/`), each given what it needs, and the safety `latch` (`latch.py`).
 """
 
 from __future__ import annotations

@@ -1,12 +1,7 @@
-"""Configuration of the real gripper (`--robot.type=blindgrasp_gripper`).
-
-Defaults are the D'Claw-derived build of the paper; a site-specific file lives in `robot_configs/` and is passed to
-any LeRobot CLI with `--robot="include robot_configs/blindgrasp_gripper.yaml"` (draccus' include syntax; later
-`--robot.<field>=...` flags still override it).
-
-Parsing is also where the config takes what the script's command line says and LeRobot never hands the robot: the
-policy it will run, the loop's rate, the dataset it records (`command_line`, read once by
-`compat.read_command_line`; the robot checks them at connect).
+"""Configuration of the real gripper (`--robot.type=blindgrasp_gripper`): the paper's D'Claw-derived build by default,
+a site's file in `robot_configs/` (`--robot="include robot_configs/blindgrasp_gripper.yaml"`). Parsing also keeps
+what the script's command line says and LeRobot never hands the robot (`command_line`: the policy, the loop's rate,
+the dataset), which the robot checks at connect.
 """
 
 from __future__ import annotations
