@@ -44,7 +44,6 @@ class PeriodMonitor:
     what: str = "control loop"
     periods: int = 0
     overruns: int = 0
-    worst_s: float = 0.0
     recent: deque = field(default_factory=lambda: deque(maxlen=200))  # the last periods measured (s)
     streaks: deque = field(default_factory=lambda: deque(maxlen=100))  # the last streaks that ended
     streak: Streak | None = None  # the streak under way
@@ -80,7 +79,6 @@ class PeriodMonitor:
             self._end_streak(f"a {period * 1e3:.0f} ms period")
             return period
         self.overruns += 1
-        self.worst_s = max(self.worst_s, period)
         if self.streak is None:
             self.streak = Streak(start=now)
             logger.warning("%s: slow streak started: a %.0f ms period (nominal %.0f ms; %d overruns in %d periods "
@@ -115,8 +113,7 @@ class SampleSpacing:
         self.period_s = period_s
         self._clock, self._sleep = clock, sleep  # injectable, so the rule can be checked on an emulated clock
         self.min_gap_s = period_s * (1.0 - slack)
-        self.waits = 0  # reads that were held back, and for how long in all (for tests and logs)
-        self.waited_s = 0.0
+        self.waits = 0  # reads that were held back
         self._last_end: float | None = None
         self._reads: deque = deque(maxlen=20)  # recent read durations (s)
 
@@ -137,7 +134,6 @@ class SampleSpacing:
         if delay <= 0:
             return 0.0
         self.waits += 1
-        self.waited_s += delay
         self._sleep(delay)
         return delay
 

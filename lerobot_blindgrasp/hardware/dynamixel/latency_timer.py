@@ -31,10 +31,6 @@ class LatencyTimerCheck:
     def ok(self) -> bool:
         return self.after_ms is not None and self.after_ms <= TARGET_MS
 
-    @property
-    def fix_command(self) -> str:
-        return f"echo {TARGET_MS} | sudo tee {self.sysfs_file}"
-
     def warning(self) -> str | None:
         """The operator's message, or None when there is nothing to say."""
         if self.sysfs_file is None or self.ok:
@@ -43,23 +39,16 @@ class LatencyTimerCheck:
         return (
             f"The USB latency timer of '{self.port}' {now} and could not be set to {TARGET_MS} ms "
             f"({self.error}). Every reply then waits up to that long (16 ms by default) in the adapter. Run\n"
-            f"    {self.fix_command}\n"
+            f"    echo {TARGET_MS} | sudo tee {self.sysfs_file}\n"
             "or install robot_configs/udev/99-blindgrasp.rules, which sets it at every plug-in (docs/bringup.md)."
         )
 
 
-def sysfs_latency_file(port: str, sysfs_root: Path = SYSFS_ROOT) -> Path | None:
-    """The latency_timer file of the adapter behind `port`, following symlinks (/dev/serial/by-id/..., a udev
-    name such as /dev/blindgrasp_u2d2) to the tty they name; None if that tty has none."""
-    tty = Path(os.path.realpath(port)).name
-    candidate = Path(sysfs_root) / "bus" / "usb-serial" / "devices" / tty / "latency_timer"
-    return candidate if candidate.is_file() else None
-
-
 def check_latency_timer(port: str, sysfs_root: Path = SYSFS_ROOT, target_ms: int = TARGET_MS) -> LatencyTimerCheck:
     """Read the adapter's latency timer and lower it to `target_ms` where this process may write it."""
-    path = sysfs_latency_file(port, sysfs_root)
-    if path is None:
+    tty = Path(os.path.realpath(port)).name  # a udev or by-id symlink names the tty whose driver has the file
+    path = Path(sysfs_root) / "bus" / "usb-serial" / "devices" / tty / "latency_timer"
+    if not path.is_file():
         return LatencyTimerCheck(port, None)
     try:
         before = int(path.read_text().strip())

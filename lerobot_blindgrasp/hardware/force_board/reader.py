@@ -99,12 +99,8 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         return self._serial is not None
 
     def connect(self) -> None:
-        self.open()
-        self.wait_first_frame()
-
-    def open(self) -> None:
-        """Take the port (exclusively) and start receiving."""
         self.start()
+        self.wait_first_frame()
 
     def wait_first_frame(self) -> None:
         if not self.wait_frames(1, self.connect_timeout_s):

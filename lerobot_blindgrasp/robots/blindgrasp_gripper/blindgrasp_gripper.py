@@ -120,7 +120,7 @@ class BlindgraspGripper(Robot):
         with self.latch.guard("connecting"):
             self._forget_goals()
             force_calibration.apply(self.force, self.calibration_dir, self.id)  # <id>.force.json, if measured
-            self.force.open()  # both ports exclusive before the first byte goes out: a second owner is refused
+            self.force.start()  # both ports exclusive before the first byte goes out: a second owner is refused
             self.bus.connect()  # pings all nine, with retries; names a Status_Return_Level that hides replies
             self.latch.arm()
             self.episodes.install()
