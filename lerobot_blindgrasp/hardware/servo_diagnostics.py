@@ -80,15 +80,13 @@ class ServoHealth:
         text = f"{t:.0f} degC (Temperature_Limit {limit:.0f}, stop at {stop:.0f})"
         if t >= stop:
             return Diagnostic(ERROR, j, "temperature", t, f"{text}: too hot")
+        if t < limit - xm430.TEMPERATURE_WARN_MARGIN_C:
+            return Diagnostic(OK, j, "temperature", t, text)
         slope = _slope(hist)
-        if t >= limit - xm430.TEMPERATURE_WARN_MARGIN_C and slope > 0:
-            eta = (limit - t) / slope
-            if eta < xm430.TEMPERATURE_TREND_HORIZON_S:
-                return Diagnostic(ERROR, j, "temperature", t, f"{text}: rising {slope * 60:.0f} degC/min, at the "
-                                  f"limit in {eta:.0f} s (over-temperature trend)")  # fmt: skip
-        if t >= limit - xm430.TEMPERATURE_WARN_MARGIN_C:
-            return Diagnostic(WARN, j, "temperature", t, f"{text}: nearing the limit")
-        return Diagnostic(OK, j, "temperature", t, text)
+        if slope > 0 and (eta := (limit - t) / slope) < xm430.TEMPERATURE_TREND_HORIZON_S:
+            return Diagnostic(ERROR, j, "temperature", t, f"{text}: rising {slope * 60:.0f} degC/min, at the "
+                              f"limit in {eta:.0f} s (over-temperature trend)")  # fmt: skip
+        return Diagnostic(WARN, j, "temperature", t, f"{text}: nearing the limit")
 
     def _voltage(self, j: str, v: float, now: float) -> Diagnostic:
         text = f"{v:.1f} V (rated {xm430.RATED_VOLTAGE_V[0]:.1f}-{xm430.RATED_VOLTAGE_V[1]:.1f} V)"

@@ -49,13 +49,7 @@ class CalibrateForceConfig:
 def _window(reader: ForceSensorReader, settle_s: float, window_s: float) -> fc.Window:
     """Counts of every stream channel over `window_s`, after `settle_s`; only fresh, fault-free frames."""
     time.sleep(settle_s)
-    samples = []
-    deadline = time.monotonic() + window_s
-    while time.monotonic() < deadline or len(samples) < 5:
-        if not reader.wait_frames(1, reader.stale_timeout_s * 4):
-            raise ForceStreamError(f"The force board stopped sending ({len(samples)} frames in this window).")
-        samples.append(reader.fresh().counts)  # fresh() raises on a fault the frame flags
-    return fc.Window.of(samples)
+    return fc.Window.of(reader.fresh_samples(window_s, "in this window", lambda frame: frame.counts))
 
 
 def _prompts(cfg: CalibrateForceConfig) -> list[str]:

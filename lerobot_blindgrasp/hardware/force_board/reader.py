@@ -223,14 +223,7 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         """Zero the sensors: mean counts over `duration_s`, with no fingertip touching anything. Refused
         (`ForceTareError`, the previous zero kept) when a pad is loaded: samples that vary more than an unloaded
         pad does (`tare_max_std_n`), or a re-tare whose zero moved more than drift explains (`tare_max_shift_n`)."""
-        samples = []
-        deadline = time.monotonic() + duration_s
-        while time.monotonic() < deadline or len(samples) < min_frames:
-            if not self.wait_frames(1, self.stale_timeout_s * 4):
-                raise ForceStreamError(f"Force-sensor stream stopped during tare ({len(samples)} frames).")
-            frame = self.fresh()  # a frozen, re-sent or faulty stream cannot be tared
-            samples.append(self._channels(frame))
-        samples = np.asarray(samples)
+        samples = np.asarray(self.fresh_samples(duration_s, "during tare", self._channels, min_frames))
         offset = samples.mean(axis=0)
         std_n = samples.std(axis=0) * np.abs(self.scale)
         shift_n = (offset - self.offset) * self.scale if self.tared else np.zeros_like(offset)
@@ -246,6 +239,17 @@ class ForceSensorReader(LatestFrameStream[Frame]):
             )
         self.offset, self.tared = offset, True
         return self.offset
+
+    def fresh_samples(self, duration_s: float, what: str, sample, min_frames: int = 5) -> list:
+        """`sample(frame)` of every frame over `duration_s` (at least `min_frames`), each passing `fresh()`: a frozen,
+        re-sent or faulty stream gives none."""
+        samples = []
+        deadline = time.monotonic() + duration_s
+        while time.monotonic() < deadline or len(samples) < min_frames:
+            if not self.wait_frames(1, self.stale_timeout_s * 4):
+                raise ForceStreamError(f"Force-sensor stream stopped {what} ({len(samples)} frames).")
+            samples.append(sample(self.fresh()))
+        return samples
 
     def read(self) -> np.ndarray:
         counts = self._channels(self.fresh())
