@@ -33,7 +33,7 @@ from lerobot_blindgrasp.hardware.servo_registers import ServoRegisters
 from . import interactive
 from . import servo_calibration as calib
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
-from .errors import ForceOverloadError, GripperBusError, GripperSafetyStop, PolicyMismatchError
+from .errors import ForceOverloadError, GripperBusError, GripperSafetyStop
 from .keepalive import feeding_the_bus
 from .latch import SafetyLatch
 from .recording_space import RecordingSpace
@@ -139,8 +139,8 @@ class BlindgraspGripper(Robot):
         allow = self.config.allow_unverified_policy
         checked = policy_contract.check_named(cl.policy_path, self.name, fps, source, allow_unverified=allow)
         if checked and fps != loop_hz:
-            raise PolicyMismatchError(f"{source}={fps:g} but the robot's loop_hz is {self.config.loop_hz:g}: set "
-                                      "--robot.loop_hz to the loop's rate (it measures the loop against it).")  # fmt: skip
+            msg = f"{source}={fps:g} but the robot's loop_hz is {loop_hz:g}: set --robot.loop_hz to the loop's rate"
+            raise policy_contract.PolicyMismatchError(f"{msg} (it measures the loop against it).")
 
     def _bring_up(self, calibrate: bool) -> bool:
         """Calibration to the servos, the force tare, configure; False when left uncalibrated (lerobot-calibrate)."""
