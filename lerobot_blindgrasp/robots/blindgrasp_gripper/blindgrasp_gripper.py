@@ -139,8 +139,8 @@ class BlindgraspGripper(Robot):
         allow = self.config.allow_unverified_policy
         checked = policy_contract.check_named(cl.policy_path, self.name, fps, source, allow_unverified=allow)
         if checked and fps != loop_hz:
-            msg = f"{source}={fps:g} but the robot's loop_hz is {loop_hz:g}: set --robot.loop_hz to the loop's rate"
-            raise policy_contract.PolicyMismatchError(f"{msg} (it measures the loop against it).")
+            fix = "set --robot.loop_hz to the loop's rate (it measures the loop against it)"
+            raise policy_contract.PolicyMismatchError(f"{source}={fps:g} but the robot's loop_hz is {loop_hz:g}: {fix}.")
 
     def _bring_up(self, calibrate: bool) -> bool:
         """Calibration to the servos, the force tare, configure; False when left uncalibrated (lerobot-calibrate)."""
