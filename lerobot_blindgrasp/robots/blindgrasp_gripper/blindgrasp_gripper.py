@@ -29,6 +29,7 @@ from lerobot_blindgrasp.hardware.period_checks import PeriodChecks
 from lerobot_blindgrasp.hardware.plausibility import PositionGate
 from lerobot_blindgrasp.hardware.servo_diagnostics import ServoHealth
 from lerobot_blindgrasp.hardware.servo_registers import ServoRegisters
+from lerobot_blindgrasp.policy_contract import PolicyMismatchError
 
 from . import interactive
 from . import servo_calibration as calib
@@ -139,8 +140,8 @@ class BlindgraspGripper(Robot):
         allow = self.config.allow_unverified_policy
         checked = policy_contract.check_named(cl.policy_path, self.name, fps, source, allow_unverified=allow)
         if checked and fps != loop_hz:
-            fix = "set --robot.loop_hz to the loop's rate (it measures the loop against it)"
-            raise policy_contract.PolicyMismatchError(f"{source}={fps:g} but the robot's loop_hz is {loop_hz:g}: {fix}.")
+            raise PolicyMismatchError(f"{source}={fps:g} but the robot's loop_hz is {self.config.loop_hz:g}: set "
+                                      "--robot.loop_hz to the loop's rate (it measures the loop against it).")  # fmt: skip
 
     def _bring_up(self, calibrate: bool) -> bool:
         """Calibration to the servos, the force tare, configure; False when left uncalibrated (lerobot-calibrate)."""
