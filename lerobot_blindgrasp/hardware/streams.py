@@ -1,16 +1,11 @@
-"""One "latest frame" stream for the devices that push data at their own rate: the fingertip force sensors (serial)
-and the glove bridge (UDP).
+"""One "latest frame" stream for the devices that push data at their own rate (the force board, the glove bridge).
 
-A background thread keeps the newest valid frame and its arrival time; the control loop never blocks on the
-device, and a device failure ends the thread and is raised at the next read. Liveness is judged by content too: a
-subclass's `_keep` drops frames whose counter repeats or runs backwards (`counter_faults`), and a channel of
-`_content` identical bit for bit for `frozen_frames` frames (beyond what its noise allows) stops counting as fresh.
-
-Stale: no fresh frame for `stale_timeout_s`. Slow: fresh frames, but fewer per second than `min_rate_hz` over the
-newest `RATE_WINDOW` intervals (each frame stamped when `_receive` hands it on, so it must hand on each frame as
-soon as it is complete). A host or USB stall is not slow: the frames wait in the OS buffer and arrive in a burst.
-
-Hand-written: neither LeRobot nor pyserial offers this (LeRobot's `OpenCVCamera.async_read` is specific to OpenCV).
+A background thread keeps the newest valid frame and its arrival time, so the control loop never blocks on the
+device; a device failure ends the thread and is raised at the next read. A subclass's `_keep` drops re-sent or
+replayed frames (`counter_faults`), and a `_content` channel identical for `frozen_frames` frames stops counting as
+fresh. Stale: no fresh frame for `stale_timeout_s`. Slow: fewer fresh frames per second than `min_rate_hz` over the
+newest `RATE_WINDOW` intervals (a host stall is not slow: the frames arrive in a burst after it). Hand-written:
+neither LeRobot nor pyserial offers this.
 """
 
 from __future__ import annotations
@@ -19,11 +14,8 @@ import logging
 import threading
 import time
 from collections import deque
-from typing import TypeVar
 
 logger = logging.getLogger(__name__)
-
-F = TypeVar("F")
 
 RATE_WINDOW = 16  # arrival intervals the rate estimate looks at (at most)
 RATE_MIN_INTERVALS = 4  # and at least, before any rate is judged

@@ -115,14 +115,12 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         self.stop()
 
     def _open(self) -> None:
-        import serial  # pyserial comes with lerobot[dynamixel]
-
         self.clock = self._new_clock()  # a new session: the board may have restarted while the port was closed
         try:
             self._serial = open_exclusive(self.port, self.baudrate, "force-sensor", timeout=RECEIVE_TIMEOUT_S)
         except ConnectionError:
             raise  # PortInUseError: says itself what to do
-        except (OSError, serial.SerialException) as e:
+        except OSError as e:  # pyserial's SerialException is one
             raise ForceStreamError(
                 f"Could not open the force-sensor port '{self.port}': {e}. Find the force board's port with "
                 "lerobot-find-port and pass --robot.force_sensor.port=..., or install "
