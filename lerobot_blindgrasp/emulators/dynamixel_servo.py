@@ -149,9 +149,8 @@ class EmulatedServo:
         return new
 
     def reboot(self) -> None:
-        """Power-cycle semantics: RAM back to defaults (torque off, errors cleared), EEPROM kept. Startup Torque On
-        (Startup_Configuration bit 0, firmware v45+) brings the torque back on by itself, holding the present
-        position."""
+        """A power cycle: RAM back to defaults (torque off, errors cleared), EEPROM kept; Startup Torque On (v45+) turns
+        the torque back on by itself, holding the present position."""
         eeprom = bytes(self.regs[:EEPROM_END])
         self.regs = bytearray(TABLE_SIZE)
         for name, value in DEFAULTS.items():

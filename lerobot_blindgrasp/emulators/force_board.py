@@ -65,11 +65,9 @@ class ForceSensorEmulator(PtyDevice):
         self.sent = 0
 
     def reset(self, boot_s: float = 0.5, cause: int | None = 0x08, unsettled_frames: int = 0) -> None:
-        """The microcontroller resets (a brown-out, a USB glitch, a watchdog): nothing for `boot_s` (its bootloader
-        and HX711 settling), then frames again from SEQ 0, the first one a boot frame with the reset `cause` (MCUSR
-        bits; 0x08 watchdog) as the shipped firmware sends it (None: no boot frame, as older firmware). The first
-        `unsettled_frames` frames after the reset carry an unloaded cell's counts whatever the load: HX711s not yet settled, as a
-        firmware that does not wait for them would send."""
+        """The board resets: silent for `boot_s`, then frames from SEQ 0, the first a boot frame with the MCUSR `cause`
+        (None: no boot frame, as older firmware); the first `unsettled_frames` carry unloaded counts whatever the
+        load, as a firmware that does not wait for its HX711s to settle would send."""
         self.seq = 0
         self._next = time.monotonic() + boot_s
         self._boot_cause, self._unsettled = cause, unsettled_frames

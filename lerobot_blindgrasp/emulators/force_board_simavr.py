@@ -142,9 +142,8 @@ class SimConfig:
 
 
 def _newest_frame_ages_ms(reader, seconds: float) -> list[float]:
-    """The newest frame's age at reads spread over every phase of the board's period, for `seconds`: what a
-    control loop that reads at its own times sees (half a period on average when frames are handed on as they
-    arrive)."""
+    """The newest frame's age at reads spread over every phase of the board's period, for `seconds`: what a control
+    loop reading at its own times sees (half a period on average when frames are handed on as they arrive)."""
     ages, k, deadline = [], 0, time.monotonic() + seconds
     while time.monotonic() < deadline:
         time.sleep(0.003 + 0.0013 * (k % 7))

@@ -164,8 +164,7 @@ class ServoRegisters:
 
     def torque_on_holding(self, present: dict[str, int], watchdog_units: int) -> None:
         """Torque on with Goal_Position = `present` (trusted ticks), so nothing moves. A watchdog error outlives the
-        torque-off (the register keeps reading -1) and makes the goal registers read-only: cleared first, armed once
-        the torque is on (it only watches while the torque is on)."""
+        torque-off and makes the goals read-only: cleared first, armed once the torque is on."""
         for j in self.joints:
             self.bus.write("Bus_Watchdog", j, 0)
             self.bus.write("Goal_Position", j, present[j])
@@ -206,9 +205,8 @@ class ServoRegisters:
         return bool(value)
 
     def rearm_watchdog(self, joints: list[str], present: dict[str, int]) -> None:
-        """The servos' bus watchdog stopped `joints` because this process sent nothing for its period (a slow save
-        between episodes, an operator prompt). The host is evidently alive again: clear the error (goal registers
-        are read-only until then), hold the pose the servos stopped in (`present`, trusted ticks), arm it again."""
+        """The bus watchdog stopped `joints` during a pause of this process, which is evidently alive again: clear the
+        error (the goals are read-only until then), hold the pose they stopped in (`present`, ticks), re-arm."""
         units = self.expected["Bus_Watchdog"]
         logger.warning("Bus watchdog stopped %s after more than %d ms without bus traffic; re-arming it.",
                        joints, units * xm430.WATCHDOG_UNIT_MS)  # fmt: skip

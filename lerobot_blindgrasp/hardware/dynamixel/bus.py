@@ -119,9 +119,8 @@ class FlushingPortHandler(PortHandler):
 
 
 class LineWatchingPacketHandler(Protocol2PacketHandler):
-    """The SDK's protocol-2 packet handler, telling the port when a receive failed so that the next try first waits
-    for the abandoned replies to end (see `FlushingPortHandler.clearPort`). Every read path ends here: unicast
-    reads, pings and each reply of a sync read."""
+    """The SDK's protocol-2 packet handler, telling the port when a receive failed (every read path ends here), so
+    the next try first waits for the abandoned replies to end (`FlushingPortHandler.clearPort`)."""
 
     def rxPacket(self, port, fast_option):
         rxpacket, result = super().rxPacket(port, fast_option)

@@ -204,9 +204,8 @@ def load_force_calibration(path) -> ForceCalibration:
 
 
 def apply(reader, calibration_dir, robot_id: str) -> ForceCalibration | None:
-    """Give `reader` (a ForceSensorReader) the scales and zero of the robot's force calibration file, if there is
-    one; None (the config's scales stay, with a warning naming the command that measures them) when there is
-    none."""
+    """Give `reader` the scales and zero of the robot's force calibration file; None when there is none (the
+    config's scales stay, with a warning naming the command that measures them)."""
     path = path_for(calibration_dir, robot_id)
     if not path.is_file():
         logger.warning(missing_warning(path, robot_id, reader.scale))

@@ -283,10 +283,9 @@ class BlindgraspGripper(Robot):
 
     @check_if_not_connected
     def send_action(self, action: dict[str, float]) -> dict[str, float]:
-        """Absolute joint targets (rad), clipped to the joint limits and then to +-max_relative_target around the
-        present position, sent with one sync write; returns the targets sent (after tick rounding). The step bound
-        comes last so it holds from the first step: a joint that starts outside its limits comes back at <=
-        max_relative_target per call, never in one jump."""
+        """Absolute joint targets (rad), clipped to the joint limits, then to +-max_relative_target around the present
+        position (last, so a joint outside its limits comes back at that rate, never in one jump), sent with one
+        sync write; returns the targets sent (after tick rounding)."""
         missing = [k for k in spec.ACTION_NAMES if k not in action]
         unknown = [k for k in action if k not in spec.ACTION_NAMES]
         if missing or unknown:  # an extra key is a policy or teleop trained for other joints: nothing is sent

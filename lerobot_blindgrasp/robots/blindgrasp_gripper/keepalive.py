@@ -16,9 +16,8 @@ KEEPALIVE_S = spec.CONTROL_DT
 
 
 def feeding_the_bus[T](work: Callable[[], T], feed: Callable[[], None]) -> T:
-    """`work` (one that touches no servo, e.g. the force tare) in a worker thread while this thread calls `feed` (one
-    servo state check) every `KEEPALIVE_S`: every bus packet stays on the caller's thread, and the work's own error
-    comes back here."""
+    """`work` (touching no servo) in a worker thread while this thread calls `feed` every `KEEPALIVE_S`: every bus
+    packet stays on the caller's thread, and the work's own error comes back here."""
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="force-tare") as pool:
         task = pool.submit(work)
         while True:

@@ -58,11 +58,8 @@ def directions(reference: dict[str, int], positive: dict[str, int], min_motion_r
 def homing_offsets(
     reference: dict[str, int], positive: dict[str, int], present_after_drive_mode: dict[str, int]
 ) -> dict[str, int]:
-    """Homing_Offset that makes the reference pose read ZERO_TICK.
-
-    `present_after_drive_mode` is read in the positive pose after writing Drive_Mode (homing offset 0). In the new
-    direction the reference pose lies |delta| ticks below that reading.
-    """
+    """Homing_Offset that makes the reference pose read ZERO_TICK: `present_after_drive_mode`, read in the positive
+    pose after writing Drive_Mode (homing offset 0), lies |delta| ticks above the reference pose."""
     return {
         j: ZERO_TICK - (present_after_drive_mode[j] - abs(wrapped_delta(reference[j], positive[j])))
         for j in reference
@@ -129,8 +126,7 @@ def read_raw(fpath: Path) -> object:
 
 def servo_calibration_problems(calibration: dict, ids: dict[str, int]) -> list[str]:
     """What is wrong with a loaded calibration, by the rules `calibrate()` builds it with: one record per joint under
-    the configured servo ID, Drive_Mode 0 or 1 (reverse), a Homing_Offset the
-    firmware accepts, and a position range 0 <= min < max <= 4095."""
+    the configured servo ID, Drive_Mode 0 or 1, a Homing_Offset the firmware accepts, 0 <= min < max <= 4095."""
     out = []
     missing, extra = [j for j in ids if j not in calibration], [j for j in calibration if j not in ids]
     if missing:
