@@ -39,15 +39,14 @@ class DynamixelBusEmulator(PtyDevice):
 
     def __init__(self, ids, *, baudrate: int = 1_000_000, initial_shaft: dict[int, float] | None = None):
         super().__init__()
+        self.supply = Supply()  # one supply for the bus (`servo_health.py`): fault injection sags it
         self.servos: dict[int, EmulatedServo] = {}
         for i in ids:
             servo = EmulatedServo(i, shaft=(initial_shaft or {}).get(i, 2048.0))
             servo.set("Baud_Rate", BAUD_REGISTER[baudrate])
             servo.reboot()
-            self.servos[i] = servo
-        self.supply = Supply()  # one supply for the bus (`servo_health.py`): fault injection sags it
-        for servo in self.servos.values():
             servo.health.supply = self.supply
+            self.servos[i] = servo
         self.twins: dict[int, EmulatedServo] = {}  # a second servo set to the same ID (`add_twin`)
         self._buf = bytearray()
         self._pending_ids: list[EmulatedServo] = []
