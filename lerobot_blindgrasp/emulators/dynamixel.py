@@ -115,9 +115,7 @@ class DynamixelBusEmulator(PtyDevice):
     # -- pty loop --
     def _tick(self) -> None:
         now = time.monotonic()
-        dt, self._last = now - self._last, now
-        if dt <= 0:
-            dt = 0.0
+        dt, self._last = max(now - self._last, 0.0), now
         for servo in (*self.servos.values(), *self.twins.values()):
             servo.step(dt)
             servo.check_watchdog(now)
