@@ -45,7 +45,8 @@ def module_name(path: str) -> str:
 
 
 def imported(tree: ast.AST) -> set[str]:
-    """Every package module a source imports, `from X import Y` counted as X.Y too (Y may be a module)."""
+    """Every absolute module a source imports, `from X import Y` counted as X.Y too for the package (Y may be a
+    module). The layout test reads imports through this function too."""
     found = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
@@ -54,7 +55,7 @@ def imported(tree: ast.AST) -> set[str]:
             found.add(node.module)
             if node.module == PACKAGE:
                 found |= {f"{PACKAGE}.{a.name}" for a in node.names}
-    return {m for m in found if room(m)}
+    return found
 
 
 def arrows(files: list[str], root: Path = ROOT) -> dict[str, set[str]]:
@@ -66,7 +67,7 @@ def arrows(files: list[str], root: Path = ROOT) -> dict[str, set[str]]:
             mod = module_name(f)
             if room(mod) is None:  # the package's __init__: its imports register the plugin, no room draws them
                 continue
-            targets = {room(m) for m in imported(ast.parse((root / f).read_text(), f))}
+            targets = {room(m) for m in imported(ast.parse((root / f).read_text(), f))} - {None}
             out[mod] = {t for t in targets if t in rooms and t != room(mod)}  # not a name like __version__
     return out
 

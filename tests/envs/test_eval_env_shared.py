@@ -57,4 +57,8 @@ def test_create_envs_shares_one_sim_per_object():
     assert isinstance(env, SharedSimVectorEnv)
     env.reset(seed=[1000, 1001])
     assert env.envs[0].unwrapped.sim() is env.envs[1].unwrapped.sim()
+    # What lerobot-eval reads off a vector env besides reset and step.
+    assert env.call("_max_episode_steps") == (spec.EPISODE_STEPS,) * 2
+    assert len(set(env.call("task_description"))) == 1
+    assert env.unwrapped.metadata["render_fps"] == env.envs[0].metadata["render_fps"]
     env.close()

@@ -12,6 +12,8 @@ import tomllib
 from collections import defaultdict
 from pathlib import Path
 
+from lab.structure import imported
+
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / "lerobot_blindgrasp"
 PLUGIN_FACE = ROOT / "lerobot_policy_blindgrasp"  # the module LeRobot's plugin discovery imports
@@ -64,18 +66,6 @@ def _sources(*roots: Path):
         yield path, ast.parse(path.read_text(), str(path))
 
 
-def _imported(tree: ast.AST) -> set[str]:
-    found = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            found |= {a.name for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            found.add(node.module)
-            if node.module == "lerobot_blindgrasp":
-                found |= {f"lerobot_blindgrasp.{a.name}" for a in node.names}
-    return found
-
-
 def test_every_room_has_a_floor():
     rooms = {p.stem if p.is_file() else p.name for p in PACKAGE.iterdir() if not p.name.startswith(("_", "."))}
     rooms = {r for r in rooms if (PACKAGE / r).is_dir() or (PACKAGE / f"{r}.py").is_file()}
@@ -89,7 +79,7 @@ def test_imports_run_down_the_floors():
         if rel.as_posix() == "__init__.py":  # the package's face registers the plugins
             continue
         src = rel.parts[0].removesuffix(".py")
-        for module in _imported(tree):
+        for module in imported(tree):
             dst = _room(module)
             if dst is None or dst == src or dst == "__version__" or (src, dst) in EXCEPTIONS:
                 continue
@@ -103,7 +93,7 @@ def test_the_package_never_imports_the_lab():
     up = [
         f"{path.relative_to(ROOT)} imports {module}"
         for path, tree in _sources()
-        for module in _imported(tree)
+        for module in imported(tree)
         if module == "lab" or module.startswith("lab.")
     ]
     assert LAB.is_dir() and not up, "the package imports the lab:\n" + "\n".join(up)
