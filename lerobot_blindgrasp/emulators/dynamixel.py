@@ -55,15 +55,12 @@ class DynamixelBusEmulator(PtyDevice):
         self.missing_ids: set[int] = set()
         self.drop_responses: dict[int, int] = {}  # id -> number of status packets to swallow (timeouts)
         self.corrupt_responses: dict[int, int] = {}  # id -> number of status packets sent with a bad CRC
-        # Seconds between the replies of a sync-read burst (real servos answer in turn, each after its
-        # Return_Delay_Time): long gaps leave the line empty for a while in the middle of a burst.
-        self.reply_gap_s = 0.0
-        # Every packet is answered this much later (a slow USB hub, a saturated adapter): the host loop slows down.
-        self.reply_delay_s = 0.0
+        self.reply_gap_s = 0.0  # between the replies of a sync-read burst: the line empty mid-burst
+        self.reply_delay_s = 0.0  # before every reply (a slow USB hub): the host loop slows down
         # Wrong values with a valid CRC and no error bit: id -> [ticks added to Present_Position, replies left].
         self.position_glitch: dict[int, list[int]] = {}
-        # Stray late status packets: (id, n data bytes) sent, with that servo's registers from Torque_Enable on,
-        # right before the replies to the next sync read (a reply of an earlier transaction arriving late).
+        # Late replies of an earlier transaction: (id, n data bytes from Torque_Enable on), sent before the next sync
+        # read's replies.
         self.stray_replies: list[tuple[int, int]] = []
         self.instruction_counts: dict[int, int] = {}  # for the tests
 
