@@ -94,8 +94,7 @@ class BlindgraspGripperConfig(RobotConfig):
         for name, values in (("joint_lower", self.joint_lower), ("joint_upper", self.joint_upper)):
             if len(values) != n:
                 raise ValueError(f"{name} needs {n} values, got {len(values)}")
-        for j, lo, hi in zip(spec.JOINT_NAMES, self.joint_lower, self.joint_upper, strict=True):
-            k = spec.JOINT_NAMES.index(j)
+        for k, (j, lo, hi) in enumerate(zip(spec.JOINT_NAMES, self.joint_lower, self.joint_upper, strict=True)):
             if not spec.JOINT_LOWER[k] <= lo < hi <= spec.JOINT_UPPER[k]:
                 raise ValueError(f"{j}: limits [{lo}, {hi}] must lie inside the sim's [{spec.JOINT_LOWER[k]}, "
                                  f"{spec.JOINT_UPPER[k]}]")  # fmt: skip
