@@ -1,6 +1,7 @@
 """Session-wide settings (headless rendering, no network, modest threading on small CI machines) and the fixtures
 of the emulated gripper that tests in every folder use."""
 
+import gc
 import os
 
 # Before anything imports mujoco: EGL renders headless (OSMesa is not installed, GLFW needs a display).
@@ -13,6 +14,14 @@ import pytest  # noqa: E402  (after the environment settings above)
 from emulators.rig import GripperRig  # noqa: E402
 
 from lerobot_blindgrasp import spec  # noqa: E402
+
+
+def pytest_collection_finish(session):
+    """The emulated servos and boards answer from threads of the test process, within a reply window a real device
+    meets in microseconds. A full garbage collection walks the whole heap (torch, LeRobot, MuJoCo and every
+    collected test) with every thread stopped, and on a busy 2-core machine that pause outlasts the window. What
+    collection leaves alive lives for the session, so it is frozen out of the collector's walks."""
+    gc.freeze()
 
 
 @pytest.fixture

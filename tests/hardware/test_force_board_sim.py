@@ -108,8 +108,9 @@ def test_each_frame_is_handed_on_when_it_arrives(build_dir):
         board.stop()
     assert 70 < sent < 90, sent
     assert abs(estimate - sent) < 0.1 * sent, (estimate, sent)
-    # Half a period (6 ms) on average, plus the host's scheduling; a timed batch read adds ~half its timeout.
-    assert np.mean(ages) < 0.0095, ages
+    # Half a period (6 ms) typically, plus the host's scheduling; frames handed on in batches of even two periods
+    # would make it 12.5 ms. The median, because a busy host's scheduling stalls a few samples, not the reader.
+    assert np.median(ages) < 0.0095, ages
 
 
 def test_a_dead_or_saturated_cell_is_a_named_fault_and_the_stream_goes_on(build_dir):
