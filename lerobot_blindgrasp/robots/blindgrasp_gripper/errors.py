@@ -1,8 +1,10 @@
 """Errors the gripper raises after a safety stop: `GripperSafetyStop` and its subclasses are all raised with the
-torque already off. A refused policy (`policy_contract.PolicyMismatchError`) and a refused tare (`ForceTareError`)
+torque already off. A refused policy (`PolicyMismatchError`, policy_contract's) and a refused tare (`ForceTareError`)
 stop nothing."""
 
 from __future__ import annotations
+
+from lerobot_blindgrasp.policy_contract import PolicyMismatchError  # noqa: F401  (the hazard tests import it here)
 
 
 class GripperSafetyStop(RuntimeError):
