@@ -1,11 +1,7 @@
 """lerobot_blindgrasp: vision-free three-finger grasping with uniaxial fingertip force sensing, for LeRobot.
 
-Importing this package registers its LeRobot plugin types (LeRobot imports it through the
-`lerobot_policy_blindgrasp` discovery shim):
-- policy `blindgrasp_transformer` (`policies/`),
-- env `blindgrasp` for lerobot-eval (`envs/`),
-- robot and teleoperator for the real gripper and the Manus glove (`robots/`, `teleoperators/`).
-Heavy modules (MuJoCo, rsl-rl) are imported lazily by the code that needs them.
+Importing it registers the plugin's LeRobot types: policy `blindgrasp_transformer`, envs `blindgrasp` and
+`blindgrasp_real`, robot `blindgrasp_gripper`, teleoperator `manus_glove`. MuJoCo and rsl-rl load lazily.
 """
 
 from lerobot_blindgrasp import envs, policies, robots, teleoperators  # noqa: F401  (registration)

@@ -1,9 +1,6 @@
-"""What every `blindgrasp-*` command shares: draccus config parsing (as LeRobot's scripts do), signal handling and
-the OpenMP setting of the commands that train.
-
-Configs are dataclasses; a command is `parse_config(Cfg, argv)` then a library function that takes the config. So
-`--output_dir=...`, dotted flags, lists as `--runs=[a,b]` and `--config_path cfg.yaml` work as in `lerobot-train`,
-and `--help` lists every field with its comment. There are no positional arguments: every input is a named flag.
+"""What every `blindgrasp-*` command shares: draccus config parsing (as LeRobot's scripts do, so dotted flags,
+`--config_path` and `--help` work as in `lerobot-train`; every input is a named flag), signal handling, and the
+OpenMP setting of the commands that train.
 """
 
 from __future__ import annotations
@@ -13,12 +10,9 @@ import os
 import signal
 import sys
 import threading
-import typing
 from collections.abc import Callable, Iterator, Sequence
 
 import draccus
-
-T = typing.TypeVar("T")
 
 
 def parse_config[T](cls: type[T], argv: list[str] | None = None) -> T:
@@ -35,17 +29,12 @@ def parse_config[T](cls: type[T], argv: list[str] | None = None) -> T:
 
 
 def sleeping_openmp_threads(restart: bool) -> None:
-    """Make idle OpenMP threads sleep instead of spin (`OMP_WAIT_POLICY=PASSIVE`), unless the user chose a policy.
+    """Make idle OpenMP threads sleep instead of spin (`OMP_WAIT_POLICY=PASSIVE`), unless the user chose a policy:
+    on a shared machine spinning threads steal the cores the others need. Call it first thing in `main(argv)`.
 
-    Why: on a small machine shared with anything else, spinning threads steal the cores the others need; it made
-    the teacher's 2-thread PPO update 4.8x slower (7.3 s against 1.6 s per iteration), while on an idle machine both
-    policies run it equally fast. Call it first thing in a command's `main(argv)`.
-
-    OpenMP reads the setting once, when torch loads it, and every module of this package has torch loaded by then.
-    So with `restart` (pass `argv is None`: the process is this command, a console script or `python -m`) the command
-    starts over with the setting in its environment (`os.execv`: same process id, same arguments). Without it (a
-    call from Python, e.g. a test, or a command that only starts others) it sets the variable for the processes this
-    one starts.
+    OpenMP reads the setting once, when torch loads it, which has happened by then. So with `restart` (pass
+    `argv is None`: the process is this command) the command starts over with it set (`os.execv`, same pid and
+    arguments); without it, it is set for the processes this one starts.
     """
     if "OMP_WAIT_POLICY" in os.environ:
         return
@@ -63,8 +52,8 @@ def command_line(prog: str, argv: list[str] | None = None) -> str:
 
 @contextlib.contextmanager
 def _handlers(signals: Sequence[signal.Signals], handler: Callable) -> Iterator[None]:
-    """Install `handler` for `signals` within the block and restore the previous ones after it. Python only
-    delivers signals to the main thread, so elsewhere (a worker thread running a collection) this does nothing."""
+    """Install `handler` for `signals` within the block, then restore the previous ones. Python delivers signals
+    to the main thread only, so elsewhere this does nothing."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -77,31 +66,25 @@ def _handlers(signals: Sequence[signal.Signals], handler: Callable) -> Iterator[
 
 
 @contextlib.contextmanager
-def interrupts_as_keyboard_interrupt(signals=(signal.SIGTERM, signal.SIGHUP)) -> Iterator[None]:
+def interrupts_as_keyboard_interrupt() -> Iterator[None]:
     """Within the block, SIGTERM/SIGHUP (a job scheduler, `docker stop`, a closed terminal) raise
     KeyboardInterrupt like Ctrl-C, so one `except KeyboardInterrupt` path saves and exits cleanly."""
 
     def _raise(signum, _frame):
         raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
 
-    with _handlers(signals, _raise):
+    with _handlers((signal.SIGTERM, signal.SIGHUP), _raise):
         yield
 
 
 class GracefulStop:
-    """Two-stage Ctrl-C for loops that can stop between steps (demo collection).
+    """Two-stage Ctrl-C for loops that can stop between steps (demo collection). First SIGINT/SIGTERM: `requested`
+    is set and the loop stops after its current step. Second: KeyboardInterrupt at once, except inside `saving()`:
+    an episode half-saved would leave rows the metadata does not list, so the abort waits until it is complete."""
 
-    First SIGINT/SIGTERM: `requested` is set and the loop stops after its current step. Second: KeyboardInterrupt
-    right away, except inside `saving()`: an episode interrupted half-way through `save_episode` would leave rows
-    in the data file that the metadata does not list, so the abort waits the few milliseconds until it is complete.
-    """
-
-    def __init__(
-        self, note: str = "stopping after this step (again to abort now)", signals=(signal.SIGINT, signal.SIGTERM)
-    ):
+    def __init__(self, note: str = "stopping after this step (again to abort now)"):
         self.requested: int | None = None
         self._note = note  # printed on the first signal
-        self._signals = signals
         self._stack = contextlib.ExitStack()
         self._saving = False
         self._abort_pending = False
@@ -126,7 +109,7 @@ class GracefulStop:
         print(f"\n{signal.Signals(signum).name}: {self._note}", file=sys.stderr, flush=True)
 
     def __enter__(self) -> GracefulStop:
-        self._stack.enter_context(_handlers(self._signals, self._handle))
+        self._stack.enter_context(_handlers((signal.SIGINT, signal.SIGTERM), self._handle))
         return self
 
     def __exit__(self, *exc) -> bool:

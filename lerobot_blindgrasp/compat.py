@@ -1,23 +1,11 @@
-"""Every place the plugin reaches into LeRobot's internals or installs a process-wide hook, as one set.
+"""Every place the plugin reaches into LeRobot's internals or installs a process-wide hook, and nowhere else
+(`tests/policies/test_compat.py` scans the package for strays): LeRobot's dataset reader and writers
+(`serve_dataset_readers_with`, `skip_empty_image_embedding`, `atomic_lerobot_metadata`, and the writers' private
+state the demo collector resets: `reopen_finalized`, `finalize_or_abandon`), lerobot-record's episode announcement (`is_episode_announcement`), LeRobot's
+command line (`read_command_line`, `set_lerobot_argv`), and the process's signal handlers and excepthook.
 
-A LeRobot plugin extends LeRobot through its registries (robot, teleoperator, env and policy configs). Where those
-do not reach, the plugin leans on how LeRobot works inside; each such reach is one small function or context
-manager here, and nowhere else in the package (`tests/policies/test_compat.py` scans for strays):
-
-- `serve_dataset_readers_with`: wraps `DatasetReader.try_load` / `load_and_activate` (the student's window cache).
-- `skip_empty_image_embedding`: replaces the dataset writer's `embed_images` within a block (demo collection).
-- `atomic_lerobot_metadata`: replaces `io_utils.write_json` and `write_tasks` within a block (demo collection).
-- `is_episode_announcement`: recognises lerobot-record's `log_say` line that starts an episode (the robot).
-- `read_command_line` (through `cli_policy_path`, `cli_arg`), `set_lerobot_argv`: LeRobot's command line, read or
-  set outside its parser.
-- `set_signal_handler`, `set_excepthook`: process-wide hooks the robot installs while a gripper is connected.
-
-`check_lerobot()` also covers the dataset writers' private state that the demo collector reads and resets to reopen a
-finalized dataset in place (`demos/crash_checkpoints.py`) or abandon a failed finalize (`demos/collection_loop.py`).
-
-Each was written against LeRobot `WRITTEN_FOR`. `check_lerobot()` lists what a reach relies on that the installed LeRobot
-no longer has; the first reach used under another LeRobot version logs the version and that list once, as a
-WARNING. A reach whose target is gone degrades to LeRobot's own behaviour, as before.
+Each was read against LeRobot `WRITTEN_FOR`. Under another version the first reach used logs, once, what
+`check_lerobot()` finds missing; a reach whose target is gone leaves LeRobot's own behaviour in place.
 """
 
 from __future__ import annotations
@@ -29,6 +17,7 @@ import importlib
 import importlib.metadata
 import importlib.util
 import logging
+import operator
 import signal
 import sys
 from collections.abc import Callable, Iterator
@@ -37,14 +26,6 @@ from lerobot_blindgrasp import durable
 
 WRITTEN_FOR = "0.6.1"  # the LeRobot release every reach below was read against
 ANNOUNCEMENT = "Recording episode"  # the text of lerobot-record's log_say before every episode
-_WRITER_STATE = ("self._finalized =", "self._pq_writer =", "self._latest_episode =")
-_META_STATE = (
-    "self._finalized =",
-    "self._pq_writer =",
-    "self.latest_episode =",
-    "self._metadata_buffer",
-    "self.episodes =",
-)
 _WRAPPED = "_blindgrasp_compat"  # marks a DatasetReader method this module has wrapped
 logger = logging.getLogger(__name__)
 _warned = False
@@ -72,15 +53,13 @@ def _has(module: str, *names: str) -> list[str]:
         mod = importlib.import_module(module)
     except ImportError as e:
         return [f"{module} cannot be imported ({e})"]
-    return [f"{module}.{name} is gone" for name in names if not _has_path(mod, name)]
-
-
-def _has_path(obj, dotted: str) -> bool:
-    for part in dotted.split("."):
-        if not hasattr(obj, part):
-            return False
-        obj = getattr(obj, part)
-    return True
+    gone = []
+    for name in names:
+        try:
+            operator.attrgetter(name)(mod)
+        except AttributeError:
+            gone.append(f"{module}.{name} is gone")
+    return gone
 
 
 def _mentions(module: str, *texts: str) -> list[str]:
@@ -90,27 +69,29 @@ def _mentions(module: str, *texts: str) -> list[str]:
 
 def check_lerobot() -> list[str]:
     """What the reaches rely on that the installed LeRobot lacks: one line each; empty when all is there."""
-    reader = "lerobot.datasets.dataset_reader"
+    reader, writer, meta = (f"lerobot.datasets.dataset_{m}" for m in ("reader", "writer", "metadata"))
     problems = _has(reader, "DatasetReader.try_load", "DatasetReader.load_and_activate", "DatasetReader.get_item")
     problems += _mentions(reader, *(f"self.{a} =" for a in ("_meta", "hf_dataset", "delta_indices")))
     problems += _mentions(reader, "self._image_transforms =", "self._absolute_to_relative_idx =")
-    problems += _has("lerobot.datasets.dataset_writer", "embed_images", "DatasetWriter._save_episode_data")
-    problems += _mentions("lerobot.datasets.dataset_writer", "embed_images(ep_dataset)")
+    problems += _has(writer, "embed_images", "DatasetWriter._save_episode_data")
+    problems += _mentions(writer, "embed_images(ep_dataset)")
     problems += _has("datasets.features.features", "require_storage_embed")
     problems += _has("lerobot.datasets.io_utils", "write_json", "write_info", "write_stats")
     problems += _mentions(
         "lerobot.datasets.io_utils", "    write_json(info.to_dict()", "    write_json(serialized"
     )
-    problems += _has("lerobot.datasets.dataset_metadata", "write_tasks")
-    problems += _mentions("lerobot.datasets.dataset_metadata", "write_tasks(self.tasks, self.root)")
+    problems += _has(meta, "write_tasks")
+    problems += _mentions(meta, "write_tasks(self.tasks, self.root)")
     problems += _has("lerobot.utils.utils", "log_say")
     problems += _mentions("lerobot.utils.utils", "logging.info(text)")
     problems += _mentions("lerobot.scripts.lerobot_record", f'log_say(f"{ANNOUNCEMENT} {{dataset.num_episodes}}"')
     problems += _has("lerobot.configs.parser", "get_path_arg", "parse_arg")
-    # The writers' private state the demo collector reads and resets (demos/crash_checkpoints.py `reopen_in_place`,
-    # demos/collection_loop.py `_finalize_or_abandon`); both fall back to LeRobot's own path when a field is missing.
-    problems += _mentions("lerobot.datasets.dataset_writer", *_WRITER_STATE)
-    problems += _mentions("lerobot.datasets.dataset_metadata", *_META_STATE)
+    # The writers' private state that demos/crash_checkpoints.py and demos/collection_loop.py read and reset.
+    problems += _mentions(writer, *(f"self.{a} =" for a in ("_finalized", "_pq_writer", "_latest_episode")))
+    problems += _mentions(
+        meta, *(f"self.{a} =" for a in ("_finalized", "_pq_writer", "latest_episode", "episodes"))
+    )
+    problems += _mentions(meta, "self._metadata_buffer")
     problems += _mentions("lerobot.datasets.lerobot_dataset", "self._is_finalized =", "self.writer =")
     return problems
 
@@ -135,14 +116,9 @@ def _used(reach: str) -> None:
 
 
 def serve_dataset_readers_with(choose: Callable) -> None:
-    """From now on in this process, after LeRobot's `DatasetReader.try_load` or `load_and_activate` loads a table,
-    `choose(reader)` may return a `DatasetReader` subclass the reader becomes (None: it stays as it is).
-
-    LeRobot 0.6.1: `LeRobotDataset.__init__` builds a private `DatasetReader` and calls `try_load()`; a finalized
-    or reloaded dataset calls `load_and_activate()`. LeRobot has no hook to choose a dataset's reader, so the student's
-    window cache (`policies/blindgrasp_transformer/window_cache.py`) wraps both. It runs at plugin import, which
-    `lerobot-train` does before it builds the dataset. Wrapping twice is a no-op; a missing method is left alone.
-    """
+    """From now on in this process, after `DatasetReader.try_load` or `load_and_activate` loads a table,
+    `choose(reader)` may return a `DatasetReader` subclass the reader becomes (None: it stays as it is). LeRobot
+    0.6.1 has no hook to choose a dataset's reader (docs/upstream/low-dimensional-cache.md). Idempotent."""
     try:
         from lerobot.datasets.dataset_reader import DatasetReader
     except ImportError:
@@ -168,16 +144,9 @@ def _choose_after(load: Callable, choose: Callable) -> Callable:
 
 @contextlib.contextmanager
 def skip_empty_image_embedding() -> Iterator[None]:
-    """Skip LeRobot's image-embedding pass for episodes that have no image columns.
-
-    LeRobot 0.6.1: `DatasetWriter._save_episode_data` always runs `io_utils.embed_images` (imported into
-    `dataset_writer`), a per-row `datasets.Dataset.map` of `embed_table_storage`, even for state-only datasets. For
-    features that need no embedding (no Image, Video, Audio...) it rebuilds each row unchanged, so the pass is pure
-    overhead: about two thirds of `save_episode` for the demos' 100-frame episodes. While this context is active,
-    the writer's `embed_images` returns the dataset as is when `datasets`' own `require_storage_embed` says no column
-    needs it, and defers to LeRobot's function otherwise. The written files are identical but for the random cache
-    fingerprint `datasets` stamps into a mapped table's parquet metadata. If LeRobot's writer is laid out
-    differently, nothing is changed.
+    """Within the block, the dataset writer's `embed_images` returns a dataset unchanged when `datasets`'
+    `require_storage_embed` says no column needs embedding: LeRobot 0.6.1 runs this per-row pass even for
+    state-only datasets, rebuilding each row unchanged (docs/upstream/skip-image-embedding.md). Same files written.
     """
     try:
         from datasets.features.features import require_storage_embed
@@ -205,13 +174,9 @@ def skip_empty_image_embedding() -> Iterator[None]:
 
 @contextlib.contextmanager
 def atomic_lerobot_metadata() -> Iterator[None]:
-    """While active, LeRobot's dataset metadata writers write atomically (temp name + rename, not fsynced).
-
-    LeRobot 0.6.1 rewrites info.json and stats.json in place after every episode (`write_info` and `write_stats`,
-    both through `io_utils.write_json`) and tasks.parquet through `write_tasks` (imported into `dataset_metadata`);
-    a kill during one leaves a truncated file, and info.json is the one a repair cannot re-derive. The demo
-    collector runs inside this context. If LeRobot's modules are laid out differently, nothing is changed.
-    """
+    """Within the block, LeRobot's dataset metadata writers write atomically (temp name + rename, not fsynced):
+    LeRobot 0.6.1 rewrites info.json, stats.json (`io_utils.write_json`) and tasks.parquet (`write_tasks`) in place
+    after every episode, so a kill during one leaves a truncated file, and a repair cannot re-derive info.json."""
     try:
         from lerobot.datasets import dataset_metadata, io_utils
     except ImportError:
@@ -239,13 +204,9 @@ def atomic_lerobot_metadata() -> Iterator[None]:
 
 
 def is_episode_announcement(record: logging.LogRecord) -> bool:
-    """Whether a log record is lerobot-record announcing the episode about to start.
-
-    LeRobot 0.6.1: the Robot interface has no call at an episode's start. lerobot-record's loop runs
-    `log_say(f"Recording episode {n}")` just before each episode (lerobot_record.py; lerobot-rollout's episodic
-    strategy too), and `log_say` logs the text at INFO (`logging.info(text)`) whether or not sounds are on. The
-    robot checks itself at each start (`robots/blindgrasp_gripper/starts.py` hands these records to it).
-    """
+    """Whether a log record is lerobot-record announcing the episode about to start. LeRobot 0.6.1's Robot
+    interface has no call at an episode's start, but lerobot-record (and lerobot-rollout's episodic strategy) runs
+    `log_say(f"Recording episode {n}")` before each, which logs the text at INFO whether or not sounds are on."""
     if record.funcName == "log_say" and isinstance(record.msg, str) and record.msg.startswith(ANNOUNCEMENT):
         _used("is_episode_announcement")
         return True
@@ -253,12 +214,7 @@ def is_episode_announcement(record: logging.LogRecord) -> bool:
 
 
 def cli_policy_path() -> str | None:
-    """`--policy.path` of this process's command line, as LeRobot's parser reads it (None: not given).
-
-    LeRobot 0.6.1: lerobot-record, lerobot-eval and lerobot-rollout connect the robot (or make the env) before they
-    load the policy, and hand the robot nothing about it. `parser.get_path_arg("policy")` reads `sys.argv` the way
-    their `@parser.wrap()` does, so the gripper can check the checkpoint's contract before a servo moves.
-    """
+    """`--policy.path` of this process's command line, as LeRobot's `@parser.wrap()` reads it (None: not given)."""
     from lerobot.configs import parser
 
     _used("cli_policy_path")
@@ -266,11 +222,7 @@ def cli_policy_path() -> str | None:
 
 
 def cli_arg(name: str) -> str | None:
-    """`--<name>` of this process's command line (e.g. `dataset.root`), as LeRobot's parser reads it.
-
-    LeRobot 0.6.1: the robot is told nothing about the dataset or the rates a script runs at; `parser.parse_arg`
-    reads them from `sys.argv` as the script's own config does (disk-space and rate checks at connect).
-    """
+    """`--<name>` of this process's command line (e.g. `dataset.root`), as LeRobot's parser reads it."""
     from lerobot.configs import parser
 
     _used("cli_arg")
@@ -291,14 +243,9 @@ class CommandLine:
 
 
 def read_command_line() -> CommandLine:
-    """The one read of this process's command line for the gripper, called where its config is parsed.
-
-    LeRobot 0.6.1: lerobot-rollout builds the robot from `--robot.*` alone and loads the policy after connecting it;
-    lerobot-record never tells its robot the dataset or the rate it records at; lerobot-eval builds the env from
-    `--env.*` before it loads `--policy.path`. Parsing is the one moment the plugin sees that command line (LeRobot's
-    own `EvalPipelineConfig.__post_init__` re-reads `--policy.path` the same way), so the robot's config takes these
-    facts there, and the robot and the real eval env check them with what they were given.
-    """
+    """The one read of this process's command line for the gripper, called where its config is parsed: LeRobot
+    0.6.1's scripts build the robot (lerobot-eval: the env) before they load `--policy.path`, and never tell it the
+    dataset or the rate they record at (LeRobot's `EvalPipelineConfig` re-reads `--policy.path` the same way)."""
     fps, flag = None, None
     for name in ("fps", "env.fps", "dataset.fps"):
         if (value := cli_arg(name)) is not None:
@@ -309,29 +256,76 @@ def read_command_line() -> CommandLine:
 
 
 def set_lerobot_argv(argv: list[str]) -> None:
-    """Make `argv` the command line LeRobot's parser reads.
-
-    LeRobot 0.6.1: `@parser.wrap()` parses `sys.argv[1:]` and takes no argument list, so a command called from
-    Python with its arguments (tests, `blindgrasp-rollout`'s `main(argv)`) sets `sys.argv` first.
-    """
+    """Make `argv` the command line LeRobot's parser reads: LeRobot 0.6.1's `@parser.wrap()` parses `sys.argv[1:]`
+    and takes no argument list, so a command called from Python with its arguments sets `sys.argv` first."""
     sys.argv = [sys.argv[0], *argv]
 
 
 def set_signal_handler(signum: int, handler) -> object:
-    """Install `handler` for `signum` (main thread only, as Python requires); returns the previous handler.
-
-    A process-wide hook: the robot installs SIGTERM/SIGHUP handlers while a gripper is connected, so a scheduler's
-    stop unwinds through the script's cleanup (torque off), and defers signals during the torque-off itself.
-    LeRobot 0.6.1's own `ProcessSignalHandler` (lerobot-rollout) is left in place by the caller.
-    """
+    """Install `handler` for `signum` (main thread only, as Python requires); returns the previous handler. The
+    robot's, while a gripper is connected, make a scheduler's stop unwind through the script's cleanup (torque
+    off)."""
     return signal.signal(signum, handler)
 
 
 def set_excepthook(hook: Callable) -> Callable:
-    """Make `hook` the process's `sys.excepthook`; returns the one it replaced.
-
-    A process-wide hook: a script whose cleanup never reaches the robot's `disconnect` (LeRobot 0.6.1's scripts
-    call it in their own `finally`) would otherwise exit with the servos torqued; the robot's hook stops them.
-    """
+    """Make `hook` the process's `sys.excepthook`; returns the one it replaced. The robot's hook stops the servos
+    of a script whose cleanup never reaches its `disconnect`, which would otherwise exit with them torqued."""
     previous, sys.excepthook = sys.excepthook, hook
     return previous
+
+
+# The dataset writers' private state (LeRobotDataset, DatasetWriter, LeRobotDatasetMetadata; check_lerobot names it).
+_WRITER_FIELDS = ("_finalized", "_latest_episode", "_pq_writer")
+_META_FIELDS = ("_finalized", "latest_episode", "episodes", "_pq_writer", "_metadata_buffer")
+
+
+def reopen_finalized(ds) -> bool:
+    """Make a finalized LeRobotDataset accept episodes again, as `LeRobotDataset.resume` would leave it: both
+    writers closed, no latest episode, and `meta.episodes[-1]` naming the last episode's files and frame range, so
+    that the next episode goes to the next data and meta/episodes files. Resume re-reads these from meta/episodes
+    (seconds on a large dataset); LeRobot holds them in memory. False (nothing changed) when LeRobot's internals
+    are not as expected or the dataset is not finalized."""
+    w, m = getattr(ds, "writer", None), getattr(ds, "meta", None)
+    expected = ((ds, ("_is_finalized",)), (w, _WRITER_FIELDS), (m, _META_FIELDS))  # None has none of them
+    if not all(hasattr(obj, f) for obj, names in expected for f in names):
+        return False
+    if w._pq_writer is not None or m._pq_writer is not None or m._metadata_buffer:
+        return False  # not finalized
+    if m.latest_episode is None or w._latest_episode is None:
+        return w._latest_episode is None and m.latest_episode is None and _unfinalize(ds)  # nothing written yet
+    last = {
+        "meta/episodes/chunk_index": int(m.latest_episode["meta/episodes/chunk_index"][0]),
+        "meta/episodes/file_index": int(m.latest_episode["meta/episodes/file_index"][0]),
+        "dataset_to_index": int(m.latest_episode["dataset_to_index"][0]),
+        "data/chunk_index": int(w._latest_episode["data/chunk_index"]),
+        "data/file_index": int(w._latest_episode["data/file_index"]),
+    }
+    m.episodes, m.latest_episode, w._latest_episode = [last], None, None
+    return _unfinalize(ds)
+
+
+def _unfinalize(ds) -> bool:
+    ds.meta._finalized = ds.writer._finalized = ds._is_finalized = False
+    return True
+
+
+def finalize_or_abandon(ds) -> None:
+    """LeRobot's finalize; if it fails, its writers are abandoned: their garbage-collection safety net would
+    retry the write at interpreter shutdown, where pyarrow aborts the process (exit 134) instead of raising. The
+    files left without a footer are what `--resume` / `blindgrasp-repair-dataset` set aside."""
+    try:
+        ds.finalize()
+    except BaseException:
+        for part in (ds.writer, ds.meta):
+            if part is None:
+                continue
+            with contextlib.suppress(Exception):
+                writer = getattr(part, "_pq_writer", None)
+                if writer is not None:
+                    writer.is_open = False  # pyarrow's __del__ would try the footer write again
+                part._pq_writer = None
+                getattr(part, "_metadata_buffer", []).clear()
+            part._finalized = True
+        ds._is_finalized = True
+        raise

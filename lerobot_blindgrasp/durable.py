@@ -1,19 +1,9 @@
 """Atomic file writes: a file is either its old self or completely replaced, whatever happens during the write.
 
-The standard idiom (as in SQLite's rollback journal spirit, Orbax and PyTorch Lightning checkpoints): write a
-temporary file in the target's folder (same filesystem, so the rename is atomic), flush and fsync it, `os.replace`
-it over the target, then fsync the folder so the rename itself survives a power cut. A kill at any instant leaves
-the old file byte-identical or the new one complete, plus at worst a hidden `.NAME.tmp-*` file that
-`remove_stale_temps` clears.
-
-    atomic_write_text(path, text)            atomic_write_bytes(path, data)
-    atomic_write_json(path, obj, indent=2)
-    with atomic_path(path) as tmp: writer(tmp)            # writers that want a path (savefig, torch.save)
-    with atomic_open(path) as f: draccus.dump(cfg, f)     # writers that want a file object
-
-A failed write raises `WriteError`, which names the file and the cause in words (a full disk, the file-size limit,
-a quota) and leaves the old file as it was. `WriteError` deliberately is not an `OSError`: code that maps OSError
-to a device fault (the gripper's safety latch calls it a bus failure) must not relabel a disk problem.
+The standard idiom: write a temporary file beside the target, fsync it, `os.replace` it over the target, fsync
+the folder. A kill leaves at worst a hidden `.NAME.tmp-*` file, which `remove_stale_temps` clears. A failed write
+raises `WriteError`, naming the cause in words (a full disk, the file-size limit); deliberately not an `OSError`,
+so code that maps OSError to a device fault (the gripper's safety latch) never relabels a disk problem.
 """
 
 from __future__ import annotations
@@ -71,45 +61,31 @@ def _diagnose(tmp: Path) -> tuple[str, int] | None:
 
 
 def fsync_dir(folder: Path) -> None:
-    """Make a rename in `folder` durable (a no-op where folders cannot be opened, e.g. Windows)."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass  # some filesystems refuse fsync on directories; the rename is still atomic
-    finally:
-        os.close(fd)
-
-
-def _temp_name(path: Path) -> Path:
-    # Hidden, in the same folder, and ending in the target's suffix: writers that pick a format from the name
-    # (savefig, torch exporters) still do, and globs such as model_*.pt never match a temp file.
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}{TEMP_MARK}", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    return Path(name)
+    """Make a rename in `folder` durable. A no-op where folders cannot be opened (Windows) or fsynced (some
+    filesystems): the rename is still atomic."""
+    with contextlib.suppress(OSError):
+        _fsync_file(folder)
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike, mode: int | None = None, fsync: bool = True) -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike, fsync: bool = True) -> Iterator[Path]:
     """Yield a temporary path beside `path`; once the block ends normally, the temp file is fsynced and renamed
-    over `path`. On any error the temp file is removed and `path` is untouched. `mode`: the new file's permissions
-    (default: the old file's, else 0o644 less the umask). fsync=False: still atomic against a killed process (the
-    page cache outlives it), not against a power cut; for files rewritten many times a second whose caller fsyncs
-    at its own checkpoints (`fsync_tree`)."""
+    over `path` (with the old file's permissions, else 0o666 less the umask). On any error the temp file is removed
+    and `path` is untouched. fsync=False: still atomic against a killed process, not against a power cut; for files
+    rewritten many times a second whose caller fsyncs at its own checkpoints (`fsync_tree`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        tmp = _temp_name(path)
+    try:  # hidden, with the target's suffix: writers pick their format from it; globs like *.pt never match it
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}{TEMP_MARK}", suffix=path.suffix, dir=path.parent)
+        os.close(fd)
     except OSError as e:
         raise WriteError(path, describe_write_error(e), e.errno) from e
+    tmp = Path(name)
     try:
         yield tmp
         if fsync:
             _fsync_file(tmp)
-        os.chmod(tmp, mode if mode is not None else _mode_for(path))
+        os.chmod(tmp, _mode_for(path))
         os.replace(tmp, path)
     except OSError as e:
         tmp.unlink(missing_ok=True)
@@ -125,9 +101,9 @@ def atomic_path(path: str | os.PathLike, mode: int | None = None, fsync: bool = 
 
 
 @contextlib.contextmanager
-def atomic_open(path: str | os.PathLike, mode: str = "w", encoding: str | None = "utf-8") -> Iterator[io.IOBase]:
-    """A file object for writers that want one (json.dump, draccus.dump); replaced atomically on success."""
-    with atomic_path(path) as tmp, open(tmp, mode, encoding=None if "b" in mode else encoding) as f:
+def atomic_open(path: str | os.PathLike) -> Iterator[io.TextIOBase]:
+    """A text file object for writers that want one (draccus.dump); replaced atomically on success."""
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
         yield f
 
 
@@ -153,29 +129,24 @@ def atomic_append_text(path: str | os.PathLike, text: str) -> Path:
     return atomic_write_bytes(path, old + text.encode())
 
 
-def fsync_tree(folder: str | os.PathLike, since: float = 0.0) -> int:
+def fsync_tree(folder: str | os.PathLike, since: float = 0.0) -> None:
     """fsync every file under `folder` modified at or after `since` (a time.time()), and their folders: what a
-    checkpoint makes durable against a power cut. Returns the number of files."""
-    folders, n = set(), 0
+    checkpoint makes durable against a power cut."""
+    folders = set()
     for p in Path(folder).rglob("*"):
         with contextlib.suppress(OSError):
             if p.is_file() and p.stat().st_mtime >= since:
                 _fsync_file(p)
                 folders.add(p.parent)
-                n += 1
     for d in folders:
         fsync_dir(d)
-    return n
 
 
-def remove_stale_temps(folder: str | os.PathLike, recursive: bool = False) -> list[Path]:
+def remove_stale_temps(folder: str | os.PathLike) -> list[Path]:
     """Delete temp files that a killed writer left in `folder`; returns them. Only for folders this process
     owns (another process writing there at the same time would lose its temp file)."""
     folder = Path(folder)
-    if not folder.is_dir():
-        return []
-    pattern = f"**/.*{TEMP_MARK}*" if recursive else f".*{TEMP_MARK}*"
-    gone = [p for p in folder.glob(pattern) if p.is_file()]
+    gone = [p for p in folder.glob(f".*{TEMP_MARK}*") if p.is_file()] if folder.is_dir() else []
     for p in gone:
         p.unlink(missing_ok=True)
     return gone

@@ -1,24 +1,12 @@
 """The policy-vs-robot contract: what a checkpoint records it was trained for, and the check that refuses one that
 does not fit the robot before any servo takes torque. The caller that knows the checkpoint passes it: the real eval
-env and blindgrasp-rollout before the policy loads, the robot at connect (its config's `command_line`).
+env and blindgrasp-rollout before the policy loads, the robot at connect (docs/hardware.md, "The policy").
 
-LeRobot's `make_policy` overwrites a checkpoint's output features with the env's, and a config validates shapes
-only. `check(path, robot)` reads the checkpoint's own files without loading the policy, names the file each fact
-came from, and compares: `config.json`'s feature keys (`observation.state` in, `action` out, no camera) and shapes
-as trained, and its `trained_for` (robot type, fps, state and action names in order, action meaning: what
-lerobot-train recorded from the training dataset, `facts_from_dataset`); the processors' normalizer shapes, their
-statistics (finite, std > 0) and the action meaning (a `relative_actions_processor` without
-`absolute_actions_processor` would send deltas to a robot that takes targets); finite weights in
-`model.safetensors`; `train_config.json`'s env type and fps, and for a checkpoint without `trained_for` its
-dataset's `meta/info.json` when it is on this machine. A fact that differs refuses the run (`PolicyMismatchError`);
-a fact no file holds refuses it too, unless `allow_unverified` (then a warning).
-
+`check_checkpoint(path, robot)` reads the checkpoint's own files without loading the policy (LeRobot's
+`make_policy` overwrites its output features with the env's) and names the file each fact came from. A fact that
+differs refuses the run (`PolicyMismatchError`); a fact no file holds refuses it too, unless `allow_unverified`.
 `python -m lerobot_blindgrasp.policy_contract` records `trained_for` in a checkpoint trained before lerobot-train
-wrote it, from its dataset or, for this project's sim demos (one schema: robot type `blindgrasp_gripper`, 20 fps,
-`spec`'s names), from that schema; running it again writes the same file:
-
-    python -m lerobot_blindgrasp.policy_contract --checkpoint=<checkpoint> --dataset_root=<dataset root>
-    python -m lerobot_blindgrasp.policy_contract --checkpoint=models/student_cpu --sim_demos=true
+wrote it, from its dataset (`--dataset_root`) or this project's sim demo schema (`--sim_demos=true`).
 """
 
 from __future__ import annotations
@@ -36,7 +24,7 @@ from lerobot_blindgrasp.cli import parse_config
 
 logger = logging.getLogger(__name__)
 
-STATE, ACTION = "observation.state", "action"
+STATE, ACTION = spec.STATE_KEY, spec.ACTION_KEY
 ACTION_MEANING = "absolute joint targets (rad)"  # what the gripper's `send_action` takes
 POLICY_TYPE = "blindgrasp_transformer"  # the policy whose checkpoints `record` stamps
 ROBOT_TYPE = "blindgrasp_gripper"  # the gripper's LeRobot name, which the sim demos' datasets carry too
@@ -59,8 +47,6 @@ class RobotContract:
     action_names: tuple[str, ...]
     fps: float
     fps_source: str
-    action_meaning: str = ACTION_MEANING
-    env_types: tuple[str, ...] = ENV_TYPES
 
 
 def gripper_contract(robot_type: str, fps: float, fps_source: str) -> RobotContract:
@@ -202,8 +188,8 @@ def _env_problems(train: dict | None, where: Path, robot: RobotContract) -> list
     env = (train or {}).get("env") or {}
     source = where / "train_config.json"
     bad = []
-    if env.get("type") is not None and env["type"] not in robot.env_types:
-        bad.append(f"env type {env['type']!r} in {source}, this robot's envs are {list(robot.env_types)}")
+    if env.get("type") is not None and env["type"] not in ENV_TYPES:
+        bad.append(f"env type {env['type']!r} in {source}, this robot's envs are {list(ENV_TYPES)}")
     if env.get("fps") is not None and float(env["fps"]) != robot.fps:
         bad.append(f"fps {env['fps']} in {source} (env), the loop runs at {robot.fps:g} ({robot.fps_source})")
     return bad
@@ -248,8 +234,8 @@ def _contract_problems(facts: dict, source: str, robot: RobotContract) -> tuple[
         elif tuple(names) != tuple(want):
             bad.append(f"'{key}' names {list(names)} in {source}, the robot's are {list(want)} (names and order)")
     meaning = facts.get("action_meaning")
-    if meaning is not None and meaning != robot.action_meaning:
-        bad.append(f"'action' meaning {meaning!r} in {source}, the robot takes {robot.action_meaning}")
+    if meaning is not None and meaning != ACTION_MEANING:
+        bad.append(f"'action' meaning {meaning!r} in {source}, the robot takes {ACTION_MEANING}")
     return bad, unverified
 
 
@@ -295,23 +281,20 @@ def check_checkpoint(path: str | Path, robot: RobotContract, *, allow_unverified
     _checked.add(key)
 
 
-def local_checkpoint(path: str) -> Path | None:
-    """A local checkpoint directory; a Hub id is resolved from the cache only (nothing is downloaded here)."""
-    if Path(path).is_dir():
-        return Path(path)
-    try:
-        from huggingface_hub import snapshot_download
-
-        return Path(snapshot_download(path, local_files_only=True))
-    except Exception:  # not cached (LeRobot downloads it later): the robot-side check runs at connect
-        return None
-
-
 def check_named(path, robot_type: str, fps: float, fps_source: str, *, allow_unverified: bool = False) -> bool:
-    """`check_checkpoint` the checkpoint a caller names (a folder, or a Hub id already in the cache) against the gripper at
-    `fps`; False when there is none here to check (LeRobot downloads it later)."""
-    if not path or (where := local_checkpoint(str(path))) is None:
+    """`check_checkpoint` the checkpoint a caller names (a folder, or a Hub id already in the cache: nothing is
+    downloaded here) against the gripper at `fps`; False when there is none here to check (LeRobot downloads it
+    later, and the robot-side check runs at connect)."""
+    if not path:
         return False
+    where = Path(path)
+    if not where.is_dir():
+        try:
+            from huggingface_hub import snapshot_download
+
+            where = Path(snapshot_download(str(path), local_files_only=True))
+        except Exception:  # not in the cache
+            return False
     check_checkpoint(where, gripper_contract(robot_type, fps, fps_source), allow_unverified=allow_unverified)
     return True
 

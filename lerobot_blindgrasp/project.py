@@ -1,15 +1,8 @@
 """Where the code and the package live, and the Hub repos the shipped artifacts go to: each said in one place.
 
-- The code's and the package's addresses are `[project.urls]` in pyproject.toml, read here from the installed
-  distribution's metadata (a wheel and an editable install carry the same `Project-URL` lines). The README and
-  every card (the student's `generate_model_card`, the teacher's export card, both dataset cards and the shipped
-  models' cards at `blindgrasp-publish`) name them through this module.
-- The project has no public home yet, so those URLs are placeholders under `example.invalid` (a domain reserved
-  never to resolve). `require_public_urls()` refuses `blindgrasp-publish` while any of them still is one, and
-  `code_line()` never writes one into a card.
-- The install line every card gives (`install_line()`) installs from that Source with pip's `git+` form: the
-  distribution is not on the package index, where `pip install lerobot_policy_blindgrasp` finds nothing.
-- `HUB_REPOS`: the Hub repo names of the shipped teacher, student and demo dataset (`blindgrasp-publish`).
+The addresses are `[project.urls]` in pyproject.toml, read from the installed distribution's metadata. While they
+are placeholders under `example.invalid` (a domain reserved never to resolve), `require_public_urls()` refuses
+`blindgrasp-publish` and `code_line()` never writes one into a card.
 """
 
 from __future__ import annotations
@@ -21,7 +14,7 @@ import re
 REPO_ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*/[A-Za-z0-9][A-Za-z0-9_.-]*$")
 DIST = "lerobot_policy_blindgrasp"  # LeRobot's plugin discovery imports the module named like the distribution
 PLACEHOLDER_HOST = "example.invalid"
-# The Hub repo names, under the namespace given to `blindgrasp-publish --namespace=`: folder under models/ (or
+# The Hub repo names of the shipped artifacts, under `blindgrasp-publish --namespace=`: folder under models/ (or
 # "demos" for the dataset) -> (repo type, repo name).
 HUB_REPOS = {
     "teacher_cpu_bc": ("model", "blindgrasp-teacher-cpu-bc"),
@@ -78,7 +71,7 @@ def code_line() -> str:
 
 def install_line() -> str:
     """The shell line that installs the plugin, for a card: from the public Source with pip's `git+` form, or, while
-    that is a placeholder, the wheel built from the code (nothing else installs it: it is not on the index)."""
+    that is a placeholder, the wheel built from the code (it is not on the package index)."""
     from lerobot_blindgrasp import __version__
 
     src = source_url()

@@ -1,8 +1,6 @@
-"""The spec as a lerobot-eval env sees it: features and gymnasium spaces, shared by the sim and the real env.
-
-Both `--env.type=blindgrasp` and `--env.type=blindgrasp_real` step gym envs that observe `{"agent_pos": o_t}` and take
-the absolute joint targets as action; LeRobot's `preprocess_observation` turns `agent_pos` into `observation.state`.
-No MuJoCo here: LeRobot imports the env configs while it parses a command line.
+"""The spec as a lerobot-eval env sees it (`--env.type=blindgrasp` and `blindgrasp_real`): features and gymnasium
+spaces. The envs observe `{"agent_pos": o_t}`, which LeRobot's `preprocess_observation` turns into
+`observation.state`, and take absolute joint targets. No MuJoCo here: LeRobot imports the env configs to parse.
 """
 
 from __future__ import annotations

@@ -1,7 +1,5 @@
-"""The shared contracts of lerobot_blindgrasp, defined once.
-
-Sim, demos, policy, real robot and glove import these names; nothing else defines joint order, limits, servo IDs,
-control rate, action bound, observation layouts or the success rule.
+"""The shared contracts of lerobot_blindgrasp, defined once: joint order, limits, servo IDs, control rate, action
+bound, observation layouts, the success rule and the seed ranges. Nothing else defines them.
 
 Joint conventions (the sim's zero is the hardware calibration target, see `robots/` for the reference pose):
 - Fingers FF, MF, TH (D'Claw naming) sit 120 deg apart on a 6 cm circle; each has J*0 (abduction), J*1 (proximal
@@ -14,6 +12,7 @@ Joint conventions (the sim's zero is the hardware calibration target, see `robot
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -77,7 +76,7 @@ def dataset_features() -> dict:
 
 
 # --- Privileged observation (teacher only) -----------------------------------------------------------------------
-# (name, size) in order. `assemble_privileged` is the only way the sim builds the vector (`sim/observations.py`),
+# (name, size) in order. `privileged_parts` is the only way the sim builds the vector (`sim/observations.py`),
 # and a shipped teacher's checkpoint records this layout, so a change here is refused at load time.
 PRIVILEGED_LAYOUT: tuple[tuple[str, int], ...] = (
     ("joint_pos", NUM_JOINTS),  # measured: with joint noise
@@ -101,25 +100,14 @@ PRIVILEGED_LAYOUT: tuple[tuple[str, int], ...] = (
 PRIVILEGED_DIM = sum(n for _, n in PRIVILEGED_LAYOUT)  # 92 (the paper reports 95 without a breakdown)
 
 
-def _slices(layout: tuple[tuple[str, int], ...]) -> dict[str, slice]:
-    out, i = {}, 0
-    for name, n in layout:
-        out[name] = slice(i, i + n)
-        i += n
-    return out
-
-
-PRIVILEGED_SLICES: dict[str, slice] = _slices(PRIVILEGED_LAYOUT)
-
-
-def assemble_privileged(parts: dict[str, np.ndarray]) -> np.ndarray:
-    """The (n, PRIVILEGED_DIM) vector from one (n, size) array per `PRIVILEGED_LAYOUT` name, in layout order."""
-    return np.concatenate(privileged_parts(parts), axis=1)
+PRIVILEGED_SLICES: dict[str, slice] = {
+    name: slice(end - n, end)
+    for (name, n), end in zip(PRIVILEGED_LAYOUT, itertools.accumulate(n for _, n in PRIVILEGED_LAYOUT))
+}
 
 
 def privileged_parts(parts: dict) -> list:
     """The parts of the privileged vector in layout order (numpy arrays or the sim's tensors), to concatenate.
-
     Refuses a missing, extra or mis-sized part, so the layout cannot drift from what the sim computes."""
     if set(parts) != set(PRIVILEGED_SLICES):
         missing, extra = set(PRIVILEGED_SLICES) - set(parts), set(parts) - set(PRIVILEGED_SLICES)
@@ -145,10 +133,9 @@ OBJECT_XY_RANGE_M = 0.03
 
 
 # --- Seed ranges (evaluation protocol) ---------------------------------------------------------------------------
-# An env's start states (physics draw, start pose, object offset, sensor noise) are a function of (env seed, episode
-# counter), and env i of a batch uses seed base + i. Each stage takes its env seeds from its own range, so no start
-# state seen while training the teacher or making demos is ever used to measure a policy. The ranges are far wider
-# than any run needs (a demo collection advances its base by num_envs per env rebuild).
+# An env's start states are a function of (env seed, episode counter); env i of a batch uses seed base + i. Each
+# stage draws env seeds from its own range (far wider than any run needs), so no start state seen in teacher
+# training or demos is ever used to measure a policy.
 SEED_RANGE_SIZE = 1 << 40
 SEED_RANGES: dict[str, range] = {
     "teacher_train": range(SEED_RANGE_SIZE),
@@ -157,10 +144,9 @@ SEED_RANGES: dict[str, range] = {
 }
 TEACHER_TRAIN_SEED = 1  # blindgrasp-train-teacher's default --seed: env seeds 1..num_envs
 DEMO_SEED = SEED_RANGES["demos"].start  # blindgrasp-collect-demos' default --seed
-# Evaluation seeds are small per-episode indices, as lerobot-eval gives them (its --seed, +1 per episode). The env
-# maps (index, object) into the eval range, one block of EVAL_TASK_STRIDE per object (task id = catalogue index),
-# so no two objects share a draw and no index reaches the training or demo ranges. The teacher eval uses the same
-# map, so both tools evaluate on the same start states for the same --seed.
+# Evaluation seeds are lerobot-eval's per-episode indices (--seed, +1 per episode). The envs and the teacher eval
+# map (index, object) into the eval range, one block of EVAL_TASK_STRIDE per object (task id = catalogue index), so
+# no two objects share a draw and both tools evaluate on the same start states for the same --seed.
 EVAL_TASK_STRIDE = 1 << 32
 EVAL_SEED = 1000  # lerobot-eval's own default --seed
 

@@ -1,7 +1,4 @@
-"""Discovery shim: LeRobot imports the module named like the distribution (`lerobot_policy_blindgrasp`).
-
-Importing `lerobot_blindgrasp` registers every plugin type this package provides (policy, env, robot,
-teleoperator), so `lerobot-train`, `lerobot-eval`, `lerobot-record`, ... find them with no extra flags.
-"""
+"""Discovery shim: LeRobot imports the module named like the distribution, and importing `lerobot_blindgrasp`
+registers every plugin type, so `lerobot-train`, `lerobot-eval`, `lerobot-record`, ... find them with no flags."""
 
 import lerobot_blindgrasp  # noqa: F401  (import for its registration side effects)

@@ -63,9 +63,9 @@ def _throwaway_teacher(tmp: Path) -> Path:
 
 def _writer_speed(episodes, root: Path, per_frame: bool, fast: bool = True) -> float:
     """Frames per second through one write path, on real rollouts (whole, untrimmed)."""
-    from lerobot_blindgrasp import spec
+    from lerobot_blindgrasp import compat, spec
     from lerobot_blindgrasp.demos import curation, dataset
-    from lerobot_blindgrasp.demos.collection_loop import _cleanup, _finalize_or_abandon
+    from lerobot_blindgrasp.demos.collection_loop import _cleanup
 
     ds = dataset.create(root, "bench/writer")
     frames, t0 = 0, time.perf_counter()
@@ -89,7 +89,7 @@ def _writer_speed(episodes, root: Path, per_frame: bool, fast: bool = True) -> f
             frames += buf["size"]
     finally:
         with _cleanup("finalizing the dataset", sys.exc_info()[1]):  # never masks the error that ended the run
-            _finalize_or_abandon(ds)
+            compat.finalize_or_abandon(ds)
     return frames / (time.perf_counter() - t0)
 
 

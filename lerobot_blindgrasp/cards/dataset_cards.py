@@ -1,13 +1,11 @@
 """Dataset cards for blindgrasp datasets, from the templates in `card_templates/` (package data, read through
-importlib.resources, so a non-editable install writes cards too; the top-level `datasets_cards/` points here).
+importlib.resources, so a non-editable install writes cards too).
 
-A card is LeRobot's own (`create_lerobot_dataset_card`: LeRobot template, `task_categories: robotics`, the
-`configs` entry the Hub viewer needs, info.json) with our body as its `dataset_description`, our tags, the license
-and the paper's citation. `push_to_hub` builds the card from the same arguments, so the README.md we write next to
-the data is exactly what lands on the Hub. Two bodies:
-- `sim_teacher_demos.md`: filled from `collection.json` and `yield_report.json` (object set, curation thresholds,
-  randomization, teacher checkpoint hash, yield);
-- `glove_teleop_demos.md`: for `lerobot-record` datasets of the real gripper, filled from the dataset's metadata.
+A card is LeRobot's own (`create_lerobot_dataset_card`: its template, `task_categories: robotics`, the `configs`
+entry the Hub viewer needs) with our body as `dataset_description`, our tags, the license and the paper's citation.
+`push_to_hub` builds the card from the same arguments, so the README.md written next to the data is what lands on
+the Hub. Bodies: `sim_teacher_demos.md` (from `collection.json` and `yield_report.json`) and
+`glove_teleop_demos.md` (from a `lerobot-record` dataset's metadata).
 """
 
 from __future__ import annotations
@@ -114,18 +112,14 @@ def dataset_fields(repo_id: str, meta) -> dict:
     }
 
 
-def glove_context(root: Path, repo_id: str, meta, operators: list[str], notes: str) -> dict:
-    import pandas as pd
-
-    files = sorted(Path(root, "meta", "episodes").glob("chunk-*/file-*.parquet"))
+def glove_context(repo_id: str, meta, operators: list[str], notes: str) -> dict:
     per_task: dict[str, dict] = {}
-    if files:
-        eps = pd.concat([pd.read_parquet(f, columns=["tasks", "length"]) for f in files], ignore_index=True)
-        for tasks, length in zip(eps["tasks"], eps["length"], strict=True):
-            for task in tasks:
-                row = per_task.setdefault(task, {"task": task, "episodes": 0, "frames": 0})
-                row["episodes"] += 1
-                row["frames"] += int(length)
+    episodes = meta.episodes or {"tasks": [], "length": []}  # LeRobot loads none for an empty dataset
+    for tasks, length in zip(episodes["tasks"], episodes["length"], strict=True):
+        for task in tasks:
+            row = per_task.setdefault(task, {"task": task, "episodes": 0, "frames": 0})
+            row["episodes"] += 1
+            row["frames"] += int(length)
     return {
         **dataset_fields(repo_id, meta),
         "tasks": list(per_task.values()),
@@ -167,9 +161,7 @@ def glove_card_kwargs(root: Path, repo_id: str, operators: list[str] | None = No
     from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 
     meta = LeRobotDatasetMetadata(repo_id, root=Path(root))
-    return card_kwargs(
-        repo_id, "glove", glove_context(Path(root), repo_id, meta, operators or [], notes), meta, **kw
-    )
+    return card_kwargs(repo_id, "glove", glove_context(repo_id, meta, operators or [], notes), meta, **kw)
 
 
 def build_card(kwargs: dict, repo_id: str):

@@ -1,11 +1,9 @@
 """Relative markdown links made absolute, for text read away from the repository: the README as the package index's
 project page (setup.py's long description) and the shipped models' cards on the Hub (`model_cards.py`).
 
-The addresses come from `[project.urls]`: a file's page is the `Changelog` URL with `CHANGELOG.md` replaced by the
-file's path (so `.../blob/main/CHANGELOG.md` gives `.../blob/main/docs/results.md`), an image's the same under
-`/raw/` (the file's bytes, which an `<img>` needs); without a Changelog URL ending in `CHANGELOG.md`, the `Source`
-URL with `/blob/main/`. Standard library only: setup.py loads this file by path at build time, before any of the
-package's dependencies exist.
+A file's page is the `[project.urls]` `Changelog` URL with `CHANGELOG.md` replaced by the file's path (else the
+`Source` URL with `/blob/main/`), an image's the same under `/raw/`. Standard library only: setup.py loads this file
+by path at build time, before any of the package's dependencies exist.
 """
 
 from __future__ import annotations

@@ -1,11 +1,9 @@
-"""The shipped models' cards: one "Install and use" section each, written in the source card and rewritten for the Hub.
+"""The shipped models' cards: one "Install and use" section each, in the source card and rewritten for the Hub.
 
-A card in `models/<name>/README.md` holds its section between `BEGIN` and `END` markers, in its local form (paths
-under `models/`, installed from a clone); `install_section(name)` makes that text and tests/hub/test_publish.py keeps the
-source cards equal to it. `render_model_card` (`blindgrasp-publish`) swaps the section for its Hub form (the repo id,
-`project.install_line()`, the code's location) and turns every link that leaves the model's folder into an address
-built from `[project.urls]` (`links.py`), or into plain text while those are placeholders. So the card on the Hub
-has exactly one install section and no `docs/...` path that means nothing there.
+`models/<name>/README.md` holds the section's local form between `BEGIN` and `END` (`install_section(name)`, which
+tests/hub/test_publish.py keeps equal). `render_model_card` (`blindgrasp-publish`) swaps it for its Hub form and
+makes every link that leaves the model's folder absolute (`links.py`), or plain text while `[project.urls]` are
+placeholders.
 """
 
 from __future__ import annotations

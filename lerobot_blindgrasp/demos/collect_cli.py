@@ -1,18 +1,7 @@
 """`blindgrasp-collect-demos`: roll out a trained teacher, curate its episodes and write a LeRobotDataset.
 
-    blindgrasp-collect-demos --output_dir=runs/demos_cpu --repo_id=me/demos_cpu     # the shipped teacher
-    blindgrasp-collect-demos --teacher=runs/teacher_cpu --output_dir=runs/demos_cpu --repo_id=me/demos_cpu
-
-The stages live in their own modules: the config (`demos/config.py`), the rollout -> curate -> write loop
-(`demos/collection_loop.py`), the run records (`demos/records.py`: provenance, statistics, yield report, card). This module
-is the command line only: parse, run, print the yield table, and map outcomes to exit codes.
-
-The output folder is the dataset root. Next to LeRobot's files it holds `collection.json` (provenance),
-`yield_report.json` (per-object yield) and `README.md` (the dataset card). Ctrl-C (or SIGTERM) stops after the
-current control step, writes the episodes still queued for the writer thread and finalizes the dataset; a second
-Ctrl-C aborts at once (or drops the queued episodes not written yet), still finalizing. Every written episode stays
-readable either way. `--resume=true` appends to the folder until the targets are met.
-"""
+The command line of `collection_loop`: print the yield table, map outcomes to exit codes. Beside LeRobot's files the
+dataset folder holds `collection.json`, `yield_report.json` and the card (README.md)."""
 
 from __future__ import annotations
 
@@ -51,11 +40,10 @@ def main(argv=None) -> None:
         raise SystemExit(EXIT_WRITE) from None
     tally = yield_report.load_tally(cfg.output_dir)
     print(yield_report.format_table(tally, list(cfg.object_names)))
-    s = stats.summary()
     print(
-        f"\n{s['kept']} episodes written ({s['frames']} frames) from {s['rollouts']} rollouts in "
-        f"{s['wall_s'] / 60:.1f} min: {s['demos_per_minute']:.1f} demos/min, "
-        f"{s['demos_per_cpu_minute']:.1f} demos/CPU-min; dataset: {cfg.output_dir}"
+        f"\n{stats.kept} episodes written ({stats.frames} frames) from {stats.rollouts} rollouts in "
+        f"{stats.wall_s / 60:.1f} min: {stats.demos_per_minute:.1f} demos/min, "
+        f"{stats.demos_per_cpu_minute:.1f} demos/CPU-min; dataset: {cfg.output_dir}"
     )
     if tally.total().kept == 0 and stats.stop_reason != "interrupted":
         # LeRobot cannot load a dataset without episodes (it then tries the Hub), so stop anything downstream here.

@@ -1,25 +1,15 @@
 """The collection loop: teacher rollouts -> curation -> dataset episodes, until every object has its quota.
 
-Paper Sec. III-C: the batched env with the paper's randomization and external pushes off, the teacher sampled from
-its Gaussian (or its mean, the "w/o stochastic teacher" ablation), 5 s episodes, each step logging the student
-observation and the teacher's action, then curation (`demos/curation.py`). Env seeds come from the demo range
-(`spec.SEED_RANGES`), never the teacher-training or evaluation ranges.
+Paper Sec. III-C: the batched env with the paper's randomization and no pushes, the teacher sampled from its
+Gaussian (or its mean: "w/o stochastic teacher"), 5 s episodes logging o_t and the teacher's action, then curation
+(`curation.py`). Env seeds come from the demo range (`spec.SEED_RANGES`). Each object gets `episodes_per_object`
+written episodes or `max_rollouts_per_object` rollouts, so an object the teacher cannot lift ends the run instead of
+stalling it; once a quarter of the envs hold finished objects, the env is rebuilt with the others.
 
-`episodes_per_object` N is the number of episodes *written* per object: collection runs until every object has N,
-or has used `max_rollouts_per_object` rollouts (default 20 N), so an object the teacher cannot lift ends the run
-instead of stalling it. When a quarter of the envs hold finished objects, the env is rebuilt with the remaining
-objects (new env seeds), so physics time goes to objects that still need demos.
-
-Kept episodes are written by a writer thread (`demos/episode_writer.py`), off the loop: the physics does not wait
-for `save_episode` unless `writer_queue` episodes are already waiting. The thread also takes the crash checkpoints
-and their records, in order, so each checkpoint records the counts that go with the episodes on disk. The dataset is
-the one the loop would write itself (`--writer_queue=0`): same episodes, same order.
-
-A first SIGINT/SIGTERM stops after the current control step; a second aborts at once. Either way the queued
-episodes are written, then the dataset is finalized and the run recorded (`demos/records.py`), however the loop
-ends. A process killed without any handler (SIGKILL, a power cut) loses at most the episodes since the last
-checkpoint (`demos/crash_checkpoints.py`: every `checkpoint_s` seconds or `num_envs` episodes written) and the at most
-`writer_queue` still queued; `--resume=true` goes on from there.
+Kept episodes, and the crash checkpoints with their records, go through one writer thread (`episode_writer.py`) in
+order: the dataset is the one `--writer_queue=0` writes in the loop. A first SIGINT/SIGTERM stops after the current
+step, a second at once; either way the queued episodes are written, the dataset finalized and the run recorded. A
+kill loses at most the episodes since the last checkpoint (`crash_checkpoints.py`) and the queued ones.
 """
 
 from __future__ import annotations
@@ -49,10 +39,8 @@ from lerobot_blindgrasp.sim import randomization
 
 logger = logging.getLogger(__name__)
 
-# Rebuild the env for the remaining objects once this fraction of envs holds finished objects. A rebuild drops the
-# running episodes of the other envs (half an episode each on average) and costs ~1 s; waiting wastes this fraction
-# of every step until the next object finishes, usually hundreds of steps later. At 0.5, a 30-minute cpu run spent
-# ~19 % of its rollouts on objects that were already done.
+# Rebuild the env for the remaining objects once this fraction of envs holds finished objects: a rebuild drops the
+# other envs' running episodes and costs ~1 s, waiting wastes this fraction of every step until the next one is done.
 REBUILD_WASTE_FRACTION = 0.25
 
 # What a demo episode keeps of each step: o_t, the commanded targets, r_t and the forces (for curation).
@@ -87,7 +75,7 @@ def _check_inputs(cfg: CollectConfig):
     if cfg.resume:
         if not out.is_dir():
             raise CollectError(f"--resume: {out} does not exist; drop --resume to start a new dataset")
-        if not provenance.provenance_path(out).is_file() and not records.empty_leftover(out):
+        if not provenance.is_collection(out) and not records.empty_leftover(out):
             raise CollectError(f"--resume: {out} was not written by blindgrasp-collect-demos (no collection.json)")
     elif out.exists():
         raise CollectError(f"{out} already exists; pass --resume=true to append to it, or a new --output_dir")
@@ -210,7 +198,17 @@ class _Run:
         """Envs for the objects still short of demos, rolled out until the run stops or enough of them are done."""
         cfg, prov, stats = self.cfg, self.prov, self.stats
         spec.check_seeds("demos", prov["next_env_seed"], cfg.num_envs)  # a long --resume stays in range
-        env = _build_env(cfg, todo, prov["next_env_seed"], self.dr, self.reward_cfg)
+        env = make_batched_env(
+            "demos",
+            tuple(todo),
+            num_envs=cfg.num_envs,
+            seed=prov["next_env_seed"],  # env i: seed + i
+            dr=self.dr,
+            episode_s=cfg.curation.episode_s,
+            reward=self.reward_cfg,
+            nthread=cfg.threads,
+            backend=cfg.backend,
+        )
         prov["next_env_seed"] += cfg.num_envs  # later envs (and --resume) never repeat a draw
         # On disk before any episode of these envs is: a resume after a kill never repeats their draws.
         self.writer.submit(functools.partial(self.record_checkpoint, self.snapshot()))
@@ -254,7 +252,9 @@ class _Run:
             raise
         finally:
             with _cleanup("finalizing the dataset", first):
-                _finalize_or_abandon(self.saved.ds)  # closes the parquet writers: every saved episode is readable
+                compat.finalize_or_abandon(
+                    self.saved.ds
+                )  # closes the parquet writers: every saved episode is readable
             self.stats.wall_s = time.perf_counter() - self.t_wall
             self.stats.cpu_s = time.process_time() - self.t_cpu
             self.stats.checkpoints, self.stats.checkpoint_s = self.saved.count, self.saved.seconds
@@ -284,42 +284,6 @@ def _cleanup(what: str, first: BaseException | None):
         logger.error(
             "%s also failed (%s); the first error stands.", what.capitalize(), durable.describe_write_error(e)
         )
-
-
-def _finalize_or_abandon(ds) -> None:
-    """LeRobot's finalize; if it fails, its writers are abandoned: their garbage-collection safety net would
-    retry the write at interpreter shutdown, where pyarrow aborts the process (exit 134) instead of raising. The
-    files left without a footer are what `--resume` / `blindgrasp-repair-dataset` set aside."""
-    try:
-        ds.finalize()
-    except BaseException:
-        for part in (ds.writer, ds.meta):
-            if part is None:
-                continue
-            with contextlib.suppress(Exception):
-                writer = getattr(part, "_pq_writer", None)
-                if writer is not None:
-                    writer.is_open = False  # pyarrow's __del__ would try the footer write again
-                part._pq_writer = None
-                getattr(part, "_metadata_buffer", []).clear()
-            part._finalized = True
-        ds._is_finalized = True
-        raise
-
-
-def _build_env(cfg: CollectConfig, object_names: list[str], seed: int, dr, reward_cfg):
-    """Envs with autoreset for the objects that still need demos, env i seeded seed + i."""
-    return make_batched_env(
-        "demos",
-        tuple(object_names),
-        num_envs=cfg.num_envs,
-        seed=seed,
-        dr=dr,
-        episode_s=cfg.curation.episode_s,
-        reward=reward_cfg,
-        nthread=cfg.threads,
-        backend=cfg.backend,
-    )
 
 
 def _handle_episode(ep: Episode, cur: curation_mod.CurationConfig, tally, stats, target: int, bar):

@@ -50,9 +50,7 @@ class CollectConfig:
     # physics: batch (mujoco.batch, CPU) or warp (MuJoCo Warp on this process's GPU, else its CPU device;
     # pip install .[gpu]). The same task, draws and curation either way.
     backend: str = "batch"
-    resume: bool = (
-        False  # append to an existing output_dir until the targets are met (repairs a crashed one first)
-    )
+    resume: bool = False  # append to output_dir until the targets are met (repairs a crashed one first)
     # Crash safety: the dataset is finalized and reopened (LeRobot rolls to fresh parquet files) at least every
     # checkpoint_s seconds and every num_envs written episodes, so a kill loses at most that much. 0: only at the
     # end (a kill then loses every episode of the run).

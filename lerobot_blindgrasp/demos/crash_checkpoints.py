@@ -1,23 +1,12 @@
 """Durable demo collection: finalize and reopen the dataset at bounded intervals, so a kill loses little.
 
-LeRobot's dataset writer keeps its parquet writers open and writes their footers only in `finalize()`; a killed
-collector (SIGKILL, the out-of-memory killer, a power cut) never gets there, and every episode in the open files is
-unreadable. `Checkpoints` finalizes the dataset every `checkpoint_s` seconds or every `num_envs` written episodes,
-whichever comes first, and reopens it for appending the way `LeRobotDataset.resume` does: the next episode starts
-fresh data and metadata files (LeRobot's own rule for appending to a finished dataset). Everything finalized is
-complete on disk; a kill costs at most the episodes since the last checkpoint, and `--resume=true` repairs the
-folder to that point (`repair.py`) and goes on.
-
-`LeRobotDataset.resume` itself re-reads meta/episodes through `datasets` (about 1 s for a small dataset, more as it
-grows), so `reopen_in_place` sets the few fields resume would rebuild
-from the metadata LeRobot already holds in memory: the last episode's file indices and frame range. It checks that
-LeRobot's writer has the fields it expects and falls back to `LeRobotDataset.resume` otherwise.
-
-LeRobot's own metadata files (info.json, stats.json, tasks.parquet) are rewritten in place after every episode;
-`compat.atomic_lerobot_metadata` makes those writes atomic while a collection runs, so a kill during one cannot
-leave a truncated info.json (the one file the repair cannot re-derive). They are not fsynced per episode (two fsyncs per
-episode cost more than the episode on a busy disk); each checkpoint fsyncs what changed since the last one, so a
-power cut, too, loses at most the episodes since the last checkpoint.
+LeRobot's writer writes its parquet footers only in `finalize()`, so a killed collector's open files are
+unreadable. `Checkpoints` finalizes every `checkpoint_s` seconds or `num_envs` written episodes and reopens the
+dataset as `LeRobotDataset.resume` would (the next episode starts fresh files); `--resume=true` repairs the folder
+to the last checkpoint (`repair.py`). `compat.reopen_finalized` sets the few fields resume would re-read from meta/episodes
+(seconds on a large dataset) from what LeRobot holds in memory, and resume is the fallback when they are not there.
+Each checkpoint fsyncs what changed since the last (not per episode: two fsyncs cost more than an episode), so a
+power cut loses at most the episodes since the last checkpoint too.
 """
 
 from __future__ import annotations
@@ -27,7 +16,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from lerobot_blindgrasp import durable
+from lerobot_blindgrasp import compat, durable
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 
 log = logging.getLogger("blindgrasp.demos")
@@ -50,14 +39,10 @@ class Checkpoints:
         self.count = 0
         self.seconds = 0.0  # time spent finalizing and reopening
 
-    def due(self) -> bool:
-        if self.every_s <= 0 or self.since == 0:
-            return False
-        return self.since >= self.every_episodes or time.monotonic() - self.last >= self.every_s
-
     def written(self, state: Any = None) -> None:
         self.since += 1
-        if self.due():
+        due = self.since >= self.every_episodes or time.monotonic() - self.last >= self.every_s
+        if self.every_s > 0 and due:
             self.now(state)
 
     def now(self, state: Any = None) -> None:
@@ -68,47 +53,9 @@ class Checkpoints:
         self.synced_at = t_sync
         episodes = self.ds.meta.total_episodes
         self.on_checkpoint(state)
-        if not reopen_in_place(self.ds):
+        if not compat.reopen_finalized(self.ds):
             self.ds = demo_dataset.resume(self.root, self.repo_id)
         self.since, self.last = 0, time.monotonic()
         self.count += 1
         self.seconds += time.perf_counter() - t0
         log.info("checkpoint: %d episodes durable in %s", episodes, self.root)
-
-
-_WRITER_FIELDS = ("_finalized", "_latest_episode", "_pq_writer")
-_META_FIELDS = ("_finalized", "latest_episode", "episodes", "_pq_writer", "_metadata_buffer")
-
-
-def reopen_in_place(ds) -> bool:
-    """Make a finalized LeRobotDataset accept episodes again, as `LeRobotDataset.resume` would leave it: both
-    writers closed, no latest episode, and `meta.episodes[-1]` naming the last episode's files and frame range, so
-    that the next episode goes to the next data and meta/episodes files. False (nothing changed) when LeRobot's
-    internals are not as expected or the dataset is not finalized."""
-    w, m = getattr(ds, "writer", None), getattr(ds, "meta", None)
-    if (
-        w is None
-        or m is None
-        or not hasattr(ds, "_is_finalized")
-        or not all(hasattr(w, f) for f in _WRITER_FIELDS)
-        or not all(hasattr(m, f) for f in _META_FIELDS)
-    ):
-        return False
-    if w._pq_writer is not None or m._pq_writer is not None or m._metadata_buffer:
-        return False  # not finalized
-    if m.latest_episode is None or w._latest_episode is None:
-        return w._latest_episode is None and m.latest_episode is None and _unfinalize(ds)  # nothing written yet
-    last = {
-        "meta/episodes/chunk_index": int(m.latest_episode["meta/episodes/chunk_index"][0]),
-        "meta/episodes/file_index": int(m.latest_episode["meta/episodes/file_index"][0]),
-        "dataset_to_index": int(m.latest_episode["dataset_to_index"][0]),
-        "data/chunk_index": int(w._latest_episode["data/chunk_index"]),
-        "data/file_index": int(w._latest_episode["data/file_index"]),
-    }
-    m.episodes, m.latest_episode, w._latest_episode = [last], None, None
-    return _unfinalize(ds)
-
-
-def _unfinalize(ds) -> bool:
-    ds.meta._finalized = ds.writer._finalized = ds._is_finalized = False
-    return True

@@ -1,29 +1,14 @@
 """Demonstration curation (paper Sec. III-C): keep grasp-and-lift episodes with rich fingertip force interaction.
 
-An episode of T <= 100 steps (5 s at 20 Hz) passes when, within it,
-- the task reward r_t (eq. 3) stays > 0.5 for >= 0.5 s without a break (10 consecutive control steps), and
-- the cumulative sum of the uniaxial fingertip forces, over the 3 sensors and the steps, exceeds 200 N.
-
-Both comparisons are strict, as the paper words them ("> 0.5", "exceeds 200 N"); only the hold length is ">=".
-
-Which force signal is summed: the compressive part, max(f, 0), of the *noise-free* uniaxial force after the 0.1 N
-deadband (`info["uniaxial_force"]` from the env), sampled once per control step, summed over the 3 sensors and the
-steps. Why:
-- noise-free: the paper sums "uniaxial fingertip contact forces", the physical contact quantity. The student's o_t
-  carries the same force plus N(0, 0.5 N) noise per sensor and step; summed over up to 300 samples that noise alone
-  random-walks by about +-9 N, so curating on it would select partly on sensor noise.
-- compressive part: the sim's reading is the contact force projected on the load cell's axis and is negative when
-  a contact pulls the tip along that axis (e.g. a touch on the back of a curled tip). Such readings are not the
-  pressing the criterion rewards, and summed signed they cancel real pressing (untrained teachers reach negative
-  totals). The env counts a sensor as "in contact" only when f > 0.1 N (r_t, r_i); this uses the same sign.
-The unit is "N summed over 20 Hz samples" (200 N = 10 N*s of impulse), not an integral over time.
-
-The paper adds that the selection "emphasizes the grasp-and-lift phase rather than the prolonged holding": that is
-what the criteria select *for*, and the paper keeps the selected episodes as they are. Kept episodes are therefore
-whole by default, holding included: success needs a 1 s hold, and a student that never sees one does not learn to
-hold. `trim_to_success` (CLI `--curation.trim_to_success=true`, off by default) instead ends a kept episode at the
-step where both criteria are first met. Acceptance does not depend on trimming. `enabled=False` (CLI
-`--curation.enabled=false`, the "w/o curation" ablation) keeps every episode whole.
+An episode of T <= 100 steps (5 s at 20 Hz) passes when the task reward r_t (eq. 3) stays > 0.5 for >= 0.5 s
+(10 consecutive steps) and the uniaxial fingertip forces summed over the 3 sensors and the steps exceed 200 N (the
+paper's strict "> 0.5" and "exceeds"; a sum over 20 Hz samples, 200 N = 10 N*s, not an integral). The sum is of the
+compressive part max(f, 0) of the *noise-free* force after the 0.1 N deadband (`info["uniaxial_force"]`): the
+student's N(0, 0.5 N) noise, summed over up to 300 samples, random-walks by about +-9 N, and a negative reading (a
+contact pulling the tip along the load cell's axis) is not the pressing the criterion rewards, yet summed signed it
+cancels real pressing. Kept episodes are whole by default, holding included (a student that never sees a 1 s hold
+does not learn to hold); `trim_to_success` ends them where both criteria are first met, and `enabled=False` ("w/o
+curation") keeps every episode whole.
 """
 
 from __future__ import annotations

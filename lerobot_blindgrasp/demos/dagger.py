@@ -3,21 +3,11 @@
     blindgrasp-dagger --student=outputs/x/student/checkpoints/last/pretrained_model \
         --demos=outputs/x/demos --output_dir=outputs/x/dagger --episodes_per_object=10
 
-The paper trains the student offline, on curated rollouts of the stochastic teacher. A student trained that way
-meets states its demos never show once its own small errors add up (compounding error), and nothing taught it how
-to recover from them. DAgger (Ross et al., 2011) closes that gap: the *student* drives the episodes, and every state
-it visits is labelled with the action the privileged *teacher* would take there (its deterministic mean). Only the
-student's own actions move the gripper; the teacher only labels.
-
-Output: `<output_dir>/relabelled`, a LeRobotDataset of those episodes (same schema as the demos; each episode whole,
-10 s or until the object left the workspace; `episode.outcome` says whether the student succeeded), and
-`<output_dir>/aggregate`, the demos and the relabelled episodes merged with LeRobot's own `aggregate_datasets`:
-the dataset the next student trains on. Start states come from their own block of the demo seed range, disjoint
-from the demos' and from evaluation. The episodes are saved as the demo collector saves its own: by the writer
-thread (`demos/episode_writer.py`), in order, while the next batch rolls out.
-
-Label: the absolute target the env would have commanded for the teacher's action (`BatchedGraspEnv.target_for_delta`:
-clip(q + clip(a_teacher, +-0.3 rad), joint limits), in the joints' measured frame).
+A student trained offline meets states its demos never show once its own errors add up. DAgger (Ross et al., 2011):
+the *student* drives, and every state it visits is labelled with the target the env would command for the
+*teacher's* mean action (`BatchedGraspEnv.target_for_delta`). `<output_dir>/relabelled` holds those episodes (the
+demo schema, each whole), `<output_dir>/aggregate` the demos and them merged (`demo_dataset.aggregate`): the next
+student's training set. Start states come from their own block of the demo seed range.
 """
 
 from __future__ import annotations
@@ -34,11 +24,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import compat, spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.demos import curation
 from lerobot_blindgrasp.demos import dataset as demo_dataset
-from lerobot_blindgrasp.demos.collection_loop import _cleanup, _finalize_or_abandon
+from lerobot_blindgrasp.demos.collection_loop import _cleanup
 from lerobot_blindgrasp.demos.episode_writer import EpisodeWriter
 from lerobot_blindgrasp.durable import atomic_write_json
 from lerobot_blindgrasp.rollout.actors import StudentActor, TeacherActor
@@ -93,8 +83,7 @@ def relabelled_episodes(
         raise RuntimeError("object allocation differs from the requested batch")
     label = TeacherActor(teacher).target
     student.reset()
-    done = run_batch(env, student, record=TRACES, labels={"action": (spec.ACTION_DIM, label)})
-    return done
+    return run_batch(env, student, record=TRACES, labels={"action": (spec.ACTION_DIM, label)})
 
 
 def run_dagger(cfg: DaggerConfig) -> dict:
@@ -136,9 +125,9 @@ def run_dagger(cfg: DaggerConfig) -> dict:
                 writer.close()  # what was rolled out is written, also on Ctrl-C
         finally:
             with _cleanup("finalizing the dataset", sys.exc_info()[1]):  # never masks the error that ended it
-                _finalize_or_abandon(ds)
+                compat.finalize_or_abandon(ds)
     demo_dataset.aggregate(
-        [_repo_id(cfg.demos), cfg.repo_id + "_relabelled"],
+        [f"local/{cfg.demos.name}", cfg.repo_id + "_relabelled"],  # info.json keeps no repo id
         [cfg.demos, out / "relabelled"],
         cfg.repo_id,
         out / "aggregate",
@@ -169,11 +158,6 @@ def _whole(ep: Episode) -> curation.CurationResult:
         force_sum_n=float(ep.uniaxial_force.sum()),
         criteria_step=-1,
     )
-
-
-def _repo_id(root: Path) -> str:
-    info = json.loads((Path(root) / "meta" / "info.json").read_text())
-    return info.get("repo_id") or f"local/{Path(root).name}"
 
 
 def main(argv=None) -> None:

@@ -1,31 +1,21 @@
 """The demo dataset: LeRobotDataset v3 at 20 fps, state-only, the shared schema plus per-episode metadata features.
 
-Schema: `spec.dataset_features()` (observation.state = 9 joint positions + 3 forces, action = 9 absolute joint
-targets) is what sim demos and glove demos share. On top of it, every frame carries its episode's metadata as three
-small extra features (constant within an episode):
-
-    episode.outcome        float32 (6,)  success, curation_passed, left_workspace, longest_hold_s, force_sum_n,
-                                          rollout_steps
-    episode.randomization  float32 (7,)  the Table II draw (frictions, mass and gain scales), the object's start xy
-    episode.seed           int64   (2,)  env_seed, env_episode: with the collection's DR they reproduce the draw
-
-The object and its size are in the task string (one task per object), which LeRobot keeps per episode.
-
-Why features and not custom columns or info.json keys: LeRobot's tools rebuild metadata from what they know.
-`DatasetInfo.from_dict` drops unknown info.json keys, and `lerobot-edit-dataset` (delete_episodes, split, merge)
-rewrites meta/episodes from episode_index, tasks, length, file indices and the per-feature stats, so extra episode
-columns vanish. Features survive every operation, are returned by `LeRobotDataset.__getitem__`, and are ignored by
-policies (only `observation.*` and `action*` keys become policy features). Their per-episode stats (min = max =
-the value) are also kept in meta/episodes, so `episode_table()` reads every episode's metadata without touching
-the frames. The cost is a few bytes per frame.
-
-Merging with glove demos (`lerobot-edit-dataset --operation.type merge`) needs identical features and robot_type:
-remove the three metadata features first (`--operation.type remove_feature`, see `MERGE_HINT`).
+`spec.dataset_features()` (observation.state = 9 joint positions + 3 forces, action = 9 absolute joint targets) is
+what sim and glove demos share. Every frame also carries its episode's metadata as small features, constant within
+the episode: `episode.outcome` (success, curation_passed, left_workspace, longest_hold_s, force_sum_n,
+rollout_steps), `episode.randomization` (the Table II draw and the object's start xy) and `episode.seed` (env_seed,
+env_episode). The object is in the task string. Features, not custom columns or info.json keys, because LeRobot's
+tools (`DatasetInfo.from_dict`, `lerobot-edit-dataset`) drop what they do not know; policies ignore them, and their
+per-episode stats (min = max = the value) let `episode_table()` read every episode without its frames. Merging with
+glove demos needs the three removed first (`MERGE_HINT`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
+import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -97,10 +87,11 @@ def resume(root: Path, repo_id: str):
     return ds
 
 
-def check_schema(features: dict, fps: int, robot_type: str | None) -> list[str]:
+def check_schema(features: dict, fps: int, robot_type: str | None, want: dict | None = None) -> list[str]:
+    """Why a dataset of these features, fps and robot type does not hold `want` (default: the demo schema) at 20
+    fps as a blindgrasp robot; [] when it does."""
     problems = []
-    want = demo_features()
-    for key, ft in want.items():
+    for key, ft in (want or demo_features()).items():
         have = features.get(key)
         if have is None:
             problems.append(f"missing feature {key!r}")
@@ -152,15 +143,9 @@ def write_episode(ds, ep: Episode, cut: CurationResult, fast: bool = True) -> in
     return cut.keep_steps
 
 
-_TASK_TO_OBJECT: dict[str, str] = {}
-
-
 def object_from_task(task: str) -> str | None:
     """The catalogue object a task string names (None for tasks that are not ours, e.g. edited ones)."""
-    if len(_TASK_TO_OBJECT) != len(objects.CATALOGUE):
-        _TASK_TO_OBJECT.clear()
-        _TASK_TO_OBJECT.update({o.task: name for name, o in objects.CATALOGUE.items()})
-    return _TASK_TO_OBJECT.get(task)
+    return next((name for name, o in objects.CATALOGUE.items() if o.task == task), None)
 
 
 def episode_table(root: str | Path):
@@ -199,33 +184,41 @@ def episode_table(root: str | Path):
 def aggregate(repo_ids: list[str], roots: list[Path], repo_id: str, dest: Path) -> None:
     """Merge datasets into `dest` with LeRobot's `aggregate_datasets`, and leave it mergeable again.
 
-    Hand-written around LeRobot 0.6.1: `aggregate_datasets` appends every source's episode rows to the destination's
-    current meta/episodes file but offsets each row's `meta/episodes/{chunk,file}_index` from the source's own. A
-    source with more than one episodes file (the collector writes one per checkpoint) so leaves rows naming a file
-    that does not exist. Training reads every file and does not notice; the next merge of the result (a DAgger
-    round on targeted demos) fails with FileNotFoundError. Each row is set to the file that holds it.
+    LeRobot 0.6.1 appends every source's episode rows to the destination's current meta/episodes file but offsets
+    each row's `meta/episodes/{chunk,file}_index` from the source's own, so a source with several episodes files
+    (one per collector checkpoint) leaves rows naming files that do not exist, and the next merge of the result
+    fails with FileNotFoundError. Each row is set to the file that holds it. Built beside `dest` (`built_beside`).
     """
     import pyarrow as pa
     import pyarrow.parquet as pq
     from lerobot.datasets.aggregate import aggregate_datasets
 
+    from lerobot_blindgrasp.demos.rebuild_meta import chunk_file
+
+    with built_beside(Path(dest)) as out:
+        aggregate_datasets(list(repo_ids), repo_id, roots=[Path(r) for r in roots], aggr_root=out)
+        for f in sorted(Path(out, "meta", "episodes").glob("chunk-*/file-*.parquet")):
+            table = pq.read_table(f)  # pyarrow, not pandas: the rest of the schema goes back unchanged
+            where = dict(zip(("chunk_index", "file_index"), chunk_file(f), strict=True))
+            if all(set(table[f"meta/episodes/{k}"].to_pylist()) == {v} for k, v in where.items()):
+                continue
+            for k, v in where.items():
+                col = f"meta/episodes/{k}"
+                column = pa.array([v] * table.num_rows, table.schema.field(col).type)
+                table = table.set_column(table.schema.get_field_index(col), table.schema.field(col), column)
+            pq.write_table(table, f)
+
+
+@contextlib.contextmanager
+def built_beside(dest: Path) -> Iterator[Path]:
+    """A fresh folder beside `dest` that replaces it, fsynced, once the block ends without an error: a kill midway
+    leaves no folder that looks finished, and the next try starts over."""
     from lerobot_blindgrasp import durable
 
-    aggregate_datasets(list(repo_ids), repo_id, roots=[Path(r) for r in roots], aggr_root=Path(dest))
-    for f in sorted(Path(dest, "meta", "episodes").glob("chunk-*/file-*.parquet")):
-        table = pq.read_table(f)  # pyarrow, not pandas: the rest of the schema goes back unchanged
-        where = {
-            "chunk_index": int(f.parent.name.removeprefix("chunk-")),
-            "file_index": int(f.stem.removeprefix("file-")),
-        }
-        if all(set(table[f"meta/episodes/{k}"].to_pylist()) == {v} for k, v in where.items()):
-            continue
-        for k, v in where.items():
-            col = f"meta/episodes/{k}"
-            table = table.set_column(
-                table.schema.get_field_index(col),
-                table.schema.field(col),
-                pa.array([v] * table.num_rows, table.schema.field(col).type),
-            )
-        with durable.atomic_path(f) as tmp:
-            pq.write_table(table, tmp)
+    tmp = dest.with_name(f".{dest.name}{durable.TEMP_MARK}build")
+    shutil.rmtree(tmp, ignore_errors=True)
+    yield tmp
+    durable.fsync_tree(tmp)
+    shutil.rmtree(dest, ignore_errors=True)
+    os.replace(tmp, dest)
+    durable.fsync_dir(dest.parent)

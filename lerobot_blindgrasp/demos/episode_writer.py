@@ -1,20 +1,12 @@
 """Dataset writes off the rollout loop: one writer thread, a bounded queue, errors raised in the caller.
 
-`LeRobotDataset.save_episode` costs tens of milliseconds per episode (statistics, a parquet append, the metadata
-files), and in the loop it stalls the physics for as long. `EpisodeWriter` runs the writes (and anything else that
-touches the dataset or the run's records, such as a crash checkpoint) on one thread, in the order they were
-submitted, so the dataset is the same as written in the loop: episode indices, files and values. The loop only
-waits when `queue` jobs are already waiting (backpressure: memory stays bounded, about 15 kB per demo episode).
-
-The first error of a job is raised in the caller's thread, by the next `submit`, `flush` or `close`; the jobs queued
-after it are dropped, so nothing is written after a failed write. `flush` and `close` write what is queued (an
-interrupted run keeps the episodes it finished) and never leave a write half done: a Ctrl-C while they wait drops
-the jobs not started yet, lets the one in progress complete, and is raised after.
-
-With `queue=0` every job runs in the caller's thread when submitted: the loop as it was before.
-
-Hand-written on `concurrent.futures` because LeRobot 0.6.1 has no asynchronous episode writer: its
-`AsyncImageWriter` writes camera frames and its streaming encoder encodes video, neither saves an episode.
+`LeRobotDataset.save_episode` costs tens of milliseconds per episode, a stall of the physics in the loop.
+`EpisodeWriter` runs the writes (and anything else that touches the dataset or the run's records) on one thread in
+submission order, so the dataset is the one the loop would write; the loop waits only when `queue` jobs wait. A
+job's error is raised in the caller by the next `submit`, `flush` or `close`, and later jobs are dropped. `flush`
+and `close` never leave a write half done: a Ctrl-C drops the jobs not started and is raised after the running one.
+`queue=0` runs every job in the caller's thread. Hand-written because LeRobot 0.6.1 has no asynchronous episode
+writer (its `AsyncImageWriter` writes camera frames only).
 """
 
 from __future__ import annotations

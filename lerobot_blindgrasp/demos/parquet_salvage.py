@@ -1,18 +1,11 @@
 """The complete row groups of a parquet file whose writer never wrote its footer (a SIGKILL, a full disk).
 
-A parquet file is `PAR1`, then each row group's column chunks as pages (each a Thrift-encoded PageHeader followed
-by its bytes), then the footer (FileMetaData, its length, `PAR1`) that only `ParquetWriter.close()` writes.
-LeRobot's writers keep their files open across episodes, one `write_table` (one row group) per episode, so a
-process that dies leaves every finished episode's pages on disk with nothing that says where they are.
-
-`salvage(path, template)` walks the page headers from the start, cuts after the last complete row group, and
-builds the footer for those bytes from a footer pyarrow writes for `template` (a one-row table with the file's
-schema): its schema and per-column facts, with each chunk's offsets, sizes and value counts taken from the pages
-found. pyarrow then reads the result and decodes every value itself; nothing here decodes data. The bytes after
-the last complete row group (an episode whose write was cut) are reported, not read.
-
-Hand-written because no installed library reads a footerless file: pyarrow, pandas and datasets all start from
-the footer. The Thrift compact protocol codec is the minimum Parquet's metadata needs (no maps, no sets).
+LeRobot's writers keep their files open, one row group per episode, and only `ParquetWriter.close()` writes the
+footer. `salvage(buf, template)` walks the page headers from the start, cuts after the last complete row group and
+builds a footer for those bytes from the one pyarrow writes for `template` (a one-row table of the file's schema),
+with each column chunk's offsets, sizes and value counts from the pages found; pyarrow then decodes the values.
+Hand-written because no installed library reads a footerless file (pyarrow, pandas and datasets all start from the
+footer); the Thrift compact codec covers what parquet's metadata uses (no maps, no sets).
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """`collection.json` in the dataset folder: how the demos were made, run by run (the card is filled from it).
 
-It lives beside `meta/` rather than inside LeRobot's metadata, which LeRobot's tools rewrite; it travels with the
-folder to the Hub. `--resume` reads it to refuse appending demos of another teacher or another curation rule,
-and to continue with env seeds no earlier run used.
+It lives beside `meta/`, which LeRobot's tools rewrite. `--resume` reads it to refuse demos of another teacher or
+curation rule, and to continue with env seeds no earlier run used.
 """
 
 from __future__ import annotations
@@ -19,12 +18,13 @@ FORMAT = "blindgrasp-demos/1"
 _MUST_MATCH = ("teacher_sha256", "stochastic", "curation", "randomization", "objects")
 
 
-def provenance_path(root: Path) -> Path:
-    return Path(root) / PROVENANCE_NAME
+def is_collection(root: Path) -> bool:
+    """Whether `root` was written by blindgrasp-collect-demos (its collection.json), not by lerobot-record."""
+    return (Path(root) / PROVENANCE_NAME).is_file()
 
 
 def load_provenance(root: Path) -> dict:
-    p = provenance_path(root)
+    p = Path(root) / PROVENANCE_NAME
     if not p.is_file():
         raise FileNotFoundError(f"{root} has no {PROVENANCE_NAME}; it was not written by blindgrasp-collect-demos")
     data = json.loads(p.read_text())
@@ -34,7 +34,7 @@ def load_provenance(root: Path) -> dict:
 
 
 def save_provenance(root: Path, data: dict) -> None:
-    durable.atomic_write_json(provenance_path(root), data, indent=2)
+    durable.atomic_write_json(Path(root) / PROVENANCE_NAME, data, indent=2)
 
 
 def mismatches(old: dict, new: dict) -> list[str]:

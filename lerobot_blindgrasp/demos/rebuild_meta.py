@@ -1,20 +1,12 @@
-"""A LeRobot recording's metadata rebuilt from its data files, for the episodes whose frames are all there.
+"""A LeRobot dataset's metadata rebuilt from its data files, for the episodes whose frames are all there.
 
-LeRobot 0.6.1 writes a recording's episode rows to meta/episodes only every `metadata_buffer_size` (10) episodes
-or at `finalize()`, and keeps its data parquet file open (no footer) until then. A `lerobot-record` killed after
-its first episode therefore leaves that episode's frames in a footerless data file and no episode row at all; one
-that meets a full disk leaves a 0-byte meta/episodes file besides (its `finalize()` opens the file, then the write
-fails). The prefix repair (`repair.py`) finds no episode row there and would keep nothing.
-
-`rebuild(root)` instead starts from the data: every complete row group of every data file (`parquet_salvage`),
-cut to the longest prefix whose episodes are whole (global `index` contiguous from 0, episode indices 0, 1, ...,
-each episode's `frame_index` 0..n-1). The metadata is then written by LeRobot's own `LeRobotDatasetMetadata`
-(episode rows, stats per episode with `compute_episode_stats`, aggregated stats, totals) into a staging folder and
-moved in file by file, each atomically, `info.json` last, so the result is what LeRobot itself would have
-written. Files that held anything else (a footerless data file, the cut episode's partial bytes, an unreadable
-metadata file) are moved, not deleted, to `<root>.set-aside/` and named in the report.
-
-It applies only where the data can say everything: no image or video features (their files are not in the data).
+LeRobot 0.6.1 writes episode rows to meta/episodes only every `metadata_buffer_size` (10) episodes or at
+`finalize()`, and keeps its parquet files footerless until then: a killed writer leaves saved frames and no episode
+row (a full disk also leaves a 0-byte meta/episodes file). `rebuild(root)` starts from the data: every complete row
+group (`parquet_salvage`), cut to the longest prefix of whole episodes (and to `limit`), fed to LeRobot's own
+`LeRobotDatasetMetadata` in a staging folder and moved in file by file, atomically, `info.json` last. Files it
+replaces are moved to `<root>.set-aside/`, not deleted. Only for datasets without image or video features (their
+frames are not in the data files).
 """
 
 from __future__ import annotations
@@ -33,6 +25,7 @@ from .parquet_salvage import MAGIC, salvage
 
 EPISODES = Path("meta/episodes")
 TASKS = Path("meta/tasks.parquet")
+STATS = Path("meta/stats.json")
 
 
 class RebuildError(Exception):
@@ -41,8 +34,10 @@ class RebuildError(Exception):
 
 @dataclass
 class Rebuilt:
-    episodes: int = 0
+    episodes: int = 0  # kept
     frames: int = 0
+    claimed: int = 0  # info.json's total_episodes before
+    changed: bool = False  # False: the metadata already said exactly this, nothing was done
     set_aside: list[str] = field(default_factory=list)  # what was moved to <root>.set-aside/, and why
     rewritten: list[str] = field(default_factory=list)
 
@@ -76,17 +71,25 @@ def _template(features: dict):
     return datasets.Dataset.from_dict(row, features=hf).with_format("arrow")[:]
 
 
-def _footer_ok(path: Path) -> bool:
+def footer_ok(path: Path) -> bool:
+    """Whether pyarrow opens the parquet file (False without a footer, or unreadable for any other reason)."""
     import pyarrow.parquet as pq
 
     try:
         pq.ParquetFile(path)
         return True
-    except Exception:  # noqa: BLE001  (no footer, or unreadable: either way the pages are what is left)
+    except Exception:  # noqa: BLE001  (ArrowInvalid for a missing footer, OSError for I/O: unreadable either way)
         return False
 
 
-def read_data(root: Path, features: dict) -> list[tuple[Path, object, bool, int]]:
+def chunk_file(path: Path) -> tuple[int, int]:
+    """(chunk index, file index) of `.../chunk-CCC/file-FFF.parquet`."""
+    return int(path.parent.name.split("-")[-1]), int(path.stem.split("-")[-1])
+
+
+def read_data(
+    root: Path, features: dict, columns: list[str] | None = None
+) -> list[tuple[Path, object, bool, int]]:
     """(path, complete rows, had a footer, bytes after the last complete row group) for each data file."""
     import io
 
@@ -94,45 +97,62 @@ def read_data(root: Path, features: dict) -> list[tuple[Path, object, bool, int]
 
     template, out = None, []
     for p in sorted((root / "data").glob("chunk-*/file-*.parquet")):
-        if _footer_ok(p):
-            out.append((p, pq.read_table(p), True, 0))
+        if footer_ok(p):
+            out.append((p, pq.read_table(p, columns=columns), True, 0))
             continue
         template = _template(features) if template is None else template
         buf = p.read_bytes()
         fixed, _, cut = salvage(buf, template) if buf[:4] == MAGIC else (None, 0, len(buf))
-        out.append((p, pq.read_table(io.BytesIO(fixed)) if fixed else template.slice(0, 0), False, cut))
+        table = pq.read_table(io.BytesIO(fixed)) if fixed else template.slice(0, 0)
+        out.append((p, table.select(columns or table.column_names), False, cut))
     return out
 
 
-def whole_prefix(files: list) -> tuple[list[dict], int]:
-    """The episodes 0..k-1 whose frames are all in the data, in order: [{index, length, file, rows}], frames."""
+def whole_prefix(files: list) -> list[dict]:
+    """The episodes 0..k-1 whose frames are all in the data, in order: [{index, length, file, rows, from}]."""
     episodes, next_index = [], 0
     for path, table, _, _ in files:
         ep, idx, fi = (table[c].to_numpy() for c in ("episode_index", "index", "frame_index"))
         for e in dict.fromkeys(ep.tolist()):
             rows = np.flatnonzero(ep == e)
             n = len(rows)
-            if e != len(episodes) or not np.array_equal(idx[rows], np.arange(next_index, next_index + n)):
-                return episodes, next_index
-            if not np.array_equal(fi[rows], np.arange(n)):
-                return episodes, next_index
+            in_order = e == len(episodes) and np.array_equal(idx[rows], np.arange(next_index, next_index + n))
+            if not (in_order and np.array_equal(fi[rows], np.arange(n))):
+                return episodes
             episodes.append({"index": int(e), "length": n, "file": path, "rows": rows, "from": next_index})
             next_index += n
-    return episodes, next_index
+    return episodes
 
 
-def needed(root: Path, files: list, n_whole: int) -> bool:
-    """True when the data holds more finished episodes than readable meta/episodes rows say, or a file is cut."""
+def episode_rows(root: Path) -> tuple[list[int], bool]:
+    """The episode indices of the rows in meta/episodes' readable files, and whether every file there is readable."""
     import pyarrow.parquet as pq
 
-    if any(not ok or cut for _, _, ok, cut in files):
-        return True
-    rows = set()
+    rows, readable = [], True
     for p in sorted((root / EPISODES).glob("chunk-*/file-*.parquet")):
-        if not _footer_ok(p):
-            return True
-        rows |= set(pq.read_table(p, columns=["episode_index"])["episode_index"].to_pylist())
-    return not set(range(n_whole)) <= rows
+        if footer_ok(p):
+            rows += pq.read_table(p, columns=["episode_index"])["episode_index"].to_pylist()
+        else:
+            readable = False
+    return rows, readable
+
+
+def _needed(root: Path, info, files: list, done: Rebuilt) -> bool:
+    """False when the dataset already says exactly `done`'s episodes: every data file whole and holding only them,
+    one episode row each, info.json's counts, a readable tasks.parquet and stats.json."""
+    if any(not ok or cut for _, _, ok, cut in files) or sum(t.num_rows for _, t, _, _ in files) != done.frames:
+        return True
+    if done.episodes and not footer_ok(root / TASKS):
+        return True  # `_tasks` then says why it cannot be rebuilt
+    rows, readable = episode_rows(root)
+    counts = (info.total_episodes, info.total_frames)
+    if not readable or sorted(rows) != list(range(done.episodes)) or counts != (done.episodes, done.frames):
+        return True
+    try:
+        json.loads((root / STATS).read_text())
+        return False
+    except (OSError, ValueError):
+        return done.episodes > 0  # LeRobot writes no stats.json before the first episode
 
 
 def _stats(table, rows, features: dict) -> dict:
@@ -180,16 +200,19 @@ def _stage(root: Path, staging: Path, info, files: list, episodes: list, tasks: 
         table = tables[e["file"]]
         rows = e["rows"]
         task_of = sorted({tasks[i] for i in table["task_index"].take(rows).to_pylist()})
-        chunk, file = (int(x.split("-")[-1]) for x in (e["file"].parent.name, e["file"].stem))
+        chunk, file = chunk_file(e["file"])
         where = {"data/chunk_index": chunk, "data/file_index": file}
         where.update(dataset_from_index=e["from"], dataset_to_index=e["from"] + e["length"])
         meta.save_episode(e["index"], e["length"], task_of, _stats(table, rows, info.features), where)
     meta.finalize()
 
 
-def _set_aside(root: Path, path: Path, why: str, done: Rebuilt, *, keep: bool = False) -> None:
+def _set_aside(root: Path, path: Path, why: str, done: Rebuilt, *, keep: bool = False, dry_run: bool) -> None:
     """Move `path` to <root>.set-aside/ (a rename: no copy on a nearly full disk); with `keep`, link it there and
     leave it in place for an atomic replacement, so that a kill in between never leaves the dataset without it."""
+    done.set_aside.append(f"{path.relative_to(root)} ({why})")
+    if dry_run:
+        return
     dest = root.parent / f"{root.name}.set-aside" / path.relative_to(root)
     dest.parent.mkdir(parents=True, exist_ok=True)
     n = 1
@@ -199,10 +222,9 @@ def _set_aside(root: Path, path: Path, why: str, done: Rebuilt, *, keep: bool = 
         os.link(path, dest)
     else:
         path.replace(dest)
-    done.set_aside.append(f"{path.relative_to(root)} ({why})")
 
 
-def _rewrite_data(root: Path, files: list, episodes: list, done: Rebuilt) -> None:
+def _rewrite_data(root: Path, files: list, episodes: list, done: Rebuilt, dry_run: bool) -> None:
     import pyarrow.parquet as pq
 
     keep = {e["file"]: max(int(r) for r in e["rows"]) + 1 for e in episodes}
@@ -212,39 +234,45 @@ def _rewrite_data(root: Path, files: list, episodes: list, done: Rebuilt) -> Non
             continue
         why = "no footer: its writer was killed" if not ok else f"holds {table.num_rows - n} rows past the prefix"
         why += f"; {cut} bytes after its last complete row group: an unfinished write" if cut else ""
-        _set_aside(root, path, why, done, keep=bool(n))
+        _set_aside(root, path, why, done, keep=bool(n), dry_run=dry_run)
         if n:
+            done.rewritten.append(str(path.relative_to(root)))
+        if n and not dry_run:
             with durable.atomic_path(path) as tmp:
                 pq.write_table(table.slice(0, n), tmp, compression="snappy", use_dictionary=True)
-            done.rewritten.append(str(path.relative_to(root)))
 
 
-def rebuild(root: str | Path, dry_run: bool = False) -> Rebuilt | None:
-    """Rebuild `root`'s metadata from its data when the data holds finished episodes the metadata lacks (see the
-    module docstring); None when nothing needs it."""
+def rebuild(root: str | Path, dry_run: bool = False, limit: int | None = None) -> Rebuilt:
+    """Rebuild `root`'s metadata from its data for its whole episodes, at most `limit` of them, unless it already
+    says exactly that (then `changed` is False); with dry_run, only say what would change."""
     root = Path(root)
     info = _info(root)
     if any(ft["dtype"] in ("image", "video") for ft in info.features.values()):
-        return None  # their frames live outside the data files: only the prefix repair applies
-    files = read_data(root, info.features)
-    episodes, frames = whole_prefix(files)
-    if not needed(root, files, len(episodes)):
-        return None
-    done = Rebuilt(episodes=len(episodes), frames=frames)
-    if dry_run:
+        raise RebuildError(f"{root} has image or video features, whose frames are not in the data files")
+    files = read_data(root, info.features, ["episode_index", "index", "frame_index"])  # all a check needs
+    episodes = whole_prefix(files)[:limit]
+    done = Rebuilt(len(episodes), sum(e["length"] for e in episodes), info.total_episodes)
+    done.changed = _needed(root, info, files, done)
+    if not done.changed:
         return done
     tasks = _tasks(root)
     staging = root / f".meta{durable.TEMP_MARK}rebuild"
     shutil.rmtree(staging, ignore_errors=True)
     try:
-        _stage(root, staging, info, files, episodes, tasks)
-        _rewrite_data(root, files, episodes, done)
+        if not dry_run:  # first: a failure here has changed nothing
+            files = read_data(root, info.features)
+            _stage(root, staging, info, files, episodes, tasks)
+        _rewrite_data(root, files, episodes, done, dry_run)
         for p in sorted((root / EPISODES).glob("chunk-*/file-*.parquet")):
-            _set_aside(root, p, "episode rows replaced by the rebuilt ones", done)
-        for src in sorted((staging / EPISODES).glob("chunk-*/file-*.parquet")) + [staging / "meta/stats.json"]:
+            _set_aside(root, p, "episode rows replaced by the rebuilt ones", done, dry_run=dry_run)
+        if dry_run:
+            return done
+        for src in sorted((staging / EPISODES).glob("chunk-*/file-*.parquet")) + [staging / STATS]:
             if src.is_file():
                 with durable.atomic_path(root / src.relative_to(staging)) as tmp:
                     shutil.copyfile(src, tmp)
+        if not (staging / STATS).is_file():  # no episode kept: LeRobot expects no stats file
+            (root / STATS).unlink(missing_ok=True)
         new = json.loads((staging / "meta/info.json").read_text())
         old = json.loads((root / "meta/info.json").read_text())
         old.update({k: new[k] for k in ("total_episodes", "total_frames", "total_tasks", "splits")})

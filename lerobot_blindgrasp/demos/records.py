@@ -1,13 +1,9 @@
 """The run records of a demo collection: provenance (`collection.json`), statistics, the yield report and card.
 
-A collection is one or more runs (`--resume=true` adds one) into one dataset folder. `open_dataset` starts or
-reopens the folder and its provenance; `start_run` and `finish_run` bracket each run, so `collection.json` lists
-every run with its outcome, however it ended, and `yield_report.json` and the card always describe the whole
-dataset. `yield_report.json` is written only when a run ends: it marks a finished collection.
-
-A run that is killed cannot record its end. `checkpoint_run` keeps `collection.json` current instead (the run in
-progress with its tally, and the next env seed before any episode of those envs is written), and `open_dataset`
-with --resume repairs the folder to its last checkpoint (`repair.py`), marks that run as killed and takes its tally.
+A collection is one or more runs (`--resume=true` adds one) into one folder. `start_run` and `finish_run` bracket
+each run, so `collection.json` lists every run however it ended; `yield_report.json` (written when a run ends) and
+the card describe the whole dataset. A killed run cannot record its end: `checkpoint_run` keeps `collection.json`
+current instead, and `open_dataset` with --resume repairs the folder to that checkpoint and takes its tally.
 """
 
 from __future__ import annotations
@@ -19,10 +15,12 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
+from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.cards import dataset_cards
 from lerobot_blindgrasp.demos import dataset as demo_dataset
 from lerobot_blindgrasp.demos import provenance, yield_report
 from lerobot_blindgrasp.demos.config import CollectConfig, CollectError
-from lerobot_blindgrasp.sim import randomization
+from lerobot_blindgrasp.sim import objects, randomization
 
 log = logging.getLogger("blindgrasp.demos")
 
@@ -50,19 +48,6 @@ class CollectStats:
     @property
     def demos_per_cpu_minute(self) -> float:
         return 60.0 * self.kept / self.cpu_s if self.cpu_s else 0.0
-
-    @property
-    def frames_written_per_s(self) -> float:
-        return self.frames / self.write_s if self.write_s else 0.0
-
-    def summary(self) -> dict:
-        d = {k: v for k, v in dataclasses.asdict(self).items() if k != "tally"}
-        d.update(
-            demos_per_minute=self.demos_per_minute,
-            demos_per_cpu_minute=self.demos_per_cpu_minute,
-            frames_written_per_s=self.frames_written_per_s,
-        )
-        return d
 
 
 def new_provenance(cfg: CollectConfig, teacher, object_names, dr: randomization.DomainRandomization) -> dict:
@@ -126,20 +111,16 @@ def open_dataset(cfg: CollectConfig, prov_new: dict):
 
 def empty_leftover(out: Path) -> bool:
     """A folder that a collection killed while starting left behind: no collection.json, no data file."""
-    return (
-        out.is_dir()
-        and not provenance.provenance_path(out).is_file()
-        and not any((out / "data").rglob("*.parquet"))
-    )
+    return out.is_dir() and not provenance.is_collection(out) and not any((out / "data").rglob("*.parquet"))
 
 
 def _repair(out: Path) -> None:
     """A crashed collection's folder back to its last checkpoint, saying what was kept and lost."""
-    from lerobot_blindgrasp.demos import repair
+    from lerobot_blindgrasp.demos import rebuild_meta, repair
 
     try:
         result = repair.repair(out)
-    except repair.RepairError as e:
+    except rebuild_meta.RebuildError as e:
         raise CollectError(f"--resume: {e}") from None
     if result.changed:
         log.warning("--resume: the dataset was left unfinished by a crash; repaired it:\n%s", result.summary())
@@ -204,18 +185,14 @@ def finish_run(cfg: CollectConfig, prov: dict, run: dict, tally: yield_report.Ta
     provenance.save_provenance(out, prov)
     _write_report(out, cfg, prov, tally)
     try:
-        from lerobot_blindgrasp.demos import collection_card
-
-        collection_card.write(out, cfg.repo_id)
+        write_collection_card(out, cfg.repo_id)
     except Exception as e:  # noqa: BLE001  (a card problem must not mask the collection's outcome)
         log.warning("could not write the dataset card: %s", e)
 
 
 def _write_report(out: Path, cfg: CollectConfig, prov: dict, tally: yield_report.Tally) -> Path:
     runs = prov["runs"]
-    wall = sum(r["wall_s"] for r in runs)
-    cpu = sum(r["cpu_s"] for r in runs)
-    kept_now = sum(r["kept"] for r in runs)
+    wall, cpu, kept = (sum(r[k] for r in runs) for k in ("wall_s", "cpu_s", "kept"))
     return yield_report.write_yield_report(
         out,
         tally,
@@ -229,8 +206,49 @@ def _write_report(out: Path, cfg: CollectConfig, prov: dict, tally: yield_report
             "runs": len(runs),
             "wall_s": wall,
             "cpu_s": cpu,
-            "demos_per_minute": 60.0 * kept_now / wall if wall else 0.0,
-            "demos_per_cpu_minute": 60.0 * kept_now / cpu if cpu else 0.0,
+            "demos_per_minute": 60.0 * kept / wall if wall else 0.0,
+            "demos_per_cpu_minute": 60.0 * kept / cpu if cpu else 0.0,
             "object_order": list(prov["objects"]),
         },
     )
+
+
+def _sim_context(root: Path, repo_id: str, meta) -> dict:
+    """The card's template context, from the collection's own records."""
+    prov = provenance.load_provenance(root)
+    tally = yield_report.load_tally(root)
+    rows = []
+    for name in prov["objects"]:
+        o = tally.of(name)
+        rows.append({"name": name, "task": objects.get_object(name).task, "yield": o.yield_rate, **vars(o)})
+    total = tally.total()
+    return {
+        **dataset_cards.dataset_fields(repo_id, meta),
+        "objects": rows,
+        "total": {"yield": total.yield_rate, **vars(total)},
+        "stochastic": prov["stochastic"],
+        "curation": prov["curation"],
+        "teacher": prov["teacher"],
+        "randomization": dataset_cards.randomization_rows(prov["randomization"]),
+        "runs": prov["runs"],
+        "state_names": list(spec.STATE_NAMES),
+        "action_names": list(spec.ACTION_NAMES),
+        "metadata_features": demo_dataset.EPISODE_FEATURES,
+        "merge_hint": demo_dataset.MERGE_HINT.format(
+            repo_id=repo_id, root="<root>", names=list(demo_dataset.METADATA_FEATURE_NAMES)
+        ),
+        **dataset_cards.versions(),
+    }
+
+
+def sim_card_kwargs(root: Path, repo_id: str, **kw) -> dict:
+    """`dataset_cards.card_kwargs` of the collection in `root`."""
+    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+
+    meta = LeRobotDatasetMetadata(repo_id, root=Path(root))
+    return dataset_cards.card_kwargs(repo_id, "sim", _sim_context(Path(root), repo_id, meta), meta, **kw)
+
+
+def write_collection_card(root: Path, repo_id: str) -> Path:
+    """The collection's card as root/README.md."""
+    return dataset_cards.write_card(root, repo_id, sim_card_kwargs(root, repo_id))

@@ -5,15 +5,10 @@ each with its card and the code's location, in one command.
     blindgrasp-publish --namespace=you                    # collects 2 demos per object, then pushes all four
     blindgrasp-publish --namespace=you --demos=runs/demos_cpu   # an existing blindgrasp-collect-demos folder
 
-The repo names are `project.HUB_REPOS`, under `--namespace`. Everything is checked before the first network call:
-`[project.urls]` must name the project's real public home (a card must not send a reader to a placeholder), each
-model loads (the teachers through `TeacherPolicy`, the student's `config.json` as LeRobot's policy config), each
-model card is rendered into a staging folder with its one install section and absolute links
-(`model_cards.py`). Without `--demos`, a small demo set is collected into the staging folder with the shipped
-student's recipe (`DEMO_RECIPE`: its teacher, and the joint calibration offset its demos are rolled out under),
-`--demo_episodes` curated episodes per object; a rerun with the same `--staging_dir` resumes it. The dataset is
-prepared by `blindgrasp-push-dataset`'s own `prepare` (its card carries the code's location too). Then the models
-go up with `HfApi.upload_folder` and the dataset with LeRobot's `push_to_hub`.
+Everything is checked before the first network call: `[project.urls]` names the real public home (no card may send
+a reader to a placeholder), each model loads, each model card renders into the staging folder (`model_cards.py`),
+and the dataset is prepared by `push.prepare`. Without `--demos`, a small curated set is collected there with the
+shipped student's demo settings (`DEMO_RECIPE`); a rerun with the same `--staging_dir` resumes it.
 """
 
 from __future__ import annotations
@@ -108,7 +103,7 @@ def collect_published_demos(cfg: PublishConfig, out: Path, repo_id: str) -> Path
         teacher=shipped.path(recipe.teacher.shipped_folder), output_dir=out, repo_id=repo_id,
         episodes_per_object=cfg.demo_episodes, objects=cfg.demo_objects,
         joint_calibration_rad=recipe.demos.joint_calibration_rad,
-        num_envs=min(recipe.demos.num_envs, _ENVS_PER_OBJECT * n_objects), resume=provenance.provenance_path(out).is_file(),
+        num_envs=min(recipe.demos.num_envs, _ENVS_PER_OBJECT * n_objects), resume=provenance.is_collection(out),
     )  # fmt: skip
     print(f"demos: {'resuming' if collect.resume else 'collecting'} {cfg.demo_episodes} curated episodes per object ({n_objects} objects) from "
           f"{collect.teacher.name} into {out}", flush=True)  # fmt: skip

@@ -1,14 +1,9 @@
 """`blindgrasp-push-dataset`: upload a blindgrasp dataset folder to the Hugging Face Hub with its card.
 
-    blindgrasp-push-dataset --root=runs/demos_cpu --repo_id=me/blindgrasp_demos_cpu
-    blindgrasp-push-dataset --root=~/glove_demos --repo_id=me/blindgrasp_glove --kind=glove --operators=[alice]
-
-Works for sim teacher demos (`blindgrasp-collect-demos` output, detected by its collection.json) and for glove
-teleoperation datasets recorded with `lerobot-record` (record them with `--dataset.push_to_hub=false`, then push
-them with this command to get the glove card). Everything is prepared locally first: the dataset is loaded (so a
-broken folder fails here, not half-way through an upload) and its card is written to README.md. Then LeRobot's own
-`LeRobotDataset.push_to_hub` uploads the folder, pushes the same card and tags the `v3.0` revision.
-`--dry_run=true` stops before the network.
+Sim teacher demos (known by their collection.json) or a glove recording from `lerobot-record` (record with
+`--dataset.push_to_hub=false`, then push with this for the glove card). Everything is prepared locally first: the
+dataset is loaded, so a broken folder fails here and not half-way through an upload, and its card is written to
+README.md; then LeRobot's `push_to_hub` uploads the folder with the same card and tags the `v3.0` revision.
 """
 
 from __future__ import annotations
@@ -18,14 +13,10 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from lerobot_blindgrasp import durable
 from lerobot_blindgrasp.cards import dataset_cards as cards
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.demos import collection_card
+from lerobot_blindgrasp.demos import provenance, records
 from lerobot_blindgrasp.project import REPO_ID_PATTERN
-
-# Not uploaded by LeRobot's push_to_hub (it ignores images/; state-only datasets have none anyway).
-_IGNORED_DIRS = ("images",)
 
 
 class PushError(Exception):
@@ -33,12 +24,10 @@ class PushError(Exception):
 
 
 def upload_plan(root: Path) -> dict:
-    """What the upload will send: file count and size, for the user and for tests."""
-    files = [p for p in root.rglob("*") if p.is_file() and p.relative_to(root).parts[0] not in _IGNORED_DIRS]
-    return {
-        "files": sorted(str(p.relative_to(root)) for p in files),
-        "bytes": sum(p.stat().st_size for p in files),
-    }
+    """What the upload will send (LeRobot's push_to_hub ignores images/): file count and size."""
+    files = sorted(p.relative_to(root) for p in root.rglob("*") if p.is_file())
+    files = [p for p in files if p.parts[0] != "images"]
+    return {"files": [str(p) for p in files], "bytes": sum((root / p).stat().st_size for p in files)}
 
 
 def prepare(
@@ -64,9 +53,7 @@ def prepare(
         kwargs = push_card_kwargs(root, repo_id, kind, license, tags, operators, notes)
     except (FileNotFoundError, ValueError) as e:
         raise PushError(str(e)) from None
-    card = cards.build_card(kwargs, repo_id)
-    cards.validate(str(card))
-    durable.atomic_write_text(root / cards.CARD_NAME, str(card))  # DatasetCard.save's text, atomically
+    cards.write_card(root, repo_id, kwargs)
     ds = LeRobotDataset(repo_id, root=root, video_backend="pyav")  # reads local files only
     push_kwargs = {k: v for k, v in kwargs.items() if not k.startswith("_")}
     return ds, push_kwargs, upload_plan(root)
@@ -74,7 +61,7 @@ def prepare(
 
 def detect_kind(root: Path) -> str:
     """'sim' for folders written by blindgrasp-collect-demos, else 'glove' (a lerobot-record dataset)."""
-    return "sim" if collection_card.is_collection(root) else "glove"
+    return "sim" if provenance.is_collection(root) else "glove"
 
 
 def push_card_kwargs(
@@ -82,7 +69,7 @@ def push_card_kwargs(
 ):
     """The card's arguments for either kind of dataset (detected when not given)."""
     if (kind or detect_kind(root)) == "sim":
-        return collection_card.sim_card_kwargs(root, repo_id, license=license, extra_tags=tags)
+        return records.sim_card_kwargs(root, repo_id, license=license, extra_tags=tags)
     return cards.glove_card_kwargs(root, repo_id, operators, notes, license=license, extra_tags=tags)
 
 

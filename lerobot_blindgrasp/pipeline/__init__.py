@@ -1,2 +1,2 @@
-"""The main job: from a teacher to an evaluated student (`run`, the stage runner behind `blindgrasp-pipeline`), the
-student recipe it follows (`recipe`), and the report it writes (`report`, with its grasp strips, `grasp_strips`)."""
+"""The main job (`run`, behind `blindgrasp-pipeline`), the commands it runs (`recipe`), its report with the grasp
+strips (`job_report`), and the glove student (`glove_train`)."""

@@ -4,36 +4,28 @@
     blindgrasp-train-glove --preset=sim_plus_glove --glove=[data/glove_s1] --sim_demos=runs/demos \\
         --output_dir=outputs/sim_plus_glove
 
-The presets are `lerobot_blindgrasp/presets/glove.py`. What runs, in order, each step with LeRobot's own tools:
-1. every source is checked for the shared schema (`spec.dataset_features()`, robot type, 20 fps), so a wrong
-   folder is named before anything is written;
-2. sim demos (`sim_plus_glove*`): their `episode.*` metadata features are removed (`dataset_tools.remove_feature`,
-   what `lerobot-edit-dataset --operation.type remove_feature` runs) into `<output_dir>/sim_schema`;
-3. two or more sources are merged (`aggregate_datasets`, what `lerobot-edit-dataset --operation.type merge` runs,
-   through `demos.dataset.aggregate`, which keeps the result mergeable) into `<output_dir>/dataset`;
-4. `lerobot-train --policy.type=blindgrasp_transformer` with the preset's size and schedule into
-   `<output_dir>/student`.
-Each dataset is written to a temporary folder and renamed when complete, so a re-run after a crash reuses what is
-finished and redoes the rest. `--dry_run=true` prints the plan and the lerobot-train command and runs nothing.
+With LeRobot's own tools, in order: every source is checked for the shared schema (`spec.dataset_features()`, robot
+type, 20 fps) before anything is written; sim demos lose their `episode.*` features (`remove_feature`) into
+`<output_dir>/sim_schema`; several sources are merged (`demos.dataset.aggregate`) into `<output_dir>/dataset`; and
+`lerobot-train` trains the preset's student (`presets/glove.py`) into `<output_dir>/student`. Each dataset is
+built in a temporary folder and renamed when complete, so a re-run reuses what is finished. `--dry_run=true`
+prints the plan and the lerobot-train command and runs nothing.
 """
 
 from __future__ import annotations
 
 import json
 import shlex
-import shutil
 import subprocess
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.pipeline import recipe
+from lerobot_blindgrasp.pipeline.stage import console_script
 from lerobot_blindgrasp.presets import student as student_presets
 from lerobot_blindgrasp.presets.glove import GlovePreset, glove_preset
-
-ROBOT_TYPE = "blindgrasp_gripper"  # = demos.dataset.ROBOT_TYPE and the robot's LeRobot name
 
 
 @dataclass
@@ -76,20 +68,14 @@ def merge_schema_problems(root: Path, extra_ok: tuple[str, ...] = ()) -> list[st
     info_path = Path(root) / "meta" / "info.json"
     if not info_path.is_file():
         return [f"{root} is not a LeRobotDataset folder (no meta/info.json)"]
+    from lerobot_blindgrasp.demos.dataset import check_schema
+
     info = json.loads(info_path.read_text())
-    problems = []
-    for key, ft in spec.dataset_features().items():
-        have = info["features"].get(key)
-        if have is None or list(have["shape"]) != list(ft["shape"]) or list(have["names"]) != ft["names"]:
-            problems.append(f"{key} is not the shared {ft['shape'][0]}-d {key} of spec.dataset_features()")
+    problems = check_schema(info["features"], info.get("fps"), info.get("robot_type"), spec.dataset_features())
     extra = [k for k, ft in info["features"].items() if k.startswith(("observation.", "action")) and
              k not in spec.dataset_features() and k not in extra_ok]  # fmt: skip
     if extra:
         problems.append(f"extra policy features {extra} (cameras?) that the other sources lack")
-    if info.get("robot_type") != ROBOT_TYPE:
-        problems.append(f"robot_type {info.get('robot_type')!r}, not {ROBOT_TYPE!r}")
-    if info.get("fps") != spec.CONTROL_HZ:
-        problems.append(f"fps {info.get('fps')}, not {spec.CONTROL_HZ}")
     return [f"{root}: {p}" for p in problems]
 
 
@@ -97,20 +83,12 @@ def _complete(root: Path) -> bool:
     return (root / "meta" / "info.json").is_file()
 
 
-def _fresh_tmp(dest: Path) -> Path:
-    tmp = dest.with_name(dest.name + ".partial")
-    if tmp.exists():
-        print(f"[glove-train] setting aside an unfinished {tmp} from an earlier run")
-        shutil.rmtree(tmp)
-    return tmp
-
-
 def sim_without_metadata(sim_root: Path, dest: Path) -> Path:
     """The sim demos without their `episode.*` features (LeRobot's remove_feature), written once."""
     from lerobot.datasets import LeRobotDataset
     from lerobot.datasets.dataset_tools import remove_feature
 
-    from lerobot_blindgrasp.demos.dataset import METADATA_FEATURE_NAMES
+    from lerobot_blindgrasp.demos.dataset import METADATA_FEATURE_NAMES, built_beside
 
     if _complete(dest):
         return dest
@@ -118,9 +96,8 @@ def sim_without_metadata(sim_root: Path, dest: Path) -> Path:
     names = [n for n in METADATA_FEATURE_NAMES if n in ds.meta.features]
     if not names:
         return Path(sim_root)  # already in the shared schema
-    tmp = _fresh_tmp(dest)
-    remove_feature(ds, names, output_dir=tmp, repo_id=f"local/{dest.name}")
-    tmp.rename(dest)
+    with built_beside(dest) as tmp:
+        remove_feature(ds, names, output_dir=tmp, repo_id=f"local/{dest.name}")
     return dest
 
 
@@ -132,9 +109,7 @@ def merged(sources: list[Path], dest: Path, repo_id: str) -> Path:
         return sources[0]
     if _complete(dest):
         return dest
-    tmp = _fresh_tmp(dest)
-    aggregate([f"local/{p.name}_{k}" for k, p in enumerate(sources)], sources, repo_id, tmp)
-    tmp.rename(dest)
+    aggregate([f"local/{p.name}_{k}" for k, p in enumerate(sources)], sources, repo_id, dest)
     return dest
 
 
@@ -143,8 +118,7 @@ def train_command(
 ) -> list[str]:
     """lerobot-train of the preset's student on the merged recordings (the venv's lerobot-train, as run here)."""
     cmd, _ = recipe.lerobot_train(p.student, dataset, repo_id, out, seed, device)
-    exe = Path(sys.executable).parent / cmd[0]
-    return [str(exe) if exe.exists() else cmd[0], *cmd[1:]]
+    return [console_script(cmd[0]), *cmd[1:]]
 
 
 def train_on_glove(cfg: GloveTrainConfig) -> Path:

@@ -1,11 +1,10 @@
 """The command line of every stage, built from a registry preset: one definition for `blindgrasp-pipeline` and for
-`scripts/paper_recipe.sh` (Table V at the preset's sizes).
+`scripts/paper_recipe.sh`, which runs Table V at the preset's sizes stage by stage:
 
     blindgrasp-pipeline --preset=paper --output_dir=outputs/paper --print_commands=demos
 
-prints, one shell line each, the commands of that Table V stage that are not done yet (the stages run in the
-order of STAGES; a re-run continues). Student steps come from the collected dataset (`presets.student`), so the
-`students` stage can only be printed once the demos exist.
+prints the commands of that stage not done yet, one shell line each (stages in the order of STAGES). Student steps
+come from the collected dataset (`presets.student`), so `students` can only be printed once the demos exist.
 """
 
 from __future__ import annotations
@@ -16,6 +15,7 @@ import time
 from pathlib import Path
 
 from lerobot_blindgrasp import presets, spec
+from lerobot_blindgrasp.sim import objects
 
 STAGES = ("teachers", "teacher_evals", "demos", "students", "evals")
 # Each pipeline --seed gets its own block of demo env seeds, so reruns with another seed are new draws.
@@ -33,12 +33,6 @@ def extra_demo_seed(seed: int, k: int, curated: bool = True) -> int:
     if not 0 <= k < 4:
         raise ValueError(f"at most 4 objects get extra episodes, not {k + 1}")
     return demo_seed(seed) + (1 if curated else 3) * DEMO_SEED_BLOCK // 4 + k * (DEMO_SEED_BLOCK // 16)
-
-
-def objects_of(task: str) -> tuple[str, ...]:
-    from lerobot_blindgrasp.sim import objects
-
-    return objects.resolve_objects(task)
 
 
 def teacher_train(
@@ -65,7 +59,7 @@ def teacher_eval(p: presets.Preset, teacher_dir: Path, dest: Path, eval_seed: in
         "blindgrasp-eval-teacher",
         f"--teacher={teacher_dir}",
         f"--episodes={e.episodes_per_object}",
-        f"--objects={','.join(objects_of(e.task))}",
+        f"--objects={','.join(objects.resolve_objects(e.task))}",
         f"--seed={eval_seed}",
         f"--modes={','.join(e.teacher_modes)}",
         f"--output_dir={dest}",
@@ -115,13 +109,6 @@ def demos_collect(
     return cmd
 
 
-def student_train(
-    p: presets.Preset, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
-) -> tuple[list[str], presets.Schedule]:
-    """lerobot-train of the preset's student; the step count (and LR schedule) follows from the dataset's frames."""
-    return lerobot_train(p.student, dataset, repo_id, out, seed, device)
-
-
 def lerobot_train(
     s: presets.StudentStage, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
 ) -> tuple[list[str], presets.Schedule]:
@@ -129,31 +116,46 @@ def lerobot_train(
     schedule) follows from the dataset's frames once it is complete."""
     frames = presets.dataset_frames(dataset) if (dataset / "meta" / "info.json").exists() else None
     sched = presets.schedule(s, frames)
-    cmd = [
+    extra = []
+    if sched.constant_lr_steps is not None:
+        extra.append(f"--policy.scheduler_constant_steps={sched.constant_lr_steps}")
+    if s.lr is not None:
+        extra.append(f"--policy.optimizer_lr={s.lr}")
+    policy = ["--policy.type=blindgrasp_transformer", f"--policy.size={s.size}"]
+    cmd = _lerobot_train(s, policy, dataset, repo_id, out, sched.steps, seed, device, [*extra, *s.policy_flags])
+    return cmd, sched
+
+
+def _lerobot_train(
+    s: presets.StudentStage,
+    policy: list[str],
+    dataset: Path,
+    repo_id: str,
+    out: Path,
+    steps: int,
+    seed: int,
+    device: str | None,
+    extra: list[str],
+) -> list[str]:
+    """The lerobot-train command both trainings share: `policy` says where the policy starts, `extra` follows the
+    batch size."""
+    return [
         "lerobot-train",
-        "--policy.type=blindgrasp_transformer",
-        f"--policy.size={s.size}",
+        *policy,
         f"--dataset.repo_id={repo_id}",
         f"--dataset.root={dataset}",
         f"--output_dir={out}",
-        f"--steps={sched.steps}",
+        f"--steps={steps}",
         f"--batch_size={s.batch_size}",
-    ]
-    if sched.constant_lr_steps is not None:
-        cmd.append(f"--policy.scheduler_constant_steps={sched.constant_lr_steps}")
-    if s.lr is not None:
-        cmd.append(f"--policy.optimizer_lr={s.lr}")
-    cmd += s.policy_flags
-    cmd += [
-        f"--save_freq={sched.steps}",
-        f"--log_freq={max(1, sched.steps // 50)}",
+        *extra,
+        f"--save_freq={steps}",
+        f"--log_freq={max(1, steps // 50)}",
         "--policy.push_to_hub=false",
         f"--policy.device={device or s.device}",
         f"--num_workers={s.num_workers}",
         "--wandb.enable=false",
         f"--seed={seed}",
     ]
-    return cmd, sched
 
 
 def dagger_seed(seed: int, round_: int) -> int:
@@ -192,23 +194,8 @@ def student_finetune(
     p: presets.Preset, init: Path, dataset: Path, repo_id: str, out: Path, seed: int, device: str | None = None
 ) -> list[str]:
     """lerobot-train from a student's weights (DAgger's retraining on the aggregate), `p.dagger.steps` steps."""
-    s, steps = p.student, p.dagger.steps
-    return [
-        "lerobot-train",
-        f"--policy.path={init}",
-        f"--dataset.repo_id={repo_id}",
-        f"--dataset.root={dataset}",
-        f"--output_dir={out}",
-        f"--steps={steps}",
-        f"--batch_size={s.batch_size}",
-        f"--save_freq={steps}",
-        f"--log_freq={max(1, steps // 50)}",
-        "--policy.push_to_hub=false",
-        f"--policy.device={device or s.device}",
-        f"--num_workers={s.num_workers}",
-        "--wandb.enable=false",
-        f"--seed={seed}",
-    ]
+    steps = p.dagger.steps
+    return _lerobot_train(p.student, [f"--policy.path={init}"], dataset, repo_id, out, steps, seed, device, [])
 
 
 def student_eval(
@@ -302,7 +289,7 @@ def table_v(
                 raise ValueError(f"{root} is not collected yet: run the demos stage first")
             if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
                 cmds.append(["mv", str(student), str(out / f"student_{row.name}_interrupted_{int(time.time())}")])
-            cmds.append(student_train(p, root, repo, student, seed, device)[0])
+            cmds.append(lerobot_train(p.student, root, repo, student, seed, device)[0])
         if stage == "evals" and not (out / f"eval_{row.name}" / "eval_info.json").exists():
             cmds.append(student_eval(p, checkpoint(student), out / f"eval_{row.name}", eval_seed, device))
     return cmds

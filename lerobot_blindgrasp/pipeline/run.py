@@ -7,32 +7,14 @@
     blindgrasp-pipeline --preset=paper --device=cuda    # the paper's Tables III-IV: a GPU machine
     blindgrasp-pipeline --preset=quick --teacher=runs/teacher_cpu     # any teacher folder instead
 
-Every size comes from the preset registry (`lerobot_blindgrasp/presets/`); the command lines from
-`lerobot_blindgrasp/pipeline/recipe.py`, which `scripts/paper_recipe.sh` uses too (`--print_commands=STAGE`). A draccus
-config like LeRobot's scripts (`--help`, `--config_path`).
-
-Stages, each a real CLI run as a subprocess (its command and log are kept in <out>/logs/):
-1. the teacher: a shipped teacher (`quick_blind`, `quick`), a given `--teacher`, or trained from scratch
-   (`blindgrasp-train-teacher`, presets `cpu`, `paper`, `smoke`);
-2. curated demos (`blindgrasp-collect-demos`) as a LeRobotDataset; a preset with `extra_episodes` (beyond the
-   paper) collects more of the objects it names, each on its own start states, and merges them in with LeRobot's
-   `aggregate_datasets`;
-3. the student (`lerobot-train --policy.type=blindgrasp_transformer`; an epoch-sized preset such as `paper` gets
-   its step count and LR schedule from the collected dataset's frames, `presets.student`);
-   With a DAgger stage (beyond the paper), `blindgrasp-dagger` then relabels the student's own episodes with the
-   teacher's mean action and `lerobot-train` fine-tunes it on the aggregate, for each round;
-4. the student in sim (`lerobot-eval --env.type=blindgrasp`) and the teacher on the *same* start states
-   (`blindgrasp-eval-teacher --seed` = lerobot-eval's `--seed`; see spec.eval_env_seed);
-5. `report.md` with PNG plots: which teacher, teacher vs student success per object with 95 % Wilson intervals
-   and paired counts, learning curves, demo yield, the preset's deviations from the paper, and the commands to
-   go bigger.
-Re-running the same command after an interruption or a kill continues where it stopped: a stage is skipped once
-it is marked completed in `pipeline.json`, a mark written (atomically) only after the stage's command succeeded,
-so a stage's partial output is never taken for a finished one. A stage cut short is run again, and resumes where
-its command can: the teacher from its newest checkpoint, the demos with `--resume=true` (repaired to their last
-checkpoint); the student and the evaluations start over.
-Env seeds: teacher training from `--seed`, demos from the demo range, evaluation from the eval range
-(`spec.SEED_RANGES`), so no start state is used twice.
+Sizes come from the preset registry (`presets/`), command lines from `recipe.py`. Stages, each a real CLI run as a
+subprocess with its log in <out>/logs/: the teacher (shipped, `--teacher`, or `blindgrasp-train-teacher`); curated
+demos (`blindgrasp-collect-demos`, a preset's `extra_episodes` merged in); the student (`lerobot-train`) and any
+DAgger rounds (`blindgrasp-dagger`, then fine-tuning); the student in sim (`lerobot-eval`) and the teacher on the
+same start states (`blindgrasp-eval-teacher` with the same `--seed`); `report.md` with its plots. A re-run goes on
+where it stopped: a stage is skipped once `pipeline.json` marks it completed, a mark written only after its command
+succeeded, and a stage cut short runs again, resuming where its command can. Env seeds: teacher training from
+`--seed`, demos and evaluation from their own ranges (`spec.SEED_RANGES`), so no start state is used twice.
 """
 
 from __future__ import annotations
@@ -45,12 +27,8 @@ from pathlib import Path
 
 from lerobot_blindgrasp import presets, spec
 from lerobot_blindgrasp.cli import parse_config, sleeping_openmp_threads
-from lerobot_blindgrasp.pipeline import demo_stages, recipe
+from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.pipeline.stage import COMPLETED, Stage
-from lerobot_blindgrasp.pipeline.teacher_source import teacher_for_run
-
-PRESETS = presets.PRESETS  # the registry itself, not a copy
-DEMO_SEED_BLOCK = recipe.DEMO_SEED_BLOCK
 
 BIGGER = """\
 Go bigger (same command, another preset):
@@ -90,7 +68,7 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     out, seed, eval_seed = cfg.output_dir, cfg.seed, cfg.eval_seed
     device = cfg.device or preset.student.device
     demo_seed = recipe.demo_seed(seed)
-    spec.check_seeds("demos", demo_seed, DEMO_SEED_BLOCK)  # one-line errors before any stage runs
+    spec.check_seeds("demos", demo_seed, recipe.DEMO_SEED_BLOCK)  # one-line errors before any stage runs
     spec.eval_env_seed(eval_seed + preset.evaluation.episodes_per_object - 1, 0)
     out.mkdir(parents=True, exist_ok=True)
     record_path = out / "pipeline.json"
@@ -106,19 +84,34 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     student_env = {**env1, "OMP_NUM_THREADS": str(preset.student.threads)}
 
     teacher_dir, record["teacher"] = teacher_for_run(stage, preset, out, seed, cfg.teacher)
-    _teacher_eval(stage, preset, teacher_dir, out / "teacher_eval", eval_seed)
+    # The teacher on the student's evaluation start states, in this run: paired on this machine's floats.
+    stage.once("teacher_eval", "done", recipe.teacher_eval(preset, teacher_dir, out / "teacher_eval", eval_seed))
     train_set, repo = _demos(stage, preset, teacher_dir, out, seed, demo_seed)
-    ckpt = _student(stage, preset, out, train_set, repo, seed, device, student_env)
+    cmd, sched = recipe.lerobot_train(preset.student, train_set, repo, out / "student", seed, device)
+    record["student_schedule"] = asdict(sched)
+    ckpt = _train(stage, "student", out / "student", cmd, student_env)
     record["student_recipe"] = preset.student_recipe
-    if preset.dagger is not None:
-        ckpt = _dagger_rounds(stage, preset, out, teacher_dir, train_set, ckpt, seed, device, student_env)
-    record["student_checkpoint"] = str(ckpt)
-    if stage.done("student_eval"):
-        stage.skip("student_eval", "done")
-    else:
-        stage.run(
-            "student_eval", recipe.student_eval(preset, ckpt, out / "student_eval", eval_seed, device), env=env1
+    # DAgger rounds (beyond the paper): the latest student drives, the teacher labels, the student is fine-tuned
+    # on the aggregate.
+    for r in range(1, (preset.dagger.rounds if preset.dagger else 0) + 1):
+        relabelled, name = out / f"dagger_{r}", f"student_dagger_{r}"
+        dagger_seed = recipe.dagger_seed(seed, r)
+        stage.once(
+            f"dagger_{r}",
+            "relabelled",
+            recipe.dagger(preset, ckpt, teacher_dir, train_set, relabelled, dagger_seed, device),
+            env=student_env,
         )
+        train_set, repo = relabelled / "aggregate", f"local/blindgrasp_{preset.name}_dagger_{r}"
+        cmd = recipe.student_finetune(preset, ckpt, train_set, repo, out / name, seed, device)
+        ckpt = _train(stage, name, out / name, cmd, student_env)
+    record["student_checkpoint"] = str(ckpt)
+    stage.once(
+        "student_eval",
+        "done",
+        recipe.student_eval(preset, ckpt, out / "student_eval", eval_seed, device),
+        env=env1,
+    )
     from lerobot_blindgrasp.pipeline.job_report import write_job_report  # matplotlib, only now
 
     report = write_job_report(out, record, BIGGER)
@@ -126,13 +119,51 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     return report
 
 
-def _teacher_eval(stage: Stage, preset: presets.Preset, teacher_dir: Path, dest: Path, eval_seed: int) -> None:
-    """The teacher on the student's evaluation start states, evaluated in this run: the paired eval is made on
-    this machine's floats, as the student's is."""
-    if stage.done("teacher_eval"):
-        stage.skip("teacher_eval", "done")
+def _train(stage: Stage, name: str, student: Path, cmd: list[str], env: dict) -> Path:
+    """lerobot-train into `student` unless done; returns its checkpoint. An interrupted run's folder is moved aside:
+    lerobot-train refuses an existing output dir unless resuming."""
+    if stage.done(name):
+        stage.skip(name, "trained")
     else:
-        stage.run("teacher_eval", recipe.teacher_eval(preset, teacher_dir, dest, eval_seed))
+        if student.exists():
+            os.replace(student, student.with_name(f"{student.name}_interrupted_{int(time.time())}"))
+        stage.run(name, cmd, env=env)
+    return recipe.checkpoint(student)
+
+
+def teacher_for_run(
+    stage: Stage, preset: presets.Preset, out: Path, seed: int, given: Path | None
+) -> tuple[Path, dict]:
+    """The teacher folder for this run and what the report says about it."""
+    from lerobot_blindgrasp.teacher.policy import TeacherError, TeacherPolicy, default_teacher
+
+    if given is not None or preset.teacher.shipped:
+        try:
+            path = Path(given) if given is not None else default_teacher(preset.teacher.shipped_folder)
+            t = TeacherPolicy(path)
+        except TeacherError as e:
+            raise SystemExit(f"[pipeline] error: {e}") from None
+        shipped = "shipped" if preset.teacher.shipped_folder else "shipped default"
+        stage.skip("teacher", f"using {'the given' if given is not None else 'the ' + shipped} teacher {path}")
+        source = "given (--teacher)" if given is not None else shipped
+        preset_name = t.config.get("preset")
+    else:
+        path, preset_name = out / "teacher", preset.teacher.settings.name
+        source = f"trained from scratch in this run (teacher preset `{preset_name}`)"
+        if stage.done("teacher"):
+            stage.skip("teacher", "trained")
+        else:
+            spec.check_seeds("teacher_train", seed, preset.teacher.num_envs or preset.teacher.settings.num_envs)
+            stage.run("teacher", recipe.teacher_train(preset, path, seed))
+        t = TeacherPolicy(path)
+    return path, {
+        "source": source,
+        "path": str(path),
+        "file": t.name,
+        "sha256": t.sha256,
+        "iteration": t.iteration,
+        "preset": preset_name,
+    }
 
 
 def _demos(
@@ -142,97 +173,101 @@ def _demos(
     preset's extra episodes merged in. Returns the dataset and its repo id."""
     record = stage.record
     repo = f"local/blindgrasp_{preset.name}"
-    demos = demo_stages.collect_stage(stage, preset, teacher_dir, out / "demos", repo, demo_seed, curate=True)
+    demos = _collect_stage(stage, preset, teacher_dir, out / "demos", repo, demo_seed, curate=True)
     train_set = demos
     record["student_dataset"] = "curated"
-    if (k := demo_stages.kept(demos)) < preset.demos.min_curated_episodes:
+    if (k := _kept(demos)) < preset.demos.min_curated_episodes:
         print(
             f"[pipeline] only {k} curated episodes (< {preset.demos.min_curated_episodes}); also collecting the "
             "uncurated set and training the student on it",
             flush=True,
         )
         repo = f"local/blindgrasp_{preset.name}_uncurated"
-        uncurated_seed = demo_seed + DEMO_SEED_BLOCK // 2
-        train_set = demo_stages.collect_stage(
+        uncurated_seed = demo_seed + recipe.DEMO_SEED_BLOCK // 2
+        train_set = _collect_stage(
             stage, preset, teacher_dir, out / "demos_uncurated", repo, uncurated_seed, curate=False
         )
         record["student_dataset"] = "uncurated (too few curated episodes)"
-    if demo_stages.kept(train_set) == 0:
+    if _kept(train_set) == 0:
         raise SystemExit(
             f"[pipeline] error: the demo dataset {train_set} has no episodes, so there is nothing to "
             "train the student on; use a better teacher (--teacher) or more rollouts"
         )
     if preset.demos.extra_episodes:
         curated = train_set == demos
-        train_set, repo = demo_stages.targeted_demos(
-            stage, preset, teacher_dir, out, train_set, repo, seed, curated
-        )
+        train_set, repo = _targeted_demos(stage, preset, teacher_dir, out, train_set, repo, seed, curated)
         record["student_dataset"] += ", with " + ", ".join(
             f"{n} more episodes of {name}" for name, n in preset.demos.extra_episodes
         )
     return train_set, repo
 
 
-def _student(
+def _collect_stage(
     stage: Stage,
     preset: presets.Preset,
+    teacher: Path,
+    root: Path,
+    repo_id: str,
+    first_seed: int,
+    curate: bool,
+    extra: tuple[str, int] | None = None,
+) -> Path:
+    name = root.name if extra else "demos" if curate else "demos_uncurated"
+    if stage.done(name):
+        stage.skip(name, "collected")
+        return root
+    from lerobot_blindgrasp.demos.collect_cli import EXIT_EMPTY
+
+    # An empty curated set is the caller's (the uncurated fallback). A collection cut short is resumed
+    # (recipe.demos_collect adds --resume=true; the collector repairs a crashed folder first).
+    cmd = recipe.demos_collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra)
+    stage.run(name, cmd, ok=(0, EXIT_EMPTY))
+    return root
+
+
+def _targeted_demos(
+    stage: Stage,
+    preset: presets.Preset,
+    teacher: Path,
     out: Path,
-    train_set: Path,
+    demos: Path,
     repo: str,
     seed: int,
-    device: str,
-    env: dict,
-) -> Path:
-    """lerobot-train of the student on the train set; returns its checkpoint."""
-    student = out / "student"
-    cmd, sched = recipe.student_train(preset, train_set, repo, student, seed, device)
-    stage.record["student_schedule"] = asdict(sched)
-    if stage.done("student"):
-        stage.skip("student", "trained")
-    else:
-        if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
-            os.replace(student, out / f"student_interrupted_{int(time.time())}")
-        stage.run("student", cmd, env=env)
-    return recipe.checkpoint(student)
+    curated: bool,
+) -> tuple[Path, str]:
+    """Beyond the paper: the preset's extra episodes of the objects it names (one collection each, curated or not
+    as the set the student trains on), merged with that set by LeRobot's `aggregate_datasets`. Returns the merged
+    dataset and its repo id."""
+    roots, repos = [demos], [repo]
+    for k, (name, n) in enumerate(preset.demos.extra_episodes):
+        root, extra_repo = out / f"{demos.name}_{name}", f"{repo}_{name}"
+        first_seed = recipe.extra_demo_seed(seed, k, curated)
+        _collect_stage(stage, preset, teacher, root, extra_repo, first_seed, curate=curated, extra=(name, n))
+        if _kept(root):  # an object the teacher never solved adds nothing (its yield report says so)
+            roots.append(root)
+            repos.append(extra_repo)
+    name = f"{demos.name}_targeted"
+    merged, merged_repo = out / name, f"{repo}_merged"
+    if stage.done(name):
+        stage.skip(name, "merged")
+        return merged, merged_repo
+    from lerobot_blindgrasp.demos.dataset import aggregate
+
+    t = time.time()
+    aggregate(repos, roots, merged_repo, merged)  # built beside `merged`: a kill leaves no finished-looking folder
+    stage.record["stages"][name] = {
+        "command": f"aggregate_datasets({repos})",
+        "wall_s": time.time() - t,
+        "roots": [str(r) for r in roots],
+    }
+    stage.complete(name)
+    print(f"[pipeline] {name}: merged {len(roots)} datasets into {merged}", flush=True)
+    return merged, merged_repo
 
 
-def _dagger_rounds(
-    stage: Stage,
-    preset: presets.Preset,
-    out: Path,
-    teacher: Path,
-    demos: Path,
-    ckpt: Path,
-    seed: int,
-    device: str,
-    env: dict,
-) -> Path:
-    """DAgger rounds (beyond the paper): the latest student drives, the teacher labels, the student is fine-tuned on
-    the aggregate. Returns the final student's checkpoint."""
-
-    for r in range(1, preset.dagger.rounds + 1):
-        name, relabelled, student = f"dagger_{r}", out / f"dagger_{r}", out / f"student_dagger_{r}"
-        if stage.done(name):
-            stage.skip(name, "relabelled")
-        else:
-            stage.run(
-                name,
-                recipe.dagger(preset, ckpt, teacher, demos, relabelled, recipe.dagger_seed(seed, r), device),
-                env=env,
-            )
-        demos, repo = relabelled / "aggregate", f"local/blindgrasp_{preset.name}_dagger_{r}"
-        if stage.done(f"student_dagger_{r}"):
-            stage.skip(f"student_dagger_{r}", "trained")
-        else:
-            if student.exists():  # an interrupted lerobot-train: its output dir must not exist unless resuming
-                os.replace(student, out / f"student_dagger_{r}_interrupted_{int(time.time())}")
-            stage.run(
-                f"student_dagger_{r}",
-                recipe.student_finetune(preset, ckpt, demos, repo, student, seed, device),
-                env=env,
-            )
-        ckpt = recipe.checkpoint(student)
-    return ckpt
+def _kept(root: Path) -> int:
+    report = json.loads((root / "yield_report.json").read_text())
+    return int(report["total"]["kept"])
 
 
 def main(argv=None) -> None:
@@ -240,18 +275,9 @@ def main(argv=None) -> None:
     cfg = parse_config(PipelineConfig, argv)
     try:
         if cfg.print_commands:
-            print(
-                recipe.shell_lines(
-                    recipe.table_v(
-                        presets.get(cfg.preset),
-                        cfg.output_dir,
-                        cfg.print_commands,
-                        cfg.seed,
-                        cfg.eval_seed,
-                        cfg.device,
-                    )
-                )
-            )
+            preset = presets.get(cfg.preset)
+            cmds = recipe.table_v(preset, cfg.output_dir, cfg.print_commands, cfg.seed, cfg.eval_seed, cfg.device)
+            print(recipe.shell_lines(cmds))
             return
         run_pipeline(cfg)
     except ValueError as e:  # seeds outside their ranges, a stage printed before its inputs exist

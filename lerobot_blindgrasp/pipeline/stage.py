@@ -25,7 +25,7 @@ class Stage:
         (out / "logs").mkdir(parents=True, exist_ok=True)
 
     def run(self, name: str, cmd: list[str], env: dict | None = None, ok: tuple[int, ...] = (0,)) -> int:
-        cmd = [_bin(cmd[0]), *cmd[1:]]
+        cmd = [console_script(cmd[0]), *cmd[1:]]
         log_path = self.out / "logs" / f"{name}.log"
         print(f"[pipeline] {name}: {shlex.join(cmd)}", flush=True)
         t = time.time()
@@ -54,6 +54,13 @@ class Stage:
         print(f"[pipeline] {name} done in {wall:.0f} s", flush=True)
         return proc.returncode
 
+    def once(self, name: str, done_note: str, cmd: list[str], **kw) -> None:
+        """`run`, unless the stage is marked completed (then it says so, with `done_note`)."""
+        if self.done(name):
+            self.skip(name, done_note)
+        else:
+            self.run(name, cmd, **kw)
+
     def skip(self, name: str, why: str) -> None:
         print(f"[pipeline] {name}: skipped ({why})", flush=True)
 
@@ -81,7 +88,7 @@ def _die_with_parent() -> None:
         ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
 
 
-def _bin(name: str) -> str:
+def console_script(name: str) -> str:
     """The console script next to this interpreter (the venv's), so subprocesses use the same install."""
     cand = Path(sys.executable).parent / name
     return str(cand) if cand.exists() else name

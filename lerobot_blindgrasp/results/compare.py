@@ -2,10 +2,9 @@
 
     python -m lerobot_blindgrasp.results.compare --a=PATH --b=PATH [--a_label=teacher --b_label=student]
 
-PATH is a lerobot-eval output (`eval_info.json`, or its folder) or a `blindgrasp-eval-teacher` output (`eval.json`,
-or its folder; deterministic mode unless written `PATH:stochastic`). Both must have been run with the same seed
-and episode count: episode k of object o is then the same start state in both (`spec.eval_seed`), so a difference
-shows up as discordant pairs, which the McNemar test weighs, rather than as two independent rates.
+PATH is a lerobot-eval or `blindgrasp-eval-teacher` output (its json, or its folder; a teacher's deterministic mode
+unless written `PATH:stochastic`). Both must have run the same seed and episode count, so that episode k of object o
+is the same start state in both (`spec.eval_seed`) and a difference shows as discordant pairs.
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
-"""Success rates with their 95 % Wilson score interval, the way every recorded number is reported.
-
-The Wilson interval stays inside [0, 1] and keeps sensible width at 0/n and n/n, where the normal approximation
-collapses to a zero-width interval; per-object rates here are often 0/20 or 20/20.
+"""Success rates with their 95 % Wilson score interval, the way every recorded number is reported: it stays inside
+[0, 1] and keeps its width at 0/n and n/n (per-object rates are often 0/20 or 20/20), where the normal
+approximation collapses to zero width.
 """
 
 from __future__ import annotations

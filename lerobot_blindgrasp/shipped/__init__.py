@@ -1,16 +1,8 @@
 """What the project ships besides code: the trained models (`models/`) and the hardware site settings
-(`robot_configs/`), found the same way from a source checkout and from an installed wheel.
+(`robot_configs/`), found the same way from a source checkout and from an installed wheel (`blindgrasp-path`).
 
-In the repository both are top-level folders (the layout the design fixes). A wheel carries them as package data
-of this package: `setup.py` maps `lerobot_blindgrasp.shipped.models` onto `models/` and
-`lerobot_blindgrasp.shipped.robot_configs` onto `robot_configs/`, so an installed copy has
-`lerobot_blindgrasp/shipped/models/...` beside this file. `folder()` looks there first, then in the source tree
-(an editable install, whose package folder holds neither copy).
-
-    blindgrasp-path --name=student_cpu                  # a shipped model folder
-    blindgrasp-path --name=blindgrasp_gripper           # a robot config (the .yaml may be left out)
-    lerobot-eval --policy.path="$(blindgrasp-path --name=student_cpu)" --env.type=blindgrasp ...
-    lerobot-calibrate --robot="include $(blindgrasp-path --name=blindgrasp_gripper)" --robot.id=lab_gripper
+A wheel carries them as this package's data (`setup.py` maps `lerobot_blindgrasp.shipped.models` onto `models/`,
+and `robot_configs` likewise); an editable install finds them in the source tree.
 """
 
 from __future__ import annotations
@@ -45,11 +37,11 @@ def folder(kind: str) -> Path:
 
 def names() -> dict[str, list[str]]:
     """Every shipped model folder and robot config, by kind."""
-    out = {"models": [], "robot_configs": []}
-    models = folder("models")
-    out["models"] = sorted(p.name for p in models.iterdir() if p.is_dir() and not p.name.startswith((".", "_")))
-    out["robot_configs"] = sorted(p.stem for p in folder("robot_configs").glob("*.yaml"))
-    return out
+    models = folder("models").iterdir()
+    return {
+        "models": sorted(p.name for p in models if p.is_dir() and not p.name.startswith((".", "_"))),
+        "robot_configs": sorted(p.stem for p in folder("robot_configs").glob("*.yaml")),
+    }
 
 
 def path(name: str) -> Path:
@@ -70,12 +62,7 @@ def path(name: str) -> Path:
 @dataclass
 class ShippedPathConfig:
     """Print the installed path of a shipped model folder or robot config (for `--policy.path=` and draccus'
-    `include`), or list them all.
-
-        blindgrasp-path --name=student_cpu
-        blindgrasp-path --name=blindgrasp_gripper
-        blindgrasp-path            # lists every name
-    """
+    `include`), or list them all."""
 
     name: str | None = None  # a model folder (student_cpu, teacher_cpu_bc) or a robot config (blindgrasp_gripper)
 

@@ -66,15 +66,9 @@ class BatchedGraspEnv:
         self.object_index = allocate_objects(n, len(cfg.objects), cfg.object_weights)  # index into cfg.objects
         self.object_names = [cfg.objects[k] for k in self.object_index]
         obj_specs = [objects.scaled(objects.get_object(name), cfg.dr.object_size_scale) for name in cfg.objects]
-
-        templates = [
-            gripper.compile_model(
-                objects.object_mjcf(o, gripper.OBJECT_CONTYPE, gripper.OBJECT_CONAFFINITY), cfg.physics
-            )
-            for o in obj_specs
-        ]
-        self._templates = templates
-        self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)  # on the CPU: it builds MjModels
+        mjcf = [objects.object_mjcf(o, gripper.OBJECT_CONTYPE, gripper.OBJECT_CONAFFINITY) for o in obj_specs]
+        self._templates = templates = [gripper.compile_model(xml, cfg.physics) for xml in mjcf]
+        self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)  # (n,) on the CPU
         if cfg.backend == "batch":
             self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
             self.physics = BatchBackend(self.models, nthread=cfg.nthread)
@@ -82,8 +76,10 @@ class BatchedGraspEnv:
         else:
             from lerobot_blindgrasp.sim.backends.warp import WarpBackend  # optional dependency
 
-            self.models = None  # per-world fields on the device; env_model(i) rebuilds env i's MjModel on demand
-            self.physics = WarpBackend(templates, self.object_index, self.env_model, device=cfg.device)
+            self.models = None  # per-world fields on the device; env_model(i) builds env i's MjModel on demand
+            self.physics = WarpBackend(
+                templates, self.object_index, self.physics_draw, cfg.dr.torque_limit_scale, device=cfg.device
+            )
             self.batch = None
         observations.check_state_layout(templates[0])
         self._init_task_state(templates[0], obj_specs)
@@ -154,7 +150,7 @@ class BatchedGraspEnv:
         qpos[:, observations.OBJECT_POS] = torch.cat([xy, self.rest_height[ids, None]], dim=1)
         qpos[:, observations.OBJECT_QUAT] = self._rest_quat[ids]
         self._qpos[ids] = qpos
-        self._ctrl[ids] = q0
+        self._ctrl[ids] = q0.to(self._ctrl.dtype)  # float32 where the tensor is Warp's own array (share_arrays)
         self.action_latency.reset(ids, q0)
         self.servo.reset(ids, q0)
         self.hold_push.reset(ids)

@@ -2,7 +2,7 @@
 
 - `raw`: noise-free quantities that rewards, success and demo curation read;
 - "policy": the student's o_t in R^12, measured joint positions and uniaxial force readings (`spec.STATE_NAMES`);
-- "privileged": the teacher's 92-d vector, assembled by name through `spec.assemble_privileged`, so each part is
+- "privileged": the teacher's 92-d vector, assembled by name through `spec.privileged_parts`, so each part is
   computed under the name `spec.PRIVILEGED_LAYOUT` gives it, never placed by position.
 
 Measurement noise comes in as one N(0, 1) draw per env and step, split by `NOISE_LAYOUT`. That order decides which

@@ -10,7 +10,8 @@ construction (paper, Sec. III-B). Deviations and readings of the table:
   (50 ms) "at randomly selected times", U[0, 10] s apart. A force held between pushes rolls spheres and capsules
   off the table (see `PushSchedule`). Off for demo collection and lerobot-eval.
 
-Where Table II lands: `apply_physics_draw` writes an env's friction, mass and servo gains into its MjModel;
+Where Table II lands: `write_physics_draw` writes envs' friction, mass and servo gains into rows of model fields
+(`apply_physics_draw`: one env's MjModel; the Warp backend: its per-world arrays on the device);
 `draw_reset` gives each episode's start pose and object position; `PushSchedule` times the random pushes.
 
 Beyond Table II, the same dataclass carries the conditions a real gripper may differ in (sensor gain, bias, range,
@@ -146,6 +147,11 @@ class PhysicsDraw:
     def row(self, i: int) -> dict[str, float]:
         return {k: float(getattr(self, k)[i]) for k in self.__dataclass_fields__}
 
+    def rows(self, sel, device: torch.device | str | None = None) -> PhysicsDraw:
+        """The draws of envs `sel` (a slice or an index tensor), on `device` (default: where they are)."""
+        rows = {k: getattr(self, k)[sel] for k in self.__dataclass_fields__}
+        return PhysicsDraw(**{k: v if device is None else v.to(device) for k, v in rows.items()})
+
 
 # The draws below are torch over the env axis, on the device of `seeds` (a uint64 array: the CPU; a tensor: its own
 # device): the resets and the per-step draws run where the physics does.
@@ -222,26 +228,56 @@ def draw_jitter_substeps(dr: DomainRandomization, seeds, counter, substeps: int)
     return torch.floor(u * (dr.period_jitter_s / dt + 1)).clamp_max(substeps - 1).to(torch.int64)
 
 
+# The model fields Table II writes (`write_physics_draw`); MuJoCo derives constants from the mass and inertia.
+PHYSICS_DRAW_FIELDS = ("geom_friction", "body_mass", "body_inertia", "actuator_gainprm", "actuator_biasprm")
+TORQUE_LIMIT_FIELD = "actuator_forcerange"
+
+
+@dataclass(frozen=True)
+class DrawTargets:
+    """Where Table II lands in the gripper-and-object model (ids shared by every object's model)."""
+
+    object_geom: int
+    tip_geoms: tuple[int, ...]
+    object_body: int
+
+    @classmethod
+    def of(cls, m: mujoco.MjModel) -> DrawTargets:
+        tips = tuple(m.geom(f"{f}_tipgeom").id for f in spec.FINGERS)
+        return cls(object_geom=m.geom("object_geom").id, tip_geoms=tips, object_body=m.body("object").id)
+
+
+def write_physics_draw(
+    fields: dict[str, torch.Tensor], at: DrawTargets, draw: PhysicsDraw, torque_limit_scale: float = 1.0
+) -> None:
+    """Table II's draw written in place into per-env rows of model fields: `fields[name]` is (n, *MjModel shape),
+    `draw` holds the n envs' rows, on the same device. The object's and the fingertips' friction, the object's mass
+    (and inertia, so its shape's mass distribution stays), the servos' position gain kp and damping kv (MuJoCo's
+    position actuator: gain kp, bias -kp q - kv qdot), and the torque limit beyond it. One implementation for both
+    backends: an MjModel's own arrays (n = 1) and the Warp backend's per-world rows on its device."""
+    f, scale = fields, draw.object_mass_scale
+    f["geom_friction"][:, at.object_geom, 0] = draw.object_friction
+    f["geom_friction"][:, list(at.tip_geoms), 0] = draw.robot_friction[:, None]
+    f["body_mass"][:, at.object_body] *= scale
+    f["body_inertia"][:, at.object_body] *= scale[:, None]
+    kp = f["actuator_gainprm"][:, :, 0] * draw.kp_scale[:, None]
+    kv = -f["actuator_biasprm"][:, :, 2] * draw.kv_scale[:, None]
+    f["actuator_gainprm"][:, :, 0] = kp
+    f["actuator_biasprm"][:, :, 1] = -kp
+    f["actuator_biasprm"][:, :, 2] = -kv
+    if torque_limit_scale != 1.0:
+        f[TORQUE_LIMIT_FIELD] *= torque_limit_scale
+
+
 def apply_physics_draw(
     template: mujoco.MjModel, draw: PhysicsDraw, i: int, torque_limit_scale: float = 1.0
 ) -> mujoco.MjModel:
-    """A copy of an object's model with env i's Table II draw written into it: the object's and the fingertips'
-    friction, the object's mass (and inertia, so its shape's mass distribution stays), the servos' position gain kp
-    and damping kv (MuJoCo's position actuator: gain kp, bias -kp q - kv qdot), and the torque limit beyond it."""
-    m, d = copy.copy(template), draw.row(i)
-    m.geom_friction[m.geom("object_geom").id, 0] = d["object_friction"]
-    for f in spec.FINGERS:
-        m.geom_friction[m.geom(f"{f}_tipgeom").id, 0] = d["robot_friction"]
-    body = m.body("object").id
-    m.body_mass[body] *= d["object_mass_scale"]
-    m.body_inertia[body] *= d["object_mass_scale"]
-    kp = m.actuator_gainprm[:, 0] * d["kp_scale"]
-    kv = -m.actuator_biasprm[:, 2] * d["kv_scale"]
-    m.actuator_gainprm[:, 0] = kp
-    m.actuator_biasprm[:, 1] = -kp
-    m.actuator_biasprm[:, 2] = -kv
-    if torque_limit_scale != 1.0:
-        m.actuator_forcerange[:] *= torque_limit_scale
+    """A copy of an object's model with env i's Table II draw (`write_physics_draw`) written into it, and the
+    constants MuJoCo derives from mass and inertia recomputed."""
+    m = copy.copy(template)
+    names = (*PHYSICS_DRAW_FIELDS, TORQUE_LIMIT_FIELD)
+    fields = {k: torch.from_numpy(getattr(m, k))[None] for k in names}  # the model's own memory
+    write_physics_draw(fields, DrawTargets.of(m), draw.rows(slice(i, i + 1)), torque_limit_scale)
     mujoco.mj_setConst(m, mujoco.MjData(m))  # mass-dependent constants (e.g. constraint scaling)
     return m
 

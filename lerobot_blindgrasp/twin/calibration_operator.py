@@ -3,15 +3,9 @@
     blindgrasp-twin-calibrate --ports_json=outputs/twin/ports.json --robot_id=twin \\
         --calibration_dir=outputs/twin/calibration
 
-Two commands, as on a freshly assembled gripper:
-- `lerobot-calibrate` asks for the REFERENCE pose (q = 0) and a POSITIVE pose by hand, torque off. Here the hand is
-  the twin's (`hold_by_hand` over the operator socket): at each prompt the twin's joints are held in that pose
-  (`positive_q` on every joint), then ENTER is pressed. The twin's mounting is not told to the host: Drive_Mode and
-  Homing_Offset come out of the calibration itself.
-- `blindgrasp-calibrate-force` (unless `--force=false`) asks for nothing on the pads, then a known weight on each pad
-  in turn, then nothing again. The twin rests `mass_kg` on the pad each prompt names (`place_weight`), so each
-  cell's scale (and any gain error the twin was started with, `--load_cell.gain`) is measured, not told.
-Both files land in `calibration_dir` under `robot_id`, where the robot finds them at connect.
+`lerobot-calibrate`'s REFERENCE (q = 0) and POSITIVE poses are held by the twin's hand (torque off), so Drive_Mode
+and Homing_Offset come out of the calibration, not from the twin's mounting. `blindgrasp-calibrate-force` (unless
+`--force=false`) gets `mass_kg` on the pad each prompt names, so each cell's scale and gain error are measured.
 """
 
 from __future__ import annotations

@@ -2,13 +2,11 @@
 
     blindgrasp-twin --ports_json=outputs/twin/ports.json --trial_log=outputs/twin/trials.jsonl
 
-It prints the two port paths and the operator socket, writes them to `--ports_json` (atomically, for scripts),
-and serves until Ctrl-C / SIGTERM, printing its real-time status every `--status_every_s`. Point the real stack at
-it as at a real gripper:
+It prints the two port paths and the operator socket, writes them to `--ports_json`, and serves until Ctrl-C or
+SIGTERM. Point the real stack at it as at a real gripper (`--env.robot.latency_timer_ms=60` on a shared machine:
+the emulators are Python threads):
 
     --env.robot.port=<dynamixel_port> --env.robot.force_sensor.port=<force_port> --env.operator_socket=<socket>
-
-`--env.robot.latency_timer_ms=60` is advisable on a shared machine (the emulators are Python threads).
 """
 
 from __future__ import annotations
@@ -32,15 +30,13 @@ CELL_SCALE_N_PER_COUNT = 9.80665 * 10 / (5.0 * 2**23 / 19.53)
 @dataclass
 class LoadCellConfig:
     """Each fingertip's load cell and ADC as the force board's emulator models them: counts = offset + gain x F /
-    scale + noise. `scale_n_per_count` is the cells' datasheet scale (what ports.json publishes); `gain` is each
-    cell's own sensitivity against it (a cell's rated output is typically +-10 % off its nominal), which only a
-    calibration with a known weight (`blindgrasp-calibrate-force`) finds."""
+    scale + noise. `scale_n_per_count` is the datasheet scale (what ports.json publishes); `gain` is each cell's
+    own error against it (typically +-10 %), which only `blindgrasp-calibrate-force` finds."""
 
     scale_n_per_count: list[float] = field(default_factory=lambda: [CELL_SCALE_N_PER_COUNT] * 3)
     offset_counts: list[float] = field(default_factory=lambda: [81_000.0, -52_000.0, 12_000.0])
-    # ADC noise (counts, 1 sigma): 300 counts = 14 mN at this scale, an HX711's noise on a 1 mV/V cell. The sim's
-    # 0.5 N is a training randomization, not a sensor: at 0.5 N the host's "below -1 N is a fault" check would
-    # stop the gripper every few seconds.
+    # ADC noise (counts, 1 sigma): 300 counts = 14 mN, an HX711's on a 1 mV/V cell (the sim's 0.5 N is a training
+    # randomization: the host's "below -1 N is a fault" check would stop the gripper every few seconds).
     noise_counts: float = 300.0
     gain: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0])
     rate_hz: float = 80.0  # the force board firmware's rate (one frame per fresh sample)
@@ -68,10 +64,9 @@ class TwinConfig:
     # The physics falling behind the clock by more than this skips ahead (counted in the status as behind_s).
     max_lag_s: float = 0.05
     status_every_s: float = 30.0  # 0: quiet
-    # > 0: the servo bus, force board and physics threads run SCHED_FIFO at this priority (root or CAP_SYS_NICE).
-    # They stand in for the gripper's own processors, which answer within microseconds whatever else the PC runs;
-    # on a loaded machine a Python thread may wait longer than the host's reply window (34 ms at the robot's
-    # default latency_timer_ms) and the real stack then stops on a timeout no gripper would cause.
+    # > 0: the servo bus, force board and physics threads run SCHED_FIFO at this priority (root or CAP_SYS_NICE),
+    # as the gripper's own processors answer within microseconds: on a loaded machine a Python thread may miss the
+    # host's reply window, and the real stack stops on a timeout no gripper would cause.
     realtime_priority: int = 0
     load_cell: LoadCellConfig = field(default_factory=LoadCellConfig)
 
@@ -90,8 +85,7 @@ def serve_twin(cfg: TwinConfig, stop: threading.Event) -> dict:
             f"operator socket {ports['operator_socket']}. Ctrl-C stops.",
             flush=True,
         )
-        # Short waits, never an endless one: a signal that lands on one of the twin's threads only runs its Python
-        # handler once the main thread runs again, and an endless wait never does.
+        # Short waits: a signal's Python handler runs only when the main thread runs; an endless wait never does.
         last = time.monotonic()
         while not stop.wait(0.5):
             if cfg.status_every_s and time.monotonic() - last >= cfg.status_every_s:

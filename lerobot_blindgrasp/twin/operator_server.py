@@ -12,10 +12,8 @@ JSON lines over a Unix socket (the host's side is `envs/operator.py:SocketOperat
                    {"key": "enter" | "s" | "f" | "y" | "n", "token": N}      the operator's keys for trial N
                    {"ok": true, ...}                                          replies to hand / status
 
-At most one outcome key goes out per trial (the verdict is latched), and each carries its trial's token, so a key
-of a finished trial can never decide the next one. A host that closes its connection without an "end" aborted its
-trial: judging stops at once and the trial's record is a failure with `"aborted": true`, whatever the physics does
-after the host let go.
+At most one outcome key goes out per trial, carrying its trial's token, so a key of a finished trial can never
+decide the next one. A host that leaves without an "end" aborted its trial: a failure with `"aborted": true`.
 """
 
 from __future__ import annotations
@@ -92,17 +90,15 @@ class OperatorServer:
                 if reply is not None:
                     self._send(conn, reply)
         self._host_left(conn)
-        # The host went away (it finished, its safety latch stopped it mid-trial, or it died): a few seconds later
-        # the operator takes the object out of the claw, so that the next session does not start with it there.
-        # Not at once: what the gripper does to the object right after its host died is part of the trial.
+        # A few seconds after the host went away the operator empties the claw for the next session; not at once:
+        # what the gripper does to the object right after its host died is part of the trial.
         timer = threading.Timer(self.empty_claw_after_s, self._finish_abandoned, args=(conn,))
         timer.daemon = True
         timer.start()
 
     def _host_left(self, conn: socket.socket) -> None:
-        """The host closed its connection without ending its trial: it aborted (SIGTERM, a safety stop, a crash).
-        Judging stops now, so a lift the physics completes after the host let go (the object still falling out of
-        a claw whose torque just went off) can never become a success; the verdict so far is kept for the record."""
+        """The host left without ending its trial (SIGTERM, a safety stop, a crash). Judging stops now, so a lift
+        the physics completes after the host let go can never become a success."""
         with self._lock:
             active = self._active if self._active is not None and self._active[0] is conn else None
             if active is not None:
@@ -167,11 +163,8 @@ class OperatorServer:
         success, reason = self._verdicts.get(placement["trial"], (False, "host ended the trial first"))
         aborted = token in self._aborted
         if aborted:  # never a success, whatever the physics judged: the host's protocol did not finish the trial
-            verdict = (
-                f"{'success' if success else 'failure'} ({reason})"
-                if placement["trial"] in self._verdicts
-                else None
-            )
+            judged = placement["trial"] in self._verdicts
+            verdict = f"{'success' if success else 'failure'} ({reason})" if judged else None
             success, reason = False, f"host aborted the trial (left without ending it); physics verdict: {verdict}"
         record = {
             **placement,

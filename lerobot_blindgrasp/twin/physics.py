@@ -1,20 +1,9 @@
 """The twin's MuJoCo side: one gripper and one object, stepped one 5 ms substep at a time, in real time.
 
-Model and draws are the sim env's own, not copies of them: the scene is `sim.gripper.compile_model` with the
-object's MJCF; a placement from (seed, object) takes the env seed `sim.gym_env.start_seed(seed, object)` and draws
-the physics (friction, mass, the servos' kp/kv) with `randomization.draw_physics` and the object's start position
-with `randomization.draw_reset`, both under the eval randomization, as `--env.type=blindgrasp` does for the same
-`--seed`. The joints are wherever the host left them: it drives them to its start pose before asking for the
-object, the paper's home pose by default, or with `--env.start_pose=sim` the sim env's own start pose for the same
-(seed, object) (`envs/real_trial.sim_start_pose`, within the host's home tolerance), which makes the start state the
-sim's whole. The sensors are the real ones (encoder ticks, a load cell).
-
-The servos are the sim's XM430 model (a position actuator with back-EMF damping and a torque limit); what the
-host wrote into each servo's registers sets its target, gain (Position_P_Gain / 800 x the drawn kp), torque limit
-(Current_Limit, or Goal_Current in current-based position mode) and whether it exerts torque at all.
-
-Success is the sim's rule (`sim/termination.py`), evaluated every 50 ms of physics time from the placement on:
-lifted >= 1.5 cm for 20 consecutive control steps; the object leaving the 10 cm workspace is a failure.
+Model and draws are the sim env's own: a placement from (seed, object) takes the env seed and the eval
+randomization's physics and start position as `--env.type=blindgrasp` draws them for the same `--seed`. The
+servos' registers set each joint's target, gain (Position_P_Gain / 800 x the drawn kp), torque limit and torque
+on/off. Success is the sim's rule (`sim/termination.py`), judged every control period from the placement on.
 """
 
 from __future__ import annotations
@@ -101,19 +90,17 @@ class TwinPhysics:
         data.qpos[observations.OBJECT_QUAT] = quat
         data.ctrl[:] = q
         mujoco.mj_forward(model, data)
-        self.model, self.data, self.object_name, self.rest_height = model, data, name, obj.rest_height
+        self.model, self.data, self.rest_height = model, data, obj.rest_height
         self.base_kp = model.actuator_gainprm[:, 0].copy()
         self.base_kv = -model.actuator_biasprm[:, 2].copy()
         self.sensor_index = sensors.SensorIndex.from_model(model)
         self._applied = None  # the command whose gains and limits are written into `model`
-        self._placed_state = (q.copy(), np.zeros_like(qd), data.qpos.copy())
+        self._placed_qpos = data.qpos.copy()
         self._held = np.zeros(1, dtype=np.int64)
         self.peak_lift = 0.0
         self._publish()
-        # The true squeeze since the placement (the trial record): its instantaneous peak, which a short impact
-        # between two of the host's 20 Hz reads can set, and the largest force held for two control periods: a
-        # read late in such a window gets a board frame from inside it (frames are well under a period old). The
-        # host's peak reading lies between the two.
+        # The true squeeze since the placement (the trial record): its instantaneous peak, and the largest force
+        # held for two control periods, which any host read in that window sees. The host's peak lies between them.
         self.peak_tip_force_n = np.zeros(spec.NUM_FORCES)
         self.held_tip_force_n = np.zeros(spec.NUM_FORCES)
         self.q_at_peak = q.copy()  # until a first squeeze: a trial that ends before any substep still has a record
@@ -190,9 +177,8 @@ class TwinPhysics:
         """Unstable physics (the sim env resets such an env too): back to the placement, joints at rest."""
         self.unstable_resets += 1
         logger.warning("twin physics went unstable; restoring the placement state")
-        q, qd, qpos = self._placed_state
-        mujoco.mj_resetData(self.model, self.data)
-        self.data.qpos[:] = qpos
+        mujoco.mj_resetData(self.model, self.data)  # joints at rest (qvel 0)
+        self.data.qpos[:] = self._placed_qpos
         mujoco.mj_forward(self.model, self.data)
 
     def _judge(self) -> TrialVerdict | None:

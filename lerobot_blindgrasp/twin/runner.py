@@ -1,11 +1,9 @@
 """The twin assembled: servo bus and force board on pseudo-terminals, MuJoCo behind them in real time, the operator
 socket beside them.
 
-Real time: one thread steps the physics one 5 ms substep at a time against the monotonic clock. Before each
-substep it reads the servos' registers into the joint command; the emulators' own threads read the physics'
-latest state when the host asks. When the host process starves the twin of CPU and the physics falls more than
-`max_lag_s` behind the clock, the twin skips ahead (the world pauses, as it cannot run faster) and counts it: a
-run whose `behind_s` is not ~0 did not keep real time, and its status says so.
+One thread steps the physics one substep at a time against the monotonic clock, reading the servos' registers
+first. A physics more than `max_lag_s` behind the clock (a starved process) skips ahead and counts it: a run whose
+`behind_s` is not ~0 did not keep real time.
 """
 
 from __future__ import annotations
@@ -34,12 +32,8 @@ def percentiles_ms(values) -> dict[str, float]:
     v = np.asarray(list(values), dtype=np.float64) * 1e3
     if v.size == 0:
         return {"n": 0}
-    return {
-        "n": int(v.size),
-        "p50_ms": round(float(np.percentile(v, 50)), 3),
-        "p99_ms": round(float(np.percentile(v, 99)), 3),
-        "max_ms": round(float(v.max()), 3),
-    }
+    p50, p99, top = (round(float(x), 3) for x in (*np.percentile(v, [50, 99]), v.max()))
+    return {"n": int(v.size), "p50_ms": p50, "p99_ms": p99, "max_ms": top}
 
 
 def make_realtime(threads: dict[str, threading.Thread], priority: int) -> str:
@@ -56,8 +50,7 @@ def make_realtime(threads: dict[str, threading.Thread], priority: int) -> str:
 
 
 class Twin:
-    def __init__(self, cfg):
-        """`cfg`: a `twin.command.TwinConfig`."""
+    def __init__(self, cfg):  # a twin.command.TwinConfig
         self.cfg = cfg
         self.physics = TwinPhysics(park_object=cfg.park_object)
         self.ids = list(spec.SERVO_IDS)
@@ -89,8 +82,7 @@ class Twin:
 
     # --- lifecycle --------------------------------------------------------------------------------------------
     def start(self) -> Twin:
-        # The emulators' threads answer the host's packets; the physics thread must not hold them off for
-        # Python's default 5 ms GIL switch interval (a reply window is a few ms on a real bus).
+        # The physics thread must not hold the emulators' threads off for Python's default 5 ms GIL switch.
         sys.setswitchinterval(0.0005)
         self._t0_wall, self._t0_cpu = time.monotonic(), time.process_time()
         self._thread.start()

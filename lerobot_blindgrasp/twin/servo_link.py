@@ -1,10 +1,6 @@
-"""Between the servo emulator's registers and the twin's MuJoCo joints, both ways.
-
-- `SimShaft` is the emulator's `ShaftDynamics` hook: a servo's shaft is the MuJoCo joint (through the twin's
-  mounting, `mount.py`), so Present_Position / Velocity / Current come from the physics, with the encoder's ticks
-  and the servo's Drive_Mode and Homing_Offset applied by the emulator as the firmware does.
-- `read_commands` turns each servo's registers (Torque_Enable, Operating_Mode, Goal_Position, Position_P_Gain,
-  Current_Limit, Goal_Current) into the joint command the physics applies every substep.
+"""Between the servo emulator's registers and the twin's MuJoCo joints, both ways: `SimShaft` (the emulator's
+`ShaftDynamics` hook) reads a servo's shaft from its joint, and `read_commands` turns the registers into the joint
+command the physics applies every substep.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The glove bridge, emulated: datagrams of `teleoperators/manus_glove/protocol.py` at `rate_hz`, sent by the
 bridge's own `GloveSender` (session id, sequence number, send time on its monotonic clock).
 
-The hand is one operator's: per ergonomics channel (names.py) an open-hand and a fist value (deg), blended by
+The hand is one operator's: per ergonomics channel (`CHANNELS`) an open-hand and a fist value (deg), blended by
 `closure` (0 open .. 1 fist), or by `closure_fn(t)` for scripted motions. `keys` picks the names it sends:
 "sdk" (the SDK enum names without side, the receiver's channels), "ros2" (the MANUS ROS 2 publisher's strings).
 
@@ -21,24 +21,40 @@ Faults:
 
 from __future__ import annotations
 
+import json
 import random
 import socket
 import threading
 import time
+from pathlib import Path
 
-from lerobot_blindgrasp.teleoperators.manus_glove import names
+from lerobot_blindgrasp.teleoperators.manus_glove.manus_bridge import CHANNELS
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender
 
 # This operator's hand (deg), by channel: open hand and fist. Spread barely changes; flexion changes a lot.
 OPEN: dict[str, float] = {}
 FIST: dict[str, float] = {}
-for _c in names.CHANNELS:
+for _c in CHANNELS:
     if _c.motion == "MCPSpread":
         OPEN[_c.name], FIST[_c.name] = (25.0, 15.0) if _c.finger == "Thumb" else (2.0, -3.0)
     else:
         OPEN[_c.name] = {"MCPStretch": 5.0, "PIPStretch": 3.0, "DIPStretch": 2.0}[_c.motion]
         FIST[_c.name] = {"MCPStretch": 85.0, "PIPStretch": 95.0, "DIPStretch": 60.0}[_c.motion]
 FIST.update({"ThumbMCPStretch": 45.0, "ThumbPIPStretch": 50.0, "ThumbDIPStretch": 40.0})
+
+
+def write_glove_calibration(fpath: Path, open_pose: dict = OPEN, fist_pose: dict = FIST) -> None:
+    """A glove calibration file as `lerobot-calibrate --teleop.type=manus_glove` writes it: the two poses."""
+    fpath.parent.mkdir(parents=True, exist_ok=True)
+    fpath.write_text(json.dumps({"open": open_pose, "fist": fist_pose}))
+
+
+def calibrated_glove(calibration_dir: Path, port: int, **config):
+    """A glove teleoperator of operator "op", this hand's calibration in `calibration_dir`, listening on `port`."""
+    from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
+
+    write_glove_calibration(calibration_dir / "op.json")
+    return ManusGlove(ManusGloveConfig(id="op", port=port, calibration_dir=calibration_dir, **config))
 
 
 def free_udp_port() -> int:
@@ -85,7 +101,7 @@ class GloveEmulator:
 
     def pose(self, closure: float) -> dict[str, float]:
         out = {}
-        for c in names.CHANNELS:
+        for c in CHANNELS:
             v = OPEN[c.name] + closure * (FIST[c.name] - OPEN[c.name])
             out[c.ros2 if self.keys == "ros2" else c.name] = v + (self.spread_offset_deg if c.motion == "MCPSpread"
                                                                    else 0.0)  # fmt: skip

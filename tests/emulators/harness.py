@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -9,7 +10,11 @@ import threading
 import time
 from pathlib import Path
 
+from emulators.rig import LATENCY_TIMER_MS
+from lerobot_blindgrasp import spec
+
 BIN = Path(sys.executable).parent
+ROBOT_LOOP = Path(__file__).resolve().parent / "robot_loop.py"
 
 
 def tiny_student_train(repo_id: str, root: Path, out: Path, steps: int, *extra: str) -> list[str]:
@@ -101,3 +106,35 @@ class Operator:
         rc = self.proc.wait(timeout=timeout_s)
         self._reader.join(timeout=5)
         return rc
+
+
+def connect_gripper(rig, tmp_path: Path, monkeypatch, **overrides):
+    """A gripper on the rig with the config's `overrides`, calibrated by the scripted operator and connected."""
+    from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
+
+    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
+    robot = BlindgraspGripper(rig.robot_config(tmp_path / "cal", **overrides))
+    robot.connect()
+    return robot
+
+
+def time_until(condition, timeout_s: float = 10.0, poll_s: float = 0.001) -> float:
+    """Seconds until `condition()` holds, polled; fails the test after `timeout_s`."""
+    t0 = time.monotonic()
+    while not condition():
+        assert time.monotonic() - t0 < timeout_s, "condition never became true"
+        time.sleep(poll_s)
+    return time.monotonic() - t0
+
+
+def robot_loop_process(rig, robot, tmp_path: Path) -> Operator:
+    """`robot_loop.py` in a subprocess on the rig, with `robot`'s calibration, once its torque is on and its fingers
+    move (`robot` is disconnected to free the ports)."""
+    robot.disconnect()  # the calibration file stays; the subprocess connects without prompting
+    args = {"port": rig.dxl.port, "force_port": rig.force.port, "calibration_dir": str(robot.calibration_dir),
+            "scale": rig.force.scale.tolist(), "latency_timer_ms": LATENCY_TIMER_MS}  # fmt: skip
+    proc = Operator([sys.executable, str(ROBOT_LOOP), json.dumps(args)], cli_env(tmp_path))
+    proc.expect("READY")
+    time.sleep(0.3)  # a few control periods with the torque on and the fingers moving
+    assert all(rig.dxl.torque_enabled(i) for i in spec.SERVO_IDS)
+    return proc

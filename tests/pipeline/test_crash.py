@@ -270,15 +270,12 @@ def test_demo_collection_killed_at_random_instants_loses_at_most_one_batch_and_r
         log = _kill_when(again, tmp_path / f"d{k}.log", ready, rng.uniform(0, 0.5))
         logs.append(log)
         durable_now = int(DURABLE.findall(log)[-1])
-        info, found, plan = repair.inspect(root)
-        # Nothing finished is lost beyond the bound: every checkpointed episode is in the verified prefix.
+        found = repair.repair(root, dry_run=True)
+        # Nothing finished is lost beyond the bound: every checkpointed episode is kept.
         assert found.kept_episodes >= durable_now >= durable_before
-        intact = {
-            p: _sha(p)
-            for p in root.glob("data/*/*.parquet")
-            if p not in plan["remove"] and p not in plan["rewrite"]
-        }
-        unfinished.append(bool(plan["remove"] or plan["rewrite"]))
+        touched = {root / line.split(" (")[0] for line in found.rebuilt.set_aside} if found.rebuilt else set()
+        intact = {p: _sha(p) for p in root.glob("data/*/*.parquet") if p not in touched}
+        unfinished.append(found.changed)
         durable_before = found.kept_episodes
     done = _run(cmd + ["--resume=true"])
     logs.append(done.stdout + done.stderr)

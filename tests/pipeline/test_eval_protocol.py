@@ -9,7 +9,7 @@ import pytest
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.demos import collect_cli
-from lerobot_blindgrasp.pipeline import run as pipeline
+from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.results import rates
 from lerobot_blindgrasp.sim import objects
 
@@ -22,7 +22,7 @@ def test_stage_seed_ranges_are_disjoint_and_hold_every_default():
     # Each CLI's default start seed and a generous run size fall in its own range, not in another's.
     spec.check_seeds("teacher_train", spec.TEACHER_TRAIN_SEED, 9000)  # the paper's env count
     spec.check_seeds("demos", collect_cli.CollectConfig.seed, 9000 * 1000)  # 1000 env rebuilds
-    spec.check_seeds("demos", pipeline.DEMO_SEED_BLOCK * 100 + spec.DEMO_SEED, pipeline.DEMO_SEED_BLOCK)
+    spec.check_seeds("demos", recipe.DEMO_SEED_BLOCK * 100 + spec.DEMO_SEED, recipe.DEMO_SEED_BLOCK)
     for stage, r in ranges.items():
         for other in set(ranges) - {stage}:
             with pytest.raises(ValueError, match=f"outside the {other} range"):

@@ -50,7 +50,7 @@ def _emulator_args(rig: GripperRig, port: int) -> list[str]:
         f"--robot.force_sensor.port={rig.force.port}",
         "--robot.force_sensor.tare_s=0.2",
         f"--robot.latency_timer_ms={LATENCY_TIMER_MS}",
-        # The timing and staleness stops are tested in test_hw_faults*.py; here a loaded CI host that starves
+        # The timing and staleness stops are tested in test_hazards_host_timing.py and test_hazards_force_frame.py; here a loaded CI host that starves
         # the emulators' threads for a few hundred ms must not end the recording (overruns are still warned).
         "--robot.max_overrun_s=0",
         "--robot.force_sensor.stale_timeout_s=2.0",

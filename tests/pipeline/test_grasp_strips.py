@@ -6,7 +6,7 @@ import av
 import numpy as np
 
 from lerobot_blindgrasp.envs.sim_env import object_for_task_id
-from lerobot_blindgrasp.pipeline.grasp_strips import (
+from lerobot_blindgrasp.pipeline.job_report import (
     pick_per_class,
     read_frames,
     successful_videos,

@@ -9,8 +9,7 @@ import sys
 
 import pytest
 
-from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.pipeline import run as pipeline
+from lerobot_blindgrasp import presets, spec
 
 
 @pytest.mark.slow
@@ -67,10 +66,10 @@ def test_step_counts_in_lerobot_logs_parse():
 
 
 def test_presets_are_consistent():
-    for p in pipeline.PRESETS.values():
+    for p in presets.PRESETS.values():
         assert p.student.size in ("quick", "cpu", "paper")
     # README command 1 starts from the shipped teacher and records results at >= 20 episodes per object.
-    quick = pipeline.PRESETS["quick"]
+    quick = presets.PRESETS["quick"]
     assert quick.teacher.shipped and quick.evaluation.episodes_per_object >= 20 and quick.evaluation.task == "all"
-    assert not pipeline.PRESETS["smoke"].teacher.shipped  # CI still trains a (tiny) teacher
-    assert pipeline.PRESETS["paper"].student.device == "cuda"
+    assert not presets.PRESETS["smoke"].teacher.shipped  # CI still trains a (tiny) teacher
+    assert presets.PRESETS["paper"].student.device == "cuda"

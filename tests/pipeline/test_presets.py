@@ -13,12 +13,12 @@ import pytest
 
 from lerobot_blindgrasp import presets
 from lerobot_blindgrasp.cli import parse_config
-from lerobot_blindgrasp.pipeline import recipe, teacher_source
+from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.pipeline import run as pipeline
 from lerobot_blindgrasp.policies.blindgrasp_transformer import configuration_blindgrasp_transformer as student_cfg
 from lerobot_blindgrasp.presets import ablations, teacher_configs
 from lerobot_blindgrasp.presets import teacher as teacher_presets
-from lerobot_blindgrasp.sim import rewards
+from lerobot_blindgrasp.sim import objects, rewards
 from lerobot_blindgrasp.teacher.train import TrainTeacherConfig
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -55,16 +55,15 @@ def test_every_entry_is_complete():
         assert p.student.size in presets.SIZES
         assert p.demos.max_rollouts_per_object >= p.demos.episodes_per_object
         assert p.evaluation.episodes_per_object >= (20 if name != "smoke" else 1)  # the evaluation protocol
-        assert recipe.objects_of(p.evaluation.task)
+        assert objects.resolve_objects(p.evaluation.task)
         for obj, _ in p.demos.extra_episodes:
-            assert recipe.objects_of(obj) == (obj,), name
+            assert objects.resolve_objects(obj) == (obj,), name
         if p.dagger is not None:
-            assert recipe.objects_of(p.dagger.objects), name
+            assert objects.resolve_objects(p.dagger.objects), name
         assert p.all_deviations and all(isinstance(d, str) and d for d in p.all_deviations), name
 
 
 def test_pipeline_teacher_and_student_read_the_same_objects():
-    assert pipeline.PRESETS is presets.PRESETS
     assert teacher_configs.Variant is presets.Variant
     for name in ("paper", "cpu", "quick"):
         assert teacher_presets.get_preset(name) is presets.teacher.TEACHER_PRESETS[name]
@@ -91,7 +90,7 @@ def test_paper_is_tables_iii_and_iv():
     s = p.student
     assert (s.size, s.batch_size, s.epochs, s.constant_lr_epochs, s.steps) == ("paper", 256, 2000, 100, None)
     # Table V is on the six medium (in-distribution) shapes.
-    assert recipe.objects_of(p.evaluation.task) == recipe.objects_of("medium")
+    assert objects.resolve_objects(p.evaluation.task) == objects.resolve_objects("medium")
 
 
 def test_quick_and_cpu_pipeline_numbers_are_unchanged():
@@ -138,16 +137,16 @@ def test_the_main_job_preset_is_the_blind_teacher_and_says_it_goes_beyond_the_pa
     assert "--joint_calibration_rad=0.05" in recipe.demos_collect(b, folder, tmp_path / "d", "x/y", 1)
     assert not any("calibration" in c for c in recipe.demos_collect(q, folder, tmp_path / "d", "x/y", 1))
     monkeypatch.delenv("BLINDGRASP_TEACHER", raising=False)
-    path, about = teacher_source.teacher_for_run(pipeline.Stage(tmp_path, {}), b, tmp_path, 1, given=None)
+    path, about = pipeline.teacher_for_run(pipeline.Stage(tmp_path, {}), b, tmp_path, 1, given=None)
     assert path == folder and about["source"] == "shipped" and about["preset"] == b.teacher.settings.name
     assert (
-        teacher_source.teacher_for_run(pipeline.Stage(tmp_path, {}), q, tmp_path, 1, given=None)[0].name
+        pipeline.teacher_for_run(pipeline.Stage(tmp_path, {}), q, tmp_path, 1, given=None)[0].name
         == "teacher_cpu_bc"
     )
-    cmd, sched = recipe.student_train(b, tmp_path / "demos", "local/x", tmp_path / "student", seed=1)
+    cmd, sched = recipe.lerobot_train(b.student, tmp_path / "demos", "local/x", tmp_path / "student", seed=1)
     assert (sched.steps, sched.constant_lr_steps) == (700, 350)
     assert {"--steps=700", "--policy.scheduler_constant_steps=350", "--policy.optimizer_lr=0.0005"} <= set(cmd)
-    quick_cmd = recipe.student_train(q, tmp_path, "x", tmp_path, 1)[0]
+    quick_cmd = recipe.lerobot_train(q.student, tmp_path, "x", tmp_path, 1)[0]
     assert "--num_workers=2" in cmd and "--num_workers=1" in quick_cmd
     assert not any(c.startswith("--policy.optimizer_lr") for c in quick_cmd)
     with pytest.raises(ValueError, match="constant_lr_steps needs steps"):
@@ -170,7 +169,7 @@ def test_the_shipped_students_preset_aims_demos_and_dagger_at_the_small_capsule(
     assert "80 student episodes of capsule_small" in words and "approaches blind" in words
     assert sum(d.startswith("beyond the paper") for d in t.deviations.values()) == 4
     assert not any(d.startswith("700 steps") for d in t.deviations.values())
-    cmd = recipe.student_train(t, tmp_path, "x", tmp_path, 1)[0]
+    cmd = recipe.lerobot_train(t.student, tmp_path, "x", tmp_path, 1)[0]
     assert {"--steps=1200", "--policy.scheduler_constant_steps=600", "--policy.optimizer_lr=0.0005"} <= set(cmd)
     # The extra collection: one object, the collector's default budget, start states of its own.
     teacher = tmp_path / "teacher"
@@ -263,7 +262,9 @@ def test_paper_student_steps_come_from_the_collected_frames(tmp_path):
     # The lerobot-train command reads total_frames from the dataset's meta/info.json.
     (tmp_path / "meta").mkdir()
     (tmp_path / "meta" / "info.json").write_text(json.dumps({"total_frames": 1000}))
-    cmd, sched = recipe.student_train(presets.PRESETS["paper"], tmp_path, "local/x", tmp_path / "s", seed=1)
+    cmd, sched = recipe.lerobot_train(
+        presets.PRESETS["paper"].student, tmp_path, "local/x", tmp_path / "s", seed=1
+    )
     assert sched.steps_per_epoch == 4 and "--steps=8000" in cmd and "--batch_size=256" in cmd
     assert "--policy.scheduler_constant_steps=400" in cmd and "--policy.size=paper" in cmd
 

@@ -103,8 +103,15 @@ def _docstrings(tree: ast.AST) -> set[int]:
     }
 
 
+def _foreign_private(target: ast.Attribute) -> bool:
+    """`x._name = ...` on another object than self or cls: another library's private state (LeRobot's writers)."""
+    owner = target.value.id if isinstance(target.value, ast.Name) else None
+    return target.attr.startswith("_") and not target.attr.startswith("__") and owner not in ("self", "cls")
+
+
 def _reaches(tree: ast.AST) -> list[str]:
-    """Each line that patches LeRobot, sets a process-wide hook, reads LeRobot's command line or matches its logs."""
+    """Each line that patches LeRobot, writes its private state, sets a process-wide hook, reads LeRobot's command
+    line or matches its logs."""
     lerobot, docs, found = _lerobot_names(tree), _docstrings(tree), []
     for node in ast.walk(tree):
         line = getattr(node, "lineno", 0)
@@ -123,7 +130,7 @@ def _reaches(tree: ast.AST) -> list[str]:
             targets = node.targets if isinstance(node, ast.Assign) else [node.target]
             for t in (e for x in targets for e in (x.elts if isinstance(x, ast.Tuple) else [x])):
                 if isinstance(t, ast.Attribute) and (
-                    _root(t) in lerobot or ast.unparse(t) in ("sys.excepthook", "sys.argv")
+                    _root(t) in lerobot or ast.unparse(t) in ("sys.excepthook", "sys.argv") or _foreign_private(t)
                 ):
                     found.append(f"{line}: {ast.unparse(t)} =")
         if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs:
@@ -151,6 +158,7 @@ def test_the_scan_finds_each_kind_of_reach():
         "parse_arg",
         "sys.excepthook =",
         "sys.argv =",
+        "ds._is_finalized =",
         "log_say",
     ):
         assert kind in found, kind

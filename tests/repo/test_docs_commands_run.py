@@ -61,7 +61,7 @@ class Lab:
 
     def robot_args(self, prefix: str = "--robot") -> list[str]:
         """The emulators' ports, this lab's calibration folder, and a loaded CI host's slack: the loop's timing and
-        the force stream's staleness are tested in test_hw_faults*.py, not here."""
+        the force stream's staleness are tested in test_hazards_host_timing.py and test_hazards_force_frame.py, not here."""
         return [
             f"{prefix}.port={self.rig.dxl.port}",
             f"{prefix}.force_sensor.port={self.rig.force.port}",

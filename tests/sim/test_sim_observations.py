@@ -42,13 +42,13 @@ def test_layout_is_contiguous_and_refuses_drift():
     assert ends[0][0] == 0 and ends[-1][1] == spec.PRIVILEGED_DIM == 92
     assert all(a[1] == b[0] for a, b in zip(ends, ends[1:]))
     parts = {name: np.zeros((2, n)) for name, n in spec.PRIVILEGED_LAYOUT}
-    assert spec.assemble_privileged(parts).shape == (2, 92)
+    assert np.concatenate(spec.privileged_parts(parts), axis=1).shape == (2, 92)
     with pytest.raises(ValueError, match="missing"):
-        spec.assemble_privileged({k: v for k, v in parts.items() if k != "object_quat"})
+        spec.privileged_parts({k: v for k, v in parts.items() if k != "object_quat"})
     with pytest.raises(ValueError, match="extra"):
-        spec.assemble_privileged({**parts, "object_colour": np.zeros((2, 1))})
+        spec.privileged_parts({**parts, "object_colour": np.zeros((2, 1))})
     with pytest.raises(ValueError, match="object_pos"):
-        spec.assemble_privileged({**parts, "object_pos": np.zeros((2, 4))})
+        spec.privileged_parts({**parts, "object_pos": np.zeros((2, 4))})
 
 
 def _same_quat(a, b, atol):

@@ -41,19 +41,50 @@ def pair36():
     return _pair(num_envs=36, seed=5, dr=NO_PUSH)
 
 
-def test_warp_groups_objects_by_geom_type_with_per_world_parameters(pair36):
-    """18 objects become 4 Warp models (box, capsule, cylinder, sphere); sizes, masses and the Table II draw are
-    per-world fields equal to the batch backend's per-env MjModels."""
+def _assert_worlds_are_the_cpu_models(backend, env_model) -> None:
+    """Every model field that differs between the CPU per-env models (the batch backend's, `env_model(i)`) is a
+    per-world field of the Warp model, and each world's row equals its env's model within float32: the fields
+    written on the device are the float64 rows cast once (half an ulp); the constants Warp's set_const derives
+    in float32 (subtree masses, centres of mass, the inverse weights from a factorized 15 x 15 mass matrix) take
+    a few float32 operations each, so 8 ulps of the field's scale bound both."""
+    from lerobot_blindgrasp.sim.backends.warp import _UNUSED, _array_fields
+
+    for g in backend.groups:
+        models = [env_model(int(i)) for i in g.ids]
+        first = _array_fields(models[0])
+        differ = {k for m in models[1:] for k, v in _array_fields(m).items() if not np.array_equal(v, first[k])}
+        assert {"geom_friction", "body_mass", "body_inertia", "actuator_gainprm", "body_invweight0"} <= differ
+        for k in sorted(differ - _UNUSED):
+            if not hasattr(g.model, k):
+                continue  # MjModel arrays Warp has no field for (the BVH, dof_M0) are not read by its physics
+            rows = getattr(g.model, k).numpy().reshape(len(g.ids), -1)  # one row per world, or it raises
+            expect = np.stack([getattr(m, k).reshape(-1) for m in models])
+            tol = 8 * F32 * np.abs(expect).max()
+            np.testing.assert_allclose(rows, expect, rtol=0, atol=tol, err_msg=k)
+
+
+def test_warp_writes_each_worlds_table_ii_draw_as_the_cpu_models_carry_it(pair36):
+    """18 objects become 4 Warp models (box, capsule, cylinder, sphere), each built from one object's MjModel; the
+    objects' sizes and masses, each env's Table II draw and the constants derived from them are per-world fields
+    written on the device, equal to the batch backend's per-env MjModels for the same seeds."""
+    from lerobot_blindgrasp.sim.backends.warp import WarpBackend
+
     _, warp = pair36
     groups = warp.physics.groups
     assert sorted(len(g.ids) for g in groups) == [6, 6, 12, 12]
-    for g in groups:
-        body = warp.env_model(int(g.ids[0])).body("object").id
-        mass = g.model.body_mass.numpy()[:, body]
-        expect = [warp.env_model(int(i)).body_mass[body] for i in g.ids]
-        np.testing.assert_allclose(mass, expect, rtol=1e-6)
-        kp = g.model.actuator_gainprm.numpy()[:, 0, 0]
-        np.testing.assert_allclose(kp, [warp.env_model(int(i)).actuator_gainprm[0, 0] for i in g.ids], rtol=1e-6)
+    _assert_worlds_are_the_cpu_models(warp.physics, warp.env_model)
+    # the torque limit beyond Table II, on one group's envs
+    ids = groups[0].ids
+    capped = WarpBackend(warp._templates, warp.object_index[ids], warp.physics_draw.rows(ids), 0.5, device="cpu")
+    draw = warp.physics_draw.rows(ids)
+
+    def capped_model(i):
+        return randomization.apply_physics_draw(warp._templates[warp.object_index[ids[i]]], draw, i, 0.5)
+
+    _assert_worlds_are_the_cpu_models(capped, capped_model)
+    limit = capped.groups[0].model.actuator_forcerange.numpy()
+    full = warp.env_model(int(ids[0])).actuator_forcerange
+    np.testing.assert_allclose(limit, np.broadcast_to(0.5 * full, limit.shape), rtol=1e-6)
     # every group steps with the scene's solver settings (no silent fallback)
     opt = groups[0].model.opt
     assert opt.noslip_iterations == 3 and int(opt.cone) == 1 and int(opt.solver) == 2
@@ -233,30 +264,39 @@ def test_each_term_per_step_within_float32_of_the_batch_backend():
         np.testing.assert_array_equal(info_w["success"], info_b["success"])
 
 
-def test_shared_arrays_are_warps_own_memory_and_step_alike():
-    """`share_arrays=True` with one geometry group: the contract's tensors are the Warp arrays themselves (same
-    memory, float32), and stepping through them gives bit for bit what the copying layout gives."""
+def test_one_group_shares_warps_own_memory_and_steps_as_the_copying_layout(pair36):
+    """With one geometry group (the default `share_arrays`), the contract's tensors are the Warp arrays themselves
+    (same memory, float32): the task resets and steps through them, auto-reset included, and stepping them gives
+    bit for bit what the copying layout gives. With several groups they cannot be, and are copies."""
     from lerobot_blindgrasp.sim.backends.warp import WarpBackend
 
+    assert not pair36[1].physics.shares_memory  # four groups
     env = BatchedGraspEnv(
         GraspEnvConfig(
-            backend="warp", device="cpu", num_envs=3, seed=5, objects=("cylinder_a_medium",), dr=NO_PUSH
+            backend="warp",
+            device="cpu",
+            num_envs=3,
+            seed=5,
+            objects=("cylinder_a_medium",),
+            dr=NO_PUSH,
+            episode_s=4 / spec.CONTROL_HZ,
         )
     )
-    env.reset()
-    copying = env.physics
-    shared = WarpBackend(env._templates, env.object_index, env.env_model, device="cpu", share_arrays=True)
-    assert shared.shares_memory and not copying.shares_memory
+    shared = env.physics
+    assert shared.shares_memory
     data = shared.groups[0].data
     for k in ("qpos", "qvel", "ctrl", "xfrc_applied", "sensordata"):
         view = getattr(shared, k)
         assert view.dtype == torch.float32 and view.data_ptr() == getattr(data, k).ptr, k
-    everyone = np.arange(3)
-    shared.reset(everyone)
-    for k in ("qpos", "qvel", "ctrl"):
-        getattr(shared, k)[:] = getattr(copying, k)  # the env's reset state, cast to float32 on the way
-    shared.forward(everyone)
+    env.reset()  # the task's reset writes its float64 draws into the float32 arrays
     np.testing.assert_array_equal(data.qpos.numpy(), shared.qpos.numpy())  # written in place, no copy
+    copying = WarpBackend(env._templates, env.object_index, env.physics_draw, device="cpu", share_arrays=False)
+    assert not copying.shares_memory and copying.qpos.dtype == torch.float64
+    everyone = np.arange(3)
+    copying.reset(everyone)
+    for k in ("qpos", "qvel", "ctrl"):
+        getattr(copying, k)[:] = getattr(shared, k)  # the env's reset state
+    copying.forward(everyone)
     target = copying.ctrl + 0.1
     for _ in range(3):
         copying.ctrl[:] = target
@@ -266,3 +306,9 @@ def test_shared_arrays_are_warps_own_memory_and_step_alike():
             np.testing.assert_array_equal(
                 getattr(shared, k).numpy(), getattr(copying, k).numpy().astype(np.float32)
             )
+    ended = 0
+    for _ in range(5):  # the 4-step episodes end and auto-reset through the shared arrays
+        obs, reward, _, truncated, info = env.step(np.zeros((3, spec.NUM_JOINTS)))
+        ended += int(truncated.sum())
+        assert np.isfinite(obs["privileged"]).all() and np.isfinite(reward).all()
+    assert ended == 3 and (env.episode_length.numpy() == 1).all()

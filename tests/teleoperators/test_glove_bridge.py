@@ -16,11 +16,12 @@ import pytest
 from emulators.glove_sender import FIST, OPEN, free_udp_port
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, names
-from lerobot_blindgrasp.teleoperators.manus_glove.bridge import (
+from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
+from lerobot_blindgrasp.teleoperators.manus_glove.manus_bridge import (
+    CHANNELS,
+    BridgeConfig,
     BridgeError,
     GloveBridge,
-    GloveBridgeConfig,
     ergonomics_from_message,
     run_bridge,
 )
@@ -31,7 +32,7 @@ def _publisher_message(side: str, pose: dict[str, float], glove_id: int = 1234, 
     """A ManusGlove as manus_data_publisher fills it: per glove, the 20 ergonomics of its side in enum order, each
     a ManusErgonomics(type=<side-less string>, value=<deg>), plus the raw skeleton (not used by the bridge)."""
     ergonomics = [SimpleNamespace(type="Invalid" if c.name in invalid else c.ros2, value=pose[c.name])
-                  for c in names.CHANNELS if c.name not in drop]  # fmt: skip
+                  for c in CHANNELS if c.name not in drop]  # fmt: skip
     node = SimpleNamespace(node_id=0, parent_node_id=0, joint_type="Invalid", chain_type="Hand",
                            pose=SimpleNamespace(position=SimpleNamespace(x=0.0, y=0.0, z=0.0)))  # fmt: skip
     return SimpleNamespace(glove_id=glove_id, side=side, raw_node_count=1, raw_nodes=[node],
@@ -63,7 +64,7 @@ def test_a_publisher_message_maps_to_the_channels():
 def teleop(tmp_path):
     (tmp_path / "op.json").write_text(json.dumps({"open": OPEN, "fist": FIST}))
     port = free_udp_port()
-    bridge = GloveBridge(GloveBridgeConfig(port=port, side="right", source_port=0))
+    bridge = GloveBridge(BridgeConfig(port=port, side="right", source_port=0))
     # As across machines: listen on every interface, and accept only the pinned bridge.
     sender = f"127.0.0.1:{bridge.sender.source[1]}"
     t = ManusGlove(ManusGloveConfig(id="op", host="0.0.0.0", port=port, sender=sender, calibration_dir=tmp_path))
@@ -119,7 +120,7 @@ def test_a_message_without_the_index_spread_is_warned_about_by_name(teleop, capl
 def test_without_ros2_the_command_says_what_to_source(monkeypatch):
     monkeypatch.setitem(sys.modules, "rclpy", None)  # as on a machine without ROS 2, even if one is installed
     with pytest.raises(BridgeError, match=r"rclpy is not importable.*source /opt/ros/<distro>/setup.bash"):
-        run_bridge(GloveBridgeConfig(source_port=0))
+        run_bridge(BridgeConfig(source_port=0))
 
 
 def test_the_console_script_parses_its_config(capsys):
@@ -149,7 +150,7 @@ def test_a_restarted_bridge_keeps_its_address():
 def test_a_network_error_does_not_stop_the_bridge(caplog):
     """sendto fails while the link is down (here: broadcast without SO_BROADCAST, which the kernel refuses); the
     callback must not raise into the ROS executor, and says so once."""
-    bridge = GloveBridge(GloveBridgeConfig(source_port=0))
+    bridge = GloveBridge(BridgeConfig(source_port=0))
     bridge.sender.addr = ("255.255.255.255", 50120)
     try:
         assert not bridge.forward(_publisher_message("Right", OPEN))

@@ -1,5 +1,5 @@
 """The glove names (issue 43 item 3): the MANUS SDK's ergonomics names and the ROS 2 publisher's strings are both
-accepted, through the one table of names.py, which docs/glove.md prints; a datagram lacking a channel the
+accepted, through the one table of manus_bridge.py, which docs/glove.md prints; a datagram lacking a channel the
 retargeting needs is reported at WARNING, once, by name; connect says why arriving data was not used."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import pytest
 from emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, manus_bridge, names
+from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, manus_bridge
 from lerobot_blindgrasp.teleoperators.manus_glove import retarget as rt
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender, decode
 
@@ -49,17 +49,17 @@ def test_the_documented_table_is_the_code_table():
         for k in keys:
             use.setdefault(k, []).append(f"{joint} ({kind})")
     expected = [[c.name, c.enum_name("right"), f"{c.enum_value('left')} / {c.enum_value('right')}", c.ros2,
-                 ", ".join(use.get(c.name, ["-"]))] for c in names.CHANNELS]  # fmt: skip
+                 ", ".join(use.get(c.name, ["-"]))] for c in manus_bridge.CHANNELS]  # fmt: skip
     assert _doc_rows() == expected
-    assert rt.REQUIRED_KEYS <= set(names.BY_NAME) and len(rt.REQUIRED_KEYS) == 12
+    assert rt.REQUIRED_KEYS <= set(manus_bridge.BY_NAME) and len(rt.REQUIRED_KEYS) == 12
 
 
 def test_the_names_are_the_sdk_and_publisher_spellings():
     name, value = SDK_ENUM_RIGHT_INDEX
-    c = names.BY_NAME["IndexMCPSpread"]
+    c = manus_bridge.BY_NAME["IndexMCPSpread"]
     assert (c.enum_name("right"), c.enum_value("right")) == (name, value)
-    assert [c.ros2 for c in names.CHANNELS] == ROS2_STRINGS
-    assert names.CHANNELS[-1].enum_value("right") == 39  # ErgonomicsDataType_MAX_SIZE = 40
+    assert [c.ros2 for c in manus_bridge.CHANNELS] == ROS2_STRINGS
+    assert manus_bridge.CHANNELS[-1].enum_value("right") == 39  # ErgonomicsDataType_MAX_SIZE = 40
 
 
 @pytest.mark.parametrize("style", ["channel", "ros2", "enum", "enum_no_prefix"])
@@ -71,7 +71,7 @@ def test_every_accepted_spelling_decodes_to_the_same_channels(style):
     sender = GloveSender("127.0.0.1", 9, "left")
     try:
         d = decode(
-            sender.pack({key(c): OPEN[c.name] for c in names.CHANNELS} | {"Invalid": 0.0}), rt.REQUIRED_KEYS
+            sender.pack({key(c): OPEN[c.name] for c in manus_bridge.CHANNELS} | {"Invalid": 0.0}), rt.REQUIRED_KEYS
         )
     finally:
         sender.close()
@@ -136,7 +136,7 @@ def test_the_ros2_publishers_strings_drive_the_gripper(tmp_path):
 
 
 def test_an_old_calibration_file_keyed_by_the_publishers_strings_still_loads(tmp_path):
-    ros2 = {c.name: c.ros2 for c in names.CHANNELS}
+    ros2 = {c.name: c.ros2 for c in manus_bridge.CHANNELS}
     (tmp_path / "op.json").write_text(json.dumps({"open": {ros2[k]: v for k, v in OPEN.items()},
                                                   "fist": {ros2[k]: v for k, v in FIST.items()}}))  # fmt: skip
     t = ManusGlove(ManusGloveConfig(id="op", calibration_dir=tmp_path))
@@ -178,7 +178,7 @@ def test_the_other_hand_and_an_old_bridge_are_named_at_connect(tmp_path):
     teleop = _teleop(tmp_path, port, connect_timeout_s=0.3)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         left = GloveSender("127.0.0.1", port, "left")
-        teleop.receiver.open()
+        teleop.receiver.start()
         try:
             left.send(OPEN)
             s.sendto(json.dumps({"proto": "blindgrasp-glove/1", "seq": 1, "t": time.time(), "side": "right",
@@ -188,7 +188,7 @@ def test_the_other_hand_and_an_old_bridge_are_named_at_connect(tmp_path):
                 time.sleep(0.01)
             why = teleop.receiver.diagnosis()
         finally:
-            teleop.receiver.close()
+            teleop.receiver.stop()
             left.close()
     assert "1 for the left hand (this teleoperator is --teleop.side=right)" in why
     assert "update the bridge" in why

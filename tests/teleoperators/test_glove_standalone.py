@@ -32,15 +32,15 @@ import pytest
 from emulators.glove_sender import FIST, OPEN, free_udp_port
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, bridge, names, protocol
+from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, bridge, protocol
 from lerobot_blindgrasp.teleoperators.manus_glove import manus_bridge as mb
 from lerobot_blindgrasp.teleoperators.manus_glove import retarget as rt
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "glove_bridge"
 BRIDGE = Path(mb.__file__)
 RIGHT, LEFT = 0x1234, 0x5678  # glove ids
-OTHER_HAND = {c.name: 77.0 for c in names.CHANNELS}  # the left glove: never in a right-hand datagram
-USER = {c.name: 66.0 for c in names.CHANNELS}  # a user's entry (isUserID), same id as the right glove: skipped
+OTHER_HAND = {c.name: 77.0 for c in mb.CHANNELS}  # the left glove: never in a right-hand datagram
+USER = {c.name: 66.0 for c in mb.CHANNELS}  # a user's entry (isUserID), same id as the right glove: skipped
 OPEN_ROUNDS = 20  # rounds of the open hand before the fist
 
 
@@ -76,7 +76,7 @@ def teleop(tmp_path):
 def _values(pose: dict[str, float], side: str) -> list[float]:
     """ErgonomicsData.data (40 floats by ErgonomicsDataType) of a glove of `side` in `pose`."""
     out = [0.0] * 40
-    for c in names.CHANNELS:
+    for c in mb.CHANNELS:
         out[c.enum_value(side)] = pose[c.name]
     return out
 
@@ -208,7 +208,7 @@ def test_a_missing_sdk_library_says_how_to_name_it(py310, lab, tmp_path):
 def _ros_rounds() -> list[list[dict]]:
     def msg(topic, glove_id, side, pose, spelling):
         return {"topic": topic, "glove_id": glove_id, "side": side,
-                "ergonomics": [[spelling(c), pose[c.name]] for c in names.CHANNELS]}  # fmt: skip
+                "ergonomics": [[spelling(c), pose[c.name]] for c in mb.CHANNELS]}  # fmt: skip
 
     rounds = []
     for k in range(OPEN_ROUNDS + 1):
@@ -248,11 +248,10 @@ def test_without_rclpy_the_ros2_source_says_what_to_source(py310, lab):
 
 def test_the_teleoperator_reads_the_bridges_own_names_and_datagram():
     """One source: the receiver's names table and datagram are the standalone bridge's objects, not copies."""
-    assert names.CHANNELS is mb.CHANNELS and names.ALIASES is mb.ALIASES and names.canonical is mb.canonical
     assert protocol.encode is mb.encode and protocol.GloveSender is mb.GloveSender and protocol.PROTO is mb.PROTO
     assert protocol.SESSION_RE is mb.SESSION_RE
     assert mb.USED_CHANNELS == rt.REQUIRED_KEYS  # what the bridge warns about is what the retargeting reads
-    assert bridge.GloveBridgeConfig is mb.BridgeConfig and bridge.run_bridge is mb.run_bridge
+    assert bridge.BridgeConfig is mb.BridgeConfig
 
 
 def test_the_bridge_imports_only_the_standard_library_and_ros2():

@@ -4,22 +4,28 @@ Layout. MuJoCo Warp steps `nworld` copies of one model; model fields whose spec 
 per world (`put_model(mjm, batch_sizes={field: nworld})`, indexed `worldid % rows` in every kernel). Objects of the
 same geom type (box, cylinder, capsule, sphere) compile to models of identical structure that differ only in such
 fields (geom size and bounds, mass, inertia, rest pose), so envs are grouped by the object's geom type: one Warp
-model and one Data per group, each with its share of worlds. Within a group every field that differs between the
-envs' randomized CPU models (the same `MjModel`s the batch backend steps: Table II friction, mass, inertia, servo
-gains, and the constants `mj_setConst` derives from them) is batched per world and filled from those models, so
-both backends simulate the same parameters. Fields that differ but cannot be batched raise at construction.
+model and one Data per group, each with its share of worlds.
 
-State. `qpos`, `qvel`, `ctrl`, `xfrc_applied` and `sensordata` are float64 tensors on Warp's device (`device`,
-the torch name of `wp_device`), in env order; a step never copies them to the host. Each control step copies ctrl
-and xfrc_applied into the groups' Warp arrays and qpos, qvel and sensordata back, on the device (about 100 floats
-per env, cast between float64 and Warp's float32); `wp.to_torch` views of the Warp arrays (shared memory) are the
-two ends of those copies. `share_arrays=True` removes the copies where it can: with one group holding every env in
-order, the tensors ARE the Warp arrays (float32, mjlab's way). It is off by default for two reasons: the task's
-reset writes float64 rows into qpos and ctrl with indexed assignment, which torch refuses into a float32 tensor
-(casting them to the tensor's dtype there is all it takes), and with several groups (the paper's 18 objects are
-four geometry types) one tensor cannot share memory with several Warp arrays whose worlds interleave in env order:
-that needs every geometry in one model. On CUDA, torch's stream is synchronized before Warp's launches and Warp's
-after them. The `nstep` substeps of each group run as one captured graph: a CUDA graph on a GPU, Warp's API
+Per-world randomization, written on the device. A group's Warp model is built from ONE MjModel, its first object's
+(not one randomized MjModel per env, as the batch backend steps). Per world, on the device: the fields that differ
+between the group's objects are gathered from the objects' models (a handful), Table II's draw is written into them
+by `randomization.write_physics_draw` (the same torch code that writes an env's MjModel for the batch backend, run
+in float64 over the worlds, then cast once into Warp's float32 arrays), and `mjw.set_const` recomputes what
+`mj_setConst` derives from them (subtree masses and centres of mass, the inverse weights of bodies and dofs; every
+field it writes has one row per world). The draws are made once per env at construction (paper, Sec. III-B), so
+resets write no model fields. Fields that differ between objects but cannot be batched raise at construction.
+`tests/sim/test_sim_warp.py` checks every per-world field against the batch backend's per-env MjModels.
+
+State. `qpos`, `qvel`, `ctrl`, `xfrc_applied` and `sensordata` are tensors on Warp's device (`device`, the torch
+name of `wp_device`), in env order; a step never copies them to the host. With one group holding every env in
+order (`share_arrays`, the default where it holds: an env of one object geometry), they ARE the group's Warp arrays
+(float32, mjlab's way) and nothing is copied; the task writes them with their dtype. With several groups (the
+paper's 18 objects are four geometry types) one tensor cannot share memory with several Warp arrays whose worlds
+interleave in env order (that needs every geometry in one model), so the tensors are float64 copies: each control
+step copies ctrl and xfrc_applied into the groups' Warp arrays and qpos, qvel and sensordata back, on the device
+(about 100 floats per env, cast between float64 and Warp's float32); `wp.to_torch` views of the Warp arrays (shared
+memory) are the two ends of those copies. On CUDA, torch's stream is synchronized before Warp's launches and
+Warp's after them. The `nstep` substeps of each group run as one captured graph: a CUDA graph on a GPU, Warp's API
 capture on its CPU device (replayed natively, without the Python launch overhead of each kernel, which on CPU is
 most of a step's time; the replay is bit-identical to stepping kernel by kernel).
 
@@ -43,6 +49,8 @@ import mujoco
 import numpy as np
 import torch
 
+from lerobot_blindgrasp.sim import randomization
+
 try:
     import mujoco_warp as mjw
     import warp as wp
@@ -55,6 +63,26 @@ _WARP_FIELDS = {f.name: f.type for f in dataclasses.fields(mjw_types.Model)}
 _BATCHABLE = {k for k, t in _WARP_FIELDS.items() if getattr(t, "shape", ())[:1] == ("*",)}
 # Unbatchable Warp fields that may still differ between objects: read only by features this model leaves off.
 _UNUSED = {"dof_length"}  # velocity weighting for sleeping islands (sleep is disabled)
+_DRAWN = (*randomization.PHYSICS_DRAW_FIELDS, randomization.TORQUE_LIMIT_FIELD)
+# What mjw.set_const derives from the model (its docstring's list): one row per world, as the mass and inertia that
+# Table II draws change some of them (subtree masses and centres of mass, the inverse weights of bodies and dofs).
+_DERIVED = (
+    "body_subtreemass",
+    "geom_aabb",
+    "geom_rbound",
+    "tendon_length0",
+    "eq_data",
+    "cam_pos0",
+    "cam_poscom0",
+    "cam_mat0",
+    "light_pos0",
+    "light_poscom0",
+    "light_dir0",
+    "dof_invweight0",
+    "body_invweight0",
+    "tendon_invweight0",
+    "actuator_acc0",
+)
 
 # Per-world contact and constraint capacity. The claw against one object makes at most ~30 contacts (3 tips and
 # 6 link geoms on the object and the table, the object on the table); elliptic condim-4 contacts take 4 rows each,
@@ -90,6 +118,14 @@ class _Group:
     view: dict | None = None  # the Data's state arrays as torch tensors (shared memory)
 
 
+@dataclasses.dataclass
+class _Worlds:
+    ids: np.ndarray  # env ids of a group's worlds, in world order
+    objects: np.ndarray  # their objects (indices into the templates)
+    draw: randomization.PhysicsDraw  # every env's Table II draw
+    torque_scale: float
+
+
 def _array_fields(m: mujoco.MjModel) -> dict[str, np.ndarray]:
     out = {}
     for name in dir(m):
@@ -108,14 +144,16 @@ class WarpBackend:
         self,
         templates: list[mujoco.MjModel],
         object_index: np.ndarray,
-        env_model,
+        draw: randomization.PhysicsDraw,
+        torque_limit_scale: float = 1.0,
         device: str | None = None,
         nconmax: int = NCONMAX,
         njmax: int = NJMAX,
-        share_arrays: bool = False,
+        share_arrays: bool = True,
     ):
-        """templates: one compiled MjModel per object; object_index: object of each env; env_model(i): env i's
-        randomized MjModel (the same one the batch backend would step)."""
+        """templates: one compiled MjModel per object; object_index: object of each env; draw: every env's Table II
+        draw (`randomization.draw_physics`), written into the worlds' rows on the device; share_arrays: the state
+        tensors are the Warp arrays themselves where that is possible (one group), else copies."""
         self.wp_device = device or default_warp_device()
         self.device = torch.device(wp.device_to_torch(self.wp_device))
         self._cuda = self.device.type == "cuda"
@@ -126,12 +164,13 @@ class WarpBackend:
         with wp.ScopedDevice(self.wp_device):
             for gt in np.unique(geom_type[object_index]):
                 ids = np.flatnonzero(geom_type[object_index] == gt)
-                self.groups.append(self._build_group(ids, [env_model(int(i)) for i in ids], nconmax, njmax))
+                world = _Worlds(ids, object_index[ids], draw, torque_limit_scale)
+                self.groups.append(self._build_group(world, templates, nconmax, njmax))
         for g in self.groups:
             g.ids_t = torch.as_tensor(g.ids, device=self.device)
             g.view = {k: wp.to_torch(getattr(g.data, k)) for k in (*_STATE, "qacc_warmstart", "overflow")}
         # share_arrays: with one group holding every env in order, the contract's tensors ARE its Warp arrays
-        # (float32, no copy at all); the task's terms must then write them with their dtype (see State above).
+        # (float32, no copy at all); the task's terms write them with their dtype (see State above).
         self.shares_memory = (
             share_arrays and len(self.groups) == 1 and np.array_equal(self.groups[0].ids, np.arange(n))
         )
@@ -150,35 +189,54 @@ class WarpBackend:
             )
         self._zero_warm = torch.zeros(n, dtype=torch.bool, device=self.device)
 
-    def _build_group(self, ids, models: list[mujoco.MjModel], nconmax: int, njmax: int) -> _Group:
-        base = models[0]
+    def _build_group(self, w: _Worlds, templates: list[mujoco.MjModel], nconmax: int, njmax: int) -> _Group:
+        """One Warp model for the group's worlds: its first object's model, with per-world rows for every field
+        that differs between its objects, Table II's fields and the constants derived from them."""
+        objs = np.unique(w.objects)
+        base, nw = templates[objs[0]], len(w.ids)
         fields0 = _array_fields(base)
-        differ: dict[str, list[np.ndarray]] = {}
-        for m in models[1:]:
-            for name, v in _array_fields(m).items():
-                if name not in differ and not np.array_equal(v, fields0[name]):
-                    differ[name] = []
+        differ = {
+            k
+            for o in objs[1:]
+            for k, v in _array_fields(templates[o]).items()
+            if not np.array_equal(v, fields0[k])
+        }
         # MjModel arrays Warp has no field for (e.g. the BVH) are never read by Warp's physics.
-        unbatchable = [k for k in differ if k in _WARP_FIELDS and k not in _BATCHABLE | _UNUSED]
+        unbatchable = sorted(k for k in differ if k in _WARP_FIELDS and k not in _BATCHABLE | _UNUSED)
         if unbatchable:
             raise NotImplementedError(f"model fields differ between worlds but cannot be batched: {unbatchable}")
-        batched = [k for k in differ if k in _BATCHABLE]
-        nw = len(models)
-        model = mjw.put_model(base, batch_sizes=dict.fromkeys(batched, nw))
+        written = sorted((differ & _BATCHABLE) | set(_DRAWN))
+        derived = [k for k in _DERIVED if k in _BATCHABLE and fields0.get(k, np.empty(0)).size]
+        model = mjw.put_model(base, batch_sizes=dict.fromkeys({*written, *derived}, nw))
         model.opt.warn_overflow = int(model.opt.warn_overflow) & ~_NOT_FAILURES  # no print per iteration cap
-        for k in batched:
-            arr = getattr(model, k)
-            ref = arr.numpy()
+        dev = wp.device_to_torch(self.wp_device)
+        # Each world's rows in float64 on the device: its object's values, then its Table II draw written into
+        # them (the same float64 arithmetic as the batch backend's MjModels), cast once to Warp's float32.
+        local = torch.as_tensor(np.searchsorted(objs, w.objects), device=dev)
+        rows = {
+            k: torch.as_tensor(np.stack([getattr(templates[o], k) for o in objs]), device=dev)[local]
+            for k in written
+        }
+        randomization.write_physics_draw(
+            rows, randomization.DrawTargets.of(base), w.draw.rows(torch.as_tensor(w.ids), dev), w.torque_scale
+        )
+        wp.synchronize_device(self.wp_device)  # put_model's uploads done before torch reads and writes them
+        for k in written:
+            view = wp.to_torch(getattr(model, k)).view(nw, -1)
             # put_model copies these fields verbatim from MjModel; check it, so that writing rows is equivalent
-            if not np.allclose(ref[0].reshape(-1), fields0[k].reshape(-1).astype(ref.dtype), rtol=1e-6, atol=0):
-                raise NotImplementedError(f"Warp's {k} is not MjModel's {k}; per-world values cannot be copied")
-            rows = np.stack([getattr(m, k) for m in models]).astype(ref.dtype)
-            arr.assign(rows.reshape(ref.shape))
+            ref = view[0].cpu().numpy()
+            if not np.allclose(ref, fields0[k].reshape(-1).astype(ref.dtype), rtol=1e-6, atol=0):
+                raise NotImplementedError(f"Warp's {k} is not MjModel's {k}; per-world values cannot be written")
+            view.copy_(rows[k].reshape(nw, -1))
+        if self._cuda:  # torch's writes done before Warp's stream reads them
+            torch.cuda.current_stream(dev).synchronize()
         data = mjw.make_data(base, nworld=nw, nconmax=nconmax, njmax=njmax)
+        # The constants MuJoCo derives from mass and inertia (mj_setConst's), per world, on the device.
+        mjw.set_const(model, data)
         # Load every kernel now: a graph capture (first step) records launches but cannot compile.
         mjw.step(model, data)
         mjw.reset_data(model, data)
-        return _Group(ids=np.asarray(ids), model=model, data=data)
+        return _Group(ids=np.asarray(w.ids), model=model, data=data)
 
     # --- state transfer (on the device) -----------------------------------------------------------------------
     def _scatter(self, fields) -> None:

@@ -1,21 +1,15 @@
 #!/usr/bin/env python3
 """The MANUS glove bridge: one hand's ergonomics -> `blindgrasp-glove/2` UDP datagrams for the manus_glove teleoperator.
 
-One file with no dependency outside Python's standard library (3.10 or later) and, for `--source=ros2`, `rclpy`:
-copy it to the machine that runs MANUS and start it there.
+One file needing only Python's standard library (3.10 or later) and, for `--source=ros2`, `rclpy`: copy it to the
+machine that runs MANUS and start it there (docs/glove.md).
 
     python3 manus_bridge.py --source=ros2 --side=right          # from MANUS's ROS 2 publisher (manus_glove_0, ...)
     python3 manus_bridge.py --source=sdk --side=right --sdk_library=/path/to/libManusSDK_Integrated.so
     python3 manus_bridge.py --side=right --host=192.168.1.20    # to a robot PC at that address
 
-`ros2`: subscribes to the topics of MANUS's `manus_data_publisher`, one `ManusGlove` per glove and frame (`side`
-"Left" | "Right", `ergonomics`: `ManusErgonomics` `type` strings and `value` degrees), depth 1, so a bridge that
-falls behind drops old messages instead of stamping them late as new. `sdk`: the MANUS SDK's C API (`ManusSDK.h`)
-through ctypes: initialise (integrated, or a MANUS Core found on the network), register the ergonomics callback,
-set a coordinate system, connect, then forward each stream's entry of this hand's glove until SIGINT or SIGTERM.
-
-This module is also the teleoperator's one source of the ergonomics names table (`CHANNELS`) and of the datagram
-(`encode`, `GloveSender`): its names.py and protocol.py import them from here.
+It is also the teleoperator's one source of the ergonomics names table (`CHANNELS`) and of the datagram (`encode`,
+`GloveSender`).
 """
 
 from __future__ import annotations
@@ -281,16 +275,15 @@ def _import_ros():
     else:
         raise BridgeError("neither manus_ros2_msgs.msg nor manus_ros2.msg has ManusGlove: build MANUS's ROS 2 "
                           "package (colcon build) and source its workspace (source install/setup.bash).")  # fmt: skip
+    # Depth 1: a bridge that falls behind drops old messages instead of stamping them late as new.
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
     return rclpy, glove_msg, qos
 
 
 def run_ros2(cfg: BridgeConfig, bridge: GloveBridge) -> None:
     rclpy, glove_msg, qos = _import_ros()
-    try:
-        from rclpy.executors import ExternalShutdownException as shutdown
-    except ImportError:  # rclpy before Humble
-        shutdown = KeyboardInterrupt
+    from rclpy.executors import ExternalShutdownException  # ROS 2 Humble or later
+
     rclpy.init()
     node = rclpy.create_node("blindgrasp_glove_bridge")
     try:
@@ -301,7 +294,7 @@ def run_ros2(cfg: BridgeConfig, bridge: GloveBridge) -> None:
         logger.info("Bridging %s (%s hand) to udp://%s:%d, session %s.", cfg.topics, cfg.side, cfg.host, cfg.port,
                     bridge.sender.session)  # fmt: skip
         rclpy.spin(node)
-    except shutdown:  # Ctrl-C or SIGTERM seen by rclpy's own handler: its context is already shut down
+    except ExternalShutdownException:  # Ctrl-C or SIGTERM seen by rclpy's own handler: its context is shut down
         pass
     finally:
         node.destroy_node()
@@ -337,26 +330,18 @@ RETURN_CODES = ("Success Error InvalidArgument ArgumentSizeMismatch UnsupportedS
 NOT_CONNECTED, SIDE_LEFT, SIDE_RIGHT = 11, 1, 2  # SDKReturnCode_NotConnected; Side_Left, Side_Right
 
 
-class ErgonomicsData(C.Structure):
-    _fields_ = [
-        ("id", C.c_uint32),
-        ("isUserID", C.c_bool),
-        ("data", C.c_float * 40),
-    ]  # ErgonomicsDataType_MAX_SIZE
+class ErgonomicsData(C.Structure):  # data: ErgonomicsDataType_MAX_SIZE floats
+    _fields_ = [("id", C.c_uint32), ("isUserID", C.c_bool), ("data", C.c_float * 40)]
 
 
 class ErgonomicsStream(C.Structure):  # publishTime is a ManusTimestamp: struct { uint64_t time; }
     _fields_ = [("publishTime", C.c_uint64), ("data", ErgonomicsData * 32), ("dataCount", C.c_uint32)]
 
 
-class Version(C.Structure):
-    _fields_ = [(n, C.c_uint32) for n in ("major", "minor", "patch")] + [
-        (n, C.c_char * 16) for n in ("label", "sha", "tag")
-    ]
-
-
-class ManusHost(C.Structure):
-    _fields_ = [("hostName", C.c_char * 256), ("ipAddress", C.c_char * 40), ("manusCoreVersion", Version)]
+class ManusHost(
+    C.Structure
+):  # manusCoreVersion (never read): Version { uint32 major, minor, patch; char[16] x 3 }
+    _fields_ = [("hostName", C.c_char * 256), ("ipAddress", C.c_char * 40), ("manusCoreVersion", C.c_uint32 * 15)]
 
 
 class CoordinateSystemVUH(C.Structure):  # AxisView, AxisPolarity, Side (C enums: int), unit scale in m
@@ -385,16 +370,10 @@ SIGNATURES = {
 }  # fmt: skip
 
 
-class SdkError(BridgeError):
-    def __init__(self, call: str, code: int):
-        name = RETURN_CODES[code] if 0 <= code < len(RETURN_CODES) else "unknown"
-        super().__init__(f"{call} returned {code} (SDKReturnCode_{name})")
-        self.call, self.code = call, code
-
-
 class ManusSdk:
-    """The SDK session: load, connect, and hand each ergonomics stream to the poll loop. The SDK calls back on its
-    own threads: the callbacks only copy and flag; the main thread does the sending."""
+    """The SDK session (ManusSDK.h): initialise, register the callbacks, set a coordinate system, connect, then
+    hand each ergonomics stream to the poll loop. The SDK calls back on its own threads: the callbacks only copy
+    and flag; the main thread does the sending."""
 
     def __init__(self, cfg: BridgeConfig):
         self.cfg = cfg
@@ -419,7 +398,8 @@ class ManusSdk:
         fn.argtypes, fn.restype = SIGNATURES[name], C.c_int
         code = fn(*args)
         if code not in ok:
-            raise SdkError(name, code)
+            why = RETURN_CODES[code] if 0 <= code < len(RETURN_CODES) else "unknown"
+            raise BridgeError(f"{name} returned {code} (SDKReturnCode_{why})")
         return code
 
     def _on_ergonomics(self, stream) -> None:
@@ -542,18 +522,12 @@ def from_sdk(cfg: BridgeConfig, bridge: GloveBridge) -> None:
 
 
 # --- the command line --------------------------------------------------------------------------------------------
-def _help() -> dict[str, str]:
-    """Each BridgeConfig field's comment (the one text, for draccus and for argparse)."""
-    try:
-        found = re.findall(r"# (.+)\n\s+(\w+):", inspect.getsource(BridgeConfig))
-    except OSError:  # no source to read (a frozen or byte-compiled copy): help without the texts
-        found = []
-    return {name: text for text, name in found}
-
-
 def parse_args(argv: list[str] | None = None) -> BridgeConfig:
     p = argparse.ArgumentParser(prog="manus_bridge.py", description=(__doc__ or "").split("\n\n")[0])
-    helps = _help()
+    try:  # each BridgeConfig field's comment is its help, for draccus and for argparse alike
+        helps = {name: text for text, name in re.findall(r"# (.+)\n\s+(\w+):", inspect.getsource(BridgeConfig))}
+    except OSError:  # no source to read (a frozen or byte-compiled copy): help without the texts
+        helps = {}
     for f in fields(BridgeConfig):
         default = f.default_factory() if callable(f.default_factory) else f.default
         kind = (

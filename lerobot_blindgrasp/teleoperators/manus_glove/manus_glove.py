@@ -6,14 +6,13 @@ The action is q_glove, the retargeted hand pose, under the robot's action keys. 
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
-from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
-import draccus
 import numpy as np
 from lerobot.teleoperators.teleoperator import Teleoperator
 from lerobot.utils.decorators import check_if_already_connected, check_if_not_connected
@@ -22,15 +21,15 @@ from lerobot.utils.errors import DeviceNotConnectedError
 from lerobot_blindgrasp import durable, spec
 from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import read_raw as read_json
 
-from . import names
 from . import retarget as rt
 from .config_manus_glove import ManusGloveConfig
+from .manus_bridge import canonical
 from .receiver import GloveReceiver
 
 logger = logging.getLogger(__name__)
 
 
-@dataclass
+@dataclasses.dataclass
 class GloveCalibration:
     """Glove ergonomics (deg) of one operator in the two reference poses, per ergonomics channel."""
 
@@ -88,13 +87,6 @@ def calibration_problems(open_pose: dict, fist_pose: dict, min_flex_range_deg: f
     return out
 
 
-def _by_channel(cal: GloveCalibration, side: str) -> tuple[GloveCalibration, list[str]]:
-    """The calibration keyed by channel name (names.py), whichever accepted name the file used (files written before
-    the names table keyed the spreads by the ROS 2 strings, e.g. IndexSpread)."""
-    (open_pose, p1), (fist_pose, p2) = names.canonical(cal.open, side), names.canonical(cal.fist, side)
-    return GloveCalibration(open=open_pose, fist=fist_pose), p1 + p2
-
-
 class ManusGlove(Teleoperator):
     config_class = ManusGloveConfig
     name = "manus_glove"
@@ -133,11 +125,11 @@ class ManusGlove(Teleoperator):
         lerobot-calibrate (connect(calibrate=False), then calibrate()) replaces it."""
         fpath = fpath or self.calibration_fpath
         try:
-            bad = calibration_schema_problems(read_json(fpath))
-            if not bad:
-                with open(fpath) as f, draccus.config_type("json"):
-                    cal = draccus.load(GloveCalibration, f)
-                cal, bad = _by_channel(cal, self.config.side)
+            raw = read_json(fpath)
+            bad = calibration_schema_problems(raw)
+            if not bad:  # keyed by channel, whichever accepted name the file used (e.g. the ROS 2 IndexSpread)
+                (open_pose, p1), (fist_pose, p2) = (canonical(raw[k], self.config.side) for k in ("open", "fist"))
+                cal, bad = GloveCalibration(open_pose, fist_pose), p1 + p2
                 bad = bad or calibration_problems(
                     cal.open, cal.fist, self.config.min_flex_range_deg, self.required
                 )
@@ -156,16 +148,15 @@ class ManusGlove(Teleoperator):
 
     def _save_calibration(self, fpath: Path | None = None) -> None:
         # Atomic: a failed save (a full disk) keeps the previous calibration and says why (durable.WriteError).
-        with durable.atomic_open(fpath or self.calibration_fpath) as f, draccus.config_type("json"):
-            draccus.dump(self.calibration, f, indent=4)
+        durable.atomic_write_json(fpath or self.calibration_fpath, dataclasses.asdict(self.calibration), indent=4)
 
     @check_if_already_connected
     def connect(self, calibrate: bool = True) -> None:
         if self.calibration_error is not None and calibrate:
             raise self.calibration_error
-        self.receiver.open()
+        self.receiver.start()
         if not self.receiver.wait_frames(1, self.config.connect_timeout_s):
-            self.receiver.close()
+            self.receiver.stop()
             raise ConnectionError(
                 f"No glove data on udp://{self.config.host}:{self.config.port} for the {self.config.side} hand "
                 f"within {self.config.connect_timeout_s:.1f} s: {self.receiver.diagnosis()}."
@@ -237,5 +228,5 @@ class ManusGlove(Teleoperator):
 
     @check_if_not_connected
     def disconnect(self) -> None:
-        self.receiver.close()
+        self.receiver.stop()
         logger.info("%s disconnected.", self)

@@ -1,26 +1,11 @@
-"""The glove datagram: one UDP datagram per glove frame, UTF-8 JSON, from a bridge next to the MANUS SDK.
+"""The glove datagram (`blindgrasp-glove/2`): one UDP datagram per glove frame, UTF-8 JSON, from a bridge next to
+the MANUS SDK. docs/glove.md, "The datagram", defines each field and what is checked:
 
     {"proto": "blindgrasp-glove/2", "session": "9f1c2a7d03b4e8aa", "seq": 1234, "sent": 81234.5678,
      "side": "right", "ergonomics": {"ThumbMCPSpread": 25.0, "IndexMCPSpread": 2.0, "IndexMCPStretch": 5.0, ...}}
 
-- `session`: a random id the bridge draws when it starts (1-64 characters of [0-9A-Za-z_-]). A new id is a
-  restarted bridge; datagrams of an earlier id arriving later are old and dropped.
-- `seq`: the bridge's frame counter in this session, from 1, +1 per datagram (uint32). The receiver keeps only
-  datagrams newer than the newest it has used: a late or duplicated one never steps the pose back.
-- `sent`: the bridge's send time in seconds on its machine's system-wide monotonic clock (`time.monotonic()`,
-  `std::chrono::steady_clock`, CLOCK_MONOTONIC): never wall time, which NTP may step, nor a counter of the bridge
-  process, which a restart would set back. The receiver ages poses by this clock (see `receiver.py`); the two
-  machines' clocks need not agree, only tick at about the same rate.
-- `side`: "left" | "right"; datagrams for the other hand are ignored (two gloves may share a port).
-- `ergonomics`: MANUS SDK ergonomics values in degrees, keyed by the names of `names.py` (the SDK's enum names,
-  with or without side, or the ROS 2 publisher's strings). Only the channels the retargeting uses are required;
-  others are ignored.
-
-Version 1 (`blindgrasp-glove/1`, no session, wall-clock `t`) is refused with a message saying so: its receiver
-ordered by arrival, which is what version 2 fixes, so accepting it would keep the fault.
-
-The bridge's end (`encode`, `GloveSender`) lives in `manus_bridge.py`, the one-file bridge a lab copies to the MANUS
-machine; this module imports it from there, so sender and receiver share one definition of the datagram.
+`sent` is the bridge machine's system-wide monotonic clock, never wall time (which NTP may step). The sender's end
+(`encode`, `GloveSender`) lives in the one-file `manus_bridge.py`, so sender and receiver share one definition.
 """
 
 from __future__ import annotations
@@ -29,8 +14,7 @@ import json
 import math
 from dataclasses import dataclass
 
-from . import names
-from .manus_bridge import PROTO, SESSION_RE, GloveSender, encode
+from .manus_bridge import PROTO, SESSION_RE, SIDES, GloveSender, canonical, encode
 
 __all__ = ["MAX_ABS_DEG", "PROTO", "DatagramError", "GloveDatagram", "GloveSender", "decode", "encode"]
 MAX_ABS_DEG = 360.0
@@ -51,7 +35,7 @@ class GloveDatagram:
     seq: int
     sent: float  # sender's monotonic clock (s)
     side: str
-    ergonomics: dict[str, float]  # by channel name (names.py), the required channels only
+    ergonomics: dict[str, float]  # by channel name (manus_bridge.CHANNELS), the required channels only
 
 
 def _number(value) -> float:
@@ -69,7 +53,7 @@ def _number(value) -> float:
 
 def _header(msg: dict) -> tuple[str, int, float, str]:
     side = msg.get("side")
-    if side not in names.SIDES:
+    if side not in SIDES:
         raise DatagramError(f"side {side!r:.40} is not 'left' or 'right'")
     session = msg.get("session")
     if not isinstance(session, str) or not SESSION_RE.fullmatch(session):
@@ -91,7 +75,7 @@ def decode(datagram: bytes, required: set[str]) -> GloveDatagram:
     except (UnicodeDecodeError, ValueError, RecursionError) as e:
         raise DatagramError(f"not JSON: {e}") from e
     proto = msg.get("proto") if isinstance(msg, dict) else None
-    if proto == "blindgrasp-glove/1":
+    if proto == "blindgrasp-glove/1":  # ordered by arrival, the fault version 2 fixes: refused, with why
         raise DatagramError("protocol blindgrasp-glove/1 (no session, no sender clock): update the bridge to "
                             f"{PROTO} (blindgrasp-glove-bridge, docs/glove.md)")  # fmt: skip
     if proto != PROTO:
@@ -100,7 +84,7 @@ def decode(datagram: bytes, required: set[str]) -> GloveDatagram:
     ergo = msg.get("ergonomics")
     if not isinstance(ergo, dict):
         raise DatagramError("ergonomics is not an object")
-    by_channel, problems = names.canonical(ergo, side)
+    by_channel, problems = canonical(ergo, side)
     if problems:
         raise DatagramError("; ".join(problems[:3]))
     missing = frozenset(required - by_channel.keys())

@@ -1,40 +1,13 @@
 """The glove receiver: the newest pose for one hand from the bridge's UDP datagrams (`protocol.py`), ordered and
-aged by the bridge's own sequence and clock, not by arrival.
+aged by the bridge's own `seq` and `sent` clock, not by arrival (docs/glove.md, "Time by the bridge's clock").
 
-Order. Within a bridge session only a datagram with a higher `seq` than the newest one used is kept. A datagram
-that was reordered on the way, delayed, or duplicated arrives with a lower or equal `seq` and is dropped
-(`late`), however long after: the pose never steps back. A new `session` is a restarted bridge (its `seq` starts
-again at 1): it is followed at once, with a warning, and the earlier session's datagrams are dropped from then on
-(`retired`). The receiver is bound to one source address, so to one machine, whose monotonic clock a restarted
-bridge shares: a new session must also be later by that clock than the newest pose used, or it is a late datagram
-of an older session this receiver never saw, and is dropped too (`retired`; after a reboot of the bridge's
-machine, whose clock starts again, the stream goes stale and the teleoperator stops: reconnect).
-
-Age. The bridge stamps `sent` on its monotonic clock. A bridge on this machine (a loopback source address) shares
-this host's monotonic clock, so a datagram's age is exact: arrival - sent, from the very first datagram on (a
-bridge that is behind, or a network that holds its datagrams, cannot make its first poses look fresh). Should its
-`sent` ever lie ahead of the arrival, it is not this machine's clock: the receiver says so once and estimates, as
-for a remote bridge. For a bridge elsewhere, arrival - sent is the one-way delay plus the (unknown, constant)
-offset between the two clocks. Its minimum over the stream estimates that offset with the
-fastest delivery seen; the estimate may rise by `OFFSET_LEAK` s per s so that a clock rate difference between
-the two machines (crystals: tens of ppm) never accumulates. A datagram's delay beyond that minimum is how long it
-was queued on the way ("arrival" is when the kernel received it, on Linux: a datagram that waits in the socket
-buffer while this process is not scheduled was not queued on the network, though it ages all the same). One queued
-longer than `max_latency_s` is dropped (`stale`): after a network pause, the
-backlog that arrives in a burst is never replayed. A kept pose's age is the larger of its age by the bridge's
-clock (now - sent, mapped to this host) and the time since it arrived, so neither clock alone can make a pose
-look fresher than it is. A `sent` that steps back within a session while `seq` moves on is the bridge's clock,
-not the network (a monotonic clock never does): such datagrams are dropped (`clock_steps`, warned once), and the
-stream goes stale and stops rather than ageing poses by a clock that jumps. Arrivals are the kernel's receive stamp
-on the wall clock, mapped to the monotonic one at read time: a wall-clock step between the two (NTP) is seen as a
-change of their difference, and that datagram's arrival is then the read time.
-
-One glove per teleoperator: the receiver binds to one sender, the configured `sender` address or else the first
-that sends a valid datagram for its hand, and drops every other sender's datagrams (`foreign`, warned once per
-address). Changing the sender (a bridge on another machine or port) takes a reconnect.
-
-Rejected datagrams are counted with their last reason, and one that lacks channels the retargeting needs is
-warned about once per missing set, naming them; `diagnosis()` says all of it in one line for the operator.
+- Order: within a session only a `seq` above the newest used is kept (`late`); a new session is a restarted
+  bridge, followed at once unless its `sent` is behind the newest pose used (`retired`, as are the old session's).
+- Age: a loopback bridge shares this host's monotonic clock (age = arrival - sent). Elsewhere the minimum of
+  arrival - sent estimates the clocks' offset, leaking upwards by `OFFSET_LEAK` s per s; a datagram queued longer
+  than `max_latency_s` beyond it is dropped (`stale`), so a backlog is never replayed. A `sent` stepping back
+  within a session is dropped (`clock_steps`). Arrival is the kernel's receive stamp.
+- One sender: the configured `sender`, else the first valid one; every other is dropped (`foreign`).
 """
 
 from __future__ import annotations
@@ -54,9 +27,8 @@ from .protocol import DatagramError, GloveDatagram, decode
 
 logger = logging.getLogger(__name__)
 
-# Linux's SO_TIMESTAMPNS (asm-generic/socket.h; Python's socket module does not name it): the kernel stamps each
-# datagram as it arrives, so the time it then waits in the socket buffer while this process is not scheduled (a
-# loaded CPU) is not taken for queueing on the network. Elsewhere, arrival is when the datagram is read.
+# Linux's SO_TIMESTAMPNS (asm-generic/socket.h; not named by Python's socket module): the kernel's arrival stamp,
+# so time spent in the socket buffer while this process waits for a CPU is not taken for queueing on the network.
 _SO_TIMESTAMPNS = 35
 _TIMESPEC = struct.Struct("@ll")
 # Upward drift allowed to the clock-offset estimate (s per s): 1000 ppm, over ten times a quartz clock's rate error.
@@ -73,8 +45,7 @@ class GloveFrame:
     seq: int
     side: str
     ergonomics: dict[str, float]
-    received: float  # this host's monotonic clock
-    sent_local: float  # the bridge's send time mapped to this host's monotonic clock (<= received)
+    sent_local: float  # the bridge's send time mapped to this host's monotonic clock (<= its arrival)
 
 
 class GloveReceiver(LatestFrameStream[GloveFrame]):
@@ -117,12 +88,6 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
     @property
     def is_open(self) -> bool:
         return self._sock is not None
-
-    def open(self) -> None:
-        self.start()
-
-    def close(self) -> None:
-        self.stop()
 
     def _open(self) -> None:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -217,12 +182,9 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             self.foreign += 1
             if addr not in self._warned_senders:
                 self._warned_senders.add(addr)
-                logger.warning(
-                    "Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. Another bridge or "
-                    "sender on the port? Reconnect to change the sender.",
-                    *addr,
-                    *self.bound,
-                )
+                logger.warning("Dropping glove datagrams from %s:%d: this teleoperator is bound to %s:%d. "
+                               "Another bridge or sender on the port? Reconnect to change the sender.",
+                               *addr, *self.bound)  # fmt: skip
             return False
         return True
 
@@ -264,7 +226,7 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
                 self._stale_run, self._stale_max * 1e3, self.max_latency_s * 1e3,
             )  # fmt: skip
             self._stale_run, self._stale_max = 0, 0.0
-        return GloveFrame(d.session, d.seq, d.side, d.ergonomics, arrival, d.sent + self._offset)
+        return GloveFrame(d.session, d.seq, d.side, d.ergonomics, d.sent + self._offset)
 
     def _clock_stepped(self, d: GloveDatagram) -> None:
         if not self.clock_steps:
@@ -290,12 +252,9 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
         if self.session is not None:
             self.restarts += 1
             self._retired.append(self.session)
-            logger.warning(
-                "Glove bridge restarted (session %s -> %s, its counter starts again): following the new session; "
-                "late datagrams of the old one are dropped.",
-                self.session,
-                session,
-            )
+            logger.warning("Glove bridge restarted (session %s -> %s, its counter starts again): following the "
+                           "new session; late datagrams of the old one are dropped.", self.session,
+                           session)  # fmt: skip
         # self._sent stays: the restarted bridge's clock is the same machine's, and it must move on from there.
         self.session, self._seq, self._offset = session, 0, None
 

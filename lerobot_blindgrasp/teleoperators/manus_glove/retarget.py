@@ -1,9 +1,6 @@
-"""Human hand -> gripper joints: index -> FF, middle -> MF, thumb -> TH; per finger, spread -> J*0 (abduction),
-MCP flexion -> J*1 (proximal), mean of PIP and DIP flexion -> J*2 (distal).
-
-Per-operator calibration records the glove in two poses, open hand and fist. Flexion channels map linearly from
-[open, fist] onto [open_pose, closed_pose] of the gripper (clipped to that segment: a hand cannot over-drive the
-claw). Spread channels map relative to the open-hand value with a gain in rad/rad, since neither pose pins spread.
+"""Human hand -> gripper joints (docs/hardware.md, "Retargeting"). Flexion maps linearly from the operator's
+[open hand, fist] onto [open_pose, closed_pose], clipped to that segment (a hand cannot over-drive the claw);
+spread maps relative to the open hand with a gain in rad/rad, since neither pose pins spread.
 """
 
 from __future__ import annotations
@@ -12,8 +9,8 @@ import numpy as np
 
 from lerobot_blindgrasp import spec
 
-# Gripper joint (spec.JOINT_NAMES order) -> (kind, glove ergonomics channels averaged), by the channel names of
-# names.py (the MANUS SDK's ErgonomicsDataType names without side).
+# Gripper joint (spec.JOINT_NAMES order) -> (kind, glove ergonomics channels averaged): index -> FF, middle -> MF,
+# thumb -> TH; spread -> J*0, MCP flexion -> J*1, mean of PIP and DIP flexion -> J*2.
 CHANNELS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("spread", ("IndexMCPSpread",)),
     ("flex", ("IndexMCPStretch",)),

@@ -1,4 +1,6 @@
-"""Analytic redundancy (docs/hardware.md, "Consistency"): a fingertip's force against its finger's servos, and each
+"""Hazards of inconsistency between inputs that see the same physics (docs/hardware.md, "Hazard analysis", table
+"Consistency: inputs that see the same physics": a fingertip's force against its finger's currents, a finger's
+effort against its tip force, commanded against measured motion). Analytic redundancy: a fingertip's force against its finger's servos, and each
 servo's motion against its command. The model alone first (no emulator), then each fault injected into the emulated
 gripper: the check fires with the torque off, and a normal squeeze does not fire it."""
 
@@ -8,7 +10,7 @@ import logging
 
 import numpy as np
 import pytest
-from test_hw_health import _hold, _stopped
+from emulators.loop import hold, stopped
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import consistency as c
@@ -115,7 +117,7 @@ def robot(rig, tmp_path, monkeypatch):
 
 
 def _bend(robot):
-    _hold(robot, 30, BENT)
+    hold(robot, 30, BENT)
 
 
 def test_a_tip_reading_force_with_its_finger_at_rest_stops(rig, robot):
@@ -123,8 +125,8 @@ def test_a_tip_reading_force_with_its_finger_at_rest_stops(rig, robot):
     _bend(robot)
     rig.force.force_fn = lambda: np.array([0.0, 20.0, 0.0])
     with pytest.raises(GripperConsistencyError, match=r"mf_tip reads 20\.\d N, which needs"):
-        _hold(robot, 40, BENT)
-    assert _stopped(rig, robot)
+        hold(robot, 40, BENT)
+    assert stopped(rig, robot)
 
 
 def test_a_normal_squeeze_fires_nothing(rig, robot, caplog):
@@ -134,7 +136,7 @@ def test_a_normal_squeeze_fires_nothing(rig, robot, caplog):
     target = BENT.copy()
     target[1::3] = BENT[1] - 0.6
     with caplog.at_level(logging.WARNING):
-        _hold(robot, 40, target)
+        hold(robot, 40, target)
     assert robot.is_connected and "Consistency" not in caplog.text
     assert 0 < robot.consistency.worst["force without effort"] < 0.2
 
@@ -148,7 +150,7 @@ def test_a_finger_pressing_on_a_dead_load_cell_warns(rig, robot, caplog):
     target = BENT.copy()
     target[1::3] = BENT[1] - 0.6
     with caplog.at_level(logging.WARNING):
-        _hold(robot, 40, target)
+        hold(robot, 40, target)
     assert robot.is_connected
     assert "Consistency WARN mf: ['mf_j21'] press" in caplog.text and "Consistency WARN ff" not in caplog.text
 
@@ -160,13 +162,12 @@ def test_a_stripped_gear_stops(rig, robot):
     target = BENT.copy()
     target[7] += 0.5
     with pytest.raises(GripperConsistencyError, match=r"th_j31 does not move toward its goal"):
-        _hold(robot, 60, target)
-    assert _stopped(rig, robot)
+        hold(robot, 60, target)
+    assert stopped(rig, robot)
 
 
-# --- held-out faults for the consistency checks (docs/hardware.md, "Consistency"): predicted from the devices and the
-# data path, named by no issue, each injected into the emulated gripper. Each input stays plausible on its own (in
-# range, live, fresh), so only a second input that sees the same physics can tell.
+# --- faults predicted from the devices and the data path, each injected into the emulated gripper. Each input stays
+# plausible on its own (in range, live, fresh), so only a second input that sees the same physics can tell.
 
 
 def _mf_squeezes(rig, robot):
@@ -175,7 +176,7 @@ def _mf_squeezes(rig, robot):
     rig.place_object(contact_q=float(BENT[4]) - 0.05)
     target = BENT.copy()
     target[4] = BENT[4] - 0.6
-    _hold(robot, 20, target)
+    hold(robot, 20, target)
     assert robot.is_connected
     return target
 
@@ -187,8 +188,8 @@ def test_force_channels_swapped_between_fingers_mid_run_stop(rig, robot):
     squeeze = rig.force.force_fn
     rig.force.force_fn = lambda: squeeze()[[0, 2, 1]]
     with pytest.raises(GripperConsistencyError, match=r"th_tip reads 2\d\.\d N, which needs"):
-        _hold(robot, 40, target)
-    assert _stopped(rig, robot)
+        hold(robot, 40, target)
+    assert stopped(rig, robot)
 
 
 def test_a_current_reported_with_its_sign_flipped_stops(rig, robot):
@@ -197,8 +198,8 @@ def test_a_current_reported_with_its_sign_flipped_stops(rig, robot):
     target = _mf_squeezes(rig, robot)
     rig.servo("mf_j21").current_sign = -1
     with pytest.raises(GripperConsistencyError, match=r"mf_j21 does not move toward its goal .* draws \+2\.30 A"):
-        _hold(robot, 40, target)
-    assert _stopped(rig, robot)
+        hold(robot, 40, target)
+    assert stopped(rig, robot)
 
 
 def test_a_present_position_frozen_while_the_joint_moves_stops(rig, robot):
@@ -211,8 +212,8 @@ def test_a_present_position_frozen_while_the_joint_moves_stops(rig, robot):
     target = BENT.copy()
     target[2] = BENT[2] + 0.5
     with pytest.raises(GripperConsistencyError, match=r"ff_j12 does not move toward its goal"):
-        _hold(robot, 60, target)
-    assert _stopped(rig, robot)
+        hold(robot, 60, target)
+    assert stopped(rig, robot)
     assert abs(servo.present_position() - servo.frozen_position) > 100  # it did move: only the reading froze
 
 
@@ -228,5 +229,5 @@ def test_a_load_cell_creeping_after_its_tare_stops_once_it_is_implausible(rig, r
 
     rig.force.force_fn = creep
     with pytest.raises(GripperConsistencyError, match=r"ff_tip reads \d+\.\d N"):
-        _hold(robot, 400, BENT)
-    assert _stopped(rig, robot)
+        hold(robot, 400, BENT)
+    assert stopped(rig, robot)
