@@ -29,7 +29,7 @@ from lerobot_blindgrasp.hardware import xm430
 
 logger = logging.getLogger(__name__)
 
-# Finger geometry of the sim model (ROBEL chain3xh; `sim/gripper.py`, tests/robots/test_hw_faults_consistency.py keeps them equal):
+# Finger geometry of the sim model (ROBEL chain3xh; `sim/gripper.py`, tests/robots/test_hazards_consistency.py keeps them equal):
 LINK_J11_J12 = 0.068  # m
 TIP_CAPSULE_START = 0.033  # m below J12, along the distal axis
 TIP_CAPSULE_RADIUS = 0.011

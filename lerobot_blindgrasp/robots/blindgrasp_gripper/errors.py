@@ -4,8 +4,6 @@ stop nothing."""
 
 from __future__ import annotations
 
-from lerobot_blindgrasp.policy_contract import PolicyMismatchError  # noqa: F401  (the hazard tests import it here)
-
 
 class GripperSafetyStop(RuntimeError):
     """The gripper stopped itself (torque off on all servos it could reach) and the run must not go on."""
