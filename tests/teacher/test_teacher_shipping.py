@@ -155,7 +155,9 @@ def test_teacher_eval_runs_the_start_states_lerobot_eval_runs():
         seen.append(obs["policy"].copy())
         return np.zeros((obs["policy"].shape[0], spec.NUM_JOINTS))
 
-    evaluate._run_object(record, "sphere_medium", 3, spec.EVAL_SEED, "deterministic", rewards.RewardConfig())
+    evaluate._run_object(
+        record, "sphere_medium", 3, spec.EVAL_SEED, "deterministic", rewards.RewardConfig(), "batch"
+    )
     for k in range(3):
         env = gym_env.BlindGraspGymEnv("sphere_medium", render_mode=None)
         obs, _ = env.reset(seed=spec.EVAL_SEED + k)
