@@ -1,22 +1,14 @@
-"""Batched blind-grasp environment: N grippers, each with one object, stepped together.
+"""Batched blind-grasp environment: N grippers, one object each, stepped together, torch over the env axis on the
+physics' device. Terms live in their own modules (randomization, events, rewards, termination, observations);
+physics runs in a backend (`backends/__init__.py` has the contract).
 
-This module steps, observes and resets the task, written once, torch over the env axis (no Python loop over envs),
-on the physics' device. It composes terms that live in one module each: the randomization draws (`randomization.py`),
-the event terms (`events.py`), the reward terms (`rewards.py`), success and termination (`termination.py`), the
-observations (`observations.py`). Physics runs in a backend chosen by `GraspEnvConfig.backend` ("batch":
-`mujoco.batch` on CPU threads, one MjModel per env with its Table II draw; "warp": MuJoCo Warp), whose state arrays
-are tensors sharing memory with the physics (`backends/__init__.py` has the contract).
+Step (Sec. III-B): a_t in R^9 is clipped to +-0.3 rad, the servo target is q_t + a_t clipped to the joint limits (as
+the real robot does), and `substeps` physics steps cover one 50 ms control period. Episodes last 10 s and terminate
+when the object leaves the 10 cm workspace. Envs auto-reset inside `step` (rsl-rl never calls reset);
+`info["final"]` describes the episodes that ended.
 
-Step (paper Sec. III-B): a_t = delta-theta in R^9 is clipped to +-0.3 rad, the servo target is q_t + a_t (clipped to
-the joint limits, as the real robot does), and `substeps` physics steps cover one 50 ms control period. Episodes
-last 10 s; one terminates when the object leaves the 10 cm workspace. Envs auto-reset inside `step` (rsl-rl never
-calls reset); `info["final"]` describes the episodes that ended.
-
-The factors beyond Table II (`DomainRandomization`, all off by default) act through the event terms, the sensor
-model (`observations.py`) and two places here: the torque limit is the actuators' forcerange (the current limit
-caps torque, xm430.torque_at_current_nm), and under a joint calibration offset readings are q + offset and the servo
-reaches an absolute target in that frame (`delta_for_target`), as a real servo does with a wrong homing offset.
-"""
+Under a joint calibration offset, readings are q + offset and the servo reaches absolute targets in that frame
+(`delta_for_target`), as a real servo with a wrong homing offset does."""
 
 from __future__ import annotations
 
@@ -43,8 +35,6 @@ from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig, allocate_objec
 from lerobot_blindgrasp.sim.host import on_host
 
 log = logging.getLogger(__name__)
-
-HOLD_PUSH_AFTER_STEPS = events.HOLD_PUSH_AFTER_STEPS
 
 
 class BatchedGraspEnv:

@@ -1,23 +1,16 @@
-"""The D'Claw-derived three-finger gripper, built in code from ROBEL's D'Claw and the XM430 facts (`hardware/xm430.py`).
+"""The D'Claw-derived three-finger gripper, built in code from ROBEL's D'Claw (`chain3xh.xml`) and the XM430 facts.
 
-Geometry (ROBEL `chain3xh.xml`): three fingers at 120 deg on a 6 cm circle, plate -> J10 = 17.25 mm, link lengths
-0.0675 / 0.068 / 0.076 m (J10->J11, J11->J12, J12->tip site), tip capsule r = 11 mm reaching 84 mm past J12.
-Joint axes and signs follow `spec` (J*1/J*2 > 0 open the finger). The plate faces down on a stationary frame; a
-table sits below it so that a straight finger's tip clears the table by about 1.3 cm.
+Geometry: three fingers at 120 deg on a 6 cm circle; a straight finger's tip clears the table by about 1.3 cm.
+Joint axes and signs follow `spec` (J*1/J*2 > 0 open the finger).
 
-Actuation: XM430-W350 in position mode, modelled as a DC motor behind a P(D) position loop:
-- `position` actuator with kp, kv (the servo's P and D gains, randomized per env, Table II) and
-  forcerange = +-4.1 N m (stall torque at 12 V);
-- joint damping = stall torque / no-load speed (4.1 / 4.82 = 0.85 N m s/rad): the back-EMF of a voltage-limited
-  motor. Together they give the servo's torque-speed line, so the speed limit (46 rpm) emerges instead of being
-  imposed on the target;
-- armature 0.002 kg m^2: rotor inertia reflected through the 353.5:1 gearbox.
+Actuation: XM430-W350 position mode as a DC motor behind a PD loop: `position` actuators (kp, kv randomized per env,
+Table II; forcerange = stall torque), and joint damping = stall torque / no-load speed (the back-EMF of a
+voltage-limited motor), so the torque-speed line and speed limit emerge rather than being imposed. Armature: rotor
+inertia through the 353.5:1 gearbox.
 
-Fingertips: a jointless `*_tip` body welded to the distal link carries the tip capsule, standing in for the paper's
-elastic printed tips (soft solref, friction 1.0, condim 4 for torsional grip). Its origin is the load cell: a
-`force`/`torque` sensor pair there gives the 6-D wrench, and a `contact` sensor (netforce over all contacts of the
-tip geom, world frame) gives the contact force that is projected on the tip's z axis for the uniaxial reading.
-"""
+Fingertips: a `*_tip` body welded to the distal link, its origin the load cell, carries a soft capsule standing in
+for the elastic printed tips. A `force`/`torque` pair gives the 6-D wrench; a `contact` netforce sensor gives the
+force projected on the tip's z axis for the uniaxial reading."""
 
 from __future__ import annotations
 

@@ -1,32 +1,20 @@
-"""One grasping trial as a gymnasium env, for `lerobot-eval` and anything else that speaks gymnasium.
+"""One grasping trial as a gymnasium env for `lerobot-eval`: a shell over one row of a `BatchedGraspEnv` (its own,
+or a row shared by a batch of these envs, see `attach`), so eval sees the physics, noise and success rule of
+teacher training and demo collection.
 
-A thin shell over one row of a `BatchedGraspEnv` (its own one-env sim, or a row of a sim that a batch of these envs
-shares, see `attach`), so that eval sees exactly the physics, randomization, noise and success rule that teacher
-training and demo collection use.
+Contract (spec.py):
+- observation `{"agent_pos": o_t}`: 9 joint positions (rad) + 3 uniaxial forces (N), float32.
+- action: absolute joint targets (rad), shape (9,), order `spec.ACTION_NAMES`; the step to them is clipped to
+  +-0.3 rad and the joint limits, as on the real gripper.
+- `info["is_success"]`: the shared, latched success rule. With `end_on_success` the episode terminates when it
+  latches: lerobot-eval stops a batch once all its episodes end, and success rates are unchanged.
 
-LeRobot-facing contract (spec.py):
-- observation `{"agent_pos": o_t}` with o_t = 9 joint positions (rad) + 3 uniaxial forces (N), float32;
-  LeRobot's `preprocess_observation` turns `agent_pos` into `observation.state`.
-- action = absolute joint targets (rad), shape (9,), order `spec.ACTION_NAMES`. The env turns it into the paper's
-  delta = target - q_now, which `BatchedGraspEnv.step` clips to +-0.3 rad and to the joint limits, as the real
-  gripper does. So a policy cannot move a joint farther than 0.3 rad in one 50 ms step, whatever it asks for.
-- `info["is_success"]`: the shared success rule (lifted >= SUCCESS_LIFT_M for SUCCESS_HOLD_S), latched.
-- With `end_on_success` (lerobot-eval's default, `--env.end_on_success`), an episode terminates at the step its
-  success latches: nothing after it can change the outcome, and lerobot-eval stops a batch once every episode in
-  it has ended, so a batch of successes costs 3-5 s of simulation instead of 10. The rates are the same either way
-  (lerobot-eval counts a success at any step up to the episode's end); only the summed rewards cover less.
-
-Seeding: `reset(seed=s)` takes s as an evaluation index (lerobot-eval passes its --seed plus the episode number)
-and runs the first episode of `BatchedGraspEnv(GraspEnvConfig(seed=start_seed(s, object)))`, where
-`start_seed` = `spec.eval_env_seed(s, catalogue index of the object)`. So every object gets its own start states
-(physics draw, start pose, object offset and sensor noise) from the same lerobot-eval seeds, and all of them lie in
-the evaluation seed range, apart from teacher training and demo collection. `reset()` without a seed draws the
-next index from gymnasium's `np_random`, so a seeded reset followed by unseeded ones is reproducible too. Every
-episode gets a fresh physics draw: a fresh `BatchedGraspEnv` costs a few milliseconds.
+Seeding: `reset(seed=s)` takes s as an evaluation index and runs `start_seed(s, object)`
+(`spec.eval_env_seed`), so each object gets its own start states, all inside the evaluation seed range. An
+unseeded reset draws the next index from `np_random`. Every episode gets a fresh physics draw.
 
 Outside LeRobot: `gym.make("lerobot_blindgrasp.sim.gym_env:lerobot_blindgrasp/BlindGrasp-v0", object_name=...)`
-(the module prefix imports this file, which registers the id with its 200-step limit), or `make_env(name)`.
-"""
+or `make_env(name)`."""
 
 from __future__ import annotations
 

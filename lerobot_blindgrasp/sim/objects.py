@@ -1,15 +1,8 @@
-"""The paper's 18 training objects (Table I), and the catalogue that later objects (OOD proxies) join.
+"""The paper's 18 training objects (Table I, cm there, metres here) and the catalogue that held-out objects join.
 
-Dimensions are Table I's, in cm there and in metres here. Interpretation of the rows:
-- cuboids: X, Y, Z are full edge lengths, Z vertical;
-- capsule: "Height" is the length of the cylindrical part between the two hemispheres (so the large capsule is
-  3.33 + 2 x 3.33 = 10 cm long); it rests lying on its side, its only stable pose;
-- cylinders: radius and full height, standing upright;
-- sphere: radius.
-
-Mass: density 400 kg/m^3, i.e. PLA (1240 kg/m^3) printed with two walls and ~20 % infill, the usual setting for
-replicas like the paper's 3D-printed ID objects. The large cuboid A is then 300 g, the small capsule 23 g.
-"""
+Readings of Table I: cuboid X, Y, Z are full edges (Z up); capsule "Height" is the cylindrical part between the
+hemispheres, and it lies on its side; cylinders stand upright. Mass: 400 kg/m^3, i.e. PLA printed with two walls and
+~20 % infill, as 3D-printed replicas usually are."""
 
 from __future__ import annotations
 

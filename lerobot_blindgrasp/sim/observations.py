@@ -1,13 +1,10 @@
-"""What the sim observes each control step, for all envs at once (torch over the env axis, on the envs' device).
+"""What the sim observes each control step, over the env axis:
+- `raw`: noise-free quantities for rewards, success and demo curation;
+- "policy": the student's o_t in R^12 (`spec.STATE_NAMES`);
+- "privileged": the teacher's 92-d vector, assembled by name (`spec.privileged_parts`), never by position.
 
-- `raw`: noise-free quantities that rewards, success and demo curation read;
-- "policy": the student's o_t in R^12, measured joint positions and uniaxial force readings (`spec.STATE_NAMES`);
-- "privileged": the teacher's 92-d vector, assembled by name through `spec.privileged_parts`, so each part is
-  computed under the name `spec.PRIVILEGED_LAYOUT` gives it, never placed by position.
-
-Measurement noise comes in as one N(0, 1) draw per env and step, split by `NOISE_LAYOUT`. That order decides which
-random number each reading gets: changing it changes every observation the shipped teacher was evaluated on.
-"""
+Noise is one N(0, 1) draw per env and step, split in `NOISE_LAYOUT` order: changing that order changes every
+observation the shipped teacher was evaluated on."""
 
 from __future__ import annotations
 
@@ -65,7 +62,7 @@ def _uniaxial_reading(uni_true, noise, dr, sensor_draw) -> torch.Tensor:
     if dr.dead_force_sensor >= 0:
         signal = signal.clone()
         signal[:, dr.dead_force_sensor] = 0.0
-    return sensors.reading(signal)
+    return force.reading(signal)
 
 
 def observe(
@@ -93,7 +90,7 @@ def observe(
     tip_obj_norm = tip_obj.square().sum(-1).sqrt()
     raw = {
         "q": qpos[:, JOINTS],
-        "uniaxial_clean": sensors.reading(uni_true),  # noise-free reading (rewards, curation)
+        "uniaxial_clean": force.reading(uni_true),  # noise-free reading (rewards, curation)
         "d_xy": rewards.planar_distance(obj_pos[:, :2]),
         "lift": obj_pos[:, 2] - rest_height,
         "tip_object_distance": si.read(sensordata, "objdist")[:, :, 0].clone(),  # kept: `read` is a live view

@@ -1,14 +1,9 @@
-"""The paper's reward, eq. 1-7, as named terms (mjlab's manager style: torch over the env axis, on the envs' device).
+"""The paper's reward, eq. 1-7, as named terms over the env axis (mjlab's manager style).
 
     r = w1 r_t + w2 r_i + w31 r_l + w32 r_a + w33 r_ar            (eq. 1, `total`)
 
-with w = (1.0, 0.2, -500, -0.04, -0.01). `TERMS` maps each term's name to the function of its equation;
-`RewardConfig.weights` gives each name its weight. The env computes every term after each control step
-(`compute_terms`), sums weight x term (`total`) and logs each term on its own; an ablation switches a term off by its
-name (`RewardConfig.without`).
-
-Two shaping terms that are not in the paper, `reach` and `touch`, are weighted by the `cpu`/`quick` teacher presets
-only (their `deviations` say why); the paper's weights leave them at 0.
+with w = (1.0, 0.2, -500, -0.04, -0.01) (`PAPER_WEIGHTS`). The shaping terms `reach` and `touch` are not in the
+paper; only the `cpu`/`quick` teacher presets weigh them. An ablation drops a term by name (`RewardConfig.without`).
 
 | paper            | name          | function        |
 |------------------|---------------|-----------------|
@@ -19,8 +14,7 @@ only (their `deviations` say why); the paper's weights leave them at 0.
 | eq. 6, r_a       | `action`      | `r_action`      |
 | eq. 7, r_ar      | `action_rate` | `r_action_rate` |
 | (shaping)        | `reach`       | `r_reach`       |
-| (shaping)        | `touch`       | `r_touch`       |
-"""
+| (shaping)        | `touch`       | `r_touch`       |"""
 
 from __future__ import annotations
 

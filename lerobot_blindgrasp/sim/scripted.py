@@ -1,11 +1,8 @@
-"""Scripted grasps: a pinch-and-lift for physics tests and the sim demo, and a side grasp (`SideGraspScript`) whose
-successful rollouts the `cpu_bc*` teachers clone (teacher/aux_bc.py). Neither is a baseline policy.
+"""Scripted grasps (not baseline policies): a pinch-and-lift for physics tests and the viewer, and a side grasp
+(`SideGraspScript`) whose successful rollouts the `cpu_bc*` teachers clone (teacher/aux_bc.py).
 
-The pinch:
-Each finger moves in its radial-vertical plane. Two-link inverse kinematics (proximal 0.068 m, distal to the tip
-sphere 0.073 m) places the tip sphere on the object's side at mid-height, presses 4 mm past the surface, then
-raises it by `lift_m` at the same radius. It assumes the object is centred, so use it without the xy offset.
-"""
+The pinch uses two-link IK in each finger's plane to press the tip 4 mm into the object's side at mid-height, then
+lifts by `lift_m`; it assumes a centred object."""
 
 from __future__ import annotations
 
@@ -20,7 +17,6 @@ _L1 = gripper.LINK_J11_J12
 _L2 = gripper.TIP_CAPSULE_END  # J12 -> centre of the tip capsule's end sphere (0.073 m)
 _R0 = gripper.BASE_RADIUS
 J11_HEIGHT_M = gripper.PLATE_HEIGHT - gripper.PLATE_TO_J10 - gripper.LINK_J10_J11  # J11 pivot, fingers at J10 = 0
-FINGER_REACH_M = _L1 + _L2  # J11 pivot to the tip sphere's centre, finger straight
 
 
 def finger_ik(radius, height):

@@ -6,8 +6,7 @@ tip, so a push on the tip end (compression, what a uniaxial cell under the tip m
 
     f_uni = -(F_on_tip . z) = F_reported . z        (positive in compression)
 
-That is the true force. What the policy sees goes through the sensor pipeline shared with the real gripper,
-`lerobot_blindgrasp.hardware.force.reading` (re-exported here as `reading`): true force + noise, then the 0.1 N deadband.
+That is the true force; the policy sees it through `hardware.force.reading`, shared with the real gripper.
 """
 
 from __future__ import annotations
@@ -19,7 +18,6 @@ import numpy as np
 import torch
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.force import reading  # noqa: F401  (the env reads its fingertip sensing from this module)
 
 PER_TIP = ("contact", "objcontact", "force", "torque", "pos", "quat", "zaxis", "objdist")
 

@@ -1,15 +1,11 @@
-"""Success and termination: when an episode counts as a grasp, and when it ends.
+"""Success and termination, over the env axis.
 
-- Success (paper Sec. IV-A, the same test in simulation, teacher evaluation and the real protocol): the object
-  lifted at least `spec.SUCCESS_LIFT_M` (1.5 cm) above its resting height and held there for `spec.SUCCESS_HOLD_S`
-  (1 s) without a break. It latches: a later drop does not undo it.
-- Termination (Sec. III-B): the object leaves the 10 cm workspace around the gripper's centre (`d_xy`, eq. 2), or
-  its physics went unstable (the env resets it).
-- Truncation: the episode's time runs out (10 s) before it terminated.
+- Success (Sec. IV-A; sim, teacher eval and the real protocol alike): lifted >= `spec.SUCCESS_LIFT_M` (1.5 cm) for
+  `spec.SUCCESS_HOLD_S` (1 s) without a break; it latches.
+- Termination (Sec. III-B): the object leaves the 10 cm workspace (`d_xy`, eq. 2), or its physics went unstable.
+- Truncation: the 10 s run out first.
 
-Each is a function of tensors over the env axis, written with operators alone, so that the twin's numpy state
-(`twin/physics.py`) goes through the same functions as the env's torch state.
-"""
+Operators only, so the twin's numpy state (`twin/physics.py`) goes through the same functions."""
 
 from __future__ import annotations
 

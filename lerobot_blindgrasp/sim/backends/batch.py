@@ -1,9 +1,6 @@
-"""The CPU backend: `mujoco.batch.Batch` (MuJoCo >= 3.17), one MjModel per env, stepped in C on all cores.
-
-Every env's state is a row; the batch loads rows into a thread-local MjData and steps them with the GIL released;
-results are bit-identical at any thread count. `qpos` etc. are float64 CPU tensors over the batch's live bindings
-of those rows (`torch.from_numpy`: the same memory, no copy; the batch's own steps and resets show in them at once).
-"""
+"""The CPU backend: `mujoco.batch.Batch` (MuJoCo >= 3.17), one MjModel per env, stepped in C on all cores with
+the GIL released, bit-identical at any thread count. The state tensors are `torch.from_numpy` views of the batch's
+live bindings."""
 
 from __future__ import annotations
 
