@@ -27,9 +27,7 @@ class GraspEnvConfig:
     physics: gripper.PhysicsOptions = field(default_factory=gripper.PhysicsOptions)
     nthread: int = 0  # 0: all CPUs
     autoreset: bool = True
-    backend: str = (
-        "batch"  # physics: "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp, GPU; needs the gpu extra)
-    )
+    backend: str = "batch"  # "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp, GPU; the gpu extra)
     device: str | None = None  # warp only: "cuda:0", "cpu"; None: this process's GPU (LOCAL_RANK) if any, else CPU
 
     def __post_init__(self):

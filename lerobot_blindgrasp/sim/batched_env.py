@@ -38,12 +38,9 @@ log = logging.getLogger(__name__)
 
 
 class BatchedGraspEnv:
-    """N envs in one object. reset() -> obs; step(action (N, 9)) -> (obs, reward (N,), terminated (N,), truncated
-    (N,), info); obs is a dict with "policy" (N, 12, the student's o_t) and "privileged" (N, 92, the teacher's).
-    `reset_tensors`/`step_tensors` take and give tensors on `device` (what rsl-rl reads); `reset`/`step` are the
-    same calls with numpy on the host (the gym env, evaluation, demo collection: on the CPU backend the arrays
-    share memory with the tensors, so nothing is copied).
-    """
+    """reset() -> obs; step(action (N, 9)) -> (obs, reward, terminated, truncated, info), obs = {"policy": (N, 12)
+    o_t, "privileged": (N, 92)}. `reset_tensors`/`step_tensors` work in tensors on `device` (rsl-rl); `reset`/`step`
+    in numpy on the host (views, not copies, on the CPU backend)."""
 
     def __init__(self, cfg: GraspEnvConfig):
         self.cfg = cfg
@@ -164,8 +161,8 @@ class BatchedGraspEnv:
         return a
 
     def step(self, action, active: np.ndarray | None = None):
-        """One control step with numpy on the host. `active` (batch backend only): the envs to simulate; the others
-        keep their physics state, which evaluation uses for episodes whose outcome is already final."""
+        """One control step, numpy on the host. `active` (batch backend only): the envs to simulate; the others keep
+        their state (evaluation's finished episodes)."""
         return on_host(self.step_tensors(action, active))
 
     def step_tensors(self, action, active=None):
@@ -196,9 +193,7 @@ class BatchedGraspEnv:
             "uniaxial_force": raw["uniaxial_clean"],  # noise-free, after the deadband (N)
             "tip_object_force": raw["tip_object_force"],  # |net force| of each tip on the object (N)
             "tip_object_downward": raw["tip_object_downward"],  # its -F_z/|F| (1: pressing straight down)
-            # The absolute targets the servos were sent this step (rad), in the joints' measured frame: with a
-            # calibration offset d the servos reached `target` by being sent target + d (`delta_for_target`), and
-            # that is the action a demo recorded under the offset must teach.
+            # the absolute targets sent (rad) in the joints' measured frame: what a demo under an offset must teach
             "joint_target": self._measured_frame(target),
             "terms": terms,
             "physics_failed": failed,
@@ -277,18 +272,16 @@ class BatchedGraspEnv:
         return self.sensor_draw.measured(q, sel) if self.cfg.dr.joint_calibration_rad else q.clone()
 
     def target_for_delta(self, delta):
-        """The absolute targets (n, 9), in the joints' measured frame, that `step` commands for `delta`: the step
-        clipped to +-0.3 rad, then the target to the joint limits (the inverse of `delta_for_target`). numpy in,
-        numpy out; a tensor in, a tensor out."""
+        """The absolute targets (n, 9) in the measured frame that `step` commands for `delta` (clipped as `step`
+        clips; the inverse of `delta_for_target`). numpy or tensor, as given."""
         q = self._qpos[:, observations.JOINTS]
         step = self._f64(delta).clamp(-spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
         out = self._measured_frame(torch.clamp(q + step, self._joint_lower, self._joint_upper))
         return out if isinstance(delta, torch.Tensor) else on_host(out)
 
     def delta_for_target(self, target, ids: slice | np.ndarray | None = None):
-        """The step (n, 9) that makes the servos of all envs (or `ids`) go to absolute `target`s given in the
-        joints' measured frame: target - (q + calibration offset). Without an offset, target - q. numpy in, numpy
-        out; a tensor in, a tensor out."""
+        """The step (n, 9) taking all envs (or `ids`) to absolute `target`s in the joints' measured frame:
+        target - (q + calibration offset). numpy or tensor, as given."""
         sel = slice(None) if ids is None else ids
         sel = sel if isinstance(sel, slice) else torch.as_tensor(sel, device=self.device)
         q = self._measured_frame(self._qpos[sel, observations.JOINTS], sel)

@@ -16,8 +16,7 @@ import torch
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import randomization
 
-# The hold push comes this many control steps (0.5 s) after the object is first lifted in an episode: half-way
-# through the 1 s hold that success needs.
+# Control steps (0.5 s) from the first lift to the hold push: half-way through the 1 s hold success needs.
 HOLD_PUSH_AFTER_STEPS = spec.SUCCESS_HOLD_STEPS // 2
 
 

@@ -55,13 +55,8 @@ class ServoParams:
 
 @dataclass(frozen=True)
 class PhysicsOptions:
-    """Solver settings, chosen by a sweep of contact settings against scripted grasps
-    (`python -m lab.contact_settings_sweep`).
-
-    Elliptic cones + noslip (3 iterations) hold a scripted grasp without creep under the paper's gain
-    randomization, for ~20 % more step time. impratio = 10, the usual anti-creep knob, made squeezed objects
-    eject explosively at this 5 ms step once kp was randomized, so it stays at 1.
-    """
+    """Solver settings (`python -m lab.contact_settings_sweep`). Elliptic cones + noslip hold a grasp without creep
+    under Table II's gains; impratio stays 1 because higher values eject squeezed objects at this 5 ms step."""
 
     timestep: float = 0.005
     substeps: int = 10  # 10 x 5 ms = one 20 Hz control step

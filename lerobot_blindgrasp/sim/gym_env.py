@@ -77,12 +77,11 @@ class BlindGraspGymEnv(gym.Env):
         self.dr = dr
         self.render_mode = render_mode
         self.render_width, self.render_height = int(render_width), int(render_height)
-        # Shadows cost ~4x per frame on a CPU renderer; eval videos are for a glance, the demo turns them on.
+        # Shadows make CPU rendering several times slower; eval videos are for a glance, the demo turns them on.
         self.render_shadows = bool(render_shadows)
         self.camera = camera
-        # A new frame every `render_stride` control steps, the last one repeated in between. lerobot-eval renders
-        # the first 10 episodes of every task at every step (hard-coded); with a software GL renderer a frame costs
-        # ~12 ms, most of a CPU eval's time. Videos keep their length and 20 fps; motion updates at 20/stride Hz.
+        # A new frame every `render_stride` control steps, the last repeated between: lerobot-eval renders every
+        # step of 10 episodes per task, and with software GL that is most of a CPU eval's time.
         if int(render_stride) < 1:
             raise ValueError(f"render_stride must be >= 1, got {render_stride}")
         self.render_stride = int(render_stride)

@@ -96,8 +96,7 @@ PAPER_OBJECTS: tuple[str, ...] = tuple(CATALOGUE)  # the 18 training objects, Ta
 MEDIUM_OBJECTS: tuple[str, ...] = tuple(n for n in PAPER_OBJECTS if n.endswith("_medium"))
 
 
-# Everyday objects outside Table I, for held-out evaluation only (no demo or teacher episode ever saw them): real
-# dimensions and masses of things a three-finger gripper of this size picks up, each one MuJoCo primitive.
+# Everyday objects outside Table I, for held-out evaluation only: real dimensions and masses, one primitive each.
 EVERYDAY: tuple[ObjectSpec, ...] = (
     ObjectSpec("everyday_tennis_ball", "tennis_ball", "everyday", "sphere", (0.0335,), mass_kg=0.058),
     ObjectSpec("everyday_apple", "apple", "everyday", "sphere", (0.038,), mass_kg=0.180),
@@ -108,8 +107,6 @@ EVERYDAY: tuple[ObjectSpec, ...] = (
     ObjectSpec("everyday_rubiks_cube", "rubiks_cube", "everyday", "box", (0.0285, 0.0285, 0.0285), mass_kg=0.090),
     ObjectSpec("everyday_orange", "orange", "everyday", "sphere", (0.042,), mass_kg=0.150),
 )
-# Tried and left out: a marker lying down (radius 0.9 cm) and a flat soap bar (3.5 cm tall). The teacher itself lifts
-# them 0/10 and 6/10 times: they are outside what this gripper reaches at table height, not a test of the student.
 
 
 def scaled(obj: ObjectSpec, scale: float) -> ObjectSpec:

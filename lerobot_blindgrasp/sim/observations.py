@@ -76,12 +76,9 @@ def observe(
     dr: randomization.DomainRandomization,
     sensor_draw: randomization.SensorDraw | None = None,
 ) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
-    """(raw, obs) for the envs whose state is given (rows of qpos, qvel, sensordata, ...; `sensor_draw` holds the
-    same rows' force biases and joint calibration offsets, None when both are zero).
-
-    The sensor errors beyond Table II (gain, bias, range, a dead cell, calibration offset) act on the two measured
-    quantities a real gripper has, `joint_pos` and `uniaxial_force`, in the student's o_t and in the teacher's
-    vector alike; the teacher's sim-only readings (contact force, wrench) keep Table II's noise only."""
+    """(raw, obs) for the given rows of state (`sensor_draw`: their force biases and calibration offsets, or None).
+    Sensor errors beyond Table II act on what a real gripper measures (`joint_pos`, `uniaxial_force`), for student
+    and teacher alike; the teacher's sim-only readings keep Table II's noise only."""
     contact = si.read(sensordata, "contact")
     tip_quat = si.read(sensordata, "quat")
     uni_true = sensors.uniaxial_force(contact, si.read(sensordata, "zaxis"))

@@ -115,9 +115,8 @@ def num_contacts(uniaxial_force, threshold: float = spec.FORCE_THRESHOLD_N):
 
 
 def r_task(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
-    """Eq. 3. Active only with >= 1 fingertip contact and the object inside the workspace; else 0.
-
-    h_o is clipped at 0, so that resting penetration does not make the square root's argument exceed 1."""
+    """Eq. 3, active only with >= 1 fingertip contact and the object inside the workspace. h_o is clipped at 0 so
+    that resting penetration cannot push the square root's argument past 1."""
     h_t = cfg.target_lift_m
     h_o = s.lift.clamp_min(0.0)
     centred = 1.0 - torch.sqrt((s.d_xy / cfg.workspace_radius_m).clamp(0.0, 1.0))
@@ -154,10 +153,8 @@ def r_reach(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
 
 
 def r_touch(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
-    """Shaping (not in the paper): fraction of fingertips pressing on the *object* (any direction, > 0.1 N).
-
-    Unlike n_contact it ignores pushes on the table, and unlike the uniaxial sensor it sees side contacts, so it
-    rewards every touch that could become a grasp."""
+    """Shaping (not in the paper): fraction of tips pressing on the *object* (> 0.1 N, any direction, so side
+    contacts count and table pushes do not)."""
     return (s.tip_object_force > cfg.contact_threshold_n).to(torch.float64).mean(-1)
 
 

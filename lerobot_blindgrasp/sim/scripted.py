@@ -94,8 +94,7 @@ def run_pinch_lift(
 
 
 def support_distance(o: objects.ObjectSpec, direction_xy: np.ndarray) -> np.ndarray:
-    """Horizontal distance from the object's centre to its surface, seen from unit directions (n, 2) in the object's
-    spawn pose (capsules lie along x; boxes are axis-aligned): how far in a tip approaching along -direction meets it."""
+    """Horizontal distance from the object's centre to its surface along unit directions (n, 2), spawn pose."""
     ux, uy = np.abs(direction_xy[:, 0]), np.abs(direction_xy[:, 1])
     if o.mjcf_type == "box":
         return o.size[0] * ux + o.size[1] * uy
@@ -105,12 +104,9 @@ def support_distance(o: objects.ObjectSpec, direction_xy: np.ndarray) -> np.ndar
 
 
 def side_pose(object_xy: np.ndarray, clearance: np.ndarray, height: np.ndarray) -> np.ndarray:
-    """Joint positions (n, 9) putting every finger's tip centre on that finger's radial line through the object's
-    centre, at horizontal distance `clearance` (n, 3) from the centre (outside it) and `height` (n, 3) above the table.
-
-    J10 (axis +x of the finger frame) swings the finger's plane sideways so the tip reaches the object's tangential
-    offset; in the swung plane the J11 pivot hangs LINK_J10_J11 below J10 and the tip `depth` below that. Heights out
-    of reach at that radius give the straight finger pointing at the target (finger_ik)."""
+    """Joint positions (n, 9) putting each tip centre on its finger's radial line through the object's centre, at
+    horizontal distance `clearance` (n, 3) from that centre and `height` (n, 3) above the table. J10 swings the
+    finger's plane to the object's tangential offset; out-of-reach heights give the straight finger (finger_ik)."""
     q = np.zeros((object_xy.shape[0], spec.NUM_JOINTS))
     for i, phi in enumerate(spec.FINGER_BASE_ANGLES_RAD):
         c, s = math.cos(phi), math.sin(phi)
@@ -125,11 +121,8 @@ def side_pose(object_xy: np.ndarray, clearance: np.ndarray, height: np.ndarray) 
 
 
 class SideGraspScript(WaypointScript):
-    """Per-env targets: hover beside the object, descend, squeeze, lift, hold.
-
-    Unlike `PinchLiftScript` it reads where each object stands (privileged, as the teacher does) and squeezes at
-    the lowest height the tip reaches beside it, which is what lifts the small capsule (a teacher that fails on
-    an object presses it from above)."""
+    """Per-env targets: hover beside the object, descend, squeeze, lift, hold. It reads where each object stands
+    (privileged) and squeezes as low as the tip reaches beside it, which is what lifts the small capsule."""
 
     GAP_M = 0.02  # tip surface to the object's surface while hovering and descending
     SQUEEZE_M = 0.006  # tip target this far inside the surface: the servo error that holds the object
