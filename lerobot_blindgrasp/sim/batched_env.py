@@ -59,7 +59,6 @@ class BatchedGraspEnv:
         if cfg.backend == "batch":
             self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
             self.physics = BatchBackend(self.models, nthread=cfg.nthread)
-            self.batch = self.physics.batch
         else:
             from lerobot_blindgrasp.sim.backends.warp import WarpBackend  # optional dependency
 
@@ -67,12 +66,10 @@ class BatchedGraspEnv:
             self.physics = WarpBackend(
                 templates, self.object_index, self.physics_draw, cfg.dr.torque_limit_scale, device=cfg.device
             )
-            self.batch = None
         observations.check_state_layout(templates[0])
         self._init_task_state(templates[0], obj_specs)
 
     def _init_task_state(self, template: mujoco.MjModel, obj_specs: list[objects.ObjectSpec]) -> None:
-        """The task's per-env state, as float64/int64/bool tensors on the physics' device."""
         cfg, n = self.cfg, self.num_envs
         dev = self.device = self.physics.device
         f64 = {"dtype": torch.float64, "device": dev}
@@ -320,10 +317,9 @@ class BatchedGraspEnv:
     def mj_model_data(self, i: int) -> tuple[mujoco.MjModel, mujoco.MjData]:
         """Env i's model and a forwarded MjData of its current state (for rendering)."""
         m = self.env_model(i)
-        d = self.batch.get_data(i) if self.batch is not None else self.physics.get_data(i, m)
+        d = self.physics.get_data(i, m)
         mujoco.mj_forward(m, d)
         return m, d
 
     def close(self) -> None:
         self.physics.close()
-        self.batch = None

@@ -1,13 +1,7 @@
 """The sim's events besides the physics step, one term each (like `rewards.py`); all off at the paper's settings
-except Table II's training pushes.
-
-- `Pushes`: Table II's random pushes (`randomization.PushSchedule`).
-- `HoldPush`: one push of `hold_push_n`, 0.5 s after the object is first lifted.
-- `ActionLatency` / `ObservationLatency`: targets / observations delayed by whole control steps.
-- `ServoModel`: velocity limit, backlash and period jitter, stepping one physics substep at a time.
-
-Each keeps per-env state on the envs' device, restarts envs in `reset(ids, ...)` and acts on masks (no index lists
-that would wait on the device); draws are keyed on env seeds, so an env's events are the same in any batch."""
+except Table II's training pushes. Each keeps per-env state on the envs' device, restarts envs in `reset(ids, ...)`
+and acts on masks (no index lists that would wait on the device); draws are keyed on env seeds, so an env's events
+are the same in any batch."""
 
 from __future__ import annotations
 

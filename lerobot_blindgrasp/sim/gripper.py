@@ -1,16 +1,12 @@
 """The D'Claw-derived three-finger gripper, built in code from ROBEL's D'Claw (`chain3xh.xml`) and the XM430 facts.
-
-Geometry: three fingers at 120 deg on a 6 cm circle; a straight finger's tip clears the table by about 1.3 cm.
 Joint axes and signs follow `spec` (J*1/J*2 > 0 open the finger).
 
 Actuation: XM430-W350 position mode as a DC motor behind a PD loop: `position` actuators (kp, kv randomized per env,
-Table II; forcerange = stall torque), and joint damping = stall torque / no-load speed (the back-EMF of a
-voltage-limited motor), so the torque-speed line and speed limit emerge rather than being imposed. Armature: rotor
-inertia through the 353.5:1 gearbox.
+Table II; forcerange = stall torque) and joint damping = stall torque / no-load speed (the back-EMF of a
+voltage-limited motor), so the speed limit emerges rather than being imposed.
 
-Fingertips: a `*_tip` body welded to the distal link, its origin the load cell, carries a soft capsule standing in
-for the elastic printed tips. A `force`/`torque` pair gives the 6-D wrench; a `contact` netforce sensor gives the
-force projected on the tip's z axis for the uniaxial reading."""
+Fingertips: a `*_tip` body, its origin the load cell, carries a soft capsule standing in for the elastic printed
+tips; a `force`/`torque` pair gives the 6-D wrench and a `contact` netforce sensor the uniaxial reading."""
 
 from __future__ import annotations
 

@@ -2,16 +2,13 @@
 or a row shared by a batch of these envs, see `attach`), so eval sees the physics, noise and success rule of
 teacher training and demo collection.
 
-Contract (spec.py):
-- observation `{"agent_pos": o_t}`: 9 joint positions (rad) + 3 uniaxial forces (N), float32.
-- action: absolute joint targets (rad), shape (9,), order `spec.ACTION_NAMES`; the step to them is clipped to
-  +-0.3 rad and the joint limits, as on the real gripper.
-- `info["is_success"]`: the shared, latched success rule. With `end_on_success` the episode terminates when it
-  latches: lerobot-eval stops a batch once all its episodes end, and success rates are unchanged.
+Contract (spec.py): observation `{"agent_pos": o_t}` (9 joint positions in rad + 3 uniaxial forces in N, float32);
+action: absolute joint targets (rad), order `spec.ACTION_NAMES`, the step to them clipped to +-0.3 rad and the joint
+limits as on the real gripper; `info["is_success"]`: the shared, latched success rule (with `end_on_success` the
+episode ends when it latches, so lerobot-eval stops a batch early; rates are unchanged).
 
-Seeding: `reset(seed=s)` takes s as an evaluation index and runs `start_seed(s, object)`
-(`spec.eval_env_seed`), so each object gets its own start states, all inside the evaluation seed range. An
-unseeded reset draws the next index from `np_random`. Every episode gets a fresh physics draw.
+Seeding: `reset(seed=s)` takes s as an evaluation index and runs sim seed `start_seed(s, object)`, so each object
+gets its own start states inside the evaluation seed range; an unseeded reset draws the next index from `np_random`.
 
 Outside LeRobot: `gym.make("lerobot_blindgrasp.sim.gym_env:lerobot_blindgrasp/BlindGrasp-v0", object_name=...)`
 or `make_env(name)`."""
@@ -123,7 +120,8 @@ class BlindGraspGymEnv(gym.Env):
         self._sim, self._row = sim, row
         self._done = False
         self._frame = None
-        return self._obs(obs, row), {"is_success": False, "eval_seed": self.eval_seed, "env_seed": self.env_seed}
+        info = {"is_success": False, "eval_seed": self.eval_seed, "env_seed": self.env_seed}
+        return spaces.observation(obs["policy"][row]), info
 
     def step(self, action):
         if self._sim is None:
@@ -162,7 +160,7 @@ class BlindGraspGymEnv(gym.Env):
             "uniaxial_force_n": info["uniaxial_force"][i].astype(np.float32),  # noise-free, after the deadband
             "joint_target": info["joint_target"][i].astype(np.float32),  # what the servos were sent
         }
-        return self._obs(obs, i), float(reward[i]), terminated, truncated, step_info
+        return spaces.observation(obs["policy"][i]), float(reward[i]), terminated, truncated, step_info
 
     def render(self):
         if self.render_mode is None:
@@ -191,10 +189,6 @@ class BlindGraspGymEnv(gym.Env):
             self._sim = None
 
     # --- helpers ----------------------------------------------------------------------------------------------
-    @staticmethod
-    def _obs(obs: dict[str, np.ndarray], row: int = 0) -> dict[str, np.ndarray]:
-        return spaces.observation(obs["policy"][row])
-
     def _make_renderer(self, model: mujoco.MjModel) -> mujoco.Renderer:
         try:
             return mujoco.Renderer(model, height=self.render_height, width=self.render_width)

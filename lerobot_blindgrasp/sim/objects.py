@@ -117,15 +117,7 @@ def scaled(obj: ObjectSpec, scale: float) -> ObjectSpec:
     return replace(obj, size=tuple(scale * v for v in obj.size), mass_kg=mass)
 
 
-def register_object(obj: ObjectSpec) -> None:
-    """Add an object (e.g. an OOD proxy) to the catalogue. Its geom must be one primitive, like the others."""
-    if obj.name in CATALOGUE:
-        raise ValueError(f"object {obj.name!r} already in the catalogue")
-    CATALOGUE[obj.name] = obj
-
-
-for _obj in EVERYDAY:
-    register_object(_obj)
+CATALOGUE.update((o.name, o) for o in EVERYDAY)
 EVERYDAY_OBJECTS: tuple[str, ...] = tuple(o.name for o in EVERYDAY)
 
 

@@ -2,19 +2,9 @@
 
     r = w1 r_t + w2 r_i + w31 r_l + w32 r_a + w33 r_ar            (eq. 1, `total`)
 
-with w = (1.0, 0.2, -500, -0.04, -0.01) (`PAPER_WEIGHTS`). The shaping terms `reach` and `touch` are not in the
-paper; only the `cpu`/`quick` teacher presets weigh them. An ablation drops a term by name (`RewardConfig.without`).
-
-| paper            | name          | function        |
-|------------------|---------------|-----------------|
-| eq. 2, d_xy      |               | `planar_distance` |
-| eq. 3, r_t       | `task`        | `r_task`        |
-| eq. 4, r_i       | `incentive`   | `r_incentive`   |
-| eq. 5, r_l       | `joint_limit` | `r_joint_limit` |
-| eq. 6, r_a       | `action`      | `r_action`      |
-| eq. 7, r_ar      | `action_rate` | `r_action_rate` |
-| (shaping)        | `reach`       | `r_reach`       |
-| (shaping)        | `touch`       | `r_touch`       |"""
+with w = (1.0, 0.2, -500, -0.04, -0.01) (`PAPER_WEIGHTS`); each term's function names its equation. The shaping
+terms `reach` and `touch` are not in the paper; only the `cpu`/`quick` teacher presets weigh them. An ablation
+drops a term by name (`RewardConfig.without`)."""
 
 from __future__ import annotations
 

@@ -1,13 +1,8 @@
-"""Fingertip sensing from MuJoCo sensor data: uniaxial force, 3-axis contact force, 6-D wrench, tip poses.
+"""Fingertip sensing from MuJoCo sensor data: uniaxial force, contact force, 6-D wrench, tip poses.
 
-The `contact` sensor (reduce="netforce") reports, in the world frame, the net force the fingertip geom exerts on
-what it touches; the force *on* the tip is its negative. The load cell's z axis points from the distal joint to the
-tip, so a push on the tip end (compression, what a uniaxial cell under the tip measures) is
-
-    f_uni = -(F_on_tip . z) = F_reported . z        (positive in compression)
-
-That is the true force; the policy sees it through `hardware.force.reading`, shared with the real gripper.
-"""
+The `contact` sensor (netforce, world frame) reports the force the tip exerts; the load cell's z axis points from
+the distal joint to the tip, so the true uniaxial force is f_uni = F_reported . z (positive in compression). The
+policy sees it through `hardware.force.reading`, shared with the real gripper."""
 
 from __future__ import annotations
 

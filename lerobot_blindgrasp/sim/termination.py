@@ -13,7 +13,6 @@ from lerobot_blindgrasp import spec
 
 
 def is_lifted(lift):
-    """The object is at least SUCCESS_LIFT_M above its resting height."""
     return lift >= spec.SUCCESS_LIFT_M
 
 
@@ -33,5 +32,4 @@ def out_of_workspace(d_xy, radius_m: float = spec.WORKSPACE_RADIUS_M):
 
 
 def timed_out(episode_length, max_steps: int, terminated):
-    """Truncation: the episode reached its length without terminating."""
     return (episode_length >= max_steps) & ~terminated

@@ -13,7 +13,6 @@ from mujoco import batch as mjbatch
 
 
 def _ids(ids) -> np.ndarray:
-    """Env ids as the batch takes them (a host index array)."""
     return ids.cpu().numpy() if isinstance(ids, torch.Tensor) else np.asarray(ids)
 
 
@@ -78,7 +77,8 @@ class BatchBackend:
     def raw_step(self, nstep: int) -> None:
         self.batch.step(nstep=nstep)
 
-    def get_data(self, i: int) -> mujoco.MjData:
+    def get_data(self, i: int, model: mujoco.MjModel | None = None) -> mujoco.MjData:
+        """Env i's current state (the batch holds its own models; `model` is the Warp backend's argument)."""
         return self.batch.get_data(i)
 
     def close(self) -> None:
