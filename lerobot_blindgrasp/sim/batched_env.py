@@ -104,7 +104,6 @@ class BatchedGraspEnv:
         self.servo = events.ServoModel(cfg.dr, self._seeds)
         self._all = torch.arange(n, device=dev)
 
-    # --- construction ----------------------------------------------------------------------------------------
     def env_model(self, i: int) -> mujoco.MjModel:
         """Env i's MjModel: its object with its Table II draw (what either backend simulates for env i)."""
         if self.models is not None:
@@ -114,7 +113,6 @@ class BatchedGraspEnv:
     def _randomized_model(self, template: mujoco.MjModel, i: int) -> mujoco.MjModel:
         return randomization.apply_physics_draw(template, self.physics_draw, i, self.cfg.dr.torque_limit_scale)
 
-    # --- reset ------------------------------------------------------------------------------------------------
     def reset(self) -> dict[str, np.ndarray]:  # numpy on the host; reset_tensors on the device
         return on_host(self.reset_tensors())
 
@@ -148,7 +146,6 @@ class BatchedGraspEnv:
             v[ids] = 0.0
         self.pushes.reset(ids)
 
-    # --- step -------------------------------------------------------------------------------------------------
     def validate_action(self, action) -> torch.Tensor:
         a = self._f64(action)
         if a.shape != (self.num_envs, spec.NUM_JOINTS):
@@ -260,7 +257,6 @@ class BatchedGraspEnv:
                 obs[k][ids] = fresh[k]
             self.obs_latency.restart(ids, fresh)  # a new episode starts with its own observation
 
-    # --- frames and targets -------------------------------------------------------------------------------------
     def _f64(self, x) -> torch.Tensor:
         return torch.as_tensor(x, dtype=torch.float64, device=self.device)
 
@@ -285,7 +281,6 @@ class BatchedGraspEnv:
         out = self._f64(target) - q
         return out if isinstance(target, torch.Tensor) else on_host(out)
 
-    # --- observation --------------------------------------------------------------------------------------------
     def _observe(self, ids: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """Both observations for all envs or `ids`; for all envs, also the raw quantities the rewards read."""
         sel = slice(None) if ids is None else ids

@@ -97,7 +97,6 @@ class BlindGraspGymEnv(gym.Env):
         self._done = False
         self._renderer: mujoco.Renderer | None = None
 
-    # --- gymnasium API ---------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         # `options` is accepted and ignored: lerobot-eval passes its own marker there.
         self.begin(seed)
@@ -188,7 +187,6 @@ class BlindGraspGymEnv(gym.Env):
             self._sim.close()
             self._sim = None
 
-    # --- helpers ----------------------------------------------------------------------------------------------
     def _make_renderer(self, model: mujoco.MjModel) -> mujoco.Renderer:
         try:
             return mujoco.Renderer(model, height=self.render_height, width=self.render_width)

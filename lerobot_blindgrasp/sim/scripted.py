@@ -29,22 +29,6 @@ def finger_ik(radius, height):
     return np.arctan2(dx, dz) + alpha, t2
 
 
-def pinch_lift_waypoints(
-    object_radius: float, grasp_height: float, lift_m: float = 0.03, squeeze_m: float = 0.004
-):
-    """Joint waypoints (approach, pinch, lift) for all three fingers, shape (3, 9)."""
-    tip_r = gripper.TIP_CAPSULE_RADIUS
-    out = []
-    for r, z in (
-        (object_radius + tip_r + 0.03, grasp_height),
-        (object_radius + tip_r - squeeze_m, grasp_height),
-        (object_radius + tip_r - squeeze_m, grasp_height + lift_m),
-    ):
-        j11, j12 = finger_ik(r, z)
-        out.append(np.tile([0.0, j11, j12], len(spec.FINGERS)))
-    return np.stack(out)
-
-
 class WaypointScript:
     """Callable q (n, 9) -> delta-theta (n, 9) that moves the joint targets along `waypoints` in `segments` of
     (steps, from waypoint, to waypoint), reaching each segment's end after 70 % of its steps, then holds the last."""
@@ -68,10 +52,12 @@ class WaypointScript:
 
 
 class PinchLiftScript(WaypointScript):
-    """Approach (15 steps), pinch (20), lift (30), hold; the same targets for every env."""
+    """Approach (15 steps), pinch 4 mm into the side (20), lift (30), hold; the same targets for every env."""
 
     def __init__(self, object_radius: float, grasp_height: float, lift_m: float = 0.03):
-        self.waypoints = pinch_lift_waypoints(object_radius, grasp_height, lift_m)
+        r = object_radius + gripper.TIP_CAPSULE_RADIUS  # tip sphere centre touching the side
+        targets = ((r + 0.03, grasp_height), (r - 0.004, grasp_height), (r - 0.004, grasp_height + lift_m))
+        self.waypoints = np.stack([np.tile([0.0, *finger_ik(x, z)], len(spec.FINGERS)) for x, z in targets])
         self.segments = ((15, 0, 0), (20, 0, 1), (30, 1, 2))
         self.t = 0
 
@@ -88,9 +74,6 @@ def run_pinch_lift(
         lifts.append(info["lift"].copy())
         forces.append(info["uniaxial_force"].copy())
     return np.array(lifts), np.array(forces), info
-
-
-# --- A side grasp that works wherever the object stands (used as demonstrations for the teacher, teacher/aux_bc.py)
 
 
 def support_distance(o: objects.ObjectSpec, direction_xy: np.ndarray) -> np.ndarray:

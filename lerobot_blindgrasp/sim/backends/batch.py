@@ -22,7 +22,6 @@ class BatchBackend:
 
     def __init__(self, models: list[mujoco.MjModel], nthread: int = 0):
         self.num_envs = n = len(models)
-        self.models = models
         self.batch = mjbatch.Batch(models[0], nsim=n, nthread=nthread)
         self.batch.set_models(models)
         self._np_qpos, self._np_qvel = self.batch.bind("qpos"), self.batch.bind("qvel")
