@@ -1,14 +1,11 @@
-"""Batched blind-grasp environment: N grippers, one object each, stepped together, torch over the env axis on the
-physics' device. Terms live in their own modules (randomization, events, rewards, termination, observations);
-physics runs in a backend (`backends/__init__.py` has the contract).
+"""Batched blind-grasp environment: N grippers, one object each, torch over the env axis on the physics' device.
+Terms live in their own modules; physics runs in a backend (`backends/__init__.py` has the contract).
 
-Step (Sec. III-B): a_t in R^9 is clipped to +-0.3 rad, the servo target is q_t + a_t clipped to the joint limits (as
-the real robot does), and `substeps` physics steps cover one 50 ms control period. Episodes last 10 s and terminate
-when the object leaves the 10 cm workspace. Envs auto-reset inside `step` (rsl-rl never calls reset);
-`info["final"]` describes the episodes that ended.
-
-Under a joint calibration offset, readings are q + offset and the servo reaches absolute targets in that frame
-(`delta_for_target`), as a real servo with a wrong homing offset does."""
+Step (Sec. III-B): a_t in R^9 is clipped to +-0.3 rad, the servo target q_t + a_t to the joint limits (as the real
+robot does), and `substeps` physics steps cover one 50 ms control period. Episodes last 10 s and terminate when the
+object leaves the 10 cm workspace; envs auto-reset inside `step` (rsl-rl never calls reset), and `info["final"]`
+describes the episodes that ended. Under a joint calibration offset, readings and absolute targets are in the
+offset frame (`delta_for_target`), as with a real servo's wrong homing offset."""
 
 from __future__ import annotations
 
@@ -56,13 +53,13 @@ class BatchedGraspEnv:
         mjcf = [objects.object_mjcf(o, gripper.OBJECT_CONTYPE, gripper.OBJECT_CONAFFINITY) for o in obj_specs]
         self._templates = templates = [gripper.compile_model(xml, cfg.physics) for xml in mjcf]
         self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)  # (n,) on the CPU
+        self.models = None  # warp: per-world fields on the device; env_model(i) builds env i's MjModel on demand
         if cfg.backend == "batch":
-            self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
+            self.models = [self.env_model(i) for i in range(n)]
             self.physics = BatchBackend(self.models, nthread=cfg.nthread)
         else:
             from lerobot_blindgrasp.sim.backends.warp import WarpBackend  # optional dependency
 
-            self.models = None  # per-world fields on the device; env_model(i) builds env i's MjModel on demand
             self.physics = WarpBackend(
                 templates, self.object_index, self.physics_draw, cfg.dr.torque_limit_scale, device=cfg.device
             )
@@ -108,9 +105,7 @@ class BatchedGraspEnv:
         """Env i's MjModel: its object with its Table II draw (what either backend simulates for env i)."""
         if self.models is not None:
             return self.models[i]
-        return self._randomized_model(self._templates[self.object_index[i]], i)
-
-    def _randomized_model(self, template: mujoco.MjModel, i: int) -> mujoco.MjModel:
+        template = self._templates[self.object_index[i]]
         return randomization.apply_physics_draw(template, self.physics_draw, i, self.cfg.dr.torque_limit_scale)
 
     def reset(self) -> dict[str, np.ndarray]:  # numpy on the host; reset_tensors on the device

@@ -75,7 +75,7 @@ class PhysicsOptions:
             )
 
 
-def _finger_xml(i: int, finger: str, servo: ServoParams) -> str:
+def _finger_xml(i: int, finger: str) -> str:
     """One finger, in a frame whose x is the radial direction and y the tangential one (seen from above: CCW)."""
     phi = spec.FINGER_BASE_ANGLES_RAD[i]
     bx, by = BASE_RADIUS * math.cos(phi), BASE_RADIUS * math.sin(phi)
@@ -122,7 +122,7 @@ def gripper_mjcf(object_xml: str, options: PhysicsOptions | None = None, servo: 
     """The whole scene (table, frame, gripper, sensors and one object body) as an MJCF string."""
     o = options or PhysicsOptions()
     s = servo or ServoParams()
-    fingers = "".join(_finger_xml(i, f, s) for i, f in enumerate(spec.FINGERS))
+    fingers = "".join(_finger_xml(i, f) for i, f in enumerate(spec.FINGERS))
     actuators = "".join(
         f'<position name="{j}" joint="{j}" kp="{s.kp}" kv="{s.kv}" forcerange="{-o.torque_limit} '
         f'{o.torque_limit}" ctrlrange="{spec.JOINT_LOWER[k]:.4f} {spec.JOINT_UPPER[k]:.4f}"/>'

@@ -1,14 +1,10 @@
-"""One grasping trial as a gymnasium env for `lerobot-eval`: a shell over one row of a `BatchedGraspEnv` (its own,
-or a row shared by a batch of these envs, see `attach`), so eval sees the physics, noise and success rule of
-teacher training and demo collection.
+"""One grasping trial as a gymnasium env for `lerobot-eval`: one row of a `BatchedGraspEnv` (its own, or shared by
+a batch of these envs, see `attach`), so eval sees the physics, noise and success rule of training.
 
 Contract (spec.py): observation `{"agent_pos": o_t}` (9 joint positions in rad + 3 uniaxial forces in N, float32);
-action: absolute joint targets (rad), order `spec.ACTION_NAMES`, the step to them clipped to +-0.3 rad and the joint
-limits as on the real gripper; `info["is_success"]`: the shared, latched success rule (with `end_on_success` the
-episode ends when it latches, so lerobot-eval stops a batch early; rates are unchanged).
-
-Seeding: `reset(seed=s)` takes s as an evaluation index and runs sim seed `start_seed(s, object)`, so each object
-gets its own start states inside the evaluation seed range; an unseeded reset draws the next index from `np_random`.
+action: absolute joint targets (rad), the step to them clipped to +-0.3 rad and the joint limits as on the real
+gripper; `info["is_success"]`: the shared, latched success rule (`end_on_success` ends the episode there).
+`reset(seed=s)` takes s as an evaluation index: sim seed `start_seed(s, object)`, per object, in the eval range.
 
 Outside LeRobot: `gym.make("lerobot_blindgrasp.sim.gym_env:lerobot_blindgrasp/BlindGrasp-v0", object_name=...)`
 or `make_env(name)`."""

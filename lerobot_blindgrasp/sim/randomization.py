@@ -7,7 +7,6 @@ Joint offsets and object positions are drawn at every reset; friction, mass and 
   each from [0.7, 1.3] (MuJoCo combines a pair with max()).
 - Random force: a push for one control step at random times (`PushSchedule`); off for demos and lerobot-eval.
 
-`write_physics_draw` writes the draw into rows of model fields (one MjModel, or the Warp backend's per-world arrays).
 The fields past Table II (`ROBUSTNESS_FIELDS`: sensor, servo, timing and object-size errors a real gripper may
 have) default to the paper's sim exactly; `lab/robustness/` sets them one at a time."""
 

@@ -1,11 +1,9 @@
-"""Success and termination, over the env axis.
+"""Success and termination, over the env axis, with operators only so the twin's numpy state (`twin/physics.py`)
+goes through them too.
 
 - Success (Sec. IV-A; sim, teacher eval and the real protocol alike): lifted >= `spec.SUCCESS_LIFT_M` (1.5 cm) for
   `spec.SUCCESS_HOLD_S` (1 s) without a break; it latches.
-- Termination (Sec. III-B): the object leaves the 10 cm workspace (`d_xy`, eq. 2), or its physics went unstable.
-- Truncation: the 10 s run out first.
-
-Operators only, so the twin's numpy state (`twin/physics.py`) goes through the same functions."""
+- Termination (Sec. III-B): the object leaves the 10 cm workspace (`d_xy`, eq. 2), or its physics went unstable."""
 
 from __future__ import annotations
 
