@@ -18,8 +18,7 @@ class GraspEnvConfig:
     # Relative share of envs per object (same order as `objects`); None: even, as the paper's 18 x 500.
     object_weights: tuple[float, ...] | None = None
     seed: int = 0  # env i uses seed + i
-    # Explicit per-env seeds (length num_envs), instead of seed + i: lets one batch hold several objects' evaluation
-    # seed blocks (spec.eval_env_seed), each env on exactly the start state the one-env gym env gives it.
+    # Per-env seeds instead of seed + i: one batch can then run several objects' evaluation seeds (spec.eval_env_seed)
     env_seeds: tuple[int, ...] | None = None
     episode_s: float = spec.EPISODE_S
     dr: randomization.DomainRandomization = field(default_factory=lambda: randomization.PAPER_DR)

@@ -150,8 +150,7 @@ class BatchedGraspEnv:
         return a
 
     def step(self, action, active: np.ndarray | None = None):
-        """One control step, numpy on the host. `active` (batch backend only): the envs to simulate; the others keep
-        their state (evaluation's finished episodes)."""
+        """One control step, numpy on the host. `active` (batch backend only): the envs to simulate; the rest wait."""
         return on_host(self.step_tensors(action, active))
 
     def step_tensors(self, action, active=None):
@@ -260,16 +259,14 @@ class BatchedGraspEnv:
         return self.sensor_draw.measured(q, sel) if self.cfg.dr.joint_calibration_rad else q.clone()
 
     def target_for_delta(self, delta):
-        """The absolute targets (n, 9) in the measured frame that `step` commands for `delta` (clipped as `step`
-        clips; the inverse of `delta_for_target`). numpy or tensor, as given."""
+        """The absolute targets (n, 9) in the measured frame that `step` commands for `delta` (numpy or tensor)."""
         q = self._qpos[:, observations.JOINTS]
         step = self._f64(delta).clamp(-spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
         out = self._measured_frame(torch.clamp(q + step, self._joint_lower, self._joint_upper))
         return out if isinstance(delta, torch.Tensor) else on_host(out)
 
     def delta_for_target(self, target, ids: slice | np.ndarray | None = None):
-        """The step (n, 9) taking all envs (or `ids`) to absolute `target`s in the joints' measured frame:
-        target - (q + calibration offset). numpy or tensor, as given."""
+        """The step (n, 9) taking all envs (or `ids`) to absolute `target`s in the measured frame (numpy or tensor)."""
         sel = slice(None) if ids is None else ids
         sel = sel if isinstance(sel, slice) else torch.as_tensor(sel, device=self.device)
         q = self._measured_frame(self._qpos[sel, observations.JOINTS], sel)

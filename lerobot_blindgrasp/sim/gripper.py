@@ -1,12 +1,9 @@
 """The D'Claw-derived three-finger gripper, built in code from ROBEL's D'Claw (`chain3xh.xml`) and the XM430 facts.
 Joint axes and signs follow `spec` (J*1/J*2 > 0 open the finger).
 
-Actuation: XM430-W350 position mode as a DC motor behind a PD loop: `position` actuators (kp, kv randomized per env,
-Table II; forcerange = stall torque) and joint damping = stall torque / no-load speed (the back-EMF of a
-voltage-limited motor), so the speed limit emerges rather than being imposed.
-
-Fingertips: a `*_tip` body, its origin the load cell, carries a soft capsule standing in for the elastic printed
-tips; a `force`/`torque` pair gives the 6-D wrench and a `contact` netforce sensor the uniaxial reading."""
+Actuation: `position` actuators (kp, kv randomized per env, Table II; forcerange = stall torque) plus joint damping
+= stall torque / no-load speed (the back-EMF of a voltage-limited motor), so the speed limit emerges. Fingertips: a
+`*_tip` body at the load cell carries a soft capsule (the elastic printed tips) and the wrench and contact sensors."""
 
 from __future__ import annotations
 

@@ -108,8 +108,7 @@ class BlindGraspGymEnv(gym.Env):
         self.env_seed = start_seed(self.eval_seed, self.object.name)
 
     def attach(self, sim: BatchedGraspEnv, row: int, obs: dict[str, np.ndarray]):
-        """Run this episode as row `row` of `sim` (reset, built with this env's `env_seed` in that row): a batch of
-        these envs can share one sim (`envs/sim_vector.py`); `obs` is the sim's reset observation."""
+        """Run this episode as row `row` of a reset `sim` built with `env_seed` there (`envs/sim_vector.py`)."""
         if self._sim is not None and self._sim is not sim:
             self._sim.close()
         self._sim, self._row = sim, row

@@ -1,10 +1,7 @@
-"""What the sim observes each control step, over the env axis:
-- `raw`: noise-free quantities for rewards, success and demo curation;
-- "policy": the student's o_t in R^12 (`spec.STATE_NAMES`);
-- "privileged": the teacher's 92-d vector, assembled by name (`spec.privileged_parts`), never by position.
-
-Noise is one N(0, 1) draw per env and step, split in `NOISE_LAYOUT` order: changing that order changes every
-observation the shipped teacher was evaluated on."""
+"""What the sim observes each control step, over the env axis: `raw` noise-free quantities (rewards, success,
+curation); "policy", the student's o_t in R^12; "privileged", the teacher's 92-d vector, assembled by name
+(`spec.privileged_parts`). Noise is one N(0, 1) draw per env and step split in `NOISE_LAYOUT` order: changing that
+order changes every observation the shipped teacher was evaluated on."""
 
 from __future__ import annotations
 

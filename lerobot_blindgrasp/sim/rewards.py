@@ -137,8 +137,7 @@ def r_action_rate(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
 
 
 def r_reach(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
-    """Shaping (not in the paper): pulls fingertips toward the object surface before any contact exists. r_t is 0
-    until the object lifts, so PPO on a small budget without it learns to keep still."""
+    """Shaping (not in the paper): pulls tips toward the object; r_t is 0 until a lift, so small budgets stall."""
     return (1.0 - torch.tanh(cfg.reach_scale * s.tip_object_distance.clamp_min(0.0))).mean(-1)
 
 

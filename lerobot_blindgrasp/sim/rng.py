@@ -1,10 +1,7 @@
-"""Counter-based random numbers over the env axis, on the envs' device.
-
-Every draw is a pure function of (env seed, stream, counter, index), so env i of a batch and a single env with env
-i's seed see the same randomness whatever the batch size, reset order or device, with no per-env loop.
-
-The mixer is SplitMix64 (Steele et al., 2014) on int64 tensors (torch has no uint64 arithmetic): +, * and ^ wrap to
-the unsigned bits, and right shifts are made logical by masking."""
+"""Counter-based random numbers over the env axis, on the envs' device. Every draw is a pure function of (env seed,
+stream, counter, index), so env i of a batch and a single env with its seed see the same randomness whatever the
+batch size, reset order or device. The mixer is SplitMix64 (Steele et al., 2014) on int64 tensors (torch has no
+uint64): +, * and ^ wrap to the unsigned bits, and right shifts are made logical by masking."""
 
 from __future__ import annotations
 

@@ -87,9 +87,8 @@ def support_distance(o: objects.ObjectSpec, direction_xy: np.ndarray) -> np.ndar
 
 
 def side_pose(object_xy: np.ndarray, clearance: np.ndarray, height: np.ndarray) -> np.ndarray:
-    """Joint positions (n, 9) putting each tip centre on its finger's radial line through the object's centre, at
-    horizontal distance `clearance` (n, 3) from that centre and `height` (n, 3) above the table. J10 swings the
-    finger's plane to the object's tangential offset; out-of-reach heights give the straight finger (finger_ik)."""
+    """Joint positions (n, 9) putting each tip centre on its finger's radial line through the object's centre,
+    `clearance` (n, 3) from it and `height` (n, 3) above the table; J10 swings to the object's tangential offset."""
     q = np.zeros((object_xy.shape[0], spec.NUM_JOINTS))
     for i, phi in enumerate(spec.FINGER_BASE_ANGLES_RAD):
         c, s = math.cos(phi), math.sin(phi)

@@ -1,20 +1,17 @@
 """The GPU backend: MuJoCo Warp (`pip install lerobot_policy_blindgrasp[gpu]`), also runnable on CPU.
 
-Layout. MuJoCo Warp steps `nworld` copies of one model, and fields whose spec starts with "*" may carry one row per
-world. Objects of one geom type compile to models that differ only in such fields, so envs are grouped by geom
-type: one Warp model and Data per group. A group's model is its first object's MjModel; per world, on the device,
-the fields that differ between its objects are gathered, Table II's draw is written by
-`randomization.write_physics_draw` (float64, the batch backend's code, then cast to float32), and `mjw.set_const`
-recomputes the derived constants. Resets write no model fields; fields that differ but cannot be batched raise.
+Envs are grouped by the object's geom type: objects of one type compile to models differing only in fields that
+MuJoCo Warp can batch per world ("*" specs), so each group is one Warp model (its first object's) and one Data.
+Per world, on the device, the differing fields are gathered, Table II's draw is written by
+`randomization.write_physics_draw` (float64, then cast to float32) and `mjw.set_const` recomputes the derived
+constants; fields that differ but cannot be batched raise.
 
-State. The contract's tensors live on Warp's device, in env order. With one group holding every env in order
-(`share_arrays`), they ARE the Warp arrays (float32, no copy); otherwise they are float64 copies exchanged with
-the groups' arrays each step (on CUDA with the streams synchronized). Each group's substeps replay as one captured
-graph (CUDA graph, or Warp's CPU capture), bit-identical to launching kernel by kernel.
+State: with one group holding every env in order (`share_arrays`), the contract's tensors ARE the Warp arrays
+(float32, no copy); otherwise they are float64 copies exchanged with the groups each step. Substeps replay as one
+captured graph (CUDA graph, or Warp's CPU capture), bit-identical to launching kernel by kernel.
 
-Differences from the batch backend: float32; MuJoCo Warp's own collision pipeline (contacts differ slightly); the
-solver hitting its iteration cap is not a failure (as on CPU); failures are buffer overflows and non-finite state
-(no per-sim `SimulationError`)."""
+Differences from the batch backend: float32; Warp's own collision pipeline (contacts differ slightly); failures are
+buffer overflows and non-finite state (an iteration cap is not one, as on CPU)."""
 
 from __future__ import annotations
 
