@@ -45,9 +45,8 @@ class GraspEnvConfig:
 
 
 def allocate_objects(num_envs: int, num_objects: int, weights: tuple[float, ...] | None) -> np.ndarray:
-    """Object index of each env. Even weights give the round-robin i % num_objects. Otherwise each object gets
-    its weighted share of envs (largest remainders, at least one env each), interleaved so that any prefix of the
-    batch holds a mix of objects."""
+    """Object index of each env: round-robin, or each object's weighted share (largest remainders, at least one
+    each), interleaved so that any prefix of the batch holds a mix of objects."""
     if weights is None:
         return np.arange(num_envs) % num_objects
     w = np.asarray(weights, dtype=float) / np.sum(weights)

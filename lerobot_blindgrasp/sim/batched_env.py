@@ -154,8 +154,7 @@ class BatchedGraspEnv:
         return on_host(self.step_tensors(action, active))
 
     def step_tensors(self, action, active=None):
-        """One control step: tensors (N, ...) on `device` in and out; `step` says what `active` means. A tensor
-        action is not checked for NaN (that would wait on the device); a policy's NaN fails the physics instead."""
+        """`step` on `device` tensors; a tensor action's NaN fails the physics (a check would wait on the device)."""
         ids = None if active is None else np.flatnonzero(on_host(active))
         if ids is not None and self.physics.name != "batch":
             raise NotImplementedError("stepping a subset of envs needs the batch backend")
@@ -193,8 +192,7 @@ class BatchedGraspEnv:
         return self.obs_latency(obs, done), reward, terminated, truncated, info
 
     def _actuate(self, a: torch.Tensor, ids: np.ndarray | None) -> tuple[torch.Tensor, torch.Tensor]:
-        """One control period of physics towards q + a: the events before it, the servos, the events after it.
-        Returns the target the servos were given and the envs whose physics failed."""
+        """One control period of physics towards q + a, with its events; (the servos' target, the failed envs)."""
         q = self._qpos[:, observations.JOINTS]
         target = self.action_latency(torch.clamp(q + a, self._joint_lower, self._joint_upper))
         self.pushes(self._xfrc, self._object_body)
@@ -226,8 +224,7 @@ class BatchedGraspEnv:
         return terms, reward
 
     def _end_episodes(self, ids: torch.Tensor, obs: dict, info: dict, terminated, truncated, failed) -> None:
-        """Describe the episodes that ended in info["final"]; with autoreset, start their next ones (their rows of
-        `obs` become the new episodes' first observations)."""
+        """Describe the ended episodes in info["final"]; with autoreset, start the next ones in their rows of `obs`."""
         unstable = failed[ids]
         if unstable.any():
             self.physics_resets += int(unstable.sum())

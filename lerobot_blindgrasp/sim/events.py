@@ -91,8 +91,7 @@ class ActionLatency:
 
 
 class ObservationLatency:
-    """A ring of the last k + 1 observations: the policy gets the one measured k control steps ago. An episode that
-    just ended reports its own final observation, and a fresh one its first, undelayed."""
+    """A ring of the last k + 1 observations (the policy gets the one k steps old); final and first are undelayed."""
 
     def __init__(self, steps: int):
         self.steps = steps

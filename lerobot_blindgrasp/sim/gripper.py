@@ -59,8 +59,7 @@ class PhysicsOptions:
     ls_iterations: int = 10
     torque_limit: float = xm430.STALL_TORQUE_NM  # N m; the robot's default current limit is the same stall point
     tip_friction: float = 1.0
-    # Contact time constants (s). MuJoCo clamps them to >= 2 x timestep. The fingertips are softer than the rest,
-    # standing in for the elastic printed tips.
+    # Contact time constants (s, MuJoCo clamps them to >= 2 x timestep); the fingertips are the soft printed tips.
     contact_timeconst: float = 0.01
     tip_timeconst: float = 0.02
 

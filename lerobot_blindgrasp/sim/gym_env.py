@@ -123,8 +123,7 @@ class BlindGraspGymEnv(gym.Env):
         if self._done:
             raise RuntimeError("the episode has ended (terminated or truncated); call reset() before step()")
         target = self.check_action(action)
-        # Targets beyond the joint limits are not rejected (a policy may overshoot a limit slightly: a command, not
-        # a bug): the sim clips the step to +-0.3 rad and the servo target to the limits, as the real gripper does.
+        # Targets past the limits are commands, not bugs: the sim clips them as the real gripper does.
         delta = self._sim.delta_for_target(target[None, :])  # in the joints' measured (calibrated) frame
         return self.row_result(self._sim.step(delta))
 
@@ -167,8 +166,7 @@ class BlindGraspGymEnv(gym.Env):
         model, data = self._sim.mj_model_data(self._row)
         if self._renderer is None:
             self._renderer = self._make_renderer(model)
-        # The renderer was built from an earlier episode's model. Every episode of this env has the same object
-        # and geometry (randomization changes only friction, mass and gains), so that model draws this data.
+        # A renderer built from an earlier episode's model draws this one: randomization never changes geometry.
         self._renderer.update_scene(data, camera=self.camera)
         self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.render_shadows
         self._frame, self._frame_step = self._renderer.render().copy(), step

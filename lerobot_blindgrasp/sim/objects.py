@@ -1,8 +1,6 @@
 """The paper's 18 training objects (Table I, cm there, metres here) and the catalogue that held-out objects join.
-
-Readings of Table I: cuboid X, Y, Z are full edges (Z up); capsule "Height" is the cylindrical part between the
-hemispheres, and it lies on its side; cylinders stand upright. Mass: 400 kg/m^3, i.e. PLA printed with two walls and
-~20 % infill, as 3D-printed replicas usually are."""
+Cuboid X, Y, Z are full edges; the capsule's "Height" is its cylindrical part, and it lies on its side. Mass:
+400 kg/m^3, i.e. PLA printed with two walls and ~20 % infill, as 3D-printed replicas usually are."""
 
 from __future__ import annotations
 

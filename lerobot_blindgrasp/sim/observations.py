@@ -73,9 +73,8 @@ def observe(
     dr: randomization.DomainRandomization,
     sensor_draw: randomization.SensorDraw | None = None,
 ) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
-    """(raw, obs) for the given rows of state (`sensor_draw`: their force biases and calibration offsets, or None).
-    Sensor errors beyond Table II act on what a real gripper measures (`joint_pos`, `uniaxial_force`), for student
-    and teacher alike; the teacher's sim-only readings keep Table II's noise only."""
+    """(raw, obs) for the given rows of state. Sensor errors beyond Table II (`sensor_draw`, or None) act on what a
+    real gripper measures (`joint_pos`, `uniaxial_force`); the teacher's sim-only readings get Table II's noise."""
     contact = si.read(sensordata, "contact")
     tip_quat = si.read(sensordata, "quat")
     uni_true = sensors.uniaxial_force(contact, si.read(sensordata, "zaxis"))

@@ -1,14 +1,11 @@
-"""Domain randomization, Table II of the paper: one preset plus the functions that draw from it.
+"""Domain randomization, Table II of the paper: one preset plus the functions that draw from it. Joint offsets and
+object positions are drawn at every reset; friction, mass and actuator gains once per env (Sec. III-B).
 
-Joint offsets and object positions are drawn at every reset; friction, mass and actuator gains once per env
-(Sec. III-B). Readings of the table:
+Readings of the table:
 - Mass: "x[0.5, 0.3]" is not an interval; we use x U[0.5, 1.5], the infill range a replica might be printed with.
-- Friction: MuJoCo has one Coulomb coefficient per geom, so one draw for the object and one for the fingertips,
-  each from [0.7, 1.3] (MuJoCo combines a pair with max()).
+- Friction: MuJoCo has one Coulomb coefficient per geom: one draw for the object, one for the tips, each [0.7, 1.3].
 - Random force: a push for one control step at random times (`PushSchedule`); off for demos and lerobot-eval.
-
-The fields past Table II (`ROBUSTNESS_FIELDS`: sensor, servo, timing and object-size errors a real gripper may
-have) default to the paper's sim exactly; `lab/robustness/` sets them one at a time."""
+The fields past Table II (`ROBUSTNESS_FIELDS`) default to the paper's sim; `lab/robustness/` sets them one at a time."""
 
 from __future__ import annotations
 
@@ -237,9 +234,8 @@ class DrawTargets:
 def write_physics_draw(
     fields: dict[str, torch.Tensor], at: DrawTargets, draw: PhysicsDraw, torque_limit_scale: float = 1.0
 ) -> None:
-    """Table II's draw written in place into per-env rows of model fields (`fields[name]`: (n, *MjModel shape),
-    on `draw`'s device): friction, object mass and inertia, kp and kv (MuJoCo's position actuator: gain kp, bias
-    -kp q - kv qdot), and the torque limit. Both backends use it: an MjModel's own arrays (n = 1), Warp's rows."""
+    """Table II's draw written in place into per-env rows (n, *MjModel shape) of model fields, for both backends.
+    MuJoCo's position actuator: gain kp, bias -kp q - kv qdot."""
     f, scale = fields, draw.object_mass_scale
     f["geom_friction"][:, at.object_geom, 0] = draw.object_friction
     f["geom_friction"][:, list(at.tip_geoms), 0] = draw.robot_friction[:, None]
@@ -267,9 +263,8 @@ def apply_physics_draw(
 
 
 class PushSchedule:
-    """Table II's random force: a push of U[-0.3, 0.3] N per axis for one control step, U[0, 10] s apart, per env.
-    A held force would roll spheres and capsules off the table, so "applied at randomly selected times" is read as
-    a push. The schedule only decides (as masks, keyed on each env's push counter); the env writes the forces."""
+    """Table II's random force: U[-0.3, 0.3] N per axis for one control step, U[0, 10] s apart (a held force would
+    roll spheres and capsules off the table). It only decides, as masks; the env writes the forces."""
 
     def __init__(self, dr: DomainRandomization, seeds: torch.Tensor):
         n = len(seeds)

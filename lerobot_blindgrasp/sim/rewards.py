@@ -1,10 +1,9 @@
-"""The paper's reward, eq. 1-7, as named terms over the env axis (mjlab's manager style).
+"""The paper's reward, eq. 1-7, as named terms over the env axis (mjlab's manager style):
 
     r = w1 r_t + w2 r_i + w31 r_l + w32 r_a + w33 r_ar            (eq. 1, `total`)
 
-with w = (1.0, 0.2, -500, -0.04, -0.01) (`PAPER_WEIGHTS`); each term's function names its equation. The shaping
-terms `reach` and `touch` are not in the paper; only the `cpu`/`quick` teacher presets weigh them. An ablation
-drops a term by name (`RewardConfig.without`)."""
+with w = (1.0, 0.2, -500, -0.04, -0.01). The shaping terms `reach` and `touch` are not in the paper; only the
+`cpu`/`quick` teacher presets weigh them."""
 
 from __future__ import annotations
 

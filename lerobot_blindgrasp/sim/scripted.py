@@ -1,8 +1,5 @@
-"""Scripted grasps (not baseline policies): a pinch-and-lift for physics tests and the viewer, and a side grasp
-(`SideGraspScript`) whose successful rollouts the `cpu_bc*` teachers clone (teacher/aux_bc.py).
-
-The pinch uses two-link IK in each finger's plane to press the tip 4 mm into the object's side at mid-height, then
-lifts by `lift_m`; it assumes a centred object."""
+"""Scripted grasps (not baseline policies): a pinch-and-lift for physics tests and the viewer (two-link IK per
+finger; it assumes a centred object), and a side grasp whose successes the `cpu_bc*` teachers clone (teacher/aux_bc.py)."""
 
 from __future__ import annotations
 
@@ -65,8 +62,7 @@ class PinchLiftScript(WaypointScript):
 def run_pinch_lift(
     env, steps: int, object_radius: float = 0.03, grasp_height: float = 0.045, lift_m: float = 0.03
 ):
-    """Drive a reset `BatchedGraspEnv` with the pinch for `steps` control steps. Returns the per-step object lift
-    (steps, N), the noise-free uniaxial forces (steps, N, 3) and the last step's info."""
+    """Pinch a reset `BatchedGraspEnv` for `steps` steps: lifts (steps, N), clean forces (steps, N, 3), last info."""
     script = PinchLiftScript(object_radius, grasp_height, lift_m)
     lifts, forces = [], []
     for _ in range(steps):
@@ -103,8 +99,7 @@ def side_pose(object_xy: np.ndarray, clearance: np.ndarray, height: np.ndarray) 
 
 
 class SideGraspScript(WaypointScript):
-    """Per-env targets: hover beside the object, descend, squeeze, lift, hold. It reads where each object stands
-    (privileged) and squeezes as low as the tip reaches beside it, which is what lifts the small capsule."""
+    """Per env: hover beside the object (privileged), descend, squeeze as low as the tip reaches, lift, hold."""
 
     GAP_M = 0.02  # tip surface to the object's surface while hovering and descending
     SQUEEZE_M = 0.006  # tip target this far inside the surface: the servo error that holds the object

@@ -63,8 +63,7 @@ def _boundary_distance(o: objects.ObjectSpec, phi: float) -> float:
 
 
 def grasp_geometry(object_name: str) -> tuple[float, float]:
-    """(radius, height) for `PinchLiftScript`: the object's side along the three finger directions, averaged
-    (the script closes all fingers to one radius; where the side is nearer, that finger just presses harder)."""
+    """(radius, height) for `PinchLiftScript`: the object's side along the three finger directions, averaged."""
     o = objects.get_object(object_name)
     radius = float(np.mean([_boundary_distance(o, phi) for phi in spec.FINGER_BASE_ANGLES_RAD]))
     return radius, o.rest_height

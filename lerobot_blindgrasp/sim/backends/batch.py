@@ -52,8 +52,7 @@ class BatchBackend:
         self._warnings_seen[ids] = self.batch.warning[ids, :, 1].sum(axis=1)
 
     def step(self, nstep: int, ids: np.ndarray | None = None) -> torch.Tensor:
-        """`nstep` physics steps for all envs, or only `ids` (the others keep their state); the failed envs (bool
-        tensor)."""
+        """`nstep` physics steps for all envs, or only `ids`; returns the failed envs (bool tensor)."""
         failed = np.zeros(self.num_envs, dtype=bool)
         try:
             self.batch.step(ids=ids, nstep=nstep)

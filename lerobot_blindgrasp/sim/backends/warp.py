@@ -162,8 +162,7 @@ class WarpBackend:
         self._zero_warm = torch.zeros(n, dtype=torch.bool, device=self.device)
 
     def _build_group(self, w: _Worlds, templates: list[mujoco.MjModel], nconmax: int, njmax: int) -> _Group:
-        """One Warp model for the group's worlds: its first object's model, with per-world rows for every field
-        that differs between its objects, Table II's fields and the constants derived from them."""
+        """One Warp model for the group: per-world rows for differing fields, Table II's and their derived ones."""
         objs = np.unique(w.objects)
         base, nw = templates[objs[0]], len(w.ids)
         fields0 = _array_fields(base)
