@@ -70,7 +70,7 @@ XM430_W350_MODEL = 1020
 BAUD_REGISTER = {9600: 0, 57600: 1, 115200: 2, 1_000_000: 3, 2_000_000: 4, 3_000_000: 5, 4_000_000: 6}
 
 # Hardware_Error_Status bits (e-Manual, XM430 "Hardware Error Status(70)").
-HW_INPUT_VOLTAGE, HW_OVERHEATING, HW_ENCODER, HW_ELECTRICAL_SHOCK, HW_OVERLOAD = 0x01, 0x04, 0x08, 0x10, 0x20
+HW_INPUT_VOLTAGE, HW_OVERHEATING, HW_OVERLOAD = 0x01, 0x04, 0x20
 STARTUP_TORQUE_ON, STARTUP_RAM_RESTORE = 0x01, 0x02  # Startup_Configuration(60) bits
 
 DEFAULTS = {
@@ -103,29 +103,26 @@ DEFAULTS = {
 }
 
 
+# The e-Manual's range of the registers the firmware range-checks on a write.
+RANGES = {"Torque_Enable": (0, 1), "Bus_Watchdog": (0, 127), "Current_Limit": (0, 1193), "Min_Position_Limit": (0, 4095),
+          "Max_Position_Limit": (0, 4095), "Homing_Offset": (-1_044_479, 1_044_479)}  # fmt: skip
+OPERATING_MODES = (0, 1, 3, 4, 5, 16)
+
+
 def write_error(servo, staged, names: list[str]) -> int:
     """The status error code the firmware answers a write with (0: accepted), `staged` holding the registers as
     they would be after it."""
     for name in names:
         value = staged.get(name)
-        if name == "Operating_Mode" and value not in (0, 1, 3, 4, 5, 16):
-            return p2.ERRNUM_DATA_RANGE
-        if name == "Torque_Enable" and value not in (0, 1):
-            return p2.ERRNUM_DATA_RANGE
-        if name == "Bus_Watchdog" and not 0 <= value <= 127:
-            return p2.ERRNUM_DATA_RANGE
-        if name.startswith("Goal_") and servo.get("Bus_Watchdog") == 255:
-            return p2.ERRNUM_DATA_RANGE  # goal registers are read-only after a watchdog stop
-        if name == "Current_Limit" and not 0 <= value <= 1193:
-            return p2.ERRNUM_DATA_RANGE
-        if name == "Goal_Current" and abs(value) > servo.get("Current_Limit"):
-            return p2.ERRNUM_DATA_LIMIT
-        if name in ("Min_Position_Limit", "Max_Position_Limit") and not 0 <= value <= 4095:
-            return p2.ERRNUM_DATA_RANGE
-        if name == "Homing_Offset" and abs(value) > 1_044_479:
+        lo, hi = RANGES.get(name, (value, value))
+        if not lo <= value <= hi or (name == "Operating_Mode" and value not in OPERATING_MODES):
             return p2.ERRNUM_DATA_RANGE
         if name == "Startup_Configuration" and value & ~(STARTUP_TORQUE_ON | STARTUP_RAM_RESTORE):
             return p2.ERRNUM_DATA_RANGE
+        if name.startswith("Goal_") and servo.get("Bus_Watchdog") == 255:
+            return p2.ERRNUM_DATA_RANGE  # goal registers are read-only after a watchdog stop
+        if name == "Goal_Current" and abs(value) > servo.get("Current_Limit"):
+            return p2.ERRNUM_DATA_LIMIT
         if name == "Goal_Position" and servo.get("Operating_Mode") == 3:
             if not servo.get("Min_Position_Limit") <= value <= servo.get("Max_Position_Limit"):
                 return p2.ERRNUM_DATA_LIMIT

@@ -1,26 +1,8 @@
-"""A Dynamixel Protocol 2.0 bus of XM430-W350 servos, emulated on a pseudo-terminal.
-
-What it implements (ROBOTIS e-Manual, "DYNAMIXEL Protocol 2.0" and the XM430-W350 control table):
-- packets, CRC-16 and byte stuffing (`dynamixel_wire.py`); PING (unicast and broadcast), READ, WRITE, SYNC READ,
-  SYNC WRITE, REBOOT; status packets (INST 0x55) with the error byte (instruction error codes 1..7 and the 0x80
-  hardware-alert bit);
-- the control table (`control_table.py`) with EEPROM write protection while torque is on, read-only registers,
-  data range and limit checks, Status Return Level (0: only PING answers, 1: PING and READ), and the bus baud
-  rate (a servo answers only when the port's termios speed matches its Baud_Rate register, like a real bus at the
-  wrong speed);
-- each servo (`dynamixel_servo.py`): Homing_Offset and Drive_Mode as the firmware applies them, first-order
-  dynamics or a plugged-in `ShaftDynamics`, the Bus Watchdog (98), a reboot with Startup_Configuration(60);
-- bring-up: factory-fresh servos (`factory_servo`: ID 1, 57 600 bps) plugged onto the cable one at a time (`plug`).
-
-Fault injection (what the tests use): a missing ID, dropped status packets (timeouts), corrupted status CRCs,
-wrong positions with a valid CRC (`position_glitch`), stray late status packets (`stray_replies`), slow replies
-(`reply_delay_s`), hardware-error status bits (the firmware then drops torque per the Shutdown register and raises
-the alert bit), a servo reset (brown-out: RAM back to factory values, torque off, no error bit), two servos on one
-ID (`add_twin`: their replies collide on the line), from `PtyDevice`, an unplugged USB adapter, and
-(`servo_health.py`, one model per servo and one `supply` per bus) a hot servo, a heating servo, a weak or sagging
-supply and the firmware's overheating, voltage and overload errors; per servo (`dynamixel_servo.py`), a stripped
-gear (`stripped`), a current reported with its sign flipped (`current_sign`), a Present_Position frozen while the shaft
-moves (`frozen_position`) and registers that acknowledge a write but keep their value (`unwritable`).
+"""A Dynamixel Protocol 2.0 bus of XM430-W350 servos, emulated on a pseudo-terminal (ROBOTIS e-Manual): PING, READ,
+WRITE, SYNC READ, SYNC WRITE and REBOOT with status packets and their error byte, over the wire format of
+`dynamixel_wire.py`, the control table of `control_table.py` and the servos of `dynamixel_servo.py`. A servo answers
+only when the port's termios speed matches its Baud_Rate, as on a real bus. What it speaks and the faults it injects
+are listed in docs/hardware.md, "Emulators and tests".
 """
 
 from __future__ import annotations
@@ -34,8 +16,6 @@ from dynamixel_sdk import robotis_def as dx
 from lerobot_blindgrasp.emulators.control_table import (  # noqa: F401  (re-exported for the tests)
     BAUD_REGISTER,
     CONTROL_TABLE,
-    HW_ELECTRICAL_SHOCK,
-    HW_ENCODER,
     HW_INPUT_VOLTAGE,
     HW_OVERHEATING,
     HW_OVERLOAD,
@@ -59,15 +39,14 @@ class DynamixelBusEmulator(PtyDevice):
 
     def __init__(self, ids, *, baudrate: int = 1_000_000, initial_shaft: dict[int, float] | None = None):
         super().__init__()
+        self.supply = Supply()  # one supply for the bus (`servo_health.py`): fault injection sags it
         self.servos: dict[int, EmulatedServo] = {}
         for i in ids:
             servo = EmulatedServo(i, shaft=(initial_shaft or {}).get(i, 2048.0))
             servo.set("Baud_Rate", BAUD_REGISTER[baudrate])
             servo.reboot()
-            self.servos[i] = servo
-        self.supply = Supply()  # one supply for the bus (`servo_health.py`): fault injection sags it
-        for servo in self.servos.values():
             servo.health.supply = self.supply
+            self.servos[i] = servo
         self.twins: dict[int, EmulatedServo] = {}  # a second servo set to the same ID (`add_twin`)
         self._buf = bytearray()
         self._pending_ids: list[EmulatedServo] = []
@@ -76,19 +55,14 @@ class DynamixelBusEmulator(PtyDevice):
         self.missing_ids: set[int] = set()
         self.drop_responses: dict[int, int] = {}  # id -> number of status packets to swallow (timeouts)
         self.corrupt_responses: dict[int, int] = {}  # id -> number of status packets sent with a bad CRC
-        # Seconds between the replies of a sync-read burst (real servos answer in turn, each after its
-        # Return_Delay_Time): long gaps leave the line empty for a while in the middle of a burst.
-        self.reply_gap_s = 0.0
-        # Every packet is answered this much later (a slow USB hub, a saturated adapter): the host loop slows down.
-        self.reply_delay_s = 0.0
+        self.reply_gap_s = 0.0  # between the replies of a sync-read burst: the line empty mid-burst
+        self.reply_delay_s = 0.0  # before every reply (a slow USB hub): the host loop slows down
         # Wrong values with a valid CRC and no error bit: id -> [ticks added to Present_Position, replies left].
         self.position_glitch: dict[int, list[int]] = {}
-        # Stray late status packets: (id, n data bytes) sent, with that servo's registers from Torque_Enable on,
-        # right before the replies to the next sync read (a reply of an earlier transaction arriving late).
+        # Late replies of an earlier transaction: (id, n data bytes from Torque_Enable on), sent before the next sync
+        # read's replies.
         self.stray_replies: list[tuple[int, int]] = []
-        # Observability for tests.
-        self.instruction_counts: dict[int, int] = {}
-        self.rx_crc_errors = 0
+        self.instruction_counts: dict[int, int] = {}  # for the tests
 
     # -- fault injection --
     def set_hardware_error(self, dxl_id: int, bits: int) -> None:
@@ -138,9 +112,7 @@ class DynamixelBusEmulator(PtyDevice):
     # -- pty loop --
     def _tick(self) -> None:
         now = time.monotonic()
-        dt, self._last = now - self._last, now
-        if dt <= 0:
-            dt = 0.0
+        dt, self._last = max(now - self._last, 0.0), now
         for servo in (*self.servos.values(), *self.twins.values()):
             servo.step(dt)
             servo.check_watchdog(now)
@@ -209,7 +181,6 @@ class DynamixelBusEmulator(PtyDevice):
     def _handle_packet(self, pkt: bytes) -> None:
         dxl_id, inst = pkt[4], pkt[7]
         if not crc_ok(pkt):
-            self.rx_crc_errors += 1
             servo = self._alive(dxl_id)
             if servo is not None:
                 self._status(servo, p2.ERRNUM_CRC)

@@ -41,13 +41,10 @@ class EmulatedServo:
     obstacle: tuple[float, int] | None = None
     last_instruction: float = 0.0  # monotonic time of the last instruction packet addressed to this servo
     watchdog_tripped_at: float | None = None  # when its bus watchdog last stopped it
-    # What moves the shaft: None is the first-order model below; the physics twin plugs in MuJoCo
-    # (`ShaftDynamics`). The registers, the protocol and the faults stay this emulator's either way.
-    dynamics: ShaftDynamics | None = None
-    # Temperature, input voltage and the firmware's shutdowns for them (`servo_health.py`); faults injected there.
-    health: ServoHealthModel = field(default_factory=ServoHealthModel)
-    # Drive faults: a stripped gear (the motor spins at its no-load current, the output shaft stays), a current
-    # reported with its sign flipped, and a Present_Position that stays at one value while the shaft moves.
+    dynamics: ShaftDynamics | None = None  # what moves the shaft: None, the first-order model below
+    health: ServoHealthModel = field(default_factory=ServoHealthModel)  # temperature, voltage, their shutdowns
+    # Drive faults: a stripped gear (the motor spins, the output shaft stays), a current reported with its sign
+    # flipped, and a Present_Position that stays at one value while the shaft moves.
     stripped: bool = False
     current_sign: int = 1
     frozen_position: int | None = None
@@ -149,9 +146,8 @@ class EmulatedServo:
         return new
 
     def reboot(self) -> None:
-        """Power-cycle semantics: RAM back to defaults (torque off, errors cleared), EEPROM kept. Startup Torque On
-        (Startup_Configuration bit 0, firmware v45+) brings the torque back on by itself, holding the present
-        position."""
+        """A power cycle: RAM back to defaults (torque off, errors cleared), EEPROM kept; Startup Torque On (v45+) turns
+        the torque back on by itself, holding the present position."""
         eeprom = bytes(self.regs[:EEPROM_END])
         self.regs = bytearray(TABLE_SIZE)
         for name, value in DEFAULTS.items():

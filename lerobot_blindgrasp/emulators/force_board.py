@@ -1,16 +1,7 @@
-"""The fingertip load-cell microcontroller, emulated on a pseudo-terminal.
-
-It streams the frame format of `lerobot_blindgrasp.hardware.force_board.frame_codec` at `rate_hz`, with raw
-counts = offset + gain x force / scale (+ noise), saturating at 24 bits, and can misbehave the ways a USB serial sensor does: dropped frames,
-garbage bytes between frames, frames with a bad CRC, a stalled stream, channel-fault status bits, a different
-channel count (firmware/config mismatch), an unplugged cable (`unplug`), and dead data that still arrives: the last
-frame re-sent, a counter running backwards, a channel frozen at one value, and a reset of the board (`reset`:
-silent while it boots, then a counter that starts again at 0).
-
-It follows the board's rule (`docs/force_board.md`): one frame per fresh sample, under the next SEQ, and nothing in
-between; STATUS bits mean faults only: a channel at the ADC's full scale sets its bit, as the firmware does, and
-`status` adds injected faults. 80 frames/s by default, the rate of the shipped HX711 board
-(`lerobot_blindgrasp/hardware/force_board/`, which itself runs in simavr for the tests that need the firmware).
+"""The fingertip force board, emulated on a pseudo-terminal: `frame_codec` frames at `rate_hz` (80, the shipped
+board's), one per fresh sample, with counts = offset + gain x force / scale + noise saturating at 24 bits (a
+saturated channel sets its STATUS bit, as the firmware does). Its faults, attributes below, are listed in
+docs/hardware.md, "Emulators and tests"; the firmware itself runs in simavr (`force_board_simavr.py`).
 """
 
 from __future__ import annotations
@@ -60,9 +51,8 @@ class ForceSensorEmulator(PtyDevice):
         self.garbage_prob = 0.0  # probability to emit 1-20 random bytes before a frame
         self.corrupt_next = 0  # send the next n frames with a wrong CRC
         self.status = 0  # channel fault bits
-        self.channels = (
-            3  # channels per frame: firmware built for another number of load cells sends more or fewer
-        )
+        # Channels per frame: firmware built for another number of load cells sends more or fewer.
+        self.channels = 3
         # Dead data that still arrives: re-send the last frame bit for bit, step SEQ by this (-1: backwards), hold
         # these channels' counts at their last value (a hung ADC whose last conversion the firmware keeps sending).
         self.resend_last = False
@@ -75,11 +65,9 @@ class ForceSensorEmulator(PtyDevice):
         self.sent = 0
 
     def reset(self, boot_s: float = 0.5, cause: int | None = 0x08, unsettled_frames: int = 0) -> None:
-        """The microcontroller resets (a brown-out, a USB glitch, a watchdog): nothing for `boot_s` (its bootloader
-        and HX711 settling), then frames again from SEQ 0, the first one a boot frame with the reset `cause` (MCUSR
-        bits; 0x08 watchdog) as the shipped firmware sends it (None: no boot frame, as older firmware). The first
-        `unsettled_frames` frames after the reset carry an unloaded cell's counts whatever the load: HX711s not yet settled, as a
-        firmware that does not wait for them would send."""
+        """The board resets: silent for `boot_s`, then frames from SEQ 0, the first a boot frame with the MCUSR `cause`
+        (None: no boot frame, as older firmware); the first `unsettled_frames` carry unloaded counts whatever the
+        load, as a firmware that does not wait for its HX711s to settle would send."""
         self.seq = 0
         self._next = time.monotonic() + boot_s
         self._boot_cause, self._unsettled = cause, unsettled_frames

@@ -1,12 +1,9 @@
 """The force board in simavr, as a device on a pseudo-terminal: `SimulatedForceBoard(...).port` is opened by the
 real reader exactly like the board's USB serial port.
 
-The firmware runs unchanged (its HEX image, the one a user flashes) on an emulated ATmega328P; three emulated HX711
-chips sit on its pins (`simavr/hx711_sim.c`). What the load cells feel is set in counts (`set_counts`) or newtons
-(`set_forces`, through a scale and an offset as a real cell and bridge give them); faults are `kill_cell` (a chip
-stops converting), `hold_dout_low` (a DOUT line shorted to GND), `hang_cell` (a chip locked up until power-cycled),
-`reset_board` and `revive_cell`; `defines` runs a test build of the firmware (one that breaks an HX711 timing, or
-hangs). The harness enforces the HX711's timing and reports violations in `log`. Built on first use into `build_dir` (a temporary folder by default).
+The firmware's HEX image runs unchanged on an emulated ATmega328P with three emulated HX711 chips on its pins
+(`simavr/hx711_sim.c`), which enforce the HX711's timing and report violations in `log`. `defines` runs a test build
+of the firmware; both are built on first use into `build_dir` (a temporary folder by default).
 """
 
 from __future__ import annotations
@@ -92,6 +89,7 @@ class SimulatedForceBoard:
         self.set_counts(self.counts_for(forces_n))
 
     def kill_cell(self, index: int) -> None:
+        """Cell `index`'s chip stops converting."""
         self._send(f"dead {index}")
 
     def hold_dout_low(self, index: int) -> None:
@@ -144,9 +142,8 @@ class SimConfig:
 
 
 def _newest_frame_ages_ms(reader, seconds: float) -> list[float]:
-    """The newest frame's age at reads spread over every phase of the board's period, for `seconds`: what a
-    control loop that reads at its own times sees (half a period on average when frames are handed on as they
-    arrive)."""
+    """The newest frame's age at reads spread over every phase of the board's period, for `seconds`: what a control
+    loop reading at its own times sees (half a period on average when frames are handed on as they arrive)."""
     ages, k, deadline = [], 0, time.monotonic() + seconds
     while time.monotonic() < deadline:
         time.sleep(0.003 + 0.0013 * (k % 7))
@@ -179,15 +176,12 @@ def main(argv: list[str] | None = None) -> None:
     force reader with its config's defaults. Exits 1 when the reader refuses the stream (e.g. `--sps=10`)."""
     from lerobot_blindgrasp.cli import parse_config
     from lerobot_blindgrasp.hardware.force_board.config_force_board import ForceSensorConfig
-    from lerobot_blindgrasp.hardware.force_board.reader import ForceSensorReader, ForceStreamError
+    from lerobot_blindgrasp.hardware.force_board.reader import ForceStreamError
 
     cfg = parse_config(SimConfig, argv)
     refused = None
     with SimulatedForceBoard(sps=cfg.sps, build_dir=cfg.build_dir) as board:
-        fs = ForceSensorConfig(port=board.port)
-        reader = ForceSensorReader(board.port, fs.baudrate, board.scale.tolist(), stale_timeout_s=fs.stale_timeout_s,
-                                   connect_timeout_s=fs.connect_timeout_s, frozen_frames=fs.frozen_frames,
-                                   min_rate_hz=fs.min_rate_hz)  # fmt: skip
+        reader = ForceSensorConfig(port=board.port).reader(board.scale.tolist())
         reader.connect()
         try:
             _report(reader, board, cfg)

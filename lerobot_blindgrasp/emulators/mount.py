@@ -1,9 +1,5 @@
-"""How an emulated gripper's servos sit on its fingers: shaft ticks at the sim's q = 0 and the sign of each servo.
-
-One layout for every emulated gripper (the tests' `GripperRig` and the physics twin). It is deliberately messy, as
-after assembly, so that `lerobot-calibrate` has to find Drive_Mode and Homing_Offset itself: no emulator ever tells
-the host its mounting.
-"""
+"""How every emulated gripper's servos sit on its fingers: shaft ticks at the sim's q = 0 and each servo's sign,
+deliberately messy, so that `lerobot-calibrate` has to find Drive_Mode and Homing_Offset itself."""
 
 from __future__ import annotations
 

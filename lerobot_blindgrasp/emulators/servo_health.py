@@ -1,16 +1,7 @@
-"""The XM430's health items, emulated: winding temperature, input voltage under load, and the firmware's reaction.
-
-What a real servo does that the tests need (XM430-W350 e-Manual, control table and "Shutdown(63)"):
-- Present_Temperature(146, 1 degC) heats with the current (I^2 R losses) and cools to ambient (first order);
-- Present_Input_Voltage(144, 0.1 V) is the supply minus the drop of its cable and supply under the current of every
-  servo on it (one shared supply: a stalled finger sags its neighbours too);
-- the firmware sets Hardware_Error_Status: overheating (0x04) at Temperature_Limit(31), input voltage (0x01) outside
-  Min/Max_Voltage_Limit(34/32), overload (0x20) after `overload_s` at the current limit, and turns the torque off for
-  the bits that are in Shutdown(63) (factory 0x34: overheating, electrical shock, overload; not the voltage).
-
-Fault injection: `Supply.open_v` / `Supply.r_ohm` (a weak or sagging supply, a thin cable), a servo's
-`extra_heating_c_per_s` (a blocked fan, a bad winding) or `temperature_c` (a servo already hot at connect).
-Kept apart from the shaft dynamics: `EmulatedServo.step` calls `ServoHealthModel.step` after it has set the current.
+"""The XM430's health items, emulated (e-Manual, control table and "Shutdown(63)"): the temperature heats with the
+current (I^2 R) and cools to ambient (first order); the input voltage sags under every servo's current on the one
+shared `Supply`; the firmware sets its overheating, input-voltage and overload bits and turns the torque off for
+those in Shutdown. Faults: `Supply.open_v` / `r_ohm`, a servo's `extra_heating_c_per_s` or `temperature_c`.
 """
 
 from __future__ import annotations
@@ -18,8 +9,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-CURRENT_UNIT_A = 0.00269
-HW_INPUT_VOLTAGE, HW_OVERHEATING, HW_OVERLOAD = 0x01, 0x04, 0x20
+from lerobot_blindgrasp.emulators.control_table import HW_INPUT_VOLTAGE, HW_OVERHEATING, HW_OVERLOAD
+from lerobot_blindgrasp.hardware.xm430 import CURRENT_UNIT_A
 
 
 @dataclass

@@ -1,10 +1,4 @@
-"""The hardware, one home per device: what the simulation and the real gripper share about it, and how the host
-talks to it. The XM430 servo's facts (`xm430`) and the Dynamixel bus (`dynamixel/`: retries, latency timer); the
-fingertip load cell's signal chain (`force`) and the force board (`force_board/`: firmware, frames, reader,
-calibration); what every serial device shares (`ports`: one owner per port; `streams`: the newest frame of a
-streaming device, kept by a thread); and what the host process needs to keep a control loop's time (`realtime`: a
-real-time priority, locked memory, no GC in a trial; `loop_timing`: the loop's period and its samples' spacing).
-What the gripper checks its readings with is here too, each given what it needs: `plausibility` (every position
-reading), `servo_registers` (setup, protection, state), `servo_diagnostics` (health), `consistency` (inputs that see
-the same physics), and `period_checks`, which runs the servo checks each control period. `sim/` models these and
-`robots/` drives them; nothing here imports MuJoCo."""
+"""The hardware, one home per device, shared by the sim and the real gripper: the XM430 (`xm430`) and its bus
+(`dynamixel/`), the load cell (`force`) and the force board (`force_board/`), what serial devices share (`ports`,
+`streams`), the host's timing (`realtime`, `loop_timing`), and the checks of the readings (`plausibility`,
+`servo_registers`, `servo_diagnostics`, `consistency`, `period_checks`). Nothing here imports MuJoCo."""

@@ -1,30 +1,19 @@
-"""Analytic redundancy: inputs that see the same physics must agree, checked against a model.
-
-Each input is already checked on its own (range, rate, sequence, CRC, liveness). These checks compare a fingertip's
-force with its finger's servos, and each servo's motion with its command, at the rate the servos' currents are read
-(the health block, every `health_every_n` periods). Levels as ROS 2 diagnostics aggregate them: a disagreement that
-physics forbids is an ERROR (`ConsistencyError`: the latch stops the gripper, torque off); one that physics allows
+"""Analytic redundancy: inputs that see the same physics must agree, checked at every current read (the health
+block). A disagreement physics forbids is an ERROR (`ConsistencyError`: the latch stops the gripper); one it allows
 but that usually means a failing input is a WARN, logged when it starts and when it ends.
 
-- **Force without effort** (ERROR). A tip load has to be held by the finger: the contact force f at a point P of the
-  tip makes a moment about the parallel axes of J11 (A) and J12 (B). The cell reads f's projection F on the distal
-  axis u, so |f| >= F / |cos(f, u)|, whatever the unmeasured friction. Over every direction of f and every point P
-  of the tip capsule, at least one of the two joints carries F * h(q12) (`lever_m`; h is 0 only for a straight
-  finger loaded along its axis: a strut). The servo's torque is its current on the stall line (4.1 N m / 2.3 A);
-  what a stopped gear train holds by friction is allowed on top (the torque of its no-load current). A tip reading F
-  while both joints show less than F * h minus that allowance, at `PERSIST` current reads in a row (a shorter
-  impact is carried by the rotor's inertia), is a load cell reading a force that is not there.
-- **Effort without force** (WARN). A finger pressing (a joint at >= half its current limit, pushing toward its
-  goal) while its tip reads nothing. Physics allows it (the distal servo's body or the proximal link touches), so it
-  only warns: mostly it is a dead or unplugged load cell.
-- **Command without motion** (ERROR). A torqued joint far from its goal (`STUCK_ERROR_RAD`) that neither moves toward
-  it nor draws the current its position loop asks for (half of the softest kp the twin draws, x 0.3), at `PERSIST`
-  reads in a row: the servo is not driving its joint (a stripped gear, a failed motor, a current reading of the wrong
-  sign). The XM430's encoder sits on the output shaft, so a horn slipping on it shows as the force checks, not here.
+- **Force without effort** (ERROR). The cell reads the projection F of the tip force f on the distal axis, and over
+  every direction of f in the friction cone and every point of the tip capsule, J11 or J12 carries at least
+  F * h(q12) (`lever_m`). A tip reading F while both joints' currents (on the stall line, plus what a stopped gear
+  train holds by friction) hold less, at `PERSIST` reads in a row (a shorter impact is carried by the rotor's
+  inertia), is a load cell reading a force that is not there.
+- **Effort without force** (WARN). A finger pressing toward its goal at >= half its current limit while its tip reads
+  nothing: physics allows it (the link touches), but mostly it is a dead or unplugged load cell.
+- **Command without motion** (ERROR). A torqued joint far from its goal that neither moves toward it nor draws the
+  current its position loop asks for (the softest kp the twin draws), at `PERSIST` + 1 reads in a row: a stripped
+  gear, a failed motor, a current of the wrong sign.
 
-Margins: `worst` keeps, per check, the largest value of (measured / tolerance) seen while it did not fire (for the
-force check the needed over the held torque at one read; for the motion check the reads in a row over the reads it
-takes); `report()` puts them into one log line at every stop (the twin's record reads them).
+`worst` keeps each check's largest measured / tolerance while it did not fire; `report()` logs them at every stop.
 """
 
 from __future__ import annotations
@@ -40,14 +29,13 @@ from lerobot_blindgrasp.hardware import xm430
 
 logger = logging.getLogger(__name__)
 
-# Finger geometry of the sim model (ROBEL chain3xh; `sim/gripper.py`, tests/robots/test_hw_faults_consistency.py keeps them equal):
+# Finger geometry of the sim model (ROBEL chain3xh; `sim/gripper.py`, tests/robots/test_hazards_consistency.py keeps them equal):
 LINK_J11_J12 = 0.068  # m
 TIP_CAPSULE_START = 0.033  # m below J12, along the distal axis
 TIP_CAPSULE_RADIUS = 0.011
 TIP_CAPSULE_END = 0.084 - TIP_CAPSULE_RADIUS
-TIP_FRICTION = (
-    1.0  # the elastic tips' friction coefficient in the sim model: the friction cone's half-angle 45 deg
-)
+# The elastic tips' friction coefficient in the sim model: the friction cone's half-angle 45 deg.
+TIP_FRICTION = 1.0
 
 KT_NM_PER_A = xm430.STALL_TORQUE_NM / xm430.STALL_CURRENT_A  # the stall line, through the origin
 NO_LOAD_CURRENT_A = 0.12  # XM430-W350 at 12 V (e-Manual, Specifications): what the gear train's friction costs

@@ -1,26 +1,12 @@
 """The uniaxial fingertip force reading: one pipeline for the sim and the real load cells (no MuJoCo here).
 
-    reading = deadband(true force + sensor noise)          |reading| < 0.1 N reads exactly 0
+    signal  = clip(gain x true force + bias + noise, -range, +range)      the cell and its ADC (`load_cell`)
+    reading = deadband(signal)                                             the host: |reading| < 0.1 N reads 0
 
-Order: noise first, then the deadband. This is what the real hardware implies, and the paper says the same:
-- On the gripper, the noise is part of the measurement. The load cell and its ADC deliver counts in which the true
-  force and the electrical noise (and drift) are already summed. The host can only tare, scale and threshold that
-  sum (`counts_to_newtons`, then `reading`). A noise term that comes after the host's deadband has no physical
-  counterpart.
-- The paper (Sec. III-B) computes each uniaxial force by "thresholding small magnitudes to suppress noise". A
-  threshold that suppresses noise must see the noise.
-The sim therefore draws its Gaussian noise (sigma = `spec.FORCE_NOISE_STD_N`, Table II) as the sensor's noise and
-passes true force + noise through the same `reading` as the real counts. A free fingertip then reads exactly 0
-whenever |noise| < 0.1 N, just as the real sensor's noise is cut to 0 in free air. Before this change the sim added
-the noise after the deadband, so a free fingertip read N(0, 0.5 N) and never 0.
-
-The noise-free reading (`reading(true_force)`, no noise argument) is what the rewards and demo curation see.
-
-A real load cell also has a scale error, a tare error (bias) and a range. `load_cell` models them in the order the
-hardware applies them, for the sim's robustness factors:
-
-    signal  = clip(gain x true force + bias + noise, -range, +range)      the cell and its ADC
-    reading = deadband(signal)                                             the host
+Noise comes before the deadband because on the gripper it is part of the measured counts, which the host can only
+tare, scale and threshold; the paper (Sec. III-B) thresholds small magnitudes "to suppress noise", which the
+threshold must see. The sim's Gaussian noise (`spec.FORCE_NOISE_STD_N`, Table II) therefore goes through the same
+`reading`; the noise-free `reading(true_force)` is what the rewards and demo curation see.
 """
 
 from __future__ import annotations
@@ -32,11 +18,8 @@ from lerobot_blindgrasp import spec
 
 DEADBAND_N = spec.FORCE_THRESHOLD_N
 
-# Force bias (N, on any one load cell at rest) that the shipped student (models/student_cpu) is measured to
-# tolerate, with margin: in its robustness sweep (`python -m lab.robustness.sweep`, 180 episodes a point) a bias on every
-# cell (random signs) of 1 / 3 / 5 N gives it 96 / 95 / 96 %, against 96 % without; an earlier student lost 5 points
-# at 3 N on a 90-episode sweep, so the warning stays at 1 N. A reading beyond it at connect means the sensors need a
-# new tare before a policy runs.
+# Force bias (N, on any one load cell at rest) the shipped student tolerates with margin (`python -m
+# lab.robustness.sweep`; an earlier student lost success at 3 N): beyond it at connect, the sensors need a new tare.
 FORCE_BIAS_TOLERANCE_N = 1.0
 
 
@@ -56,11 +39,8 @@ def deadband(force, threshold: float = DEADBAND_N):
 
 
 def reading(true_force, noise=0.0, threshold: float = DEADBAND_N):
-    """What a uniaxial fingertip sensor reports for `true_force` (N), given the sensor's noise sample (N): one
-    function for the robot (numpy) and the sim (torch over the env axis).
-
-    Sim: `true_force` is the contact force projected on the tip's z axis, `noise` the drawn Gaussian sample.
-    Real: the noise is already inside the measured newtons (`counts_to_newtons`), so `noise` stays 0."""
+    """What a uniaxial fingertip sensor reports for `true_force` (N) and its noise sample (N), numpy (the robot) or
+    torch (the sim). On the robot the noise is already inside the measured newtons, so `noise` stays 0."""
     return deadband(_array(true_force) + noise, threshold)
 
 

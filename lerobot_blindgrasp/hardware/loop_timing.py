@@ -1,21 +1,13 @@
 """Keeping time in the host's control loop.
 
-`PeriodMonitor` measures the period of whatever loop calls it once per step: the robot ticks it in every
-`get_observation`, so lerobot-record, lerobot-rollout and the real eval env are all measured, whoever's loop it is.
-A period over `(1 + tolerance)` times the nominal one is an overrun. Overruns back to back are a streak, named as it
-happens: one warning when it starts and one when it ends (its length in periods and seconds, its worst period), so a
-second stall after a first is heard too. A streak of `max_overrun_s` and at least `min_overruns` periods stops
-(`LoopOverrunError`): the data no longer come at the rate the policy and the dataset assume, and the policy's hold
-(the success rule's 1 s) would be judged at another rate; the count keeps a few deliberately slow steps (a script
-that waits between calls) from stopping. A gap of `pause_s` or more is a pause of the loop (a dataset save, an
-operator prompt), not an overrun: it ends a streak.
+`PeriodMonitor` measures whatever loop ticks it once per step (the robot does in every `get_observation`). A period
+over `(1 + tolerance)` times the nominal one is an overrun; overruns back to back are a streak, logged when it starts
+and when it ends. A streak of `max_overrun_s` and at least `min_overruns` periods stops (`LoopOverrunError`): the data
+no longer come at the rate the policy and the dataset assume (the count spares a script that waits between calls).
+A gap of `pause_s` or more is a pause (a dataset save, an operator prompt), not an overrun.
 
-`SampleSpacing` keeps any loop's samples at least 0.9 period apart: the robot holds a read back when the previous
-one ended too recently (after a slow read), so no loop takes two samples a few ms apart for two periods.
-
-`StepPacer` paces a loop we own (the real eval env's trial). It sleeps to the next tick; when a step comes late it
-re-bases the schedule on now, so after a stall the loop goes on at its period instead of firing the missed ticks
-back to back, and it spaces its reads as `SampleSpacing` does.
+`SampleSpacing` keeps any loop's samples at least 0.9 period apart; `StepPacer` paces a loop we own (the real eval
+env's trial), re-basing on now after a late step instead of firing the missed ticks back to back.
 """
 
 from __future__ import annotations
@@ -52,7 +44,6 @@ class PeriodMonitor:
     what: str = "control loop"
     periods: int = 0
     overruns: int = 0
-    worst_s: float = 0.0
     recent: deque = field(default_factory=lambda: deque(maxlen=200))  # the last periods measured (s)
     streaks: deque = field(default_factory=lambda: deque(maxlen=100))  # the last streaks that ended
     streak: Streak | None = None  # the streak under way
@@ -88,7 +79,6 @@ class PeriodMonitor:
             self._end_streak(f"a {period * 1e3:.0f} ms period")
             return period
         self.overruns += 1
-        self.worst_s = max(self.worst_s, period)
         if self.streak is None:
             self.streak = Streak(start=now)
             logger.warning("%s: slow streak started: a %.0f ms period (nominal %.0f ms; %d overruns in %d periods "
@@ -111,16 +101,11 @@ class PeriodMonitor:
 class SampleSpacing:
     """No two samples closer than `min_gap_s` (0.9 of a period), whoever's loop it is and however long its reads.
 
-    LeRobot's loops (lerobot-record, lerobot-rollout) sleep `period - (time since the loop's start)`: after an
-    observation that took long to read (a slow bus, a loaded host: 30 ms or 49 ms alike), the loop goes straight
-    on, and the next observation's data would be read a few ms after the slow one's, which the policy and the
-    dataset take for one whole period. So before every read the robot waits until the read will end no earlier
-    than `min_gap_s` after the previous one ended. It cannot know how long the read will take: it takes the
-    shortest of the recent reads (none until it has seen `MIN_READS` since the loop (re)started).
-    A steadily loaded loop does not wait: its samples come one caller period apart, and a read that takes up to the
-    slack (5 ms at 20 Hz: a health read, bus jitter) longer than the shortest recent one leaves the next gap
-    inside the contract. After a wait the caller's next start comes that much later and its own sleep shrinks by as
-    much, so the waits die out and the caller's pacing takes over again."""
+    LeRobot's loops sleep `period - (time since the loop's start)`, so after a slow read the next sample would come a
+    few ms later, which the policy and the dataset take for a whole period. So each read waits until it will end no
+    earlier than `min_gap_s` after the previous one ended, taking the shortest of the recent reads (after
+    `MIN_READS`) as its duration. A steadily loaded loop never waits, and after a wait the caller's own sleep
+    shrinks by as much, so the waits die out."""
 
     MIN_READS = 4
 
@@ -128,8 +113,7 @@ class SampleSpacing:
         self.period_s = period_s
         self._clock, self._sleep = clock, sleep  # injectable, so the rule can be checked on an emulated clock
         self.min_gap_s = period_s * (1.0 - slack)
-        self.waits = 0  # reads that were held back, and for how long in all (for tests and logs)
-        self.waited_s = 0.0
+        self.waits = 0  # reads that were held back
         self._last_end: float | None = None
         self._reads: deque = deque(maxlen=20)  # recent read durations (s)
 
@@ -150,7 +134,6 @@ class SampleSpacing:
         if delay <= 0:
             return 0.0
         self.waits += 1
-        self.waited_s += delay
         self._sleep(delay)
         return delay
 
@@ -160,10 +143,8 @@ class SampleSpacing:
 
 
 class StepPacer:
-    """Paces a loop we own (the eval trial): one step per period, its read spaced from the last by
-    `SampleSpacing`. A step that comes late re-bases the schedule on now (never a burst of catch-up steps); a read
-    held back by the spacing re-bases it on the held read, so after a slow read the loop is back at its period at
-    once instead of over several steps."""
+    """One step per period, its read spaced by `SampleSpacing`; a late step, or a read the spacing held back,
+    re-bases the schedule on now (never a burst of catch-up steps)."""
 
     def __init__(self, period_s: float, slack: float = 0.1):
         self.period_s = period_s

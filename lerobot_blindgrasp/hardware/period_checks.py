@@ -1,15 +1,7 @@
-"""What every control period checks of the servos and the fingertips, whoever calls (get_observation, or send_action
-alone as in a replay script), within the bus budget:
-
-- the servos' state block, every period (`servo_registers.ServoRegisters.check_state`); joints the bus watchdog
-  stopped during a pause of the host hold the pose they stopped in and are re-armed;
-- the health block every `every_n` periods, judged by `servo_diagnostics.py`; at a start (connect, a trial, a recording
-  episode, a loop resuming after a pause: the caller says when) at once, at the start levels;
-- after a period's readings, when its health read brought currents: the force and motion checks of
-  `consistency.py`.
-
-Each failure raises the checking module's own error; the gripper's safety latch turns it into a named stop.
-"""
+"""What every control period checks, whoever calls (get_observation, or send_action alone): the servos' state block
+every period (a joint the bus watchdog stopped is re-armed holding its pose), the health block every `every_n`
+periods and at once at a start, and the consistency checks after a period whose health read brought currents.
+Each failure raises the checking module's own error; the gripper's safety latch turns it into a named stop."""
 
 from __future__ import annotations
 

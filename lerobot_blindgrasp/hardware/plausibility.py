@@ -1,20 +1,12 @@
 """The one gate every servo position reading passes before anything uses it.
 
-A reading can be wrong and still arrive with a valid CRC and no error bit: a stray status packet of another
-transaction, a glitching encoder, a bit flipped before the servo computed its CRC. So a reading is trusted only if
-it is physically possible:
-- inside the encoder's range: a calibrated single-turn reading is 0..4095 ticks (q in [-pi, pi));
-- reachable from the trusted estimate: no servo moves faster than its no-load speed, so between the trusted reading
-  at time t0 and a new one at t1 every joint moved at most `speed * (t1 - t0) + margin`;
-- with the torque on, between the estimate and the goal: a position-controlled servo moves toward its goal, or is
-  pushed back from it by a load no further than its P loop yields at the torque limit (`backdrive_ticks`: a grasp
-  squeezed by another finger does push a finger open; the physics twin showed it), so a reading beyond both, by
-  more than the margin and that compliance, is not motion;
-- or, when there is no trusted estimate yet (just connected, torque off so a hand may move the fingers), confirmed
-  by an immediate second reading that agrees with it within the same bound.
-Anything else is read again (`rereads` times); a reading that never passes is `ImplausibleReadingError` and the robot
-stops with the torque off. A rejected reading never becomes the estimate, and the estimate is what the robot
-centres its per-step bound on, so no goal is ever computed from an implausible reading.
+A reading can be wrong and still arrive with a valid CRC (a stray reply of another transaction, a glitching
+encoder), so it is trusted only if physically possible: inside the encoder's range (0..4095 ticks); within
+`speed * dt + margin` of the trusted estimate (no servo outruns its no-load speed); with the torque on, between the
+estimate and the goal, give or take the margin and what a load can push a torqued servo back (`backdrive_ticks`);
+or, with no estimate yet or the torque off, confirmed by a second reading within the same bound. Anything else is
+read again (`rereads` times), then `ImplausibleReadingError`. A rejected reading never becomes the estimate, which
+is what the robot centres its per-step bound on.
 """
 
 from __future__ import annotations

@@ -1,10 +1,6 @@
-"""One owner per gripper: its serial ports are opened for exclusive use, as serial terminals do.
-
-pyserial's `exclusive=True` takes an advisory `flock(LOCK_EX | LOCK_NB)` on the device the moment it is opened,
-before any byte is written or any termios setting changes. A second process (or a second robot object in this one)
-that opens the same bus or force-sensor port is refused right there: it cannot ping the servos, let alone turn the
-first owner's torque off. The lock goes with the file descriptor, so a crashed owner never leaves a stale lock.
-"""
+"""One owner per gripper: its serial ports are opened with pyserial's `exclusive=True`, an advisory flock taken before
+any byte is written, so a second owner is refused before it can touch the servos. The lock goes with the file
+descriptor: a crashed owner leaves no stale lock."""
 
 from __future__ import annotations
 

@@ -1,18 +1,7 @@
-"""A host process that keeps a control loop's time on a PC doing other work: a real-time scheduling priority for the
-control thread, memory that does not page, and Python's garbage collector kept out of a trial.
-
-Each setter says what it got and, when the kernel refuses, why and how to allow it; none raises, because the loop's
-own overrun check (`loop_timing.py`) still stops a loop that cannot keep its period.
-
-- `set_realtime_priority`: SCHED_FIFO for the calling thread (Linux: threads it starts afterwards inherit it, so call
-  it before the force reader's thread and torch's worker threads start). The kernel's RT throttling
-  (`/proc/sys/kernel/sched_rt_runtime_us`, 95 % by default) still leaves other processes a share of each core.
-  Allowed to root, to a process with CAP_SYS_NICE, or up to the user's RLIMIT_RTPRIO (`ulimit -r`).
-- `lock_memory`: mlockall(MCL_CURRENT | MCL_FUTURE) through libc (Python's os module has no mlockall). A page the
-  loop needs is then never written out and read back from disk in the middle of a period. Allowed with CAP_IPC_LOCK
-  or within RLIMIT_MEMLOCK (`ulimit -l`), which a torch process far exceeds at the usual 8 MiB default.
-- `GcPause`: what exists at a trial's start is frozen out of the collector's reach, the collector is off during the
-  trial, and the young objects are collected once at its end.
+"""A control loop's time on a PC doing other work: SCHED_FIFO for the control thread (`set_realtime_priority`;
+threads started afterwards inherit it), memory that does not page (`lock_memory`: mlockall through libc, which
+Python's os module lacks), and no garbage collection inside a trial (`GcPause`). The setters never raise: a refusal
+is a warning saying how to allow it, and the loop's own overrun check (`loop_timing.py`) still stops a slow loop.
 """
 
 from __future__ import annotations
@@ -92,15 +81,9 @@ def prepare_host(config) -> dict[str, str]:
 
 
 class GcPause:
-    """Python's cyclic garbage collector kept out of a stretch of time-critical work (a trial).
-
-    A full collection in a host with LeRobot, torch and a policy loaded walks some 400 000 objects: hundreds of ms,
-    in the middle of a period whenever the collector's thresholds say so, with the GIL held (so the force reader's
-    thread waits too, and no packet keeps the servos' bus watchdog fed). So `pause` first freezes what exists
-    (gc.freeze: the loaded modules, the policy and the robot, which live as long as the process, are never scanned
-    again) and turns automatic collection off; `resume` turns it back on and collects the young generations only:
-    the cycles made since the pause, a fraction of a ms, never a full pass. Reference counting still frees almost
-    everything a period allocates; only cycles wait for the end of the trial."""
+    """Python's cyclic garbage collector kept out of a trial: a full collection with torch and a policy loaded takes
+    hundreds of ms with the GIL held (the force reader and the bus watchdog's feed wait too). `pause` freezes what
+    exists (gc.freeze) and turns collection off; `resume` turns it on and collects the young generations only."""
 
     def __init__(self):
         self.paused = False

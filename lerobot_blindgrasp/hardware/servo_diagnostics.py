@@ -1,18 +1,12 @@
 """Servo health as ROS 2 diagnostics report it: OK / WARN / ERROR per joint and item, before the firmware acts.
 
-The XM430 firmware protects itself late: it drops the torque (and the object) at Temperature_Limit, after an
-overload held for an unpublished time, and it never drops it for a sagging supply (Shutdown 0x34 leaves the voltage
-bit out) until the MCU browns out. The host reads the health items (Present_Temperature, Present_Input_Voltage,
-Present_Current against the current limit) and acts first: WARN, refuse a start, or ERROR (a named stop with the
-torque off). The levels are constants of `hardware/xm430.py`, the one place they are stated; `levels_table()`
-renders them as docs/hardware.md shows them (tests/robots/test_hw_hazard_table.py keeps the two equal). Temperatures are relative to each servo's own Temperature_Limit(31),
-read at connect with the rest of its EEPROM limits.
+The XM430 firmware protects itself late: it drops the torque (and the object) at Temperature_Limit or after an
+overload, and never for a sagging supply. The host reads temperature, input voltage and current and acts first:
+WARN, refuse a start, or ERROR (a named stop, torque off). The levels are `xm430.py`'s constants; `levels_table()`
+renders them for docs/hardware.md. Temperatures are relative to each servo's own Temperature_Limit(31).
 
-Bus budget at 1 Mbps (10 bits per byte): the health block Present_Current(126)..Present_Temperature(146) is 21
-bytes, one sync read = a 23-byte instruction + 9 replies of 11 + 21 bytes = 311 bytes = 3.1 ms of wire time, plus
-one USB round trip. The per-period traffic is already ~7 ms (state block 4.8 ms, positions 1.6 ms, goals 0.6 ms), so
-the health read runs every `health_every_n` periods (4: 5 Hz, +0.8 ms per period on average): temperature moves in
-seconds, a stall is judged over seconds, and a sag over half a second.
+The health block is one 3.1 ms sync read at 1 Mbps on top of ~7 ms per period, so it runs every `health_every_n`
+periods: temperature moves in seconds, a stall is judged over seconds, a sag over half a second.
 """
 
 from __future__ import annotations
@@ -86,15 +80,13 @@ class ServoHealth:
         text = f"{t:.0f} degC (Temperature_Limit {limit:.0f}, stop at {stop:.0f})"
         if t >= stop:
             return Diagnostic(ERROR, j, "temperature", t, f"{text}: too hot")
+        if t < limit - xm430.TEMPERATURE_WARN_MARGIN_C:
+            return Diagnostic(OK, j, "temperature", t, text)
         slope = _slope(hist)
-        if t >= limit - xm430.TEMPERATURE_WARN_MARGIN_C and slope > 0:
-            eta = (limit - t) / slope
-            if eta < xm430.TEMPERATURE_TREND_HORIZON_S:
-                return Diagnostic(ERROR, j, "temperature", t, f"{text}: rising {slope * 60:.0f} degC/min, at the "
-                                  f"limit in {eta:.0f} s (over-temperature trend)")  # fmt: skip
-        if t >= limit - xm430.TEMPERATURE_WARN_MARGIN_C:
-            return Diagnostic(WARN, j, "temperature", t, f"{text}: nearing the limit")
-        return Diagnostic(OK, j, "temperature", t, text)
+        if slope > 0 and (eta := (limit - t) / slope) < xm430.TEMPERATURE_TREND_HORIZON_S:
+            return Diagnostic(ERROR, j, "temperature", t, f"{text}: rising {slope * 60:.0f} degC/min, at the "
+                              f"limit in {eta:.0f} s (over-temperature trend)")  # fmt: skip
+        return Diagnostic(WARN, j, "temperature", t, f"{text}: nearing the limit")
 
     def _voltage(self, j: str, v: float, now: float) -> Diagnostic:
         text = f"{v:.1f} V (rated {xm430.RATED_VOLTAGE_V[0]:.1f}-{xm430.RATED_VOLTAGE_V[1]:.1f} V)"

@@ -1,26 +1,15 @@
-"""What the servos' control tables must hold, besides positions and health: read at connect, restored at configure,
-checked every control period.
+"""What the servos' control tables must hold, besides positions and health.
 
-- At connect, before anything is written (`ServoRegisters.check_setup`): Firmware_Version(6) (Drive_Mode and
-  Bus_Watchdog need v38), the EEPROM limits Temperature_Limit(31)..Shutdown(63) (handed to the health judge,
-  `servo_diagnostics.py`), Startup_Configuration(60) (v45+: a servo set to turn its torque on at power-up is set back at
-  configure, so a reset still shows as a dropped torque).
-- At configure, torque off (`ServoRegisters.restore`): Startup Torque On cleared, and the registers that protect a
-  servo when no host watches it (`xm430.NO_HOST_PROTECTION` and Current_Limit) restored and read back: one that does
-  not keep its value refuses the connect (`ProtectionNotKeptError`), naming it.
-- Every control period (`ServoRegisters.check_state`): one sync read of the contiguous block
-  Torque_Enable(64) .. Goal_Current(102-103) covers, on all nine servos at once:
-  - Torque_Enable: a reset or anyone else's torque-off reads 0 (a brown-out or reset of one servo turns its torque
-    off and restores its RAM defaults without raising any error bit, so the loop would go on with a limp finger);
-  - Hardware_Error_Status: the firmware's own fault bits, confirmed by a second, unicast read;
-  - Position P/I/D gains, Bus_Watchdog and Goal_Current (the torque limit in current-based position mode): RAM
-    registers that a reset puts back to factory values;
-  - Bus_Watchdog also reads 255 (-1) once the servo's watchdog has stopped it after a pause in the bus traffic: those
-    joints are returned, for the caller to hold their pose and re-arm them (`rearm_watchdog`).
-  The EEPROM limits (Operating_Mode, Current_Limit, Min/Max_Position_Limit, Drive_Mode, Homing_Offset) need no
-  per-period read: the firmware refuses EEPROM writes while the torque is on, and the torque is checked here.
-
-The bus is LeRobot's `DynamixelMotorsBus` with raw block reads (`read_block`, `read_despite_alert`).
+- At connect, before any write (`check_setup`): Firmware_Version (Drive_Mode and Bus_Watchdog need v38), the EEPROM
+  limits for the health judge, and Startup_Configuration (a servo that turns its torque on at power-up would hide a
+  reset).
+- At configure, torque off (`restore`): Startup Torque On cleared, and the no-host protection registers restored and
+  read back (`ProtectionNotKeptError` names one that does not keep its value).
+- Every period (`check_state`): one sync read of Torque_Enable(64)..Goal_Current(102), all nine servos. A reset drops
+  the torque and restores RAM defaults without an error bit, so Torque_Enable, the gains, Bus_Watchdog and
+  Goal_Current must still read what configure set; Hardware_Error_Status is confirmed by a unicast read; a
+  Bus_Watchdog of 255 names the joints the watchdog stopped, for the caller to re-arm (`rearm_watchdog`). EEPROM
+  needs no per-period read: the firmware refuses EEPROM writes while the torque is on.
 """
 
 from __future__ import annotations
@@ -175,8 +164,7 @@ class ServoRegisters:
 
     def torque_on_holding(self, present: dict[str, int], watchdog_units: int) -> None:
         """Torque on with Goal_Position = `present` (trusted ticks), so nothing moves. A watchdog error outlives the
-        torque-off (the register keeps reading -1) and makes the goal registers read-only: cleared first, armed once
-        the torque is on (it only watches while the torque is on)."""
+        torque-off and makes the goals read-only: cleared first, armed once the torque is on."""
         for j in self.joints:
             self.bus.write("Bus_Watchdog", j, 0)
             self.bus.write("Goal_Position", j, present[j])
@@ -217,9 +205,8 @@ class ServoRegisters:
         return bool(value)
 
     def rearm_watchdog(self, joints: list[str], present: dict[str, int]) -> None:
-        """The servos' bus watchdog stopped `joints` because this process sent nothing for its period (a slow save
-        between episodes, an operator prompt). The host is evidently alive again: clear the error (goal registers
-        are read-only until then), hold the pose the servos stopped in (`present`, trusted ticks), arm it again."""
+        """The bus watchdog stopped `joints` during a pause of this process, which is evidently alive again: clear the
+        error (the goals are read-only until then), hold the pose they stopped in (`present`, ticks), re-arm."""
         units = self.expected["Bus_Watchdog"]
         logger.warning("Bus watchdog stopped %s after more than %d ms without bus traffic; re-arming it.",
                        joints, units * xm430.WATCHDOG_UNIT_MS)  # fmt: skip

@@ -1,31 +1,11 @@
-"""One "latest frame" stream for the devices that push data at their own rate: the fingertip force sensors (serial)
-and the glove bridge (UDP).
+"""One "latest frame" stream for the devices that push data at their own rate (the force board, the glove bridge).
 
-A background thread receives and decodes frames and keeps only the newest valid one, with its arrival time on
-this host's monotonic clock. The control loop never blocks on the device. It asks for the newest frame and its age,
-and treats a frame older than `stale_timeout_s` as a fault. A device that fails (unplugged USB cable, closed
-socket) ends the thread. The failure is then raised at the next read, so it is not discarded.
-
-Liveness is judged by content, not only by arrival: a device can keep sending while its data died.
-- Counter: each subclass's `_keep` drops a frame whose counter repeats or runs backwards (`counter_faults`), so a
-  firmware that re-sends its last frame, or replays old ones, ages like a silent one and goes stale.
-- Frozen values: `_content` names the values that carry sensor noise (one tuple entry per channel). A channel
-  that stays identical bit for bit for `frozen_frames` frames in a row is beyond what the noise allows: from then
-  on the frames no longer count as fresh, so the stream goes stale by age with the reason in the message. 0 turns
-  the check off for devices whose values may legitimately repeat.
-
-Stale and slow are told apart. Stale: no fresh frame for `stale_timeout_s` (silence, or only re-sent, replayed or
-frozen frames). Slow: fresh frames keep coming, but fewer per second than `min_rate_hz` (0: not checked), e.g. a
-force board whose ADCs convert at 10/s instead of 80/s; the control loop would then see the same sample for
-several periods without any frame being old enough to be stale. The rate is the newest `RATE_WINDOW` intervals over
-the time they span, each frame stamped when `_receive` hands it on (so `_receive` must hand each frame on as soon as
-it is complete, not in timed batches). A host or USB stall does not read as a slow device: the device's frames wait
-in the OS buffer and arrive in one burst after it, so the window holds as many frames over as much time as without
-the stall. A slow device has fewer frames over the same time.
-
-Subclasses say how to open, receive and close (`_open`, `_receive`, `_close`), and may filter frames (`_keep`).
-Hand-written because neither LeRobot nor pyserial offers this; LeRobot's cameras do the same inside
-`OpenCVCamera.async_read`, which is specific to frames from OpenCV.
+A background thread keeps the newest valid frame and its arrival time, so the control loop never blocks on the
+device; a device failure ends the thread and is raised at the next read. A subclass's `_keep` drops re-sent or
+replayed frames (`counter_faults`), and a `_content` channel identical for `frozen_frames` frames stops counting as
+fresh. Stale: no fresh frame for `stale_timeout_s`. Slow: fewer fresh frames per second than `min_rate_hz` over the
+newest `RATE_WINDOW` intervals (a host stall is not slow: the frames arrive in a burst after it). Hand-written:
+neither LeRobot nor pyserial offers this.
 """
 
 from __future__ import annotations
@@ -34,11 +14,8 @@ import logging
 import threading
 import time
 from collections import deque
-from typing import TypeVar
 
 logger = logging.getLogger(__name__)
-
-F = TypeVar("F")
 
 RATE_WINDOW = 16  # arrival intervals the rate estimate looks at (at most)
 RATE_MIN_INTERVALS = 4  # and at least, before any rate is judged

@@ -1,9 +1,5 @@
-"""Facts about the XM430-W350 servo (ROBOTIS e-Manual, 12 V), shared by the sim and the real gripper.
-
-No MuJoCo and no LeRobot here: the sim's actuator model (`sim/gripper.py`) and the robot's registers
-(`robots/blindgrasp_gripper/`) both read these numbers, so the sim's torque limit and the real current limit
-cannot drift apart.
-"""
+"""Facts about the XM430-W350 servo (ROBOTIS e-Manual, 12 V), read by the sim's actuator model and the robot alike,
+so the sim's torque limit and the real current limit cannot drift apart."""
 
 from __future__ import annotations
 
@@ -15,7 +11,6 @@ MODEL = "xm430-w350"  # the model name in LeRobot's Dynamixel tables
 STALL_TORQUE_NM = 4.1  # at 12 V
 STALL_CURRENT_A = 2.3  # at 12 V
 NO_LOAD_SPEED_RAD_S = 46.0 * 2.0 * math.pi / 60.0  # 46 rpm at 12 V
-GEAR_RATIO = 353.5
 
 # --- control table units ------------------------------------------------------------------------------------------
 TICKS_PER_REV = 4096  # Present_Position / Goal_Position: 12-bit absolute encoder
@@ -66,10 +61,8 @@ MIN_VOLTAGE_LIMIT_DEFAULT_V = 9.5  # Min_Voltage_Limit(34) factory value (95)
 RATED_VOLTAGE_V = (10.0, 14.8)  # operating voltage range of the XM430-W350 (recommended 12.0 V)
 RECOMMENDED_VOLTAGE_V = 12.0
 SHUTDOWN_DEFAULT = 0x34  # Shutdown(63): overheating | electrical shock | overload turn the torque off
-# The EEPROM registers whose only job is to protect a servo while no host watches it (hung, killed, unplugged: the case
-# the Bus_Watchdog stops it for, after which only the firmware acts). Verified at every connect and restored to these
-# values, or the connect is refused naming the register (`servo_checks.py`); Current_Limit joins them with the
-# configured current limit. The factory values, which the sim's servo model and the health levels assume.
+# The EEPROM registers that protect a servo while no host watches it, at the factory values the sim's servo model and
+# the health levels assume: restored at every connect, or the connect is refused (`servo_registers.py`).
 NO_HOST_PROTECTION = {
     "Shutdown": SHUTDOWN_DEFAULT,  # which hardware errors drop the torque by themselves
     "Temperature_Limit": TEMPERATURE_LIMIT_DEFAULT_C,  # the overheating error's threshold
@@ -77,8 +70,6 @@ NO_HOST_PROTECTION = {
     "Min_Voltage_Limit": round(MIN_VOLTAGE_LIMIT_DEFAULT_V / VOLTAGE_UNIT_V),
     "PWM_Limit": 885,  # the motor's voltage cap: its torque and speed with or without a host (100 %)
 }
-# Hardware_Error_Status bits that the firmware also sets in Shutdown's sense (bit 0x01 input voltage is flagged but,
-# with the factory Shutdown 0x34, does NOT turn the torque off: a sagging supply runs on until the MCU browns out).
 
 # What the host does before the firmware does (ROS 2 diagnostics' OK / WARN / ERROR): margins below the limits.
 TEMPERATURE_WARN_MARGIN_C = 15.0  # WARN at 65 degC with the default limit

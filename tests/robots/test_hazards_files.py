@@ -30,9 +30,9 @@ from lerobot.teleoperators.config import TeleoperatorConfig
 from test_policy_check import ROBOT, _checkpoint
 
 from lerobot_blindgrasp import policy_contract, spec
+from lerobot_blindgrasp.policy_contract import PolicyMismatchError
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
 from lerobot_blindgrasp.robots.blindgrasp_gripper import servo_calibration as calib
-from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import PolicyMismatchError
 from lerobot_blindgrasp.robots.blindgrasp_gripper.servo_calibration import CalibrationFileError
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveCalibrationError

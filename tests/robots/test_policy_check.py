@@ -19,8 +19,8 @@ from emulators.harness import BIN, cli_env
 
 from lerobot_blindgrasp import policy_contract, spec
 from lerobot_blindgrasp.demos.dataset import ROBOT_TYPE
+from lerobot_blindgrasp.policy_contract import PolicyMismatchError
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
-from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import PolicyMismatchError
 
 SHIPPED = Path(__file__).resolve().parents[2] / "models" / "student_cpu"
 ROBOT = policy_contract.gripper_contract(ROBOT_TYPE, 20, "--env.fps")

@@ -1,23 +1,9 @@
-"""LeRobot's `DynamixelMotorsBus`, with the bus-level behaviour the gripper's safety depends on.
-
-- Every transaction is retried: `num_retry` is the floor for every read, write, sync read and sync write, including
-  those LeRobot's own methods make (`read_calibration`, `disable_torque`, ...). Registers are raw by default: the
-  calibration lives in the servos (Drive_Mode, Homing_Offset), so no LeRobot normalization applies.
-- The port is opened for exclusive use (`hardware/ports.py`): a second owner is refused before it sends a byte.
-- A status packet whose length or kind does not match the request (a stray late reply of another transaction with
-  the right ID and a valid CRC) is a corrupt reply, retried like a bad CRC; the SDK alone would decode its first
-  bytes as the value asked for.
-- Each try starts on an empty line (`FlushingPortHandler`, told by `LineWatchingPacketHandler` when a receive
-  failed, so that it waits out the rest of an abandoned reply burst). The port also reports an unplugged adapter as one
-  `PortLostError`.
-- The handshake retries, names missing IDs and wrong models, and counts a servo that replies with the
-  hardware-alert bit as present (`_raise_on_hardware_errors` of the robot then says what is wrong with it).
-- The calibration read and written includes Drive_Mode (LeRobot's `write_calibration` skips it).
-- `read_state` reads the per-period servo state block in one sync read, and `torque_off_everywhere` is the latched
-  stop's torque-off, confirmed servo by servo.
-
-The sub-classing points are LeRobot's own: `_read`/`_write`/`_sync_read`/`_sync_write` (their retry loops are
-reused, not rewritten), `_assert_motors_exist`, `read_calibration`/`write_calibration` and `connect`.
+"""LeRobot's `DynamixelMotorsBus`, with the bus-level behaviour the gripper's safety depends on: `num_retry` as the
+floor of every transaction (LeRobot's own calls included), raw registers (the calibration lives in the servos), an
+exclusive port, a clean line for every try, a stray reply of another transaction taken as a corrupt one, an
+unplugged adapter as one `PortLostError`, a handshake that names missing IDs, wrong models and a silencing
+Status_Return_Level, Drive_Mode in the calibration, block reads, and the latched stop's confirmed torque-off.
+It overrides only LeRobot's and the SDK's own sub-classing points; their retry loops are reused.
 """
 
 from __future__ import annotations
@@ -48,9 +34,7 @@ from lerobot_blindgrasp.hardware.xm430 import EXTRA_REGISTERS, MODEL
 logger = logging.getLogger(__name__)
 
 _OS_ERRORS = (OSError, termios.error)  # serial.SerialException subclasses OSError; termios.error does not
-READ_IDLE_S = (
-    0.001  # longest wait for a reply's next byte between two polls of the SDK (its timeout: 2 ms and more)
-)
+READ_IDLE_S = 0.001  # longest wait for a reply's next byte between two polls of the SDK (its timeout: >= 2 ms)
 ALERT_BIT = 0x80  # status-packet error byte: "hardware error, see Hardware_Error_Status"; the instruction worked
 
 
@@ -59,14 +43,9 @@ class PortLostError(ConnectionError):
 
 
 class FlushingPortHandler(PortHandler):
-    """dynamixel-sdk's port with two changes.
-
-    1. `clearPort()` also drops the input. The SDK calls it right before every instruction packet (so before every
-       retry of LeRobot's retry loops) but only drains the output. A reply that arrived late for a failed try, or
-       the rest of an abandoned sync-read burst, would otherwise be parsed as the next try's answer: the SDK
-       matches status packets by ID only.
-    2. OS errors of a vanished adapter (pyserial's `SerialException`, `OSError`, `termios.error`) become one
-       `PortLostError`, instead of a raw termios traceback."""
+    """dynamixel-sdk's port, with `clearPort()` (called before every instruction packet) also dropping the input, so
+    a late reply of a failed try is never parsed as the next try's answer (the SDK matches replies by ID only), and
+    a vanished adapter's OS errors raised as one `PortLostError`."""
 
     def setupPort(self, cflag_baud):
         # The SDK's own setupPort with the exclusive lock (it also runs on every baud-rate change).
@@ -140,9 +119,8 @@ class FlushingPortHandler(PortHandler):
 
 
 class LineWatchingPacketHandler(Protocol2PacketHandler):
-    """The SDK's protocol-2 packet handler, telling the port when a receive failed so that the next try first waits
-    for the abandoned replies to end (see `FlushingPortHandler.clearPort`). Every read path ends here: unicast
-    reads, pings and each reply of a sync read."""
+    """The SDK's protocol-2 packet handler, telling the port when a receive failed (every read path ends here), so
+    the next try first waits for the abandoned replies to end (`FlushingPortHandler.clearPort`)."""
 
     def rxPacket(self, port, fast_option):
         rxpacket, result = super().rxPacket(port, fast_option)

@@ -1,17 +1,9 @@
 """The USB-serial adapter's latency timer: 1 ms, or a warning that says how to get it.
 
-An FTDI chip (the U2D2 is an FT232H, USB 0403:6014; an original Arduino Nano an FT232RL, 0403:6001) holds received
-bytes for up to `latency_timer` ms before it hands a short packet to the host. The Linux default is 16 ms. Every
-Dynamixel status reply is a short packet, so each sync read then waits up to 16 ms for its answer, and a 20 Hz control
-period makes at least three of them (positions, the servo state block, and the handshake's re-reads): up to half of
-the 50 ms budget spent waiting. ROBOTIS tells every U2D2 user to set it to 1 ms; the udev rule shipped in
-`robot_configs/udev/99-blindgrasp.rules` does so at every plug-in.
-
-The kernel's ftdi_sio driver exposes it as `/sys/bus/usb-serial/devices/<ttyUSBn>/latency_timer` (writable by root
-only). Other adapters have no such file: a CH340 (ch341 driver) has no timer to set, a CDC-ACM board (`ttyACM*`) is
-not a usb-serial device, and an emulator's pseudo-terminal has no sysfs entry at all. For those, nothing is said.
-
-`check_latency_timer` is a pure function of the port name and a sysfs root, so it is tested on a fake tree.
+An FTDI chip (the U2D2, a Nano's FT232RL) holds a short packet for up to `latency_timer` ms (Linux default 16) before
+handing it on, so every status reply waits that long: at three sync reads a period, up to half of a 20 Hz budget.
+ftdi_sio exposes it as `/sys/bus/usb-serial/devices/<tty>/latency_timer` (root only; the shipped udev rule sets it);
+other adapters and pseudo-terminals have no such file, and nothing is said for them.
 """
 
 from __future__ import annotations
@@ -39,10 +31,6 @@ class LatencyTimerCheck:
     def ok(self) -> bool:
         return self.after_ms is not None and self.after_ms <= TARGET_MS
 
-    @property
-    def fix_command(self) -> str:
-        return f"echo {TARGET_MS} | sudo tee {self.sysfs_file}"
-
     def warning(self) -> str | None:
         """The operator's message, or None when there is nothing to say."""
         if self.sysfs_file is None or self.ok:
@@ -51,23 +39,16 @@ class LatencyTimerCheck:
         return (
             f"The USB latency timer of '{self.port}' {now} and could not be set to {TARGET_MS} ms "
             f"({self.error}). Every reply then waits up to that long (16 ms by default) in the adapter. Run\n"
-            f"    {self.fix_command}\n"
+            f"    echo {TARGET_MS} | sudo tee {self.sysfs_file}\n"
             "or install robot_configs/udev/99-blindgrasp.rules, which sets it at every plug-in (docs/bringup.md)."
         )
 
 
-def sysfs_latency_file(port: str, sysfs_root: Path = SYSFS_ROOT) -> Path | None:
-    """The latency_timer file of the adapter behind `port`, following symlinks (/dev/serial/by-id/..., a udev
-    name such as /dev/blindgrasp_u2d2) to the tty they name; None if that tty has none."""
-    tty = Path(os.path.realpath(port)).name
-    candidate = Path(sysfs_root) / "bus" / "usb-serial" / "devices" / tty / "latency_timer"
-    return candidate if candidate.is_file() else None
-
-
 def check_latency_timer(port: str, sysfs_root: Path = SYSFS_ROOT, target_ms: int = TARGET_MS) -> LatencyTimerCheck:
     """Read the adapter's latency timer and lower it to `target_ms` where this process may write it."""
-    path = sysfs_latency_file(port, sysfs_root)
-    if path is None:
+    tty = Path(os.path.realpath(port)).name  # a udev or by-id symlink names the tty whose driver has the file
+    path = Path(sysfs_root) / "bus" / "usb-serial" / "devices" / tty / "latency_timer"
+    if not path.is_file():
         return LatencyTimerCheck(port, None)
     try:
         before = int(path.read_text().strip())

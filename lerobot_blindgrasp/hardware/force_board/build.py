@@ -2,11 +2,8 @@
 
     python -m lerobot_blindgrasp.hardware.force_board.build --out_dir=build/force_board --port=/dev/ttyUSB0
 
-prints the HEX image it built and the two ways to flash it onto the Nano at `--port`: the avrdude command, and the
-same through the firmware's Makefile (its path inside the installed package, which a user cannot guess).
-
-The sources ship inside the package (package data), so this works from a wheel as well as from a checkout; the
-build writes only into `out_dir`. What each step needs, as Debian/Ubuntu packages, is `missing_packages`'s answer.
+prints the HEX image it built and the two ways to flash it onto the Nano at `--port` (avrdude, or the firmware's
+Makefile inside the installed package). The sources ship as package data; the build writes only into `out_dir`.
 """
 
 from __future__ import annotations
@@ -36,7 +33,6 @@ SIMULATOR_NEEDS = (
     ("gcc", lambda: shutil.which("cc")),
     ("libsimavr-dev", lambda: (SIMAVR_INCLUDE / "sim_avr.h").exists()),
 )
-DEBIAN_PACKAGES = ("gcc-avr", "avr-libc", "simavr", "libsimavr-dev")
 
 
 class BuildError(RuntimeError):
@@ -51,8 +47,7 @@ def missing_packages(simulator: bool = True) -> list[str]:
 
 
 def _require(needs) -> None:
-    missing = [package for package, present in needs if not present()]
-    if missing:
+    if missing := [package for package, present in needs if not present()]:
         raise BuildError(f"missing build tools: apt-get install {' '.join(missing)} (Debian/Ubuntu package names)")
 
 

@@ -1,25 +1,11 @@
 """A device's frame counter judged against this host's clock: a board that restarted told from a replay, and a counter
-that runs ahead of the time that passed.
+that runs ahead of the time that passed (docs/force_board.md, "A board reset is not a replay").
 
-A device that numbers its frames (+1 per frame sent, wrapping at `modulus`) can advance its counter no faster than
-it sends frames. So between two frames that arrive `dt` apart the counter may advance by at most
-`1 + max_rate_hz * (dt + slack_s)`: the slack is how much later than its neighbour a frame may arrive (host
-scheduling, USB buffering) before the stream is stale anyway. Frames lost on the way (USB, CRC errors) advance the
-counter more than the frames that arrive, never less, so only the upper bound is a fault here; a counter that
-advances slowly is a slow device, which the stream's rate check reports.
-
-What a counter that steps back (or repeats) means:
-- Replay: old frames sent again (a firmware re-sending its buffer, a loop in a bridge). They keep coming at the
-  device's rate, with no gap, and stay behind the newest counter: dropped.
-- Restart: the device reset (watchdog, brown-out, a USB glitch). It is silent while it boots, then its counter
-  starts again from 0, so the new counter is at most what the time since the last counted frame allows. A restart
-  is taken when the device marks its first frame after boot (`boot`), or, without a mark, when the frame ends a
-  silence of at least `boot_silence_s` and its counter is that small. A restarted counter is trusted only after
-  `confirm_frames` more frames advance with time (a replay that happens to jump back near 0 never does); until then
-  its frames are held: kept, never live.
-A frame that continues the old counter during that hold cancels the restart (the "restart" was a stray frame).
-
-Hand-written: the rule is the device's frame format plus this host's clock; no library judges one.
+Between two frames `dt` apart the counter may advance by at most `1 + max_rate_hz * (dt + slack_s)`; lost frames
+only advance it more, so only the upper bound is a fault. A counter that steps back is a replay (dropped), unless it
+is a restart: marked by the device (`boot`), or ending a silence of `boot_silence_s` with a counter no larger than
+that time allows. A restarted counter is held (kept, never live) until `confirm_frames` more frames advance with
+time; a frame that continues the old counter meanwhile cancels it. Hand-written: no library judges a counter.
 """
 
 from __future__ import annotations

@@ -1,21 +1,12 @@
 """Force calibration: scale and offset per fingertip from a known weight, a wiring check, and the file the robot
-reads at connect. The command that asks the operator for the weights is `force_calibration_cli.py`.
+reads at connect (the operator's command is `force_calibration_cli.py`).
 
-The fit, per fingertip k with stream channel c = channel_map[k]:
-    offset_c = mean counts with nothing on the pads (before and after the loadings)
-    scale_k  = mass x g / (mean counts with the weight on pad k alone - the unloaded mean before it)    N/count
-The sign comes with it, so a push on the pad reads positive whichever way the bridge is wired.
-
-The wiring check: with the weight on pad k, stream channel c must respond (beyond `min_snr` times its at-rest
-noise) and carry the largest response; any other channel must stay within `max_crosstalk` of it. A weight on
-mf_tip that moves channel 2 is a swapped cable (or a wrong channel_map), caught before any scale is saved and
-named with both fingers and the channel_map that matches the wiring.
-
-The file `<calibration_dir>/<robot id>.force.json` sits next to the servo calibration `<robot id>.json` (the
-folder is `--robot.calibration_dir`, by default `$HF_LEROBOT_CALIBRATION/robots/blindgrasp_gripper`) and is
-written atomically (`durable`). At connect the robot loads it (`apply`): its scales replace
-`force_sensor.scale_n_per_count`, its offsets are the zero until the connect tare refreshes them, and a
-channel_map other than the one it was measured with is refused.
+Per fingertip k on stream channel c = channel_map[k]: offset_c = mean unloaded counts (before and after),
+scale_k = mass x g / (loaded - unloaded mean counts) in N/count, its sign making a push read positive. With the
+weight on pad k, channel c must respond most (beyond `min_snr` x its noise) and every other stay within
+`max_crosstalk` of it, so a swapped cable is named before anything is saved. The file `<robot id>.force.json` sits
+next to the servo calibration; at connect (`apply`) its scales and offsets replace the config's, and a channel_map
+other than the one it was measured with is refused.
 """
 
 from __future__ import annotations
@@ -213,9 +204,8 @@ def load_force_calibration(path) -> ForceCalibration:
 
 
 def apply(reader, calibration_dir, robot_id: str) -> ForceCalibration | None:
-    """Give `reader` (a ForceSensorReader) the scales and zero of the robot's force calibration file, if there is
-    one; None (the config's scales stay, with a warning naming the command that measures them) when there is
-    none."""
+    """Give `reader` the scales and zero of the robot's force calibration file; None when there is none (the
+    config's scales stay, with a warning naming the command that measures them)."""
     path = path_for(calibration_dir, robot_id)
     if not path.is_file():
         logger.warning(missing_warning(path, robot_id, reader.scale))
@@ -228,6 +218,6 @@ def apply(reader, calibration_dir, robot_id: str) -> ForceCalibration | None:
             "with the new channel_map, or restore the old one."
         )
     reader.scale = np.asarray(cal.scales(), dtype=np.float64)
-    reader.offset = np.asarray([cal.fingers[n].offset_counts for n in spec.FORCE_SENSOR_NAMES], dtype=np.float64)
+    reader.offset = np.asarray(cal.offsets(), dtype=np.float64)
     logger.info("Force scales %s N/count from %s.", [f"{s:.4g}" for s in cal.scales()], path)
     return cal

@@ -3,13 +3,9 @@
     blindgrasp-calibrate-force --robot.type=blindgrasp_gripper --robot.id=lab_gripper \
         --robot.force_sensor.port=/dev/ttyUSB1 --mass_kg=0.5
 
-The same `--robot` flags as `lerobot-calibrate` (or `--robot="include robot_configs/blindgrasp_gripper.yaml"`), so the
-file lands next to that robot's servo calibration and the robot finds it at connect. Only the force board is
-opened: the servos need no power, and a servo calibration never asks for weights (why this is a command of its own
-rather than a step of `lerobot-calibrate`, which calls the robot's servo `calibrate()` and nothing else).
-
-The operator answers five prompts (ENTER each): nothing on the pads; the weight on ff_tip, then moved to mf_tip,
-then to th_tip; the weight off. The fit, the checks and the file are `force_calibration.py`'s.
+The same `--robot` flags as `lerobot-calibrate`, so the file lands next to that robot's servo calibration. Only the
+force board is opened (a command of its own: `lerobot-calibrate` only calls the servos' `calibrate()`). Five prompts:
+nothing on the pads, the weight on each pad in turn, the weight off.
 """
 
 import logging
@@ -53,13 +49,7 @@ class CalibrateForceConfig:
 def _window(reader: ForceSensorReader, settle_s: float, window_s: float) -> fc.Window:
     """Counts of every stream channel over `window_s`, after `settle_s`; only fresh, fault-free frames."""
     time.sleep(settle_s)
-    samples = []
-    deadline = time.monotonic() + window_s
-    while time.monotonic() < deadline or len(samples) < 5:
-        if not reader.wait_frames(1, reader.stale_timeout_s * 4):
-            raise ForceStreamError(f"The force board stopped sending ({len(samples)} frames in this window).")
-        samples.append(reader.fresh().counts)  # fresh() raises on a fault the frame flags
-    return fc.Window.of(samples)
+    return fc.Window.of(reader.fresh_samples(window_s, "in this window", lambda frame: frame.counts))
 
 
 def _prompts(cfg: CalibrateForceConfig) -> list[str]:
@@ -83,9 +73,7 @@ def calibrate_force(cfg: CalibrateForceConfig) -> fc.ForceCalibration:
         raise SystemExit("error: --robot.id is required: it names the gripper whose calibration this is")
     fs = robot.force_sensor
     calibration_dir = robot.calibration_dir or HF_LEROBOT_CALIBRATION / ROBOTS / "blindgrasp_gripper"
-    reader = ForceSensorReader(fs.port, fs.baudrate, [1.0] * spec.NUM_FORCES, channel_map=fs.channel_map,
-                               stale_timeout_s=fs.stale_timeout_s, connect_timeout_s=fs.connect_timeout_s,
-                               frozen_frames=fs.frozen_frames, min_rate_hz=fs.min_rate_hz)  # fmt: skip
+    reader = fs.reader([1.0] * spec.NUM_FORCES)  # raw counts: the scales are what this measures
     reader.connect()
     try:
         windows = []

@@ -1,24 +1,12 @@
 """The force board's frames: encoder (for the emulators and tests) and the host's incremental decoder.
 
-Wire protocol (microcontroller -> host only, little-endian; docs/force_board.md, "Frame protocol"):
+Wire protocol (board -> host, little-endian; the field table is docs/force_board.md, "Frame protocol"):
 
-    offset size  field
-    0      2     SYNC    0xA5 0x5A
-    2      1     LEN     bytes from SEQ to the end of the body: 2 + 4 * N + 1 (15 for N = 3 channels), or one more
-                         (16) for the boot frame
-    3      2     SEQ     uint16 frame counter, +1 per frame, wraps at 65535; 0 on the first frame after a reset
-    5      4*N   COUNTS  int32 raw ADC counts per channel (24-bit ADCs sign-extended), ff, mf, th order
-    5+4N   1     STATUS  bit i set: channel i has a fault (its ADC stopped converting, or it is saturated)
-    6+4N   1     RESET   boot frame only: the microcontroller's reset cause (ATmega MCUSR: bit 0 power-on, 1 the
-                         reset pin, 2 brown-out, 3 watchdog)
-    ...    2     CRC     CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection) over LEN..the last body byte
+    SYNC a5 5a | LEN u8 | SEQ u16 | COUNTS i32 x N | STATUS u8 | RESET u8 (boot frame only) | CRC-16/CCITT-FALSE u16
 
-The boot frame is the first frame after every reset: the same samples, plus the reset cause. Its LEN (4N + 4) is
-no data frame's (4N + 3), so a host that predates it drops it as a bad length and reads every other frame as before,
-and this decoder reads both.
-
-CRC-16/CCITT-FALSE of b"123456789" is 0x29B1 (check value for firmware authors). The decoder resynchronises on the
-next SYNC after any bad length or CRC, so garbage bytes on the line cost frames, never wrong values.
+LEN counts SEQ..the body's end (4N + 3, or 4N + 4 for the boot frame, the first after every reset); the CRC covers
+LEN..the body's end. The decoder resynchronises on the next SYNC after any bad length or CRC, so garbage on the
+line costs frames, never wrong values.
 """
 
 from __future__ import annotations

@@ -1,36 +1,11 @@
-"""Fingertip force sensors: a microcontroller streams raw load-cell counts over a serial port.
+"""The force board's reader on the host: its serial stream as tared, scaled, deadbanded newtons.
 
-The board that ships is three HX711 on an Arduino Nano (`lerobot_blindgrasp/hardware/force_board/`, parts, wiring
-and flashing in `docs/force_board.md`). Its frames and their decoder: `frame_codec.py`.
-
-Between conversions nothing is sent: a frame carries a fresh sample of every channel under a new SEQ, or no frame
-goes out. "No new sample yet" is therefore never a frame and never a STATUS bit, and any STATUS bit is a real fault
-that stops the gripper. The HX711 board sends ~80 frames/s; the host needs `min_rate_hz` (40/s by default, two
-fresh samples per 20 Hz control period) and calls a stream that sends fewer fresh frames "slow", apart from
-"stale" (no fresh frame for `stale_timeout_s`).
-
-The host resynchronises on the next SYNC after any bad length or CRC; SEQ gaps count dropped frames; the age of
-the newest good frame detects a stalled or unplugged stream.
-
-Liveness by content (`LatestFrameStream`): the SEQ is judged against this host's clock (`counter_clock.py`).
-A SEQ that repeats or runs backwards is a re-sent or replayed frame, dropped and counted, so a firmware stuck
-re-sending one frame goes stale like a silent one. A board that reset is not a replay: it was silent while it booted
-and its SEQ starts again near 0 (its first frame, the boot frame, says so and why). Its frames are held, never
-fresh, until `SETTLE_FRAMES` more advance with time, then the stream is live again with a WARNING naming the reset.
-The tare is kept: the HX711s keep their bridges' offset and gain 128 through a reset, and a tare taken now would
-zero whatever presses on the pads. A SEQ further ahead than the time since the last frame allows (a stray frame
-from garbage, a corrupted counter) is dropped and counted, so one stray frame never locks the stream out. A
-channel whose counts stay identical bit for bit for `frozen_frames` frames is frozen (a 24-bit ADC's noise never
-repeats that long), and the stream goes stale too. `dropped_frames` counts only forward SEQ gaps.
-
-A tare is trusted only at rest (`tare`): the samples must vary no more than an unloaded pad does, and a re-tare
-must not move the zero by more than drift explains; otherwise it is refused and the old zero kept. A load cell
-in a fingertip is compressive only, so a reading clearly below zero is a fault (a tare taken under load, a
-damaged cell, a wrong scale sign), never a value.
-
-Host side: counts -> newtons with a tare (mean counts over `tare_s` at connect, fingers in free air) and a
-per-channel scale in N/count from the robot config, then the sensor pipeline the sim uses too
-(`lerobot_blindgrasp.hardware.force.reading`: the measured newtons already hold the sensor's noise; |f| < 0.1 N reads 0).
+The board sends a frame per fresh sample and nothing in between, so any STATUS bit is a real fault. The SEQ is
+judged against this host's clock (`counter_clock.py`): re-sent, replayed or impossible frames are dropped and
+counted, and a board reset is held until `SETTLE_FRAMES` frames advance with time, keeping the tare (the HX711s keep
+their offset). A tare is taken only at rest, and a compressive load cell reading clearly below zero is a fault.
+What the host checks and why: docs/force_board.md. Counts become newtons by `force.counts_to_newtons`, then the
+sim's own `force.reading`.
 """
 
 from __future__ import annotations
@@ -124,12 +99,8 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         return self._serial is not None
 
     def connect(self) -> None:
-        self.open()
-        self.wait_first_frame()
-
-    def open(self) -> None:
-        """Take the port (exclusively) and start receiving."""
         self.start()
+        self.wait_first_frame()
 
     def wait_first_frame(self) -> None:
         if not self.wait_frames(1, self.connect_timeout_s):
@@ -144,14 +115,12 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         self.stop()
 
     def _open(self) -> None:
-        import serial  # pyserial comes with lerobot[dynamixel]
-
         self.clock = self._new_clock()  # a new session: the board may have restarted while the port was closed
         try:
             self._serial = open_exclusive(self.port, self.baudrate, "force-sensor", timeout=RECEIVE_TIMEOUT_S)
         except ConnectionError:
             raise  # PortInUseError: says itself what to do
-        except (OSError, serial.SerialException) as e:
+        except OSError as e:  # pyserial's SerialException is one
             raise ForceStreamError(
                 f"Could not open the force-sensor port '{self.port}': {e}. Find the force board's port with "
                 "lerobot-find-port and pass --robot.force_sensor.port=..., or install "
@@ -252,14 +221,7 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         """Zero the sensors: mean counts over `duration_s`, with no fingertip touching anything. Refused
         (`ForceTareError`, the previous zero kept) when a pad is loaded: samples that vary more than an unloaded
         pad does (`tare_max_std_n`), or a re-tare whose zero moved more than drift explains (`tare_max_shift_n`)."""
-        samples = []
-        deadline = time.monotonic() + duration_s
-        while time.monotonic() < deadline or len(samples) < min_frames:
-            if not self.wait_frames(1, self.stale_timeout_s * 4):
-                raise ForceStreamError(f"Force-sensor stream stopped during tare ({len(samples)} frames).")
-            frame = self.fresh()  # a frozen, re-sent or faulty stream cannot be tared
-            samples.append(self._channels(frame))
-        samples = np.asarray(samples)
+        samples = np.asarray(self.fresh_samples(duration_s, "during tare", self._channels, min_frames))
         offset = samples.mean(axis=0)
         std_n = samples.std(axis=0) * np.abs(self.scale)
         shift_n = (offset - self.offset) * self.scale if self.tared else np.zeros_like(offset)
@@ -275,6 +237,17 @@ class ForceSensorReader(LatestFrameStream[Frame]):
             )
         self.offset, self.tared = offset, True
         return self.offset
+
+    def fresh_samples(self, duration_s: float, what: str, sample, min_frames: int = 5) -> list:
+        """`sample(frame)` of every frame over `duration_s` (at least `min_frames`), each passing `fresh()`: a frozen,
+        re-sent or faulty stream gives none."""
+        samples = []
+        deadline = time.monotonic() + duration_s
+        while time.monotonic() < deadline or len(samples) < min_frames:
+            if not self.wait_frames(1, self.stale_timeout_s * 4):
+                raise ForceStreamError(f"Force-sensor stream stopped {what} ({len(samples)} frames).")
+            samples.append(sample(self.fresh()))
+        return samples
 
     def read(self) -> np.ndarray:
         counts = self._channels(self.fresh())

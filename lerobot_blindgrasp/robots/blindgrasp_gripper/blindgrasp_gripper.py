@@ -1,11 +1,6 @@
 """The real gripper: nine XM430-W350 on one Dynamixel bus plus three fingertip load cells, in lifecycle order like
-LeRobot's `koch_follower`; observation and action are `spec`'s (names, order, rad and N), as in the sim demos.
-
-It holds what checks it, each object given what it needs: bus and force reader on exclusive ports (`hardware/`);
-the plausibility `gate` of every position reading; the servos' `registers`, `health` and tip `consistency`, run
-each period by `checks`; the loop's `timing` and `spacing`; the safety `latch` (`latch.py`: any failure while
-connected turns the torque off on every servo that answers, closes the ports, raises one named error); the policy
-named on the script's command line, checked before any port opens (`policy_contract.py`).
+LeRobot's `koch_follower`; observation and action are `spec`'s (names, order, rad and N), as in the sim demos. It
+holds the objects that check it (`hardware/`), each given what it needs, and the safety `latch` (`latch.py`).
 """
 
 from __future__ import annotations
@@ -34,11 +29,12 @@ from lerobot_blindgrasp.hardware.period_checks import PeriodChecks
 from lerobot_blindgrasp.hardware.plausibility import PositionGate
 from lerobot_blindgrasp.hardware.servo_diagnostics import ServoHealth
 from lerobot_blindgrasp.hardware.servo_registers import ServoRegisters
+from lerobot_blindgrasp.policy_contract import PolicyMismatchError
 
 from . import interactive
 from . import servo_calibration as calib
 from .config_blindgrasp_gripper import BlindgraspGripperConfig
-from .errors import ForceOverloadError, GripperBusError, GripperSafetyStop, PolicyMismatchError
+from .errors import ForceOverloadError, GripperBusError, GripperSafetyStop
 from .keepalive import feeding_the_bus
 from .latch import SafetyLatch
 from .recording_space import RecordingSpace
@@ -69,7 +65,7 @@ class BlindgraspGripper(Robot):
             num_retry=config.bus_num_retry,
             latency_timer_ms=config.latency_timer_ms,
         )
-        self.force = config.force_reader()
+        self.force = config.force_sensor.reader()
         self.gate = PositionGate(
             speed_ticks_s=config.max_joint_speed_rad_s / xm430.RAD_PER_TICK,
             margin_ticks=config.plausibility_margin_rad / xm430.RAD_PER_TICK,
@@ -125,7 +121,7 @@ class BlindgraspGripper(Robot):
         with self.latch.guard("connecting"):
             self._forget_goals()
             force_calibration.apply(self.force, self.calibration_dir, self.id)  # <id>.force.json, if measured
-            self.force.open()  # both ports exclusive before the first byte goes out: a second owner is refused
+            self.force.start()  # both ports exclusive before the first byte goes out: a second owner is refused
             self.bus.connect()  # pings all nine, with retries; names a Status_Return_Level that hides replies
             self.latch.arm()
             self.episodes.install()
@@ -287,10 +283,9 @@ class BlindgraspGripper(Robot):
 
     @check_if_not_connected
     def send_action(self, action: dict[str, float]) -> dict[str, float]:
-        """Absolute joint targets (rad), clipped to the joint limits and then to +-max_relative_target around the
-        present position, sent with one sync write; returns the targets sent (after tick rounding). The step bound
-        comes last so it holds from the first step: a joint that starts outside its limits comes back at <=
-        max_relative_target per call, never in one jump."""
+        """Absolute joint targets (rad), clipped to the joint limits, then to +-max_relative_target around the present
+        position (last, so a joint outside its limits comes back at that rate, never in one jump), sent with one
+        sync write; returns the targets sent (after tick rounding)."""
         missing = [k for k in spec.ACTION_NAMES if k not in action]
         unknown = [k for k in action if k not in spec.ACTION_NAMES]
         if missing or unknown:  # an extra key is a policy or teleop trained for other joints: nothing is sent

@@ -1,12 +1,7 @@
-"""Configuration of the real gripper (`--robot.type=blindgrasp_gripper`).
-
-Defaults are the D'Claw-derived build of the paper; a site-specific file lives in `robot_configs/` and is passed to
-any LeRobot CLI with `--robot="include robot_configs/blindgrasp_gripper.yaml"` (draccus' include syntax; later
-`--robot.<field>=...` flags still override it).
-
-Parsing is also where the config takes what the script's command line says and LeRobot never hands the robot: the
-policy it will run, the loop's rate, the dataset it records (`command_line`, read once by
-`compat.read_command_line`; the robot checks them at connect).
+"""Configuration of the real gripper (`--robot.type=blindgrasp_gripper`): the paper's D'Claw-derived build by default,
+a site's file in `robot_configs/` (`--robot="include robot_configs/blindgrasp_gripper.yaml"`). Parsing also keeps
+what the script's command line says and LeRobot never hands the robot (`command_line`: the policy, the loop's rate,
+the dataset), which the robot checks at connect.
 """
 
 from __future__ import annotations
@@ -17,7 +12,7 @@ from dataclasses import dataclass, field
 from lerobot.robots.config import RobotConfig
 
 from lerobot_blindgrasp import compat, spec
-from lerobot_blindgrasp.hardware.force_board import ForceSensorConfig, ForceSensorReader
+from lerobot_blindgrasp.hardware.force_board import ForceSensorConfig
 from lerobot_blindgrasp.hardware.xm430 import (
     CURRENT_LIMIT_MAX_UNITS,
     CURRENT_UNIT_A,
@@ -58,45 +53,35 @@ class BlindgraspGripperConfig(RobotConfig):
     profile_velocity: int = 0
     # Extra tries of a failed bus transaction before the gripper stops with a GripperBusError.
     bus_num_retry: int = 2
-    # The servos' own Bus_Watchdog (register 98, 20 ms units): a servo that receives no instruction packet for this
-    # long stops where it is (torque stays on, goal registers refuse writes) until the robot re-arms it. It bounds
-    # how long the gripper keeps moving after the host dies (SIGKILL, crash, unplugged USB): 200 ms = 4 control
-    # periods, long enough for a busy host not to trip it every few seconds. 0 disables it.
+    # The servos' own Bus_Watchdog (20 ms units): a servo that hears no instruction for this long stops where it is
+    # until the robot re-arms it, which bounds how long the gripper moves after the host dies. 0 disables it.
     bus_watchdog_ms: int = 200
     # USB adapter latency timer (ms; FTDI/U2D2 default 16). dynamixel-sdk waits 2 x this + 2 ms for a reply, so
     # raise it on a loaded host or a slow USB hub instead of seeing timeouts.
     latency_timer_ms: int = 16
-    # Plausibility of every position reading: a joint moves at most max_joint_speed_rad_s (the XM430's no-load
-    # speed) plus plausibility_margin_rad between two readings; a reading that is not is read again up to
-    # plausibility_rereads times, then the gripper stops (GripperReadingError).
+    # Plausibility of every position reading (`hardware/plausibility.py`): at most max_joint_speed_rad_s plus
+    # plausibility_margin_rad between two readings, else read again up to plausibility_rereads times, then a stop.
     max_joint_speed_rad_s: float = NO_LOAD_SPEED_RAD_S
     plausibility_margin_rad: float = 0.1
     plausibility_rereads: int = 2
-    # With the torque on, a load may push a joint back past its goal by as much as the position loop yields at the
-    # torque limit: stall torque / kp = 4.1 / 15 = 0.27 rad for an XM430 at P gain 800 (the sim's servo model).
-    # A softer loop (a lower position_p_gain, or the physics twin's Table II draws down to kp x 0.3) yields more.
+    # How far a load may push a torqued joint back past its goal: stall torque / kp = 4.1 / 15 = 0.27 rad at P gain
+    # 800; a softer loop yields more.
     plausibility_backdrive_rad: float = 0.3
-    # The control loop's rate (lerobot-record --dataset.fps, rollout --fps): get_observation measures its period.
-    # Overrun streaks are named when they start and end; one of max_overrun_s (and >= 10 periods) stops the gripper
-    # (GripperTimingError): as long as the success rule's hold (1 s), so no hold is judged at another rate and no
-    # more than two thirds of the student's 1.5 s context (30 steps) spans a rate it never saw. 0: never stop.
+    # The control loop's rate (lerobot-record --dataset.fps, rollout --fps), which get_observation measures. An
+    # overrun streak of max_overrun_s (the success rule's 1 s hold) stops the gripper; 0: never stop.
     loop_hz: float = spec.CONTROL_HZ
     max_overrun_s: float = spec.SUCCESS_HOLD_S
-    # The host's control thread (`hardware/realtime.py`), set at connect: > 0 runs it SCHED_FIFO at this priority
-    # (1-99; the force reader's and torch's threads started after it inherit it), so background work on the PC does
-    # not delay a period; lock_memory keeps the process's memory in RAM (mlockall). Both need a permission the
-    # kernel may refuse (docs/hardware.md, "The host PC"): a refusal is a warning that says how to allow it.
+    # The control thread (`hardware/realtime.py`, set at connect): > 0 runs it SCHED_FIFO at this priority (1-99);
+    # lock_memory keeps the process in RAM (mlockall). A refusal is a warning (docs/hardware.md, "The host PC").
     realtime_priority: int = 0
     lock_memory: bool = False
-    # Servo health (`hardware/servo_diagnostics.py`): the health block (temperature, input voltage, current) is read every this many
-    # control periods; its levels are the datasheet's (`hardware/xm430.py`).
+    # Servo health (`hardware/servo_diagnostics.py`): the health block is read every this many control periods.
     health_every_n: int = 4
     # Calibration: a joint must move at least this far (rad) in the "positive" pose to read its direction.
     calibration_min_motion_rad: float = 0.15
     disable_torque_on_disconnect: bool = True
-    # A policy on the command line whose fit no file states (no `trained_for` in its config.json and no training
-    # dataset metadata on this machine) is refused before any torque (`policy_contract.py`); true runs it with a
-    # warning.
+    # A policy on the command line whose fit no file states is refused before any torque (`policy_contract.py`);
+    # true runs it with a warning.
     allow_unverified_policy: bool = False
     force_sensor: ForceSensorConfig = field(default_factory=ForceSensorConfig)
 
@@ -109,8 +94,7 @@ class BlindgraspGripperConfig(RobotConfig):
         for name, values in (("joint_lower", self.joint_lower), ("joint_upper", self.joint_upper)):
             if len(values) != n:
                 raise ValueError(f"{name} needs {n} values, got {len(values)}")
-        for j, lo, hi in zip(spec.JOINT_NAMES, self.joint_lower, self.joint_upper, strict=True):
-            k = spec.JOINT_NAMES.index(j)
+        for k, (j, lo, hi) in enumerate(zip(spec.JOINT_NAMES, self.joint_lower, self.joint_upper, strict=True)):
             if not spec.JOINT_LOWER[k] <= lo < hi <= spec.JOINT_UPPER[k]:
                 raise ValueError(f"{j}: limits [{lo}, {hi}] must lie inside the sim's [{spec.JOINT_LOWER[k]}, "
                                  f"{spec.JOINT_UPPER[k]}]")  # fmt: skip
@@ -159,19 +143,3 @@ class BlindgraspGripperConfig(RobotConfig):
             raise ValueError("force_sensor.frozen_frames must be 0 (off) or >= 2")
         if len(set(fs.channel_map)) != spec.NUM_FORCES or not all(0 <= c < 8 for c in fs.channel_map):
             raise ValueError(f"force_sensor.channel_map needs distinct channels 0..7, not {fs.channel_map}")
-
-    def force_reader(self) -> ForceSensorReader:
-        fs = self.force_sensor
-        return ForceSensorReader(
-            fs.port,
-            fs.baudrate,
-            fs.scale_n_per_count,
-            channel_map=fs.channel_map,
-            stale_timeout_s=fs.stale_timeout_s,
-            connect_timeout_s=fs.connect_timeout_s,
-            frozen_frames=fs.frozen_frames,
-            min_rate_hz=fs.min_rate_hz,
-            tare_max_std_n=fs.tare_max_std_n,
-            tare_max_shift_n=fs.tare_max_shift_n,
-            negative_fault_n=fs.negative_fault_n,
-        )

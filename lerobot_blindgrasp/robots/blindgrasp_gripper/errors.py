@@ -1,10 +1,8 @@
-"""Errors the gripper raises after a safety stop (`GripperSafetyStop` and its subclasses are all raised with the
-torque already off), and the policy refusal made before any torque (`PolicyMismatchError`). The force board's
-refused tare, which stops nothing, is its reader's (`hardware/force_board/reader.py`, `ForceTareError`)."""
+"""Errors the gripper raises after a safety stop: `GripperSafetyStop` and its subclasses are all raised with the
+torque already off. A refused policy (`PolicyMismatchError`, policy_contract's) and a refused tare (`ForceTareError`)
+stop nothing."""
 
 from __future__ import annotations
-
-from lerobot_blindgrasp.policy_contract import PolicyMismatchError  # noqa: F401  (the robot refuses a policy with it)
 
 
 class GripperSafetyStop(RuntimeError):

@@ -1,14 +1,7 @@
-"""Bus traffic while no control loop runs, so that the servos' bus watchdog stays armed and never trips.
-
-Between trials the gripper holds its start pose with the torque on while a person places the object and presses
-ENTER, and while the fingertips are tared (`tare_s`, longer than the 200 ms watchdog). The servos' Bus_Watchdog(98)
-is what stops them when this host dies, so it stays armed through those waits; the host keeps it fed instead: one
-state check (`hardware/servo_registers.py`, one sync read) every `KEEPALIVE_S`. Each check is also a real check: a servo that
-reset or changed a setting during the wait is caught before the next trial, not at its first step.
-
-Disarming the watchdog during the waits (Bus_Watchdog 0) was the other choice; it would leave a host that dies during
-a wait with nine servos holding a pose with nobody watching, and a trip needs a clear-and-rearm that a dead host
-cannot do anyway. Feeding it keeps the one defence that works without the host.
+"""Bus traffic while no control loop runs (a tare, an operator placing the object): one servo state check every
+`KEEPALIVE_S`, so the servos' Bus_Watchdog, which stops them when this host dies, stays armed and never trips, and a
+servo that reset during the wait is caught before the next trial. Disarming it instead would leave a host that dies
+in a wait with nine torqued servos and nobody watching.
 """
 
 from __future__ import annotations
@@ -23,9 +16,8 @@ KEEPALIVE_S = spec.CONTROL_DT
 
 
 def feeding_the_bus[T](work: Callable[[], T], feed: Callable[[], None]) -> T:
-    """`work` (one that touches no servo, e.g. the force tare) in a worker thread while this thread calls `feed` (one
-    servo state check) every `KEEPALIVE_S`: every bus packet stays on the caller's thread, and the work's own error
-    comes back here."""
+    """`work` (touching no servo) in a worker thread while this thread calls `feed` every `KEEPALIVE_S`: every bus
+    packet stays on the caller's thread, and the work's own error comes back here."""
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="force-tare") as pool:
         task = pool.submit(work)
         while True:

@@ -1,18 +1,11 @@
 """The safety latch: any failure while connected turns the torque off on every servo that answers, closes both ports
 and raises one error that says so.
 
-`SafetyLatch.guard(what)` wraps every call of the gripper that touches the hardware (connect, configure,
-get_observation, send_action, tares, health checks). Its causes: a bus error after the retries, a lost port, a servo
-hardware error, a servo that reset or lost its settings, an implausible reading, force overload, stale or frozen
-force data, a sustained loop overrun, a servo near a limit, an exception, Ctrl-C or SIGTERM/SIGHUP inside a call. A
-failure of the layers below (`hardware/`) becomes the gripper's named error (`errors.py`). Reconnecting is an
-explicit decision of the operator.
-
-Outside the calls, the process itself is guarded while the latch is armed (`arm`, at connect): `atexit` stops a
-gripper left connected, and so does an uncaught exception before Python reports it (`sys.excepthook`), and
-SIGTERM/SIGHUP unwind like Ctrl-C (`signals.py`). The excepthook matters when a script's cleanup fails before its
-disconnect: lerobot-record's `finally` runs `dataset.finalize()` before `robot.disconnect()`, so a full disk there
-skips the disconnect, and an interpreter that cannot exit (a thread that never ends) would never reach `atexit`.
+`SafetyLatch.guard(what)` wraps every call of the gripper that touches the hardware; a failure of the layers below
+(`hardware/`) becomes the gripper's named error (`errors.py`), and reconnecting is the operator's decision. While
+armed (at connect), the process is guarded too: `atexit`, an uncaught exception before Python reports it (a
+script's cleanup can fail before its disconnect, as lerobot-record's `dataset.finalize()` on a full disk), and
+SIGTERM/SIGHUP unwinding like Ctrl-C (`signals.py`).
 """
 
 from __future__ import annotations
@@ -133,9 +126,7 @@ class SafetyLatch:
             else:
                 note = "Torque is off on all servos."
             err = self._named_stop(e, what, note)
-            if (
-                err is None
-            ):  # KeyboardInterrupt, programming errors: keep the original exception, the torque is off
+            if err is None:  # KeyboardInterrupt, a programming error: the original exception, torque off
                 logger.error("%s while %s. %s", type(e).__name__, what, note)
                 e.torque_off_handled = True
                 raise

@@ -1,23 +1,10 @@
 """Room on disk for the next recording episode, checked at every episode start: refused with the numbers if not.
 
-LeRobot's dataset writer keeps an episode's frames in memory and writes them at `save_episode`, together with the
-episode's metadata; a disk that fills there fails the save, and the `finalize()` that follows leaves the episode
-metadata file 0 bytes long, so the episodes before are lost too (docs/upstream/dataset-crash-safety.md). Checking
-before an episode starts is the one place where refusing costs nothing: the episodes recorded so far are whole.
-
-What the robot can observe of a `lerobot-record` run: its own connect and control calls, and the command line its
-config was parsed from (`compat.read_command_line`: lerobot-record tells its robot nothing of the dataset).
-LeRobot creates (or resumes) the dataset before it connects the robot, so at connect the dataset's `meta/info.json`
-is on disk under `--dataset.root` (default `$HF_LEROBOT_HOME/<repo_id>`); the frames of an episode are
-`--dataset.fps` x `--dataset.episode_time_s`, with `DatasetRecordConfig`'s defaults. The starts are the robot's own
-(an announced episode, or the loop resuming after a pause).
-
-The estimate is an upper bound, not a measurement: raw bytes per frame from the features' dtypes and shapes
-(images and videos at their raw size: LeRobot stages them as PNG frames), the episode's metadata row (its
-per-feature stats, `STATS_PER_VALUE` float64 numbers per value), times `MARGIN` for parquet's dictionary pages and
-page headers (a column of distinct floats stores each value in the dictionary and again as an index), plus
-`FIXED_BYTES` for the files rewritten at every save (info.json, stats.json, tasks.parquet), the two parquet footers
-`finalize()` writes, and filesystem block rounding.
+A disk that fills at LeRobot's `save_episode` also loses the episodes before (docs/upstream/dataset-crash-safety.md);
+before an episode starts, refusing costs nothing. The dataset is found from the script's command line
+(`compat.read_command_line`), its features from its `meta/info.json`. The need is an upper bound: raw bytes per frame
+(images at their raw size), the episode's stats row, times `MARGIN` for parquet's dictionary pages, plus
+`FIXED_BYTES` for the files rewritten at every save and the footers `finalize()` writes.
 """
 
 from __future__ import annotations

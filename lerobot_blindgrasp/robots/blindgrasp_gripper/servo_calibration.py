@@ -1,17 +1,10 @@
-"""Raw servo ticks -> the sim's joint zero and direction, from two hand-held poses (torque off).
+"""Raw servo ticks -> the sim's joint zero and direction, from two hand-held poses (torque off): the reference pose
+(q = 0) and a positive pose (every joint moved at least `calibration_min_motion_rad` its positive way).
 
-1. Reference pose (q = 0 on every joint, table in `robot_configs/README.md`): fingers hang straight down from the
-   plate, each finger in its own vertical plane through the claw axis.
-2. Positive pose: every joint moved by hand at least `calibration_min_motion_rad` in its positive direction
-   (J*0: fingertip counter-clockwise seen from above; J*1, J*2: fingertip swings away from the claw axis, opening).
-
-The sign of (positive - reference) gives Drive_Mode bit 0 (reverse) per servo, so every servo counts up in the
-sim's positive direction; Homing_Offset then puts the reference pose at `ZERO_TICK`. Both live in the servo's
-EEPROM, so the firmware itself reports sim-convention positions and `DynamixelMotorsBus.is_calibrated` can check
-them against the file. Drive mode is written before the homing offset is computed from a fresh reading, so the
-result only relies on the firmware's documented rules (reverse negates the count, homing offset adds to it).
-Converting a calibrated reading is then one affine map, the same for every joint and independent of how a servo
-horn was mounted: q = (ticks - ZERO_TICK) * 2 pi / 4096.
+The sign of the motion gives Drive_Mode's reverse bit, then Homing_Offset puts the reference pose at `ZERO_TICK`,
+both in the servo's EEPROM: the firmware reports sim-convention positions, q = (ticks - ZERO_TICK) * 2 pi / 4096 for
+every joint, and `DynamixelMotorsBus.is_calibrated` checks them against the file. This file also reads, checks and
+writes the calibration file.
 """
 
 from __future__ import annotations
@@ -65,11 +58,8 @@ def directions(reference: dict[str, int], positive: dict[str, int], min_motion_r
 def homing_offsets(
     reference: dict[str, int], positive: dict[str, int], present_after_drive_mode: dict[str, int]
 ) -> dict[str, int]:
-    """Homing_Offset that makes the reference pose read ZERO_TICK.
-
-    `present_after_drive_mode` is read in the positive pose after writing Drive_Mode (homing offset 0). In the new
-    direction the reference pose lies |delta| ticks below that reading.
-    """
+    """Homing_Offset that makes the reference pose read ZERO_TICK: `present_after_drive_mode`, read in the positive
+    pose after writing Drive_Mode (homing offset 0), lies |delta| ticks above the reference pose."""
     return {
         j: ZERO_TICK - (present_after_drive_mode[j] - abs(wrapped_delta(reference[j], positive[j])))
         for j in reference
@@ -136,8 +126,7 @@ def read_raw(fpath: Path) -> object:
 
 def servo_calibration_problems(calibration: dict, ids: dict[str, int]) -> list[str]:
     """What is wrong with a loaded calibration, by the rules `calibrate()` builds it with: one record per joint under
-    the configured servo ID, Drive_Mode 0 or 1 (reverse), a Homing_Offset the
-    firmware accepts, and a position range 0 <= min < max <= 4095."""
+    the configured servo ID, Drive_Mode 0 or 1, a Homing_Offset the firmware accepts, 0 <= min < max <= 4095."""
     out = []
     missing, extra = [j for j in ids if j not in calibration], [j for j in calibration if j not in ids]
     if missing:
@@ -194,10 +183,8 @@ def save_atomic(calibration: dict[str, MotorCalibration], fpath: Path) -> None:
 
 
 # --- a missing file at connect -----------------------------------------------------------------------------------
-# LeRobot's robots calibrate interactively inside `connect()` when no calibration file exists (koch_follower does).
-# That is right at a terminal, where the operator reads the prompt, and wrong when nobody can answer (`lerobot-eval`
-# under nohup, a job scheduler or a pipe): there `input()` fails with EOFError mid-calibration or waits for ever. The
-# usual cause is a `--robot.id` other than the one calibrated, so the refusal names the ids that are calibrated.
+# LeRobot's robots calibrate interactively inside `connect()` when no file exists, which fails mid-calibration or
+# waits for ever when nobody can answer; the usual cause is a wrong `--robot.id`, so the refusal names the known ones.
 _BUILTIN_INPUT = builtins.input
 
 

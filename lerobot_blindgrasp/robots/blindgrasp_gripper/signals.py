@@ -1,13 +1,7 @@
-"""Process signals while the gripper is connected.
-
-- SIGTERM and SIGHUP (a job scheduler, `docker stop`, a closed terminal) kill a Python process outright by default:
-  no `finally`, no `atexit`, so lerobot-record or lerobot-eval would leave nine servos torqued. While a gripper is
-  connected, a signal that still has its default action raises `SystemExit(128 + signum)` in the main thread
-  instead, which unwinds exactly like Ctrl-C: the script's cleanup finalizes the dataset (the episode in progress
-  is discarded, as on Ctrl-C) and disconnects the robot (torque off). A handler someone already installed (LeRobot's
-  `ProcessSignalHandler` in lerobot-rollout) is left alone: it already ends the run cleanly.
-- `deferred()` guards the torque-off itself: a second Ctrl-C or SIGTERM arriving in the middle of it waits until the
-  torque is off, then takes effect.
+"""Process signals while the gripper is connected. SIGTERM and SIGHUP kill a Python process outright by default (no
+`finally`, no `atexit`: nine servos left torqued); while connected, one that still has its default action raises
+`SystemExit(128 + signum)` instead, which unwinds like Ctrl-C (a handler someone installed is left alone).
+`deferred()` holds a second Ctrl-C or SIGTERM until the torque-off it interrupts is done.
 """
 
 from __future__ import annotations

@@ -1,14 +1,9 @@
-"""Where a start is, as the robot can tell: a start (connect, a trial, a recording episode, a loop resuming after a
-pause) is judged like a connect (`hardware/servo_diagnostics.py` at its start levels), and a recording's needs room on
-disk for the episode (`recording_space.py`).
+"""Where a start is, as the robot can tell (connect, a recording episode, a loop resuming after a pause): health is
+then judged at the start levels, and a recording's episode needs room on disk (`recording_space.py`).
 
-LeRobot's Robot interface has no call at an episode's start: lerobot-record goes on calling get_observation and
-send_action through its reset phase and into the next episode. What it does at every episode is announce it: its
-`log_say` logs a line at INFO just before the episode's loop, whether or not sounds are on
-(`compat.is_episode_announcement` recognises it), and its `init_logging` leaves the root logger at NOTSET, so the
-line reaches every root handler. `EpisodeStarts` is one: installed while the gripper is connected, it marks a
-start. `Starts` also counts a loop that resumes after a pause (a dataset save, an operator prompt, any script that
-waits between runs) as a start.
+LeRobot's Robot interface has no call at an episode's start, but lerobot-record announces each episode with a
+`log_say` line at INFO that reaches every root handler (`compat.is_episode_announcement` recognises it):
+`EpisodeStarts`, installed while the gripper is connected, is one such handler.
 """
 
 from __future__ import annotations
