@@ -18,8 +18,7 @@ class GraspEnvConfig:
     # Relative share of envs per object (same order as `objects`); None: even, as the paper's 18 x 500.
     object_weights: tuple[float, ...] | None = None
     seed: int = 0  # env i uses seed + i
-    # Explicit per-env seeds (length num_envs), instead of seed + i: lets one batch hold several objects' evaluation
-    # seed blocks (spec.eval_env_seed), each env on exactly the start state the one-env gym env gives it.
+    # Per-env seeds instead of seed + i: one batch can then run several objects' evaluation seeds (spec.eval_env_seed)
     env_seeds: tuple[int, ...] | None = None
     episode_s: float = spec.EPISODE_S
     dr: randomization.DomainRandomization = field(default_factory=lambda: randomization.PAPER_DR)
@@ -27,9 +26,7 @@ class GraspEnvConfig:
     physics: gripper.PhysicsOptions = field(default_factory=gripper.PhysicsOptions)
     nthread: int = 0  # 0: all CPUs
     autoreset: bool = True
-    backend: str = (
-        "batch"  # physics: "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp, GPU; needs the gpu extra)
-    )
+    backend: str = "batch"  # "batch" (mujoco.batch, CPU) or "warp" (MuJoCo Warp, GPU; the gpu extra)
     device: str | None = None  # warp only: "cuda:0", "cpu"; None: this process's GPU (LOCAL_RANK) if any, else CPU
 
     def __post_init__(self):
@@ -48,9 +45,8 @@ class GraspEnvConfig:
 
 
 def allocate_objects(num_envs: int, num_objects: int, weights: tuple[float, ...] | None) -> np.ndarray:
-    """Object index of each env. Even weights give the round-robin i % num_objects. Otherwise each object gets
-    its weighted share of envs (largest remainders, at least one env each), interleaved so that any prefix of the
-    batch holds a mix of objects."""
+    """Object index of each env: round-robin, or each object's weighted share (largest remainders, at least one
+    each), interleaved so that any prefix of the batch holds a mix of objects."""
     if weights is None:
         return np.arange(num_envs) % num_objects
     w = np.asarray(weights, dtype=float) / np.sum(weights)

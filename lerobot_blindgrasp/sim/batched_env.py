@@ -1,22 +1,11 @@
-"""Batched blind-grasp environment: N grippers, each with one object, stepped together.
+"""Batched blind-grasp environment: N grippers, one object each, torch over the env axis on the physics' device.
+Terms live in their own modules; physics runs in a backend (`backends/__init__.py` has the contract).
 
-This module steps, observes and resets the task, written once, torch over the env axis (no Python loop over envs),
-on the physics' device. It composes terms that live in one module each: the randomization draws (`randomization.py`),
-the event terms (`events.py`), the reward terms (`rewards.py`), success and termination (`termination.py`), the
-observations (`observations.py`). Physics runs in a backend chosen by `GraspEnvConfig.backend` ("batch":
-`mujoco.batch` on CPU threads, one MjModel per env with its Table II draw; "warp": MuJoCo Warp), whose state arrays
-are tensors sharing memory with the physics (`backends/__init__.py` has the contract).
-
-Step (paper Sec. III-B): a_t = delta-theta in R^9 is clipped to +-0.3 rad, the servo target is q_t + a_t (clipped to
-the joint limits, as the real robot does), and `substeps` physics steps cover one 50 ms control period. Episodes
-last 10 s; one terminates when the object leaves the 10 cm workspace. Envs auto-reset inside `step` (rsl-rl never
-calls reset); `info["final"]` describes the episodes that ended.
-
-The factors beyond Table II (`DomainRandomization`, all off by default) act through the event terms, the sensor
-model (`observations.py`) and two places here: the torque limit is the actuators' forcerange (the current limit
-caps torque, xm430.torque_at_current_nm), and under a joint calibration offset readings are q + offset and the servo
-reaches an absolute target in that frame (`delta_for_target`), as a real servo does with a wrong homing offset.
-"""
+Step (Sec. III-B): a_t in R^9 is clipped to +-0.3 rad, the servo target q_t + a_t to the joint limits (as the real
+robot does), and `substeps` physics steps cover one 50 ms control period. Episodes last 10 s and terminate when the
+object leaves the 10 cm workspace; envs auto-reset inside `step` (rsl-rl never calls reset), and `info["final"]`
+describes the episodes that ended. Under a joint calibration offset, readings and absolute targets are in the
+offset frame (`delta_for_target`), as with a real servo's wrong homing offset."""
 
 from __future__ import annotations
 
@@ -44,16 +33,11 @@ from lerobot_blindgrasp.sim.host import on_host
 
 log = logging.getLogger(__name__)
 
-HOLD_PUSH_AFTER_STEPS = events.HOLD_PUSH_AFTER_STEPS
-
 
 class BatchedGraspEnv:
-    """N envs in one object. reset() -> obs; step(action (N, 9)) -> (obs, reward (N,), terminated (N,), truncated
-    (N,), info); obs is a dict with "policy" (N, 12, the student's o_t) and "privileged" (N, 92, the teacher's).
-    `reset_tensors`/`step_tensors` take and give tensors on `device` (what rsl-rl reads); `reset`/`step` are the
-    same calls with numpy on the host (the gym env, evaluation, demo collection: on the CPU backend the arrays
-    share memory with the tensors, so nothing is copied).
-    """
+    """reset() -> obs; step(action (N, 9)) -> (obs, reward, terminated, truncated, info), obs = {"policy": (N, 12)
+    o_t, "privileged": (N, 92)}. `reset_tensors`/`step_tensors` work in tensors on `device` (rsl-rl); `reset`/`step`
+    in numpy on the host (views, not copies, on the CPU backend)."""
 
     def __init__(self, cfg: GraspEnvConfig):
         self.cfg = cfg
@@ -69,23 +53,20 @@ class BatchedGraspEnv:
         mjcf = [objects.object_mjcf(o, gripper.OBJECT_CONTYPE, gripper.OBJECT_CONAFFINITY) for o in obj_specs]
         self._templates = templates = [gripper.compile_model(xml, cfg.physics) for xml in mjcf]
         self.physics_draw = randomization.draw_physics(cfg.dr, self.env_seeds)  # (n,) on the CPU
+        self.models = None  # warp: per-world fields on the device; env_model(i) builds env i's MjModel on demand
         if cfg.backend == "batch":
-            self.models = [self._randomized_model(templates[self.object_index[i]], i) for i in range(n)]
+            self.models = [self.env_model(i) for i in range(n)]
             self.physics = BatchBackend(self.models, nthread=cfg.nthread)
-            self.batch = self.physics.batch
         else:
             from lerobot_blindgrasp.sim.backends.warp import WarpBackend  # optional dependency
 
-            self.models = None  # per-world fields on the device; env_model(i) builds env i's MjModel on demand
             self.physics = WarpBackend(
                 templates, self.object_index, self.physics_draw, cfg.dr.torque_limit_scale, device=cfg.device
             )
-            self.batch = None
         observations.check_state_layout(templates[0])
         self._init_task_state(templates[0], obj_specs)
 
     def _init_task_state(self, template: mujoco.MjModel, obj_specs: list[objects.ObjectSpec]) -> None:
-        """The task's per-env state, as float64/int64/bool tensors on the physics' device."""
         cfg, n = self.cfg, self.num_envs
         dev = self.device = self.physics.device
         f64 = {"dtype": torch.float64, "device": dev}
@@ -120,17 +101,13 @@ class BatchedGraspEnv:
         self.servo = events.ServoModel(cfg.dr, self._seeds)
         self._all = torch.arange(n, device=dev)
 
-    # --- construction ----------------------------------------------------------------------------------------
     def env_model(self, i: int) -> mujoco.MjModel:
         """Env i's MjModel: its object with its Table II draw (what either backend simulates for env i)."""
         if self.models is not None:
             return self.models[i]
-        return self._randomized_model(self._templates[self.object_index[i]], i)
-
-    def _randomized_model(self, template: mujoco.MjModel, i: int) -> mujoco.MjModel:
+        template = self._templates[self.object_index[i]]
         return randomization.apply_physics_draw(template, self.physics_draw, i, self.cfg.dr.torque_limit_scale)
 
-    # --- reset ------------------------------------------------------------------------------------------------
     def reset(self) -> dict[str, np.ndarray]:  # numpy on the host; reset_tensors on the device
         return on_host(self.reset_tensors())
 
@@ -164,7 +141,6 @@ class BatchedGraspEnv:
             v[ids] = 0.0
         self.pushes.reset(ids)
 
-    # --- step -------------------------------------------------------------------------------------------------
     def validate_action(self, action) -> torch.Tensor:
         a = self._f64(action)
         if a.shape != (self.num_envs, spec.NUM_JOINTS):
@@ -174,13 +150,11 @@ class BatchedGraspEnv:
         return a
 
     def step(self, action, active: np.ndarray | None = None):
-        """One control step with numpy on the host. `active` (batch backend only): the envs to simulate; the others
-        keep their physics state, which evaluation uses for episodes whose outcome is already final."""
+        """One control step, numpy on the host. `active` (batch backend only): the envs to simulate; the rest wait."""
         return on_host(self.step_tensors(action, active))
 
     def step_tensors(self, action, active=None):
-        """One control step: tensors (N, ...) on `device` in and out; `step` says what `active` means. A tensor
-        action is not checked for NaN (that would wait on the device); a policy's NaN fails the physics instead."""
+        """`step` on `device` tensors; a tensor action's NaN fails the physics (a check would wait on the device)."""
         ids = None if active is None else np.flatnonzero(on_host(active))
         if ids is not None and self.physics.name != "batch":
             raise NotImplementedError("stepping a subset of envs needs the batch backend")
@@ -206,9 +180,7 @@ class BatchedGraspEnv:
             "uniaxial_force": raw["uniaxial_clean"],  # noise-free, after the deadband (N)
             "tip_object_force": raw["tip_object_force"],  # |net force| of each tip on the object (N)
             "tip_object_downward": raw["tip_object_downward"],  # its -F_z/|F| (1: pressing straight down)
-            # The absolute targets the servos were sent this step (rad), in the joints' measured frame: with a
-            # calibration offset d the servos reached `target` by being sent target + d (`delta_for_target`), and
-            # that is the action a demo recorded under the offset must teach.
+            # the absolute targets sent (rad) in the joints' measured frame: what a demo under an offset must teach
             "joint_target": self._measured_frame(target),
             "terms": terms,
             "physics_failed": failed,
@@ -220,8 +192,7 @@ class BatchedGraspEnv:
         return self.obs_latency(obs, done), reward, terminated, truncated, info
 
     def _actuate(self, a: torch.Tensor, ids: np.ndarray | None) -> tuple[torch.Tensor, torch.Tensor]:
-        """One control period of physics towards q + a: the events before it, the servos, the events after it.
-        Returns the target the servos were given and the envs whose physics failed."""
+        """One control period of physics towards q + a, with its events; (the servos' target, the failed envs)."""
         q = self._qpos[:, observations.JOINTS]
         target = self.action_latency(torch.clamp(q + a, self._joint_lower, self._joint_upper))
         self.pushes(self._xfrc, self._object_body)
@@ -253,8 +224,7 @@ class BatchedGraspEnv:
         return terms, reward
 
     def _end_episodes(self, ids: torch.Tensor, obs: dict, info: dict, terminated, truncated, failed) -> None:
-        """Describe the episodes that ended in info["final"]; with autoreset, start their next ones (their rows of
-        `obs` become the new episodes' first observations)."""
+        """Describe the ended episodes in info["final"]; with autoreset, start the next ones in their rows of `obs`."""
         unstable = failed[ids]
         if unstable.any():
             self.physics_resets += int(unstable.sum())
@@ -278,7 +248,6 @@ class BatchedGraspEnv:
                 obs[k][ids] = fresh[k]
             self.obs_latency.restart(ids, fresh)  # a new episode starts with its own observation
 
-    # --- frames and targets -------------------------------------------------------------------------------------
     def _f64(self, x) -> torch.Tensor:
         return torch.as_tensor(x, dtype=torch.float64, device=self.device)
 
@@ -287,25 +256,20 @@ class BatchedGraspEnv:
         return self.sensor_draw.measured(q, sel) if self.cfg.dr.joint_calibration_rad else q.clone()
 
     def target_for_delta(self, delta):
-        """The absolute targets (n, 9), in the joints' measured frame, that `step` commands for `delta`: the step
-        clipped to +-0.3 rad, then the target to the joint limits (the inverse of `delta_for_target`). numpy in,
-        numpy out; a tensor in, a tensor out."""
+        """The absolute targets (n, 9) in the measured frame that `step` commands for `delta` (numpy or tensor)."""
         q = self._qpos[:, observations.JOINTS]
         step = self._f64(delta).clamp(-spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
         out = self._measured_frame(torch.clamp(q + step, self._joint_lower, self._joint_upper))
         return out if isinstance(delta, torch.Tensor) else on_host(out)
 
     def delta_for_target(self, target, ids: slice | np.ndarray | None = None):
-        """The step (n, 9) that makes the servos of all envs (or `ids`) go to absolute `target`s given in the
-        joints' measured frame: target - (q + calibration offset). Without an offset, target - q. numpy in, numpy
-        out; a tensor in, a tensor out."""
+        """The step (n, 9) taking all envs (or `ids`) to absolute `target`s in the measured frame (numpy or tensor)."""
         sel = slice(None) if ids is None else ids
         sel = sel if isinstance(sel, slice) else torch.as_tensor(sel, device=self.device)
         q = self._measured_frame(self._qpos[sel, observations.JOINTS], sel)
         out = self._f64(target) - q
         return out if isinstance(target, torch.Tensor) else on_host(out)
 
-    # --- observation --------------------------------------------------------------------------------------------
     def _observe(self, ids: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """Both observations for all envs or `ids`; for all envs, also the raw quantities the rewards read."""
         sel = slice(None) if ids is None else ids
@@ -337,10 +301,9 @@ class BatchedGraspEnv:
     def mj_model_data(self, i: int) -> tuple[mujoco.MjModel, mujoco.MjData]:
         """Env i's model and a forwarded MjData of its current state (for rendering)."""
         m = self.env_model(i)
-        d = self.batch.get_data(i) if self.batch is not None else self.physics.get_data(i, m)
+        d = self.physics.get_data(i, m)
         mujoco.mj_forward(m, d)
         return m, d
 
     def close(self) -> None:
         self.physics.close()
-        self.batch = None

@@ -1,19 +1,7 @@
-"""The sim's events: what happens to the envs besides the physics step, one named term each, as the reward terms
-are (`rewards.py`). `BatchedGraspEnv` composes them; every one is off at the paper's settings except Table II's
-pushes during training.
-
-- `Pushes`: Table II's random pushes on the object (`randomization.PushSchedule` decides when and how hard).
-- `HoldPush`: one push of `hold_push_n` on the object 0.5 s after it is first lifted in an episode.
-- `ActionLatency`: the servos get the target sent `action_latency_steps` control steps ago.
-- `ObservationLatency`: the policy gets the observation measured `obs_latency_steps` control steps ago.
-- `ServoModel`: velocity limit, backlash and period jitter; the control period is then stepped one physics substep
-  at a time (the setpoint moves towards the target at most `velocity_limit_rad_s`, the servo exerts no torque
-  within +-backlash/2 of it, and a new target takes over from the previous one only after the step's random delay).
-
-Each keeps its own per-env state (tensors on the envs' device), restarts envs in `reset(ids, ...)` and acts in one
-call per control step, on masks over the env axis (no index lists that would wait on the device). Draws are keyed on
-each env's seed and its own counters (`randomization`), so an env's events are the same in any batch.
-"""
+"""The sim's events besides the physics step, one term each (like `rewards.py`); all off at the paper's settings
+except Table II's training pushes. Each keeps per-env state on the envs' device, restarts envs in `reset(ids, ...)`
+and acts on masks (no index lists that would wait on the device); draws are keyed on env seeds, so an env's events
+are the same in any batch."""
 
 from __future__ import annotations
 
@@ -22,8 +10,7 @@ import torch
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import randomization
 
-# The hold push comes this many control steps (0.5 s) after the object is first lifted in an episode: half-way
-# through the 1 s hold that success needs.
+# Control steps (0.5 s) from the first lift to the hold push: half-way through the 1 s hold success needs.
 HOLD_PUSH_AFTER_STEPS = spec.SUCCESS_HOLD_STEPS // 2
 
 
@@ -104,8 +91,7 @@ class ActionLatency:
 
 
 class ObservationLatency:
-    """A ring of the last k + 1 observations: the policy gets the one measured k control steps ago. An episode that
-    just ended reports its own final observation, and a fresh one its first, undelayed."""
+    """A ring of the last k + 1 observations (the policy gets the one k steps old); final and first are undelayed."""
 
     def __init__(self, steps: int):
         self.steps = steps

@@ -1,23 +1,9 @@
-"""The D'Claw-derived three-finger gripper, built in code from ROBEL's D'Claw and the XM430 facts (`hardware/xm430.py`).
+"""The D'Claw-derived three-finger gripper, built in code from ROBEL's D'Claw (`chain3xh.xml`) and the XM430 facts.
+Joint axes and signs follow `spec` (J*1/J*2 > 0 open the finger).
 
-Geometry (ROBEL `chain3xh.xml`): three fingers at 120 deg on a 6 cm circle, plate -> J10 = 17.25 mm, link lengths
-0.0675 / 0.068 / 0.076 m (J10->J11, J11->J12, J12->tip site), tip capsule r = 11 mm reaching 84 mm past J12.
-Joint axes and signs follow `spec` (J*1/J*2 > 0 open the finger). The plate faces down on a stationary frame; a
-table sits below it so that a straight finger's tip clears the table by about 1.3 cm.
-
-Actuation: XM430-W350 in position mode, modelled as a DC motor behind a P(D) position loop:
-- `position` actuator with kp, kv (the servo's P and D gains, randomized per env, Table II) and
-  forcerange = +-4.1 N m (stall torque at 12 V);
-- joint damping = stall torque / no-load speed (4.1 / 4.82 = 0.85 N m s/rad): the back-EMF of a voltage-limited
-  motor. Together they give the servo's torque-speed line, so the speed limit (46 rpm) emerges instead of being
-  imposed on the target;
-- armature 0.002 kg m^2: rotor inertia reflected through the 353.5:1 gearbox.
-
-Fingertips: a jointless `*_tip` body welded to the distal link carries the tip capsule, standing in for the paper's
-elastic printed tips (soft solref, friction 1.0, condim 4 for torsional grip). Its origin is the load cell: a
-`force`/`torque` sensor pair there gives the 6-D wrench, and a `contact` sensor (netforce over all contacts of the
-tip geom, world frame) gives the contact force that is projected on the tip's z axis for the uniaxial reading.
-"""
+Actuation: `position` actuators (kp, kv randomized per env, Table II; forcerange = stall torque) plus joint damping
+= stall torque / no-load speed (the back-EMF of a voltage-limited motor), so the speed limit emerges. Fingertips: a
+`*_tip` body at the load cell carries a soft capsule (the elastic printed tips) and the wrench and contact sensors."""
 
 from __future__ import annotations
 
@@ -62,13 +48,8 @@ class ServoParams:
 
 @dataclass(frozen=True)
 class PhysicsOptions:
-    """Solver settings, chosen by a sweep of contact settings against scripted grasps
-    (`python -m lab.contact_settings_sweep`).
-
-    Elliptic cones + noslip (3 iterations) hold a scripted grasp without creep under the paper's gain
-    randomization, for ~20 % more step time. impratio = 10, the usual anti-creep knob, made squeezed objects
-    eject explosively at this 5 ms step once kp was randomized, so it stays at 1.
-    """
+    """Solver settings (`python -m lab.contact_settings_sweep`). Elliptic cones + noslip hold a grasp without creep
+    under Table II's gains; impratio stays 1 because higher values eject squeezed objects at this 5 ms step."""
 
     timestep: float = 0.005
     substeps: int = 10  # 10 x 5 ms = one 20 Hz control step
@@ -78,8 +59,7 @@ class PhysicsOptions:
     ls_iterations: int = 10
     torque_limit: float = xm430.STALL_TORQUE_NM  # N m; the robot's default current limit is the same stall point
     tip_friction: float = 1.0
-    # Contact time constants (s). MuJoCo clamps them to >= 2 x timestep. The fingertips are softer than the rest,
-    # standing in for the elastic printed tips.
+    # Contact time constants (s, MuJoCo clamps them to >= 2 x timestep); the fingertips are the soft printed tips.
     contact_timeconst: float = 0.01
     tip_timeconst: float = 0.02
 
@@ -91,7 +71,7 @@ class PhysicsOptions:
             )
 
 
-def _finger_xml(i: int, finger: str, servo: ServoParams) -> str:
+def _finger_xml(i: int, finger: str) -> str:
     """One finger, in a frame whose x is the radial direction and y the tangential one (seen from above: CCW)."""
     phi = spec.FINGER_BASE_ANGLES_RAD[i]
     bx, by = BASE_RADIUS * math.cos(phi), BASE_RADIUS * math.sin(phi)
@@ -138,7 +118,7 @@ def gripper_mjcf(object_xml: str, options: PhysicsOptions | None = None, servo: 
     """The whole scene (table, frame, gripper, sensors and one object body) as an MJCF string."""
     o = options or PhysicsOptions()
     s = servo or ServoParams()
-    fingers = "".join(_finger_xml(i, f, s) for i, f in enumerate(spec.FINGERS))
+    fingers = "".join(_finger_xml(i, f) for i, f in enumerate(spec.FINGERS))
     actuators = "".join(
         f'<position name="{j}" joint="{j}" kp="{s.kp}" kv="{s.kv}" forcerange="{-o.torque_limit} '
         f'{o.torque_limit}" ctrlrange="{spec.JOINT_LOWER[k]:.4f} {spec.JOINT_UPPER[k]:.4f}"/>'

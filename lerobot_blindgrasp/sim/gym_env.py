@@ -1,32 +1,13 @@
-"""One grasping trial as a gymnasium env, for `lerobot-eval` and anything else that speaks gymnasium.
+"""One grasping trial as a gymnasium env for `lerobot-eval`: one row of a `BatchedGraspEnv` (its own, or shared by
+a batch of these envs, see `attach`), so eval sees the physics, noise and success rule of training.
 
-A thin shell over one row of a `BatchedGraspEnv` (its own one-env sim, or a row of a sim that a batch of these envs
-shares, see `attach`), so that eval sees exactly the physics, randomization, noise and success rule that teacher
-training and demo collection use.
-
-LeRobot-facing contract (spec.py):
-- observation `{"agent_pos": o_t}` with o_t = 9 joint positions (rad) + 3 uniaxial forces (N), float32;
-  LeRobot's `preprocess_observation` turns `agent_pos` into `observation.state`.
-- action = absolute joint targets (rad), shape (9,), order `spec.ACTION_NAMES`. The env turns it into the paper's
-  delta = target - q_now, which `BatchedGraspEnv.step` clips to +-0.3 rad and to the joint limits, as the real
-  gripper does. So a policy cannot move a joint farther than 0.3 rad in one 50 ms step, whatever it asks for.
-- `info["is_success"]`: the shared success rule (lifted >= SUCCESS_LIFT_M for SUCCESS_HOLD_S), latched.
-- With `end_on_success` (lerobot-eval's default, `--env.end_on_success`), an episode terminates at the step its
-  success latches: nothing after it can change the outcome, and lerobot-eval stops a batch once every episode in
-  it has ended, so a batch of successes costs 3-5 s of simulation instead of 10. The rates are the same either way
-  (lerobot-eval counts a success at any step up to the episode's end); only the summed rewards cover less.
-
-Seeding: `reset(seed=s)` takes s as an evaluation index (lerobot-eval passes its --seed plus the episode number)
-and runs the first episode of `BatchedGraspEnv(GraspEnvConfig(seed=start_seed(s, object)))`, where
-`start_seed` = `spec.eval_env_seed(s, catalogue index of the object)`. So every object gets its own start states
-(physics draw, start pose, object offset and sensor noise) from the same lerobot-eval seeds, and all of them lie in
-the evaluation seed range, apart from teacher training and demo collection. `reset()` without a seed draws the
-next index from gymnasium's `np_random`, so a seeded reset followed by unseeded ones is reproducible too. Every
-episode gets a fresh physics draw: a fresh `BatchedGraspEnv` costs a few milliseconds.
+Contract (spec.py): observation `{"agent_pos": o_t}` (9 joint positions in rad + 3 uniaxial forces in N, float32);
+action: absolute joint targets (rad), the step to them clipped to +-0.3 rad and the joint limits as on the real
+gripper; `info["is_success"]`: the shared, latched success rule (`end_on_success` ends the episode there).
+`reset(seed=s)` takes s as an evaluation index: sim seed `start_seed(s, object)`, per object, in the eval range.
 
 Outside LeRobot: `gym.make("lerobot_blindgrasp.sim.gym_env:lerobot_blindgrasp/BlindGrasp-v0", object_name=...)`
-(the module prefix imports this file, which registers the id with its 200-step limit), or `make_env(name)`.
-"""
+or `make_env(name)`."""
 
 from __future__ import annotations
 
@@ -89,12 +70,11 @@ class BlindGraspGymEnv(gym.Env):
         self.dr = dr
         self.render_mode = render_mode
         self.render_width, self.render_height = int(render_width), int(render_height)
-        # Shadows cost ~4x per frame on a CPU renderer; eval videos are for a glance, the demo turns them on.
+        # Shadows make CPU rendering several times slower; eval videos are for a glance, the demo turns them on.
         self.render_shadows = bool(render_shadows)
         self.camera = camera
-        # A new frame every `render_stride` control steps, the last one repeated in between. lerobot-eval renders
-        # the first 10 episodes of every task at every step (hard-coded); with a software GL renderer a frame costs
-        # ~12 ms, most of a CPU eval's time. Videos keep their length and 20 fps; motion updates at 20/stride Hz.
+        # A new frame every `render_stride` control steps, the last repeated between: lerobot-eval renders every
+        # step of 10 episodes per task, and with software GL that is most of a CPU eval's time.
         if int(render_stride) < 1:
             raise ValueError(f"render_stride must be >= 1, got {render_stride}")
         self.render_stride = int(render_stride)
@@ -113,7 +93,6 @@ class BlindGraspGymEnv(gym.Env):
         self._done = False
         self._renderer: mujoco.Renderer | None = None
 
-    # --- gymnasium API ---------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         # `options` is accepted and ignored: lerobot-eval passes its own marker there.
         self.begin(seed)
@@ -129,14 +108,14 @@ class BlindGraspGymEnv(gym.Env):
         self.env_seed = start_seed(self.eval_seed, self.object.name)
 
     def attach(self, sim: BatchedGraspEnv, row: int, obs: dict[str, np.ndarray]):
-        """Run this episode as row `row` of `sim` (reset, built with this env's `env_seed` in that row): a batch of
-        these envs can share one sim (`envs/sim_vector.py`); `obs` is the sim's reset observation."""
+        """Run this episode as row `row` of a reset `sim` built with `env_seed` there (`envs/sim_vector.py`)."""
         if self._sim is not None and self._sim is not sim:
             self._sim.close()
         self._sim, self._row = sim, row
         self._done = False
         self._frame = None
-        return self._obs(obs, row), {"is_success": False, "eval_seed": self.eval_seed, "env_seed": self.env_seed}
+        info = {"is_success": False, "eval_seed": self.eval_seed, "env_seed": self.env_seed}
+        return spaces.observation(obs["policy"][row]), info
 
     def step(self, action):
         if self._sim is None:
@@ -144,8 +123,7 @@ class BlindGraspGymEnv(gym.Env):
         if self._done:
             raise RuntimeError("the episode has ended (terminated or truncated); call reset() before step()")
         target = self.check_action(action)
-        # Targets beyond the joint limits are not rejected (a policy may overshoot a limit slightly: a command, not
-        # a bug): the sim clips the step to +-0.3 rad and the servo target to the limits, as the real gripper does.
+        # Targets past the limits are commands, not bugs: the sim clips them as the real gripper does.
         delta = self._sim.delta_for_target(target[None, :])  # in the joints' measured (calibrated) frame
         return self.row_result(self._sim.step(delta))
 
@@ -175,7 +153,7 @@ class BlindGraspGymEnv(gym.Env):
             "uniaxial_force_n": info["uniaxial_force"][i].astype(np.float32),  # noise-free, after the deadband
             "joint_target": info["joint_target"][i].astype(np.float32),  # what the servos were sent
         }
-        return self._obs(obs, i), float(reward[i]), terminated, truncated, step_info
+        return spaces.observation(obs["policy"][i]), float(reward[i]), terminated, truncated, step_info
 
     def render(self):
         if self.render_mode is None:
@@ -188,8 +166,7 @@ class BlindGraspGymEnv(gym.Env):
         model, data = self._sim.mj_model_data(self._row)
         if self._renderer is None:
             self._renderer = self._make_renderer(model)
-        # The renderer was built from an earlier episode's model. Every episode of this env has the same object
-        # and geometry (randomization changes only friction, mass and gains), so that model draws this data.
+        # A renderer built from an earlier episode's model draws this one: randomization never changes geometry.
         self._renderer.update_scene(data, camera=self.camera)
         self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.render_shadows
         self._frame, self._frame_step = self._renderer.render().copy(), step
@@ -202,11 +179,6 @@ class BlindGraspGymEnv(gym.Env):
         if self._sim is not None:
             self._sim.close()
             self._sim = None
-
-    # --- helpers ----------------------------------------------------------------------------------------------
-    @staticmethod
-    def _obs(obs: dict[str, np.ndarray], row: int = 0) -> dict[str, np.ndarray]:
-        return spaces.observation(obs["policy"][row])
 
     def _make_renderer(self, model: mujoco.MjModel) -> mujoco.Renderer:
         try:

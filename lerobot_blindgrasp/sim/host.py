@@ -1,8 +1,5 @@
-"""Tensors to the host: what a caller that reads numpy gets from the env's tensors on its device.
-
-On the CPU a tensor's numpy view shares its memory, so the CPU backend hands numpy callers the env's own results
-without a copy; on a GPU this is where an env step's results cross to the host, and only when a caller asks.
-"""
+"""Tensors to numpy for host callers: a view on the CPU (no copy); on a GPU, the one place results cross to the
+host, and only when asked."""
 
 from __future__ import annotations
 

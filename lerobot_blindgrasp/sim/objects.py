@@ -1,15 +1,6 @@
-"""The paper's 18 training objects (Table I), and the catalogue that later objects (OOD proxies) join.
-
-Dimensions are Table I's, in cm there and in metres here. Interpretation of the rows:
-- cuboids: X, Y, Z are full edge lengths, Z vertical;
-- capsule: "Height" is the length of the cylindrical part between the two hemispheres (so the large capsule is
-  3.33 + 2 x 3.33 = 10 cm long); it rests lying on its side, its only stable pose;
-- cylinders: radius and full height, standing upright;
-- sphere: radius.
-
-Mass: density 400 kg/m^3, i.e. PLA (1240 kg/m^3) printed with two walls and ~20 % infill, the usual setting for
-replicas like the paper's 3D-printed ID objects. The large cuboid A is then 300 g, the small capsule 23 g.
-"""
+"""The paper's 18 training objects (Table I, cm there, metres here) and the catalogue that held-out objects join.
+Cuboid X, Y, Z are full edges; the capsule's "Height" is its cylindrical part, and it lies on its side. Mass:
+400 kg/m^3, i.e. PLA printed with two walls and ~20 % infill, as 3D-printed replicas usually are."""
 
 from __future__ import annotations
 
@@ -103,8 +94,7 @@ PAPER_OBJECTS: tuple[str, ...] = tuple(CATALOGUE)  # the 18 training objects, Ta
 MEDIUM_OBJECTS: tuple[str, ...] = tuple(n for n in PAPER_OBJECTS if n.endswith("_medium"))
 
 
-# Everyday objects outside Table I, for held-out evaluation only (no demo or teacher episode ever saw them): real
-# dimensions and masses of things a three-finger gripper of this size picks up, each one MuJoCo primitive.
+# Everyday objects outside Table I, for held-out evaluation only: real dimensions and masses, one primitive each.
 EVERYDAY: tuple[ObjectSpec, ...] = (
     ObjectSpec("everyday_tennis_ball", "tennis_ball", "everyday", "sphere", (0.0335,), mass_kg=0.058),
     ObjectSpec("everyday_apple", "apple", "everyday", "sphere", (0.038,), mass_kg=0.180),
@@ -115,8 +105,6 @@ EVERYDAY: tuple[ObjectSpec, ...] = (
     ObjectSpec("everyday_rubiks_cube", "rubiks_cube", "everyday", "box", (0.0285, 0.0285, 0.0285), mass_kg=0.090),
     ObjectSpec("everyday_orange", "orange", "everyday", "sphere", (0.042,), mass_kg=0.150),
 )
-# Tried and left out: a marker lying down (radius 0.9 cm) and a flat soap bar (3.5 cm tall). The teacher itself lifts
-# them 0/10 and 6/10 times: they are outside what this gripper reaches at table height, not a test of the student.
 
 
 def scaled(obj: ObjectSpec, scale: float) -> ObjectSpec:
@@ -127,15 +115,7 @@ def scaled(obj: ObjectSpec, scale: float) -> ObjectSpec:
     return replace(obj, size=tuple(scale * v for v in obj.size), mass_kg=mass)
 
 
-def register_object(obj: ObjectSpec) -> None:
-    """Add an object (e.g. an OOD proxy) to the catalogue. Its geom must be one primitive, like the others."""
-    if obj.name in CATALOGUE:
-        raise ValueError(f"object {obj.name!r} already in the catalogue")
-    CATALOGUE[obj.name] = obj
-
-
-for _obj in EVERYDAY:
-    register_object(_obj)
+CATALOGUE.update((o.name, o) for o in EVERYDAY)
 EVERYDAY_OBJECTS: tuple[str, ...] = tuple(o.name for o in EVERYDAY)
 
 

@@ -1,13 +1,7 @@
-"""What the sim observes each control step, for all envs at once (torch over the env axis, on the envs' device).
-
-- `raw`: noise-free quantities that rewards, success and demo curation read;
-- "policy": the student's o_t in R^12, measured joint positions and uniaxial force readings (`spec.STATE_NAMES`);
-- "privileged": the teacher's 92-d vector, assembled by name through `spec.privileged_parts`, so each part is
-  computed under the name `spec.PRIVILEGED_LAYOUT` gives it, never placed by position.
-
-Measurement noise comes in as one N(0, 1) draw per env and step, split by `NOISE_LAYOUT`. That order decides which
-random number each reading gets: changing it changes every observation the shipped teacher was evaluated on.
-"""
+"""What the sim observes each control step, over the env axis: `raw` noise-free quantities (rewards, success,
+curation); "policy", the student's o_t in R^12; "privileged", the teacher's 92-d vector, assembled by name
+(`spec.privileged_parts`). Noise is one N(0, 1) draw per env and step split in `NOISE_LAYOUT` order: changing that
+order changes every observation the shipped teacher was evaluated on."""
 
 from __future__ import annotations
 
@@ -65,7 +59,7 @@ def _uniaxial_reading(uni_true, noise, dr, sensor_draw) -> torch.Tensor:
     if dr.dead_force_sensor >= 0:
         signal = signal.clone()
         signal[:, dr.dead_force_sensor] = 0.0
-    return sensors.reading(signal)
+    return force.reading(signal)
 
 
 def observe(
@@ -79,12 +73,8 @@ def observe(
     dr: randomization.DomainRandomization,
     sensor_draw: randomization.SensorDraw | None = None,
 ) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
-    """(raw, obs) for the envs whose state is given (rows of qpos, qvel, sensordata, ...; `sensor_draw` holds the
-    same rows' force biases and joint calibration offsets, None when both are zero).
-
-    The sensor errors beyond Table II (gain, bias, range, a dead cell, calibration offset) act on the two measured
-    quantities a real gripper has, `joint_pos` and `uniaxial_force`, in the student's o_t and in the teacher's
-    vector alike; the teacher's sim-only readings (contact force, wrench) keep Table II's noise only."""
+    """(raw, obs) for the given rows of state. Sensor errors beyond Table II (`sensor_draw`, or None) act on what a
+    real gripper measures (`joint_pos`, `uniaxial_force`); the teacher's sim-only readings get Table II's noise."""
     contact = si.read(sensordata, "contact")
     tip_quat = si.read(sensordata, "quat")
     uni_true = sensors.uniaxial_force(contact, si.read(sensordata, "zaxis"))
@@ -93,7 +83,7 @@ def observe(
     tip_obj_norm = tip_obj.square().sum(-1).sqrt()
     raw = {
         "q": qpos[:, JOINTS],
-        "uniaxial_clean": sensors.reading(uni_true),  # noise-free reading (rewards, curation)
+        "uniaxial_clean": force.reading(uni_true),  # noise-free reading (rewards, curation)
         "d_xy": rewards.planar_distance(obj_pos[:, :2]),
         "lift": obj_pos[:, 2] - rest_height,
         "tip_object_distance": si.read(sensordata, "objdist")[:, :, 0].clone(),  # kept: `read` is a live view

@@ -1,26 +1,11 @@
-"""Domain randomization, Table II of the paper, as one preset plus the functions that draw from it.
+"""Domain randomization, Table II of the paper: one preset plus the functions that draw from it. Joint offsets and
+object positions are drawn at every reset; friction, mass and actuator gains once per env (Sec. III-B).
 
-Joint offsets and object positions are drawn at every reset; friction, mass and actuator gains once per env at
-construction (paper, Sec. III-B). Deviations and readings of the table:
-- Mass: the table's "x[0.5, 0.3]" is not an interval (lower > upper). We use x U[0.5, 1.5], symmetric about the
-  nominal 3D-printed mass, which spans the infill settings a replica might be printed with (10-40 %).
-- Static vs dynamic friction: MuJoCo has one Coulomb coefficient per geom (no static/dynamic split), so we draw one
-  coefficient per object and one for the fingertips, each from [0.7, 1.3]. MuJoCo combines a pair with max().
-- Random force: each env pushes its object with a force whose components are U[-0.3, 0.3] N for one control step
-  (50 ms) "at randomly selected times", U[0, 10] s apart. A force held between pushes rolls spheres and capsules
-  off the table (see `PushSchedule`). Off for demo collection and lerobot-eval.
-
-Where Table II lands: `write_physics_draw` writes envs' friction, mass and servo gains into rows of model fields
-(`apply_physics_draw`: one env's MjModel; the Warp backend: its per-world arrays on the device);
-`draw_reset` gives each episode's start pose and object position; `PushSchedule` times the random pushes.
-
-Beyond Table II, the same dataclass carries the conditions a real gripper may differ in (sensor gain, bias, range,
-a dead load cell, joint calibration, backlash, torque and velocity limits, latency, period jitter, object size,
-pushes during the hold). Their defaults are the paper's sim exactly, so every preset above is unchanged; the
-robustness sweep (`lab/robustness/`) sets them one at a time, and training can set them too. Where
-each acts: the sensor model in `sim/observations.py` and `hardware/force.py`, the servo and timing model in `sim/batched_env.py`,
-the object size in `sim/objects.py`. `ROBUSTNESS_FIELDS` names them.
-"""
+Readings of the table:
+- Mass: "x[0.5, 0.3]" is not an interval; we use x U[0.5, 1.5], the infill range a replica might be printed with.
+- Friction: MuJoCo has one Coulomb coefficient per geom: one draw for the object, one for the tips, each [0.7, 1.3].
+- Random force: a push for one control step at random times (`PushSchedule`); off for demos and lerobot-eval.
+The fields past Table II (`ROBUSTNESS_FIELDS`) default to the paper's sim; `lab/robustness/` sets them one at a time."""
 
 from __future__ import annotations
 
@@ -221,8 +206,7 @@ def draw_hold_push(dr: DomainRandomization, seeds, episode) -> torch.Tensor:
 
 
 def draw_jitter_substeps(dr: DomainRandomization, seeds, counter, substeps: int) -> torch.Tensor:
-    """(n,) integer substeps by which this control step's target reaches the servos late: U[0, jitter], quantized
-    to the physics timestep (the period lasts 50 ms on average; each command arrives 0..jitter late)."""
+    """(n,) substeps by which this control step's target arrives late: U[0, jitter], quantized to the timestep."""
     dt = spec.CONTROL_DT / substeps
     u = rng.uniform(seeds, rng.STREAM_JITTER, counter, 1)[:, 0]
     return torch.floor(u * (dr.period_jitter_s / dt + 1)).clamp_max(substeps - 1).to(torch.int64)
@@ -250,11 +234,8 @@ class DrawTargets:
 def write_physics_draw(
     fields: dict[str, torch.Tensor], at: DrawTargets, draw: PhysicsDraw, torque_limit_scale: float = 1.0
 ) -> None:
-    """Table II's draw written in place into per-env rows of model fields: `fields[name]` is (n, *MjModel shape),
-    `draw` holds the n envs' rows, on the same device. The object's and the fingertips' friction, the object's mass
-    (and inertia, so its shape's mass distribution stays), the servos' position gain kp and damping kv (MuJoCo's
-    position actuator: gain kp, bias -kp q - kv qdot), and the torque limit beyond it. One implementation for both
-    backends: an MjModel's own arrays (n = 1) and the Warp backend's per-world rows on its device."""
+    """Table II's draw written in place into per-env rows (n, *MjModel shape) of model fields, for both backends.
+    MuJoCo's position actuator: gain kp, bias -kp q - kv qdot."""
     f, scale = fields, draw.object_mass_scale
     f["geom_friction"][:, at.object_geom, 0] = draw.object_friction
     f["geom_friction"][:, list(at.tip_geoms), 0] = draw.robot_friction[:, None]
@@ -272,8 +253,7 @@ def write_physics_draw(
 def apply_physics_draw(
     template: mujoco.MjModel, draw: PhysicsDraw, i: int, torque_limit_scale: float = 1.0
 ) -> mujoco.MjModel:
-    """A copy of an object's model with env i's Table II draw (`write_physics_draw`) written into it, and the
-    constants MuJoCo derives from mass and inertia recomputed."""
+    """A copy of an object's model with env i's Table II draw written in and its derived constants recomputed."""
     m = copy.copy(template)
     names = (*PHYSICS_DRAW_FIELDS, TORQUE_LIMIT_FIELD)
     fields = {k: torch.from_numpy(getattr(m, k))[None] for k in names}  # the model's own memory
@@ -283,14 +263,8 @@ def apply_physics_draw(
 
 
 class PushSchedule:
-    """Table II's random force: a push of U[-0.3, 0.3] N per axis lasting one control step (50 ms), at random
-    times U[0, 10] s apart, per env. Held forces would blow spheres and capsules (23-300 g, rolling) off the table
-    in well under a second (37 % of untouched episodes ended out of reach), so "applied at randomly selected
-    times" is read as a push, not a lasting force.
-
-    The schedule only decides; the env writes the forces into its physics (`step` returns which envs' pushes end
-    and which start, with what force). Draws are keyed on each env's own push counter, so an env's pushes are the
-    same in any batch. Masks over the env axis, not index lists: nothing waits on the device to count them."""
+    """Table II's random force: U[-0.3, 0.3] N per axis for one control step, U[0, 10] s apart (a held force would
+    roll spheres and capsules off the table). It only decides, as masks; the env writes the forces."""
 
     def __init__(self, dr: DomainRandomization, seeds: torch.Tensor):
         n = len(seeds)

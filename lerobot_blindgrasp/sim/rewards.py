@@ -1,26 +1,9 @@
-"""The paper's reward, eq. 1-7, as named terms (mjlab's manager style: torch over the env axis, on the envs' device).
+"""The paper's reward, eq. 1-7, as named terms over the env axis (mjlab's manager style):
 
     r = w1 r_t + w2 r_i + w31 r_l + w32 r_a + w33 r_ar            (eq. 1, `total`)
 
-with w = (1.0, 0.2, -500, -0.04, -0.01). `TERMS` maps each term's name to the function of its equation;
-`RewardConfig.weights` gives each name its weight. The env computes every term after each control step
-(`compute_terms`), sums weight x term (`total`) and logs each term on its own; an ablation switches a term off by its
-name (`RewardConfig.without`).
-
-Two shaping terms that are not in the paper, `reach` and `touch`, are weighted by the `cpu`/`quick` teacher presets
-only (their `deviations` say why); the paper's weights leave them at 0.
-
-| paper            | name          | function        |
-|------------------|---------------|-----------------|
-| eq. 2, d_xy      |               | `planar_distance` |
-| eq. 3, r_t       | `task`        | `r_task`        |
-| eq. 4, r_i       | `incentive`   | `r_incentive`   |
-| eq. 5, r_l       | `joint_limit` | `r_joint_limit` |
-| eq. 6, r_a       | `action`      | `r_action`      |
-| eq. 7, r_ar      | `action_rate` | `r_action_rate` |
-| (shaping)        | `reach`       | `r_reach`       |
-| (shaping)        | `touch`       | `r_touch`       |
-"""
+with w = (1.0, 0.2, -500, -0.04, -0.01). The shaping terms `reach` and `touch` are not in the paper; only the
+`cpu`/`quick` teacher presets weigh them."""
 
 from __future__ import annotations
 
@@ -121,9 +104,8 @@ def num_contacts(uniaxial_force, threshold: float = spec.FORCE_THRESHOLD_N):
 
 
 def r_task(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
-    """Eq. 3. Active only with >= 1 fingertip contact and the object inside the workspace; else 0.
-
-    h_o is clipped at 0, so that resting penetration does not make the square root's argument exceed 1."""
+    """Eq. 3, active only with >= 1 fingertip contact and the object inside the workspace. h_o is clipped at 0 so
+    that resting penetration cannot push the square root's argument past 1."""
     h_t = cfg.target_lift_m
     h_o = s.lift.clamp_min(0.0)
     centred = 1.0 - torch.sqrt((s.d_xy / cfg.workspace_radius_m).clamp(0.0, 1.0))
@@ -154,16 +136,13 @@ def r_action_rate(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
 
 
 def r_reach(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
-    """Shaping (not in the paper): pulls fingertips toward the object surface before any contact exists. r_t is 0
-    until the object lifts, so PPO on a small budget without it learns to keep still."""
+    """Shaping (not in the paper): pulls tips toward the object; r_t is 0 until a lift, so small budgets stall."""
     return (1.0 - torch.tanh(cfg.reach_scale * s.tip_object_distance.clamp_min(0.0))).mean(-1)
 
 
 def r_touch(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
-    """Shaping (not in the paper): fraction of fingertips pressing on the *object* (any direction, > 0.1 N).
-
-    Unlike n_contact it ignores pushes on the table, and unlike the uniaxial sensor it sees side contacts, so it
-    rewards every touch that could become a grasp."""
+    """Shaping (not in the paper): fraction of tips pressing on the *object* (> 0.1 N, any direction, so side
+    contacts count and table pushes do not)."""
     return (s.tip_object_force > cfg.contact_threshold_n).to(torch.float64).mean(-1)
 
 

@@ -1,13 +1,7 @@
-"""Counter-based random numbers, torch over the env axis, on the envs' device.
-
-Every draw is a pure function of (env seed, stream, counter, index), so env i of a batch and a single env built with
-env i's seed see exactly the same randomness, whatever the batch size, the order of resets or the device. A per-env
-generator would need a loop over envs on every reset; this needs none, and it runs where the physics runs.
-
-The mixer is SplitMix64 (Steele et al., 2014), applied to a key built from the inputs. The 64-bit words are held in
-int64 tensors (torch has no arithmetic on uint64): addition, multiplication and xor wrap to the same bits as
-unsigned arithmetic, and the right shifts are made logical by masking the sign bits the arithmetic shift copies in.
-"""
+"""Counter-based random numbers over the env axis, on the envs' device. Every draw is a pure function of (env seed,
+stream, counter, index), so env i of a batch and a single env with its seed see the same randomness whatever the
+batch size, reset order or device. The mixer is SplitMix64 (Steele et al., 2014) on int64 tensors (torch has no
+uint64): +, * and ^ wrap to the unsigned bits, and right shifts are made logical by masking."""
 
 from __future__ import annotations
 

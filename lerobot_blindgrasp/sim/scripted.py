@@ -1,11 +1,5 @@
-"""Scripted grasps: a pinch-and-lift for physics tests and the sim demo, and a side grasp (`SideGraspScript`) whose
-successful rollouts the `cpu_bc*` teachers clone (teacher/aux_bc.py). Neither is a baseline policy.
-
-The pinch:
-Each finger moves in its radial-vertical plane. Two-link inverse kinematics (proximal 0.068 m, distal to the tip
-sphere 0.073 m) places the tip sphere on the object's side at mid-height, presses 4 mm past the surface, then
-raises it by `lift_m` at the same radius. It assumes the object is centred, so use it without the xy offset.
-"""
+"""Scripted grasps (not baseline policies): a pinch-and-lift for physics tests and the viewer (two-link IK per
+finger; it assumes a centred object), and a side grasp whose successes the `cpu_bc*` teachers clone (teacher/aux_bc.py)."""
 
 from __future__ import annotations
 
@@ -20,7 +14,6 @@ _L1 = gripper.LINK_J11_J12
 _L2 = gripper.TIP_CAPSULE_END  # J12 -> centre of the tip capsule's end sphere (0.073 m)
 _R0 = gripper.BASE_RADIUS
 J11_HEIGHT_M = gripper.PLATE_HEIGHT - gripper.PLATE_TO_J10 - gripper.LINK_J10_J11  # J11 pivot, fingers at J10 = 0
-FINGER_REACH_M = _L1 + _L2  # J11 pivot to the tip sphere's centre, finger straight
 
 
 def finger_ik(radius, height):
@@ -31,22 +24,6 @@ def finger_ik(radius, height):
     t2 = -np.arccos(np.clip(c2, -1.0, 1.0))  # distal curls inward (negative)
     alpha = np.arctan2(_L2 * np.sin(-t2), _L1 + _L2 * np.cos(t2))
     return np.arctan2(dx, dz) + alpha, t2
-
-
-def pinch_lift_waypoints(
-    object_radius: float, grasp_height: float, lift_m: float = 0.03, squeeze_m: float = 0.004
-):
-    """Joint waypoints (approach, pinch, lift) for all three fingers, shape (3, 9)."""
-    tip_r = gripper.TIP_CAPSULE_RADIUS
-    out = []
-    for r, z in (
-        (object_radius + tip_r + 0.03, grasp_height),
-        (object_radius + tip_r - squeeze_m, grasp_height),
-        (object_radius + tip_r - squeeze_m, grasp_height + lift_m),
-    ):
-        j11, j12 = finger_ik(r, z)
-        out.append(np.tile([0.0, j11, j12], len(spec.FINGERS)))
-    return np.stack(out)
 
 
 class WaypointScript:
@@ -72,10 +49,12 @@ class WaypointScript:
 
 
 class PinchLiftScript(WaypointScript):
-    """Approach (15 steps), pinch (20), lift (30), hold; the same targets for every env."""
+    """Approach (15 steps), pinch 4 mm into the side (20), lift (30), hold; the same targets for every env."""
 
     def __init__(self, object_radius: float, grasp_height: float, lift_m: float = 0.03):
-        self.waypoints = pinch_lift_waypoints(object_radius, grasp_height, lift_m)
+        r = object_radius + gripper.TIP_CAPSULE_RADIUS  # tip sphere centre touching the side
+        targets = ((r + 0.03, grasp_height), (r - 0.004, grasp_height), (r - 0.004, grasp_height + lift_m))
+        self.waypoints = np.stack([np.tile([0.0, *finger_ik(x, z)], len(spec.FINGERS)) for x, z in targets])
         self.segments = ((15, 0, 0), (20, 0, 1), (30, 1, 2))
         self.t = 0
 
@@ -83,8 +62,7 @@ class PinchLiftScript(WaypointScript):
 def run_pinch_lift(
     env, steps: int, object_radius: float = 0.03, grasp_height: float = 0.045, lift_m: float = 0.03
 ):
-    """Drive a reset `BatchedGraspEnv` with the pinch for `steps` control steps. Returns the per-step object lift
-    (steps, N), the noise-free uniaxial forces (steps, N, 3) and the last step's info."""
+    """Pinch a reset `BatchedGraspEnv` for `steps` steps: lifts (steps, N), clean forces (steps, N, 3), last info."""
     script = PinchLiftScript(object_radius, grasp_height, lift_m)
     lifts, forces = [], []
     for _ in range(steps):
@@ -94,12 +72,8 @@ def run_pinch_lift(
     return np.array(lifts), np.array(forces), info
 
 
-# --- A side grasp that works wherever the object stands (used as demonstrations for the teacher, teacher/aux_bc.py)
-
-
 def support_distance(o: objects.ObjectSpec, direction_xy: np.ndarray) -> np.ndarray:
-    """Horizontal distance from the object's centre to its surface, seen from unit directions (n, 2) in the object's
-    spawn pose (capsules lie along x; boxes are axis-aligned): how far in a tip approaching along -direction meets it."""
+    """Horizontal distance from the object's centre to its surface along unit directions (n, 2), spawn pose."""
     ux, uy = np.abs(direction_xy[:, 0]), np.abs(direction_xy[:, 1])
     if o.mjcf_type == "box":
         return o.size[0] * ux + o.size[1] * uy
@@ -109,12 +83,8 @@ def support_distance(o: objects.ObjectSpec, direction_xy: np.ndarray) -> np.ndar
 
 
 def side_pose(object_xy: np.ndarray, clearance: np.ndarray, height: np.ndarray) -> np.ndarray:
-    """Joint positions (n, 9) putting every finger's tip centre on that finger's radial line through the object's
-    centre, at horizontal distance `clearance` (n, 3) from the centre (outside it) and `height` (n, 3) above the table.
-
-    J10 (axis +x of the finger frame) swings the finger's plane sideways so the tip reaches the object's tangential
-    offset; in the swung plane the J11 pivot hangs LINK_J10_J11 below J10 and the tip `depth` below that. Heights out
-    of reach at that radius give the straight finger pointing at the target (finger_ik)."""
+    """Joint positions (n, 9) putting each tip centre on its finger's radial line through the object's centre,
+    `clearance` (n, 3) from it and `height` (n, 3) above the table; J10 swings to the object's tangential offset."""
     q = np.zeros((object_xy.shape[0], spec.NUM_JOINTS))
     for i, phi in enumerate(spec.FINGER_BASE_ANGLES_RAD):
         c, s = math.cos(phi), math.sin(phi)
@@ -129,11 +99,7 @@ def side_pose(object_xy: np.ndarray, clearance: np.ndarray, height: np.ndarray) 
 
 
 class SideGraspScript(WaypointScript):
-    """Per-env targets: hover beside the object, descend, squeeze, lift, hold.
-
-    Unlike `PinchLiftScript` it reads where each object stands (privileged, as the teacher does) and squeezes at
-    the lowest height the tip reaches beside it, which is what lifts the small capsule (a teacher that fails on
-    an object presses it from above)."""
+    """Per env: hover beside the object (privileged), descend, squeeze as low as the tip reaches, lift, hold."""
 
     GAP_M = 0.02  # tip surface to the object's surface while hovering and descending
     SQUEEZE_M = 0.006  # tip target this far inside the surface: the servo error that holds the object

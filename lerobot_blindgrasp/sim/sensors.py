@@ -1,14 +1,8 @@
-"""Fingertip sensing from MuJoCo sensor data: uniaxial force, 3-axis contact force, 6-D wrench, tip poses.
+"""Fingertip sensing from MuJoCo sensor data: uniaxial force, contact force, 6-D wrench, tip poses.
 
-The `contact` sensor (reduce="netforce") reports, in the world frame, the net force the fingertip geom exerts on
-what it touches; the force *on* the tip is its negative. The load cell's z axis points from the distal joint to the
-tip, so a push on the tip end (compression, what a uniaxial cell under the tip measures) is
-
-    f_uni = -(F_on_tip . z) = F_reported . z        (positive in compression)
-
-That is the true force. What the policy sees goes through the sensor pipeline shared with the real gripper,
-`lerobot_blindgrasp.hardware.force.reading` (re-exported here as `reading`): true force + noise, then the 0.1 N deadband.
-"""
+The `contact` sensor (netforce, world frame) reports the force the tip exerts; the load cell's z axis points from
+the distal joint to the tip, so the true uniaxial force is f_uni = F_reported . z (positive in compression). The
+policy sees it through `hardware.force.reading`, shared with the real gripper."""
 
 from __future__ import annotations
 
@@ -19,16 +13,14 @@ import numpy as np
 import torch
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.hardware.force import reading  # noqa: F401  (the env reads its fingertip sensing from this module)
 
 PER_TIP = ("contact", "objcontact", "force", "torque", "pos", "quat", "zaxis", "objdist")
 
 
 @dataclass(frozen=True)
 class SensorIndex:
-    """Column indices into `sensordata` for each (finger, reading), as (n_fingers, dim) integer tensors on the
-    device of the sensordata they index. `block`: (first column, columns per finger) when every finger's readings
-    sit in one block of the same layout (the gripper's scene), so that a reading is a view, not a gather."""
+    """`sensordata` columns of each (finger, reading), (n_fingers, dim) on its device. `block`: (first column,
+    columns per finger) when the fingers' readings share one layout, so that a reading is a view, not a gather."""
 
     cols: dict[str, torch.Tensor]
     block: tuple[int, int] | None = None
@@ -60,11 +52,8 @@ class SensorIndex:
         return tips[:, :, off : off + dim]
 
 
-# quat_to_mat's nine entries from the quaternion's pairwise products p = q_i q_j (wxyz; index 4 i + j):
-#   R = [[1 - 2(yy + zz), 2(xy - wz), 2(xz + wy)], [2(xy + wz), 1 - 2(xx + zz), 2(yz - wx)],
-#        [2(xz - wy), 2(yz + wx), 1 - 2(xx + yy)]]
-# as c (A + s B) + 1 on the diagonal, in a few whole-tensor ops instead of one small op per entry (each entry's
-# arithmetic is the formula's: -2 (A + B) + 1 and 2 (A - B) round exactly as 1 - 2 (A + B) and 2 (A - B)).
+# quat_to_mat's nine entries R_k = C_k (p[A_k] + S_k p[B_k]) (+ 1 on the diagonal) from the pairwise products
+# p = q_i q_j (wxyz, index 4 i + j): the textbook formula, rounding identically, in a few whole-tensor ops.
 _A = [10, 6, 7, 6, 5, 11, 7, 11, 5]  # yy xy xz / xy xx yz / xz yz xx
 _B = [15, 3, 2, 3, 15, 1, 2, 1, 10]  # zz wz wy / wz zz wx / wy wx yy
 _S = [1.0, -1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0]

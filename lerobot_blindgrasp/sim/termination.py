@@ -1,15 +1,9 @@
-"""Success and termination: when an episode counts as a grasp, and when it ends.
+"""Success and termination, over the env axis, with operators only so the twin's numpy state (`twin/physics.py`)
+goes through them too.
 
-- Success (paper Sec. IV-A, the same test in simulation, teacher evaluation and the real protocol): the object
-  lifted at least `spec.SUCCESS_LIFT_M` (1.5 cm) above its resting height and held there for `spec.SUCCESS_HOLD_S`
-  (1 s) without a break. It latches: a later drop does not undo it.
-- Termination (Sec. III-B): the object leaves the 10 cm workspace around the gripper's centre (`d_xy`, eq. 2), or
-  its physics went unstable (the env resets it).
-- Truncation: the episode's time runs out (10 s) before it terminated.
-
-Each is a function of tensors over the env axis, written with operators alone, so that the twin's numpy state
-(`twin/physics.py`) goes through the same functions as the env's torch state.
-"""
+- Success (Sec. IV-A; sim, teacher eval and the real protocol alike): lifted >= `spec.SUCCESS_LIFT_M` (1.5 cm) for
+  `spec.SUCCESS_HOLD_S` (1 s) without a break; it latches.
+- Termination (Sec. III-B): the object leaves the 10 cm workspace (`d_xy`, eq. 2), or its physics went unstable."""
 
 from __future__ import annotations
 
@@ -17,7 +11,6 @@ from lerobot_blindgrasp import spec
 
 
 def is_lifted(lift):
-    """The object is at least SUCCESS_LIFT_M above its resting height."""
     return lift >= spec.SUCCESS_LIFT_M
 
 
@@ -37,5 +30,4 @@ def out_of_workspace(d_xy, radius_m: float = spec.WORKSPACE_RADIUS_M):
 
 
 def timed_out(episode_length, max_steps: int, terminated):
-    """Truncation: the episode reached its length without terminating."""
     return (episode_length >= max_steps) & ~terminated

@@ -1,14 +1,7 @@
-"""`blindgrasp-sim-viewer`: watch the sim work before training anything.
+"""`blindgrasp-sim-viewer`: a scripted pinch-and-lift through the lerobot-eval gym env, rendered to an mp4, with
+lift, fingertip forces (N) and success printed. The script knows the object's shape and assumes it is centred.
 
-A scripted pinch-and-lift runs through the same gymnasium env lerobot-eval uses (absolute joint targets in, o_t
-out, the paper's randomization and sensor noise), rendered to an mp4, with a printed summary: lift, fingertip
-forces in newtons, success by the shared rule.
-
-    blindgrasp-sim-viewer --object=sphere_small --output=outputs/sim_demo/sphere_small.mp4
-
-The script is not a policy: it knows the object's shape and assumes it is centred, so the object's xy offset is
-off here. It lifts every Table I object.
-"""
+    blindgrasp-sim-viewer --object=sphere_small --output=outputs/sim_demo/sphere_small.mp4"""
 
 from __future__ import annotations
 
@@ -70,8 +63,7 @@ def _boundary_distance(o: objects.ObjectSpec, phi: float) -> float:
 
 
 def grasp_geometry(object_name: str) -> tuple[float, float]:
-    """(radius, height) for `PinchLiftScript`: the object's side along the three finger directions, averaged
-    (the script closes all fingers to one radius; where the side is nearer, that finger just presses harder)."""
+    """(radius, height) for `PinchLiftScript`: the object's side along the three finger directions, averaged."""
     o = objects.get_object(object_name)
     radius = float(np.mean([_boundary_distance(o, phi) for phi in spec.FINGER_BASE_ANGLES_RAD]))
     return radius, o.rest_height

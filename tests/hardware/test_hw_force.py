@@ -19,7 +19,7 @@ from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.hardware.force_board.frame_codec import encode_frame
 from lerobot_blindgrasp.hardware.force_board.reader import SETTLE_FRAMES, ForceSensorReader, ForceStreamError
-from lerobot_blindgrasp.sim import randomization, sensors
+from lerobot_blindgrasp.sim import randomization
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 
@@ -56,7 +56,7 @@ def sensor():
 def test_sim_and_real_give_the_same_reading_for_the_same_true_force(sensor):
     emu, reader = sensor
     for true, noise in CASES:
-        sim = sensors.reading(np.array([true]), np.array([noise]))[0]  # what `BatchedGraspEnv._observe` does
+        sim = force.reading(np.array([true]), np.array([noise]))[0]  # what `BatchedGraspEnv._observe` does
         emu.forces_n = np.add(true, noise)  # the physical sensor's output holds the noise
         assert reader.wait_frames(3, 1.0)  # past any frame built before the change
         real = reader.read()

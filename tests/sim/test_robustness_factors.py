@@ -12,7 +12,8 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import xm430
 from lerobot_blindgrasp.sim import objects, randomization
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
-from lerobot_blindgrasp.sim.batched_env import HOLD_PUSH_AFTER_STEPS, BatchedGraspEnv
+from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.events import HOLD_PUSH_AFTER_STEPS
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
 # The paper's sensor noise but no start-state randomization: the scripted pinch needs a centred object.

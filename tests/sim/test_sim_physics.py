@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.sim import gripper, objects, randomization, sensors
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
@@ -126,12 +127,12 @@ def test_uniaxial_sensor_reads_a_known_load_in_newtons():
     assert raw["tip_object_downward"][0, 0] == pytest.approx(1.0, abs=0.02)
     assert raw["tip_object_force"][0, 1:].max() == 0.0 and raw["tip_object_downward"][0, 1:].max() == 0.0
     # The other two sensors see nothing, and the deadband maps small readings to exactly 0.
-    assert np.all(sensors.reading(uni()[1:]) == 0.0)
+    assert np.all(force.reading(uni()[1:]) == 0.0)
 
 
 def test_deadband_threshold():
     f = np.array([0.0, 0.05, -0.099, 0.1, -0.5, 3.0])
-    np.testing.assert_array_equal(sensors.reading(f), [0.0, 0.0, 0.0, 0.1, -0.5, 3.0])
+    np.testing.assert_array_equal(force.reading(f), [0.0, 0.0, 0.0, 0.1, -0.5, 3.0])
 
 
 def test_scripted_closing_motion_lifts_the_medium_cylinder():

@@ -1,9 +1,6 @@
-"""The CPU backend: `mujoco.batch.Batch` (MuJoCo >= 3.17), one MjModel per env, stepped in C on all cores.
-
-Every env's state is a row; the batch loads rows into a thread-local MjData and steps them with the GIL released;
-results are bit-identical at any thread count. `qpos` etc. are float64 CPU tensors over the batch's live bindings
-of those rows (`torch.from_numpy`: the same memory, no copy; the batch's own steps and resets show in them at once).
-"""
+"""The CPU backend: `mujoco.batch.Batch` (MuJoCo >= 3.17), one MjModel per env, stepped in C on all cores with
+the GIL released, bit-identical at any thread count. The state tensors are `torch.from_numpy` views of the batch's
+live bindings."""
 
 from __future__ import annotations
 
@@ -16,7 +13,6 @@ from mujoco import batch as mjbatch
 
 
 def _ids(ids) -> np.ndarray:
-    """Env ids as the batch takes them (a host index array)."""
     return ids.cpu().numpy() if isinstance(ids, torch.Tensor) else np.asarray(ids)
 
 
@@ -26,7 +22,6 @@ class BatchBackend:
 
     def __init__(self, models: list[mujoco.MjModel], nthread: int = 0):
         self.num_envs = n = len(models)
-        self.models = models
         self.batch = mjbatch.Batch(models[0], nsim=n, nthread=nthread)
         self.batch.set_models(models)
         self._np_qpos, self._np_qvel = self.batch.bind("qpos"), self.batch.bind("qvel")
@@ -57,8 +52,7 @@ class BatchBackend:
         self._warnings_seen[ids] = self.batch.warning[ids, :, 1].sum(axis=1)
 
     def step(self, nstep: int, ids: np.ndarray | None = None) -> torch.Tensor:
-        """`nstep` physics steps for all envs, or only `ids` (the others keep their state); the failed envs (bool
-        tensor)."""
+        """`nstep` physics steps for all envs, or only `ids`; returns the failed envs (bool tensor)."""
         failed = np.zeros(self.num_envs, dtype=bool)
         try:
             self.batch.step(ids=ids, nstep=nstep)
@@ -81,7 +75,8 @@ class BatchBackend:
     def raw_step(self, nstep: int) -> None:
         self.batch.step(nstep=nstep)
 
-    def get_data(self, i: int) -> mujoco.MjData:
+    def get_data(self, i: int, model: mujoco.MjModel | None = None) -> mujoco.MjData:
+        """Env i's current state (the batch holds its own models; `model` is the Warp backend's argument)."""
         return self.batch.get_data(i)
 
     def close(self) -> None:

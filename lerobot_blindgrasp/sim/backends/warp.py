@@ -1,44 +1,17 @@
-"""The GPU backend: MuJoCo Warp (`pip install lerobot_policy_blindgrasp[gpu]`), also runnable on CPU for development.
+"""The GPU backend: MuJoCo Warp (`pip install lerobot_policy_blindgrasp[gpu]`), also runnable on CPU.
 
-Layout. MuJoCo Warp steps `nworld` copies of one model; model fields whose spec starts with "*" may carry one row
-per world (`put_model(mjm, batch_sizes={field: nworld})`, indexed `worldid % rows` in every kernel). Objects of the
-same geom type (box, cylinder, capsule, sphere) compile to models of identical structure that differ only in such
-fields (geom size and bounds, mass, inertia, rest pose), so envs are grouped by the object's geom type: one Warp
-model and one Data per group, each with its share of worlds.
+Envs are grouped by the object's geom type: objects of one type compile to models differing only in fields that
+MuJoCo Warp can batch per world ("*" specs), so each group is one Warp model (its first object's) and one Data.
+Per world, on the device, the differing fields are gathered, Table II's draw is written by
+`randomization.write_physics_draw` (float64, then cast to float32) and `mjw.set_const` recomputes the derived
+constants; fields that differ but cannot be batched raise.
 
-Per-world randomization, written on the device. A group's Warp model is built from ONE MjModel, its first object's
-(not one randomized MjModel per env, as the batch backend steps). Per world, on the device: the fields that differ
-between the group's objects are gathered from the objects' models (a handful), Table II's draw is written into them
-by `randomization.write_physics_draw` (the same torch code that writes an env's MjModel for the batch backend, run
-in float64 over the worlds, then cast once into Warp's float32 arrays), and `mjw.set_const` recomputes what
-`mj_setConst` derives from them (subtree masses and centres of mass, the inverse weights of bodies and dofs; every
-field it writes has one row per world). The draws are made once per env at construction (paper, Sec. III-B), so
-resets write no model fields. Fields that differ between objects but cannot be batched raise at construction.
-`tests/sim/test_sim_warp.py` checks every per-world field against the batch backend's per-env MjModels.
+State: with one group holding every env in order (`share_arrays`), the contract's tensors ARE the Warp arrays
+(float32, no copy); otherwise they are float64 copies exchanged with the groups each step. Substeps replay as one
+captured graph (CUDA graph, or Warp's CPU capture), bit-identical to launching kernel by kernel.
 
-State. `qpos`, `qvel`, `ctrl`, `xfrc_applied` and `sensordata` are tensors on Warp's device (`device`, the torch
-name of `wp_device`), in env order; a step never copies them to the host. With one group holding every env in
-order (`share_arrays`, the default where it holds: an env of one object geometry), they ARE the group's Warp arrays
-(float32, mjlab's way) and nothing is copied; the task writes them with their dtype. With several groups (the
-paper's 18 objects are four geometry types) one tensor cannot share memory with several Warp arrays whose worlds
-interleave in env order (that needs every geometry in one model), so the tensors are float64 copies: each control
-step copies ctrl and xfrc_applied into the groups' Warp arrays and qpos, qvel and sensordata back, on the device
-(about 100 floats per env, cast between float64 and Warp's float32); `wp.to_torch` views of the Warp arrays (shared
-memory) are the two ends of those copies. On CUDA, torch's stream is synchronized before Warp's launches and
-Warp's after them. The `nstep` substeps of each group run as one captured graph: a CUDA graph on a GPU, Warp's API
-capture on its CPU device (replayed natively, without the Python launch overhead of each kernel, which on CPU is
-most of a step's time; the replay is bit-identical to stepping kernel by kernel).
-
-Differences from the batch backend:
-- float32 throughout (MuJoCo Warp's `float`), against float64 on CPU;
-- contacts: MuJoCo Warp's own collision pipeline (primitive colliders and GJK/EPA with multi-contact for
-  capsule/cylinder pairs) against CPU MuJoCo's; contact points and counts differ slightly;
-- all PhysicsOptions are supported by mujoco-warp 4.0 (Newton solver, elliptic cones, impratio, noslip
-  iterations, implicitfast, dense Jacobian); the solver (or its line search) stopping at its iteration cap
-  is reported by Warp as an overflow bit, which is not a failure here (CPU MuJoCo stops there silently);
-- failures are buffer overflows (contacts, constraints) and non-finite state; CPU MuJoCo's per-sim
-  `SimulationError` (bad qacc) has no Warp counterpart, so such a world shows up as non-finite instead.
-"""
+Differences from the batch backend: float32; Warp's own collision pipeline (contacts differ slightly); failures are
+buffer overflows and non-finite state (an iteration cap is not one, as on CPU)."""
 
 from __future__ import annotations
 
@@ -151,9 +124,8 @@ class WarpBackend:
         njmax: int = NJMAX,
         share_arrays: bool = True,
     ):
-        """templates: one compiled MjModel per object; object_index: object of each env; draw: every env's Table II
-        draw (`randomization.draw_physics`), written into the worlds' rows on the device; share_arrays: the state
-        tensors are the Warp arrays themselves where that is possible (one group), else copies."""
+        """templates: one MjModel per object; object_index: each env's object; draw: every env's Table II draw;
+        share_arrays: the state tensors are the Warp arrays themselves where possible (one group)."""
         self.wp_device = device or default_warp_device()
         self.device = torch.device(wp.device_to_torch(self.wp_device))
         self._cuda = self.device.type == "cuda"
@@ -190,8 +162,7 @@ class WarpBackend:
         self._zero_warm = torch.zeros(n, dtype=torch.bool, device=self.device)
 
     def _build_group(self, w: _Worlds, templates: list[mujoco.MjModel], nconmax: int, njmax: int) -> _Group:
-        """One Warp model for the group's worlds: its first object's model, with per-world rows for every field
-        that differs between its objects, Table II's fields and the constants derived from them."""
+        """One Warp model for the group: per-world rows for differing fields, Table II's and their derived ones."""
         objs = np.unique(w.objects)
         base, nw = templates[objs[0]], len(w.ids)
         fields0 = _array_fields(base)
@@ -269,8 +240,7 @@ class WarpBackend:
         self._zero_warm[ids] = True
 
     def forward(self, ids) -> None:
-        """Sensors of `ids` at their current state. Forward runs on every world of their groups; the others keep
-        the sensors of their last step (a step's sensors are those of the state it started from)."""
+        """Sensors of `ids` at their current state; the other envs keep their last step's sensors."""
         ids = self._ids(ids)
         mine = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         mine[ids] = True
