@@ -1,15 +1,11 @@
 """`blindgrasp-train-glove`: a student on glove recordings, alone or merged with sim demos, by a named preset.
 
     blindgrasp-train-glove --preset=glove --glove=[data/glove_s1,data/glove_s2] --output_dir=outputs/glove
-    blindgrasp-train-glove --preset=sim_plus_glove --glove=[data/glove_s1] --sim_demos=runs/demos \\
-        --output_dir=outputs/sim_plus_glove
 
-With LeRobot's own tools, in order: every source is checked for the shared schema (`spec.dataset_features()`, robot
-type, 20 fps) before anything is written; sim demos lose their `episode.*` features (`remove_feature`) into
-`<output_dir>/sim_schema`; several sources are merged (`demos.dataset.aggregate`) into `<output_dir>/dataset`; and
-`lerobot-train` trains the preset's student (`presets/glove.py`) into `<output_dir>/student`. Each dataset is
-built in a temporary folder and renamed when complete, so a re-run reuses what is finished. `--dry_run=true`
-prints the plan and the lerobot-train command and runs nothing.
+Every source is checked for the shared schema (`spec.dataset_features()`, robot type, 20 fps) before anything is
+written; sim demos lose their `episode.*` features (LeRobot's `remove_feature`), the sources are merged
+(`demos.dataset.aggregate`) and `lerobot-train` trains the preset's student (`presets/glove.py`). Each dataset is
+built beside its folder and renamed when complete, so a re-run reuses what is finished.
 """
 
 from __future__ import annotations

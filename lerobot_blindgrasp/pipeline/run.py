@@ -1,20 +1,13 @@
-"""`blindgrasp-pipeline --preset={quick_blind,quick,cpu,paper,smoke}`: the whole method, end to end, ending in a report.
+"""`blindgrasp-pipeline --preset=NAME`: the whole method, end to end, ending in a report (the presets and their run
+times: docs/getting-started.md).
 
-    blindgrasp-pipeline                    # README command 1 (quick_blind, beyond the paper): ~10 min on 2 cores
-    blindgrasp-pipeline --preset=quick_blind_targeted   # the shipped student's recipe (beyond the paper), ~17 min
-    blindgrasp-pipeline --preset=quick     # the paper's student recipe on the default shipped teacher, ~13 min
-    blindgrasp-pipeline --preset=cpu       # trains its own teacher from scratch: hours on 2 cores
-    blindgrasp-pipeline --preset=paper --device=cuda    # the paper's Tables III-IV: a GPU machine
-    blindgrasp-pipeline --preset=quick --teacher=runs/teacher_cpu     # any teacher folder instead
-
-Sizes come from the preset registry (`presets/`), command lines from `recipe.py`. Stages, each a real CLI run as a
+Sizes come from the preset registry (`presets/`), command lines from `recipe.py`. Each stage is a real CLI run as a
 subprocess with its log in <out>/logs/: the teacher (shipped, `--teacher`, or `blindgrasp-train-teacher`); curated
 demos (`blindgrasp-collect-demos`, a preset's `extra_episodes` merged in); the student (`lerobot-train`) and any
-DAgger rounds (`blindgrasp-dagger`, then fine-tuning); the student in sim (`lerobot-eval`) and the teacher on the
-same start states (`blindgrasp-eval-teacher` with the same `--seed`); `report.md` with its plots. A re-run goes on
-where it stopped: a stage is skipped once `pipeline.json` marks it completed, a mark written only after its command
-succeeded, and a stage cut short runs again, resuming where its command can. Env seeds: teacher training from
-`--seed`, demos and evaluation from their own ranges (`spec.SEED_RANGES`), so no start state is used twice.
+DAgger rounds; the student in sim (`lerobot-eval`) and the teacher on the same start states (the same `--seed`);
+`report.md` with its plots. A re-run skips each stage `pipeline.json` marks completed (marked only after its command
+succeeded) and runs one cut short again, resuming where its command can. Each stage draws env seeds from its own
+range (`spec.SEED_RANGES`), so no start state is used twice.
 """
 
 from __future__ import annotations
@@ -212,16 +205,13 @@ def _collect_stage(
     curate: bool,
     extra: tuple[str, int] | None = None,
 ) -> Path:
-    name = root.name if extra else "demos" if curate else "demos_uncurated"
-    if stage.done(name):
-        stage.skip(name, "collected")
-        return root
     from lerobot_blindgrasp.demos.collect_cli import EXIT_EMPTY
 
+    name = root.name if extra else "demos" if curate else "demos_uncurated"
     # An empty curated set is the caller's (the uncurated fallback). A collection cut short is resumed
     # (recipe.demos_collect adds --resume=true; the collector repairs a crashed folder first).
     cmd = recipe.demos_collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra)
-    stage.run(name, cmd, ok=(0, EXIT_EMPTY))
+    stage.once(name, "collected", cmd, ok=(0, EXIT_EMPTY))
     return root
 
 

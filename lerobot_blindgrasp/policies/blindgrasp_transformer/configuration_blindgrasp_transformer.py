@@ -69,9 +69,8 @@ class ConstantThenLinearDecaySchedulerConfig(LRSchedulerConfig):
 
 @dataclass
 class TrainedFor:
-    """The robot a checkpoint was trained for, from its training dataset's metadata (robot type, fps, the state and
-    action names, in order): the real gripper refuses a checkpoint whose facts differ from its own, or that has
-    none, before any servo takes torque (`policy_contract.py`)."""
+    """The robot a checkpoint was trained for (`policy_contract.facts_from_dataset`), which the real gripper checks
+    before any servo takes torque."""
 
     robot_type: str | None = None
     fps: float | None = None
@@ -79,11 +78,6 @@ class TrainedFor:
     action_names: list[str] | None = None
     action_meaning: str = policy_contract.ACTION_MEANING  # what the action means once postprocessed
     source: str | None = None
-
-    @classmethod
-    def from_dataset(cls, meta, source: str | None = None) -> TrainedFor:
-        """From a `LeRobotDatasetMetadata` (or anything with `robot_type`, `fps`, `features` and `repo_id`)."""
-        return cls(**policy_contract.facts_from_dataset(meta, source))
 
 
 @PreTrainedConfig.register_subclass("blindgrasp_transformer")
@@ -110,7 +104,6 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
         default_factory=lambda: {"STATE": NormalizationMode.MEAN_STD, "ACTION": NormalizationMode.IDENTITY}
     )
 
-    # Training (Table IV). The batch size of 256 is lerobot-train's `--batch_size=256`.
     optimizer_lr: float = 1e-4
     optimizer_betas: tuple[float, float] = (0.9, 0.999)
     optimizer_eps: float = 1e-8

@@ -8,10 +8,9 @@ A LeRobot `action` is the ABSOLUTE joint target (rad), target = q_now + delta; t
     select_action  action := q_now + 0.3 * pred, with the q_now that came with the observation
     postprocessor  unnormalizer (identity for the action; kept for lerobot-train's overrides) -> device(cpu)
 
-The policy, not the postprocessor, makes the target: LeRobot's postprocessor sees only the policy's output, so
-q_now travels with the observation and nothing is remembered between calls. The clip is of training targets;
-actions are bounded by the model (tanh) and by the env or robot. LeRobot's `RelativeActionsProcessorStep` takes the
-whole state, does no bound scaling, and is refused by lerobot-rollout's sync engine.
+The policy makes the target (LeRobot's postprocessor sees only the policy's output), so nothing is remembered
+between calls. LeRobot's `RelativeActionsProcessorStep` takes the whole state, does no bound scaling, and is refused
+by lerobot-rollout's sync engine.
 """
 
 from __future__ import annotations
