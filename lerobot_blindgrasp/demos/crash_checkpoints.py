@@ -1,12 +1,9 @@
 """Durable demo collection: finalize and reopen the dataset at bounded intervals, so a kill loses little.
 
-LeRobot's writer writes its parquet footers only in `finalize()`, so a killed collector's open files are
-unreadable. `Checkpoints` finalizes every `checkpoint_s` seconds or `num_envs` written episodes and reopens the
-dataset as `LeRobotDataset.resume` would (the next episode starts fresh files); `--resume=true` repairs the folder
-to the last checkpoint (`repair.py`). `compat.reopen_finalized` sets the few fields resume would re-read from meta/episodes
-(seconds on a large dataset) from what LeRobot holds in memory, and resume is the fallback when they are not there.
-Each checkpoint fsyncs what changed since the last (not per episode: two fsyncs cost more than an episode), so a
-power cut loses at most the episodes since the last checkpoint too.
+LeRobot's writer writes its parquet footers only in `finalize()`, so a killed collector's open files are unreadable.
+`Checkpoints` finalizes every `checkpoint_s` seconds or `num_envs` written episodes, fsyncs what changed (not per
+episode: two fsyncs cost more than an episode) and reopens the dataset (`compat.reopen_finalized`, else
+`LeRobotDataset.resume`); `--resume=true` repairs the folder to the last checkpoint (`repair.py`).
 """
 
 from __future__ import annotations

@@ -1,7 +1,5 @@
-"""Per-object yield of a collection: counts, the printed table and `yield_report.json` in the dataset folder.
-
-Counts are cumulative over `--resume` runs. `rollouts` counts every finished rollout, including those of objects
-that already had their quota (their curation outcome still measures the yield); `kept` counts written episodes.
+"""Per-object yield of a collection: counts, the printed table and `yield_report.json` in the dataset folder. Counts
+are cumulative over `--resume` runs; `rollouts` includes those of objects that already had their quota.
 """
 
 from __future__ import annotations
