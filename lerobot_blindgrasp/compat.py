@@ -1,11 +1,9 @@
 """Every place the plugin reaches into LeRobot's internals or installs a process-wide hook, and nowhere else
-(`tests/policies/test_compat.py` scans the package for strays): LeRobot's dataset reader and writers
-(`serve_dataset_readers_with`, `skip_empty_image_embedding`, `atomic_lerobot_metadata`, and the writers' private
-state the demo collector resets: `reopen_finalized`, `finalize_or_abandon`), lerobot-record's episode announcement (`is_episode_announcement`), LeRobot's
-command line (`read_command_line`, `set_lerobot_argv`), and the process's signal handlers and excepthook.
-
-Each was read against LeRobot `WRITTEN_FOR`. Under another version the first reach used logs, once, what
-`check_lerobot()` finds missing; a reach whose target is gone leaves LeRobot's own behaviour in place.
+(`tests/policies/test_compat.py` scans the package for strays): LeRobot's dataset reader and writers and the
+writers' private state the demo collector resets, lerobot-record's episode announcement, LeRobot's command line, and
+the process's signal handlers and excepthook. Each was read against LeRobot `WRITTEN_FOR`; under another version the
+first reach used logs, once, what `check_lerobot()` finds missing, and a reach whose target is gone leaves LeRobot's
+own behaviour in place.
 """
 
 from __future__ import annotations

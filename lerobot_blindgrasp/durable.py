@@ -1,9 +1,7 @@
-"""Atomic file writes: a file is either its old self or completely replaced, whatever happens during the write.
-
-The standard idiom: write a temporary file beside the target, fsync it, `os.replace` it over the target, fsync
-the folder. A kill leaves at worst a hidden `.NAME.tmp-*` file, which `remove_stale_temps` clears. A failed write
-raises `WriteError`, naming the cause in words (a full disk, the file-size limit); deliberately not an `OSError`,
-so code that maps OSError to a device fault (the gripper's safety latch) never relabels a disk problem.
+"""Atomic file writes: a temporary file beside the target, fsynced, `os.replace`d over it, the folder fsynced. A kill
+leaves at worst a hidden `.NAME.tmp-*` file (`remove_stale_temps`). A failed write raises `WriteError`, naming the
+cause in words; deliberately not an `OSError`, so code that maps OSError to a device fault (the gripper's safety
+latch) never relabels a disk problem.
 """
 
 from __future__ import annotations

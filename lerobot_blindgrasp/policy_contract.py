@@ -1,8 +1,8 @@
-"""The policy-vs-robot contract: refuse a checkpoint that does not fit the robot before any servo takes torque. The
-caller that knows the checkpoint passes it (the real eval env, blindgrasp-rollout, the robot at connect). The check
-reads the checkpoint's own files, not the loaded policy (LeRobot's `make_policy` overwrites its output features with
-the env's), and names the file each fact came from. `python -m lerobot_blindgrasp.policy_contract` records
-`trained_for` in a checkpoint trained before lerobot-train wrote it (docs/hardware.md, "The policy").
+"""The policy-vs-robot contract: what a checkpoint records it was trained for, and the check that refuses one that
+does not fit the robot before any servo takes torque. The caller that knows the checkpoint runs it (the real eval
+env, blindgrasp-rollout, the robot at connect); it reads the checkpoint's own files (LeRobot's `make_policy`
+overwrites a loaded policy's output features with the env's) and names the file each fact came from. `python -m
+lerobot_blindgrasp.policy_contract` records `trained_for` in a checkpoint trained before lerobot-train wrote it.
 """
 
 from __future__ import annotations
@@ -86,11 +86,6 @@ def dataset_info(train: dict | None, where: Path) -> tuple[dict | None, str]:
     return None, f"the training dataset's meta/info.json (looked in {[str(c) for c in candidates]}, from {where})"
 
 
-def shape(features: dict | None, key: str) -> tuple | None:
-    ft = (features or {}).get(key)
-    return tuple(ft["shape"]) if isinstance(ft, dict) and "shape" in ft else None
-
-
 def step_names(pipeline: dict | None) -> list[str]:
     return [s.get("registry_name", "") for s in (pipeline or {}).get("steps", [])]
 
@@ -158,7 +153,8 @@ def _feature_problems(cfg: dict, where: Path, robot: RobotContract) -> list[str]
         extra = sorted(set(cfg.get(group) or {}) - {key})
         if extra:
             bad.append(f"{group} {extra} in {where / 'config.json'}: the robot has only '{key}' there (no camera)")
-        have = shape(cfg.get(group), key)
+        ft = (cfg.get(group) or {}).get(key)
+        have = tuple(ft["shape"]) if isinstance(ft, dict) and "shape" in ft else None
         if have != want[key]:
             bad.append(f"'{key}' shape {have} in {where / 'config.json'} ({group}), the robot has {want[key]}")
     for name in PROCESSORS:

@@ -1,9 +1,7 @@
 """Relative markdown links made absolute, for text read away from the repository: the README as the package index's
-project page (setup.py's long description) and the shipped models' cards on the Hub (`model_cards.py`).
-
-A file's page is the `[project.urls]` `Changelog` URL with `CHANGELOG.md` replaced by the file's path (else the
-`Source` URL with `/blob/main/`), an image's the same under `/raw/`. Standard library only: setup.py loads this file
-by path at build time, before any of the package's dependencies exist.
+project page (setup.py's long description) and the shipped models' cards on the Hub. A file's page is under the
+`[project.urls]` `Changelog` URL's folder (else `Source` + `/blob/main/`), an image's under `/raw/`. Standard library
+only: setup.py loads this file by path at build time, before any of the package's dependencies exist.
 """
 
 from __future__ import annotations

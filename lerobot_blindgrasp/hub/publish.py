@@ -1,14 +1,10 @@
 """`blindgrasp-publish`: push the shipped teachers, the shipped student and a demo dataset to the Hugging Face Hub,
 each with its card and the code's location, in one command.
 
-    blindgrasp-publish --namespace=you --dry_run=true     # everything but the upload
-    blindgrasp-publish --namespace=you                    # collects 2 demos per object, then pushes all four
-    blindgrasp-publish --namespace=you --demos=runs/demos_cpu   # an existing blindgrasp-collect-demos folder
-
-Everything is checked before the first network call: `[project.urls]` names the real public home (no card may send
-a reader to a placeholder), each model loads, each model card renders into the staging folder (`model_cards.py`),
-and the dataset is prepared by `push.prepare`. Without `--demos`, a small curated set is collected there with the
-shipped student's demo settings (`DEMO_RECIPE`); a rerun with the same `--staging_dir` resumes it.
+Everything is checked before the first network call: `[project.urls]` names the real public home (no card may send a
+reader to a placeholder), each model loads, each model card renders into the staging folder, and the dataset is
+prepared by `push.prepare`. Without `--demos`, a small curated set is collected there with the shipped student's
+demo settings (`DEMO_RECIPE`); a rerun with the same `--staging_dir` resumes it.
 """
 
 from __future__ import annotations
@@ -62,10 +58,7 @@ def stage_model(name: str, repo_id: str, staging: Path) -> Path:
 
 @dataclass
 class PublishConfig:
-    """Push the shipped teachers, the shipped student and a demo dataset to the Hub, each with its card.
-
-    blindgrasp-publish --namespace=you [--demos=runs/demos_cpu] [--dry_run=true]
-    """
+    """Push the shipped teachers, the shipped student and a demo dataset to the Hub, each with its card."""
 
     namespace: str | None = None  # Hub user or organization the repos go under (names: hub/project.py HUB_REPOS)
     # the demo dataset folder to push (blindgrasp-collect-demos output); default: collect one into the staging folder

@@ -2,9 +2,8 @@
 
     python -m lerobot_blindgrasp.results.compare --a=PATH --b=PATH [--a_label=teacher --b_label=student]
 
-PATH is a lerobot-eval or `blindgrasp-eval-teacher` output (its json, or its folder; a teacher's deterministic mode
-unless written `PATH:stochastic`). Both must have run the same seed and episode count, so that episode k of object o
-is the same start state in both (`spec.eval_seed`) and a difference shows as discordant pairs.
+Both must have run the same seed and episode count, so that episode k of object o is the same start state in both
+(`spec.eval_env_seed`) and a difference shows as discordant pairs.
 """
 
 from __future__ import annotations
