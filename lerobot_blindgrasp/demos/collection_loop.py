@@ -1,10 +1,9 @@
-"""The collection loop: teacher rollouts -> curation -> dataset episodes, until every object has its quota.
-
-Paper Sec. III-C: the paper's randomization without pushes, the teacher sampled from its Gaussian (or its mean),
-5 s episodes, then curation (`curation.py`). An object stops at `episodes_per_object` written episodes or
-`max_rollouts_per_object` rollouts, so one the teacher cannot lift never stalls the run. Kept episodes and crash
-checkpoints go through one writer thread in order (`episode_writer.py`). A first SIGINT/SIGTERM stops after the
-current step, a second at once; either way the queued episodes are written, the dataset finalized, the run recorded.
+"""The collection loop: teacher rollouts -> curation -> dataset episodes, until every object has its quota (paper
+Sec. III-C: the paper's randomization without pushes, the teacher's Gaussian or its mean, 5 s episodes). An object
+stops at `episodes_per_object` written episodes or `max_rollouts_per_object` rollouts, so one the teacher cannot
+lift never stalls the run. Kept episodes and crash checkpoints go through one writer thread in order. A first
+SIGINT/SIGTERM stops after the current step, a second at once; either way the queued episodes are written, the
+dataset finalized and the run recorded.
 """
 
 from __future__ import annotations

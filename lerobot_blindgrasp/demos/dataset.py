@@ -1,10 +1,8 @@
-"""The demo dataset: LeRobotDataset v3 at 20 fps, state-only, the shared schema plus per-episode metadata features.
-
-`spec.dataset_features()` is what sim and glove demos share. Every frame also carries its episode's metadata,
-constant within the episode: `episode.outcome`, `episode.randomization` (the Table II draw and the object's start xy)
-and `episode.seed`; the object is in the task string. Features, not custom columns or info.json keys, because
-LeRobot's tools drop what they do not know; their per-episode stats (min = max = the value) let `episode_table()`
-read every episode without its frames. Merging with glove demos needs the three removed first (`MERGE_HINT`).
+"""The demo dataset: LeRobotDataset v3 at 20 fps, state-only, the shared schema (`spec.dataset_features()`) plus
+per-episode metadata features, constant within the episode: `episode.outcome`, `episode.randomization` (the Table II
+draw and the object's start xy) and `episode.seed`; the object is in the task string. Features, because LeRobot's
+tools drop unknown columns and info.json keys; their per-episode stats (min = max) let `episode_table()` read every
+episode without its frames. Merging with glove demos needs the three removed first (`MERGE_HINT`).
 """
 
 from __future__ import annotations

@@ -1,10 +1,8 @@
-"""A LeRobot dataset's metadata rebuilt from its data files, for the episodes whose frames are all there (datasets
-without image or video features: their frames are not in the data files).
-
-LeRobot 0.6.1 writes episode rows to meta/episodes only every `metadata_buffer_size` (10) episodes or at `finalize()`,
-and its parquet files stay footerless until then. `rebuild(root)` takes every complete row group (`parquet_salvage`),
-cut to the longest prefix of whole episodes (and to `limit`), feeds it to LeRobot's `LeRobotDatasetMetadata` in a
-staging folder and moves the files in atomically, `info.json` last; replaced files go to `<root>.set-aside/`.
+"""A LeRobot dataset's metadata rebuilt from its data files, for the episodes whose frames are all there (no image or
+video features). LeRobot 0.6.1 writes episode rows only every `metadata_buffer_size` (10) episodes or at `finalize()`.
+`rebuild(root)` takes every complete row group (`parquet_salvage`), cut to the longest prefix of whole episodes (and
+to `limit`), feeds it to LeRobot's `LeRobotDatasetMetadata` in a staging folder and moves the files in atomically,
+`info.json` last; replaced files go to `<root>.set-aside/`.
 """
 
 from __future__ import annotations

@@ -1,10 +1,8 @@
 """`blindgrasp-publish`: push the shipped teachers, the shipped student and a demo dataset to the Hugging Face Hub,
-each with its card and the code's location, in one command.
-
-Everything is checked before the first network call: `[project.urls]` names the real public home (no card may send a
-reader to a placeholder), each model loads, each model card renders into the staging folder, and the dataset is
-prepared by `push.prepare`. Without `--demos`, a small curated set is collected there with the shipped student's
-demo settings (`DEMO_RECIPE`); a rerun with the same `--staging_dir` resumes it.
+each with its card and the code's location, in one command. Everything is checked before the first network call:
+`[project.urls]` names the real public home, each model loads, each card renders into the staging folder, and the
+dataset is prepared. Without `--demos`, a small curated set is collected there with the shipped student's demo
+settings (`DEMO_RECIPE`); a rerun with the same `--staging_dir` resumes it.
 """
 
 from __future__ import annotations

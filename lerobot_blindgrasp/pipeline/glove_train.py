@@ -28,19 +28,14 @@ from lerobot_blindgrasp.presets.glove import GlovePreset, glove_preset
 class GloveTrainConfig:
     # lerobot-record dataset folders (each session's --dataset.root), merged in this order
     glove: list[Path] = field(default_factory=list)
-    # where the merged dataset and the student go
-    output_dir: Path | None = None
-    # a key of lerobot_blindgrasp.presets.glove.GLOVE_PRESETS: glove, sim_plus_glove (and *_smoke for CI)
-    preset: str = "glove"
+    output_dir: Path | None = None  # where the merged dataset and the student go
+    preset: str = "glove"  # a key of presets.glove.GLOVE_PRESETS: glove, sim_plus_glove (and *_smoke for CI)
     # a blindgrasp-collect-demos folder; required by the sim_plus_glove presets, refused by the others
     sim_demos: Path | None = None
-    # repo id of the merged dataset (a local name; nothing is pushed)
-    repo_id: str = "local/blindgrasp_glove_train"
+    repo_id: str = "local/blindgrasp_glove_train"  # the merged dataset's (a local name; nothing is pushed)
     seed: int = 1000
-    # lerobot-train --policy.device; None: the preset's (cpu)
-    device: str | None = None
-    # print what would run, run nothing
-    dry_run: bool = False
+    device: str | None = None  # lerobot-train --policy.device; None: the preset's (cpu)
+    dry_run: bool = False  # print what would run, run nothing
 
     def __post_init__(self):
         p = glove_preset(self.preset)
@@ -141,15 +136,9 @@ def train_on_glove(cfg: GloveTrainConfig) -> Path:
     if cfg.dry_run:
         many = len(sources) + (cfg.sim_demos is not None) > 1
         dataset = out / "dataset" if many else Path(cfg.glove[0])
-        print(
-            "\n".join(
-                [
-                    *plan,
-                    f"merge -> {dataset}" if many else f"train on {dataset}",
-                    shlex.join(train_command(p, dataset, cfg.repo_id, student, cfg.seed, cfg.device)),
-                ]
-            )
-        )
+        plan.append(f"merge -> {dataset}" if many else f"train on {dataset}")
+        cmd = train_command(p, dataset, cfg.repo_id, student, cfg.seed, cfg.device)
+        print("\n".join([*plan, shlex.join(cmd)]))
         return student
     out.mkdir(parents=True, exist_ok=True)
     if cfg.sim_demos is not None:

@@ -10,13 +10,11 @@ Table IV -> field:
     L2 regularization 0.01              -> `optimizer_weight_decay`
     linear lr decay after 100 epochs    -> `scheduler_constant_steps` (100 epochs' steps), `scheduler_end_factor`
     loss: MSE                           -> `BlindgraspTransformerPolicy.forward`
-    Transformer layers 6                -> `n_layers`   (via `size="paper"`)
-    embedding dimension 512             -> `embed_dim`  (via `size="paper"`)
-    attention heads 8                   -> `n_heads`    (via `size="paper"`)
+    layers 6, embedding 512, heads 8    -> `n_layers`, `embed_dim`, `n_heads` (via `size="paper"`)
+    MLP head [1024, 1024]               -> `head_hidden_dims` (via `size="paper"`)
     context length 30 / frame stack 30  -> `n_obs_steps`
     dropout rate 0.1                    -> `dropout`
     activation GELU                     -> the transformer MLP (fixed)
-    MLP head [1024, 1024]               -> `head_hidden_dims` (via `size="paper"`)
 
 `--policy.size` (default `paper`, Table IV) picks the architecture from `SIZES`; an explicit `n_layers`,
 `embed_dim`, `n_heads` or `head_hidden_dims` wins. `config.json` stores the resolved numbers.
