@@ -67,10 +67,9 @@ def fsync_dir(folder: Path) -> None:
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, fsync: bool = True) -> Iterator[Path]:
-    """Yield a temporary path beside `path`; once the block ends normally, the temp file is fsynced and renamed
-    over `path` (with the old file's permissions, else 0o666 less the umask). On any error the temp file is removed
-    and `path` is untouched. fsync=False: still atomic against a killed process, not against a power cut; for files
-    rewritten many times a second whose caller fsyncs at its own checkpoints (`fsync_tree`)."""
+    """Yield a temporary path beside `path`, fsynced and renamed over it (with the old file's permissions, else 0o666
+    less the umask) once the block ends normally; on any error it is removed and `path` is untouched. fsync=False:
+    atomic against a kill, not a power cut; for files rewritten often whose caller fsyncs at checkpoints."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:  # hidden, with the target's suffix: writers pick their format from it; globs like *.pt never match it

@@ -61,11 +61,8 @@ def _rewrite(text: str, doc: str, keep_under: str | None, make) -> str:
 
 
 def absolute_links(text: str, doc: str, urls: dict[str, str], keep_under: str | None = None) -> str:
-    """`text` (the markdown file at repository path `doc`) with every relative link and image made absolute.
-
-    keep_under: a repository folder whose files travel with the text (a model's folder, uploaded whole to its Hub
-    repo): links into it stay relative to `doc`.
-    """
+    """`text` (the markdown file at repository path `doc`) with every relative link and image made absolute, but
+    those into `keep_under`, a folder whose files travel with the text (a model's, uploaded whole to its Hub repo)."""
     base, raw = file_base(urls), raw_base(urls)
     return _rewrite(
         text,

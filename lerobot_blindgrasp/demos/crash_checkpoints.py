@@ -18,9 +18,8 @@ log = logging.getLogger("blindgrasp.demos")
 
 
 class Checkpoints:
-    """Holds the open dataset (`.ds`); call `written(state)` after every saved episode, with the run state that goes
-    with the episodes saved so far. `on_checkpoint(state)` runs after each finalize, before the reopen: it records
-    that state, now that its episodes are on disk."""
+    """Holds the open dataset (`.ds`); call `written(state)` after every saved episode with the run state so far.
+    `on_checkpoint(state)` runs after each finalize, before the reopen: it records that state, now on disk."""
 
     def __init__(
         self, ds, root, repo_id: str, every_s: float, every_episodes: int, on_checkpoint: Callable[[Any], None]

@@ -44,13 +44,10 @@ class Tally:
         return t
 
     def to_json(self) -> dict:
-        rows = {}
-        for name, o in self.objects.items():
-            rows[name] = {
-                **asdict(o),
-                "yield": o.yield_rate,
-                "force_sum_n_mean": _mean(o.force_sum_n_total, o.rollouts),
-            }
+        rows = {
+            name: {**asdict(o), "yield": o.yield_rate, "force_sum_n_mean": _mean(o.force_sum_n_total, o.rollouts)}
+            for name, o in self.objects.items()
+        }
         t = self.total()
         return {"objects": rows, "total": {**asdict(t), "yield": t.yield_rate}}
 
@@ -80,10 +77,8 @@ def format_table(tally: Tally, order: list[str] | None = None) -> str:
             f"{succ:>8.1%} {_mean(o.force_sum_n_total, o.rollouts):>8.0f}"
         )
 
-    for name in names:
-        lines.append(row(name, tally.of(name)))
-    lines.append("-" * len(head))
-    lines.append(row("total", tally.total()))
+    lines += [row(name, tally.of(name)) for name in names]
+    lines += ["-" * len(head), row("total", tally.total())]
     return "\n".join(lines)
 
 

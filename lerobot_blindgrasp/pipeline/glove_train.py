@@ -3,9 +3,8 @@
     blindgrasp-train-glove --preset=glove --glove=[data/glove_s1,data/glove_s2] --output_dir=outputs/glove
 
 Every source is checked for the shared schema (`spec.dataset_features()`, robot type, 20 fps) before anything is
-written; sim demos lose their `episode.*` features (LeRobot's `remove_feature`), the sources are merged
-(`demos.dataset.aggregate`) and `lerobot-train` trains the preset's student (`presets/glove.py`). Each dataset is
-built beside its folder and renamed when complete, so a re-run reuses what is finished.
+written; sim demos lose their `episode.*` features, the sources are merged and `lerobot-train` trains the preset's
+student (`presets/glove.py`). Each dataset is built beside its folder and renamed when complete, so a re-run reuses it.
 """
 
 from __future__ import annotations

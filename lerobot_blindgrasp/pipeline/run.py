@@ -1,13 +1,11 @@
 """`blindgrasp-pipeline --preset=NAME`: the whole method, end to end, ending in a report (the presets and their run
-times: docs/getting-started.md).
+times: docs/getting-started.md). Sizes come from the preset registry (`presets/`), command lines from `recipe.py`.
 
-Sizes come from the preset registry (`presets/`), command lines from `recipe.py`. Each stage is a real CLI run as a
-subprocess with its log in <out>/logs/: the teacher (shipped, `--teacher`, or `blindgrasp-train-teacher`); curated
-demos (`blindgrasp-collect-demos`, a preset's `extra_episodes` merged in); the student (`lerobot-train`) and any
-DAgger rounds; the student in sim (`lerobot-eval`) and the teacher on the same start states (the same `--seed`);
-`report.md` with its plots. A re-run skips each stage `pipeline.json` marks completed (marked only after its command
-succeeded) and runs one cut short again, resuming where its command can. Each stage draws env seeds from its own
-range (`spec.SEED_RANGES`), so no start state is used twice.
+Each stage is a real CLI run as a subprocess with its log in <out>/logs/: the teacher (shipped, `--teacher`, or
+trained), curated demos, the student (`lerobot-train`) and any DAgger rounds, the student in sim (`lerobot-eval`)
+and the teacher on the same start states, then `report.md`. A re-run skips each stage `pipeline.json` marks completed
+(marked only after its command succeeded) and runs one cut short again, resuming where its command can. Each stage
+draws env seeds from its own range (`spec.SEED_RANGES`), so no start state is used twice.
 """
 
 from __future__ import annotations
@@ -225,9 +223,8 @@ def _targeted_demos(
     seed: int,
     curated: bool,
 ) -> tuple[Path, str]:
-    """Beyond the paper: the preset's extra episodes of the objects it names (one collection each, curated or not
-    as the set the student trains on), merged with that set by LeRobot's `aggregate_datasets`. Returns the merged
-    dataset and its repo id."""
+    """Beyond the paper: (merged dataset, repo id) of the set the student trains on and the preset's extra episodes
+    of the objects it names, one collection each, curated or not as that set (LeRobot's `aggregate_datasets`)."""
     roots, repos = [demos], [repo]
     for k, (name, n) in enumerate(preset.demos.extra_episodes):
         root, extra_repo = out / f"{demos.name}_{name}", f"{repo}_{name}"

@@ -72,10 +72,9 @@ def paired_counts(a: Iterable, b: Iterable) -> dict[str, int]:
 
 
 def paired_difference(a: Mapping[str, Sequence], b: Mapping[str, Sequence], keys: Iterable[str]) -> dict:
-    """B against A on the same start states, pooled over `keys` (objects; one missing from a side counts as no
-    episodes there), episode k of each key paired with episode k: `paired_counts`, plus `n` episodes,
-    `a_successes` and `b_successes`, `diff_pp` (B minus A, in percentage points) and the exact McNemar `p`.
-    Raises ValueError when the two sides do not hold the same number of episodes."""
+    """B against A on the same start states, pooled over `keys` (a key missing from a side has no episodes there):
+    `paired_counts`, plus `n` episodes, `a_successes`, `b_successes`, `diff_pp` (B minus A, in percentage points)
+    and the exact McNemar `p`. ValueError when the two sides do not hold the same number of episodes."""
     keys = list(keys)
     pa = [bool(x) for k in keys for x in a.get(k, [])]
     pb = [bool(x) for k in keys for x in b.get(k, [])]

@@ -5,10 +5,9 @@ deterministic head) over o_t = (9 joint positions, 3 forces). B batch, T context
     n_layers x pre-LN block: x + Attn(LN(x)), x + MLP(LN(x))      fused qkv (no bias), GELU MLP 4x
     final LayerNorm -> MLP head [1024, 1024] on the LAST token -> A -> tanh
 
-A window that starts before its episode repeats the first frame, flagged in `observation.state_is_pad` (LeRobot's
-padding); padded keys are masked out of attention, and the rolling inference context starts the same way, so step t
-sees exactly what training saw for frame t. `forward` runs the last layer for the last token only (the one the head
-reads); `forward_reference`, every token with explicit softmax attention, is kept to check it.
+A window that starts before its episode repeats the first frame, flagged in `observation.state_is_pad`; padded keys
+are masked out of attention, and the inference context starts the same way, so step t sees what training saw for
+frame t. `forward` runs the last layer for the last token only; `forward_reference` (every token) checks it.
 """
 
 from __future__ import annotations

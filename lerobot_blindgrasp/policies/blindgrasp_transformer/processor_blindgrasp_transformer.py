@@ -82,10 +82,8 @@ class TargetToNormalizedDeltaStep(ProcessorStep):
 class SensorAugmentStep(ProcessorStep):
     """Training-time sensor errors, drawn once per sample and held over its window (beyond the paper): a force gain
     g (log-uniform in [1/(1+force_gain), 1+force_gain]), a force offset b (+-force_bias_n) and a joint calibration
-    offset d (+-joint_offset_rad per joint). The observation becomes (q + d, g f + b) and the target moves by d, so
-    the commanded step is unchanged, as on a gripper whose encoders are off by d. Only (B, T, 12) windows that come
-    with an action (training batches) are changed.
-    """
+    offset d (+-joint_offset_rad per joint). The observation becomes (q + d, g f + b) and the target moves by d: the
+    same step, as on a gripper whose encoders are off by d. Only (B, T, 12) windows with an action (training) change."""
 
     force_gain: float = 0.0
     force_bias_n: float = 0.0
