@@ -1,9 +1,8 @@
 """Every place the plugin reaches into LeRobot's internals or installs a process-wide hook, and nowhere else
-(`tests/policies/test_compat.py` scans the package for strays): LeRobot's dataset reader and writers and the
-writers' private state the demo collector resets, lerobot-record's episode announcement, LeRobot's command line, and
-the process's signal handlers and excepthook. Each was read against LeRobot `WRITTEN_FOR`; under another version the
-first reach used logs, once, what `check_lerobot()` finds missing, and a reach whose target is gone leaves LeRobot's
-own behaviour in place.
+(`tests/policies/test_compat.py` scans the package for strays): LeRobot's dataset reader and writers, lerobot-record's
+episode announcement, LeRobot's command line, and the process's signal handlers and excepthook. Each was read against
+LeRobot `WRITTEN_FOR`; under another version the first reach used logs, once, what `check_lerobot()` finds missing,
+and a reach whose target is gone leaves LeRobot's own behaviour in place.
 """
 
 from __future__ import annotations

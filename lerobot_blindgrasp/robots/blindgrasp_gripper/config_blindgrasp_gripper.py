@@ -1,7 +1,6 @@
 """Configuration of the real gripper (`--robot.type=blindgrasp_gripper`): the paper's D'Claw-derived build by default,
-a site's file in `robot_configs/` (`--robot="include robot_configs/blindgrasp_gripper.yaml"`). Parsing also keeps
-what the script's command line says and LeRobot never hands the robot (`command_line`: the policy, the loop's rate,
-the dataset), which the robot checks at connect.
+a site's file in `robot_configs/`. Parsing also keeps what the script's command line says and LeRobot never hands the
+robot (`command_line`: the policy, the loop's rate, the dataset), which the robot checks at connect.
 """
 
 from __future__ import annotations
