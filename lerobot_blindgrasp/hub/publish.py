@@ -26,25 +26,22 @@ DEMO_RECIPE = "quick_blind_targeted"
 _ENVS_PER_OBJECT = 10  # parallel rollouts per object while collecting (the pipeline's 180 for 18 objects)
 
 
-def _check_loads(folder: Path) -> None:
-    if folder.name.startswith("teacher"):
-        from lerobot_blindgrasp.teacher.policy import TeacherPolicy
-
-        TeacherPolicy(folder)
-    else:
-        from lerobot.configs.policies import PreTrainedConfig
-
-        PreTrainedConfig.from_pretrained(folder)
-
-
 def stage_model(name: str, repo_id: str, staging: Path) -> Path:
     """Copy the Hub files of shipped model `name` to `staging/name` with its rendered card; returns that folder."""
     src = shipped.path(name)
-    _check_loads(src)
+    if name.startswith("teacher"):  # the model loads, before anything is staged
+        from lerobot_blindgrasp.teacher.policy import TeacherPolicy
+
+        TeacherPolicy(src)
+        patterns = _TEACHER_FILES
+    else:
+        from lerobot.configs.policies import PreTrainedConfig
+
+        PreTrainedConfig.from_pretrained(src)
+        patterns = ("*",)
     out = staging / name
     if out.exists():
         shutil.rmtree(out)
-    patterns = _TEACHER_FILES if name.startswith("teacher") else ("*",)
     for pattern in patterns:
         for f in src.glob(pattern):
             if f.is_file() and f.name != "README.md":
