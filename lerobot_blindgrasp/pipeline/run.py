@@ -34,9 +34,7 @@ Go bigger (same command, another preset):
 class PipelineConfig:
     """The method end to end (teacher -> curated demos -> student -> paired sim eval -> report)."""
 
-    # registry preset (lerobot_blindgrasp/presets): quick_blind (README command 1, beyond the paper), quick (the
-    # paper's student recipe on the default shipped teacher), cpu, paper, smoke, ...
-    preset: str = "quick_blind"
+    preset: str = "quick_blind"  # a registry preset (`lerobot_blindgrasp/presets`, listed in docs/reference.md)
     output_dir: Path | None = None  # default outputs/pipeline_<preset>; re-running continues where it stopped
     seed: int = spec.TEACHER_TRAIN_SEED  # teacher-training env seed and torch seed; also picks the demo seed block
     teacher: Path | None = None  # this teacher folder instead of the preset's (shipped or trained from scratch)
@@ -69,8 +67,7 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     record["seeds"] = {"pipeline": seed, "demos_first_env_seed": demo_seed, "eval_index": eval_seed}
     record["device"] = device
     stage = Stage(out, record)
-    # One torch thread per process: on 2 cores, intra-op threads of several processes fight; MuJoCo's own threads
-    # are unaffected.
+    # One torch thread per process: on few cores, intra-op threads of several processes fight (MuJoCo's are apart).
     env1 = {"OMP_NUM_THREADS": "1", "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     student_env = {**env1, "OMP_NUM_THREADS": str(preset.student.threads)}
 
@@ -82,8 +79,7 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     record["student_schedule"] = asdict(sched)
     ckpt = _train(stage, "student", out / "student", cmd, student_env)
     record["student_recipe"] = preset.student_recipe
-    # DAgger rounds (beyond the paper): the latest student drives, the teacher labels, the student is fine-tuned
-    # on the aggregate.
+    # DAgger rounds (beyond the paper): the latest student drives, the teacher labels, the student is fine-tuned.
     for r in range(1, (preset.dagger.rounds if preset.dagger else 0) + 1):
         relabelled, name = out / f"dagger_{r}", f"student_dagger_{r}"
         dagger_seed = recipe.dagger_seed(seed, r)
