@@ -106,8 +106,7 @@ class LowDimCache:
             wanted = abs_idx + delta
             padding[f"{key}_is_pad"] = (wanted < start) | (wanted >= end)
             windows[key] = self.columns[key][self.rows(wanted.clamp(start, end - 1))]
-        item = {**item, **padding}
-        item.update(windows)
+        item = {**item, **padding, **windows}  # a window replaces its frame's value in place
         item["task"] = self.tasks[int(item["task_index"])]
         return item
 
