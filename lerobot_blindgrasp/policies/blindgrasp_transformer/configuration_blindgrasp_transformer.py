@@ -83,8 +83,7 @@ class TrainedFor:
 class BlindgraspTransformerConfig(PreTrainedConfig):
     """See the module docstring for the Table IV mapping and the size presets."""
 
-    # Context length = frame stacking length (Table IV: 30): the policy sees (o_{t-29}, ..., o_t).
-    n_obs_steps: int = 30
+    n_obs_steps: int = 30  # context length = frame stack (Table IV): the policy sees (o_{t-29}, ..., o_t)
 
     # Architecture. None -> taken from SIZES[size] in __post_init__.
     size: str = "paper"
@@ -94,8 +93,7 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     head_hidden_dims: list[int] | None = None
     # One rate for robomimic's three dropouts (embedding, attention weights, block outputs); Table IV gives one.
     dropout: float = 0.1
-    # robomimic's deterministic BC-Transformer squashes the action output with tanh (targets lie in [-1, 1]).
-    tanh_output: bool = True
+    tanh_output: bool = True  # as robomimic's deterministic BC-Transformer (the targets lie in [-1, 1])
 
     # Action: IDENTITY, since the target->delta processor step scales it by the 0.3 rad bound (checked below).
     normalization_mapping: dict[str, NormalizationMode] = field(
@@ -106,8 +104,7 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     optimizer_betas: tuple[float, float] = (0.9, 0.999)
     optimizer_eps: float = 1e-8
     optimizer_weight_decay: float = 0.01
-    # Not in the paper; LeRobot's AdamW default. 0 disables clipping.
-    optimizer_grad_clip_norm: float = 10.0
+    optimizer_grad_clip_norm: float = 10.0  # not in the paper: LeRobot's AdamW default; 0 disables clipping
     # "Linear decay after 100 epochs": constant lr for this many steps (None: the whole run; epochs depend on the
     # dataset, `presets.student`), then linear to end_factor x lr (0.1: robomimic's BC-Transformer template).
     scheduler_constant_steps: int | None = None
@@ -119,8 +116,7 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     augment_force_bias_n: float = 0.0
     augment_joint_offset_rad: float = 0.0
 
-    # Filled from the training dataset's metadata when lerobot-train builds the policy. None: not recorded.
-    trained_for: TrainedFor | None = None
+    trained_for: TrainedFor | None = None  # set when lerobot-train builds the policy; None: not recorded
 
     @property
     def augmentation_active(self) -> bool:
