@@ -1,7 +1,7 @@
 """Durable demo collection: LeRobot's writer writes its parquet footers only in `finalize()`, so `Checkpoints`
-finalizes every `checkpoint_s` seconds or `num_envs` written episodes, fsyncs what changed (per episode, two fsyncs
-would cost more than the episode) and reopens the dataset; a kill loses at most the episodes since. `--resume=true`
-repairs the folder to the last checkpoint (`repair.py`).
+finalizes every `checkpoint_s` seconds or `num_envs` written episodes, fsyncs what changed since the last one (not
+each episode: two fsyncs cost more than an episode) and reopens the dataset; a kill loses at most the episodes since.
+`--resume=true` repairs the folder to the last checkpoint (`repair.py`).
 """
 
 from __future__ import annotations
