@@ -99,8 +99,7 @@ class GripperRig:
         return operator
 
     def robot_config(self, calibration_dir, **overrides):
-        from lerobot_blindgrasp.hardware.force_board import ForceSensorConfig
-        from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig
+        from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig, ForceSensorConfig
 
         fs = ForceSensorConfig(port=self.force.port, scale_n_per_count=self.force.scale.tolist(), tare_s=0.2)
         # A shared, loaded CI host can stall the emulator thread for longer than the real 34 ms reply window.
