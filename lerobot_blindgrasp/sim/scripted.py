@@ -1,4 +1,4 @@
-"""Scripted grasps (not baseline policies): a pinch-and-lift for physics tests and the viewer (two-link IK per
+"""Scripted grasps (not baseline policies): a pinch-and-lift for the viewer and physics tests (two-link IK per
 finger; it assumes a centred object), and a side grasp whose successes the `cpu_bc*` teachers clone (teacher/aux_bc.py)."""
 
 from __future__ import annotations
@@ -57,19 +57,6 @@ class PinchLiftScript(WaypointScript):
         self.waypoints = np.stack([np.tile([0.0, *finger_ik(x, z)], len(spec.FINGERS)) for x, z in targets])
         self.segments = ((15, 0, 0), (20, 0, 1), (30, 1, 2))
         self.t = 0
-
-
-def run_pinch_lift(
-    env, steps: int, object_radius: float = 0.03, grasp_height: float = 0.045, lift_m: float = 0.03
-):
-    """Pinch a reset `BatchedGraspEnv` for `steps` steps: lifts (steps, N), clean forces (steps, N, 3), last info."""
-    script = PinchLiftScript(object_radius, grasp_height, lift_m)
-    lifts, forces = [], []
-    for _ in range(steps):
-        _, _, _, _, info = env.step(script(env.joint_positions()))
-        lifts.append(info["lift"].copy())
-        forces.append(info["uniaxial_force"].copy())
-    return np.array(lifts), np.array(forces), info
 
 
 def support_distance(o: objects.ObjectSpec, direction_xy: np.ndarray) -> np.ndarray:
