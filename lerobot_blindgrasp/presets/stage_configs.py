@@ -88,13 +88,6 @@ class Preset:
             return self.ablation_teacher or self.teacher
         return self.teacher
 
-    def teacher_recipe(self, variant: Variant = Variant()) -> str:
-        """Which teacher a row with `variant` uses here, in the words the Table V report uses."""
-        t = self.teacher_stage(variant)
-        iterations = t.iterations or t.settings.max_iterations
-        words = ablations.teacher_words(t.settings.name, variant, iterations - 1)
-        return f"the shipped teacher: {words}" if t.shipped else f"trained by the recipe: {words}"
-
     @property
     def student_recipe(self) -> str:
         """Which recipe makes the student, in the words every report and card uses."""
