@@ -8,7 +8,7 @@ with w = (1.0, 0.2, -500, -0.04, -0.01). The shaping terms `reach` and `touch` a
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 
 import torch
@@ -73,21 +73,14 @@ class RewardConfig:
 
     def as_record(self) -> dict:
         """The config as a run records it (teacher_config.json): `w_<term>` for every term, then the parameters."""
-        return {
-            **{f"w_{name}": self.weight(name) for name in TERMS},
-            "reach_scale": self.reach_scale,
-            "target_lift_m": self.target_lift_m,
-            "contact_threshold_n": self.contact_threshold_n,
-            "workspace_radius_m": self.workspace_radius_m,
-        }
+        params = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "weights"}
+        return {**{f"w_{name}": self.weight(name) for name in TERMS}, **params}
 
     @classmethod
     def from_record(cls, record: Mapping) -> RewardConfig:
         """The inverse of `as_record` (what a teacher's teacher_config.json holds)."""
         params = {k: v for k, v in record.items() if not k.startswith("w_")}
-        unknown = sorted(
-            set(params) - {"reach_scale", "target_lift_m", "contact_threshold_n", "workspace_radius_m"}
-        )
+        unknown = sorted(set(params) - set(cls().as_record()))
         if unknown:
             raise ValueError(f"unknown reward setting(s) {unknown} in {dict(record)}")
         return cls(weights={k[2:]: float(v) for k, v in record.items() if k.startswith("w_")}, **params)
