@@ -25,6 +25,8 @@ def ppo_config(
     num_learning_epochs: int = 5,
 ) -> dict:
     """rsl-rl 5.x OnPolicyRunner config with Table III's PPO values unless overridden."""
+    mlp = {"class_name": "MLPModel", "hidden_dims": list(hidden_dims), "activation": "elu"}
+    mlp["obs_normalization"] = obs_normalization
     return {
         "num_steps_per_env": num_steps_per_env,
         "save_interval": save_interval,
@@ -44,19 +46,8 @@ def ppo_config(
             "max_grad_norm": 1.0,
             "use_clipped_value_loss": True,
         },
-        "actor": {
-            "class_name": "MLPModel",
-            "hidden_dims": list(hidden_dims),
-            "activation": "elu",
-            "obs_normalization": obs_normalization,
-            "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": init_std},
-        },
-        "critic": {
-            "class_name": "MLPModel",
-            "hidden_dims": list(hidden_dims),
-            "activation": "elu",
-            "obs_normalization": obs_normalization,
-        },
+        "actor": {**mlp, "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": init_std}},
+        "critic": mlp,
     }
 
 
