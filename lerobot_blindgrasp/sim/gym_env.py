@@ -189,12 +189,6 @@ class BlindGraspGymEnv(gym.Env):
                 f"before anything imports mujoco (MUJOCO_GL is {os.environ.get('MUJOCO_GL')!r} here)."
             ) from e
 
-    def sim(self) -> BatchedGraspEnv:
-        """The underlying one-env batch (for tests and demos that want ground truth, e.g. the object height)."""
-        if self._sim is None:
-            raise RuntimeError("call reset() first")
-        return self._sim
-
 
 def make_sim(object_name: str, env_seeds: list[int], dr: randomization.DomainRandomization) -> BatchedGraspEnv:
     """The sim that runs episodes of `object_name` from these sim seeds (`start_seed`), one row each."""
