@@ -91,10 +91,7 @@ class BlindGraspEnvConfig(EnvConfig):
             fns = [partial(gym_env.make_env, name, **self.env_kwargs(i)) for i in range(n_envs)]
             if use_async_envs and n_envs > 1:
                 vec = _LazyAsyncVectorEnv(
-                    fns,
-                    spaces.observation_space(),
-                    spaces.action_space(),
-                    dict(gym_env.BlindGraspGymEnv.metadata),
+                    fns, spaces.observation_space(), spaces.action_space(), dict(gym_env.BlindGraspGymEnv.metadata)
                 )
             else:
                 vec = SharedSimVectorEnv(fns)

@@ -217,8 +217,5 @@ def eval_dr(object_xy: bool = True) -> randomization.DomainRandomization:
 
 if GYM_ID not in gym.registry:
     gym.register(
-        GYM_ID,
-        entry_point=BlindGraspGymEnv,
-        max_episode_steps=spec.EPISODE_STEPS,
-        disable_env_checker=True,
+        GYM_ID, entry_point=BlindGraspGymEnv, max_episode_steps=spec.EPISODE_STEPS, disable_env_checker=True
     )
