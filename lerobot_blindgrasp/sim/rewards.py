@@ -35,13 +35,7 @@ class StepQuantities:
         return num_contacts(self.uniaxial_force, self.contact_threshold_n)
 
 
-PAPER_WEIGHTS: dict[str, float] = {
-    "task": 1.0,
-    "incentive": 0.2,
-    "joint_limit": -500.0,
-    "action": -0.04,
-    "action_rate": -0.01,
-}
+PAPER_WEIGHTS = {"task": 1.0, "incentive": 0.2, "joint_limit": -500.0, "action": -0.04, "action_rate": -0.01}
 
 
 @dataclass(frozen=True)
@@ -154,13 +148,8 @@ def _joint_limits(q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 # Every term, by name, in eq. 1's order (the shaping terms last): the order `total` sums in.
 TERMS: dict[str, Callable[[StepQuantities, RewardConfig], torch.Tensor]] = {
-    "task": r_task,
-    "incentive": r_incentive,
-    "joint_limit": r_joint_limit,
-    "action": r_action,
-    "action_rate": r_action_rate,
-    "reach": r_reach,
-    "touch": r_touch,
+    fn.__name__.removeprefix("r_"): fn
+    for fn in (r_task, r_incentive, r_joint_limit, r_action, r_action_rate, r_reach, r_touch)
 }
 TERM_NAMES = tuple(TERMS)
 PAPER_REWARD = RewardConfig()
