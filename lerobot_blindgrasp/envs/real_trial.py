@@ -232,18 +232,12 @@ class RealGraspEnv(gym.Env):
 
     def _log_trial(self, success: bool) -> None:
         who = self._decided[1] if self._decided else "time limit"
-        logger.info(
-            "[%s] trial %d: %s (%s, %d steps)",
-            self.object_name,
-            self.session.trials[self.object_name],
-            "SUCCESS" if success else "failure",
-            who,
-            self._t,
-        )
+        trial, outcome = self.session.trials[self.object_name], "SUCCESS" if success else "failure"
+        logger.info("[%s] trial %d: %s (%s, %d steps)", self.object_name, trial, outcome, who, self._t)
         if self.cfg.trial_log:
             record = {
                 "object": self.object_name,
-                "trial": self.session.trials[self.object_name],
+                "trial": trial,
                 "seed": getattr(self, "_seed", None),
                 "success": success,
                 "decided_by": who,

@@ -43,12 +43,8 @@ def newest_loadable_checkpoint(run_dir: Path) -> Path | None:
             if lead:
                 aside = ckpt.with_name(ckpt.name + ".corrupt")
                 os.replace(ckpt, aside)
-                log.warning(
-                    "checkpoint %s cannot be read (%s); set aside as %s, resuming from the one before",
-                    ckpt,
-                    why,
-                    aside.name,
-                )
+                msg = "checkpoint %s cannot be read (%s); set aside as %s, resuming from the one before"
+                log.warning(msg, ckpt, why, aside.name)
     return None
 
 
