@@ -138,5 +138,4 @@ class SocketOperator(_KeyQueue):
 
 
 def make_operator(socket_path: str | None) -> _KeyQueue:
-    """The keyboard, or the operator listening on `socket_path`."""
     return OperatorKeys() if socket_path is None else SocketOperator(socket_path)

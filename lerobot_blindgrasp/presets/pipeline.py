@@ -18,8 +18,7 @@ SHIPPED_TEACHER_ITERATIONS = 2100
 # The Table V teacher ablations of `cpu` and `quick`: the shipped recipe up to where its cloning begins, which is
 # the `cpu` preset exactly, so each differs from the shipped teacher's PPO-only prefix by its one switch.
 ABLATION_TEACHER = TeacherStage(settings=teacher.CPU, iterations=ablations.cloning_start(SHIPPED_TEACHER_PRESET))
-# The main job's teacher: the shipped calibration-blind teacher (models/teacher_cpu_bc_calib).
-SHIPPED_BLIND_TEACHER = "teacher_cpu_bc_calib"
+SHIPPED_BLIND_TEACHER = "teacher_cpu_bc_calib"  # the main job's: the shipped calibration-blind teacher
 
 _SIM_EVAL = "evaluated in simulation, not on the real gripper"
 _CPU_SIZE = "student size cpu (3 layers x 128, 4 heads, head [256, 256]) instead of 6 x 512"
@@ -70,7 +69,6 @@ CPU = Preset(
 
 QUICK = Preset(
     name="quick",
-    # Shipped: only the Table V teacher ablations train a teacher.
     teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET, shipped=True, iterations=SHIPPED_TEACHER_ITERATIONS),
     ablation_teacher=ABLATION_TEACHER,
     demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720, min_curated_episodes=18),
@@ -113,9 +111,8 @@ CPU_DAGGER = derive(
     CPU, "cpu_dagger", {"dagger": _DAGGER}, dagger=DaggerStage(episodes_per_object=20, steps=2000, rounds=2)
 )
 
-# The main job (README command 1), beyond the paper (its deviations say how): the shipped calibration-blind
-# teacher's demos under a +-0.05 rad joint calibration error, and a shorter student stage at a 5x learning rate,
-# chosen by side-by-side runs (same demos, same seed), with two loader processes next to one torch thread.
+# The main job (README command 1), beyond the paper (its deviations say how); its student stage was chosen by
+# side-by-side runs (same demos, same seed).
 QUICK_BLIND = derive(
     QUICK,
     "quick_blind",
@@ -142,8 +139,7 @@ QUICK_BLIND = derive(
     student=replace(QUICK.student, steps=700, lr=5e-4, constant_lr_steps=350, num_workers=2),
 )
 
-# The shipped student's recipe (models/student_cpu), beyond the paper: quick_blind at 1200 steps, with more demos
-# of the object its student trailed its teacher on (the small capsule) and DAgger on it alone.
+# The shipped student's recipe (models/student_cpu): quick_blind, beyond it as its deviations say.
 _TARGETED = (("capsule_small", 240),)  # object, extra curated episodes (7x its 40 in the main set)
 QUICK_BLIND_TARGETED = derive(
     QUICK_BLIND,

@@ -1,6 +1,5 @@
-"""The pipeline's config types: a `Preset` is one config per stage of the main job, its deviations from the paper
-(keyed by what they concern: "teacher", "demos", "student.size", ...; `derive` restates only the keys it changes),
-and the words every report and card uses for its recipe.
+"""The pipeline's config types: a `Preset` is one config per stage of the main job and its deviations from the
+paper, keyed by what they concern ("teacher", "demos", "student.size", ...; `derive` restates only those it changes).
 """
 
 from __future__ import annotations

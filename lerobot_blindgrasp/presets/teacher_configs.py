@@ -1,7 +1,4 @@
-"""The teacher's config types, which the presets (`presets/teacher.py`) are made of and `teacher/` reads: rsl-rl's
-PPO settings (`ppo_config`), `TeacherPreset`, the Table V switches (`Variant`), what a blind-approach actor reads
-(`ActorInput`) and the scripted grasps a recipe clones into its actor (`ScriptedDemos`).
-"""
+"""The teacher's config types, which the presets (`presets/teacher.py`) are made of and `teacher/` reads."""
 
 from __future__ import annotations
 

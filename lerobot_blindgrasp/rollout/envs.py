@@ -79,5 +79,4 @@ def env_config(
 
 
 def make_batched_env(purpose: str, object_names: tuple[str, ...], **kwargs) -> BatchedGraspEnv:
-    """`BatchedGraspEnv(env_config(purpose, object_names, **kwargs))`."""
     return BatchedGraspEnv(env_config(purpose, object_names, **kwargs))

@@ -53,7 +53,6 @@ class BlindGraspGymEnv(gym.Env):
         render_width: int = 320,
         render_height: int = 240,
         render_shadows: bool = False,
-        camera: str = "side",
         render_stride: int = 1,
         end_on_success: bool = False,
     ):
@@ -72,9 +71,7 @@ class BlindGraspGymEnv(gym.Env):
         self.render_width, self.render_height = int(render_width), int(render_height)
         # Shadows make CPU rendering several times slower; eval videos are for a glance, the demo turns them on.
         self.render_shadows = bool(render_shadows)
-        self.camera = camera
-        # A new frame every `render_stride` control steps, the last repeated between: lerobot-eval renders every
-        # step of 10 episodes per task, and with software GL that is most of a CPU eval's time.
+        # A new frame every `render_stride` control steps, the last repeated between (why: envs/sim_env.py).
         if int(render_stride) < 1:
             raise ValueError(f"render_stride must be >= 1, got {render_stride}")
         self.render_stride = int(render_stride)
@@ -167,7 +164,7 @@ class BlindGraspGymEnv(gym.Env):
         if self._renderer is None:
             self._renderer = self._make_renderer(model)
         # A renderer built from an earlier episode's model draws this one: randomization never changes geometry.
-        self._renderer.update_scene(data, camera=self.camera)
+        self._renderer.update_scene(data, camera="side")
         self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.render_shadows
         self._frame, self._frame_step = self._renderer.render().copy(), step
         return self._frame

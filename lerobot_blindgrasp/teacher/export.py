@@ -72,7 +72,6 @@ def export_teacher(source: str | Path, out_dir: str | Path, overwrite_card: bool
 
 
 def card(config: dict) -> str:
-    """A short model card: what it is, how to load it, how it was made."""
     w = config["weights"]
     return f"""---
 library_name: {PACKAGE}
