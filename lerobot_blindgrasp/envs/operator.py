@@ -58,10 +58,7 @@ class OperatorKeys(_KeyQueue):
             from lerobot.utils.keyboard_input import create_key_listener as listener_factory
 
         self.listener = listener_factory(self.queue.put, controls_help=self.HELP)
-
-    @property
-    def available(self) -> bool:
-        return self.listener is not None
+        self.available = self.listener is not None  # no keyboard (no display for pynput): None
 
     def stop(self) -> None:
         if self.listener is not None:

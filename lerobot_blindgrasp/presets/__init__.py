@@ -21,7 +21,6 @@ from lerobot_blindgrasp.presets.teacher_configs import Variant
 
 __all__ = [
     "PRESETS",
-    "REGISTRY",
     "SHIPPED_TEACHER_ITERATIONS",
     "SHIPPED_TEACHER_PRESET",
     "SIZES",

@@ -95,7 +95,6 @@ class SideGraspScript(WaypointScript):
     segments = ((15, 0, 1), (15, 1, 2), (15, 2, 3), (30, 3, 4))
 
     def __init__(self, q0: np.ndarray, object_pos: np.ndarray, specs: list[objects.ObjectSpec]):
-        n = len(specs)
         dirs = np.array([[math.cos(p), math.sin(p)] for p in spec.FINGER_BASE_ANGLES_RAD])
         surface = np.stack([support_distance(o, dirs) for o in specs]) + gripper.TIP_CAPSULE_RADIUS  # (n, 3)
         top = np.array([o.rest_height * 2.0 for o in specs])[:, None].repeat(3, axis=1)
@@ -111,5 +110,5 @@ class SideGraspScript(WaypointScript):
                 side_pose(xy, surface - self.SQUEEZE_M, grasp_z + self.LIFT_M),
             ]
         )  # (5, n, 9)
-        assert self.waypoints.shape[1] == n
+        assert self.waypoints.shape[1] == len(specs)
         self.t = 0

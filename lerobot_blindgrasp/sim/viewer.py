@@ -17,8 +17,6 @@ from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import gym_env, objects, randomization
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
-LIFT_M = 0.03
-
 
 @dataclass
 class SimDemoConfig:
@@ -42,9 +40,7 @@ class SimDemoConfig:
 
     @property
     def video_path(self) -> Path | None:
-        if not self.video:
-            return None
-        return self.output or Path("outputs/sim_demo") / f"{self.object}.mp4"
+        return (self.output or Path("outputs/sim_demo") / f"{self.object}.mp4") if self.video else None
 
 
 def _boundary_distance(o: objects.ObjectSpec, phi: float) -> float:
@@ -78,7 +74,7 @@ def run_demo(cfg: SimDemoConfig) -> dict:
         cfg.object, dr=dr, render_mode="rgb_array" if output else None, render_width=cfg.width,
         render_height=cfg.height, render_shadows=cfg.shadows,
     )  # fmt: skip
-    script = PinchLiftScript(*grasp_geometry(cfg.object), LIFT_M)
+    script = PinchLiftScript(*grasp_geometry(cfg.object))  # a 3 cm lift
     obs, _ = env.reset(seed=cfg.seed)
     frames = [env.render()] if output else []
     lifts, clean_forces, measured_forces = [], [], []
