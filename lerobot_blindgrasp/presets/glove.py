@@ -70,9 +70,3 @@ GLOVE_PRESETS: dict[str, GlovePreset] = {
         ),
     )
 }
-
-
-def glove_preset(name: str) -> GlovePreset:
-    if name not in GLOVE_PRESETS:
-        raise ValueError(f"unknown glove preset {name!r}; choose one of {sorted(GLOVE_PRESETS)}")
-    return GLOVE_PRESETS[name]

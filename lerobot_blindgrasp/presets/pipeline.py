@@ -11,8 +11,7 @@ from lerobot_blindgrasp.presets import ablations, teacher
 from lerobot_blindgrasp.presets.stage_configs import DemoStage, EvalStage, Preset, TeacherStage, derive
 from lerobot_blindgrasp.presets.student import DaggerStage, StudentStage
 
-# The shipped default teacher (models/teacher_cpu_bc) is iterations 0..2099 of `blindgrasp-train-teacher
-# --preset=cpu_bc_capsule --seed=1`.
+# The shipped default teacher (models/teacher_cpu_bc): iterations 0..2099 of `--preset=cpu_bc_capsule --seed=1`.
 SHIPPED_TEACHER_PRESET = teacher.CPU_BC_CAPSULE
 SHIPPED_TEACHER_ITERATIONS = 2100
 # The Table V teacher ablations of `cpu` and `quick`: the shipped recipe up to where its cloning begins, which is
@@ -31,8 +30,7 @@ _DAGGER = (
 PAPER = Preset(
     name="paper",
     teacher=TeacherStage(settings=teacher.PAPER),
-    # 5000 per object for the paper's 89,500 (18 x ~4972); it gives no rollout cap: 20 x lets a 5 %-yield object
-    # still reach it.
+    # 5000 per object for the paper's 89,500; the paper gives no rollout cap: 20 x lets a 5 %-yield object fill up.
     demos=DemoStage(
         episodes_per_object=5000, max_rollouts_per_object=100_000, num_envs=9000, min_curated_episodes=1000
     ),

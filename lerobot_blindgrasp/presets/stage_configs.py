@@ -100,11 +100,8 @@ class Preset:
                 "on the aggregate)"
             )
         if self.student.policy_flags:
-            beyond.append(
-                "training-time sensor errors ("
-                + ", ".join(f.removeprefix("--policy.augment_") for f in self.student.policy_flags)
-                + ")"
-            )
+            errors = ", ".join(f.removeprefix("--policy.augment_") for f in self.student.policy_flags)
+            beyond.append(f"training-time sensor errors ({errors})")
         imitation = "offline imitation of curated stochastic-teacher demos"
         if self.blind_teacher:
             imitation += (

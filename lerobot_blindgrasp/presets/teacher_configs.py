@@ -123,8 +123,7 @@ class ScriptedDemos:
         return runner
 
     def weight_at(self, iteration: int) -> float:
-        """The cloning loss's weight at a PPO iteration: 0 before `start_iteration`, then decaying linearly to 0
-        over `decay_iterations`."""
+        """The cloning loss's weight at a PPO iteration: 0 before `start_iteration`, then `coef` decaying to 0."""
         if iteration < self.start_iteration:
             return 0.0
         return self.coef * max(0.0, 1.0 - (iteration - self.start_iteration) / self.decay_iterations)

@@ -1,5 +1,4 @@
-"""A teacher run's checkpoints: rsl-rl's saves made atomic, the newest one that loads (a corrupt one set aside), and
-the actor's TorchScript/ONNX export."""
+"""A teacher run's checkpoints: atomic saves, the newest that loads (a corrupt one set aside), the actor's export."""
 
 from __future__ import annotations
 
