@@ -106,10 +106,10 @@ class SocketOperator(_KeyQueue):
             pass
         self.queue.put("operator-gone")
 
-    def announce_trial(self, object_name: str, trial: int, seed: int | None) -> None:
+    def announce_trial(self, object_name: str, seed: int) -> None:
+        """The next trial: `object_name` at evaluation index `seed`."""
         self._token += 1
         self._asked = False
-        seed = trial - 1 if seed is None else int(seed)
         self._send({"op": "place", "object": object_name, "seed": seed, "token": self._token})
 
     def wait_for(self, keys: set[str], timeout_s: float | None = None) -> str | None:

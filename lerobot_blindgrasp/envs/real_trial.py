@@ -141,11 +141,11 @@ class RealGraspEnv(gym.Env):
         keys = self.session.keys
         k = self.session.trials.get(self.object_name, 0) + 1
         self._seed = seed  # lerobot-eval's evaluation index: the start state an unattended operator places
-        index = k - 1 if seed is None else int(seed)  # as the operator socket's placement (envs/operator.py)
+        index = k - 1 if seed is None else int(seed)
         self._go_home(sim_start_pose(self.object_name, index) if self.cfg.start_pose == "sim" else spec.HOME_POSE)
         self.session.trials[self.object_name] = k
         if hasattr(keys, "announce_trial"):  # an unattended operator places the object this trial names
-            keys.announce_trial(self.object_name, k, seed)
+            keys.announce_trial(self.object_name, index)
         if keys.available:  # an ENTER pressed while the gripper was homing counts: the operator is ready
             print(f"\n[{self.object_name}] trial {k}: place the object at the claw centre, hands clear, ENTER.")
             self._wait_keeping_bus_alive({"enter"})

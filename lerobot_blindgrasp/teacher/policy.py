@@ -63,15 +63,11 @@ def resolve_checkpoint(path: str | Path) -> Path:
     p = Path(path)
     _refuse_student(p)
     if p.is_dir():
-        if (p / WEIGHTS_NAME).is_file():
-            ckpt = p / WEIGHTS_NAME
-        else:
-            ckpt = latest_checkpoint(p)
-            if ckpt is None:
-                raise TeacherError(
-                    f"no teacher in {p}: no {WEIGHTS_NAME} (a shipped teacher) and no model_<iteration>.pt "
-                    "(a training run)"
-                )
+        ckpt = p / WEIGHTS_NAME if (p / WEIGHTS_NAME).is_file() else latest_checkpoint(p)
+        if ckpt is None:
+            raise TeacherError(
+                f"no teacher in {p}: no {WEIGHTS_NAME} (a shipped teacher) and no model_<iteration>.pt (a training run)"
+            )
     elif p.is_file():
         ckpt = p
     else:
@@ -160,11 +156,8 @@ class TeacherPolicy:
         self.actor.to(device).eval()
         # A blind-approach teacher computes its actor's group itself from the env's "privileged" vector.
         self.actor_input = blind_approach.ActorInput.from_record(self.config.get("actor_input"))
-        self._blind = (
-            blind_approach.BlindGroup(self.actor_input)
-            if blind_approach.reads_blind_group({"actor": self.obs_groups["actor"]})
-            else None
-        )
+        reads_blind = blind_approach.reads_blind_group({"actor": self.obs_groups["actor"]})
+        self._blind = blind_approach.BlindGroup(self.actor_input) if reads_blind else None
         self.device = device
         weights = self.config.get("weights", {})
         self.iteration = iteration if iteration is not None else int(weights.get("iteration", -1))
