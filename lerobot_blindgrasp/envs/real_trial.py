@@ -80,7 +80,7 @@ class RealGraspEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": spec.CONTROL_HZ}
 
     def __init__(self, session: GripperSession, object_name: str):
-        self.session = session
+        self.session, self.robot = session, session.robot  # the one gripper, shared by the per-object envs
         self.cfg = session.cfg
         self.object_name = object_name
         self.task = self.task_description = task_string(object_name)
@@ -104,12 +104,8 @@ class RealGraspEnv(gym.Env):
         self._returned_at: float | None = None
 
     def _overruns(self) -> int:
-        timing = getattr(self.session.robot, "timing", None)
+        timing = getattr(self.robot, "timing", None)
         return timing.overruns if timing is not None else 0
-
-    @property
-    def robot(self):
-        return self.session.robot
 
     def _observe(self) -> dict[str, np.ndarray]:
         started = time.monotonic()

@@ -162,16 +162,13 @@ class TeacherPolicy:
         weights = self.config.get("weights", {})
         self.iteration = iteration if iteration is not None else int(weights.get("iteration", -1))
         self.sha256 = file_sha256(self.checkpoint)
+        # folder/file, e.g. `teacher_cpu/teacher.safetensors`, for reports and provenance
+        self.name = f"{self.checkpoint.parent.name}/{self.checkpoint.name}"
 
     @property
     def action_std(self) -> np.ndarray:
         """(9,) std of the stochastic teacher's Gaussian, rad: the noise in every demo's action label."""
         return self.actor.distribution.std_param.detach().cpu().numpy().astype(np.float64)
-
-    @property
-    def name(self) -> str:
-        """Folder/file, e.g. `teacher_cpu/teacher.safetensors`, for reports and provenance."""
-        return f"{self.checkpoint.parent.name}/{self.checkpoint.name}"
 
     @torch.inference_mode()
     def __call__(self, obs: dict[str, np.ndarray], stochastic: bool = False) -> np.ndarray:
