@@ -83,9 +83,7 @@ class Preset:
     def teacher_stage(self, variant: Variant = Variant()) -> TeacherStage:
         """The stage that makes a teacher with `variant`'s switches: the preset's own teacher for the plain one,
         the ablation teacher for a Table V teacher ablation."""
-        if ablations.is_teacher_ablation(variant):
-            return self.ablation_teacher or self.teacher
-        return self.teacher
+        return (self.ablation_teacher or self.teacher) if ablations.is_teacher_ablation(variant) else self.teacher
 
     @property
     def student_recipe(self) -> str:

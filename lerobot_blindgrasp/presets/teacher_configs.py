@@ -165,9 +165,7 @@ class Variant:
 
     def apply(self, preset: TeacherPreset) -> TeacherPreset:
         runner = preset.runner_cfg()
-        reward = preset.reward
-        if self.no_incentive:
-            reward = reward.without(*CONTACT_REWARD_TERMS)
+        reward = preset.reward.without(*CONTACT_REWARD_TERMS) if self.no_incentive else preset.reward
         if self.student_obs:
             runner["obs_groups"] = {"actor": ["policy"], "critic": ["policy"]}
         return replace(preset, runner=runner, reward=reward)

@@ -108,9 +108,7 @@ EVERYDAY: tuple[ObjectSpec, ...] = (
 
 
 def scaled(obj: ObjectSpec, scale: float) -> ObjectSpec:
-    """`obj` with every dimension x `scale` (same density, so mass x scale^3); `obj` itself at scale 1."""
-    if scale == 1.0:
-        return obj
+    """`obj` with every dimension x `scale` (same density, so mass x scale^3)."""
     mass = None if obj.mass_kg is None else obj.mass_kg * scale**3
     return replace(obj, size=tuple(scale * v for v in obj.size), mass_kg=mass)
 

@@ -58,8 +58,7 @@ def latest_checkpoint(run_dir: Path) -> Path | None:
 
 
 def resolve_checkpoint(path: str | Path) -> Path:
-    """The weights file of a teacher folder (teacher.safetensors first, else the latest model_<it>.pt), or the
-    given file. One-line errors for anything else."""
+    """The weights file of a teacher folder (teacher.safetensors, else the latest model_<it>.pt), or the file given."""
     p = Path(path)
     _refuse_student(p)
     if p.is_dir():
