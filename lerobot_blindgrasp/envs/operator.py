@@ -132,7 +132,3 @@ class SocketOperator(_KeyQueue):
             self._sock.shutdown(socket.SHUT_RDWR)
         with contextlib.suppress(OSError):
             self._sock.close()
-
-
-def make_operator(socket_path: str | None) -> _KeyQueue:
-    return OperatorKeys() if socket_path is None else SocketOperator(socket_path)

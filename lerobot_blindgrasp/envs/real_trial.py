@@ -16,7 +16,7 @@ import numpy as np
 
 from lerobot_blindgrasp import durable, spaces, spec
 from lerobot_blindgrasp.envs import real_report
-from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
+from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, SocketOperator
 from lerobot_blindgrasp.hardware.loop_timing import StepPacer
 from lerobot_blindgrasp.hardware.realtime import GcPause
 from lerobot_blindgrasp.sim import objects, randomization
@@ -57,7 +57,10 @@ class GripperSession:
 
     def ensure_connected(self) -> None:
         if self.keys is None:
-            self.keys = make_operator(self.cfg.operator_socket)
+            sock = self.cfg.operator_socket
+            self.keys = (
+                OperatorKeys() if sock is None else SocketOperator(sock)
+            )  # a person, or an operator program
         if self.cfg.success_mode == "operator" and not self.keys.available:
             raise RuntimeError(
                 "success_mode=operator needs keyboard input (a display for pynput, or run lerobot-eval in a "

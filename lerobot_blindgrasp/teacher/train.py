@@ -53,8 +53,7 @@ def build_env_config(
     preset: TeacherPreset, num_envs: int, seed: int, nthread: int = 0, backend: str = "batch"
 ) -> GraspEnvConfig:
     dr = randomization.PAPER_DR if preset.external_force else randomization.EVAL_DR
-    if preset.joint_calibration_rad:
-        dr = dataclasses.replace(dr, joint_calibration_rad=preset.joint_calibration_rad)
+    dr = dataclasses.replace(dr, joint_calibration_rad=preset.joint_calibration_rad)
     return env_config(
         "train",
         objects.PAPER_OBJECTS,
