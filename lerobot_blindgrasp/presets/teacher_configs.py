@@ -16,10 +16,7 @@ def ppo_config(
     init_std: float,
     obs_normalization: bool,
     save_interval: int,
-    learning_rate: float = 1e-3,
-    entropy_coef: float = 0.003,
     num_mini_batches: int = 6,
-    num_learning_epochs: int = 5,
 ) -> dict:
     """rsl-rl 5.x OnPolicyRunner config with Table III's PPO values unless overridden."""
     mlp = {"class_name": "MLPModel", "hidden_dims": list(hidden_dims), "activation": "elu"}
@@ -30,12 +27,12 @@ def ppo_config(
         "obs_groups": {"actor": ["privileged"], "critic": ["privileged"]},
         "algorithm": {
             "class_name": "PPO",
-            "learning_rate": learning_rate,
+            "learning_rate": 1e-3,
             "schedule": "adaptive",
             "desired_kl": 0.01,
-            "num_learning_epochs": num_learning_epochs,
+            "num_learning_epochs": 5,
             "num_mini_batches": num_mini_batches,
-            "entropy_coef": entropy_coef,
+            "entropy_coef": 0.003,
             "value_loss_coef": 1.0,
             "clip_param": 0.2,
             "gamma": 0.99,
