@@ -10,7 +10,7 @@ The fields past Table II (`ROBUSTNESS_FIELDS`) default to the paper's sim; `lab/
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 
 import mujoco
 import torch
@@ -73,7 +73,7 @@ class DomainRandomization:
 
 
 # The fields past Table II (from `force_gain` on); a dataset card lists them only where they differ from the default.
-_NAMES = [f.name for f in fields(DomainRandomization)]
+_NAMES = list(DomainRandomization.__dataclass_fields__)
 ROBUSTNESS_FIELDS: tuple[str, ...] = tuple(_NAMES[_NAMES.index("force_gain") :])
 
 PAPER_DR = DomainRandomization()
