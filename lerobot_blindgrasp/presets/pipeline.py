@@ -37,7 +37,6 @@ PAPER = Preset(
     student=StudentStage(
         size="paper", batch_size=256, epochs=2000, constant_lr_epochs=100, device="cuda", num_workers=4
     ),
-    # Table V is on the six in-distribution objects, the medium training shapes.
     evaluation=EvalStage(episodes_per_object=50, task="medium", async_envs=True),
     deviations={
         "evaluation": f"{_SIM_EVAL}: the six medium training shapes stand in for Table V's 3D-printed replicas, "

@@ -18,8 +18,6 @@ import os
 if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
     os.environ["MUJOCO_GL"] = "egl"
 
-from dataclasses import replace  # noqa: E402
-
 import gymnasium as gym  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
@@ -205,11 +203,6 @@ def make_sim(object_name: str, env_seeds: list[int], dr: randomization.DomainRan
 def make_env(object_name: str = "cylinder_a_medium", **kwargs) -> gym.Env:
     """`gym.make` of the registered id; module-level, so that async vector env workers can unpickle it by name."""
     return gym.make(GYM_ID, object_name=object_name, **kwargs)
-
-
-def eval_dr(object_xy: bool = True) -> randomization.DomainRandomization:
-    """The eval randomization; `object_xy=False` centres the object (for scripted, centre-assuming motions)."""
-    return randomization.EVAL_DR if object_xy else replace(randomization.EVAL_DR, object_xy_m=0.0)
 
 
 if GYM_ID not in gym.registry:

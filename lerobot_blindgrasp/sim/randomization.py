@@ -80,6 +80,7 @@ PAPER_DR = DomainRandomization()
 # The paper's randomization and sensor noise without the pushes: the pushes are a training-time robustness aid, and
 # evaluation (lerobot-eval, the teacher eval) and demo collection run undisturbed trials.
 EVAL_DR = replace(PAPER_DR, external_force=False)
+CENTRED_EVAL_DR = replace(EVAL_DR, object_xy_m=0.0)  # the object centred: for scripted, centre-assuming motions
 # No randomization at all: for physics tests and scripted checks.
 NO_DR = DomainRandomization(
     joint_offset_rad=0.0,

@@ -69,7 +69,7 @@ def grasp_geometry(object_name: str) -> tuple[float, float]:
 def run_demo(cfg: SimDemoConfig) -> dict:
     """Run one scripted episode; write the video if `cfg.video_path` is set; return the summary."""
     output = cfg.video_path
-    dr = gym_env.eval_dr(object_xy=False) if cfg.randomization else randomization.NO_DR
+    dr = randomization.CENTRED_EVAL_DR if cfg.randomization else randomization.NO_DR
     env = gym_env.BlindGraspGymEnv(
         cfg.object, dr=dr, render_mode="rgb_array" if output else None, render_width=cfg.width,
         render_height=cfg.height, render_shadows=cfg.shadows,

@@ -90,7 +90,7 @@ def test_action_is_an_absolute_target_clipped_to_0p3_rad_from_the_current_positi
 def _scripted_lift(**env_kwargs):
     """A pinch-and-lift of the centred medium cylinder until the episode ends: (per-step success, terminated,
     truncated, last observation, last info)."""
-    env = gym_env.make_env("cylinder_a_medium", dr=gym_env.eval_dr(object_xy=False), **env_kwargs)
+    env = gym_env.make_env("cylinder_a_medium", dr=randomization.CENTRED_EVAL_DR, **env_kwargs)
     env.reset(seed=0)
     script = PinchLiftScript(object_radius=0.03, grasp_height=0.045, lift_m=0.03)
     success = []
