@@ -89,8 +89,7 @@ class Preset:
     def student_recipe(self) -> str:
         """Which recipe makes the student, in the words every report and card uses."""
         beyond = []
-        if self.dagger is not None:
-            d = self.dagger
+        if (d := self.dagger) is not None:
             which = "per object" if d.objects == "all" else f"of {d.objects.replace(',', ', ')}"
             beyond.append(
                 f"{d.rounds} round(s) of DAgger-style relabelling ({d.episodes_per_object} student "

@@ -144,8 +144,7 @@ def format_summary(s: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    summary = run_demo(parse_config(SimDemoConfig, argv))
-    print(format_summary(summary))
+    print(format_summary(run_demo(parse_config(SimDemoConfig, argv))))
     return 0
 
 
