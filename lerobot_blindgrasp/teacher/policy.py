@@ -137,11 +137,8 @@ class TeacherPolicy:
                 f"{self.checkpoint} was trained on another observation layout than spec.PRIVILEGED_LAYOUT; "
                 "retrain or use a teacher from this version"
             )
-        dims = {
-            "policy": spec.STATE_DIM,
-            "privileged": spec.PRIVILEGED_DIM,
-            blind_approach.GROUP: spec.PRIVILEGED_DIM,
-        }
+        priv = spec.PRIVILEGED_DIM  # "privileged" and its blind-approach form are alike wide
+        dims = {"policy": spec.STATE_DIM, "privileged": priv, blind_approach.GROUP: priv}
         dummy = TensorDict({k: torch.zeros(1, d) for k, d in dims.items()}, batch_size=[1])
         self.actor = MLPModel(dummy, self.obs_groups, "actor", spec.NUM_JOINTS, **actor_cfg)
         state, iteration = load_actor_state(self.checkpoint)
