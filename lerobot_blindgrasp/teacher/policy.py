@@ -137,7 +137,7 @@ class TeacherPolicy:
                 f"{self.checkpoint} was trained on another observation layout than spec.PRIVILEGED_LAYOUT; "
                 "retrain or use a teacher from this version"
             )
-        priv = spec.PRIVILEGED_DIM  # "privileged" and its blind-approach form are alike wide
+        priv = spec.PRIVILEGED_DIM  # the width of "privileged" and of its blind-approach form
         dims = {"policy": spec.STATE_DIM, "privileged": priv, blind_approach.GROUP: priv}
         dummy = TensorDict({k: torch.zeros(1, d) for k, d in dims.items()}, batch_size=[1])
         self.actor = MLPModel(dummy, self.obs_groups, "actor", spec.NUM_JOINTS, **actor_cfg)
