@@ -58,7 +58,7 @@ class OperatorKeys(_KeyQueue):
             from lerobot.utils.keyboard_input import create_key_listener as listener_factory
 
         self.listener = listener_factory(self.queue.put, controls_help=self.HELP)
-        self.available = self.listener is not None  # no keyboard (no display for pynput): None
+        self.available = self.listener is not None  # the factory gives None without a keyboard (no display)
 
     def stop(self) -> None:
         if self.listener is not None:

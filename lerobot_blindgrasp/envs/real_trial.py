@@ -57,10 +57,8 @@ class GripperSession:
 
     def ensure_connected(self) -> None:
         if self.keys is None:
-            sock = self.cfg.operator_socket
-            self.keys = (
-                OperatorKeys() if sock is None else SocketOperator(sock)
-            )  # a person, or an operator program
+            sock = self.cfg.operator_socket  # None: a person at the keyboard; else an operator program
+            self.keys = OperatorKeys() if sock is None else SocketOperator(sock)
         if self.cfg.success_mode == "operator" and not self.keys.available:
             raise RuntimeError(
                 "success_mode=operator needs keyboard input (a display for pynput, or run lerobot-eval in a "

@@ -17,7 +17,7 @@ SHIPPED_TEACHER_ITERATIONS = 2100
 # The Table V teacher ablations of `cpu` and `quick`: the shipped recipe up to where its cloning begins, which is
 # the `cpu` preset exactly, so each differs from the shipped teacher's PPO-only prefix by its one switch.
 ABLATION_TEACHER = TeacherStage(settings=teacher.CPU, iterations=ablations.cloning_start(SHIPPED_TEACHER_PRESET))
-SHIPPED_BLIND_TEACHER = "teacher_cpu_bc_calib"  # the main job's: the shipped calibration-blind teacher
+SHIPPED_BLIND_TEACHER = "teacher_cpu_bc_calib"  # the main job's teacher: the shipped calibration-blind one
 
 _SIM_EVAL = "evaluated in simulation, not on the real gripper"
 _CPU_SIZE = "student size cpu (3 layers x 128, 4 heads, head [256, 256]) instead of 6 x 512"

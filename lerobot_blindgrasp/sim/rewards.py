@@ -128,7 +128,7 @@ def r_reach(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
 
 
 def r_touch(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
-    """Shaping (not in the paper): fraction of tips pressing on the *object*, not the table (> 0.1 N, any way)."""
+    """Shaping (not in the paper): fraction of tips pressing on the *object* (> 0.1 N, any direction), not the table."""
     return (s.tip_object_force > cfg.contact_threshold_n).to(torch.float64).mean(-1)
 
 
