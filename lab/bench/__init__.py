@@ -21,7 +21,7 @@ import draccus
 
 from lerobot_blindgrasp.cli import parse_config, sleeping_openmp_threads
 
-BENCHMARKS = ("sim", "teacher", "demos", "policy", "student", "paper", "build")
+BENCHMARKS = ("sim", "teacher", "demos", "policy", "student", "paper", "build", "onemodel")
 
 
 @dataclass
