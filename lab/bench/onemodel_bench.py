@@ -35,9 +35,10 @@ import torch
 
 from lab.bench import BenchConfig
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.sim import gripper, objects, observations
+from lerobot_blindgrasp.sim import gripper, objects, observations, scripted
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
+from lerobot_blindgrasp.sim.sensors import SensorIndex
 
 SLOTS = ("box", "capsule", "cylinder", "sphere")  # the object body's geoms, one per MuJoCo type, in this order
 SLOT_NAMES = ("object_geom", "object_capsule", "object_cylinder", "object_sphere")
@@ -107,36 +108,43 @@ def _copy_state(src, dst) -> None:
     dst.forward(every)
 
 
-def joint_targets(env: BatchedGraspEnv, steps: int, seed: int = 0) -> tuple[list[torch.Tensor], np.ndarray]:
-    """The servo targets the env sends under random delta-theta actions, and which worlds had a fingertip on the
-    object meanwhile (so that the check covers grasp contacts, not only objects resting on the table)."""
-    rng = np.random.default_rng(seed)
-    targets, touched = [], np.zeros(env.num_envs, dtype=bool)
-    for a in rng.uniform(-0.15, 0.15, (steps, env.num_envs, spec.NUM_JOINTS)):
-        info = env.step(a)[4]
-        targets.append(torch.tensor(np.asarray(info["joint_target"]), dtype=torch.float64))
-        touched |= np.asarray(info["tip_object_force"]).max(axis=1) > 0
-    return targets, touched
+def grasp_targets(env: BatchedGraspEnv, steps: int) -> list[torch.Tensor]:
+    """Reset the env with every finger 2 cm beside its object at grasp height (the side grasp's own pose), and
+    return the servo targets of the rest of that grasp: squeeze over 8 control steps, then lift and hold. Fingertips
+    are on the objects within a few steps, so both paths are compared (and timed) with grasp contacts."""
+    env.reset()
+    specs = [objects.scaled(objects.get_object(n), env.cfg.dr.object_size_scale) for n in env.object_names]
+    pos = env.physics.qpos[:, observations.OBJECT_POS].double().cpu().numpy()
+    script = scripted.SideGraspScript(env.joint_positions(), pos, specs)
+    script.segments = ((8, 2, 3), (max(steps - 8, 1), 3, 4))
+    lower, upper = np.asarray(spec.JOINT_LOWER), np.asarray(spec.JOINT_UPPER)
+    beside = torch.as_tensor(np.clip(script.waypoints[2], lower, upper))
+    p = env.physics
+    p.qpos[:, observations.JOINTS] = beside.to(p.qpos.device, p.qpos.dtype)
+    p.ctrl[:] = beside.to(p.ctrl.device, p.ctrl.dtype)
+    p.forward(torch.arange(env.num_envs, device=p.device))
+    return [torch.as_tensor(np.clip(script.target(t), lower, upper)) for t in range(steps)]
 
 
 def replay(backend, targets: list[torch.Tensor], substeps: int) -> list[torch.Tensor]:
-    """Object poses (worlds, 7), float64 copies on the host, after each control step of the targets replayed."""
-    poses = []
+    """(worlds, 7 + nsensordata) after each control step of the targets replayed: the object pose and every
+    sensor, float64 copies on the host."""
+    out = []
     for target in targets:
         backend.ctrl[:] = target.to(backend.ctrl.device)
         backend.step(substeps)
         pose = backend.qpos[:, observations.OBJECT_POS.start : observations.OBJECT_QUAT.stop]
-        poses.append(pose.to("cpu", torch.float64, copy=True))  # a copy: the state tensor moves on
-    return poses
+        out.append(torch.cat([pose, backend.sensordata], 1).to("cpu", torch.float64, copy=True))  # a copy
+    return out
 
 
-def max_diff(a: list[torch.Tensor], b: list[torch.Tensor]) -> float:
-    return max(float((x - y).abs().max()) for x, y in zip(a, b, strict=True))
+def max_diff(a: list[torch.Tensor], b: list[torch.Tensor], cols: slice) -> float:
+    return max(float((x[:, cols] - y[:, cols]).abs().max()) for x, y in zip(a, b, strict=True))
 
 
-def check(env: BatchedGraspEnv, one, steps: int, seed: int = 0) -> dict:
-    """Both paths from the env's reset through the same joint targets: the one model's object poses against the
-    groups', and the groups' against themselves (a second replay).
+def check(env: BatchedGraspEnv, one, steps: int) -> dict:
+    """Both paths through the same grasp from the same state: the one model's object poses and sensors against
+    the groups', and the groups' against themselves (a second replay).
 
     The tolerance, derived: per world both paths run the same float32 operations (the same model rows, the same
     contacts in the same order: the extra geoms never pass the broadphase), so where Warp runs a kernel's threads
@@ -144,25 +152,27 @@ def check(env: BatchedGraspEnv, one, steps: int, seed: int = 0) -> dict:
     from atomics (a GPU), two replays of the groups' own path already differ, and chaotically more with each step;
     there the one model may differ from the groups by at most twice what the groups differ from themselves."""
     substeps = env.cfg.physics.substeps
-    env.reset()
+    targets = grasp_targets(env, steps)
     start = env.physics.snapshot()
-    targets, touched = joint_targets(env, steps, seed)
-    env.physics.restore(start)
     _copy_state(env.physics, one)
     groups = replay(env.physics, targets, substeps)
-    poses = replay(one, targets, substeps)
+    mine = replay(one, targets, substeps)
     env.physics.restore(start)
     again = replay(env.physics, targets, substeps)
-    diff, spread = max_diff(poses, groups), max_diff(again, groups)
-    tolerance = 2.0 * spread
+    pose, sensors = slice(0, 7), slice(7, None)
+    diff, spread = max_diff(mine, groups, pose), max_diff(again, groups, pose)
+    index = SensorIndex.from_model(env._templates[0])
+    touch = torch.stack([index.read(x[:, 7:], "objcontact").norm(dim=2).amax(1) for x in groups]).amax(0)
     return {
         "control_steps": steps,
         "worlds": env.num_envs,
-        "worlds_with_a_tip_on_the_object": int(touched.sum()),
+        "worlds_with_a_tip_on_the_object": int((touch > 0).sum()),
         "max_pose_diff": diff,  # m and unit-quaternion components, over every world and control step
         "groups_rerun_max_pose_diff": spread,
-        "tolerance": tolerance,
-        "agree": diff <= tolerance,
+        "tolerance": 2.0 * spread,
+        "agree": diff <= 2.0 * spread,
+        "max_sensor_diff": max_diff(mine, groups, sensors),  # forces in N, distances in m, ...
+        "groups_rerun_max_sensor_diff": max_diff(again, groups, sensors),
     }
 
 
@@ -184,7 +194,7 @@ def time_paths(env: BatchedGraspEnv, one, steps: int, blocks: int, deadline: flo
     """Env control steps per second of each path, `raw_step` and `step`, in alternating blocks from the same
     state with the same targets (the env's own under random actions); no block starts after `deadline`."""
     substeps = env.cfg.physics.substeps
-    targets, _ = joint_targets(env, steps, seed=1)  # from wherever the check left the env: fingers moving
+    targets = grasp_targets(env, steps)
     paths = {"groups": env.physics, "one": one}
     _copy_state(env.physics, one)
     starts = {k: b.snapshot() for k, b in paths.items()}
