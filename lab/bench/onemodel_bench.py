@@ -1,4 +1,4 @@
-"""One MuJoCo Warp model for every object against the product's object groups, stepped back to back (issue 58).
+"""One MuJoCo Warp model for every object against the product's object groups, stepped back to back.
 
     python -m lab.bench --bench.type=onemodel --bench.num_envs=[36,360] --bench.json=true
 
@@ -17,10 +17,12 @@ geoms: the tiny ones sit inside the object, so the nearest is the object's own g
 Both paths run the same envs, objects and Table II draw (`BatchedGraspEnv`'s), each as one `WarpBackend`: the
 groups one is the env's own; the one-model one gets the four-geom object models, one per object, which differ
 only in batchable fields, so the backend makes them one group. Table II's friction lands on `object_geom` there and
-is copied to the other three. The check: from the env's reset, both replay the same joint targets (the env's own,
-under random actions) for --bench.check_steps control steps; the object poses must agree within `tolerance`
-(below). The timing: each path's captured graph(s) replay the same targets from the same state, in alternating
-blocks; env control steps per second (worlds x control steps / s) of `raw_step` (physics only) for each.
+is copied to the other three. The check (`check`): from the same state, fingers 2 cm beside each object, both
+replay the same side grasp's joint targets for --bench.check_steps control steps; the object poses must agree
+within the tolerance derived there, and every sensor is compared too. The timing (`time_paths`): the same grasp
+from the same state, in alternating blocks; env control steps per second (worlds x control steps / s) of each
+path's `raw_step` (its captured graph(s), physics only) and `step` (plus the state the env reads and the failure
+check).
 """
 
 from __future__ import annotations
