@@ -203,11 +203,10 @@ def time_paths(env: BatchedGraspEnv, one, steps: int, blocks: int, deadline: flo
     for k, b in paths.items():  # untimed: first launches of the captured graphs
         _block(b, starts[k], targets[:1], substeps, raw=True)
     seconds = {(k, raw): 0.0 for k in paths for raw in (True, False)}
-    done = 0
+    done, order = 0, list(seconds)
     while done < blocks and (done == 0 or time.perf_counter() < deadline):
-        for k, b in paths.items():
-            for raw in (True, False):
-                seconds[k, raw] += _block(b, starts[k], targets, substeps, raw)
+        for k, raw in order if done % 2 == 0 else order[::-1]:  # every other block in reverse: no path first
+            seconds[k, raw] += _block(paths[k], starts[k], targets, substeps, raw)
         done += 1
     n = done * steps * env.num_envs
     out = {
