@@ -251,7 +251,7 @@ class BenchOneModelConfig(BenchConfig):
     num_envs: list[int] = field(default_factory=lambda: [36, 360])  # env counts (18 objects, allocated evenly)
     check_steps: int = 20  # control steps of the equivalence check
     steps: int = 12  # control steps per timed block
-    blocks: int = 3  # alternating blocks per path
+    blocks: int = 4  # alternating blocks per path (even: each order of the paths as often)
     budget_s: float = 600.0  # per env count: no timing block starts after this
     device: str | None = None  # Warp device (default: the GPU if there is one, else "cpu")
 

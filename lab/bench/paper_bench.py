@@ -69,7 +69,7 @@ class BenchPaperConfig(BenchConfig):
     demo_start_s: float = 420.0  # the collector's start-up (imports, teacher, env build) may take this long
     onemodel_s: float = 60.0  # onemodel: no timing block starts after this many seconds of the stage
     onemodel_check_steps: int = 16  # onemodel: control steps of the side grasp both paths replay
-    onemodel_steps: int = 8  # onemodel: control steps per timing block (up to 3 blocks per path)
+    onemodel_steps: int = 8  # onemodel: control steps per timing block (up to 4 blocks per path)
     teacher: Path | None = None  # demos: teacher folder or checkpoint (default: the shipped teacher)
     output: Path | None = None  # the JSON, rewritten after each stage (default: printed only)
 
@@ -257,7 +257,7 @@ def _onemodel(cfg: BenchPaperConfig, num_envs: int) -> dict:
     from lab.bench import onemodel_bench
 
     steps, check = cfg.onemodel_steps, cfg.onemodel_check_steps
-    return onemodel_bench.measure(num_envs, check, steps, blocks=3, budget_s=cfg.onemodel_s)
+    return onemodel_bench.measure(num_envs, check, steps, blocks=4, budget_s=cfg.onemodel_s)
 
 
 def _wait_until_collecting(proc, out: Path, deadline: float) -> float | None:
