@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 import torch
+import warp as wp
 
 from lab.bench import BenchConfig
 from lerobot_blindgrasp import spec
@@ -44,7 +45,7 @@ from lerobot_blindgrasp.sim.sensors import SensorIndex
 
 SLOTS = ("box", "capsule", "cylinder", "sphere")  # the object body's geoms, one per MuJoCo type, in this order
 SLOT_NAMES = ("object_geom", "object_capsule", "object_cylinder", "object_sphere")
-OFF_SIZE = 1e-4  # m: a world's other geoms, inside its object (its smallest half-extent is 1.5 cm)
+OFF_SIZE = 1e-4  # m: a world's other geoms, at its object's centre (2 cm or more from any object's surface)
 
 
 def object_mjcf(obj: objects.ObjectSpec) -> str:
@@ -89,16 +90,11 @@ def build_pair(num_envs: int, seed: int = 0, device: str | None = None):
     )
     if len(one.groups) != 1:
         raise RuntimeError(f"the four-geom models made {len(one.groups)} Warp models, not one")
-    friction = _torch_view(one.groups[0].model.geom_friction)  # (worlds, ngeom, 3): Table II drew the box's
+    # Table II's object friction went to `object_geom` (the box slot); every world's own geom gets it too.
+    friction = wp.to_torch(one.groups[0].model.geom_friction)  # (worlds, ngeom, 3), the model's own memory
     slots = [templates[0].geom(n).id for n in SLOT_NAMES]
     friction[:, slots[1:], 0] = friction[:, slots[:1], 0]
     return env, one
-
-
-def _torch_view(array) -> torch.Tensor:
-    import warp as wp
-
-    return wp.to_torch(array)
 
 
 def _copy_state(src, dst) -> None:
@@ -163,7 +159,7 @@ def check(env: BatchedGraspEnv, one, steps: int) -> dict:
     again = replay(env.physics, targets, substeps)
     pose, sensors = slice(0, 7), slice(7, None)
     diff, spread = max_diff(mine, groups, pose), max_diff(again, groups, pose)
-    index = SensorIndex.from_model(env._templates[0])
+    index = SensorIndex.from_model(one_model_template(objects.get_object(env.object_names[0]), env.cfg.physics))
     touch = torch.stack([index.read(x[:, 7:], "objcontact").norm(dim=2).amax(1) for x in groups]).amax(0)
     return {
         "control_steps": steps,
@@ -194,7 +190,7 @@ def _block(backend, start, targets: list[torch.Tensor], substeps: int, raw: bool
 
 def time_paths(env: BatchedGraspEnv, one, steps: int, blocks: int, deadline: float) -> dict:
     """Env control steps per second of each path, `raw_step` and `step`, in alternating blocks from the same
-    state with the same targets (the env's own under random actions); no block starts after `deadline`."""
+    state with the same targets (`grasp_targets`: grasp contacts in every world); no block starts after `deadline`."""
     substeps = env.cfg.physics.substeps
     targets = grasp_targets(env, steps)
     paths = {"groups": env.physics, "one": one}
