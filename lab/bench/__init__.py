@@ -1,5 +1,5 @@
-"""`python -m lab.bench --bench.type={sim,teacher,demos,policy,student,paper,build,onemodel}`: benchmarks that print one
-table per run (JSON with --bench.json=true).
+"""`python -m lab.bench --bench.type={sim,teacher,demos,policy,student,paper,build,onemodel}`: benchmarks that
+print one table per run (JSON with --bench.json=true).
 
     python -m lab.bench --bench.type=sim --bench.num_envs=1026 --bench.threads=[1,2]
     python -m lab.bench --bench.type=teacher --bench.preset=cpu --bench.iterations=6 --bench.json=true

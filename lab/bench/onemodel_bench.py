@@ -9,9 +9,9 @@ model's object geom. Every world can still hold one object geom of each type. In
 object body carries a box, a capsule, a cylinder and a sphere (that order, the box named `object_geom`); in each
 world the object's own geom has its size and mass and the other three are 0.1 mm, massless, at the body origin,
 i.e. deep inside the object. MuJoCo Warp's broadphase bounding-sphere test (`_sphere_filter`) then never passes
-them on to the narrowphase, so they make no contact; but every world pays for their pairs in the broadphase, for the
-narrowphase kernels of every type pair (one kernel per convex pair type present in the model, each over all
-contact slots), and for the fingertip distance sensors, now taken to the object body (the nearest of its four
+them on to the narrowphase, so they make no contact. Every world still pays for their pairs in the broadphase,
+for the narrowphase kernels of every type pair (one kernel per convex pair type present in the model, each over
+all contact slots), and for the fingertip distance sensors, now taken to the object body (the nearest of its four
 geoms: the tiny ones sit inside the object, so the nearest is the object's own geom).
 
 Both paths run the same envs, objects and Table II draw (`BatchedGraspEnv`'s), each as one `WarpBackend`: the
@@ -108,8 +108,9 @@ def _copy_state(src, dst) -> None:
 
 def grasp_targets(env: BatchedGraspEnv, steps: int) -> list[torch.Tensor]:
     """Reset the env with every finger 2 cm beside its object at grasp height (the side grasp's own pose), and
-    return the servo targets of the rest of that grasp: squeeze over 8 control steps, then lift and hold. Fingertips
-    are on the objects within a few steps, so both paths are compared (and timed) with grasp contacts."""
+    return the servo targets of the rest of that grasp: squeeze over 8 control steps, then lift and hold.
+    Fingertips are on the objects within a few steps, so both paths are compared (and timed) with grasp
+    contacts."""
     env.reset()
     specs = [objects.scaled(objects.get_object(n), env.cfg.dr.object_size_scale) for n in env.object_names]
     pos = env.physics.qpos[:, observations.OBJECT_POS].double().cpu().numpy()
@@ -190,7 +191,8 @@ def _block(backend, start, targets: list[torch.Tensor], substeps: int, raw: bool
 
 def time_paths(env: BatchedGraspEnv, one, steps: int, blocks: int, deadline: float) -> dict:
     """Env control steps per second of each path, `raw_step` and `step`, in alternating blocks from the same
-    state with the same targets (`grasp_targets`: grasp contacts in every world); no block starts after `deadline`."""
+    state with the same targets (`grasp_targets`: grasp contacts in every world); no block starts after
+    `deadline`."""
     substeps = env.cfg.physics.substeps
     targets = grasp_targets(env, steps)
     paths = {"groups": env.physics, "one": one}
