@@ -94,6 +94,8 @@ def build_pair(num_envs: int, seed: int = 0, device: str | None = None):
     friction = wp.to_torch(one.groups[0].model.geom_friction)  # (worlds, ngeom, 3), the model's own memory
     slots = [templates[0].geom(n).id for n in SLOT_NAMES]
     friction[:, slots[1:], 0] = friction[:, slots[:1], 0]
+    if one.device.type == "cuda":  # torch's write done before Warp's stream reads the model
+        torch.cuda.current_stream(one.device).synchronize()
     return env, one
 
 
