@@ -91,6 +91,7 @@ def build_pair(num_envs: int, seed: int = 0, device: str | None = None):
     if len(one.groups) != 1:
         raise RuntimeError(f"the four-geom models made {len(one.groups)} Warp models, not one")
     # Table II's object friction went to `object_geom` (the box slot); every world's own geom gets it too.
+    wp.synchronize_device(one.wp_device)  # the build's work on Warp's stream done before torch touches its arrays
     friction = wp.to_torch(one.groups[0].model.geom_friction)  # (worlds, ngeom, 3), the model's own memory
     slots = [templates[0].geom(n).id for n in SLOT_NAMES]
     friction[:, slots[1:], 0] = friction[:, slots[:1], 0]
