@@ -69,7 +69,7 @@ def quat_to_mat(q: torch.Tensor) -> torch.Tensor:
         )
     a, b, s, c, diagonal = _ROT[q.device]
     p = (q[..., :, None] * q[..., None, :]).flatten(-2)
-    r = c * (p[..., a] + s * p[..., b])
+    r = c * (p.index_select(-1, a) + s * p.index_select(-1, b))
     return torch.where(diagonal, r + 1.0, r).unflatten(-1, (3, 3))
 
 
