@@ -37,7 +37,7 @@ class SensorIndex:
             cols[kind] = np.stack(rows)
         first = min(int(c[0, 0]) for c in cols.values())
         width = sum(c.shape[1] for c in cols.values())
-        regular = all(np.array_equal(c - c[:1], np.arange(len(c))[:, None] * width) for c in cols.values())
+        regular = all(((c - c[:1]) == np.arange(len(c))[:, None] * width).all() for c in cols.values())
         block = (first, width) if regular and first + len(spec.FINGERS) * width <= m.nsensordata else None
         spans = {k: (int(c[0, 0]) - first, c.shape[1]) for k, c in cols.items()}
         return cls({k: torch.as_tensor(c, device=device) for k, c in cols.items()}, block, spans)
