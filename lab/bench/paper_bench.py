@@ -253,6 +253,7 @@ def headline(stages: dict) -> dict:
     return {
         "env_steps_per_s_with_training": rate,
         "collection_over_raw_physics": ppo.get("collect_over_raw"),
+        "collection_overhead_ms_per_step": ppo.get("overhead_ms_per_step"),
         "update_over_collection": ppo.get("update_over_collect"),
         "curated_demos_per_s": demo_rate,
         "raw_physics_control_steps_per_s": ppo.get("raw_control_steps_per_s"),

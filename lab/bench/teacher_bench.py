@@ -190,6 +190,9 @@ def _summary(cfg: BenchTeacherConfig, preset, env, rows: list[dict], device: str
         "raw_control_steps_per_s": raw,
         "loop_over_raw": loop / raw,
         "collect_over_raw": collect / raw,
+        # What collection adds to the physics per control step (all envs): the ratio above also moves with the
+        # physics' own speed, which on a shared machine is the other processes' load; this moves far less.
+        "overhead_ms_per_step": 1e3 * (total["collect_s"] - env_steps / raw) / (len(rows) * steps_per_it),
         "per_iteration": rows,
         # Peak resident memory of this process (env models + rollout storage + nets), for sizing bigger runs.
         "max_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,

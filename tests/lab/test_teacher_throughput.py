@@ -99,6 +99,8 @@ def test_bench_teacher_reports_collection_update_and_raw_physics():
     assert 0 < r["collect_cores_busy"] < 1.5 and 0 < r["update_cores_busy"] < 2.5  # 1 physics, 2 update threads
     assert r["update_over_collect"] == pytest.approx(r["update_s_per_it"] / r["collect_s_per_it"])
     assert r["loop_over_raw"] == pytest.approx(r["loop_env_steps_per_s"] / r["raw_control_steps_per_s"])
+    raw_s = 24 * 18 / r["raw_control_steps_per_s"]  # one iteration of 24 steps x 18 envs
+    assert r["overhead_ms_per_step"] == pytest.approx(1e3 * (r["collect_s_per_it"] - raw_s) / 24)
 
 
 @pytest.mark.slow
