@@ -10,9 +10,9 @@ with other --bench.stages (same preset, env count and backend) adds its stages t
    which makes Warp compile every kernel the run uses, or load it from its kernel cache (~/.cache/warp); with the
    `onemodel` stage, its one model too.
 2. `loop`: the preset's env and rsl-rl runner at --bench.num_envs, built once as `blindgrasp-train-teacher` builds
-   them. Then the env alone against raw physics replaying the same joint targets (the sim bench), and the whole PPO
-   loop (the teacher bench: collection, the update, and raw physics replaying each iteration's targets right after
-   it), one iteration at a time until --bench.iterations, or until --bench.loop_s seconds of them have passed.
+   them. Then the env alone against raw physics (the sim bench), and the whole PPO loop (the teacher bench:
+   collection, the update), each physics call replayed as raw physics right after it from the same state, one
+   iteration at a time until --bench.iterations, or until --bench.loop_s seconds of them have passed.
 3. `demos`: `blindgrasp-collect-demos` (the shipped teacher unless --bench.teacher) in its own process at
    --bench.demo_num_envs envs, stopped after --bench.demo_s seconds of collecting the way Ctrl-C stops it. The
    clock starts when the collector has built its env (it records the run in collection.json then): curated demos
@@ -283,6 +283,7 @@ def headline(stages: dict) -> dict:
     return {
         "env_steps_per_s_with_training": rate,
         "collection_over_raw_physics": ppo.get("collect_over_raw"),
+        "collection_overhead_ms_per_step": ppo.get("overhead_ms_per_step"),
         "update_over_collection": ppo.get("update_over_collect"),
         "curated_demos_per_s": demo_rate,
         "raw_physics_control_steps_per_s": ppo.get("raw_control_steps_per_s"),
