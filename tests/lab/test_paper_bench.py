@@ -50,3 +50,12 @@ def test_a_stage_not_run_is_not_measured():
     assert all(v is None for v in head.values())
     with pytest.raises(ValueError, match="stages"):
         BenchPaperConfig(stages=["warmup", "gpu"])
+
+
+def test_the_onemodel_stage_runs_only_when_named_and_only_on_warp():
+    """The GPU run names it (scripts/gpu_run.sh); on the batch backend it has nothing to compare."""
+    assert "onemodel" not in BenchPaperConfig().stages
+    result = run(BenchPaperConfig(backend="batch", num_envs=18, stages=["onemodel"], json=True))
+    assert set(result["stages"]) == {"onemodel"} and "skipped" in result["stages"]["onemodel"]
+    head = result["headline"]
+    assert head["groups_raw_control_steps_per_s"] is None and head["one_model_raw_control_steps_per_s"] is None
