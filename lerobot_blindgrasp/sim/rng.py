@@ -73,8 +73,7 @@ def _offsets(n: int, device: torch.device) -> torch.Tensor:
 
 
 def uniform(seeds, stream: int, counter, n: int, key: torch.Tensor | None = None) -> torch.Tensor:
-    """U[0, 1) float64 draws of shape (len(seeds), n), one row per env, on the seeds' device. `key`: the seeds'
-    `stream_key`, when the caller keeps it."""
+    """U[0, 1) float64 draws (len(seeds), n), one row per env, on the seeds' device; `key`: their kept `stream_key`."""
     key = stream_key(seeds, stream) if key is None else key
     counter = as_words(counter, key.device)
     key = _splitmix64(key ^ (counter * _COUNTER_MUL))
