@@ -6,7 +6,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
-from pinch_lift import run_pinch_lift
+from test_sim_physics import run_pinch_lift
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force

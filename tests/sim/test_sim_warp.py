@@ -20,7 +20,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
-from pinch_lift import run_pinch_lift
+from test_sim_physics import run_pinch_lift
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import objects, randomization
