@@ -13,17 +13,8 @@ import time
 from dynamixel_sdk import protocol2_packet_handler as p2
 from dynamixel_sdk import robotis_def as dx
 
-from lerobot_blindgrasp.emulators.control_table import (  # noqa: F401  (re-exported for the tests)
-    BAUD_REGISTER,
-    CONTROL_TABLE,
-    HW_INPUT_VOLTAGE,
-    HW_OVERHEATING,
-    HW_OVERLOAD,
-    TABLE_SIZE,
-    XM430_W350_MODEL,
-    write_error,
-)
-from lerobot_blindgrasp.emulators.dynamixel_servo import EmulatedServo, ShaftDynamics  # noqa: F401
+from lerobot_blindgrasp.emulators.control_table import BAUD_REGISTER, CONTROL_TABLE, TABLE_SIZE, write_error
+from lerobot_blindgrasp.emulators.dynamixel_servo import EmulatedServo
 from lerobot_blindgrasp.emulators.dynamixel_wire import collide, crc_ok, make_packet, unstuff
 from lerobot_blindgrasp.emulators.pty_device import PtyDevice
 from lerobot_blindgrasp.emulators.servo_health import Supply
@@ -47,11 +38,11 @@ class DynamixelBusEmulator(PtyDevice):
             servo.reboot()
             servo.health.supply = self.supply
             self.servos[i] = servo
-        self.twins: dict[int, EmulatedServo] = {}  # a second servo set to the same ID (`add_twin`)
+        self.twins: dict[int, EmulatedServo] = {}  # a second servo set to the same ID: both answer
         self._buf = bytearray()
         self._pending_ids: list[EmulatedServo] = []
         self._last = time.monotonic()
-        # Fault injection.
+        # Fault injection (more in tests/emulators/rig.py's `FaultyBus`).
         self.missing_ids: set[int] = set()
         self.drop_responses: dict[int, int] = {}  # id -> number of status packets to swallow (timeouts)
         self.corrupt_responses: dict[int, int] = {}  # id -> number of status packets sent with a bad CRC
@@ -63,45 +54,6 @@ class DynamixelBusEmulator(PtyDevice):
         # read's replies.
         self.stray_replies: list[tuple[int, int]] = []
         self.instruction_counts: dict[int, int] = {}  # for the tests
-
-    # -- fault injection --
-    def set_hardware_error(self, dxl_id: int, bits: int) -> None:
-        servo = self.servos[dxl_id]
-        servo.set("Hardware_Error_Status", bits)
-        if bits & servo.get("Shutdown"):
-            servo.set("Torque_Enable", 0)
-
-    def reset_servo(self, dxl_id: int) -> None:
-        """A brown-out or watchdog reset of one servo's MCU: what `reboot` does, with no status packet and no error
-        bit, so only the registers tell."""
-        self.servos[dxl_id].reboot()
-
-    def add_twin(self, dxl_id: int, shaft: float = 2048.0) -> EmulatedServo:
-        """A tenth servo on the bus, set to an ID already in use (set up twice, or swapped in with its factory ID
-        changed to the one it replaces): both hear every instruction and both answer, over each other."""
-        twin = EmulatedServo(dxl_id, shaft=shaft)
-        twin.set("Baud_Rate", self.servos[dxl_id].get("Baud_Rate"))
-        twin.reboot()
-        twin.health.supply = self.supply
-        self.twins[dxl_id] = twin
-        return twin
-
-    # -- bring-up: servos out of the box, plugged in one at a time --
-    @staticmethod
-    def factory_servo(shaft: float = 2048.0) -> EmulatedServo:
-        """A servo as it leaves ROBOTIS (e-Manual, factory values): ID 1, Baud_Rate 1 = 57 600 bps."""
-        servo = EmulatedServo(1, shaft=shaft)
-        servo.set("Baud_Rate", BAUD_REGISTER[57_600])
-        servo.reboot()
-        return servo
-
-    def plug(self, *servos: EmulatedServo) -> None:
-        """The cable now carries exactly `servos` (each answers at its own ID and baud rate), as when the operator
-        unplugs one servo and plugs in the next; an ID a servo is given over the bus takes effect as on the wire."""
-        self.servos = {s.get("ID"): s for s in servos}
-        for servo in servos:
-            servo.id = servo.get("ID")
-            servo.health.supply = self.supply
 
     def torque_enabled(self, dxl_id: int) -> bool:
         return self.servos[dxl_id].get("Torque_Enable") == 1
