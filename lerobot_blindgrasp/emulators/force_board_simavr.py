@@ -60,7 +60,7 @@ class SimulatedForceBoard:
             self.stop()
             raise RuntimeError(f"the simavr force board did not start: {line!r} {err}")
         self.port = line.split(maxsplit=1)[1].strip()
-        self._send(f"noise {self.noise_counts}")
+        self.send(f"noise {self.noise_counts}")
         self.set_forces(np.zeros(3))
         return self
 
@@ -71,7 +71,9 @@ class SimulatedForceBoard:
         reader.join(self.start_timeout_s)
         return out[0] if out else ""
 
-    def _send(self, line: str) -> None:
+    def send(self, line: str) -> None:
+        """One command to the harness (`simavr/hx711_sim.c`'s `command`): also the faults `dead`, `stuck` (DOUT held
+        low), `hang` and `alive` of one chip, by index, and `reset` (the ATmega's reset pin)."""
         with self._lock:
             if self._proc is None or self._proc.poll() is not None:
                 raise RuntimeError("the simavr force board is not running")
@@ -83,30 +85,10 @@ class SimulatedForceBoard:
 
     def set_counts(self, counts) -> None:
         """The raw counts each cell's bridge produces (channel A, gain 128), before the chip's noise."""
-        self._send("counts " + " ".join(str(int(round(c))) for c in counts))
+        self.send("counts " + " ".join(str(int(round(c))) for c in counts))
 
     def set_forces(self, forces_n) -> None:
         self.set_counts(self.counts_for(forces_n))
-
-    def kill_cell(self, index: int) -> None:
-        """Cell `index`'s chip stops converting."""
-        self._send(f"dead {index}")
-
-    def hold_dout_low(self, index: int) -> None:
-        """Cell `index`'s DOUT line held low (shorted to GND): every read clocks out zeros and fails its check."""
-        self._send(f"stuck {index}")
-
-    def hang_cell(self, index: int) -> None:
-        """Cell `index`'s chip locks up (stops converting) until the firmware powers it down and up."""
-        self._send(f"hang {index}")
-
-    def reset_board(self) -> None:
-        """The ATmega's reset pin pulled (a USB glitch, DTR): it boots again, the chips keep converting."""
-        self._send("reset")
-
-    def revive_cell(self, index: int) -> None:
-        """Undo `kill_cell`, `hold_dout_low` or `hang_cell`."""
-        self._send(f"alive {index}")
 
     def stop(self) -> None:
         proc, self._proc = self._proc, None
