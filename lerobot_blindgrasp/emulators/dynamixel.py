@@ -1,8 +1,6 @@
-"""A Dynamixel Protocol 2.0 bus of XM430-W350 servos, emulated on a pseudo-terminal (ROBOTIS e-Manual): PING, READ,
-WRITE, SYNC READ, SYNC WRITE and REBOOT with status packets and their error byte, over the wire format of
-`dynamixel_wire.py`, the control table of `control_table.py` and the servos of `dynamixel_servo.py`. A servo answers
-only when the port's termios speed matches its Baud_Rate, as on a real bus. What it speaks and the faults it injects
-are listed in docs/hardware.md, "Emulators and tests".
+"""A Dynamixel Protocol 2.0 bus of XM430-W350 servos, emulated on a pseudo-terminal (ROBOTIS e-Manual). A servo
+answers only when the port's termios speed matches its Baud_Rate, as on a real bus. What it speaks and the faults it
+injects: docs/hardware.md, "Emulators and tests".
 """
 
 from __future__ import annotations

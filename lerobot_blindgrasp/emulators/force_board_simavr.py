@@ -1,9 +1,6 @@
-"""The force board in simavr, as a device on a pseudo-terminal: `SimulatedForceBoard(...).port` is opened by the
-real reader exactly like the board's USB serial port.
-
-The firmware's HEX image runs unchanged on an emulated ATmega328P with three emulated HX711 chips on its pins
-(`simavr/hx711_sim.c`), which enforce the HX711's timing and report violations in `log`. `defines` runs a test build
-of the firmware; both are built on first use into `build_dir` (a temporary folder by default).
+"""The force board in simavr on a pseudo-terminal that the real reader opens like the board's USB serial port: the
+firmware's HEX image runs unchanged on an emulated ATmega328P with three emulated HX711s (`simavr/hx711_sim.c`),
+which enforce the HX711's timing and report violations in `log`. Both are built on first use into `build_dir`.
 """
 
 from __future__ import annotations

@@ -1,9 +1,5 @@
-"""The twin assembled: servo bus and force board on pseudo-terminals, MuJoCo behind them in real time, the operator
-socket beside them.
-
-One thread steps the physics one substep at a time against the monotonic clock, reading the servos' registers
-first. A physics more than `max_lag_s` behind the clock (a starved process) skips ahead and counts it: a run whose
-`behind_s` is not ~0 did not keep real time.
+"""The twin assembled: servo bus and force board on pseudo-terminals, MuJoCo behind them stepped one substep at a time
+against the monotonic clock, the operator socket beside them. A run whose `behind_s` is not ~0 did not keep real time.
 """
 
 from __future__ import annotations

@@ -1,9 +1,6 @@
-"""The USB-serial adapter's latency timer: 1 ms, or a warning that says how to get it.
-
-An FTDI chip (the U2D2, a Nano's FT232RL) holds a short packet for up to `latency_timer` ms (Linux default 16) before
-handing it on, so every status reply waits that long: at three sync reads a period, up to half of a 20 Hz budget.
-ftdi_sio exposes it as `/sys/bus/usb-serial/devices/<tty>/latency_timer` (root only; the shipped udev rule sets it);
-other adapters and pseudo-terminals have no such file, and nothing is said for them.
+"""The USB-serial adapter's latency timer: 1 ms, or a warning that says how to get it. An FTDI chip (the U2D2, a
+Nano's FT232RL) holds a short packet up to `latency_timer` ms (Linux default 16) before handing it on: at three sync
+reads a period, up to half of a 20 Hz budget. Other adapters and pseudo-terminals have no such file.
 """
 
 from __future__ import annotations

@@ -1,11 +1,6 @@
-"""The force board's reader on the host: its serial stream as tared, scaled, deadbanded newtons.
-
-The board sends a frame per fresh sample and nothing in between, so any STATUS bit is a real fault. The SEQ is
-judged against this host's clock (`counter_clock.py`): re-sent, replayed or impossible frames are dropped and
-counted, and a board reset is held until `SETTLE_FRAMES` frames advance with time, keeping the tare (the HX711s keep
-their offset). A tare is taken only at rest, and a compressive load cell reading clearly below zero is a fault.
-What the host checks and why: docs/force_board.md. Counts become newtons by `force.counts_to_newtons`, then the
-sim's own `force.reading`.
+"""The force board's reader on the host: its serial stream as tared, scaled, deadbanded newtons (the sim's own
+`force.reading`). The SEQ is judged against this host's clock (`counter_clock.py`); a board reset keeps the tare
+(the HX711s keep their offset). What the host checks and why: docs/force_board.md.
 """
 
 from __future__ import annotations

@@ -2,14 +2,8 @@
 """The MANUS glove bridge: one hand's ergonomics -> `blindgrasp-glove/2` UDP datagrams for the manus_glove teleoperator.
 
 One file needing only Python's standard library (3.10 or later) and, for `--source=ros2`, `rclpy`: copy it to the
-machine that runs MANUS and start it there (docs/glove.md).
-
-    python3 manus_bridge.py --source=ros2 --side=right          # from MANUS's ROS 2 publisher (manus_glove_0, ...)
-    python3 manus_bridge.py --source=sdk --side=right --sdk_library=/path/to/libManusSDK_Integrated.so
-    python3 manus_bridge.py --side=right --host=192.168.1.20    # to a robot PC at that address
-
-It is also the teleoperator's one source of the ergonomics names table (`CHANNELS`) and of the datagram (`encode`,
-`GloveSender`).
+machine that runs MANUS and start it there (docs/glove.md; `python3 manus_bridge.py --help`). It is also the
+teleoperator's one source of the ergonomics names table (`CHANNELS`) and of the datagram (`encode`, `GloveSender`).
 """
 
 from __future__ import annotations
