@@ -1,5 +1,5 @@
 """The fingertip force board, emulated on a pseudo-terminal: `frame_codec` frames at `rate_hz` (80, the shipped
-board's), one per fresh sample, with counts = offset + gain x force / scale + noise saturating at 24 bits (a
+board's), one per fresh sample, with counts = offset + force / scale + noise saturating at 24 bits (a
 saturated channel sets its STATUS bit, as the firmware does). Its faults, attributes below, are listed in
 docs/hardware.md, "Emulators and tests"; the firmware itself runs in simavr (`force_board_simavr.py`).
 """
@@ -30,16 +30,12 @@ class ForceSensorEmulator(PtyDevice):
         noise_counts: float = 300.0,
         force_fn=None,
         seed: int = 0,
-        gain: float = 1.0,
     ):
         super().__init__()
         self.period = 1.0 / rate_hz
         self.scale = np.asarray(scale_n_per_count, dtype=np.float64)
         self.offset = np.asarray(offset_counts, dtype=np.float64)
         self.noise = noise_counts
-        # The cell's true sensitivity over the one the host is configured with (`scale_n_per_count`): a cell that
-        # was never weighed reads gain x the force.
-        self.gain = float(gain)
         self.forces_n = np.zeros(3)  # used when force_fn is None
         self.force_fn = force_fn  # () -> forces (N) per channel, e.g. a contact model on the servo emulator
         self.rng = random.Random(seed)
@@ -73,7 +69,7 @@ class ForceSensorEmulator(PtyDevice):
         self._boot_cause, self._unsettled = cause, unsettled_frames
 
     def counts_for(self, forces) -> np.ndarray:
-        return self.offset + self.gain * np.asarray(forces, dtype=np.float64) / self.scale
+        return self.offset + np.asarray(forces, dtype=np.float64) / self.scale
 
     def _tick(self) -> None:
         # The board converts on its own clock, whatever the host does: when this thread was not scheduled for a

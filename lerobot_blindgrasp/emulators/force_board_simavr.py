@@ -17,6 +17,8 @@ import numpy as np
 
 from lerobot_blindgrasp.hardware.force_board.build import build_firmware, build_simulator
 
+START_TIMEOUT_S = 10.0  # for the harness's first line (its pty), after the builds
+
 
 class SimulatedForceBoard:
     def __init__(
@@ -27,7 +29,6 @@ class SimulatedForceBoard:
         noise_counts: int = 200,
         sps: float = 80.0,
         build_dir=None,
-        start_timeout_s: float = 10.0,
         defines: tuple[str, ...] = (),
     ):
         self.scale = np.asarray(scale_n_per_count, dtype=np.float64)
@@ -36,7 +37,6 @@ class SimulatedForceBoard:
         self.sps = sps
         self._tmp = None if build_dir else tempfile.TemporaryDirectory(prefix="force-board-")
         self.build_dir = Path(build_dir or self._tmp.name)
-        self.start_timeout_s = start_timeout_s
         self.defines = tuple(defines)  # a test build of the firmware (build.build_firmware), into its own folder
         self.port = ""
         self.log = ""  # the harness's report (stderr) once stopped
@@ -65,7 +65,7 @@ class SimulatedForceBoard:
         out: list[str] = []
         reader = threading.Thread(target=lambda: out.append(self._proc.stdout.readline()), daemon=True)
         reader.start()
-        reader.join(self.start_timeout_s)
+        reader.join(START_TIMEOUT_S)
         return out[0] if out else ""
 
     def send(self, line: str) -> None:

@@ -132,8 +132,6 @@ class CounterClock:
             self.restarts.pop()
             self._hold(seq, now, self._ref[0], boot, cause)
             return FrameVerdict.HOLD
-        return (
-            FrameVerdict.REPEAT
-            if step == 0
-            else (FrameVerdict.AHEAD if step <= self.modulus // 2 else FrameVerdict.BACKWARD)
-        )
+        if step == 0:
+            return FrameVerdict.REPEAT
+        return FrameVerdict.AHEAD if step <= self.modulus // 2 else FrameVerdict.BACKWARD
