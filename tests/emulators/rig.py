@@ -9,13 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from emulators.faults import FaultyBus, FaultyForceBoard
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.control_table import BAUD_REGISTER
-from lerobot_blindgrasp.emulators.dynamixel import DynamixelBusEmulator, EmulatedServo
-from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.emulators.mount import MOUNT_SIGN, MOUNT_ZERO, q_for_shaft, shaft_for_q
 
-__all__ = ["LATENCY_TIMER_MS", "MOUNT_SIGN", "FaultyBus", "GripperRig"]
+__all__ = ["LATENCY_TIMER_MS", "MOUNT_SIGN", "GripperRig"]
 # Reply timeout for clients of the emulators (see BlindgraspGripperConfig.latency_timer_ms): 2 x 150 + 2 = 302 ms,
 # the twin's. A real servo answers within its Return_Delay_Time (0.5 ms), whatever the host does; an emulated one is a
 # thread of the test process, so it waits for the CPU and for the GIL whenever the machine is busy, and a thread
@@ -23,52 +21,11 @@ __all__ = ["LATENCY_TIMER_MS", "MOUNT_SIGN", "FaultyBus", "GripperRig"]
 LATENCY_TIMER_MS = 150
 
 
-class FaultyBus(DynamixelBusEmulator):
-    """The servo bus emulator with the faults and bring-up steps only tests inject."""
-
-    def set_hardware_error(self, dxl_id: int, bits: int) -> None:
-        servo = self.servos[dxl_id]
-        servo.set("Hardware_Error_Status", bits)
-        if bits & servo.get("Shutdown"):
-            servo.set("Torque_Enable", 0)
-
-    def reset_servo(self, dxl_id: int) -> None:
-        """A brown-out or watchdog reset of one servo's MCU: what `reboot` does, with no status packet and no error
-        bit, so only the registers tell."""
-        self.servos[dxl_id].reboot()
-
-    def add_twin(self, dxl_id: int, shaft: float = 2048.0) -> EmulatedServo:
-        """A tenth servo on the bus, set to an ID already in use (set up twice, or swapped in with its factory ID
-        changed to the one it replaces): both hear every instruction and both answer, over each other."""
-        twin = EmulatedServo(dxl_id, shaft=shaft)
-        twin.set("Baud_Rate", self.servos[dxl_id].get("Baud_Rate"))
-        twin.reboot()
-        twin.health.supply = self.supply
-        self.twins[dxl_id] = twin
-        return twin
-
-    @staticmethod
-    def factory_servo(shaft: float = 2048.0) -> EmulatedServo:
-        """A servo as it leaves ROBOTIS (e-Manual, factory values): ID 1, Baud_Rate 1 = 57 600 bps."""
-        servo = EmulatedServo(1, shaft=shaft)
-        servo.set("Baud_Rate", BAUD_REGISTER[57_600])
-        servo.reboot()
-        return servo
-
-    def plug(self, *servos: EmulatedServo) -> None:
-        """The cable now carries exactly `servos` (each answers at its own ID and baud rate), as when the operator
-        unplugs one servo and plugs in the next; an ID a servo is given over the bus takes effect as on the wire."""
-        self.servos = {s.get("ID"): s for s in servos}
-        for servo in servos:
-            servo.id = servo.get("ID")
-            servo.health.supply = self.supply
-
-
 class GripperRig:
     def __init__(self, force_fn=None, **force_kwargs):
         self.ids = list(spec.SERVO_IDS)
         self.dxl = FaultyBus(self.ids, initial_shaft=dict(zip(self.ids, MOUNT_ZERO)))
-        self.force = ForceSensorEmulator(force_fn=force_fn, **force_kwargs)
+        self.force = FaultyForceBoard(force_fn=force_fn, **force_kwargs)
 
     def start(self) -> GripperRig:
         self.dxl.start()

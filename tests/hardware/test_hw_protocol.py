@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from dynamixel_sdk import COMM_RX_CORRUPT, COMM_RX_TIMEOUT, COMM_SUCCESS, PacketHandler, PortHandler
 from dynamixel_sdk import protocol2_packet_handler as p2
-from emulators.rig import LATENCY_TIMER_MS, FaultyBus
+from emulators.faults import FaultyBus
+from emulators.rig import LATENCY_TIMER_MS
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.control_table import CONTROL_TABLE, HW_OVERLOAD, XM430_W350_MODEL

@@ -15,8 +15,9 @@ import re
 from pathlib import Path
 
 import pytest
+from emulators.faults import FaultyBus
 from emulators.harness import BIN, Operator, cli_env
-from emulators.rig import LATENCY_TIMER_MS, FaultyBus, GripperRig
+from emulators.rig import LATENCY_TIMER_MS, GripperRig
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware.dynamixel import latency_timer
