@@ -13,7 +13,7 @@ from dynamixel_sdk import robotis_def as dx
 
 from lerobot_blindgrasp.emulators.control_table import BAUD_REGISTER, CONTROL_TABLE, TABLE_SIZE, write_error
 from lerobot_blindgrasp.emulators.dynamixel_servo import EmulatedServo
-from lerobot_blindgrasp.emulators.dynamixel_wire import collide, crc_ok, make_packet, unstuff
+from lerobot_blindgrasp.emulators.dynamixel_wire import crc_ok, make_packet, unstuff
 from lerobot_blindgrasp.emulators.pty_device import PtyDevice
 from lerobot_blindgrasp.emulators.servo_health import Supply
 
@@ -36,22 +36,9 @@ class DynamixelBusEmulator(PtyDevice):
             servo.reboot()
             servo.health.supply = self.supply
             self.servos[i] = servo
-        self.twins: dict[int, EmulatedServo] = {}  # a second servo set to the same ID: both answer
         self._buf = bytearray()
         self._pending_ids: list[EmulatedServo] = []
         self._last = time.monotonic()
-        # Fault injection (more in tests/emulators/rig.py's `FaultyBus`).
-        self.missing_ids: set[int] = set()
-        self.drop_responses: dict[int, int] = {}  # id -> number of status packets to swallow (timeouts)
-        self.corrupt_responses: dict[int, int] = {}  # id -> number of status packets sent with a bad CRC
-        self.reply_gap_s = 0.0  # between the replies of a sync-read burst: the line empty mid-burst
-        self.reply_delay_s = 0.0  # before every reply (a slow USB hub): the host loop slows down
-        # Wrong values with a valid CRC and no error bit: id -> [ticks added to Present_Position, replies left].
-        self.position_glitch: dict[int, list[int]] = {}
-        # Late replies of an earlier transaction: (id, n data bytes from Torque_Enable on), sent before the next sync
-        # read's replies.
-        self.stray_replies: list[tuple[int, int]] = []
-        self.instruction_counts: dict[int, int] = {}  # for the tests
 
     def torque_enabled(self, dxl_id: int) -> bool:
         return self.servos[dxl_id].get("Torque_Enable") == 1
@@ -59,11 +46,15 @@ class DynamixelBusEmulator(PtyDevice):
     def any_torque(self) -> bool:
         return any(s.get("Torque_Enable") for s in self.servos.values())
 
+    def _on_the_line(self) -> list[EmulatedServo]:
+        """Every servo on the cable, each stepped and fed by the bus (the tests' `FaultyBus` adds more)."""
+        return list(self.servos.values())
+
     # -- pty loop --
     def _tick(self) -> None:
         now = time.monotonic()
         dt, self._last = max(now - self._last, 0.0), now
-        for servo in (*self.servos.values(), *self.twins.values()):
+        for servo in self._on_the_line():
             servo.step(dt)
             servo.check_watchdog(now)
 
@@ -94,33 +85,18 @@ class DynamixelBusEmulator(PtyDevice):
     # -- protocol --
     def _alive(self, dxl_id: int) -> EmulatedServo | None:
         servo = self.servos.get(dxl_id)
-        if servo is None or dxl_id in self.missing_ids:
+        if servo is None:
             return None
         baud = self._port_baudrate()
         if baud is not None and BAUD_REGISTER.get(baud) != servo.get("Baud_Rate"):
             return None
         return servo
 
-    def _status(self, servo: EmulatedServo, error: int = 0, params: bytes = b"", *, twin_params=None) -> None:
-        if servo.get("Hardware_Error_Status"):
-            error |= p2.ERRBIT_ALERT
-        if self.drop_responses.get(servo.id, 0) > 0:
-            self.drop_responses[servo.id] -= 1
-            return
-        bad = self.corrupt_responses.get(servo.id, 0) > 0
-        if bad:
-            self.corrupt_responses[servo.id] -= 1
-        packet = make_packet(servo.id, dx.INST_STATUS, bytes([error]) + params, bad_crc=bad)
-        twin = self.twins.get(servo.id)
-        if twin is not None:  # the twin answers at the same moment: the two replies collide on the line
-            twin_error = p2.ERRBIT_ALERT if twin.get("Hardware_Error_Status") else 0
-            twin_body = params if twin_params is None else twin_params
-            packet = collide(packet, make_packet(servo.id, dx.INST_STATUS, bytes([twin_error]) + twin_body))
-        self.write(packet)
+    def _status(self, servo: EmulatedServo, error: int = 0, params: bytes = b"") -> None:
+        alert = p2.ERRBIT_ALERT if servo.get("Hardware_Error_Status") else 0
+        self.write(make_packet(servo.id, dx.INST_STATUS, bytes([error | alert]) + params))
 
     def _handle(self, pkt: bytes) -> None:
-        if self.reply_delay_s:
-            time.sleep(self.reply_delay_s)
         self._tick()  # registers reflect the shaft at the moment the packet arrives (tests move shafts directly)
         self._handle_packet(pkt)
         for servo in self._pending_ids:
@@ -136,15 +112,14 @@ class DynamixelBusEmulator(PtyDevice):
                 self._status(servo, p2.ERRNUM_CRC)
             return
         params = unstuff(pkt[8:-2])
-        self.instruction_counts[inst] = self.instruction_counts.get(inst, 0) + 1
         broadcast = dxl_id == dx.BROADCAST_ID
         now = time.monotonic()
-        for servo in (*self.servos.values(), *self.twins.values()):  # what feeds the bus watchdog
+        for servo in self._on_the_line():  # what feeds the bus watchdog
             if broadcast or servo.id == dxl_id:
                 servo.last_instruction = now
         handler = self._HANDLERS.get((inst, broadcast))
         if handler is not None:
-            handler(self, dxl_id, params)
+            getattr(self, handler)(dxl_id, params)
         elif not broadcast and (servo := self._alive(dxl_id)) is not None:
             self._status(servo, p2.ERRNUM_INSTRUCTION)
 
@@ -167,23 +142,15 @@ class DynamixelBusEmulator(PtyDevice):
             servo = self._alive(i)
             if servo is None:
                 continue
-            if i in self.twins:
-                self._write(self.twins[i], addr, data)
             error = self._write(servo, addr, data)
             if not broadcast and servo.get("Status_Return_Level") >= 2:
                 self._status(servo, error)
 
     def _sync_read(self, dxl_id: int, params: bytes) -> None:
         addr, size = params[0] | params[1] << 8, params[2] | params[3] << 8
-        while self.stray_replies:
-            i, n = self.stray_replies.pop(0)
-            regs = self.servos[i].regs
-            self.write(make_packet(i, dx.INST_STATUS, bytes([0]) + bytes(regs[64 : 64 + n])))
-        for k, i in enumerate(params[4:]):
+        for i in params[4:]:
             servo = self._alive(i)
             if servo is not None:
-                if k and self.reply_gap_s:
-                    time.sleep(self.reply_gap_s)
                 self._reply_read(servo, addr, size)
 
     def _sync_write(self, dxl_id: int, params: bytes) -> None:
@@ -192,10 +159,7 @@ class DynamixelBusEmulator(PtyDevice):
         for k in range(0, len(body) - size, size + 1):
             servo = self._alive(body[k])
             if servo is not None:
-                data = body[k + 1 : k + 1 + size]
-                if servo.id in self.twins:
-                    self._write(self.twins[servo.id], addr, data)
-                self._write(servo, addr, data)
+                self._write(servo, addr, body[k + 1 : k + 1 + size])
 
     def _reboot(self, dxl_id: int, params: bytes) -> None:
         servo = self._alive(dxl_id)
@@ -203,32 +167,22 @@ class DynamixelBusEmulator(PtyDevice):
             self._status(servo, 0)
             servo.reboot()
 
-    _HANDLERS = {
-        (dx.INST_PING, False): _ping,
-        (dx.INST_PING, True): _ping,
-        (dx.INST_READ, False): _read,
-        (dx.INST_WRITE, False): _write_inst,
-        (dx.INST_WRITE, True): _write_inst,
-        (dx.INST_SYNC_READ, True): _sync_read,
-        (dx.INST_SYNC_WRITE, True): _sync_write,
-        (dx.INST_REBOOT, False): _reboot,
+    _HANDLERS = {  # (instruction, broadcast) -> method, by name so that a subclass's override handles it
+        (dx.INST_PING, False): "_ping",
+        (dx.INST_PING, True): "_ping",
+        (dx.INST_READ, False): "_read",
+        (dx.INST_WRITE, False): "_write_inst",
+        (dx.INST_WRITE, True): "_write_inst",
+        (dx.INST_SYNC_READ, True): "_sync_read",
+        (dx.INST_SYNC_WRITE, True): "_sync_write",
+        (dx.INST_REBOOT, False): "_reboot",
     }
 
     def _reply_read(self, servo: EmulatedServo, addr: int, size: int) -> None:
         if addr + size > TABLE_SIZE:
             self._status(servo, p2.ERRNUM_ACCESS)
             return
-        data = bytearray(servo.regs[addr : addr + size])
-        pos = CONTROL_TABLE["Present_Position"][0]
-        glitch = self.position_glitch.get(servo.id)
-        if glitch and glitch[1] > 0 and addr <= pos and pos + 4 <= addr + size:
-            glitch[1] -= 1
-            value = (servo.get("Present_Position") + glitch[0]) & 0xFFFFFFFF
-            data[pos - addr : pos - addr + 4] = value.to_bytes(4, "little")
-        twin = self.twins.get(servo.id)
-        self._status(
-            servo, 0, bytes(data), twin_params=None if twin is None else bytes(twin.regs[addr : addr + size])
-        )
+        self._status(servo, 0, bytes(servo.regs[addr : addr + size]))
 
     def _write(self, servo: EmulatedServo, addr: int, data: bytes) -> int:
         """Apply a write like the firmware does; returns the status error code (0 = ok, nothing written else)."""

@@ -7,15 +7,114 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from dynamixel_sdk import protocol2_packet_handler as p2
+from dynamixel_sdk import robotis_def as dx
 
-from lerobot_blindgrasp.emulators.control_table import BAUD_REGISTER
+from lerobot_blindgrasp.emulators.control_table import BAUD_REGISTER, CONTROL_TABLE, TABLE_SIZE
 from lerobot_blindgrasp.emulators.dynamixel import DynamixelBusEmulator, EmulatedServo
+from lerobot_blindgrasp.emulators.dynamixel_wire import crc_ok, make_packet
 from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.hardware.force_board.frame_codec import encode_frame
 
 
+def collide(*packets: bytes) -> bytes:
+    """What the line carries when several servos answer at once (two servos on one ID): their drivers fight, and
+    the line reads low wherever any of them pulls it low (a bitwise AND, as on an open-drain bus). Identical replies
+    survive intact; different ones fail their CRC."""
+    out = bytearray(max(len(p) for p in packets))
+    for i in range(len(out)):
+        byte = 0xFF
+        for p in packets:
+            byte &= p[i] if i < len(p) else 0xFF
+        out[i] = byte
+    return bytes(out)
+
+
 class FaultyBus(DynamixelBusEmulator):
-    """The servo bus emulator with the faults and bring-up steps only tests inject."""
+    def __init__(self, ids, **kwargs):
+        super().__init__(ids, **kwargs)
+        self.twins: dict[int, EmulatedServo] = {}  # a second servo set to the same ID (`add_twin`): both answer
+        self.missing_ids: set[int] = set()
+        self.drop_responses: dict[int, int] = {}  # id -> number of status packets to swallow (timeouts)
+        self.corrupt_responses: dict[int, int] = {}  # id -> number of status packets sent with a bad CRC
+        self.reply_gap_s = 0.0  # between the replies of a sync-read burst: the line empty mid-burst
+        self.reply_delay_s = 0.0  # before every reply (a slow USB hub): the host loop slows down
+        # Wrong values with a valid CRC and no error bit: id -> [ticks added to Present_Position, replies left].
+        self.position_glitch: dict[int, list[int]] = {}
+        # Late replies of an earlier transaction: (id, n data bytes from Torque_Enable on), sent before the next sync
+        # read's replies.
+        self.stray_replies: list[tuple[int, int]] = []
+        self.instruction_counts: dict[int, int] = {}
+        self._twin_params: bytes | None = None  # what the twin reads back, for the read being answered
+
+    def _on_the_line(self) -> list[EmulatedServo]:
+        return [*self.servos.values(), *self.twins.values()]
+
+    def _alive(self, dxl_id: int) -> EmulatedServo | None:
+        return None if dxl_id in self.missing_ids else super()._alive(dxl_id)
+
+    def _handle(self, pkt: bytes) -> None:
+        if self.reply_delay_s:
+            time.sleep(self.reply_delay_s)
+        super()._handle(pkt)
+
+    def _handle_packet(self, pkt: bytes) -> None:
+        if crc_ok(pkt):
+            self.instruction_counts[pkt[7]] = self.instruction_counts.get(pkt[7], 0) + 1
+        super()._handle_packet(pkt)
+
+    def _status(self, servo: EmulatedServo, error: int = 0, params: bytes = b"") -> None:
+        if self.drop_responses.get(servo.id, 0) > 0:
+            self.drop_responses[servo.id] -= 1
+            return
+        bad = self.corrupt_responses.get(servo.id, 0) > 0
+        if bad:
+            self.corrupt_responses[servo.id] -= 1
+        alert = p2.ERRBIT_ALERT if servo.get("Hardware_Error_Status") else 0
+        packet = make_packet(servo.id, dx.INST_STATUS, bytes([error | alert]) + params, bad_crc=bad)
+        twin = self.twins.get(servo.id)
+        if twin is not None:  # the twin answers at the same moment: the two replies collide on the line
+            twin_error = p2.ERRBIT_ALERT if twin.get("Hardware_Error_Status") else 0
+            twin_body = params if self._twin_params is None else self._twin_params
+            packet = collide(packet, make_packet(servo.id, dx.INST_STATUS, bytes([twin_error]) + twin_body))
+        self.write(packet)
+
+    def _sync_read(self, dxl_id: int, params: bytes) -> None:
+        addr, size = params[0] | params[1] << 8, params[2] | params[3] << 8
+        while self.stray_replies:
+            i, n = self.stray_replies.pop(0)
+            regs = self.servos[i].regs
+            self.write(make_packet(i, dx.INST_STATUS, bytes([0]) + bytes(regs[64 : 64 + n])))
+        for k, i in enumerate(params[4:]):
+            servo = self._alive(i)
+            if servo is not None:
+                if k and self.reply_gap_s:
+                    time.sleep(self.reply_gap_s)
+                self._reply_read(servo, addr, size)
+
+    def _reply_read(self, servo: EmulatedServo, addr: int, size: int) -> None:
+        if addr + size > TABLE_SIZE:
+            self._status(servo, p2.ERRNUM_ACCESS)
+            return
+        data = bytearray(servo.regs[addr : addr + size])
+        pos = CONTROL_TABLE["Present_Position"][0]
+        glitch = self.position_glitch.get(servo.id)
+        if glitch and glitch[1] > 0 and addr <= pos and pos + 4 <= addr + size:
+            glitch[1] -= 1
+            value = (servo.get("Present_Position") + glitch[0]) & 0xFFFFFFFF
+            data[pos - addr : pos - addr + 4] = value.to_bytes(4, "little")
+        twin = self.twins.get(servo.id)
+        self._twin_params = None if twin is None else bytes(twin.regs[addr : addr + size])
+        try:
+            self._status(servo, 0, bytes(data))
+        finally:
+            self._twin_params = None
+
+    def _write(self, servo: EmulatedServo, addr: int, data: bytes) -> int:
+        twin = self.twins.get(servo.id)
+        if twin is not None and twin is not servo:  # the twin hears every write too
+            super()._write(twin, addr, data)
+        return super()._write(servo, addr, data)
 
     def set_hardware_error(self, dxl_id: int, bits: int) -> None:
         servo = self.servos[dxl_id]
