@@ -1,6 +1,6 @@
 """A Dynamixel Protocol 2.0 bus of XM430-W350 servos, emulated on a pseudo-terminal (ROBOTIS e-Manual). A servo
-answers only when the port's termios speed matches its Baud_Rate, as on a real bus. What it speaks and the faults it
-injects: docs/hardware.md, "Emulators and tests".
+answers only when the port's termios speed matches its Baud_Rate, as on a real bus. What it speaks, and the faults
+the tests inject (`tests/emulators/faults.py`): docs/hardware.md, "Emulators and tests".
 """
 
 from __future__ import annotations
