@@ -40,9 +40,6 @@ class DynamixelBusEmulator(PtyDevice):
         self._pending_ids: list[EmulatedServo] = []
         self._last = time.monotonic()
 
-    def torque_enabled(self, dxl_id: int) -> bool:
-        return self.servos[dxl_id].get("Torque_Enable") == 1
-
     def any_torque(self) -> bool:
         return any(s.get("Torque_Enable") for s in self.servos.values())
 

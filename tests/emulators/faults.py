@@ -47,6 +47,9 @@ class FaultyBus(DynamixelBusEmulator):
         self.instruction_counts: dict[int, int] = {}
         self._twin_params: bytes | None = None  # what the twin reads back, for the read being answered
 
+    def torque_enabled(self, dxl_id: int) -> bool:
+        return self.servos[dxl_id].get("Torque_Enable") == 1
+
     def _on_the_line(self) -> list[EmulatedServo]:
         return [*self.servos.values(), *self.twins.values()]
 
