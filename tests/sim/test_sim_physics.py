@@ -9,13 +9,13 @@ import mujoco
 import numpy as np
 import pytest
 import torch
+from pinch_lift import run_pinch_lift
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.sim import gripper, objects, randomization, sensors
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.scripted import run_pinch_lift
 
 
 def _model(obj="cylinder_a_medium"):
