@@ -12,7 +12,8 @@
 #   BLINDGRASP_LIMIT_S  the whole run's limit in seconds (default 570: one 10-minute call with room to spare)
 # Stages and their bounds at the defaults: warm-up (Warp compiles its kernels into ~/.cache/warp, or loads them),
 # the PPO loop (no timed iteration starts after 120 s of them), demo collection (60 s of collecting, counted once
-# the collector has built its env). The JSON is rewritten after each stage, so a run stopped at the limit keeps
+# the collector has built its env), then the object groups' graphs against one model with per-world geometry
+# (lab/bench/onemodel_bench.py: no timing block starts after 60 s of the stage). The JSON is rewritten after each stage, so a run stopped at the limit keeps
 # what it finished; the stages it did not reach run in a second call into the same JSON, e.g.
 #   bash scripts/gpu_run.sh outputs/gpu_run/paper.json --bench.stages=[demos]
 set -euo pipefail
@@ -48,8 +49,10 @@ print("torch", torch.__version__, "cuda" if torch.cuda.is_available() else "no c
       "| warp", wp.__version__, "kernel cache", wp.config.kernel_cache_dir)
 EOF
 
-# 2-4. Warm-up (kernel cache), the PPO loop with raw physics and the env alone, demo collection: one JSON.
+# 2-5. Warm-up (kernel cache), the PPO loop with raw physics and the env alone, demo collection, one model against
+# the groups: one JSON.
 mkdir -p "$(dirname "$OUT")"
 timeout --signal=INT --kill-after=30 "${BLINDGRASP_LIMIT_S:-570}" \
-  "$PY" -m lab.bench --bench.type=paper --bench.backend=warp --bench.output="$OUT" "${SMOKE[@]}" "$@"
+  "$PY" -m lab.bench --bench.type=paper --bench.backend=warp --bench.output="$OUT" \
+  --bench.stages=[warmup,loop,demos,onemodel] "${SMOKE[@]}" "$@"
 echo "wrote $OUT" >&2

@@ -1,13 +1,13 @@
-"""`python -m lab.bench --bench.type={sim,teacher,demos,policy,student,paper,build}`: benchmarks that print one table
-per run (JSON with --bench.json=true).
+"""`python -m lab.bench --bench.type={sim,teacher,demos,policy,student,paper,build,onemodel}`: benchmarks that
+print one table per run (JSON with --bench.json=true).
 
     python -m lab.bench --bench.type=sim --bench.num_envs=1026 --bench.threads=[1,2]
     python -m lab.bench --bench.type=teacher --bench.preset=cpu --bench.iterations=6 --bench.json=true
 
 `--bench.type` picks the benchmark (as `--policy.type` picks a LeRobot policy); `--bench.*` are that benchmark's
 options (`--bench.type=sim --help` lists them). Each lives in its own module (`sim_bench.py`, `teacher_bench.py`,
-`demos_bench.py`, `policy_bench.py`, `student_bench.py`, `paper_bench.py`, `build_bench.py`) that registers its
-`BenchConfig` subclass under its name and has `run(cfg) -> dict`.
+`demos_bench.py`, `policy_bench.py`, `student_bench.py`, `paper_bench.py`, `build_bench.py`, `onemodel_bench.py`)
+that registers its `BenchConfig` subclass under its name and has `run(cfg) -> dict`.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import draccus
 
 from lerobot_blindgrasp.cli import parse_config, sleeping_openmp_threads
 
-BENCHMARKS = ("sim", "teacher", "demos", "policy", "student", "paper", "build")
+BENCHMARKS = ("sim", "teacher", "demos", "policy", "student", "paper", "build", "onemodel")
 
 
 @dataclass
@@ -33,7 +33,7 @@ class BenchConfig(draccus.ChoiceRegistry):
 
 @dataclass
 class BenchCommand:
-    bench: BenchConfig  # --bench.type: sim, teacher, demos, policy, student, paper or build
+    bench: BenchConfig  # --bench.type: sim, teacher, demos, policy, student, paper, build or onemodel
 
 
 def _modules(argv: list[str]) -> tuple[str, ...]:

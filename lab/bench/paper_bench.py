@@ -7,15 +7,22 @@
 is rewritten (atomically) after each, so a run killed at its limit keeps the stages it finished, and a later run
 with other --bench.stages (same preset, env count and backend) adds its stages to the same JSON:
 1. `warmup`: a small env of every catalogue object (with Warp: one model per object geometry type) stepped once,
-   which makes Warp compile every kernel the run uses, or load it from its kernel cache (~/.cache/warp).
+   which makes Warp compile every kernel the run uses, or load it from its kernel cache (~/.cache/warp); with the
+   `onemodel` stage, its one model too.
 2. `loop`: the preset's env and rsl-rl runner at --bench.num_envs, built once as `blindgrasp-train-teacher` builds
-   them. Then the env alone against raw physics replaying the same joint targets (the sim bench), and the whole PPO
-   loop (the teacher bench: collection, the update, and raw physics replaying each iteration's targets right after
-   it), one iteration at a time until --bench.iterations, or until --bench.loop_s seconds of them have passed.
+   them. Then the env alone against raw physics (the sim bench), and the whole PPO loop (the teacher bench:
+   collection, the update), each physics call replayed as raw physics right after it from the same state, one
+   iteration at a time until --bench.iterations, or until --bench.loop_s seconds of them have passed.
 3. `demos`: `blindgrasp-collect-demos` (the shipped teacher unless --bench.teacher) in its own process at
    --bench.demo_num_envs envs, stopped after --bench.demo_s seconds of collecting the way Ctrl-C stops it. The
    clock starts when the collector has built its env (it records the run in collection.json then): curated demos
    per second of collection, not of start-up.
+
+4. `onemodel` (not run unless named in --bench.stages; `scripts/gpu_run.sh` names it): the object groups' captured
+   graphs back to back (the backend's path) against one model with a geom of each type per object
+   (`onemodel_bench.py`), both at --bench.num_envs: built, checked to step the same physics along a side grasp
+   (--bench.onemodel_check_steps control steps), then timed in alternating blocks; no timing block starts after
+   --bench.onemodel_s seconds of the stage.
 
 `headline` holds the four figures of the issue (env steps/s with training, collection / raw physics, update /
 collection, curated demos/s) and the hours they give for Table III's 972 M env steps and the paper's 89,500 demos.
@@ -38,7 +45,8 @@ from pathlib import Path
 
 from lab.bench import BenchConfig
 
-STAGES = ("warmup", "loop", "demos")
+STAGES = ("warmup", "loop", "demos", "onemodel")
+DEFAULT_STAGES = ("warmup", "loop", "demos")  # onemodel: only when named
 TABLE_III_ENV_STEPS = 9000 * 24 * 4500  # envs x steps per env x iterations (Table III)
 PAPER_DEMOS = 89_500  # the paper's curated demos
 
@@ -51,7 +59,7 @@ class BenchPaperConfig(BenchConfig):
     preset: str = "paper"  # teacher preset
     num_envs: int | None = None  # default: the preset's (9000)
     backend: str = "warp"  # physics: warp (the GPU if there is one, else Warp's CPU device) or batch
-    stages: list[str] = field(default_factory=lambda: list(STAGES))  # which of warmup, loop, demos
+    stages: list[str] = field(default_factory=lambda: list(DEFAULT_STAGES))  # of warmup, loop, demos, onemodel
     iterations: int = 3  # timed PPO iterations at most (after one warm-up iteration)
     loop_s: float = 120.0  # no timed PPO iteration starts after this many seconds of them
     env_steps: int = 24  # control steps per block of the env-alone timing (one PPO rollout's length)
@@ -59,6 +67,9 @@ class BenchPaperConfig(BenchConfig):
     demo_s: float = 60.0  # seconds of demo collection, counted from the collector's built env
     demo_num_envs: int | None = None  # default: num_envs
     demo_start_s: float = 420.0  # the collector's start-up (imports, teacher, env build) may take this long
+    onemodel_s: float = 60.0  # onemodel: no timing block starts after this many seconds of the stage
+    onemodel_check_steps: int = 16  # onemodel: control steps of the side grasp both paths replay
+    onemodel_steps: int = 8  # onemodel: control steps per timing block (up to 4 blocks per path)
     teacher: Path | None = None  # demos: teacher folder or checkpoint (default: the shipped teacher)
     output: Path | None = None  # the JSON, rewritten after each stage (default: printed only)
 
@@ -79,7 +90,7 @@ def run(cfg: BenchPaperConfig) -> dict:
     num_envs = cfg.num_envs or teacher_presets.get_preset(cfg.preset).num_envs
     result = {"preset": cfg.preset, "num_envs": num_envs, "backend": cfg.backend, "machine": machine(cfg.backend)}
     result["stages"] = _earlier_stages(cfg, result)
-    for name, stage in (("warmup", _warmup), ("loop", _loop), ("demos", _demos)):
+    for name, stage in (("warmup", _warmup), ("loop", _loop), ("demos", _demos), ("onemodel", _onemodel)):
         if name not in cfg.stages:
             continue
         t = time.perf_counter()
@@ -155,7 +166,15 @@ def _warmup(cfg: BenchPaperConfig, num_envs: int) -> dict:
     env.step(np.zeros((env.num_envs, spec.NUM_JOINTS)))
     groups = len(getattr(env.physics, "groups", ())) or None
     env.close()
-    return {"envs": env.num_envs, "physics_groups": groups, "compile_or_load_s": time.perf_counter() - t}
+    out = {"envs": env.num_envs, "physics_groups": groups, "compile_or_load_s": time.perf_counter() - t}
+    if "onemodel" in cfg.stages and cfg.backend == "warp":  # its kernels too (collision pairs of every type)
+        from lab.bench import onemodel_bench
+
+        t = time.perf_counter()
+        for backend in onemodel_bench.build_pair(len(objects.PAPER_OBJECTS)):
+            backend.close()
+        out["one_model_compile_or_load_s"] = time.perf_counter() - t
+    return out
 
 
 def _loop(cfg: BenchPaperConfig, num_envs: int) -> dict:
@@ -231,6 +250,16 @@ def _demos(cfg: BenchPaperConfig, num_envs: int) -> dict:
     }
 
 
+def _onemodel(cfg: BenchPaperConfig, num_envs: int) -> dict:
+    """The groups' graphs back to back against one model with per-world geometry (MuJoCo Warp only)."""
+    if cfg.backend != "warp":
+        return {"skipped": "one Warp model against the Warp groups: needs --bench.backend=warp"}
+    from lab.bench import onemodel_bench
+
+    steps, check = cfg.onemodel_steps, cfg.onemodel_check_steps
+    return onemodel_bench.measure(num_envs, check, steps, blocks=4, budget_s=cfg.onemodel_s)
+
+
 def _wait_until_collecting(proc, out: Path, deadline: float) -> float | None:
     """When the collector has built its env (its run shows in collection.json), or None if it exited first."""
     from lerobot_blindgrasp.demos import provenance
@@ -248,16 +277,21 @@ def headline(stages: dict) -> dict:
     ppo = (stages.get("loop") or {}).get("ppo") or {}
     demos = stages.get("demos") or {}
     env_alone = (stages.get("loop") or {}).get("env_alone") or {}
+    one = stages.get("onemodel") or {}
     rate = ppo.get("loop_env_steps_per_s")
     demo_rate = demos.get("curated_demos_per_s")
     return {
         "env_steps_per_s_with_training": rate,
         "collection_over_raw_physics": ppo.get("collect_over_raw"),
+        "collection_overhead_ms_per_step": ppo.get("overhead_ms_per_step"),
         "update_over_collection": ppo.get("update_over_collect"),
         "curated_demos_per_s": demo_rate,
         "raw_physics_control_steps_per_s": ppo.get("raw_control_steps_per_s"),
         "env_alone_control_steps_per_s": env_alone.get("env_control_steps_per_s"),
         "env_alone_over_raw": env_alone.get("env_over_raw"),
+        "groups_raw_control_steps_per_s": (one.get("groups") or {}).get("raw_control_steps_per_s"),
+        "one_model_raw_control_steps_per_s": (one.get("one") or {}).get("raw_control_steps_per_s"),
+        "one_model_agrees": (one.get("check") or {}).get("agree"),
         "table_iii_hours": TABLE_III_ENV_STEPS / rate / 3600 if rate else None,
         "paper_demos_hours": PAPER_DEMOS / demo_rate / 3600 if demo_rate else None,
     }

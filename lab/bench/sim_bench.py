@@ -1,11 +1,10 @@
 """Simulation throughput: raw physics vs the env's control step (obs, reward, resets), 1 thread and all cores.
 
 Raw physics = `mujoco.batch.Batch.step(nstep=substeps)` on the env's own per-env models (same objects, same
-randomization draw, same substeps and threads) with no observation or reward work. Env = `BatchedGraspEnv.step`.
-Each block first runs the env from a saved physics state with random delta-theta actions (fingers hit objects),
-recording the joint targets it commanded; then restores that state and replays the same targets through raw
-stepping, so both do identical physics. Blocks alternate so that a noisy shared machine affects both alike. The
-ratio env / raw is the overhead check (target >= 0.85).
+randomization draw, same substeps and threads) with no observation or reward work. Env = `BatchedGraspEnv.step`
+with random delta-theta actions (fingers hit objects). Each physics call of the env is replayed right after it
+from the same state with the same targets (`ReplayedPhysics`), so both do identical physics and a noisy shared
+machine affects both alike. The ratio env / raw is the overhead check (target >= 0.85).
 
 `--backend warp`: the same on MuJoCo Warp; raw = Warp's `step` x substeps per object-type model, with the targets
 uploaded, without downloading state (one row: Warp parallelizes over worlds on its device).
@@ -18,7 +17,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from lab.bench import BenchConfig
 from lerobot_blindgrasp import spec
@@ -50,32 +48,21 @@ def _measure(num_envs: int, nthread: int, steps: int, blocks: int, backend: str 
 
 
 def time_env(env: BatchedGraspEnv, steps: int, blocks: int) -> dict:
-    """The env's control step against raw physics replaying its joint targets, on an env already reset."""
+    """The env's control step against raw physics replaying each of its physics calls right after it
+    (`ReplayedPhysics`), on an env already reset: `blocks` x `steps` control steps of random actions."""
     k, num_envs = env.cfg.physics.substeps, env.num_envs
     rng = np.random.default_rng(0)
     actions = rng.uniform(-0.15, 0.15, (steps, num_envs, spec.NUM_JOINTS))
     for a in actions[:5]:  # warm-up, and get fingers moving
         env.step(a)
-    raw_t = env_t = 0.0
-    ctrl = env.physics.ctrl
-    for _ in range(blocks):
-        saved = env.physics.snapshot()
-        targets = []
+    with ReplayedPhysics(env.physics) as replay:
         t = time.perf_counter()
-        for a in actions:
-            _, _, _, _, info = env.step(a)
-            targets.append(info["joint_target"])
-        env_t += time.perf_counter() - t
-        after_env = env.physics.snapshot()
-        env.physics.restore(saved)
-        t = time.perf_counter()
-        for target in targets:
-            ctrl[:] = torch.as_tensor(target)  # the backend's ctrl is a tensor over the physics' own rows
-            env.physics.raw_step(k)  # physics only: no observation, reward or state download
-        raw_t += time.perf_counter() - t
-        env.physics.restore(after_env)
+        for _ in range(blocks):
+            for a in actions:
+                env.step(a)
+        env_t = time.perf_counter() - t - replay.extra_s
     n_ctrl = blocks * steps * num_envs
-    raw_ctrl = n_ctrl / raw_t
+    raw_ctrl = n_ctrl / replay.raw_s
     env_ctrl = n_ctrl / env_t
     return {
         "raw_physics_steps_per_s": raw_ctrl * k,
@@ -83,6 +70,53 @@ def time_env(env: BatchedGraspEnv, steps: int, blocks: int) -> dict:
         "env_control_steps_per_s": env_ctrl,
         "env_over_raw": env_ctrl / raw_ctrl,
     }
+
+
+class ReplayedPhysics:
+    """`env.physics.step` that replays each call as raw physics right after it, in the same load moment: the state
+    before the call is restored, the backend's `raw_step` (the same physics without the env's bookkeeping) is timed
+    on it with the same joint targets, and the state after the call is put back. The backend is deterministic, so
+    the env goes on exactly as without the replay. `raw_s`: the replays' wall time; `extra_s` and `extra_cpu_s`: the
+    snapshots', restores' and replays' wall and CPU time, which a caller takes out of what it measured around the
+    env's steps."""
+
+    def __init__(self, physics):
+        self.physics, self.step = physics, physics.step
+        self.raw_s = self.extra_s = self.extra_cpu_s = 0.0
+
+    def __call__(self, nstep: int):
+        p, t0, c0 = self.physics, time.perf_counter(), time.process_time()
+        before = p.snapshot()
+        t1, c1 = time.perf_counter(), time.process_time()
+        failed = self.step(nstep)
+        t2, c2 = time.perf_counter(), time.process_time()
+        after = p.snapshot()
+        p.restore(before)
+        _wait(p)
+        t3 = time.perf_counter()
+        p.raw_step(nstep)
+        t4 = time.perf_counter()
+        p.restore(after)
+        _wait(p)
+        self.raw_s += t4 - t3
+        self.extra_s += (t1 - t0) + (time.perf_counter() - t2)
+        self.extra_cpu_s += (c1 - c0) + (time.process_time() - c2)
+        return failed
+
+    def __enter__(self):
+        self.physics.step = self  # the instance's step: what the env calls
+        return self
+
+    def __exit__(self, *exc):
+        del self.physics.step
+
+
+def _wait(physics) -> None:
+    """Queued device work done (Warp on a GPU), so that a timer started next times only what follows."""
+    if physics.device.type == "cuda":
+        import warp as wp
+
+        wp.synchronize_device(physics.wp_device)
 
 
 def run(cfg: BenchSimConfig) -> dict:

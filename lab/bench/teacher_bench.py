@@ -6,10 +6,10 @@
 Builds the preset's env and rsl-rl `OnPolicyRunner` exactly as `blindgrasp-train-teacher` does (no logging to
 disk), runs a warm-up iteration and then `--iterations` timed ones. Per iteration it splits wall time into
 collection (env steps + the actor/critic forward passes rsl-rl does while acting) and update (`PPO.update`).
-After each iteration, in the same process, it times raw physics (`Batch.step` with the same per-env models, substeps
-and threads, no observation, reward or policy work) replaying that iteration's joint targets from its start state,
-so collection and the same physics alternate and see the same load on a shared machine: whole-loop / raw says how
-much of the machine the learner leaves to physics, and collection / raw what the env and the acting forward cost.
+Each physics call of the collection is replayed right after it as raw physics (`Batch.step` with the same per-env
+models, substeps, threads, state and joint targets, no observation, reward or policy work; `sim_bench.ReplayedPhysics`),
+so collection and the same physics see the same load on a shared machine: whole-loop / raw says how much of the
+machine the learner leaves to physics, and collection / raw what the env and the acting forward cost.
 
 Overrides (`--bench.hidden_dims`, `--bench.mini_batches`, `--bench.epochs`, `--bench.torch_threads`,
 `--bench.update_threads`, `--bench.num_envs`) set the timed loop. `--bench.update_variants=[5x4@1,5x4@2,5x2@2]`
@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lab.bench import BenchConfig
+from lab.bench import BenchConfig, sim_bench
 from lerobot_blindgrasp.presets import teacher as teacher_presets
 from lerobot_blindgrasp.presets.teacher_configs import TeacherPreset
 
@@ -90,34 +90,6 @@ def _preset(cfg: BenchTeacherConfig) -> TeacherPreset:
     return replace(preset, runner=runner)
 
 
-def _replayed_control_steps_per_s(env, start, targets: list) -> float:
-    """Raw stepping of the env's backend (`Batch.step`, or Warp's `step` per model) from `start`, the state before
-    an iteration's collection, commanding the joint targets that collection commanded, step by step: the same
-    physics without observations, rewards, resets or the policy. The env's state is put back afterwards."""
-    end = env.physics.snapshot()
-    env.physics.restore(start)
-    ctrl = env.physics.ctrl
-    t = time.perf_counter()
-    for target in targets:
-        ctrl[:] = target
-        env.physics.raw_step(env.cfg.physics.substeps)
-    wall = time.perf_counter() - t
-    env.physics.restore(end)
-    return len(targets) * env.num_envs / wall
-
-
-def _recording_targets(env, into: list):
-    """env.step_tensors that also keeps the joint command it left in the backend after each control step."""
-    step = type(env).step_tensors
-
-    def recorded(*args, **kwargs):
-        out = step(env, *args, **kwargs)
-        into.append(env.physics.ctrl.clone())
-        return out
-
-    return recorded
-
-
 def _build(cfg: BenchTeacherConfig):
     """The preset's env, rsl-rl runner and device, as blindgrasp-train-teacher builds them (no log dir)."""
     from rsl_rl.runners import OnPolicyRunner
@@ -148,10 +120,10 @@ def _build(cfg: BenchTeacherConfig):
 
 
 def _timed_iterations(runner, env, update, iterations: int) -> list[dict]:
-    """Per PPO iteration (rsl-rl's own `learn`): wall and process CPU seconds of collection and of the update; then
-    raw physics replaying that collection's joint targets from its start state. Each replay runs right after its
-    iteration, so that it and the collection it is compared with see the same load on a shared machine. Envs that
-    reset during collection keep stepping in the replay: the same number of env steps, not the same resets."""
+    """Per PPO iteration (rsl-rl's own `learn`): wall and process CPU seconds of collection and of the update, and
+    raw physics replaying each physics call of the collection from the same state right after it
+    (`sim_bench.ReplayedPhysics`), so that the two see the same load on a shared machine and do the same physics, resets
+    included. The replays' wall and CPU time are taken out of the collection's."""
     spent: dict[str, float] = {}
 
     def timed_update():
@@ -161,30 +133,25 @@ def _timed_iterations(runner, env, update, iterations: int) -> list[dict]:
         return out
 
     runner.alg.update = timed_update
-    targets: list = []
-    env.step_tensors = _recording_targets(env, targets)  # the instance's step: what the vec env calls
+    env_steps = runner.cfg["num_steps_per_env"] * env.num_envs
     rows = []
-    try:
-        for _ in range(iterations):
-            targets.clear()
-            start = env.physics.snapshot()
+    for _ in range(iterations):
+        with sim_bench.ReplayedPhysics(env.physics) as replay:
             t, c = time.perf_counter(), time.process_time()
             runner.learn(1)
             wall, cpu = time.perf_counter() - t, time.process_time() - c
-            raw = _replayed_control_steps_per_s(env, start, targets)
-            collect = wall - spent["update"]
-            rows.append(
-                {
-                    "collect_s": collect,
-                    "update_s": spent["update"],
-                    "collect_cpu_s": cpu - spent["update_cpu"],
-                    "update_cpu_s": spent["update_cpu"],
-                    "collect_env_steps_per_s": len(targets) * env.num_envs / collect,
-                    "raw_control_steps_per_s": raw,
-                }
-            )
-    finally:
-        del env.step_tensors
+        collect = wall - spent["update"] - replay.extra_s
+        rows.append(
+            {
+                "collect_s": collect,
+                "update_s": spent["update"],
+                "collect_cpu_s": cpu - spent["update_cpu"] - replay.extra_cpu_s,
+                "update_cpu_s": spent["update_cpu"],
+                "collect_env_steps_per_s": env_steps / collect,
+                "raw_control_steps_per_s": env_steps / replay.raw_s,
+                "collect_over_raw": replay.raw_s / collect,
+            }
+        )
     return rows
 
 
@@ -223,6 +190,9 @@ def _summary(cfg: BenchTeacherConfig, preset, env, rows: list[dict], device: str
         "raw_control_steps_per_s": raw,
         "loop_over_raw": loop / raw,
         "collect_over_raw": collect / raw,
+        # What collection adds to the physics per control step (all envs): the ratio above also moves with the
+        # physics' own speed, which on a shared machine is the other processes' load; this moves far less.
+        "overhead_ms_per_step": 1e3 * (total["collect_s"] - env_steps / raw) / (len(rows) * steps_per_it),
         "per_iteration": rows,
         # Peak resident memory of this process (env models + rollout storage + nets), for sizing bigger runs.
         "max_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,

@@ -1,8 +1,6 @@
-"""A Dynamixel Protocol 2.0 bus of XM430-W350 servos, emulated on a pseudo-terminal (ROBOTIS e-Manual): PING, READ,
-WRITE, SYNC READ, SYNC WRITE and REBOOT with status packets and their error byte, over the wire format of
-`dynamixel_wire.py`, the control table of `control_table.py` and the servos of `dynamixel_servo.py`. A servo answers
-only when the port's termios speed matches its Baud_Rate, as on a real bus. What it speaks and the faults it injects
-are listed in docs/hardware.md, "Emulators and tests".
+"""A Dynamixel Protocol 2.0 bus of XM430-W350 servos, emulated on a pseudo-terminal (ROBOTIS e-Manual). A servo
+answers only when the port's termios speed matches its Baud_Rate, as on a real bus. What it speaks, and the faults
+the tests inject (`tests/emulators/faults.py`): docs/hardware.md, "Emulators and tests".
 """
 
 from __future__ import annotations
@@ -13,18 +11,9 @@ import time
 from dynamixel_sdk import protocol2_packet_handler as p2
 from dynamixel_sdk import robotis_def as dx
 
-from lerobot_blindgrasp.emulators.control_table import (  # noqa: F401  (re-exported for the tests)
-    BAUD_REGISTER,
-    CONTROL_TABLE,
-    HW_INPUT_VOLTAGE,
-    HW_OVERHEATING,
-    HW_OVERLOAD,
-    TABLE_SIZE,
-    XM430_W350_MODEL,
-    write_error,
-)
-from lerobot_blindgrasp.emulators.dynamixel_servo import EmulatedServo, ShaftDynamics  # noqa: F401
-from lerobot_blindgrasp.emulators.dynamixel_wire import collide, crc_ok, make_packet, unstuff
+from lerobot_blindgrasp.emulators.control_table import BAUD_REGISTER, CONTROL_TABLE, TABLE_SIZE, write_error
+from lerobot_blindgrasp.emulators.dynamixel_servo import EmulatedServo
+from lerobot_blindgrasp.emulators.dynamixel_wire import crc_ok, make_packet, unstuff
 from lerobot_blindgrasp.emulators.pty_device import PtyDevice
 from lerobot_blindgrasp.emulators.servo_health import Supply
 
@@ -47,73 +36,22 @@ class DynamixelBusEmulator(PtyDevice):
             servo.reboot()
             servo.health.supply = self.supply
             self.servos[i] = servo
-        self.twins: dict[int, EmulatedServo] = {}  # a second servo set to the same ID (`add_twin`)
         self._buf = bytearray()
         self._pending_ids: list[EmulatedServo] = []
         self._last = time.monotonic()
-        # Fault injection.
-        self.missing_ids: set[int] = set()
-        self.drop_responses: dict[int, int] = {}  # id -> number of status packets to swallow (timeouts)
-        self.corrupt_responses: dict[int, int] = {}  # id -> number of status packets sent with a bad CRC
-        self.reply_gap_s = 0.0  # between the replies of a sync-read burst: the line empty mid-burst
-        self.reply_delay_s = 0.0  # before every reply (a slow USB hub): the host loop slows down
-        # Wrong values with a valid CRC and no error bit: id -> [ticks added to Present_Position, replies left].
-        self.position_glitch: dict[int, list[int]] = {}
-        # Late replies of an earlier transaction: (id, n data bytes from Torque_Enable on), sent before the next sync
-        # read's replies.
-        self.stray_replies: list[tuple[int, int]] = []
-        self.instruction_counts: dict[int, int] = {}  # for the tests
-
-    # -- fault injection --
-    def set_hardware_error(self, dxl_id: int, bits: int) -> None:
-        servo = self.servos[dxl_id]
-        servo.set("Hardware_Error_Status", bits)
-        if bits & servo.get("Shutdown"):
-            servo.set("Torque_Enable", 0)
-
-    def reset_servo(self, dxl_id: int) -> None:
-        """A brown-out or watchdog reset of one servo's MCU: what `reboot` does, with no status packet and no error
-        bit, so only the registers tell."""
-        self.servos[dxl_id].reboot()
-
-    def add_twin(self, dxl_id: int, shaft: float = 2048.0) -> EmulatedServo:
-        """A tenth servo on the bus, set to an ID already in use (set up twice, or swapped in with its factory ID
-        changed to the one it replaces): both hear every instruction and both answer, over each other."""
-        twin = EmulatedServo(dxl_id, shaft=shaft)
-        twin.set("Baud_Rate", self.servos[dxl_id].get("Baud_Rate"))
-        twin.reboot()
-        twin.health.supply = self.supply
-        self.twins[dxl_id] = twin
-        return twin
-
-    # -- bring-up: servos out of the box, plugged in one at a time --
-    @staticmethod
-    def factory_servo(shaft: float = 2048.0) -> EmulatedServo:
-        """A servo as it leaves ROBOTIS (e-Manual, factory values): ID 1, Baud_Rate 1 = 57 600 bps."""
-        servo = EmulatedServo(1, shaft=shaft)
-        servo.set("Baud_Rate", BAUD_REGISTER[57_600])
-        servo.reboot()
-        return servo
-
-    def plug(self, *servos: EmulatedServo) -> None:
-        """The cable now carries exactly `servos` (each answers at its own ID and baud rate), as when the operator
-        unplugs one servo and plugs in the next; an ID a servo is given over the bus takes effect as on the wire."""
-        self.servos = {s.get("ID"): s for s in servos}
-        for servo in servos:
-            servo.id = servo.get("ID")
-            servo.health.supply = self.supply
-
-    def torque_enabled(self, dxl_id: int) -> bool:
-        return self.servos[dxl_id].get("Torque_Enable") == 1
 
     def any_torque(self) -> bool:
         return any(s.get("Torque_Enable") for s in self.servos.values())
+
+    def _on_the_line(self) -> list[EmulatedServo]:
+        """Every servo on the cable, each stepped and fed by the bus (the tests' `FaultyBus` adds more)."""
+        return list(self.servos.values())
 
     # -- pty loop --
     def _tick(self) -> None:
         now = time.monotonic()
         dt, self._last = max(now - self._last, 0.0), now
-        for servo in (*self.servos.values(), *self.twins.values()):
+        for servo in self._on_the_line():
             servo.step(dt)
             servo.check_watchdog(now)
 
@@ -144,33 +82,18 @@ class DynamixelBusEmulator(PtyDevice):
     # -- protocol --
     def _alive(self, dxl_id: int) -> EmulatedServo | None:
         servo = self.servos.get(dxl_id)
-        if servo is None or dxl_id in self.missing_ids:
+        if servo is None:
             return None
         baud = self._port_baudrate()
         if baud is not None and BAUD_REGISTER.get(baud) != servo.get("Baud_Rate"):
             return None
         return servo
 
-    def _status(self, servo: EmulatedServo, error: int = 0, params: bytes = b"", *, twin_params=None) -> None:
-        if servo.get("Hardware_Error_Status"):
-            error |= p2.ERRBIT_ALERT
-        if self.drop_responses.get(servo.id, 0) > 0:
-            self.drop_responses[servo.id] -= 1
-            return
-        bad = self.corrupt_responses.get(servo.id, 0) > 0
-        if bad:
-            self.corrupt_responses[servo.id] -= 1
-        packet = make_packet(servo.id, dx.INST_STATUS, bytes([error]) + params, bad_crc=bad)
-        twin = self.twins.get(servo.id)
-        if twin is not None:  # the twin answers at the same moment: the two replies collide on the line
-            twin_error = p2.ERRBIT_ALERT if twin.get("Hardware_Error_Status") else 0
-            twin_body = params if twin_params is None else twin_params
-            packet = collide(packet, make_packet(servo.id, dx.INST_STATUS, bytes([twin_error]) + twin_body))
-        self.write(packet)
+    def _status(self, servo: EmulatedServo, error: int = 0, params: bytes = b"") -> None:
+        alert = p2.ERRBIT_ALERT if servo.get("Hardware_Error_Status") else 0
+        self.write(make_packet(servo.id, dx.INST_STATUS, bytes([error | alert]) + params))
 
     def _handle(self, pkt: bytes) -> None:
-        if self.reply_delay_s:
-            time.sleep(self.reply_delay_s)
         self._tick()  # registers reflect the shaft at the moment the packet arrives (tests move shafts directly)
         self._handle_packet(pkt)
         for servo in self._pending_ids:
@@ -186,15 +109,14 @@ class DynamixelBusEmulator(PtyDevice):
                 self._status(servo, p2.ERRNUM_CRC)
             return
         params = unstuff(pkt[8:-2])
-        self.instruction_counts[inst] = self.instruction_counts.get(inst, 0) + 1
         broadcast = dxl_id == dx.BROADCAST_ID
         now = time.monotonic()
-        for servo in (*self.servos.values(), *self.twins.values()):  # what feeds the bus watchdog
+        for servo in self._on_the_line():  # what feeds the bus watchdog
             if broadcast or servo.id == dxl_id:
                 servo.last_instruction = now
         handler = self._HANDLERS.get((inst, broadcast))
         if handler is not None:
-            handler(self, dxl_id, params)
+            getattr(self, handler)(dxl_id, params)
         elif not broadcast and (servo := self._alive(dxl_id)) is not None:
             self._status(servo, p2.ERRNUM_INSTRUCTION)
 
@@ -217,23 +139,15 @@ class DynamixelBusEmulator(PtyDevice):
             servo = self._alive(i)
             if servo is None:
                 continue
-            if i in self.twins:
-                self._write(self.twins[i], addr, data)
             error = self._write(servo, addr, data)
             if not broadcast and servo.get("Status_Return_Level") >= 2:
                 self._status(servo, error)
 
     def _sync_read(self, dxl_id: int, params: bytes) -> None:
         addr, size = params[0] | params[1] << 8, params[2] | params[3] << 8
-        while self.stray_replies:
-            i, n = self.stray_replies.pop(0)
-            regs = self.servos[i].regs
-            self.write(make_packet(i, dx.INST_STATUS, bytes([0]) + bytes(regs[64 : 64 + n])))
-        for k, i in enumerate(params[4:]):
+        for i in params[4:]:
             servo = self._alive(i)
             if servo is not None:
-                if k and self.reply_gap_s:
-                    time.sleep(self.reply_gap_s)
                 self._reply_read(servo, addr, size)
 
     def _sync_write(self, dxl_id: int, params: bytes) -> None:
@@ -242,10 +156,7 @@ class DynamixelBusEmulator(PtyDevice):
         for k in range(0, len(body) - size, size + 1):
             servo = self._alive(body[k])
             if servo is not None:
-                data = body[k + 1 : k + 1 + size]
-                if servo.id in self.twins:
-                    self._write(self.twins[servo.id], addr, data)
-                self._write(servo, addr, data)
+                self._write(servo, addr, body[k + 1 : k + 1 + size])
 
     def _reboot(self, dxl_id: int, params: bytes) -> None:
         servo = self._alive(dxl_id)
@@ -253,32 +164,22 @@ class DynamixelBusEmulator(PtyDevice):
             self._status(servo, 0)
             servo.reboot()
 
-    _HANDLERS = {
-        (dx.INST_PING, False): _ping,
-        (dx.INST_PING, True): _ping,
-        (dx.INST_READ, False): _read,
-        (dx.INST_WRITE, False): _write_inst,
-        (dx.INST_WRITE, True): _write_inst,
-        (dx.INST_SYNC_READ, True): _sync_read,
-        (dx.INST_SYNC_WRITE, True): _sync_write,
-        (dx.INST_REBOOT, False): _reboot,
+    _HANDLERS = {  # (instruction, broadcast) -> method, by name so that a subclass's override handles it
+        (dx.INST_PING, False): "_ping",
+        (dx.INST_PING, True): "_ping",
+        (dx.INST_READ, False): "_read",
+        (dx.INST_WRITE, False): "_write_inst",
+        (dx.INST_WRITE, True): "_write_inst",
+        (dx.INST_SYNC_READ, True): "_sync_read",
+        (dx.INST_SYNC_WRITE, True): "_sync_write",
+        (dx.INST_REBOOT, False): "_reboot",
     }
 
     def _reply_read(self, servo: EmulatedServo, addr: int, size: int) -> None:
         if addr + size > TABLE_SIZE:
             self._status(servo, p2.ERRNUM_ACCESS)
             return
-        data = bytearray(servo.regs[addr : addr + size])
-        pos = CONTROL_TABLE["Present_Position"][0]
-        glitch = self.position_glitch.get(servo.id)
-        if glitch and glitch[1] > 0 and addr <= pos and pos + 4 <= addr + size:
-            glitch[1] -= 1
-            value = (servo.get("Present_Position") + glitch[0]) & 0xFFFFFFFF
-            data[pos - addr : pos - addr + 4] = value.to_bytes(4, "little")
-        twin = self.twins.get(servo.id)
-        self._status(
-            servo, 0, bytes(data), twin_params=None if twin is None else bytes(twin.regs[addr : addr + size])
-        )
+        self._status(servo, 0, bytes(servo.regs[addr : addr + size]))
 
     def _write(self, servo: EmulatedServo, addr: int, data: bytes) -> int:
         """Apply a write like the firmware does; returns the status error code (0 = ok, nothing written else)."""

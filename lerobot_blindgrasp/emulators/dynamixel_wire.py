@@ -48,16 +48,3 @@ def make_packet(dxl_id: int, instruction: int, params: bytes = b"", *, bad_crc: 
 
 def crc_ok(pkt: bytes) -> bool:
     return crc16(pkt[:-2]) == (pkt[-2] | (pkt[-1] << 8))
-
-
-def collide(*packets: bytes) -> bytes:
-    """What the line carries when several servos answer at once (two servos on one ID): their drivers fight, and
-    the line reads low wherever any of them pulls it low (a bitwise AND, as on an open-drain bus). Identical replies
-    survive intact; different ones fail their CRC."""
-    out = bytearray(max(len(p) for p in packets))
-    for i in range(len(out)):
-        byte = 0xFF
-        for p in packets:
-            byte &= p[i] if i < len(p) else 0xFF
-        out[i] = byte
-    return bytes(out)

@@ -1,9 +1,6 @@
-"""The force board in simavr, as a device on a pseudo-terminal: `SimulatedForceBoard(...).port` is opened by the
-real reader exactly like the board's USB serial port.
-
-The firmware's HEX image runs unchanged on an emulated ATmega328P with three emulated HX711 chips on its pins
-(`simavr/hx711_sim.c`), which enforce the HX711's timing and report violations in `log`. `defines` runs a test build
-of the firmware; both are built on first use into `build_dir` (a temporary folder by default).
+"""The force board in simavr on a pseudo-terminal that the real reader opens like the board's USB serial port: the
+firmware's HEX image runs unchanged on an emulated ATmega328P with three emulated HX711s (`simavr/hx711_sim.c`),
+which enforce the HX711's timing and report violations in `log`. Both are built on first use into `build_dir`.
 """
 
 from __future__ import annotations
@@ -20,6 +17,8 @@ import numpy as np
 
 from lerobot_blindgrasp.hardware.force_board.build import build_firmware, build_simulator
 
+START_TIMEOUT_S = 10.0  # for the harness's first line (its pty), after the builds
+
 
 class SimulatedForceBoard:
     def __init__(
@@ -30,7 +29,6 @@ class SimulatedForceBoard:
         noise_counts: int = 200,
         sps: float = 80.0,
         build_dir=None,
-        start_timeout_s: float = 10.0,
         defines: tuple[str, ...] = (),
     ):
         self.scale = np.asarray(scale_n_per_count, dtype=np.float64)
@@ -39,7 +37,6 @@ class SimulatedForceBoard:
         self.sps = sps
         self._tmp = None if build_dir else tempfile.TemporaryDirectory(prefix="force-board-")
         self.build_dir = Path(build_dir or self._tmp.name)
-        self.start_timeout_s = start_timeout_s
         self.defines = tuple(defines)  # a test build of the firmware (build.build_firmware), into its own folder
         self.port = ""
         self.log = ""  # the harness's report (stderr) once stopped
@@ -60,7 +57,7 @@ class SimulatedForceBoard:
             self.stop()
             raise RuntimeError(f"the simavr force board did not start: {line!r} {err}")
         self.port = line.split(maxsplit=1)[1].strip()
-        self._send(f"noise {self.noise_counts}")
+        self.send(f"noise {self.noise_counts}")
         self.set_forces(np.zeros(3))
         return self
 
@@ -68,10 +65,12 @@ class SimulatedForceBoard:
         out: list[str] = []
         reader = threading.Thread(target=lambda: out.append(self._proc.stdout.readline()), daemon=True)
         reader.start()
-        reader.join(self.start_timeout_s)
+        reader.join(START_TIMEOUT_S)
         return out[0] if out else ""
 
-    def _send(self, line: str) -> None:
+    def send(self, line: str) -> None:
+        """One command to the harness (`simavr/hx711_sim.c`'s `command`): also the faults `dead`, `stuck` (DOUT held
+        low), `hang` and `alive` of one chip, by index, and `reset` (the ATmega's reset pin)."""
         with self._lock:
             if self._proc is None or self._proc.poll() is not None:
                 raise RuntimeError("the simavr force board is not running")
@@ -83,30 +82,10 @@ class SimulatedForceBoard:
 
     def set_counts(self, counts) -> None:
         """The raw counts each cell's bridge produces (channel A, gain 128), before the chip's noise."""
-        self._send("counts " + " ".join(str(int(round(c))) for c in counts))
+        self.send("counts " + " ".join(str(int(round(c))) for c in counts))
 
     def set_forces(self, forces_n) -> None:
         self.set_counts(self.counts_for(forces_n))
-
-    def kill_cell(self, index: int) -> None:
-        """Cell `index`'s chip stops converting."""
-        self._send(f"dead {index}")
-
-    def hold_dout_low(self, index: int) -> None:
-        """Cell `index`'s DOUT line held low (shorted to GND): every read clocks out zeros and fails its check."""
-        self._send(f"stuck {index}")
-
-    def hang_cell(self, index: int) -> None:
-        """Cell `index`'s chip locks up (stops converting) until the firmware powers it down and up."""
-        self._send(f"hang {index}")
-
-    def reset_board(self) -> None:
-        """The ATmega's reset pin pulled (a USB glitch, DTR): it boots again, the chips keep converting."""
-        self._send("reset")
-
-    def revive_cell(self, index: int) -> None:
-        """Undo `kill_cell`, `hold_dout_low` or `hang_cell`."""
-        self._send(f"alive {index}")
 
     def stop(self) -> None:
         proc, self._proc = self._proc, None

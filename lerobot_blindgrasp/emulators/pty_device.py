@@ -30,6 +30,8 @@ class PtyDevice:
         return self
 
     def stop(self) -> None:
+        """Also the USB adapter pulled: every operation of a client on its open port then fails with EIO (pyserial's
+        SerialException on read/write, termios.error on flush), as with a real adapter."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
@@ -41,15 +43,6 @@ class PtyDevice:
             except OSError:
                 pass
         self.master_fd = self._slave_fd = -1
-
-    def unplug(self) -> None:
-        """The USB adapter is pulled: the device side goes away and every operation of the client on its open port
-        fails with EIO (pyserial's SerialException on read/write, termios.error on flush), as with a real adapter."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-        os.close(self.master_fd)
-        self.master_fd = -1
 
     def __enter__(self):
         return self.start()

@@ -58,10 +58,7 @@ class OperatorKeys(_KeyQueue):
             from lerobot.utils.keyboard_input import create_key_listener as listener_factory
 
         self.listener = listener_factory(self.queue.put, controls_help=self.HELP)
-
-    @property
-    def available(self) -> bool:
-        return self.listener is not None
+        self.available = self.listener is not None  # the factory gives None without a keyboard (no display)
 
     def stop(self) -> None:
         if self.listener is not None:
@@ -109,10 +106,10 @@ class SocketOperator(_KeyQueue):
             pass
         self.queue.put("operator-gone")
 
-    def announce_trial(self, object_name: str, trial: int, seed: int | None) -> None:
+    def announce_trial(self, object_name: str, seed: int) -> None:
+        """The next trial: `object_name` at evaluation index `seed`."""
         self._token += 1
         self._asked = False
-        seed = trial - 1 if seed is None else int(seed)
         self._send({"op": "place", "object": object_name, "seed": seed, "token": self._token})
 
     def wait_for(self, keys: set[str], timeout_s: float | None = None) -> str | None:
@@ -135,8 +132,3 @@ class SocketOperator(_KeyQueue):
             self._sock.shutdown(socket.SHUT_RDWR)
         with contextlib.suppress(OSError):
             self._sock.close()
-
-
-def make_operator(socket_path: str | None) -> _KeyQueue:
-    """The keyboard, or the operator listening on `socket_path`."""
-    return OperatorKeys() if socket_path is None else SocketOperator(socket_path)

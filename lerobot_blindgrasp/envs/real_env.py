@@ -87,7 +87,6 @@ class BlindGraspRealEnvConfig(EnvConfig):
         policy_contract.check_named(path, self.robot.type, self.fps, "--env.fps", allow_unverified=allow)
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
-        # Imported here: the trial is needed only when envs are made.
         from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 
         self.check_policy()

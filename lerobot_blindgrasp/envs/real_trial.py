@@ -16,7 +16,7 @@ import numpy as np
 
 from lerobot_blindgrasp import durable, spaces, spec
 from lerobot_blindgrasp.envs import real_report
-from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, make_operator
+from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, SocketOperator
 from lerobot_blindgrasp.hardware.loop_timing import StepPacer
 from lerobot_blindgrasp.hardware.realtime import GcPause
 from lerobot_blindgrasp.sim import objects, randomization
@@ -57,7 +57,8 @@ class GripperSession:
 
     def ensure_connected(self) -> None:
         if self.keys is None:
-            self.keys = make_operator(self.cfg.operator_socket)
+            sock = self.cfg.operator_socket  # None: a person at the keyboard; else an operator program
+            self.keys = OperatorKeys() if sock is None else SocketOperator(sock)
         if self.cfg.success_mode == "operator" and not self.keys.available:
             raise RuntimeError(
                 "success_mode=operator needs keyboard input (a display for pynput, or run lerobot-eval in a "
@@ -80,7 +81,7 @@ class RealGraspEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": spec.CONTROL_HZ}
 
     def __init__(self, session: GripperSession, object_name: str):
-        self.session = session
+        self.session, self.robot = session, session.robot  # the one gripper, shared by the per-object envs
         self.cfg = session.cfg
         self.object_name = object_name
         self.task = self.task_description = task_string(object_name)
@@ -104,12 +105,8 @@ class RealGraspEnv(gym.Env):
         self._returned_at: float | None = None
 
     def _overruns(self) -> int:
-        timing = getattr(self.session.robot, "timing", None)
+        timing = getattr(self.robot, "timing", None)
         return timing.overruns if timing is not None else 0
-
-    @property
-    def robot(self):
-        return self.session.robot
 
     def _observe(self) -> dict[str, np.ndarray]:
         started = time.monotonic()
@@ -141,11 +138,11 @@ class RealGraspEnv(gym.Env):
         keys = self.session.keys
         k = self.session.trials.get(self.object_name, 0) + 1
         self._seed = seed  # lerobot-eval's evaluation index: the start state an unattended operator places
-        index = k - 1 if seed is None else int(seed)  # as the operator socket's placement (envs/operator.py)
+        index = k - 1 if seed is None else int(seed)
         self._go_home(sim_start_pose(self.object_name, index) if self.cfg.start_pose == "sim" else spec.HOME_POSE)
         self.session.trials[self.object_name] = k
         if hasattr(keys, "announce_trial"):  # an unattended operator places the object this trial names
-            keys.announce_trial(self.object_name, k, seed)
+            keys.announce_trial(self.object_name, index)
         if keys.available:  # an ENTER pressed while the gripper was homing counts: the operator is ready
             print(f"\n[{self.object_name}] trial {k}: place the object at the claw centre, hands clear, ENTER.")
             self._wait_keeping_bus_alive({"enter"})
@@ -232,18 +229,12 @@ class RealGraspEnv(gym.Env):
 
     def _log_trial(self, success: bool) -> None:
         who = self._decided[1] if self._decided else "time limit"
-        logger.info(
-            "[%s] trial %d: %s (%s, %d steps)",
-            self.object_name,
-            self.session.trials[self.object_name],
-            "SUCCESS" if success else "failure",
-            who,
-            self._t,
-        )
+        trial, outcome = self.session.trials[self.object_name], "SUCCESS" if success else "failure"
+        logger.info("[%s] trial %d: %s (%s, %d steps)", self.object_name, trial, outcome, who, self._t)
         if self.cfg.trial_log:
             record = {
                 "object": self.object_name,
-                "trial": self.session.trials[self.object_name],
+                "trial": trial,
                 "seed": getattr(self, "_seed", None),
                 "success": success,
                 "decided_by": who,

@@ -90,13 +90,9 @@ class BlindGraspEnvConfig(EnvConfig):
             # A module-level function plus plain kwargs: async workers unpickle it by reference.
             fns = [partial(gym_env.make_env, name, **self.env_kwargs(i)) for i in range(n_envs)]
             if use_async_envs and n_envs > 1:
-                vec = _LazyAsyncVectorEnv(
-                    fns,
-                    spaces.observation_space(),
-                    spaces.action_space(),
-                    dict(gym_env.BlindGraspGymEnv.metadata),
+                out[task_id(name)] = _LazyAsyncVectorEnv(
+                    fns, spaces.observation_space(), spaces.action_space(), dict(gym_env.BlindGraspGymEnv.metadata)
                 )
             else:
-                vec = SharedSimVectorEnv(fns)
-            out[task_id(name)] = vec
+                out[task_id(name)] = SharedSimVectorEnv(fns)
         return {TASK_GROUP: out}

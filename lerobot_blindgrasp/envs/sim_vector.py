@@ -19,11 +19,8 @@ from lerobot_blindgrasp.sim import gym_env
 
 
 class SharedSimVectorEnv(gym.vector.VectorEnv):
-    """`env_fns` build `BlindGraspGymEnv`s of one object (possibly inside gym.make's wrappers).
-
-    A `VectorEnv` with its own buffers, not a `SyncVectorEnv`: the step is this class's, so it relies on no
-    sync env's private state. `call`, `get_attr` and `render` reach the sub-envs as `SyncVectorEnv`'s do.
-    """
+    """`env_fns` build `BlindGraspGymEnv`s of one object (possibly inside gym.make's wrappers). Not a
+    `SyncVectorEnv`: the step is this class's, so it relies on no sync env's private state."""
 
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]]):
         super().__init__()

@@ -1,19 +1,7 @@
 """Analytic redundancy: inputs that see the same physics must agree, checked at every current read (the health
-block). A disagreement physics forbids is an ERROR (`ConsistencyError`: the latch stops the gripper); one it allows
-but that usually means a failing input is a WARN, logged when it starts and when it ends.
-
-- **Force without effort** (ERROR). The cell reads the projection F of the tip force f on the distal axis, and over
-  every direction of f in the friction cone and every point of the tip capsule, J11 or J12 carries at least
-  F * h(q12) (`lever_m`). A tip reading F while both joints' currents (on the stall line, plus what a stopped gear
-  train holds by friction) hold less, at `PERSIST` reads in a row (a shorter impact is carried by the rotor's
-  inertia), is a load cell reading a force that is not there.
-- **Effort without force** (WARN). A finger pressing toward its goal at >= half its current limit while its tip reads
-  nothing: physics allows it (the link touches), but mostly it is a dead or unplugged load cell.
-- **Command without motion** (ERROR). A torqued joint far from its goal that neither moves toward it nor draws the
-  current its position loop asks for (the softest kp the twin draws), at `PERSIST` + 1 reads in a row: a stripped
-  gear, a failed motor, a current of the wrong sign.
-
-`worst` keeps each check's largest measured / tolerance while it did not fire; `report()` logs them at every stop.
+block). A disagreement physics forbids is an ERROR (`ConsistencyError`); one it allows but that usually means a
+failing input is a WARN, logged when it starts and when it ends. The three checks (force without effort, effort
+without force, command without motion) and their tolerances: docs/hardware.md, "Consistency".
 """
 
 from __future__ import annotations

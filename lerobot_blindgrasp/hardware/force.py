@@ -19,7 +19,7 @@ from lerobot_blindgrasp import spec
 DEADBAND_N = spec.FORCE_THRESHOLD_N
 
 # Force bias (N, on any one load cell at rest) the shipped student tolerates with margin (`python -m
-# lab.robustness.sweep`; an earlier student lost success at 3 N): beyond it at connect, the sensors need a new tare.
+# lab.robustness.sweep`): beyond it at connect, the sensors need a new tare.
 FORCE_BIAS_TOLERANCE_N = 1.0
 
 
@@ -64,11 +64,11 @@ def counts_to_newtons(counts, tare_counts, scale_n_per_count) -> np.ndarray:
     return (np.asarray(counts, dtype=np.float64) - tare_counts) * np.asarray(scale_n_per_count, dtype=np.float64)
 
 
-def force_bias_warning(bias_n, tolerance_n: float = FORCE_BIAS_TOLERANCE_N) -> str | None:
+def force_bias_warning(bias_n) -> str | None:
     """A warning for the gripper's connect check when a load cell reads more than the student tolerates at rest
-    (fingers in free air, after the tare): None when every |bias| is within `tolerance_n`."""
-    values = [float(b) for b in (bias_n if hasattr(bias_n, "__len__") else [bias_n])]
-    bad = {name: v for name, v in zip(spec.FORCE_SENSOR_NAMES, values, strict=False) if abs(v) > tolerance_n}
+    (fingers in free air, after the tare, N per cell): None when every |bias| is within the tolerance."""
+    tolerance_n = FORCE_BIAS_TOLERANCE_N
+    bad = {name: float(v) for name, v in zip(spec.FORCE_SENSOR_NAMES, bias_n, strict=True) if abs(v) > tolerance_n}
     if not bad:
         return None
     read = ", ".join(f"{k} {v:+.2f} N" for k, v in bad.items())

@@ -1,14 +1,6 @@
-"""Keeping time in the host's control loop.
-
-`PeriodMonitor` measures whatever loop ticks it once per step (the robot does in every `get_observation`). A period
-over `(1 + tolerance)` times the nominal one is an overrun; overruns back to back are a streak, logged when it starts
-and when it ends. A streak of `max_overrun_s` and at least `min_overruns` periods stops (`LoopOverrunError`): the data
-no longer come at the rate the policy and the dataset assume (the count spares a script that waits between calls).
-A gap of `pause_s` or more is a pause (a dataset save, an operator prompt), not an overrun.
-
-`SampleSpacing` keeps any loop's samples at least 0.9 period apart; `StepPacer` paces a loop we own (the real eval
-env's trial), re-basing on now after a late step instead of firing the missed ticks back to back.
-"""
+"""Keeping time in the host's control loop: `PeriodMonitor` (overrun streaks, and a stop once the data no longer come
+at the rate the policy and the dataset assume), `SampleSpacing` (samples at least 0.9 period apart, in any loop) and
+`StepPacer` (a loop we own, re-based on now after a late step, never a burst of missed ticks)."""
 
 from __future__ import annotations
 
@@ -36,6 +28,10 @@ class Streak:
 
 @dataclass
 class PeriodMonitor:
+    """Ticked once per loop step. A period over `(1 + tolerance)` x nominal is an overrun; a streak of them lasting
+    `max_overrun_s` and `min_overruns` periods (the count spares a script that waits between calls) stops. A gap of
+    `pause_s` is a pause (a dataset save, an operator prompt), not an overrun."""
+
     period_s: float
     max_overrun_s: float = 1.0  # 0: name the streaks, never stop
     tolerance: float = 0.5

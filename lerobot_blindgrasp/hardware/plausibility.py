@@ -1,12 +1,8 @@
-"""The one gate every servo position reading passes before anything uses it.
-
-A reading can be wrong and still arrive with a valid CRC (a stray reply of another transaction, a glitching
-encoder), so it is trusted only if physically possible: inside the encoder's range (0..4095 ticks); within
-`speed * dt + margin` of the trusted estimate (no servo outruns its no-load speed); with the torque on, between the
-estimate and the goal, give or take the margin and what a load can push a torqued servo back (`backdrive_ticks`);
-or, with no estimate yet or the torque off, confirmed by a second reading within the same bound. Anything else is
-read again (`rereads` times), then `ImplausibleReadingError`. A rejected reading never becomes the estimate, which
-is what the robot centres its per-step bound on.
+"""The one gate every servo position reading passes before anything uses it. A reading can be wrong and still arrive
+with a valid CRC (a stray reply, a glitching encoder), so it is trusted only if physically possible: in the encoder's
+range, reachable at no-load speed from the trusted estimate, and (torque on) between the estimate and the goal; with
+no estimate or the torque off, once a second reading confirms it. Anything else is read again, then
+`ImplausibleReadingError`. A rejected reading never becomes the estimate the robot centres its step bound on.
 """
 
 from __future__ import annotations

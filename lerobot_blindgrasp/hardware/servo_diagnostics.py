@@ -1,11 +1,8 @@
 """Servo health as ROS 2 diagnostics report it: OK / WARN / ERROR per joint and item, before the firmware acts.
 
 The XM430 firmware protects itself late: it drops the torque (and the object) at Temperature_Limit or after an
-overload, and never for a sagging supply. The host reads temperature, input voltage and current and acts first:
-WARN, refuse a start, or ERROR (a named stop, torque off). The levels are `xm430.py`'s constants; `levels_table()`
-renders them for docs/hardware.md. Temperatures are relative to each servo's own Temperature_Limit(31).
-
-The health block is one 3.1 ms sync read at 1 Mbps on top of ~7 ms per period, so it runs every `health_every_n`
+overload, and never for a sagging supply, so the host acts first, at the levels of `xm430.py` (temperatures relative
+to each servo's Temperature_Limit(31)). The health block is a 3.1 ms sync read, so it runs every `health_every_n`
 periods: temperature moves in seconds, a stall is judged over seconds, a sag over half a second.
 """
 

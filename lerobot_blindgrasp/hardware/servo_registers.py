@@ -1,15 +1,7 @@
-"""What the servos' control tables must hold, besides positions and health.
-
-- At connect, before any write (`check_setup`): Firmware_Version (Drive_Mode and Bus_Watchdog need v38), the EEPROM
-  limits for the health judge, and Startup_Configuration (a servo that turns its torque on at power-up would hide a
-  reset).
-- At configure, torque off (`restore`): Startup Torque On cleared, and the no-host protection registers restored and
-  read back (`ProtectionNotKeptError` names one that does not keep its value).
-- Every period (`check_state`): one sync read of Torque_Enable(64)..Goal_Current(102), all nine servos. A reset drops
-  the torque and restores RAM defaults without an error bit, so Torque_Enable, the gains, Bus_Watchdog and
-  Goal_Current must still read what configure set; Hardware_Error_Status is confirmed by a unicast read; a
-  Bus_Watchdog of 255 names the joints the watchdog stopped, for the caller to re-arm (`rearm_watchdog`). EEPROM
-  needs no per-period read: the firmware refuses EEPROM writes while the torque is on.
+"""What the servos' control tables must hold besides positions and health: checked at connect (`check_setup`),
+restored at configure (`restore`), and read every period (`check_state`): a reset drops the torque and restores RAM
+defaults without an error bit, so what configure set must still read back. EEPROM needs no per-period read: the
+firmware refuses EEPROM writes while the torque is on.
 """
 
 from __future__ import annotations

@@ -15,12 +15,12 @@ import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import presets, spec
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.pipeline import recipe
 from lerobot_blindgrasp.pipeline.stage import console_script
 from lerobot_blindgrasp.presets import student as student_presets
-from lerobot_blindgrasp.presets.glove import GlovePreset, glove_preset
+from lerobot_blindgrasp.presets.glove import GlovePreset
 
 
 @dataclass
@@ -37,7 +37,7 @@ class GloveTrainConfig:
     dry_run: bool = False  # print what would run, run nothing
 
     def __post_init__(self):
-        p = glove_preset(self.preset)
+        p = presets.get(self.preset, "glove")
         if not self.glove:
             raise ValueError("--glove needs at least one lerobot-record dataset folder, e.g. --glove=[data/glove]")
         if self.output_dir is None:
@@ -113,7 +113,7 @@ def train_command(
 
 def train_on_glove(cfg: GloveTrainConfig) -> Path:
     """Merge and train; returns the student's checkpoint folder (`.../pretrained_model`)."""
-    p = glove_preset(cfg.preset)
+    p = presets.get(cfg.preset, "glove")
     out = Path(cfg.output_dir)
     problems = [q for g in cfg.glove for q in merge_schema_problems(g)]
     if cfg.sim_demos is not None:

@@ -21,7 +21,6 @@ from lerobot_blindgrasp.presets.teacher_configs import Variant
 
 __all__ = [
     "PRESETS",
-    "REGISTRY",
     "SHIPPED_TEACHER_ITERATIONS",
     "SHIPPED_TEACHER_PRESET",
     "SIZES",
@@ -62,9 +61,7 @@ def get(name: str, kind: str = "pipeline"):
 def _check_teacher_stages() -> None:
     """A staged teacher recipe lists its predecessors as they themselves are staged: the last stage's own stages are
     this preset's earlier ones, and each stage stops at an iteration within that preset's own length."""
-    for p in TEACHER_PRESETS.values():
-        if not p.stages:
-            continue
+    for p in [p for p in TEACHER_PRESETS.values() if p.stages]:
         *earlier, (last, stop) = p.stages
         prior = TEACHER_PRESETS[last]
         if list(prior.stages) != earlier or not 0 < stop <= prior.max_iterations < p.max_iterations + 1:

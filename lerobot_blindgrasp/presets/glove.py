@@ -1,10 +1,7 @@
 """Student presets for glove recordings (`lerobot-record` on the real gripper), alone or merged with sim demos, for
 `blindgrasp-train-glove --preset=NAME`; the `*_smoke` ones are the same plumbing at CI size. Settings only: no real
-glove recordings exist in this repository.
-
-Why these sizes: 20 ten-second episodes per object are 4000 frames, against the quick sim preset's 72,000. So
-`glove` counts passes over the data (epochs, as Table IV) at the shipped student's `cpu` size, and `sim_plus_glove`
-trains the `cpu` preset's 5000 steps on the union, where the glove episodes teach the real sensors and servos.
+glove recordings exist in this repository. Sizes: 20 ten-second episodes per object are 4000 frames, against the
+quick sim preset's 72,000, so `glove` counts epochs (as Table IV) and `sim_plus_glove` trains `cpu`'s 5000 steps.
 """
 
 from __future__ import annotations
@@ -73,9 +70,3 @@ GLOVE_PRESETS: dict[str, GlovePreset] = {
         ),
     )
 }
-
-
-def glove_preset(name: str) -> GlovePreset:
-    if name not in GLOVE_PRESETS:
-        raise ValueError(f"unknown glove preset {name!r}; choose one of {sorted(GLOVE_PRESETS)}")
-    return GLOVE_PRESETS[name]

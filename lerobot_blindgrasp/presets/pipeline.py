@@ -11,15 +11,13 @@ from lerobot_blindgrasp.presets import ablations, teacher
 from lerobot_blindgrasp.presets.stage_configs import DemoStage, EvalStage, Preset, TeacherStage, derive
 from lerobot_blindgrasp.presets.student import DaggerStage, StudentStage
 
-# The shipped default teacher (models/teacher_cpu_bc) is iterations 0..2099 of `blindgrasp-train-teacher
-# --preset=cpu_bc_capsule --seed=1`.
+# The shipped default teacher (models/teacher_cpu_bc): iterations 0..2099 of `--preset=cpu_bc_capsule --seed=1`.
 SHIPPED_TEACHER_PRESET = teacher.CPU_BC_CAPSULE
 SHIPPED_TEACHER_ITERATIONS = 2100
 # The Table V teacher ablations of `cpu` and `quick`: the shipped recipe up to where its cloning begins, which is
 # the `cpu` preset exactly, so each differs from the shipped teacher's PPO-only prefix by its one switch.
 ABLATION_TEACHER = TeacherStage(settings=teacher.CPU, iterations=ablations.cloning_start(SHIPPED_TEACHER_PRESET))
-# The main job's teacher: the shipped calibration-blind teacher (models/teacher_cpu_bc_calib).
-SHIPPED_BLIND_TEACHER = "teacher_cpu_bc_calib"
+SHIPPED_BLIND_TEACHER = "teacher_cpu_bc_calib"  # the main job's teacher: the shipped calibration-blind one
 
 _SIM_EVAL = "evaluated in simulation, not on the real gripper"
 _CPU_SIZE = "student size cpu (3 layers x 128, 4 heads, head [256, 256]) instead of 6 x 512"
@@ -32,15 +30,13 @@ _DAGGER = (
 PAPER = Preset(
     name="paper",
     teacher=TeacherStage(settings=teacher.PAPER),
-    # 5000 per object for the paper's 89,500 (18 x ~4972); it gives no rollout cap: 20 x lets a 5 %-yield object
-    # still reach it.
+    # 5000 per object for the paper's 89,500; the paper gives no rollout cap: 20 x lets a 5 %-yield object fill up.
     demos=DemoStage(
         episodes_per_object=5000, max_rollouts_per_object=100_000, num_envs=9000, min_curated_episodes=1000
     ),
     student=StudentStage(
         size="paper", batch_size=256, epochs=2000, constant_lr_epochs=100, device="cuda", num_workers=4
     ),
-    # Table V is on the six in-distribution objects, the medium training shapes.
     evaluation=EvalStage(episodes_per_object=50, task="medium", async_envs=True),
     deviations={
         "evaluation": f"{_SIM_EVAL}: the six medium training shapes stand in for Table V's 3D-printed replicas, "
@@ -70,7 +66,6 @@ CPU = Preset(
 
 QUICK = Preset(
     name="quick",
-    # Shipped: only the Table V teacher ablations train a teacher.
     teacher=TeacherStage(settings=SHIPPED_TEACHER_PRESET, shipped=True, iterations=SHIPPED_TEACHER_ITERATIONS),
     ablation_teacher=ABLATION_TEACHER,
     demos=DemoStage(episodes_per_object=40, max_rollouts_per_object=400, num_envs=720, min_curated_episodes=18),
@@ -113,9 +108,8 @@ CPU_DAGGER = derive(
     CPU, "cpu_dagger", {"dagger": _DAGGER}, dagger=DaggerStage(episodes_per_object=20, steps=2000, rounds=2)
 )
 
-# The main job (README command 1), beyond the paper (its deviations say how): the shipped calibration-blind
-# teacher's demos under a +-0.05 rad joint calibration error, and a shorter student stage at a 5x learning rate,
-# chosen by side-by-side runs (same demos, same seed), with two loader processes next to one torch thread.
+# The main job (README command 1), beyond the paper (its deviations say how); its student stage was chosen by
+# side-by-side runs (same demos, same seed).
 QUICK_BLIND = derive(
     QUICK,
     "quick_blind",
@@ -142,8 +136,7 @@ QUICK_BLIND = derive(
     student=replace(QUICK.student, steps=700, lr=5e-4, constant_lr_steps=350, num_workers=2),
 )
 
-# The shipped student's recipe (models/student_cpu), beyond the paper: quick_blind at 1200 steps, with more demos
-# of the object its student trailed its teacher on (the small capsule) and DAgger on it alone.
+# The shipped student's recipe (models/student_cpu): quick_blind, beyond it as its deviations say.
 _TARGETED = (("capsule_small", 240),)  # object, extra curated episodes (7x its 40 in the main set)
 QUICK_BLIND_TARGETED = derive(
     QUICK_BLIND,

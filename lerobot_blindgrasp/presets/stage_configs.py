@@ -1,6 +1,5 @@
-"""The pipeline's config types: a `Preset` is one config per stage of the main job, its deviations from the paper
-(keyed by what they concern: "teacher", "demos", "student.size", ...; `derive` restates only the keys it changes),
-and the words every report and card uses for its recipe.
+"""The pipeline's config types: a `Preset` is one config per stage of the main job and its deviations from the
+paper, keyed by what they concern ("teacher", "demos", "student.size", ...; `derive` restates only those it changes).
 """
 
 from __future__ import annotations
@@ -84,23 +83,13 @@ class Preset:
     def teacher_stage(self, variant: Variant = Variant()) -> TeacherStage:
         """The stage that makes a teacher with `variant`'s switches: the preset's own teacher for the plain one,
         the ablation teacher for a Table V teacher ablation."""
-        if ablations.is_teacher_ablation(variant):
-            return self.ablation_teacher or self.teacher
-        return self.teacher
-
-    def teacher_recipe(self, variant: Variant = Variant()) -> str:
-        """Which teacher a row with `variant` uses here, in the words the Table V report uses."""
-        t = self.teacher_stage(variant)
-        iterations = t.iterations or t.settings.max_iterations
-        words = ablations.teacher_words(t.settings.name, variant, iterations - 1)
-        return f"the shipped teacher: {words}" if t.shipped else f"trained by the recipe: {words}"
+        return (self.ablation_teacher or self.teacher) if ablations.is_teacher_ablation(variant) else self.teacher
 
     @property
     def student_recipe(self) -> str:
         """Which recipe makes the student, in the words every report and card uses."""
         beyond = []
-        if self.dagger is not None:
-            d = self.dagger
+        if (d := self.dagger) is not None:
             which = "per object" if d.objects == "all" else f"of {d.objects.replace(',', ', ')}"
             beyond.append(
                 f"{d.rounds} round(s) of DAgger-style relabelling ({d.episodes_per_object} student "
@@ -108,11 +97,8 @@ class Preset:
                 "on the aggregate)"
             )
         if self.student.policy_flags:
-            beyond.append(
-                "training-time sensor errors ("
-                + ", ".join(f.removeprefix("--policy.augment_") for f in self.student.policy_flags)
-                + ")"
-            )
+            errors = ", ".join(f.removeprefix("--policy.augment_") for f in self.student.policy_flags)
+            beyond.append(f"training-time sensor errors ({errors})")
         imitation = "offline imitation of curated stochastic-teacher demos"
         if self.blind_teacher:
             imitation += (

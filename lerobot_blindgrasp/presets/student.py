@@ -98,5 +98,4 @@ def schedule(stage: StudentStage, total_frames: int | None) -> Schedule:
 
 
 def dataset_frames(root: Path) -> int:
-    """total_frames of a LeRobotDataset folder, from its meta/info.json."""
     return int(json.loads((Path(root) / "meta" / "info.json").read_text())["total_frames"])

@@ -1,7 +1,4 @@
-"""The teacher's config types, which the presets (`presets/teacher.py`) are made of and `teacher/` reads: rsl-rl's
-PPO settings (`ppo_config`), `TeacherPreset`, the Table V switches (`Variant`), what a blind-approach actor reads
-(`ActorInput`) and the scripted grasps a recipe clones into its actor (`ScriptedDemos`).
-"""
+"""The teacher's config types, which the presets (`presets/teacher.py`) are made of and `teacher/` reads."""
 
 from __future__ import annotations
 
@@ -19,24 +16,23 @@ def ppo_config(
     init_std: float,
     obs_normalization: bool,
     save_interval: int,
-    learning_rate: float = 1e-3,
-    entropy_coef: float = 0.003,
     num_mini_batches: int = 6,
-    num_learning_epochs: int = 5,
 ) -> dict:
     """rsl-rl 5.x OnPolicyRunner config with Table III's PPO values unless overridden."""
+    mlp = {"class_name": "MLPModel", "hidden_dims": list(hidden_dims), "activation": "elu"}
+    mlp["obs_normalization"] = obs_normalization
     return {
         "num_steps_per_env": num_steps_per_env,
         "save_interval": save_interval,
         "obs_groups": {"actor": ["privileged"], "critic": ["privileged"]},
         "algorithm": {
             "class_name": "PPO",
-            "learning_rate": learning_rate,
+            "learning_rate": 1e-3,
             "schedule": "adaptive",
             "desired_kl": 0.01,
-            "num_learning_epochs": num_learning_epochs,
+            "num_learning_epochs": 5,
             "num_mini_batches": num_mini_batches,
-            "entropy_coef": entropy_coef,
+            "entropy_coef": 0.003,
             "value_loss_coef": 1.0,
             "clip_param": 0.2,
             "gamma": 0.99,
@@ -44,19 +40,8 @@ def ppo_config(
             "max_grad_norm": 1.0,
             "use_clipped_value_loss": True,
         },
-        "actor": {
-            "class_name": "MLPModel",
-            "hidden_dims": list(hidden_dims),
-            "activation": "elu",
-            "obs_normalization": obs_normalization,
-            "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": init_std},
-        },
-        "critic": {
-            "class_name": "MLPModel",
-            "hidden_dims": list(hidden_dims),
-            "activation": "elu",
-            "obs_normalization": obs_normalization,
-        },
+        "actor": {**mlp, "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": init_std}},
+        "critic": mlp,
     }
 
 
@@ -135,8 +120,7 @@ class ScriptedDemos:
         return runner
 
     def weight_at(self, iteration: int) -> float:
-        """The cloning loss's weight at a PPO iteration: 0 before `start_iteration`, then decaying linearly to 0
-        over `decay_iterations`."""
+        """The cloning loss's weight at a PPO iteration: 0 before `start_iteration`, then `coef` decaying to 0."""
         if iteration < self.start_iteration:
             return 0.0
         return self.coef * max(0.0, 1.0 - (iteration - self.start_iteration) / self.decay_iterations)
@@ -178,9 +162,7 @@ class Variant:
 
     def apply(self, preset: TeacherPreset) -> TeacherPreset:
         runner = preset.runner_cfg()
-        reward = preset.reward
-        if self.no_incentive:
-            reward = reward.without(*CONTACT_REWARD_TERMS)
+        reward = preset.reward.without(*CONTACT_REWARD_TERMS) if self.no_incentive else preset.reward
         if self.student_obs:
             runner["obs_groups"] = {"actor": ["policy"], "critic": ["policy"]}
         return replace(preset, runner=runner, reward=reward)

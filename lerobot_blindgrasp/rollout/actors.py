@@ -55,8 +55,7 @@ class StudentActor:
         cfg.pretrained_path = Path(path)
         cfg.device = device
         env_cfg = BlindGraspEnvConfig(task=",".join(object_names))
-        policy = make_policy(cfg=cfg, env_cfg=env_cfg)
-        policy.eval()
+        policy = make_policy(cfg=cfg, env_cfg=env_cfg).eval()
         pre, post = make_pre_post_processors(
             policy_cfg=cfg,
             pretrained_path=cfg.pretrained_path,

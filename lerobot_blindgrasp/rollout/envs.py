@@ -67,17 +67,14 @@ def env_config(
         if episodes is None or num_envs is not None:
             raise ValueError(f"a {purpose} env takes episodes per object, not num_envs")
         seeds = eval_start_seeds(tuple(object_names), episodes, seed, copies)
-        return GraspEnvConfig(
-            num_envs=len(seeds), objects=tuple(object_names), env_seeds=seeds, dr=dr, autoreset=False, **options
-        )
-    if num_envs is None or episodes is not None:
-        raise ValueError(f"a {purpose} env takes num_envs (env i seeded seed + i), not episodes")
-    spec.check_seeds(p.seed_range, seed, num_envs)
-    return GraspEnvConfig(
-        num_envs=num_envs, objects=tuple(object_names), seed=seed, dr=dr, autoreset=p.autoreset, **options
-    )
+        options |= {"num_envs": len(seeds), "env_seeds": seeds}
+    else:
+        if num_envs is None or episodes is not None:
+            raise ValueError(f"a {purpose} env takes num_envs (env i seeded seed + i), not episodes")
+        spec.check_seeds(p.seed_range, seed, num_envs)
+        options |= {"num_envs": num_envs, "seed": seed}
+    return GraspEnvConfig(objects=tuple(object_names), dr=dr, autoreset=p.autoreset, **options)
 
 
 def make_batched_env(purpose: str, object_names: tuple[str, ...], **kwargs) -> BatchedGraspEnv:
-    """`BatchedGraspEnv(env_config(purpose, object_names, **kwargs))`."""
     return BatchedGraspEnv(env_config(purpose, object_names, **kwargs))

@@ -5,22 +5,17 @@ outcome record, `Episode`, whose `traces` hold what was recorded at each step (`
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim import randomization
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 from lerobot_blindgrasp.sim.host import on_host
 
 # Names of the per-episode randomization values an episode keeps (the Table II draw plus the reset's object offset).
-PHYSICS_DRAW_NAMES: tuple[str, ...] = (
-    "object_friction",
-    "robot_friction",
-    "object_mass_scale",
-    "kp_scale",
-    "kv_scale",
-)
+PHYSICS_DRAW_NAMES: tuple[str, ...] = tuple(f.name for f in fields(randomization.PhysicsDraw))
 RANDOMIZATION_NAMES: tuple[str, ...] = PHYSICS_DRAW_NAMES + ("object_x", "object_y")
 
 # What the loop can record at every step: name -> (width, dtype). "state" is o_t before the step; the others are

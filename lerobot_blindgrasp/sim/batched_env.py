@@ -132,13 +132,11 @@ class BatchedGraspEnv:
         self.servo.reset(ids, q0)
         self.hold_push.reset(ids)
         self.physics.forward(ids)
-        self.episode_length[ids] = 0
-        self.lifted_steps[ids] = 0
-        self.success[ids] = False
-        self.prev_action[ids] = 0.0
-        self.episode_return[ids] = 0.0
+        # index_fill_: one op each, where `x[ids] = 0` also makes a scalar tensor and goes through advanced indexing
+        for v in (self.episode_length, self.lifted_steps, self.success, self.prev_action, self.episode_return):
+            v.index_fill_(0, ids, 0)
         for v in self.episode_terms.values():
-            v[ids] = 0.0
+            v.index_fill_(0, ids, 0)
         self.pushes.reset(ids)
 
     def validate_action(self, action) -> torch.Tensor:

@@ -15,8 +15,7 @@ HOLD_PUSH_AFTER_STEPS = spec.SUCCESS_HOLD_STEPS // 2
 
 
 def set_object_force(xfrc: torch.Tensor, body: int, mask: torch.Tensor, force, add: bool = False) -> None:
-    """Write (or add) a force (N, world frame; (n, 3) or a number) on the object body of the envs in `mask` into
-    the physics' applied forces, in place."""
+    """Write (or add) a force (N, world frame; (n, 3) or a number) on the object of the envs in `mask`, in place."""
     f = xfrc[:, body, :3]
     new = f + force if add else torch.as_tensor(force, dtype=f.dtype, device=f.device).expand_as(f)
     f.copy_(torch.where(mask[:, None], new, f))
@@ -128,10 +127,7 @@ class ServoModel:
         kw = {"dtype": torch.float64, "device": seeds.device}
         self.setpoint = torch.zeros((n, spec.NUM_JOINTS), **kw)  # velocity-limited servo setpoint
         self.last_target = torch.zeros((n, spec.NUM_JOINTS), **kw)  # the target in force before this step's
-
-    @property
-    def on(self) -> bool:
-        return self.dr.substep_servo
+        self.on = dr.substep_servo
 
     def reset(self, ids: torch.Tensor, q0: torch.Tensor) -> None:
         self.setpoint[ids] = q0

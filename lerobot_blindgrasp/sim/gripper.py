@@ -38,12 +38,9 @@ _TABLE_BIT, _OBJECT_BIT, _PLATE_BIT = 1, 2, 32
 _FINGER_BITS = (4, 8, 16)
 
 
-@dataclass(frozen=True)
-class ServoParams:
-    """Nominal servo loop gains; Table II scales kp by x[0.3, 3] and kv by x[0.75, 1.5] per env."""
-
-    kp: float = 15.0  # N m/rad: ~the XM430 default P gain (800) mapped to torque; saturates at 0.27 rad error
-    kv: float = 0.2  # N m s/rad
+# Nominal servo loop gains; Table II scales kp by x[0.3, 3] and kv by x[0.75, 1.5] per env.
+SERVO_KP = 15.0  # N m/rad: ~the XM430 default P gain (800) mapped to torque; saturates at 0.27 rad error
+SERVO_KV = 0.2  # N m s/rad
 
 
 @dataclass(frozen=True)
@@ -114,13 +111,12 @@ def _finger_xml(i: int, finger: str) -> str:
     </body>"""
 
 
-def gripper_mjcf(object_xml: str, options: PhysicsOptions | None = None, servo: ServoParams | None = None) -> str:
+def gripper_mjcf(object_xml: str, options: PhysicsOptions | None = None) -> str:
     """The whole scene (table, frame, gripper, sensors and one object body) as an MJCF string."""
     o = options or PhysicsOptions()
-    s = servo or ServoParams()
     fingers = "".join(_finger_xml(i, f) for i, f in enumerate(spec.FINGERS))
     actuators = "".join(
-        f'<position name="{j}" joint="{j}" kp="{s.kp}" kv="{s.kv}" forcerange="{-o.torque_limit} '
+        f'<position name="{j}" joint="{j}" kp="{SERVO_KP}" kv="{SERVO_KV}" forcerange="{-o.torque_limit} '
         f'{o.torque_limit}" ctrlrange="{spec.JOINT_LOWER[k]:.4f} {spec.JOINT_UPPER[k]:.4f}"/>'
         for k, j in enumerate(spec.JOINT_NAMES)
     )

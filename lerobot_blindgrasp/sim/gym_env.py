@@ -18,8 +18,6 @@ import os
 if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
     os.environ["MUJOCO_GL"] = "egl"
 
-from dataclasses import replace  # noqa: E402
-
 import gymnasium as gym  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
@@ -53,7 +51,6 @@ class BlindGraspGymEnv(gym.Env):
         render_width: int = 320,
         render_height: int = 240,
         render_shadows: bool = False,
-        camera: str = "side",
         render_stride: int = 1,
         end_on_success: bool = False,
     ):
@@ -72,9 +69,7 @@ class BlindGraspGymEnv(gym.Env):
         self.render_width, self.render_height = int(render_width), int(render_height)
         # Shadows make CPU rendering several times slower; eval videos are for a glance, the demo turns them on.
         self.render_shadows = bool(render_shadows)
-        self.camera = camera
-        # A new frame every `render_stride` control steps, the last repeated between: lerobot-eval renders every
-        # step of 10 episodes per task, and with software GL that is most of a CPU eval's time.
+        # A new frame every `render_stride` control steps, the last repeated between (why: envs/sim_env.py).
         if int(render_stride) < 1:
             raise ValueError(f"render_stride must be >= 1, got {render_stride}")
         self.render_stride = int(render_stride)
@@ -167,7 +162,7 @@ class BlindGraspGymEnv(gym.Env):
         if self._renderer is None:
             self._renderer = self._make_renderer(model)
         # A renderer built from an earlier episode's model draws this one: randomization never changes geometry.
-        self._renderer.update_scene(data, camera=self.camera)
+        self._renderer.update_scene(data, camera="side")
         self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.render_shadows
         self._frame, self._frame_step = self._renderer.render().copy(), step
         return self._frame
@@ -188,12 +183,6 @@ class BlindGraspGymEnv(gym.Env):
                 f"MuJoCo offscreen rendering failed ({e}). On a headless machine set MUJOCO_GL=egl (or osmesa) "
                 f"before anything imports mujoco (MUJOCO_GL is {os.environ.get('MUJOCO_GL')!r} here)."
             ) from e
-
-    def sim(self) -> BatchedGraspEnv:
-        """The underlying one-env batch (for tests and demos that want ground truth, e.g. the object height)."""
-        if self._sim is None:
-            raise RuntimeError("call reset() first")
-        return self._sim
 
 
 def make_sim(object_name: str, env_seeds: list[int], dr: randomization.DomainRandomization) -> BatchedGraspEnv:
@@ -216,15 +205,7 @@ def make_env(object_name: str = "cylinder_a_medium", **kwargs) -> gym.Env:
     return gym.make(GYM_ID, object_name=object_name, **kwargs)
 
 
-def eval_dr(object_xy: bool = True) -> randomization.DomainRandomization:
-    """The eval randomization; `object_xy=False` centres the object (for scripted, centre-assuming motions)."""
-    return randomization.EVAL_DR if object_xy else replace(randomization.EVAL_DR, object_xy_m=0.0)
-
-
 if GYM_ID not in gym.registry:
     gym.register(
-        GYM_ID,
-        entry_point=BlindGraspGymEnv,
-        max_episode_steps=spec.EPISODE_STEPS,
-        disable_env_checker=True,
+        GYM_ID, entry_point=BlindGraspGymEnv, max_episode_steps=spec.EPISODE_STEPS, disable_env_checker=True
     )

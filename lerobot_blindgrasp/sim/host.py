@@ -1,5 +1,4 @@
-"""Tensors to numpy for host callers: a view on the CPU (no copy); on a GPU, the one place results cross to the
-host, and only when asked."""
+"""Tensors to numpy for host callers: a view on the CPU; on a GPU, the one place results cross to the host."""
 
 from __future__ import annotations
 

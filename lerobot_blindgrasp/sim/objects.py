@@ -108,9 +108,7 @@ EVERYDAY: tuple[ObjectSpec, ...] = (
 
 
 def scaled(obj: ObjectSpec, scale: float) -> ObjectSpec:
-    """`obj` with every dimension x `scale` (same density, so mass x scale^3); `obj` itself at scale 1."""
-    if scale == 1.0:
-        return obj
+    """`obj` with every dimension x `scale` (same density, so mass x scale^3)."""
     mass = None if obj.mass_kg is None else obj.mass_kg * scale**3
     return replace(obj, size=tuple(scale * v for v in obj.size), mass_kg=mass)
 
@@ -156,7 +154,7 @@ def object_for_task_id(tid: int) -> str:
     return names[tid]
 
 
-def object_mjcf(obj: ObjectSpec, contype: int, conaffinity: int, friction: float = 1.0) -> str:
+def object_mjcf(obj: ObjectSpec, contype: int, conaffinity: int) -> str:
     # The spawn rotation goes on the body, not the geom: every object then has the same sparsity layout, which
     # `mujoco.batch` needs to step models of different objects together.
     size = " ".join(f"{v:.6f}" for v in obj.size)
@@ -165,6 +163,6 @@ def object_mjcf(obj: ObjectSpec, contype: int, conaffinity: int, friction: float
     <body name="object" pos="0 0 {obj.rest_height:.6f}" euler="{euler}">
       <freejoint name="object_free"/>
       <geom name="object_geom" type="{obj.mjcf_type}" size="{size}" mass="{obj.mass:.6f}"
-            condim="4" friction="{friction} 0.005 0.0001" contype="{contype}" conaffinity="{conaffinity}"
+            condim="4" friction="1.0 0.005 0.0001" contype="{contype}" conaffinity="{conaffinity}"
             rgba="0.2 0.6 0.3 1"/>
     </body>"""

@@ -31,7 +31,6 @@ NOISE_DIM = sum(n for _, n in NOISE_LAYOUT)
 
 
 def check_state_layout(m: mujoco.MjModel) -> None:
-    """Refuse a scene whose qpos/qvel order differs from the slices above."""
     hinges = [m.joint(j) for j in spec.JOINT_NAMES]
     free = m.joint("object_free")
     ok = [int(j.qposadr[0]) for j in hinges] == list(range(spec.NUM_JOINTS))

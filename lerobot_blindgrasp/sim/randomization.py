@@ -54,24 +54,13 @@ class DomainRandomization:
     hold_push_n: float = 0.0  # one push of this size (random 3-D direction, 50 ms) 0.5 s into each hold
 
     def __post_init__(self):
-        for name in (
-            "force_range_n",
-            "joint_calibration_rad",
-            "backlash_rad",
-            "velocity_limit_rad_s",
-            "period_jitter_s",
-            "hold_push_n",
-            "force_bias_n",
-            "joint_noise_rad",
-            "force_noise_n",
-        ):
-            if getattr(self, name) < 0:
+        # Every field past Table II is a size, count or scale (>= 0), except the dead load cell's index.
+        for name in ("joint_noise_rad", "force_noise_n", *ROBUSTNESS_FIELDS):
+            if name != "dead_force_sensor" and getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         for name in ("force_gain", "torque_limit_scale", "object_size_scale"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        if self.obs_latency_steps < 0 or self.action_latency_steps < 0:
-            raise ValueError("latencies are whole control steps >= 0")
         if not -1 <= self.dead_force_sensor < spec.NUM_FORCES:
             raise ValueError(f"dead_force_sensor must be -1 or a finger index < {spec.NUM_FORCES}")
         if self.period_jitter_s > spec.CONTROL_DT:
@@ -83,10 +72,15 @@ class DomainRandomization:
         return bool(self.backlash_rad or self.velocity_limit_rad_s or self.period_jitter_s)
 
 
+# The fields past Table II (from `force_gain` on); a dataset card lists them only where they differ from the default.
+_NAMES = list(DomainRandomization.__dataclass_fields__)
+ROBUSTNESS_FIELDS: tuple[str, ...] = tuple(_NAMES[_NAMES.index("force_gain") :])
+
 PAPER_DR = DomainRandomization()
 # The paper's randomization and sensor noise without the pushes: the pushes are a training-time robustness aid, and
 # evaluation (lerobot-eval, the teacher eval) and demo collection run undisturbed trials.
 EVAL_DR = replace(PAPER_DR, external_force=False)
+CENTRED_EVAL_DR = replace(EVAL_DR, object_xy_m=0.0)  # the object centred: for scripted, centre-assuming motions
 # No randomization at all: for physics tests and scripted checks.
 NO_DR = DomainRandomization(
     joint_offset_rad=0.0,
@@ -99,23 +93,6 @@ NO_DR = DomainRandomization(
     external_force=False,
     joint_noise_rad=0.0,
     force_noise_n=0.0,
-)
-
-# The fields past Table II; a dataset card lists them only where they differ from the default.
-ROBUSTNESS_FIELDS: tuple[str, ...] = (
-    "force_gain",
-    "force_bias_n",
-    "force_range_n",
-    "dead_force_sensor",
-    "joint_calibration_rad",
-    "backlash_rad",
-    "torque_limit_scale",
-    "velocity_limit_rad_s",
-    "obs_latency_steps",
-    "action_latency_steps",
-    "period_jitter_s",
-    "object_size_scale",
-    "hold_push_n",
 )
 
 

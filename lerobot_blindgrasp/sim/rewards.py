@@ -8,7 +8,7 @@ with w = (1.0, 0.2, -500, -0.04, -0.01). The shaping terms `reach` and `touch` a
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 
 import torch
@@ -35,13 +35,7 @@ class StepQuantities:
         return num_contacts(self.uniaxial_force, self.contact_threshold_n)
 
 
-PAPER_WEIGHTS: dict[str, float] = {
-    "task": 1.0,
-    "incentive": 0.2,
-    "joint_limit": -500.0,
-    "action": -0.04,
-    "action_rate": -0.01,
-}
+PAPER_WEIGHTS = {"task": 1.0, "incentive": 0.2, "joint_limit": -500.0, "action": -0.04, "action_rate": -0.01}
 
 
 @dataclass(frozen=True)
@@ -73,21 +67,14 @@ class RewardConfig:
 
     def as_record(self) -> dict:
         """The config as a run records it (teacher_config.json): `w_<term>` for every term, then the parameters."""
-        return {
-            **{f"w_{name}": self.weight(name) for name in TERMS},
-            "reach_scale": self.reach_scale,
-            "target_lift_m": self.target_lift_m,
-            "contact_threshold_n": self.contact_threshold_n,
-            "workspace_radius_m": self.workspace_radius_m,
-        }
+        params = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "weights"}
+        return {**{f"w_{name}": self.weight(name) for name in TERMS}, **params}
 
     @classmethod
     def from_record(cls, record: Mapping) -> RewardConfig:
         """The inverse of `as_record` (what a teacher's teacher_config.json holds)."""
         params = {k: v for k, v in record.items() if not k.startswith("w_")}
-        unknown = sorted(
-            set(params) - {"reach_scale", "target_lift_m", "contact_threshold_n", "workspace_radius_m"}
-        )
+        unknown = sorted(set(params) - set(cls().as_record()))
         if unknown:
             raise ValueError(f"unknown reward setting(s) {unknown} in {dict(record)}")
         return cls(weights={k[2:]: float(v) for k, v in record.items() if k.startswith("w_")}, **params)
@@ -141,8 +128,7 @@ def r_reach(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
 
 
 def r_touch(s: StepQuantities, cfg: RewardConfig) -> torch.Tensor:
-    """Shaping (not in the paper): fraction of tips pressing on the *object* (> 0.1 N, any direction, so side
-    contacts count and table pushes do not)."""
+    """Shaping (not in the paper): fraction of tips pressing on the *object* (> 0.1 N, any direction), not the table."""
     return (s.tip_object_force > cfg.contact_threshold_n).to(torch.float64).mean(-1)
 
 
@@ -161,13 +147,8 @@ def _joint_limits(q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 # Every term, by name, in eq. 1's order (the shaping terms last): the order `total` sums in.
 TERMS: dict[str, Callable[[StepQuantities, RewardConfig], torch.Tensor]] = {
-    "task": r_task,
-    "incentive": r_incentive,
-    "joint_limit": r_joint_limit,
-    "action": r_action,
-    "action_rate": r_action_rate,
-    "reach": r_reach,
-    "touch": r_touch,
+    fn.__name__.removeprefix("r_"): fn
+    for fn in (r_task, r_incentive, r_joint_limit, r_action, r_action_rate, r_reach, r_touch)
 }
 TERM_NAMES = tuple(TERMS)
 PAPER_REWARD = RewardConfig()

@@ -37,10 +37,14 @@ def _shr(x: torch.Tensor, k: int) -> torch.Tensor:
 
 
 def _splitmix64(x: torch.Tensor) -> torch.Tensor:
+    # in place on one new tensor: a per-step draw is tens of whole-batch ops, and fresh memory for each costs more
+    # on a CPU than the op itself
     z = x + _GOLDEN
-    z = (z ^ _shr(z, 30)) * _MIX1
-    z = (z ^ _shr(z, 27)) * _MIX2
-    return z ^ _shr(z, 31)
+    for shift, mul in ((30, _MIX1), (27, _MIX2), (31, None)):
+        z ^= torch.bitwise_right_shift(z, shift).bitwise_and_((1 << (64 - shift)) - 1)
+        if mul is not None:
+            z *= mul
+    return z
 
 
 def as_words(x, device: torch.device | str | None = None) -> torch.Tensor:
@@ -69,20 +73,19 @@ def _offsets(n: int, device: torch.device) -> torch.Tensor:
 
 
 def uniform(seeds, stream: int, counter, n: int, key: torch.Tensor | None = None) -> torch.Tensor:
-    """U[0, 1) float64 draws of shape (len(seeds), n), one row per env, on the seeds' device. `key`: the seeds'
-    `stream_key`, when the caller keeps it."""
+    """U[0, 1) float64 draws (len(seeds), n), one row per env, on the seeds' device; `key`: their kept `stream_key`."""
     key = stream_key(seeds, stream) if key is None else key
     counter = as_words(counter, key.device)
     key = _splitmix64(key ^ (counter * _COUNTER_MUL))
     bits = _splitmix64(key[:, None] + _offsets(n, key.device))
-    return _shr(bits, 11).to(torch.float64) * (1.0 / (1 << 53))
+    return _shr(bits, 11).to(torch.float64).mul_(1.0 / (1 << 53))
 
 
 def normal(seeds, stream: int, counter, n: int, key: torch.Tensor | None = None) -> torch.Tensor:
     """Standard normal draws of shape (len(seeds), n) (Box-Muller on two uniform blocks)."""
     u = uniform(seeds, stream, counter, 2 * n, key)
-    u1 = u[:, :n].clamp_min(1e-300)
-    return torch.sqrt(-2.0 * torch.log(u1)) * torch.cos(2.0 * np.pi * u[:, n:])
+    radius = u[:, :n].clamp_min(1e-300).log_().mul_(-2.0).sqrt_()
+    return radius.mul_(u[:, n:].mul(2.0 * np.pi).cos_())
 
 
 def between(u: torch.Tensor, low, high) -> torch.Tensor:

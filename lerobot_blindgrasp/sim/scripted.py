@@ -1,4 +1,4 @@
-"""Scripted grasps (not baseline policies): a pinch-and-lift for physics tests and the viewer (two-link IK per
+"""Scripted grasps (not baseline policies): a pinch-and-lift for the viewer and physics tests (two-link IK per
 finger; it assumes a centred object), and a side grasp whose successes the `cpu_bc*` teachers clone (teacher/aux_bc.py)."""
 
 from __future__ import annotations
@@ -59,19 +59,6 @@ class PinchLiftScript(WaypointScript):
         self.t = 0
 
 
-def run_pinch_lift(
-    env, steps: int, object_radius: float = 0.03, grasp_height: float = 0.045, lift_m: float = 0.03
-):
-    """Pinch a reset `BatchedGraspEnv` for `steps` steps: lifts (steps, N), clean forces (steps, N, 3), last info."""
-    script = PinchLiftScript(object_radius, grasp_height, lift_m)
-    lifts, forces = [], []
-    for _ in range(steps):
-        _, _, _, _, info = env.step(script(env.joint_positions()))
-        lifts.append(info["lift"].copy())
-        forces.append(info["uniaxial_force"].copy())
-    return np.array(lifts), np.array(forces), info
-
-
 def support_distance(o: objects.ObjectSpec, direction_xy: np.ndarray) -> np.ndarray:
     """Horizontal distance from the object's centre to its surface along unit directions (n, 2), spawn pose."""
     ux, uy = np.abs(direction_xy[:, 0]), np.abs(direction_xy[:, 1])
@@ -108,7 +95,6 @@ class SideGraspScript(WaypointScript):
     segments = ((15, 0, 1), (15, 1, 2), (15, 2, 3), (30, 3, 4))
 
     def __init__(self, q0: np.ndarray, object_pos: np.ndarray, specs: list[objects.ObjectSpec]):
-        n = len(specs)
         dirs = np.array([[math.cos(p), math.sin(p)] for p in spec.FINGER_BASE_ANGLES_RAD])
         surface = np.stack([support_distance(o, dirs) for o in specs]) + gripper.TIP_CAPSULE_RADIUS  # (n, 3)
         top = np.array([o.rest_height * 2.0 for o in specs])[:, None].repeat(3, axis=1)
@@ -124,5 +110,5 @@ class SideGraspScript(WaypointScript):
                 side_pose(xy, surface - self.SQUEEZE_M, grasp_z + self.LIFT_M),
             ]
         )  # (5, n, 9)
-        assert self.waypoints.shape[1] == n
+        assert self.waypoints.shape[1] == len(specs)
         self.t = 0

@@ -37,7 +37,7 @@ class SensorIndex:
             cols[kind] = np.stack(rows)
         first = min(int(c[0, 0]) for c in cols.values())
         width = sum(c.shape[1] for c in cols.values())
-        regular = all(np.array_equal(c - c[:1], np.arange(len(c))[:, None] * width) for c in cols.values())
+        regular = all(((c - c[:1]) == np.arange(len(c))[:, None] * width).all() for c in cols.values())
         block = (first, width) if regular and first + len(spec.FINGERS) * width <= m.nsensordata else None
         spans = {k: (int(c[0, 0]) - first, c.shape[1]) for k, c in cols.items()}
         return cls({k: torch.as_tensor(c, device=device) for k, c in cols.items()}, block, spans)
@@ -69,7 +69,7 @@ def quat_to_mat(q: torch.Tensor) -> torch.Tensor:
         )
     a, b, s, c, diagonal = _ROT[q.device]
     p = (q[..., :, None] * q[..., None, :]).flatten(-2)
-    r = c * (p[..., a] + s * p[..., b])
+    r = c * (p.index_select(-1, a) + s * p.index_select(-1, b))
     return torch.where(diagonal, r + 1.0, r).unflatten(-1, (3, 3))
 
 

@@ -10,13 +10,9 @@ from __future__ import annotations
 from lerobot_blindgrasp import spec
 
 
-def is_lifted(lift):
-    return lift >= spec.SUCCESS_LIFT_M
-
-
 def held_steps(previous, lift):
-    """Consecutive control steps lifted, counting this one (0 once it is no longer lifted)."""
-    return (previous + 1) * is_lifted(lift)
+    """Consecutive control steps lifted >= SUCCESS_LIFT_M, counting this one (0 once it is no longer lifted)."""
+    return (previous + 1) * (lift >= spec.SUCCESS_LIFT_M)
 
 
 def is_success(held):

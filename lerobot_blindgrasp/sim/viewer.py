@@ -17,8 +17,6 @@ from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.sim import gym_env, objects, randomization
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
-LIFT_M = 0.03
-
 
 @dataclass
 class SimDemoConfig:
@@ -36,14 +34,13 @@ class SimDemoConfig:
     randomization: bool = True
 
     def __post_init__(self):
-        if self.object not in objects.CATALOGUE:
-            raise ValueError(f"unknown object {self.object!r}; one of: {', '.join(objects.CATALOGUE)}")
+        objects.get_object(self.object)  # raises on unknown names, listing the known ones
+        if not 1 <= self.steps <= spec.EPISODE_STEPS:
+            raise ValueError(f"steps must be in [1, {spec.EPISODE_STEPS}] (one 10 s trial), got {self.steps}")
 
     @property
     def video_path(self) -> Path | None:
-        if not self.video:
-            return None
-        return self.output or Path("outputs/sim_demo") / f"{self.object}.mp4"
+        return (self.output or Path("outputs/sim_demo") / f"{self.object}.mp4") if self.video else None
 
 
 def _boundary_distance(o: objects.ObjectSpec, phi: float) -> float:
@@ -69,33 +66,21 @@ def grasp_geometry(object_name: str) -> tuple[float, float]:
     return radius, o.rest_height
 
 
-def run_demo(
-    object_name: str = "cylinder_a_medium",
-    *,
-    seed: int = 0,
-    steps: int = spec.EPISODE_STEPS,
-    output: Path | None = None,
-    width: int = 640,
-    height: int = 480,
-    shadows: bool = True,
-    randomize: bool = True,
-) -> dict:
-    """Run one scripted episode; write the video if `output` is given; return the summary."""
-    if not 1 <= steps <= spec.EPISODE_STEPS:
-        raise ValueError(f"steps must be in [1, {spec.EPISODE_STEPS}] (one 10 s trial), got {steps}")
-    dr = gym_env.eval_dr(object_xy=False) if randomize else randomization.NO_DR
-    render = "rgb_array" if output else None
+def run_demo(cfg: SimDemoConfig) -> dict:
+    """Run one scripted episode; write the video if `cfg.video_path` is set; return the summary."""
+    output = cfg.video_path
+    dr = randomization.CENTRED_EVAL_DR if cfg.randomization else randomization.NO_DR
     env = gym_env.BlindGraspGymEnv(
-        object_name, dr=dr, render_mode=render, render_width=width, render_height=height, render_shadows=shadows
-    )
-    radius, grasp_height = grasp_geometry(object_name)
-    script = PinchLiftScript(radius, grasp_height, LIFT_M)
-    obs, _ = env.reset(seed=seed)
+        cfg.object, dr=dr, render_mode="rgb_array" if output else None, render_width=cfg.width,
+        render_height=cfg.height, render_shadows=cfg.shadows,
+    )  # fmt: skip
+    script = PinchLiftScript(*grasp_geometry(cfg.object))  # a 3 cm lift
+    obs, _ = env.reset(seed=cfg.seed)
     frames = [env.render()] if output else []
     lifts, clean_forces, measured_forces = [], [], []
     first_success = None
     t0 = time.perf_counter()
-    for t in range(steps):
+    for t in range(cfg.steps):
         obs, _, terminated, truncated, info = env.step(script.target(t))
         lifts.append(info["lift_m"])
         clean_forces.append(info["uniaxial_force_n"])
@@ -111,9 +96,9 @@ def run_demo(
 
     last_s = max(1, min(len(lifts), spec.CONTROL_HZ))  # the last second: the hold
     summary = {
-        "object": object_name,
-        "task": objects.get_object(object_name).task,
-        "seed": seed,
+        "object": cfg.object,
+        "task": objects.get_object(cfg.object).task,
+        "seed": cfg.seed,
         "steps": len(lifts),
         "success": first_success is not None,
         "success_at_s": None if first_success is None else first_success / spec.CONTROL_HZ,
@@ -159,12 +144,7 @@ def format_summary(s: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    cfg = parse_config(SimDemoConfig, argv)
-    summary = run_demo(
-        cfg.object, seed=cfg.seed, steps=cfg.steps, output=cfg.video_path, width=cfg.width, height=cfg.height,
-        shadows=cfg.shadows, randomize=cfg.randomization,
-    )  # fmt: skip
-    print(format_summary(summary))
+    print(format_summary(run_demo(parse_config(SimDemoConfig, argv))))
     return 0
 
 

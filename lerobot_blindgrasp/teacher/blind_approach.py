@@ -2,9 +2,6 @@
 pose, velocities and planar distance read as 0 until a load cell has read above `TOUCH_N` (for more than
 `reveal_delay_steps`), and optionally the fingertip poses from the measured joints. A teacher steering by what the
 student cannot see asks it for actions it cannot infer; the critic still reads everything.
-
-`BlindGroup` keeps per-env touch counts (one instance per env batch); an episode starts where the privileged
-previous action is exactly 0 on all joints (the env zeroes it on reset), so no loop needs to tell it of resets.
 """
 
 from __future__ import annotations
@@ -67,7 +64,9 @@ class MeasuredKinematics:
 
 
 class BlindGroup:
-    """GROUP for one batch of envs under one `ActorInput`: call it on each step's observation dict."""
+    """GROUP for one batch of envs under one `ActorInput`, called on each step's observation dict. It keeps per-env
+    touch counts; an episode starts where the privileged previous action is exactly 0 on all joints (the env zeroes
+    it on reset), so no loop needs to tell it of resets."""
 
     def __init__(self, actor_input: ActorInput = ActorInput()):
         self.actor_input = actor_input

@@ -1,5 +1,4 @@
-"""A teacher run's checkpoints: rsl-rl's saves made atomic, the newest one that loads (a corrupt one set aside), and
-the actor's TorchScript/ONNX export."""
+"""A teacher run's checkpoints: atomic saves, the newest that loads (a corrupt one set aside), the actor's export."""
 
 from __future__ import annotations
 
@@ -43,12 +42,8 @@ def newest_loadable_checkpoint(run_dir: Path) -> Path | None:
             if lead:
                 aside = ckpt.with_name(ckpt.name + ".corrupt")
                 os.replace(ckpt, aside)
-                log.warning(
-                    "checkpoint %s cannot be read (%s); set aside as %s, resuming from the one before",
-                    ckpt,
-                    why,
-                    aside.name,
-                )
+                msg = "checkpoint %s cannot be read (%s); set aside as %s, resuming from the one before"
+                log.warning(msg, ckpt, why, aside.name)
     return None
 
 

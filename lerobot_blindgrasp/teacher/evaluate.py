@@ -74,7 +74,6 @@ def evaluate_teacher(
     backend: str = "batch",
 ) -> dict:
     """Success (with per-episode flags) and mean lift per object and mode, on the paired start states."""
-    spec.eval_env_seed(seed + episodes_per_object - 1, 0)  # raises if the indices leave the eval block
     reward_cfg = rewards.RewardConfig.from_record(teacher.config["reward"])
     results: dict = {
         "objects": list(object_names),

@@ -56,8 +56,7 @@ def export_teacher(source: str | Path, out_dir: str | Path, overwrite_card: bool
         "source_checkpoint": ckpt.name,
         "source_sha256": policy.file_sha256(ckpt),
     }
-    summary = ckpt.parent / "train_summary.json"
-    if summary.is_file():
+    if (summary := ckpt.parent / "train_summary.json").is_file():
         config["train_summary"] = json.loads(summary.read_text())
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -72,7 +71,6 @@ def export_teacher(source: str | Path, out_dir: str | Path, overwrite_card: bool
 
 
 def card(config: dict) -> str:
-    """A short model card: what it is, how to load it, how it was made."""
     w = config["weights"]
     return f"""---
 library_name: {PACKAGE}

@@ -58,20 +58,15 @@ def latest_checkpoint(run_dir: Path) -> Path | None:
 
 
 def resolve_checkpoint(path: str | Path) -> Path:
-    """The weights file of a teacher folder (teacher.safetensors first, else the latest model_<it>.pt), or the
-    given file. One-line errors for anything else."""
+    """The weights file of a teacher folder (teacher.safetensors, else the latest model_<it>.pt), or the file given."""
     p = Path(path)
     _refuse_student(p)
     if p.is_dir():
-        if (p / WEIGHTS_NAME).is_file():
-            ckpt = p / WEIGHTS_NAME
-        else:
-            ckpt = latest_checkpoint(p)
-            if ckpt is None:
-                raise TeacherError(
-                    f"no teacher in {p}: no {WEIGHTS_NAME} (a shipped teacher) and no model_<iteration>.pt "
-                    "(a training run)"
-                )
+        ckpt = p / WEIGHTS_NAME if (p / WEIGHTS_NAME).is_file() else latest_checkpoint(p)
+        if ckpt is None:
+            raise TeacherError(
+                f"no teacher in {p}: no {WEIGHTS_NAME} (a shipped teacher) and no model_<iteration>.pt (a training run)"
+            )
     elif p.is_file():
         ckpt = p
     else:
@@ -142,11 +137,8 @@ class TeacherPolicy:
                 f"{self.checkpoint} was trained on another observation layout than spec.PRIVILEGED_LAYOUT; "
                 "retrain or use a teacher from this version"
             )
-        dims = {
-            "policy": spec.STATE_DIM,
-            "privileged": spec.PRIVILEGED_DIM,
-            blind_approach.GROUP: spec.PRIVILEGED_DIM,
-        }
+        priv = spec.PRIVILEGED_DIM  # the width of "privileged" and of its blind-approach form
+        dims = {"policy": spec.STATE_DIM, "privileged": priv, blind_approach.GROUP: priv}
         dummy = TensorDict({k: torch.zeros(1, d) for k, d in dims.items()}, batch_size=[1])
         self.actor = MLPModel(dummy, self.obs_groups, "actor", spec.NUM_JOINTS, **actor_cfg)
         state, iteration = load_actor_state(self.checkpoint)
@@ -160,25 +152,19 @@ class TeacherPolicy:
         self.actor.to(device).eval()
         # A blind-approach teacher computes its actor's group itself from the env's "privileged" vector.
         self.actor_input = blind_approach.ActorInput.from_record(self.config.get("actor_input"))
-        self._blind = (
-            blind_approach.BlindGroup(self.actor_input)
-            if blind_approach.reads_blind_group({"actor": self.obs_groups["actor"]})
-            else None
-        )
+        reads_blind = blind_approach.reads_blind_group({"actor": self.obs_groups["actor"]})
+        self._blind = blind_approach.BlindGroup(self.actor_input) if reads_blind else None
         self.device = device
         weights = self.config.get("weights", {})
         self.iteration = iteration if iteration is not None else int(weights.get("iteration", -1))
         self.sha256 = file_sha256(self.checkpoint)
+        # folder/file, e.g. `teacher_cpu/teacher.safetensors`, for reports and provenance
+        self.name = f"{self.checkpoint.parent.name}/{self.checkpoint.name}"
 
     @property
     def action_std(self) -> np.ndarray:
         """(9,) std of the stochastic teacher's Gaussian, rad: the noise in every demo's action label."""
         return self.actor.distribution.std_param.detach().cpu().numpy().astype(np.float64)
-
-    @property
-    def name(self) -> str:
-        """Folder/file, e.g. `teacher_cpu/teacher.safetensors`, for reports and provenance."""
-        return f"{self.checkpoint.parent.name}/{self.checkpoint.name}"
 
     @torch.inference_mode()
     def __call__(self, obs: dict[str, np.ndarray], stochastic: bool = False) -> np.ndarray:

@@ -35,9 +35,7 @@ def collect_scripted_demos(cfg: ScriptedDemos) -> dict:
             seen_policy.append(obs["policy"].astype(np.float32))
             seen_act.append(action.astype(np.float32))
         obs, _, terminated, _, info = env.step(action)
-        success |= info["success"]
-        if terminated.any():  # an object left the workspace: that episode is not a demonstration
-            success &= ~terminated
+        success = (success | info["success"]) & ~terminated  # an object that left the workspace: no demonstration
     env.close()
     names = np.array(env.object_names)
     rates = {name: float(success[names == name].mean()) for name in cfg.objects}

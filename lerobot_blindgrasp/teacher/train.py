@@ -53,8 +53,7 @@ def build_env_config(
     preset: TeacherPreset, num_envs: int, seed: int, nthread: int = 0, backend: str = "batch"
 ) -> GraspEnvConfig:
     dr = randomization.PAPER_DR if preset.external_force else randomization.EVAL_DR
-    if preset.joint_calibration_rad:
-        dr = dataclasses.replace(dr, joint_calibration_rad=preset.joint_calibration_rad)
+    dr = dataclasses.replace(dr, joint_calibration_rad=preset.joint_calibration_rad)
     return env_config(
         "train",
         objects.PAPER_OBJECTS,
@@ -73,8 +72,7 @@ class TrainTeacherConfig:
     """PPO teacher training (paper Sec. III-B, Table III)."""
 
     output_dir: Path | None = None  # run directory; re-running with the same one resumes
-    # a teacher preset (docs/reference.md): cpu_bc_capsule (the shipped teacher's staged recipe), paper (Table III),
-    # cpu, quick, and the cpu_bc_* stages and fine-tunings
+    # a teacher preset (docs/reference.md lists them); default: the shipped teacher's staged recipe
     preset: str = SHIPPED_TEACHER_PRESET.name
     # env i uses seed + i (inside spec.SEED_RANGES["teacher_train"]); the torch seed
     seed: int = spec.TEACHER_TRAIN_SEED

@@ -2,8 +2,7 @@
 
 Observation groups: "policy" (the student's 12-d o_t), "privileged" (the teacher's 92-d vector) and, with
 `blind_group`, "privileged_blind" (`blind_approach.py`, the one host round trip). extras["time_outs"] marks
-truncations; extras["log"] carries, for the episodes that ended this step, each weighted reward term per second,
-success overall and per object, and termination reasons, which rsl-rl averages into TensorBoard.
+truncations; extras["log"] the ended episodes' reward terms, successes and terminations (`_episode_log`).
 """
 
 from __future__ import annotations

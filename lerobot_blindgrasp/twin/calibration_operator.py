@@ -3,9 +3,8 @@
     blindgrasp-twin-calibrate --ports_json=outputs/twin/ports.json --robot_id=twin \\
         --calibration_dir=outputs/twin/calibration
 
-`lerobot-calibrate`'s REFERENCE (q = 0) and POSITIVE poses are held by the twin's hand (torque off), so Drive_Mode
-and Homing_Offset come out of the calibration, not from the twin's mounting. `blindgrasp-calibrate-force` (unless
-`--force=false`) gets `mass_kg` on the pad each prompt names, so each cell's scale and gain error are measured.
+The twin's hand holds `lerobot-calibrate`'s poses, and `blindgrasp-calibrate-force` (unless `--force=false`) gets
+`mass_kg` on the pad each prompt names, so both calibrations are measured, not copied from the twin.
 """
 
 from __future__ import annotations

@@ -1,9 +1,6 @@
-"""The twin's MuJoCo side: one gripper and one object, stepped one 5 ms substep at a time, in real time.
-
-Model and draws are the sim env's own: a placement from (seed, object) takes the env seed and the eval
-randomization's physics and start position as `--env.type=blindgrasp` draws them for the same `--seed`. The
-servos' registers set each joint's target, gain (Position_P_Gain / 800 x the drawn kp), torque limit and torque
-on/off. Success is the sim's rule (`sim/termination.py`), judged every control period from the placement on.
+"""The twin's MuJoCo side: one gripper and one object, stepped one 5 ms substep at a time. A placement from (seed,
+object) draws the physics and start position `--env.type=blindgrasp` draws for the same `--seed`; success is the
+sim's rule (`sim/termination.py`), judged every control period from the placement on.
 """
 
 from __future__ import annotations

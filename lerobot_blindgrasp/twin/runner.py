@@ -1,15 +1,10 @@
-"""The twin assembled: servo bus and force board on pseudo-terminals, MuJoCo behind them in real time, the operator
-socket beside them.
-
-One thread steps the physics one substep at a time against the monotonic clock, reading the servos' registers
-first. A physics more than `max_lag_s` behind the clock (a starved process) skips ahead and counts it: a run whose
-`behind_s` is not ~0 did not keep real time.
+"""The twin assembled: servo bus and force board on pseudo-terminals, MuJoCo behind them stepped one substep at a time
+against the monotonic clock, the operator socket beside them. A run whose `behind_s` is not ~0 did not keep real time.
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import sys
 import threading
 import time
@@ -21,6 +16,7 @@ from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators import mount
 from lerobot_blindgrasp.emulators.dynamixel import DynamixelBusEmulator
 from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
+from lerobot_blindgrasp.hardware.realtime import set_realtime_priority
 from lerobot_blindgrasp.twin.operator_server import OperatorServer
 from lerobot_blindgrasp.twin.physics import TwinPhysics
 from lerobot_blindgrasp.twin.servo_link import SimShaft, read_commands
@@ -38,15 +34,12 @@ def percentiles_ms(values) -> dict[str, float]:
 
 def make_realtime(threads: dict[str, threading.Thread], priority: int) -> str:
     """SCHED_FIFO at `priority` for each thread (the physics one step below the emulators, which must answer
-    first); says what it got. The kernel's RT throttling still leaves other processes 5 % of each core."""
-    try:
-        for name, thread in threads.items():
-            prio = priority - 1 if name == "physics" else priority
-            os.sched_setscheduler(thread.native_id, os.SCHED_FIFO, os.sched_param(max(1, prio)))
-    except (OSError, AttributeError) as e:
-        logger.warning("the twin's threads stay at normal priority: %s", e)
-        return f"not permitted ({e})"
-    return f"SCHED_FIFO {priority}"
+    first); says what the emulators got. The kernel's RT throttling still leaves other processes 5 % of each core."""
+    got = {
+        name: set_realtime_priority(max(1, priority - 1) if name == "physics" else priority, t.native_id)
+        for name, t in threads.items()
+    }
+    return got["bus"]
 
 
 class Twin:

@@ -1,5 +1,6 @@
 """The glove bridge, emulated: datagrams of `teleoperators/manus_glove/protocol.py` at `rate_hz`, sent by the
-bridge's own `GloveSender` (session id, sequence number, send time on its monotonic clock).
+bridge's own `GloveSender` (session id, sequence number, send time on its monotonic clock), extended here with what
+only an emulated bridge does (`EmulatedBridgeSender`).
 
 The hand is one operator's: per ergonomics channel (`CHANNELS`) an open-hand and a fist value (deg), blended by
 `closure` (0 open .. 1 fist), or by `closure_fn(t)` for scripted motions. `keys` picks the names it sends:
@@ -23,13 +24,14 @@ from __future__ import annotations
 
 import json
 import random
+import secrets
 import socket
 import threading
 import time
 from pathlib import Path
 
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_bridge import CHANNELS
-from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender
+from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender, encode
 
 # This operator's hand (deg), by channel: open hand and fist. Spread barely changes; flexion changes a lot.
 OPEN: dict[str, float] = {}
@@ -57,6 +59,22 @@ def calibrated_glove(calibration_dir: Path, port: int, **config):
     return ManusGlove(ManusGloveConfig(id="op", port=port, calibration_dir=calibration_dir, **config))
 
 
+class EmulatedBridgeSender(GloveSender):
+    """The bridge's sender, plus the faults of `GloveEmulator`: a datagram stamped with a chosen time (a bridge clock
+    that jumps or lags), sent later or not at all (the network), and a restart from the same source address."""
+
+    def pack(self, ergonomics: dict[str, float], sent: float) -> bytes:
+        self.seq += 1
+        return encode(self.session, self.seq, sent, ergonomics, self.side)
+
+    def send_raw(self, datagram: bytes) -> None:
+        self._sock.sendto(datagram, self.addr)
+
+    def restart(self) -> None:
+        """A restarted bridge: a new session, counting from 1 again."""
+        self.session, self.seq = secrets.token_hex(8), 0
+
+
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -81,7 +99,8 @@ class GloveEmulator:
         self.frozen = False
         self._rng = random.Random(0)
         self._last_pose: dict[str, float] | None = None
-        self.sender = GloveSender(host, port, side, source_host=host)  # a fixed source address, like a bridge's
+        # A fixed source address, like a bridge's.
+        self.sender = EmulatedBridgeSender(host, port, side, source_host=host)
         self._later: list[tuple[int, bytes]] = []  # (frames to wait, datagram)
         self._delay_next: list[tuple[int, bool]] = []  # (n, keep the original on time)
         self._backlog: list[bytes] = []

@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from emulators.faults import FaultyBus, FaultyForceBoard
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.dynamixel import DynamixelBusEmulator
-from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.emulators.mount import MOUNT_SIGN, MOUNT_ZERO, q_for_shaft, shaft_for_q
 
 __all__ = ["LATENCY_TIMER_MS", "MOUNT_SIGN", "GripperRig"]
@@ -25,8 +24,8 @@ LATENCY_TIMER_MS = 150
 class GripperRig:
     def __init__(self, force_fn=None, **force_kwargs):
         self.ids = list(spec.SERVO_IDS)
-        self.dxl = DynamixelBusEmulator(self.ids, initial_shaft=dict(zip(self.ids, MOUNT_ZERO)))
-        self.force = ForceSensorEmulator(force_fn=force_fn, **force_kwargs)
+        self.dxl = FaultyBus(self.ids, initial_shaft=dict(zip(self.ids, MOUNT_ZERO)))
+        self.force = FaultyForceBoard(force_fn=force_fn, **force_kwargs)
 
     def start(self) -> GripperRig:
         self.dxl.start()

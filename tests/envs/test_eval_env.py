@@ -20,7 +20,7 @@ from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 
 
 def _true_q(env: gym.Env) -> np.ndarray:
-    return env.unwrapped.sim().joint_positions()[0]
+    return env.unwrapped._sim.joint_positions()[0]
 
 
 def _rollout(env: gym.Env, seed: int | None, actions: np.ndarray) -> np.ndarray:
@@ -90,7 +90,7 @@ def test_action_is_an_absolute_target_clipped_to_0p3_rad_from_the_current_positi
 def _scripted_lift(**env_kwargs):
     """A pinch-and-lift of the centred medium cylinder until the episode ends: (per-step success, terminated,
     truncated, last observation, last info)."""
-    env = gym_env.make_env("cylinder_a_medium", dr=gym_env.eval_dr(object_xy=False), **env_kwargs)
+    env = gym_env.make_env("cylinder_a_medium", dr=randomization.CENTRED_EVAL_DR, **env_kwargs)
     env.reset(seed=0)
     script = PinchLiftScript(object_radius=0.03, grasp_height=0.045, lift_m=0.03)
     success = []
@@ -166,7 +166,7 @@ def test_seed_makes_the_episode_reproducible():
     np.testing.assert_array_equal(a, b)
     assert not np.allclose(a[0], _rollout(env, 8, actions)[0])  # another seed: another start pose and noise
     # The seed flows into the sim: episode 0 of BatchedGraspEnv with this object's eval-range seed for it.
-    assert env.unwrapped.sim().cfg.seed == gym_env.start_seed(8, "capsule_medium")
+    assert env.unwrapped._sim.cfg.seed == gym_env.start_seed(8, "capsule_medium")
     # Unseeded resets continue a seeded sequence reproducibly, and give new episodes.
     env.reset(seed=3)
     first = _rollout(env, None, actions)
@@ -184,7 +184,7 @@ def test_each_object_gets_its_own_start_states_from_the_same_seed():
         env = gym_env.BlindGraspGymEnv(name, render_mode=None)
         _, info = env.reset(seed=1000)
         assert spec.SEED_RANGES["eval"].start <= info["env_seed"] < spec.SEED_RANGES["eval"].stop
-        sims[name] = env.unwrapped.sim()
+        sims[name] = env.unwrapped._sim
     seeds = {n: int(s.env_seeds[0]) for n, s in sims.items()}
     assert seeds[names[0]] != seeds[names[1]]
     # Different physics draws (friction, gains, ...) and start poses, not just a different object.

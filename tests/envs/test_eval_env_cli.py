@@ -18,7 +18,7 @@ from emulators.harness import BIN, tiny_student_train
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.envs.sim_env import task_id
-from lerobot_blindgrasp.sim import gym_env, objects
+from lerobot_blindgrasp.sim import gym_env, objects, randomization
 from lerobot_blindgrasp.sim.scripted import PinchLiftScript
 from lerobot_blindgrasp.sim.viewer import grasp_geometry
 
@@ -52,7 +52,7 @@ def _make_dataset(root: Path, repo_id: str) -> None:
     ds = LeRobotDataset.create(repo_id, fps=spec.CONTROL_HZ, features=spec.dataset_features(), root=root,
                                use_videos=False)  # fmt: skip
     for k, name in enumerate(OBJECTS):
-        env = gym_env.BlindGraspGymEnv(name, dr=gym_env.eval_dr(object_xy=False), render_mode=None)
+        env = gym_env.BlindGraspGymEnv(name, dr=randomization.CENTRED_EVAL_DR, render_mode=None)
         for seed in range(2):
             obs, _ = env.reset(seed=10 * k + seed)
             script = PinchLiftScript(*grasp_geometry(name))

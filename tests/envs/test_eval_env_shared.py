@@ -56,7 +56,7 @@ def test_create_envs_shares_one_sim_per_object():
     [env] = vec.values()
     assert isinstance(env, SharedSimVectorEnv)
     env.reset(seed=[1000, 1001])
-    assert env.envs[0].unwrapped.sim() is env.envs[1].unwrapped.sim()
+    assert env.envs[0].unwrapped._sim is env.envs[1].unwrapped._sim
     # What lerobot-eval reads off a vector env besides reset and step.
     assert env.call("_max_episode_steps") == (spec.EPISODE_STEPS,) * 2
     assert len(set(env.call("task_description"))) == 1

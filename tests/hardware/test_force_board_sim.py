@@ -119,11 +119,11 @@ def test_a_dead_or_saturated_cell_is_a_named_fault_and_the_stream_goes_on(build_
     try:
         reader.connect()
         reader.tare(0.2)
-        board.kill_cell(1)
+        board.send("dead 1")  # the chip stops converting
         time.sleep(0.3)
         with pytest.raises(ForceStreamError, match=r"mf_tip \(channel 1\) stopped converting"):
             reader.read()
-        board.revive_cell(1)
+        board.send("alive 1")
         assert reader.wait_frames(RATE_WINDOW + 1, 1.0)  # the rate is judged again on the frames since
         np.testing.assert_allclose(reader.read(), 0.0, atol=0.02)
         board.set_counts([0x7FFFFF + 5000, -52_000, 12_000])  # far beyond the ADC's range
@@ -144,7 +144,7 @@ def test_a_cell_whose_dout_is_held_low_keeps_its_last_value(build_dir):
     try:
         reader.connect()
         assert reader.wait_frames(3, 1.0)
-        board.hold_dout_low(1)
+        board.send("stuck 1")  # DOUT shorted to GND: every read clocks out zeros
         assert reader.wait_frames(3, 2.0)  # 50 ms without a valid conversion, then a fault frame every 50 ms
         frame = reader.latest()[0]
     finally:
@@ -299,7 +299,7 @@ def test_a_stuck_hx711_is_power_cycled_and_comes_back(build_dir):
     try:
         reader.connect()
         reader.tare(0.2)
-        board.hang_cell(1)
+        board.send("hang 1")  # the chip locks up until the firmware power-cycles it
         time.sleep(0.15)
         with pytest.raises(ForceStreamError, match=r"mf_tip \(channel 1\) stopped converting"):
             reader.read()
@@ -326,7 +326,7 @@ def test_a_board_reset_by_its_reset_pin_comes_back_with_the_same_forces(build_di
         reader.tare(0.2)
         board.set_forces([0.0, 0.0, 2.0])
         assert reader.wait_frames(4, 1.0)
-        board.reset_board()
+        board.send("reset")  # the reset pin (a USB glitch, DTR): the chips keep converting
         seen = _reads_until_resynchronised(reader, deadline_s=8.0)
     finally:
         reader.disconnect()

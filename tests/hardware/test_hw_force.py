@@ -13,9 +13,9 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from emulators.faults import FaultyForceBoard
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.force_board import ForceSensorEmulator
 from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.hardware.force_board.frame_codec import encode_frame
 from lerobot_blindgrasp.hardware.force_board.reader import SETTLE_FRAMES, ForceSensorReader, ForceStreamError
@@ -41,7 +41,7 @@ def test_noise_comes_before_the_deadband():
 @pytest.fixture
 def sensor():
     # No emulator noise of its own: each case puts its noise sample into the true force, as a load cell does.
-    emu = ForceSensorEmulator(noise_counts=0.0)
+    emu = FaultyForceBoard(noise_counts=0.0)
     emu.start()
     reader = ForceSensorReader(emu.port, 115_200, emu.scale.tolist(), stale_timeout_s=0.5)
     try:
@@ -91,7 +91,7 @@ def test_the_sim_observation_goes_through_the_sensor_pipeline():
 def test_a_slow_stream_is_told_from_a_stale_one():
     """Slow: fresh frames, none old enough to be stale, but fewer per second than the control loop needs. Stale:
     no fresh frame for `stale_timeout_s`. Each error says which, and the stream recovers from a slow spell."""
-    emu = ForceSensorEmulator(rate_hz=15.0).start()
+    emu = FaultyForceBoard(rate_hz=15.0).start()
     reader = ForceSensorReader(emu.port, 115_200, emu.scale.tolist(), stale_timeout_s=0.15, min_rate_hz=40.0)
     try:
         reader.connect()
@@ -144,7 +144,7 @@ def test_a_board_reset_resynchronises_and_a_loaded_tip_stays_loaded(cause, caplo
     (an unloaded cell's counts, as a firmware that does not wait for the HX711s would send). The host names the reset
     (not a replay), holds the stream stale until `SETTLE_FRAMES` frames advanced with time, then reads 5 N again with
     the same tare: no read in between ever says the tip is unloaded."""
-    emu = ForceSensorEmulator(noise_counts=0.0).start()
+    emu = FaultyForceBoard(noise_counts=0.0).start()
     reader = ForceSensorReader(emu.port, 115_200, emu.scale.tolist(), stale_timeout_s=0.15, min_rate_hz=40.0)
     try:
         reader.connect()
@@ -176,7 +176,7 @@ def test_a_board_reset_resynchronises_and_a_loaded_tip_stays_loaded(cause, caplo
 def test_replayed_frames_stay_rejected_after_a_silence_or_near_zero():
     """A replay is no reset: old SEQs sent again straight after live ones (no boot silence), even near 0, or after a
     silence from far back (more than the time allows for a counter restarted at 0), stay dropped: stale."""
-    emu = ForceSensorEmulator()
+    emu = FaultyForceBoard()
     emu.seq = 20_000  # a board that has run for 4 minutes: a replayed counter does not catch up during the test
     emu.start()
     reader = ForceSensorReader(emu.port, 115_200, emu.scale.tolist(), stale_timeout_s=0.15)
@@ -206,7 +206,7 @@ def test_replayed_frames_stay_rejected_after_a_silence_or_near_zero():
 def test_a_stray_frame_far_ahead_is_dropped_and_does_not_lock_the_stream():
     """One frame whose SEQ is 30 000 ahead (garbage that passed the CRC, a corrupted counter): more than 160/s over
     the time since the last frame. Adopting it would make every real frame look replayed; it is dropped instead."""
-    emu = ForceSensorEmulator().start()
+    emu = FaultyForceBoard().start()
     reader = ForceSensorReader(emu.port, 115_200, emu.scale.tolist(), stale_timeout_s=0.15)
     try:
         reader.connect()
@@ -223,7 +223,7 @@ def test_a_stray_frame_far_ahead_is_dropped_and_does_not_lock_the_stream():
 def test_a_lossy_link_is_told_from_a_slow_board():
     """3 frames in 4 lost on the way (seeded): fresh frames arrive at ~20/s, under the 40/s floor, but the board's SEQ
     advances at 80/s, so the message says frames are lost, not that the board is slow."""
-    emu = ForceSensorEmulator(seed=3).start()
+    emu = FaultyForceBoard(seed=3).start()
     reader = ForceSensorReader(emu.port, 115_200, emu.scale.tolist(), stale_timeout_s=0.5, min_rate_hz=40.0)
     try:
         reader.connect()

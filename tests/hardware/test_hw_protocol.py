@@ -11,16 +11,12 @@ import numpy as np
 import pytest
 from dynamixel_sdk import COMM_RX_CORRUPT, COMM_RX_TIMEOUT, COMM_SUCCESS, PacketHandler, PortHandler
 from dynamixel_sdk import protocol2_packet_handler as p2
+from emulators.faults import FaultyBus
 from emulators.rig import LATENCY_TIMER_MS
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.dynamixel import (
-    CONTROL_TABLE,
-    HW_OVERLOAD,
-    XM430_W350_MODEL,
-    DynamixelBusEmulator,
-    EmulatedServo,
-)
+from lerobot_blindgrasp.emulators.control_table import CONTROL_TABLE, HW_OVERLOAD, XM430_W350_MODEL
+from lerobot_blindgrasp.emulators.dynamixel import DynamixelBusEmulator, EmulatedServo
 from lerobot_blindgrasp.emulators.dynamixel_wire import crc16, stuff, unstuff
 from lerobot_blindgrasp.hardware.force_board.frame_codec import FrameParser, crc16_ccitt_false, encode_frame
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper, BlindgraspGripperConfig
@@ -30,7 +26,7 @@ ADDR = {name: spec_[0] for name, spec_ in CONTROL_TABLE.items()}
 
 @pytest.fixture
 def bus():
-    with DynamixelBusEmulator([10, 11, 12]) as emu:
+    with FaultyBus([10, 11, 12]) as emu:
         port = PortHandler(emu.port)
         assert port.openPort() and port.getBaudRate() == 1_000_000
         yield emu, port, PacketHandler(2.0)

@@ -24,6 +24,7 @@ def test_the_paper_bench_runs_every_stage_and_writes_one_json(tmp_path):
     head = result["headline"]
     assert head["env_steps_per_s_with_training"] == ppo["loop_env_steps_per_s"] > 0
     assert head["collection_over_raw_physics"] == ppo["collect_over_raw"] > 0
+    assert head["collection_overhead_ms_per_step"] == ppo["overhead_ms_per_step"]
     assert head["update_over_collection"] == ppo["update_over_collect"] > 0
     assert head["table_iii_hours"] == pytest.approx(9000 * 24 * 4500 / ppo["loop_env_steps_per_s"] / 3600)
     # The collector was stopped as Ctrl-C stops it (exit 130), after its env was built and it had stepped.
@@ -49,3 +50,12 @@ def test_a_stage_not_run_is_not_measured():
     assert all(v is None for v in head.values())
     with pytest.raises(ValueError, match="stages"):
         BenchPaperConfig(stages=["warmup", "gpu"])
+
+
+def test_the_onemodel_stage_runs_only_when_named_and_only_on_warp():
+    """The GPU run names it (scripts/gpu_run.sh); on the batch backend it has nothing to compare."""
+    assert "onemodel" not in BenchPaperConfig().stages
+    result = run(BenchPaperConfig(backend="batch", num_envs=18, stages=["onemodel"], json=True))
+    assert set(result["stages"]) == {"onemodel"} and "skipped" in result["stages"]["onemodel"]
+    head = result["headline"]
+    assert head["groups_raw_control_steps_per_s"] is None and head["one_model_raw_control_steps_per_s"] is None

@@ -49,6 +49,28 @@ def test_env_uses_the_weighted_allocation_and_rejects_bad_weights():
         GraspEnvConfig(num_envs=4, object_weights=(1.0, -1.0))
 
 
+def test_the_replayed_raw_physics_leaves_the_env_as_it_was_and_is_timed():
+    """The bench replays each physics call right after it (same state, same targets): the env must go on exactly
+    as without the replay, bit for bit, resets included."""
+    import torch
+
+    from lab.bench.sim_bench import ReplayedPhysics
+
+    cfg = GraspEnvConfig(num_envs=6, seed=3, nthread=1, episode_s=0.2)  # 4-step episodes: resets within the run
+    plain, replayed = BatchedGraspEnv(cfg), BatchedGraspEnv(cfg)
+    actions = np.random.default_rng(0).uniform(-0.2, 0.2, (6, 6, 9))
+    with ReplayedPhysics(replayed.physics) as replay:
+        for env in (plain, replayed):
+            env.reset()
+            env.out = [env.step_tensors(torch.as_tensor(a)) for a in actions]
+    assert "step" not in vars(replayed.physics)  # the backend's own step again
+    for a, b in zip(plain.out, replayed.out, strict=True):
+        assert all(torch.equal(a[0][k], b[0][k]) for k in a[0]) and torch.equal(a[1], b[1])
+        assert torch.equal(a[2], b[2]) and torch.equal(a[3], b[3])
+    assert torch.equal(plain.physics.qpos, replayed.physics.qpos) and plain.episode.sum() > 0
+    assert replay.raw_s > 0 and replay.extra_s > replay.raw_s
+
+
 @pytest.mark.slow
 def test_bench_teacher_reports_collection_update_and_raw_physics():
     out = subprocess.run(
@@ -77,6 +99,8 @@ def test_bench_teacher_reports_collection_update_and_raw_physics():
     assert 0 < r["collect_cores_busy"] < 1.5 and 0 < r["update_cores_busy"] < 2.5  # 1 physics, 2 update threads
     assert r["update_over_collect"] == pytest.approx(r["update_s_per_it"] / r["collect_s_per_it"])
     assert r["loop_over_raw"] == pytest.approx(r["loop_env_steps_per_s"] / r["raw_control_steps_per_s"])
+    raw_s = 24 * 18 / r["raw_control_steps_per_s"]  # one iteration of 24 steps x 18 envs
+    assert r["overhead_ms_per_step"] == pytest.approx(1e3 * (r["collect_s_per_it"] - raw_s) / 24)
 
 
 @pytest.mark.slow

@@ -36,7 +36,7 @@ GRIPPER_ID, OPERATOR_ID = "lab_gripper", "alice"  # the ids the guide calibrates
 
 def _as_documented(program: str) -> list[str]:
     """The guide's own command line (docs/bringup.md), to be run from the repository root."""
-    from test_docs_commands import commands_of
+    from doc_commands import commands_of
 
     [cmd] = [c for c in commands_of(BRINGUP) if c.argv[0] == program]
     assert f"--robot.id={GRIPPER_ID}" in cmd.argv and f"--teleop.id={OPERATOR_ID}" in cmd.argv, cmd

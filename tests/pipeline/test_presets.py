@@ -350,6 +350,13 @@ def test_quick_table_v_teacher_ablations_are_the_recorded_ones(tmp_path):
         assert run["runner"] == variant.apply(stage.settings).runner_cfg()
 
 
+def _teacher_recipe(p: presets.Preset, variant: presets.Variant = presets.Variant()) -> str:
+    """Which teacher a row with `variant` uses in preset `p`, in the words the Table V report uses."""
+    t = p.teacher_stage(variant)
+    words = ablations.teacher_words(t.settings.name, variant, (t.iterations or t.settings.max_iterations) - 1)
+    return f"the shipped teacher: {words}" if t.shipped else f"trained by the recipe: {words}"
+
+
 def test_no_teacher_ablation_clones_scripted_grasps_and_every_row_names_its_teacher():
     assert ablations.has_scripted_cloning(presets.SHIPPED_TEACHER_PRESET)  # staged: both stages clone
     assert ablations.has_scripted_cloning(presets.teacher.CPU_BC_JOINT)
@@ -362,7 +369,7 @@ def test_no_teacher_ablation_clones_scripted_grasps_and_every_row_names_its_teac
     for p in presets.PRESETS.values():
         for row in presets.TABLE_V.values():
             variant = presets.TEACHERS[row.teacher]
-            stage, words = p.teacher_stage(variant), p.teacher_recipe(variant)
+            stage, words = p.teacher_stage(variant), _teacher_recipe(p, variant)
             assert f"`{stage.settings.name}`" in words and "iterations 0.." in words, (p.name, row.name)
             if ablations.is_teacher_ablation(variant):
                 assert not stage.shipped and not ablations.has_scripted_cloning(stage.settings), (p.name, row.name)
@@ -370,8 +377,8 @@ def test_no_teacher_ablation_clones_scripted_grasps_and_every_row_names_its_teac
                 assert f"--{'no_incentive' if variant.no_incentive else 'student_obs'}=true" in words
             else:
                 assert stage is p.teacher
-    assert presets.PRESETS["quick"].teacher_recipe().startswith("the shipped teacher: `cpu_bc_capsule`")
-    assert "scripted-grasp cloning" in presets.PRESETS["quick"].teacher_recipe()
+    assert _teacher_recipe(presets.PRESETS["quick"]).startswith("the shipped teacher: `cpu_bc_capsule`")
+    assert "scripted-grasp cloning" in _teacher_recipe(presets.PRESETS["quick"])
     # A preset whose teacher ablations would clone is refused where it is defined.
     with pytest.raises(ValueError, match="clones scripted grasps"):
         dataclasses.replace(presets.PRESETS["cpu"], ablation_teacher=None)

@@ -23,9 +23,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from doc_commands import ALL, ROOT, SHIPPED_STUDENT
 from emulators.glove_sender import GloveEmulator, free_udp_port
 from emulators.rig import LATENCY_TIMER_MS, GripperRig
-from test_docs_commands import ALL, ROOT, SHIPPED_STUDENT, offline_in, run_in_process
+from test_docs_commands import offline_in, run_in_process
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware.force_board import build

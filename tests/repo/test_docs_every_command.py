@@ -24,8 +24,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from doc_commands import ROOT, concrete, shell_blocks
 from packaging.requirements import Requirement
-from test_docs_commands import ROOT, concrete, run_in_process, shell_blocks
+from test_docs_commands import run_in_process
 
 PARSED = "parsed by its own CLI parser (test_docs_commands.py)"
 PIP = "checked: each requirement parses and names this distribution, its extras exist in pyproject.toml"

@@ -15,6 +15,7 @@ import re
 from pathlib import Path
 
 import pytest
+from emulators.faults import FaultyBus
 from emulators.harness import BIN, Operator, cli_env
 from emulators.rig import LATENCY_TIMER_MS, GripperRig
 
@@ -242,11 +243,11 @@ def test_lerobot_setup_motors_from_factory_servos_one_at_a_time(tmp_path):
     cable at their own IDs and the config's baud rate, and `lerobot-calibrate`'s bus finds them."""
     from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
-    from lerobot_blindgrasp.emulators.dynamixel import BAUD_REGISTER, DynamixelBusEmulator
+    from lerobot_blindgrasp.emulators.control_table import BAUD_REGISTER
 
     config = ROOT / "robot_configs" / "blindgrasp_gripper.yaml"
     joints = spec.JOINT_NAMES
-    with DynamixelBusEmulator([], baudrate=57_600) as emu:
+    with FaultyBus([], baudrate=57_600) as emu:
         cmd = [str(BIN / "lerobot-setup-motors"), f"--robot=include {config}", "--robot.id=new",
                f"--robot.port={emu.port}", f"--robot.calibration_dir={tmp_path / 'calibration'}",
                f"--robot.latency_timer_ms={LATENCY_TIMER_MS}"]  # fmt: skip
@@ -254,7 +255,7 @@ def test_lerobot_setup_motors_from_factory_servos_one_at_a_time(tmp_path):
         fresh = []
         for joint, dxl_id in reversed(list(zip(joints, spec.SERVO_IDS, strict=True))):
             op.expect(f"Connect the controller board to the '{joint}' servo (ID {dxl_id}) only")
-            fresh.append(DynamixelBusEmulator.factory_servo())
+            fresh.append(FaultyBus.factory_servo())
             emu.plug(fresh[-1])  # the previous servo unplugged, this one out of its box
             op.answer()
             op.expect(f"'{joint}' servo: ID {dxl_id} at 1000000 bps")

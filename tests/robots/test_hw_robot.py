@@ -22,7 +22,7 @@ from lerobot.robots.config import RobotConfig
 from lerobot.utils.feature_utils import combine_feature_dicts
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.emulators.dynamixel import HW_OVERHEATING, HW_OVERLOAD
+from lerobot_blindgrasp.emulators.control_table import HW_OVERHEATING, HW_OVERLOAD
 from lerobot_blindgrasp.hardware.xm430 import (
     CURRENT_UNIT_A,
     RAD_PER_TICK,

@@ -249,3 +249,21 @@ def test_batch_backend_state_is_torch_sharing_memory_with_the_physics():
     np.testing.assert_array_equal(p.qpos.numpy(), p.batch.bind("qpos"))  # the same memory, after the step
     assert (p.qpos[:, :9] - before[:, :9]).abs().max() > 1e-3  # and the joints moved towards them
     env.close()
+
+
+def test_batch_backend_reset_starts_envs_from_rest_and_leaves_the_others():
+    """The batch's reset (mj_resetData's defaults) zeroes velocity, the solver's warm start and applied forces of the
+    envs it resets, so the backend does not zero them again; the other envs keep their state."""
+    env = BatchedGraspEnv(GraspEnvConfig(num_envs=3, seed=0, nthread=1))
+    env.reset()
+    p, warm = env.physics, env.physics.batch.bind("qacc_warmstart")
+    p.ctrl[:] = p.ctrl + 0.2
+    p.xfrc_applied[:, :, :3] = 0.3
+    p.step(10)
+    assert (p.qvel.abs().amax(dim=1) > 0).all()
+    assert (np.abs(warm).max(axis=1) > 0).all()
+    kept = p.qvel[2].clone()
+    p.reset(torch.tensor([0, 1]))
+    assert p.qvel[:2].abs().max() == 0 and (warm[:2] == 0).all() and p.xfrc_applied[:2].abs().max() == 0
+    assert torch.equal(p.qvel[2], kept) and p.xfrc_applied[2, :, :3].abs().min() == 0.3
+    env.close()

@@ -6,13 +6,13 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+from test_sim_physics import run_pinch_lift
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.sim import randomization
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.scripted import run_pinch_lift
 
 N = 3
 

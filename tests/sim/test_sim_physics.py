@@ -15,7 +15,21 @@ from lerobot_blindgrasp.hardware import force
 from lerobot_blindgrasp.sim import gripper, objects, randomization, sensors
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-from lerobot_blindgrasp.sim.scripted import run_pinch_lift
+from lerobot_blindgrasp.sim.scripted import PinchLiftScript
+
+
+# The scripted pinch-and-lift as the physics tests run it (test_sim_warp and test_sim_observations too).
+def run_pinch_lift(
+    env, steps: int, object_radius: float = 0.03, grasp_height: float = 0.045, lift_m: float = 0.03
+):
+    """Pinch a reset `BatchedGraspEnv` for `steps` steps: lifts (steps, N), clean forces (steps, N, 3), last info."""
+    script = PinchLiftScript(object_radius, grasp_height, lift_m)
+    lifts, forces = [], []
+    for _ in range(steps):
+        _, _, _, _, info = env.step(script(env.joint_positions()))
+        lifts.append(info["lift"].copy())
+        forces.append(info["uniaxial_force"].copy())
+    return np.array(lifts), np.array(forces), info
 
 
 def _model(obj="cylinder_a_medium"):

@@ -220,6 +220,18 @@ def test_observation_terms_match_the_numpy_implementation(rollout):
         np.testing.assert_allclose(obs["policy"].numpy(), policy, rtol=F32_ULP, atol=F32_ULP * 1e-3)
 
 
+def test_the_scenes_tip_readings_are_views_of_sensordata(rollout):
+    """The fingers' readings share one layout in the scene, so each read is a view (no gather per reading per step);
+    it holds what the columns say."""
+    env, _ = rollout
+    si, sd = env.sensor_index, env.physics.sensordata
+    assert si.block is not None
+    for kind, cols in si.cols.items():
+        view = si.read(sd, kind)
+        assert view.untyped_storage().data_ptr() == sd.untyped_storage().data_ptr()
+        assert torch.equal(view, sd[:, cols])
+
+
 def test_reward_terms_match_the_numpy_implementation(rollout):
     env, states = rollout
     cfg = rewards.PAPER_REWARD.with_weights(reach=0.5, touch=0.5)

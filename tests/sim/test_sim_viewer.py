@@ -11,7 +11,7 @@ import imageio.v3 as iio
 import pytest
 
 from lerobot_blindgrasp.sim import objects
-from lerobot_blindgrasp.sim.viewer import run_demo
+from lerobot_blindgrasp.sim.viewer import SimDemoConfig, run_demo
 
 DEMO = Path(sys.executable).with_name("blindgrasp-sim-viewer")
 
@@ -36,7 +36,7 @@ def test_scripted_lift_works_on_every_paper_object(name):
     # hold the lift on 3 of the 5 per-object evaluation draws 0-4), so it must hold on most of five draws.
     held = []
     for seed in range(5):
-        s = run_demo(name, seed=seed, steps=100, output=None)
+        s = run_demo(SimDemoConfig(name, seed=seed, steps=100, video=False))
         assert s["max_lift_m"] < 0.045, s  # lifted by about the scripted 3 cm, not thrown by a physics blow-up
         if s["success"] and 0.02 < s["final_lift_m"] < 0.04:
             # No reading near a physics blow-up. No lower bound: the sensor is axial, and a pinch that holds a large
@@ -48,6 +48,6 @@ def test_scripted_lift_works_on_every_paper_object(name):
 
 def test_demo_rejects_bad_options():
     with pytest.raises(ValueError, match="unknown object"):
-        run_demo("teapot", output=None)
+        SimDemoConfig("teapot")
     with pytest.raises(ValueError, match="steps"):
-        run_demo(steps=0, output=None)
+        SimDemoConfig(steps=0)

@@ -20,11 +20,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
+from test_sim_physics import run_pinch_lift
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import objects, randomization
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv, GraspEnvConfig
-from lerobot_blindgrasp.sim.scripted import run_pinch_lift
 
 NO_PUSH = randomization.EVAL_DR
 

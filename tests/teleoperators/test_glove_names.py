@@ -20,7 +20,7 @@ from emulators.glove_sender import FIST, OPEN, GloveEmulator, free_udp_port
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, manus_bridge
 from lerobot_blindgrasp.teleoperators.manus_glove import retarget as rt
-from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender, decode
+from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveSender, decode, encode
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "glove.md"
 
@@ -51,12 +51,12 @@ def test_the_documented_table_is_the_code_table():
     expected = [[c.name, c.enum_name("right"), f"{c.enum_value('left')} / {c.enum_value('right')}", c.ros2,
                  ", ".join(use.get(c.name, ["-"]))] for c in manus_bridge.CHANNELS]  # fmt: skip
     assert _doc_rows() == expected
-    assert rt.REQUIRED_KEYS <= set(manus_bridge.BY_NAME) and len(rt.REQUIRED_KEYS) == 12
+    assert rt.REQUIRED_KEYS <= {c.name for c in manus_bridge.CHANNELS} and len(rt.REQUIRED_KEYS) == 12
 
 
 def test_the_names_are_the_sdk_and_publisher_spellings():
     name, value = SDK_ENUM_RIGHT_INDEX
-    c = manus_bridge.BY_NAME["IndexMCPSpread"]
+    c = next(c for c in manus_bridge.CHANNELS if c.name == "IndexMCPSpread")
     assert (c.enum_name("right"), c.enum_value("right")) == (name, value)
     assert [c.ros2 for c in manus_bridge.CHANNELS] == ROS2_STRINGS
     assert manus_bridge.CHANNELS[-1].enum_value("right") == 39  # ErgonomicsDataType_MAX_SIZE = 40
@@ -68,13 +68,8 @@ def test_every_accepted_spelling_decodes_to_the_same_channels(style):
         return {"channel": c.name, "ros2": c.ros2, "enum": c.enum_name("left"),
                 "enum_no_prefix": c.enum_name("left").removeprefix("ErgonomicsDataType_")}[style]  # fmt: skip
 
-    sender = GloveSender("127.0.0.1", 9, "left")
-    try:
-        d = decode(
-            sender.pack({key(c): OPEN[c.name] for c in manus_bridge.CHANNELS} | {"Invalid": 0.0}), rt.REQUIRED_KEYS
-        )
-    finally:
-        sender.close()
+    ergonomics = {key(c): OPEN[c.name] for c in manus_bridge.CHANNELS} | {"Invalid": 0.0}
+    d = decode(encode("spellings", 1, 0.0, ergonomics, "left"), rt.REQUIRED_KEYS)
     assert d.ergonomics == {k: OPEN[k] for k in rt.REQUIRED_KEYS}
 
 

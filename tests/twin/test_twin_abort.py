@@ -36,7 +36,7 @@ def twin(tmp_path):
 
 def _start_trial(twin, seed: int) -> tuple[SocketOperator, int]:
     host = SocketOperator(twin.cfg.socket)
-    host.announce_trial("sphere_medium", 1, seed)
+    host.announce_trial("sphere_medium", seed)
     assert host.wait_for({"enter"}, timeout_s=30) == "enter"
     return host, twin.physics.trial
 

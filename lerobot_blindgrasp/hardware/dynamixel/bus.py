@@ -1,9 +1,7 @@
-"""LeRobot's `DynamixelMotorsBus`, with the bus-level behaviour the gripper's safety depends on: `num_retry` as the
-floor of every transaction (LeRobot's own calls included), raw registers (the calibration lives in the servos), an
-exclusive port, a clean line for every try, a stray reply of another transaction taken as a corrupt one, an
-unplugged adapter as one `PortLostError`, a handshake that names missing IDs, wrong models and a silencing
-Status_Return_Level, Drive_Mode in the calibration, block reads, and the latched stop's confirmed torque-off.
-It overrides only LeRobot's and the SDK's own sub-classing points; their retry loops are reused.
+"""LeRobot's `DynamixelMotorsBus` with the bus-level behaviour the gripper's safety depends on (retries on every
+transaction, raw registers, an exclusive port, a clean line for every try, stray replies refused, an unplugged
+adapter as one `PortLostError`, a handshake that names what is wrong, block reads, a confirmed torque-off). It
+overrides only LeRobot's and the SDK's own sub-classing points; their retry loops are reused.
 """
 
 from __future__ import annotations

@@ -1,9 +1,6 @@
-"""The USB-serial adapter's latency timer: 1 ms, or a warning that says how to get it.
-
-An FTDI chip (the U2D2, a Nano's FT232RL) holds a short packet for up to `latency_timer` ms (Linux default 16) before
-handing it on, so every status reply waits that long: at three sync reads a period, up to half of a 20 Hz budget.
-ftdi_sio exposes it as `/sys/bus/usb-serial/devices/<tty>/latency_timer` (root only; the shipped udev rule sets it);
-other adapters and pseudo-terminals have no such file, and nothing is said for them.
+"""The USB-serial adapter's latency timer: 1 ms, or a warning that says how to get it. An FTDI chip (the U2D2, a
+Nano's FT232RL) holds a short packet up to `latency_timer` ms (Linux default 16) before handing it on: at three sync
+reads a period, up to half of a 20 Hz budget. Other adapters and pseudo-terminals have no such file.
 """
 
 from __future__ import annotations
@@ -44,8 +41,8 @@ class LatencyTimerCheck:
         )
 
 
-def check_latency_timer(port: str, sysfs_root: Path = SYSFS_ROOT, target_ms: int = TARGET_MS) -> LatencyTimerCheck:
-    """Read the adapter's latency timer and lower it to `target_ms` where this process may write it."""
+def check_latency_timer(port: str, sysfs_root: Path = SYSFS_ROOT) -> LatencyTimerCheck:
+    """Read the adapter's latency timer and lower it to `TARGET_MS` where this process may write it."""
     tty = Path(os.path.realpath(port)).name  # a udev or by-id symlink names the tty whose driver has the file
     path = Path(sysfs_root) / "bus" / "usb-serial" / "devices" / tty / "latency_timer"
     if not path.is_file():
@@ -54,16 +51,16 @@ def check_latency_timer(port: str, sysfs_root: Path = SYSFS_ROOT, target_ms: int
         before = int(path.read_text().strip())
     except (OSError, ValueError) as e:
         return LatencyTimerCheck(port, path, error=f"unreadable: {e}")
-    if before <= target_ms:
+    if before <= TARGET_MS:
         return LatencyTimerCheck(port, path, before, before)
     try:
-        path.write_text(f"{target_ms}\n")
+        path.write_text(f"{TARGET_MS}\n")
         after = int(path.read_text().strip())
     except OSError as e:  # not root (the usual case: the file is root's), or a read-only /sys in a container
         return LatencyTimerCheck(port, path, before, None, error=e.strerror or str(e))
     except ValueError as e:
         return LatencyTimerCheck(port, path, before, None, error=f"unreadable after the write: {e}")
-    if after > target_ms:
+    if after > TARGET_MS:
         return LatencyTimerCheck(port, path, before, after, error=f"the driver kept {after} ms")
     return LatencyTimerCheck(port, path, before, after)
 

@@ -40,14 +40,13 @@ class BuildError(RuntimeError):
     own words."""
 
 
-def missing_packages(simulator: bool = True) -> list[str]:
-    """The Debian packages that are missing for the firmware build (and the simulator's, when `simulator`)."""
-    needs = FIRMWARE_NEEDS + (SIMULATOR_NEEDS if simulator else ())
+def missing_packages(needs=FIRMWARE_NEEDS + SIMULATOR_NEEDS) -> list[str]:
+    """The Debian packages that are missing for the firmware and the simulator builds (or for `needs`)."""
     return [package for package, present in needs if not present()]
 
 
 def _require(needs) -> None:
-    if missing := [package for package, present in needs if not present()]:
+    if missing := missing_packages(needs):
         raise BuildError(f"missing build tools: apt-get install {' '.join(missing)} (Debian/Ubuntu package names)")
 
 

@@ -1,11 +1,7 @@
-"""A device's frame counter judged against this host's clock: a board that restarted told from a replay, and a counter
-that runs ahead of the time that passed (docs/force_board.md, "A board reset is not a replay").
-
-Between two frames `dt` apart the counter may advance by at most `1 + max_rate_hz * (dt + slack_s)`; lost frames
-only advance it more, so only the upper bound is a fault. A counter that steps back is a replay (dropped), unless it
-is a restart: marked by the device (`boot`), or ending a silence of `boot_silence_s` with a counter no larger than
-that time allows. A restarted counter is held (kept, never live) until `confirm_frames` more frames advance with
-time; a frame that continues the old counter meanwhile cancels it. Hand-written: no library judges a counter.
+"""A device's frame counter judged against this host's clock (docs/force_board.md, "A board reset is not a replay"):
+it may advance by at most `1 + max_rate_hz * (dt + slack_s)` between frames `dt` apart (lost frames only advance it
+more); stepping back is a replay unless it is a restart (marked `boot`, or after a silence of `boot_silence_s`),
+which is held until `confirm_frames` more frames advance with time. Hand-written: no library judges a counter.
 """
 
 from __future__ import annotations
@@ -136,8 +132,6 @@ class CounterClock:
             self.restarts.pop()
             self._hold(seq, now, self._ref[0], boot, cause)
             return FrameVerdict.HOLD
-        return (
-            FrameVerdict.REPEAT
-            if step == 0
-            else (FrameVerdict.AHEAD if step <= self.modulus // 2 else FrameVerdict.BACKWARD)
-        )
+        if step == 0:
+            return FrameVerdict.REPEAT
+        return FrameVerdict.AHEAD if step <= self.modulus // 2 else FrameVerdict.BACKWARD

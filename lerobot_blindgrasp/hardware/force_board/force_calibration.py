@@ -1,12 +1,7 @@
-"""Force calibration: scale and offset per fingertip from a known weight, a wiring check, and the file the robot
-reads at connect (the operator's command is `force_calibration_cli.py`).
-
-Per fingertip k on stream channel c = channel_map[k]: offset_c = mean unloaded counts (before and after),
-scale_k = mass x g / (loaded - unloaded mean counts) in N/count, its sign making a push read positive. With the
-weight on pad k, channel c must respond most (beyond `min_snr` x its noise) and every other stay within
-`max_crosstalk` of it, so a swapped cable is named before anything is saved. The file `<robot id>.force.json` sits
-next to the servo calibration; at connect (`apply`) its scales and offsets replace the config's, and a channel_map
-other than the one it was measured with is refused.
+"""Force calibration (docs/force_board.md, "Calibration"): per fingertip, scale = mass x g / (loaded - unloaded mean
+counts) in N/count (a push reads positive) and offset = the unloaded mean; the loaded pad's channel must respond
+most, so a swapped cable is named before anything is saved. At connect (`apply`) the file `<robot id>.force.json`
+replaces the config's scales, and refuses a channel_map other than the one it was measured with.
 """
 
 from __future__ import annotations

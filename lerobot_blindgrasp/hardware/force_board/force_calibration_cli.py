@@ -3,9 +3,8 @@
     blindgrasp-calibrate-force --robot.type=blindgrasp_gripper --robot.id=lab_gripper \
         --robot.force_sensor.port=/dev/ttyUSB1 --mass_kg=0.5
 
-The same `--robot` flags as `lerobot-calibrate`, so the file lands next to that robot's servo calibration. Only the
-force board is opened (a command of its own: `lerobot-calibrate` only calls the servos' `calibrate()`). Five prompts:
-nothing on the pads, the weight on each pad in turn, the weight off.
+The same `--robot` flags as `lerobot-calibrate`, so the file lands next to that robot's servo calibration; only the
+force board is opened (`lerobot-calibrate` only calls the servos' `calibrate()`).
 """
 
 import logging

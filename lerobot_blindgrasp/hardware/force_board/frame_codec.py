@@ -1,12 +1,8 @@
-"""The force board's frames: encoder (for the emulators and tests) and the host's incremental decoder.
-
-Wire protocol (board -> host, little-endian; the field table is docs/force_board.md, "Frame protocol"):
+"""The force board's frames (docs/force_board.md, "Frame protocol"): the encoder (for the emulators and tests) and the
+host's incremental decoder, which resynchronises on the next SYNC after any bad length or CRC, so garbage on the
+line costs frames, never wrong values.
 
     SYNC a5 5a | LEN u8 | SEQ u16 | COUNTS i32 x N | STATUS u8 | RESET u8 (boot frame only) | CRC-16/CCITT-FALSE u16
-
-LEN counts SEQ..the body's end (4N + 3, or 4N + 4 for the boot frame, the first after every reset); the CRC covers
-LEN..the body's end. The decoder resynchronises on the next SYNC after any bad length or CRC, so garbage on the
-line costs frames, never wrong values.
 """
 
 from __future__ import annotations

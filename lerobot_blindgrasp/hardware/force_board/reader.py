@@ -1,11 +1,6 @@
-"""The force board's reader on the host: its serial stream as tared, scaled, deadbanded newtons.
-
-The board sends a frame per fresh sample and nothing in between, so any STATUS bit is a real fault. The SEQ is
-judged against this host's clock (`counter_clock.py`): re-sent, replayed or impossible frames are dropped and
-counted, and a board reset is held until `SETTLE_FRAMES` frames advance with time, keeping the tare (the HX711s keep
-their offset). A tare is taken only at rest, and a compressive load cell reading clearly below zero is a fault.
-What the host checks and why: docs/force_board.md. Counts become newtons by `force.counts_to_newtons`, then the
-sim's own `force.reading`.
+"""The force board's reader on the host: its serial stream as tared, scaled, deadbanded newtons (the sim's own
+`force.reading`). The SEQ is judged against this host's clock (`counter_clock.py`); a board reset keeps the tare
+(the HX711s keep their offset). What the host checks and why: docs/force_board.md.
 """
 
 from __future__ import annotations
@@ -30,6 +25,7 @@ BOARD_RATE_HZ = 80.0  # the HX711s' conversions per second with RATE high: one f
 # The HX711's output settling time after a reset or power-up (50 ms at 80 samples/s), in frames: a board that
 # restarted is trusted again only after this many frames advance with time, and it boots silent for at least as long.
 SETTLE_FRAMES = 4
+MIN_SAMPLES = 5  # a tare or calibration window averages at least this many frames, however short
 
 
 class ForceStreamError(StreamError):
@@ -217,11 +213,11 @@ class ForceSensorReader(LatestFrameStream[Frame]):
             )
         return np.array([frame.counts[c] for c in self.channel_map], dtype=np.float64)
 
-    def tare(self, duration_s: float, min_frames: int = 5) -> np.ndarray:
+    def tare(self, duration_s: float) -> np.ndarray:
         """Zero the sensors: mean counts over `duration_s`, with no fingertip touching anything. Refused
         (`ForceTareError`, the previous zero kept) when a pad is loaded: samples that vary more than an unloaded
         pad does (`tare_max_std_n`), or a re-tare whose zero moved more than drift explains (`tare_max_shift_n`)."""
-        samples = np.asarray(self.fresh_samples(duration_s, "during tare", self._channels, min_frames))
+        samples = np.asarray(self.fresh_samples(duration_s, "during tare", self._channels))
         offset = samples.mean(axis=0)
         std_n = samples.std(axis=0) * np.abs(self.scale)
         shift_n = (offset - self.offset) * self.scale if self.tared else np.zeros_like(offset)
@@ -238,12 +234,12 @@ class ForceSensorReader(LatestFrameStream[Frame]):
         self.offset, self.tared = offset, True
         return self.offset
 
-    def fresh_samples(self, duration_s: float, what: str, sample, min_frames: int = 5) -> list:
-        """`sample(frame)` of every frame over `duration_s` (at least `min_frames`), each passing `fresh()`: a frozen,
+    def fresh_samples(self, duration_s: float, what: str, sample) -> list:
+        """`sample(frame)` of every frame over `duration_s` (at least `MIN_SAMPLES`), each passing `fresh()`: a frozen,
         re-sent or faulty stream gives none."""
         samples = []
         deadline = time.monotonic() + duration_s
-        while time.monotonic() < deadline or len(samples) < min_frames:
+        while time.monotonic() < deadline or len(samples) < MIN_SAMPLES:
             if not self.wait_frames(1, self.stale_timeout_s * 4):
                 raise ForceStreamError(f"Force-sensor stream stopped {what} ({len(samples)} frames).")
             samples.append(sample(self.fresh()))

@@ -31,7 +31,6 @@ class BatchBackend:
         with warnings.catch_warnings():  # the binding is read-only: MuJoCo computes it, and the env only reads it
             warnings.filterwarnings("ignore", "The given NumPy array is not writable")
             self.sensordata = torch.from_numpy(self.batch.bind("sensordata"))
-        self._warm = self.batch.bind("qacc_warmstart")
         self._warnings_seen = np.zeros(n, dtype=np.int64)
 
     @property
@@ -39,11 +38,8 @@ class BatchBackend:
         return self.batch.nthread
 
     def reset(self, ids) -> None:
-        ids = _ids(ids)
-        self.batch.reset(ids, stage=mujoco.mjtStage.mjSTAGE_NONE)
-        self.qvel[ids] = 0.0
-        self._warm[ids] = 0.0
-        self.xfrc_applied[ids] = 0.0
+        # the model's defaults, as mj_resetData: zero velocity, warm-start and applied forces
+        self.batch.reset(_ids(ids), stage=mujoco.mjtStage.mjSTAGE_NONE)
 
     def forward(self, ids) -> None:
         ids = _ids(ids)

@@ -2,14 +2,8 @@
 """The MANUS glove bridge: one hand's ergonomics -> `blindgrasp-glove/2` UDP datagrams for the manus_glove teleoperator.
 
 One file needing only Python's standard library (3.10 or later) and, for `--source=ros2`, `rclpy`: copy it to the
-machine that runs MANUS and start it there (docs/glove.md).
-
-    python3 manus_bridge.py --source=ros2 --side=right          # from MANUS's ROS 2 publisher (manus_glove_0, ...)
-    python3 manus_bridge.py --source=sdk --side=right --sdk_library=/path/to/libManusSDK_Integrated.so
-    python3 manus_bridge.py --side=right --host=192.168.1.20    # to a robot PC at that address
-
-It is also the teleoperator's one source of the ergonomics names table (`CHANNELS`) and of the datagram (`encode`,
-`GloveSender`).
+machine that runs MANUS and start it there (docs/glove.md; `python3 manus_bridge.py --help`). It is also the
+teleoperator's one source of the ergonomics names table (`CHANNELS`) and of the datagram (`encode`, `GloveSender`).
 """
 
 from __future__ import annotations
@@ -59,7 +53,6 @@ def _ros2_string(finger: str, motion: str) -> str:
 
 
 CHANNELS = tuple(Channel(f"{f}{m}", f, m, _ros2_string(f, m)) for f in FINGERS for m in MOTIONS)
-BY_NAME = {c.name: c for c in CHANNELS}
 # The channels the gripper's retargeting reads (thumb, index, middle): the bridge warns when its hand lacks one.
 USED_CHANNELS = frozenset(c.name for c in CHANNELS if c.finger in ("Thumb", "Index", "Middle"))
 
@@ -127,20 +120,10 @@ class GloveSender:
     def source(self) -> tuple[str, int]:
         return self._sock.getsockname()
 
-    def pack(self, ergonomics: dict[str, float], sent: float | None = None) -> bytes:
-        """The next datagram of this session (numbered and stamped now), not sent yet."""
-        self.seq += 1
-        return encode(self.session, self.seq, time.monotonic() if sent is None else sent, ergonomics, self.side)
-
-    def send_raw(self, datagram: bytes) -> None:
-        self._sock.sendto(datagram, self.addr)
-
     def send(self, ergonomics: dict[str, float]) -> None:
-        self.send_raw(self.pack(ergonomics))
-
-    def restart(self) -> None:
-        """What a restarted bridge looks like: a new session, counting from 1 again."""
-        self.session, self.seq = secrets.token_hex(8), 0
+        """The next datagram of this session, numbered and stamped now."""
+        self.seq += 1
+        self._sock.sendto(encode(self.session, self.seq, time.monotonic(), ergonomics, self.side), self.addr)
 
     def close(self) -> None:
         self._sock.close()
@@ -338,9 +321,8 @@ class ErgonomicsStream(C.Structure):  # publishTime is a ManusTimestamp: struct 
     _fields_ = [("publishTime", C.c_uint64), ("data", ErgonomicsData * 32), ("dataCount", C.c_uint32)]
 
 
-class ManusHost(
-    C.Structure
-):  # manusCoreVersion (never read): Version { uint32 major, minor, patch; char[16] x 3 }
+# manusCoreVersion (never read): Version { uint32 major, minor, patch; char[16] x 3 }
+class ManusHost(C.Structure):
     _fields_ = [("hostName", C.c_char * 256), ("ipAddress", C.c_char * 40), ("manusCoreVersion", C.c_uint32 * 15)]
 
 

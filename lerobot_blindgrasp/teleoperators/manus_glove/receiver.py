@@ -1,13 +1,6 @@
-"""The glove receiver: the newest pose for one hand from the bridge's UDP datagrams (`protocol.py`), ordered and
-aged by the bridge's own `seq` and `sent` clock, not by arrival (docs/glove.md, "Time by the bridge's clock").
-
-- Order: within a session only a `seq` above the newest used is kept (`late`); a new session is a restarted
-  bridge, followed at once unless its `sent` is behind the newest pose used (`retired`, as are the old session's).
-- Age: a loopback bridge shares this host's monotonic clock (age = arrival - sent). Elsewhere the minimum of
-  arrival - sent estimates the clocks' offset, leaking upwards by `OFFSET_LEAK` s per s; a datagram queued longer
-  than `max_latency_s` beyond it is dropped (`stale`), so a backlog is never replayed. A `sent` stepping back
-  within a session is dropped (`clock_steps`). Arrival is the kernel's receive stamp.
-- One sender: the configured `sender`, else the first valid one; every other is dropped (`foreign`).
+"""The glove receiver: the newest pose for one hand from one bridge's UDP datagrams (`protocol.py`), ordered and
+aged by the bridge's own `seq` and `sent` clock, not by arrival; the rules and their counters (`late`, `stale`,
+`retired`, `clock_steps`, `foreign`) are docs/glove.md's "Time by the bridge's clock".
 """
 
 from __future__ import annotations
