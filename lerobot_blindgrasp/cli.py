@@ -31,11 +31,8 @@ def parse_config[T](cls: type[T], argv: list[str] | None = None) -> T:
 def sleeping_openmp_threads(restart: bool) -> None:
     """Make idle OpenMP threads sleep instead of spin (`OMP_WAIT_POLICY=PASSIVE`), unless the user chose a policy:
     on a shared machine spinning threads steal the cores the others need. Call it first thing in `main(argv)`.
-
-    OpenMP reads the setting once, when torch loads it, which has happened by then. So with `restart` (pass
-    `argv is None`: the process is this command) the command starts over with it set (`os.execv`, same pid and
-    arguments); without it, it is set for the processes this one starts.
-    """
+    OpenMP reads the setting once, when torch loads, which has happened by then: with `restart` (pass `argv is
+    None`) the command starts over with it set (`os.execv`); without, it holds for the processes this one starts."""
     if "OMP_WAIT_POLICY" in os.environ:
         return
     os.environ["OMP_WAIT_POLICY"] = "PASSIVE"

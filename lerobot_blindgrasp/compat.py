@@ -1,11 +1,8 @@
 """Every place the plugin reaches into LeRobot's internals or installs a process-wide hook, and nowhere else
-(`tests/policies/test_compat.py` scans the package for strays): LeRobot's dataset reader and writers
-(`serve_dataset_readers_with`, `skip_empty_image_embedding`, `atomic_lerobot_metadata`, and the writers' private
-state the demo collector resets: `reopen_finalized`, `finalize_or_abandon`), lerobot-record's episode announcement (`is_episode_announcement`), LeRobot's
-command line (`read_command_line`, `set_lerobot_argv`), and the process's signal handlers and excepthook.
-
-Each was read against LeRobot `WRITTEN_FOR`. Under another version the first reach used logs, once, what
-`check_lerobot()` finds missing; a reach whose target is gone leaves LeRobot's own behaviour in place.
+(`tests/policies/test_compat.py` scans the package for strays): LeRobot's dataset reader and writers, lerobot-record's
+episode announcement, LeRobot's command line, and the process's signal handlers and excepthook. Each was read against
+LeRobot `WRITTEN_FOR`; under another version the first reach used logs, once, what `check_lerobot()` finds missing,
+and a reach whose target is gone leaves LeRobot's own behaviour in place.
 """
 
 from __future__ import annotations
@@ -70,16 +67,15 @@ def _mentions(module: str, *texts: str) -> list[str]:
 def check_lerobot() -> list[str]:
     """What the reaches rely on that the installed LeRobot lacks: one line each; empty when all is there."""
     reader, writer, meta = (f"lerobot.datasets.dataset_{m}" for m in ("reader", "writer", "metadata"))
+    io_utils = "lerobot.datasets.io_utils"
     problems = _has(reader, "DatasetReader.try_load", "DatasetReader.load_and_activate", "DatasetReader.get_item")
     problems += _mentions(reader, *(f"self.{a} =" for a in ("_meta", "hf_dataset", "delta_indices")))
     problems += _mentions(reader, "self._image_transforms =", "self._absolute_to_relative_idx =")
     problems += _has(writer, "embed_images", "DatasetWriter._save_episode_data")
     problems += _mentions(writer, "embed_images(ep_dataset)")
     problems += _has("datasets.features.features", "require_storage_embed")
-    problems += _has("lerobot.datasets.io_utils", "write_json", "write_info", "write_stats")
-    problems += _mentions(
-        "lerobot.datasets.io_utils", "    write_json(info.to_dict()", "    write_json(serialized"
-    )
+    problems += _has(io_utils, "write_json", "write_info", "write_stats")
+    problems += _mentions(io_utils, "    write_json(info.to_dict()", "    write_json(serialized")
     problems += _has(meta, "write_tasks")
     problems += _mentions(meta, "write_tasks(self.tasks, self.root)")
     problems += _has("lerobot.utils.utils", "log_say")
@@ -144,10 +140,9 @@ def _choose_after(load: Callable, choose: Callable) -> Callable:
 
 @contextlib.contextmanager
 def skip_empty_image_embedding() -> Iterator[None]:
-    """Within the block, the dataset writer's `embed_images` returns a dataset unchanged when `datasets`'
-    `require_storage_embed` says no column needs embedding: LeRobot 0.6.1 runs this per-row pass even for
-    state-only datasets, rebuilding each row unchanged (docs/upstream/skip-image-embedding.md). Same files written.
-    """
+    """Within the block, the dataset writer's `embed_images` returns a dataset unchanged when no column needs
+    embedding (`datasets`' `require_storage_embed`): LeRobot 0.6.1 runs this per-row pass even for state-only
+    datasets (docs/upstream/skip-image-embedding.md). Same files written."""
     try:
         from datasets.features.features import require_storage_embed
         from lerobot.datasets import dataset_writer
@@ -262,9 +257,8 @@ def set_lerobot_argv(argv: list[str]) -> None:
 
 
 def set_signal_handler(signum: int, handler) -> object:
-    """Install `handler` for `signum` (main thread only, as Python requires); returns the previous handler. The
-    robot's, while a gripper is connected, make a scheduler's stop unwind through the script's cleanup (torque
-    off)."""
+    """Install `handler` for `signum` (main thread only); returns the previous handler. The robot's, while a gripper
+    is connected, make a scheduler's stop unwind through the script's cleanup (torque off)."""
     return signal.signal(signum, handler)
 
 
@@ -281,11 +275,10 @@ _META_FIELDS = ("_finalized", "latest_episode", "episodes", "_pq_writer", "_meta
 
 
 def reopen_finalized(ds) -> bool:
-    """Make a finalized LeRobotDataset accept episodes again, as `LeRobotDataset.resume` would leave it: both
-    writers closed, no latest episode, and `meta.episodes[-1]` naming the last episode's files and frame range, so
-    that the next episode goes to the next data and meta/episodes files. Resume re-reads these from meta/episodes
-    (seconds on a large dataset); LeRobot holds them in memory. False (nothing changed) when LeRobot's internals
-    are not as expected or the dataset is not finalized."""
+    """Make a finalized LeRobotDataset accept episodes again, as `LeRobotDataset.resume` would leave it (both writers
+    closed, `meta.episodes[-1]` naming the last episode's files and frame range) but from what LeRobot holds in
+    memory, not by re-reading meta/episodes (seconds on a large dataset). False (nothing changed) when LeRobot's
+    internals are not as expected or the dataset is not finalized."""
     w, m = getattr(ds, "writer", None), getattr(ds, "meta", None)
     expected = ((ds, ("_is_finalized",)), (w, _WRITER_FIELDS), (m, _META_FIELDS))  # None has none of them
     if not all(hasattr(obj, f) for obj, names in expected for f in names):
@@ -311,9 +304,8 @@ def _unfinalize(ds) -> bool:
 
 
 def finalize_or_abandon(ds) -> None:
-    """LeRobot's finalize; if it fails, its writers are abandoned: their garbage-collection safety net would
-    retry the write at interpreter shutdown, where pyarrow aborts the process (exit 134) instead of raising. The
-    files left without a footer are what `--resume` / `blindgrasp-repair-dataset` set aside."""
+    """LeRobot's finalize; if it fails, its writers are abandoned (their garbage-collection safety net would retry the
+    write at interpreter shutdown, where pyarrow aborts the process instead of raising) and `--resume` repairs."""
     try:
         ds.finalize()
     except BaseException:

@@ -1,9 +1,7 @@
-"""Atomic file writes: a file is either its old self or completely replaced, whatever happens during the write.
-
-The standard idiom: write a temporary file beside the target, fsync it, `os.replace` it over the target, fsync
-the folder. A kill leaves at worst a hidden `.NAME.tmp-*` file, which `remove_stale_temps` clears. A failed write
-raises `WriteError`, naming the cause in words (a full disk, the file-size limit); deliberately not an `OSError`,
-so code that maps OSError to a device fault (the gripper's safety latch) never relabels a disk problem.
+"""Atomic file writes: a temporary file beside the target, fsynced, `os.replace`d over it, the folder fsynced. A kill
+leaves at worst a hidden `.NAME.tmp-*` file (`remove_stale_temps`). A failed write raises `WriteError`, naming the
+cause in words; deliberately not an `OSError`, so code that maps OSError to a device fault (the gripper's safety
+latch) never relabels a disk problem.
 """
 
 from __future__ import annotations
@@ -69,10 +67,9 @@ def fsync_dir(folder: Path) -> None:
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, fsync: bool = True) -> Iterator[Path]:
-    """Yield a temporary path beside `path`; once the block ends normally, the temp file is fsynced and renamed
-    over `path` (with the old file's permissions, else 0o666 less the umask). On any error the temp file is removed
-    and `path` is untouched. fsync=False: still atomic against a killed process, not against a power cut; for files
-    rewritten many times a second whose caller fsyncs at its own checkpoints (`fsync_tree`)."""
+    """Yield a temporary path beside `path`, fsynced and renamed over it (with the old file's permissions, else 0o666
+    less the umask) once the block ends normally; on any error it is removed and `path` is untouched. fsync=False:
+    atomic against a kill, not a power cut; for files rewritten often whose caller fsyncs at checkpoints."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:  # hidden, with the target's suffix: writers pick their format from it; globs like *.pt never match it

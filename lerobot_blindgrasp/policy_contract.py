@@ -1,12 +1,8 @@
 """The policy-vs-robot contract: what a checkpoint records it was trained for, and the check that refuses one that
-does not fit the robot before any servo takes torque. The caller that knows the checkpoint passes it: the real eval
-env and blindgrasp-rollout before the policy loads, the robot at connect (docs/hardware.md, "The policy").
-
-`check_checkpoint(path, robot)` reads the checkpoint's own files without loading the policy (LeRobot's
-`make_policy` overwrites its output features with the env's) and names the file each fact came from. A fact that
-differs refuses the run (`PolicyMismatchError`); a fact no file holds refuses it too, unless `allow_unverified`.
-`python -m lerobot_blindgrasp.policy_contract` records `trained_for` in a checkpoint trained before lerobot-train
-wrote it, from its dataset (`--dataset_root`) or this project's sim demo schema (`--sim_demos=true`).
+does not fit the robot before any servo takes torque. The caller that knows the checkpoint runs it (the real eval
+env, blindgrasp-rollout, the robot at connect); it reads the checkpoint's own files (LeRobot's `make_policy`
+overwrites a loaded policy's output features with the env's) and names the file each fact came from. `python -m
+lerobot_blindgrasp.policy_contract` records `trained_for` in a checkpoint trained before lerobot-train wrote it.
 """
 
 from __future__ import annotations
@@ -36,8 +32,7 @@ _checked: set[tuple] = set()
 
 
 class PolicyMismatchError(ValueError):
-    """The policy checkpoint was trained for another robot (feature names, shapes or order, robot type, fps, action
-    meaning): refused before any servo takes torque."""
+    """The checkpoint was trained for another robot (features, robot type, fps, action meaning): refused before torque."""
 
 
 @dataclass(frozen=True)
@@ -89,11 +84,6 @@ def dataset_info(train: dict | None, where: Path) -> tuple[dict | None, str]:
         if info is not None:
             return info, str(root / "meta" / "info.json")
     return None, f"the training dataset's meta/info.json (looked in {[str(c) for c in candidates]}, from {where})"
-
-
-def shape(features: dict | None, key: str) -> tuple | None:
-    ft = (features or {}).get(key)
-    return tuple(ft["shape"]) if isinstance(ft, dict) and "shape" in ft else None
 
 
 def step_names(pipeline: dict | None) -> list[str]:
@@ -163,7 +153,8 @@ def _feature_problems(cfg: dict, where: Path, robot: RobotContract) -> list[str]
         extra = sorted(set(cfg.get(group) or {}) - {key})
         if extra:
             bad.append(f"{group} {extra} in {where / 'config.json'}: the robot has only '{key}' there (no camera)")
-        have = shape(cfg.get(group), key)
+        ft = (cfg.get(group) or {}).get(key)
+        have = tuple(ft["shape"]) if isinstance(ft, dict) and "shape" in ft else None
         if have != want[key]:
             bad.append(f"'{key}' shape {have} in {where / 'config.json'} ({group}), the robot has {want[key]}")
     for name in PROCESSORS:
@@ -204,14 +195,7 @@ def _trained_for(cfg: dict, train: dict | None, where: Path) -> tuple[dict | Non
     info, source = dataset_info(train, where)
     if info is None:
         return None, f"{where / 'config.json'} has no trained_for, and {source} was not found"
-    features = info.get("features") or {}
-
-    def names(key: str):
-        value = (features.get(key) or {}).get("names")
-        return next(iter(value.values()), None) if isinstance(value, dict) else value
-
-    return {"robot_type": info.get("robot_type"), "fps": info.get("fps"), "state_names": names(STATE),
-            "action_names": names(ACTION)}, source  # fmt: skip
+    return facts_from_dataset(SimpleNamespace(**info), source), source
 
 
 def _contract_problems(facts: dict, source: str, robot: RobotContract) -> tuple[list[str], list[str]]:
@@ -309,7 +293,7 @@ def facts_from_dataset(meta, source: str | None = None) -> dict:
         value = (features.get(key) or {}).get("names")
         if isinstance(value, dict):  # LeRobot also writes {"axes": [...]} for some features
             value = next(iter(value.values()), None)
-        return [str(n) for n in value] if isinstance(value, (list, tuple)) else None
+        return [str(n) for n in value] if isinstance(value, (list, tuple)) else value
 
     fps = getattr(meta, "fps", None)
     return {"robot_type": getattr(meta, "robot_type", None), "fps": float(fps) if fps is not None else None,
@@ -338,11 +322,10 @@ def record(cfg: PolicyContractConfig) -> dict:
         raise SystemExit(f"error: {where / 'config.json'} is a {config.get('type')!r} policy, not {POLICY_TYPE!r}")
     if cfg.dataset_root is not None:
         info_path = Path(cfg.dataset_root) / "meta" / "info.json"
-        if not info_path.is_file():
+        info = read_checkpoint_json(info_path)
+        if info is None:
             raise SystemExit(f"error: {info_path} not found")
-        meta = SimpleNamespace(**{k: json.loads(info_path.read_text(encoding="utf-8")).get(k)
-                                  for k in ("robot_type", "fps", "features")})  # fmt: skip
-        facts = facts_from_dataset(meta, source=str(info_path))
+        facts = facts_from_dataset(SimpleNamespace(**info), source=str(info_path))
     else:
         train = where / "train_config.json"
         repo_id = json.loads(train.read_text())["dataset"]["repo_id"] if train.is_file() else "?"

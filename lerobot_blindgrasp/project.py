@@ -1,8 +1,6 @@
-"""Where the code and the package live, and the Hub repos the shipped artifacts go to: each said in one place.
-
-The addresses are `[project.urls]` in pyproject.toml, read from the installed distribution's metadata. While they
-are placeholders under `example.invalid` (a domain reserved never to resolve), `require_public_urls()` refuses
-`blindgrasp-publish` and `code_line()` never writes one into a card.
+"""Where the code and the package live (`[project.urls]` of the installed distribution), and the Hub repos the shipped
+artifacts go to. While the URLs are placeholders under `example.invalid` (a domain reserved never to resolve),
+`require_public_urls()` refuses `blindgrasp-publish` and `code_line()` never writes one into a card.
 """
 
 from __future__ import annotations

@@ -1,11 +1,7 @@
-"""Dataset cards for blindgrasp datasets, from the templates in `card_templates/` (package data, read through
-importlib.resources, so a non-editable install writes cards too).
-
-A card is LeRobot's own (`create_lerobot_dataset_card`: its template, `task_categories: robotics`, the `configs`
-entry the Hub viewer needs) with our body as `dataset_description`, our tags, the license and the paper's citation.
-`push_to_hub` builds the card from the same arguments, so the README.md written next to the data is what lands on
-the Hub. Bodies: `sim_teacher_demos.md` (from `collection.json` and `yield_report.json`) and
-`glove_teleop_demos.md` (from a `lerobot-record` dataset's metadata).
+"""Dataset cards for blindgrasp datasets: LeRobot's own (`create_lerobot_dataset_card`: its template, the `configs`
+entry the Hub viewer needs) with our body from `card_templates/` (package data) as `dataset_description`, our tags,
+the license and the paper's citation. `push_to_hub` builds the card from the same arguments, so the README.md written
+next to the data is what lands on the Hub.
 """
 
 from __future__ import annotations
@@ -169,9 +165,7 @@ def build_card(kwargs: dict, repo_id: str):
     from lerobot.datasets.utils import create_lerobot_dataset_card
 
     kw = dict(kwargs)
-    info = kw.pop("_dataset_info")
-    tags = kw.pop("tags")
-    return create_lerobot_dataset_card(tags=tags, dataset_info=info, repo_id=repo_id, **kw)
+    return create_lerobot_dataset_card(dataset_info=kw.pop("_dataset_info"), repo_id=repo_id, **kw)
 
 
 def write_card(root: Path, repo_id: str, kwargs: dict) -> Path:
@@ -184,10 +178,8 @@ def write_card(root: Path, repo_id: str, kwargs: dict) -> Path:
 
 
 def validate(text: str) -> dict:
-    """Parse a card with huggingface_hub and check the Hub metadata we rely on; returns the metadata dict.
-
-    The Hub's own validator (`DatasetCard.validate`) is an online call; this is the offline part of it.
-    """
+    """Parse a card with huggingface_hub and check the Hub metadata we rely on; returns the metadata dict (the
+    offline part of the Hub's own validator, `DatasetCard.validate`, an online call)."""
     from huggingface_hub import DatasetCard
 
     card = DatasetCard(text)

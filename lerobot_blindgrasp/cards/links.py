@@ -1,9 +1,7 @@
 """Relative markdown links made absolute, for text read away from the repository: the README as the package index's
-project page (setup.py's long description) and the shipped models' cards on the Hub (`model_cards.py`).
-
-A file's page is the `[project.urls]` `Changelog` URL with `CHANGELOG.md` replaced by the file's path (else the
-`Source` URL with `/blob/main/`), an image's the same under `/raw/`. Standard library only: setup.py loads this file
-by path at build time, before any of the package's dependencies exist.
+project page (setup.py's long description) and the shipped models' cards on the Hub. A file's page is under the
+`[project.urls]` `Changelog` URL's folder (else `Source` + `/blob/main/`), an image's under `/raw/`. Standard library
+only: setup.py loads this file by path at build time, before any of the package's dependencies exist.
 """
 
 from __future__ import annotations
@@ -63,11 +61,8 @@ def _rewrite(text: str, doc: str, keep_under: str | None, make) -> str:
 
 
 def absolute_links(text: str, doc: str, urls: dict[str, str], keep_under: str | None = None) -> str:
-    """`text` (the markdown file at repository path `doc`) with every relative link and image made absolute.
-
-    keep_under: a repository folder whose files travel with the text (a model's folder, uploaded whole to its Hub
-    repo): links into it stay relative to `doc`.
-    """
+    """`text` (the markdown file at repository path `doc`) with every relative link and image made absolute, but
+    those into `keep_under`, a folder whose files travel with the text (a model's, uploaded whole to its Hub repo)."""
     base, raw = file_base(urls), raw_base(urls)
     return _rewrite(
         text,

@@ -1,9 +1,6 @@
-"""The shipped models' cards: one "Install and use" section each, in the source card and rewritten for the Hub.
-
-`models/<name>/README.md` holds the section's local form between `BEGIN` and `END` (`install_section(name)`, which
-tests/hub/test_publish.py keeps equal). `render_model_card` (`blindgrasp-publish`) swaps it for its Hub form and
-makes every link that leaves the model's folder absolute (`links.py`), or plain text while `[project.urls]` are
-placeholders.
+"""The shipped models' cards: one "Install and use" section each, in the source card (between `BEGIN` and `END`) and
+rewritten for the Hub by `render_model_card` (`blindgrasp-publish`), whose links that leave the model's folder are made
+absolute (`links.py`), or plain text while `[project.urls]` are placeholders.
 """
 
 from __future__ import annotations

@@ -1,7 +1,5 @@
-"""`blindgrasp-collect-demos`: roll out a trained teacher, curate its episodes and write a LeRobotDataset.
-
-The command line of `collection_loop`: print the yield table, map outcomes to exit codes. Beside LeRobot's files the
-dataset folder holds `collection.json`, `yield_report.json` and the card (README.md)."""
+"""`blindgrasp-collect-demos`: roll out a trained teacher, curate its episodes and write a LeRobotDataset. The command
+line of `collection_loop`: it prints the yield table and maps outcomes to exit codes."""
 
 from __future__ import annotations
 

@@ -1,15 +1,9 @@
-"""The collection loop: teacher rollouts -> curation -> dataset episodes, until every object has its quota.
-
-Paper Sec. III-C: the batched env with the paper's randomization and no pushes, the teacher sampled from its
-Gaussian (or its mean: "w/o stochastic teacher"), 5 s episodes logging o_t and the teacher's action, then curation
-(`curation.py`). Env seeds come from the demo range (`spec.SEED_RANGES`). Each object gets `episodes_per_object`
-written episodes or `max_rollouts_per_object` rollouts, so an object the teacher cannot lift ends the run instead of
-stalling it; once a quarter of the envs hold finished objects, the env is rebuilt with the others.
-
-Kept episodes, and the crash checkpoints with their records, go through one writer thread (`episode_writer.py`) in
-order: the dataset is the one `--writer_queue=0` writes in the loop. A first SIGINT/SIGTERM stops after the current
-step, a second at once; either way the queued episodes are written, the dataset finalized and the run recorded. A
-kill loses at most the episodes since the last checkpoint (`crash_checkpoints.py`) and the queued ones.
+"""The collection loop: teacher rollouts -> curation -> dataset episodes, until every object has its quota (paper
+Sec. III-C: the paper's randomization without pushes, the teacher's Gaussian or its mean, 5 s episodes). An object
+stops at `episodes_per_object` written episodes or `max_rollouts_per_object` rollouts, so one the teacher cannot
+lift never stalls the run. Kept episodes and crash checkpoints go through one writer thread in order. A first
+SIGINT/SIGTERM stops after the current step, a second at once; either way the queued episodes are written, the
+dataset finalized and the run recorded.
 """
 
 from __future__ import annotations
@@ -251,10 +245,8 @@ class _Run:
                 first = e
             raise
         finally:
-            with _cleanup("finalizing the dataset", first):
-                compat.finalize_or_abandon(
-                    self.saved.ds
-                )  # closes the parquet writers: every saved episode is readable
+            with _cleanup("finalizing the dataset", first):  # footers written: every saved episode is readable
+                compat.finalize_or_abandon(self.saved.ds)
             self.stats.wall_s = time.perf_counter() - self.t_wall
             self.stats.cpu_s = time.process_time() - self.t_cpu
             self.stats.checkpoints, self.stats.checkpoint_s = self.saved.count, self.saved.seconds

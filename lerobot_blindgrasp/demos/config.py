@@ -22,9 +22,6 @@ class CollectError(Exception):
 class CollectConfig:
     """Roll out a trained teacher, curate its episodes and write a LeRobotDataset (paper Sec. III-C).
 
-        blindgrasp-collect-demos --output_dir=runs/demos_cpu --repo_id=me/blindgrasp_demos_cpu   # shipped teacher
-        blindgrasp-collect-demos --teacher=runs/teacher_cpu --output_dir=runs/demos_cpu --repo_id=me/demos_cpu
-
     Ablations: --stochastic=false (teacher mean: "w/o stochastic teacher"), --curation.enabled=false ("w/o
     curation"). --curation.trim_to_success=true ends kept episodes where the curation criteria are first met.
     """

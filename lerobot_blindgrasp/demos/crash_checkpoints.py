@@ -1,12 +1,7 @@
-"""Durable demo collection: finalize and reopen the dataset at bounded intervals, so a kill loses little.
-
-LeRobot's writer writes its parquet footers only in `finalize()`, so a killed collector's open files are
-unreadable. `Checkpoints` finalizes every `checkpoint_s` seconds or `num_envs` written episodes and reopens the
-dataset as `LeRobotDataset.resume` would (the next episode starts fresh files); `--resume=true` repairs the folder
-to the last checkpoint (`repair.py`). `compat.reopen_finalized` sets the few fields resume would re-read from meta/episodes
-(seconds on a large dataset) from what LeRobot holds in memory, and resume is the fallback when they are not there.
-Each checkpoint fsyncs what changed since the last (not per episode: two fsyncs cost more than an episode), so a
-power cut loses at most the episodes since the last checkpoint too.
+"""Durable demo collection: LeRobot's writer writes its parquet footers only in `finalize()`, so `Checkpoints`
+finalizes every `checkpoint_s` seconds or `num_envs` written episodes, fsyncs what changed since the last one (not
+each episode: two fsyncs cost more than an episode) and reopens the dataset; a kill loses at most the episodes since.
+`--resume=true` repairs the folder to the last checkpoint (`repair.py`).
 """
 
 from __future__ import annotations
@@ -23,9 +18,8 @@ log = logging.getLogger("blindgrasp.demos")
 
 
 class Checkpoints:
-    """Holds the open dataset (`.ds`); call `written(state)` after every saved episode, with the run state that goes
-    with the episodes saved so far. `on_checkpoint(state)` runs after each finalize, before the reopen: it records
-    that state, now that its episodes are on disk."""
+    """Holds the open dataset (`.ds`); call `written(state)` after every saved episode with the run state so far.
+    `on_checkpoint(state)` runs after each finalize, before the reopen: it records that state, now on disk."""
 
     def __init__(
         self, ds, root, repo_id: str, every_s: float, every_episodes: int, on_checkpoint: Callable[[Any], None]

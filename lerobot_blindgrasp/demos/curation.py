@@ -1,14 +1,11 @@
 """Demonstration curation (paper Sec. III-C): keep grasp-and-lift episodes with rich fingertip force interaction.
 
-An episode of T <= 100 steps (5 s at 20 Hz) passes when the task reward r_t (eq. 3) stays > 0.5 for >= 0.5 s
-(10 consecutive steps) and the uniaxial fingertip forces summed over the 3 sensors and the steps exceed 200 N (the
-paper's strict "> 0.5" and "exceeds"; a sum over 20 Hz samples, 200 N = 10 N*s, not an integral). The sum is of the
-compressive part max(f, 0) of the *noise-free* force after the 0.1 N deadband (`info["uniaxial_force"]`): the
-student's N(0, 0.5 N) noise, summed over up to 300 samples, random-walks by about +-9 N, and a negative reading (a
-contact pulling the tip along the load cell's axis) is not the pressing the criterion rewards, yet summed signed it
-cancels real pressing. Kept episodes are whole by default, holding included (a student that never sees a 1 s hold
-does not learn to hold); `trim_to_success` ends them where both criteria are first met, and `enabled=False` ("w/o
-curation") keeps every episode whole.
+An episode of T <= 100 steps (5 s at 20 Hz) passes when the task reward r_t (eq. 3) stays > 0.5 for >= 0.5 s (10
+consecutive steps) and the uniaxial fingertip forces summed over the 3 sensors and the steps exceed 200 N (a sum of
+20 Hz samples, not an integral). The sum is of the compressive part max(f, 0) of the *noise-free* force after the
+0.1 N deadband: the student's N(0, 0.5 N) noise summed over up to 300 samples random-walks by about +-9 N, and a tip
+pulled along its load cell's axis is not pressing. Kept episodes are whole by default, holding included (a student
+that never sees a 1 s hold does not learn to hold); `trim_to_success` ends them where both criteria are first met.
 """
 
 from __future__ import annotations

@@ -1,13 +1,7 @@
-"""`blindgrasp-dagger`: DAgger-style relabelling of a student's own rollouts. Beyond the paper.
-
-    blindgrasp-dagger --student=outputs/x/student/checkpoints/last/pretrained_model \
-        --demos=outputs/x/demos --output_dir=outputs/x/dagger --episodes_per_object=10
-
-A student trained offline meets states its demos never show once its own errors add up. DAgger (Ross et al., 2011):
-the *student* drives, and every state it visits is labelled with the target the env would command for the
-*teacher's* mean action (`BatchedGraspEnv.target_for_delta`). `<output_dir>/relabelled` holds those episodes (the
-demo schema, each whole), `<output_dir>/aggregate` the demos and them merged (`demo_dataset.aggregate`): the next
-student's training set. Start states come from their own block of the demo seed range.
+"""`blindgrasp-dagger`: DAgger-style relabelling of a student's own rollouts (Ross et al., 2011). Beyond the paper.
+A student trained offline meets states its demos never show once its own errors add up, so the *student* drives and
+every state it visits is labelled with the target the env would command for the *teacher's* mean action.
+`<output_dir>/aggregate`, those episodes merged with the demos, is the next student's training set.
 """
 
 from __future__ import annotations

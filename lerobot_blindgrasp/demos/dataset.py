@@ -1,13 +1,8 @@
-"""The demo dataset: LeRobotDataset v3 at 20 fps, state-only, the shared schema plus per-episode metadata features.
-
-`spec.dataset_features()` (observation.state = 9 joint positions + 3 forces, action = 9 absolute joint targets) is
-what sim and glove demos share. Every frame also carries its episode's metadata as small features, constant within
-the episode: `episode.outcome` (success, curation_passed, left_workspace, longest_hold_s, force_sum_n,
-rollout_steps), `episode.randomization` (the Table II draw and the object's start xy) and `episode.seed` (env_seed,
-env_episode). The object is in the task string. Features, not custom columns or info.json keys, because LeRobot's
-tools (`DatasetInfo.from_dict`, `lerobot-edit-dataset`) drop what they do not know; policies ignore them, and their
-per-episode stats (min = max = the value) let `episode_table()` read every episode without its frames. Merging with
-glove demos needs the three removed first (`MERGE_HINT`).
+"""The demo dataset: LeRobotDataset v3 at 20 fps, state-only, the shared schema (`spec.dataset_features()`) plus
+per-episode metadata features, constant within the episode: `episode.outcome`, `episode.randomization` (the Table II
+draw and the object's start xy) and `episode.seed`; the object is in the task string. Features, because LeRobot's
+tools drop unknown columns and info.json keys; their per-episode stats (min = max) let `episode_table()` read every
+episode without its frames. Merging with glove demos needs the three removed first (`MERGE_HINT`).
 """
 
 from __future__ import annotations
@@ -149,11 +144,8 @@ def object_from_task(task: str) -> str | None:
 
 
 def episode_table(root: str | Path):
-    """One row per episode (pandas): episode_index, task, object, length and every metadata value.
-
-    Read from meta/episodes only (the per-episode stats of the metadata features), so it is fast on large
-    datasets. Pick episodes with it and pass them to `LeRobotDataset(repo_id, root=..., episodes=[...])`.
-    """
+    """One row per episode (pandas): episode_index, task, object, length and every metadata value, read from
+    meta/episodes only (fast on large datasets); pick episodes for `LeRobotDataset(..., episodes=[...])` with it."""
     import pandas as pd
 
     files = sorted(Path(root, "meta", "episodes").glob("chunk-*/file-*.parquet"))
@@ -182,13 +174,9 @@ def episode_table(root: str | Path):
 
 
 def aggregate(repo_ids: list[str], roots: list[Path], repo_id: str, dest: Path) -> None:
-    """Merge datasets into `dest` with LeRobot's `aggregate_datasets`, and leave it mergeable again.
-
-    LeRobot 0.6.1 appends every source's episode rows to the destination's current meta/episodes file but offsets
-    each row's `meta/episodes/{chunk,file}_index` from the source's own, so a source with several episodes files
-    (one per collector checkpoint) leaves rows naming files that do not exist, and the next merge of the result
-    fails with FileNotFoundError. Each row is set to the file that holds it. Built beside `dest` (`built_beside`).
-    """
+    """Merge datasets into `dest` (built beside it) with LeRobot's `aggregate_datasets`, mergeable again: LeRobot
+    0.6.1 offsets each appended row's `meta/episodes/{chunk,file}_index` from the source's own, so a source with
+    several episodes files leaves rows naming files that do not exist. Each row is set to the file that holds it."""
     import pyarrow as pa
     import pyarrow.parquet as pq
     from lerobot.datasets.aggregate import aggregate_datasets

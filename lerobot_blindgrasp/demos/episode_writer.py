@@ -1,12 +1,7 @@
-"""Dataset writes off the rollout loop: one writer thread, a bounded queue, errors raised in the caller.
-
-`LeRobotDataset.save_episode` costs tens of milliseconds per episode, a stall of the physics in the loop.
-`EpisodeWriter` runs the writes (and anything else that touches the dataset or the run's records) on one thread in
-submission order, so the dataset is the one the loop would write; the loop waits only when `queue` jobs wait. A
-job's error is raised in the caller by the next `submit`, `flush` or `close`, and later jobs are dropped. `flush`
-and `close` never leave a write half done: a Ctrl-C drops the jobs not started and is raised after the running one.
-`queue=0` runs every job in the caller's thread. Hand-written because LeRobot 0.6.1 has no asynchronous episode
-writer (its `AsyncImageWriter` writes camera frames only).
+"""Dataset writes off the rollout loop: `LeRobotDataset.save_episode` costs tens of milliseconds per episode, a stall
+of the physics. `EpisodeWriter` runs the writes (and whatever else touches the dataset or the run's records) on one
+thread in submission order, so the dataset is the one the loop would write; errors are raised in the caller.
+Hand-written because LeRobot 0.6.1's only asynchronous writer (`AsyncImageWriter`) writes camera frames.
 """
 
 from __future__ import annotations

@@ -1,11 +1,7 @@
-"""The complete row groups of a parquet file whose writer never wrote its footer (a SIGKILL, a full disk).
-
-LeRobot's writers keep their files open, one row group per episode, and only `ParquetWriter.close()` writes the
-footer. `salvage(buf, template)` walks the page headers from the start, cuts after the last complete row group and
-builds a footer for those bytes from the one pyarrow writes for `template` (a one-row table of the file's schema),
-with each column chunk's offsets, sizes and value counts from the pages found; pyarrow then decodes the values.
-Hand-written because no installed library reads a footerless file (pyarrow, pandas and datasets all start from the
-footer); the Thrift compact codec covers what parquet's metadata uses (no maps, no sets).
+"""The complete row groups of a parquet file whose writer never wrote its footer (a SIGKILL, a full disk):
+`salvage(buf, template)` walks the page headers, cuts after the last complete row group and builds a footer for those
+bytes from the one pyarrow writes for `template` (a one-row table of the file's schema). Hand-written because
+pyarrow, pandas and datasets all start from the footer; the Thrift compact codec covers what parquet's metadata uses.
 """
 
 from __future__ import annotations

@@ -1,7 +1,5 @@
-"""`collection.json` in the dataset folder: how the demos were made, run by run (the card is filled from it).
-
-It lives beside `meta/`, which LeRobot's tools rewrite. `--resume` reads it to refuse demos of another teacher or
-curation rule, and to continue with env seeds no earlier run used.
+"""`collection.json` in the dataset folder, beside `meta/` (which LeRobot's tools rewrite): how the demos were made,
+run by run. `--resume` reads it to refuse demos of another teacher or curation rule and to continue the env seeds.
 """
 
 from __future__ import annotations

@@ -1,12 +1,8 @@
-"""A LeRobot dataset's metadata rebuilt from its data files, for the episodes whose frames are all there.
-
-LeRobot 0.6.1 writes episode rows to meta/episodes only every `metadata_buffer_size` (10) episodes or at
-`finalize()`, and keeps its parquet files footerless until then: a killed writer leaves saved frames and no episode
-row (a full disk also leaves a 0-byte meta/episodes file). `rebuild(root)` starts from the data: every complete row
-group (`parquet_salvage`), cut to the longest prefix of whole episodes (and to `limit`), fed to LeRobot's own
-`LeRobotDatasetMetadata` in a staging folder and moved in file by file, atomically, `info.json` last. Files it
-replaces are moved to `<root>.set-aside/`, not deleted. Only for datasets without image or video features (their
-frames are not in the data files).
+"""A LeRobot dataset's metadata rebuilt from its data files, for the episodes whose frames are all there (no image or
+video features). LeRobot 0.6.1 writes episode rows only every `metadata_buffer_size` (10) episodes or at `finalize()`.
+`rebuild(root)` takes every complete row group (`parquet_salvage`), cut to the longest prefix of whole episodes (and
+to `limit`), feeds it to LeRobot's `LeRobotDatasetMetadata` in a staging folder and moves the files in atomically,
+`info.json` last; replaced files go to `<root>.set-aside/`.
 """
 
 from __future__ import annotations

@@ -1,9 +1,6 @@
 """The run records of a demo collection: provenance (`collection.json`), statistics, the yield report and card.
-
-A collection is one or more runs (`--resume=true` adds one) into one folder. `start_run` and `finish_run` bracket
-each run, so `collection.json` lists every run however it ended; `yield_report.json` (written when a run ends) and
-the card describe the whole dataset. A killed run cannot record its end: `checkpoint_run` keeps `collection.json`
-current instead, and `open_dataset` with --resume repairs the folder to that checkpoint and takes its tally.
+`start_run` and `finish_run` bracket each run (`--resume=true` adds one), so `collection.json` lists every run however
+it ended; a killed run cannot record its end, so `checkpoint_run` keeps `collection.json` current instead.
 """
 
 from __future__ import annotations
@@ -185,7 +182,7 @@ def finish_run(cfg: CollectConfig, prov: dict, run: dict, tally: yield_report.Ta
     provenance.save_provenance(out, prov)
     _write_report(out, cfg, prov, tally)
     try:
-        write_collection_card(out, cfg.repo_id)
+        dataset_cards.write_card(out, cfg.repo_id, sim_card_kwargs(out, cfg.repo_id))
     except Exception as e:  # noqa: BLE001  (a card problem must not mask the collection's outcome)
         log.warning("could not write the dataset card: %s", e)
 
@@ -247,8 +244,3 @@ def sim_card_kwargs(root: Path, repo_id: str, **kw) -> dict:
 
     meta = LeRobotDatasetMetadata(repo_id, root=Path(root))
     return dataset_cards.card_kwargs(repo_id, "sim", _sim_context(Path(root), repo_id, meta), meta, **kw)
-
-
-def write_collection_card(root: Path, repo_id: str) -> Path:
-    """The collection's card as root/README.md."""
-    return dataset_cards.write_card(root, repo_id, sim_card_kwargs(root, repo_id))

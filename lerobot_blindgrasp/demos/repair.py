@@ -1,14 +1,8 @@
-"""`blindgrasp-repair-dataset --root=DIR`: bring a crashed LeRobotDataset back to every complete episode.
-
-    blindgrasp-repair-dataset --root=runs/demos_cpu            # repair in place, say what was kept and lost
-    blindgrasp-repair-dataset --root=runs/demos_cpu --dry_run=true
-
-A LeRobot v3 writer that dies before `finalize()` leaves footerless parquet files, episode rows that never reached
-meta/episodes, and counts in info.json for frames that are gone; LeRobot then refuses the folder. The repair
-rebuilds the metadata from the data with LeRobot's own writer (`rebuild_meta`) for every whole episode, or, in a
-demo collection (collection.json), for the episodes of its last checkpoint (those with a meta/episodes row), which
-its tally and seeds describe. Temp files of killed atomic writes are removed. Every write is atomic: a repair killed
-half-way is run again; on a consistent dataset it changes nothing. Image and video datasets are refused.
+"""`blindgrasp-repair-dataset --root=DIR`: bring a crashed LeRobotDataset back to every complete episode. A writer
+that dies before `finalize()` leaves footerless parquet files, episode rows that never reached meta/episodes and
+counts for frames that are gone, and LeRobot refuses the folder. The metadata is rebuilt from the data (`rebuild_meta`)
+for every whole episode, or, in a demo collection, for those of its last checkpoint, which its tally and seeds
+describe. Every write is atomic: a killed repair is run again; on a consistent dataset it changes nothing.
 """
 
 from __future__ import annotations

@@ -1,7 +1,5 @@
-"""Per-object yield of a collection: counts, the printed table and `yield_report.json` in the dataset folder.
-
-Counts are cumulative over `--resume` runs. `rollouts` counts every finished rollout, including those of objects
-that already had their quota (their curation outcome still measures the yield); `kept` counts written episodes.
+"""Per-object yield of a collection: counts, the printed table and `yield_report.json` in the dataset folder. Counts
+are cumulative over `--resume` runs; `rollouts` includes those of objects that already had their quota.
 """
 
 from __future__ import annotations
@@ -46,13 +44,10 @@ class Tally:
         return t
 
     def to_json(self) -> dict:
-        rows = {}
-        for name, o in self.objects.items():
-            rows[name] = {
-                **asdict(o),
-                "yield": o.yield_rate,
-                "force_sum_n_mean": _mean(o.force_sum_n_total, o.rollouts),
-            }
+        rows = {
+            name: {**asdict(o), "yield": o.yield_rate, "force_sum_n_mean": _mean(o.force_sum_n_total, o.rollouts)}
+            for name, o in self.objects.items()
+        }
         t = self.total()
         return {"objects": rows, "total": {**asdict(t), "yield": t.yield_rate}}
 
@@ -82,10 +77,8 @@ def format_table(tally: Tally, order: list[str] | None = None) -> str:
             f"{succ:>8.1%} {_mean(o.force_sum_n_total, o.rollouts):>8.0f}"
         )
 
-    for name in names:
-        lines.append(row(name, tally.of(name)))
-    lines.append("-" * len(head))
-    lines.append(row("total", tally.total()))
+    lines += [row(name, tally.of(name)) for name in names]
+    lines += ["-" * len(head), row("total", tally.total())]
     return "\n".join(lines)
 
 

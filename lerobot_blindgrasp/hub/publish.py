@@ -1,14 +1,8 @@
 """`blindgrasp-publish`: push the shipped teachers, the shipped student and a demo dataset to the Hugging Face Hub,
-each with its card and the code's location, in one command.
-
-    blindgrasp-publish --namespace=you --dry_run=true     # everything but the upload
-    blindgrasp-publish --namespace=you                    # collects 2 demos per object, then pushes all four
-    blindgrasp-publish --namespace=you --demos=runs/demos_cpu   # an existing blindgrasp-collect-demos folder
-
-Everything is checked before the first network call: `[project.urls]` names the real public home (no card may send
-a reader to a placeholder), each model loads, each model card renders into the staging folder (`model_cards.py`),
-and the dataset is prepared by `push.prepare`. Without `--demos`, a small curated set is collected there with the
-shipped student's demo settings (`DEMO_RECIPE`); a rerun with the same `--staging_dir` resumes it.
+each with its card and the code's location, in one command. Everything is checked before the first network call:
+`[project.urls]` names the real public home, each model loads, each card renders into the staging folder, and the
+dataset is prepared. Without `--demos`, a small curated set is collected there with the shipped student's demo
+settings (`DEMO_RECIPE`); a rerun with the same `--staging_dir` resumes it.
 """
 
 from __future__ import annotations
@@ -32,25 +26,22 @@ DEMO_RECIPE = "quick_blind_targeted"
 _ENVS_PER_OBJECT = 10  # parallel rollouts per object while collecting (the pipeline's 180 for 18 objects)
 
 
-def _check_loads(folder: Path) -> None:
-    if folder.name.startswith("teacher"):
-        from lerobot_blindgrasp.teacher.policy import TeacherPolicy
-
-        TeacherPolicy(folder)
-    else:
-        from lerobot.configs.policies import PreTrainedConfig
-
-        PreTrainedConfig.from_pretrained(folder)
-
-
 def stage_model(name: str, repo_id: str, staging: Path) -> Path:
     """Copy the Hub files of shipped model `name` to `staging/name` with its rendered card; returns that folder."""
     src = shipped.path(name)
-    _check_loads(src)
+    if name.startswith("teacher"):  # the model loads, before anything is staged
+        from lerobot_blindgrasp.teacher.policy import TeacherPolicy
+
+        TeacherPolicy(src)
+        patterns = _TEACHER_FILES
+    else:
+        from lerobot.configs.policies import PreTrainedConfig
+
+        PreTrainedConfig.from_pretrained(src)
+        patterns = ("*",)
     out = staging / name
     if out.exists():
         shutil.rmtree(out)
-    patterns = _TEACHER_FILES if name.startswith("teacher") else ("*",)
     for pattern in patterns:
         for f in src.glob(pattern):
             if f.is_file() and f.name != "README.md":
@@ -62,10 +53,7 @@ def stage_model(name: str, repo_id: str, staging: Path) -> Path:
 
 @dataclass
 class PublishConfig:
-    """Push the shipped teachers, the shipped student and a demo dataset to the Hub, each with its card.
-
-    blindgrasp-publish --namespace=you [--demos=runs/demos_cpu] [--dry_run=true]
-    """
+    """Push the shipped teachers, the shipped student and a demo dataset to the Hub, each with its card."""
 
     namespace: str | None = None  # Hub user or organization the repos go under (names: hub/project.py HUB_REPOS)
     # the demo dataset folder to push (blindgrasp-collect-demos output); default: collect one into the staging folder

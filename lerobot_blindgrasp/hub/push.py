@@ -1,9 +1,6 @@
-"""`blindgrasp-push-dataset`: upload a blindgrasp dataset folder to the Hugging Face Hub with its card.
-
-Sim teacher demos (known by their collection.json) or a glove recording from `lerobot-record` (record with
-`--dataset.push_to_hub=false`, then push with this for the glove card). Everything is prepared locally first: the
-dataset is loaded, so a broken folder fails here and not half-way through an upload, and its card is written to
-README.md; then LeRobot's `push_to_hub` uploads the folder with the same card and tags the `v3.0` revision.
+"""`blindgrasp-push-dataset`: upload a blindgrasp dataset folder (sim teacher demos, or a glove recording made with
+`--dataset.push_to_hub=false`) to the Hugging Face Hub with its card. The dataset is loaded and its card written to
+README.md first, so a broken folder fails before any upload; LeRobot's `push_to_hub` then uploads the folder.
 """
 
 from __future__ import annotations
@@ -88,11 +85,7 @@ def _network_errors() -> tuple[type[BaseException], ...]:
 
 @dataclass
 class PushDatasetConfig:
-    """Upload a blindgrasp dataset folder (sim teacher demos or glove teleoperation) to the Hub with its card.
-
-    blindgrasp-push-dataset --root=runs/demos_cpu --repo_id=me/blindgrasp_demos_cpu
-    blindgrasp-push-dataset --root=~/glove_demos --repo_id=me/blindgrasp_glove --kind=glove --operators=[alice]
-    """
+    """Upload a blindgrasp dataset folder (sim teacher demos or glove teleoperation) to the Hub with its card."""
 
     root: Path | None = None  # dataset folder (LeRobotDataset root)
     repo_id: str | None = None  # USER/NAME on the Hub

@@ -1,15 +1,10 @@
 """`blindgrasp-train-glove`: a student on glove recordings, alone or merged with sim demos, by a named preset.
 
     blindgrasp-train-glove --preset=glove --glove=[data/glove_s1,data/glove_s2] --output_dir=outputs/glove
-    blindgrasp-train-glove --preset=sim_plus_glove --glove=[data/glove_s1] --sim_demos=runs/demos \\
-        --output_dir=outputs/sim_plus_glove
 
-With LeRobot's own tools, in order: every source is checked for the shared schema (`spec.dataset_features()`, robot
-type, 20 fps) before anything is written; sim demos lose their `episode.*` features (`remove_feature`) into
-`<output_dir>/sim_schema`; several sources are merged (`demos.dataset.aggregate`) into `<output_dir>/dataset`; and
-`lerobot-train` trains the preset's student (`presets/glove.py`) into `<output_dir>/student`. Each dataset is
-built in a temporary folder and renamed when complete, so a re-run reuses what is finished. `--dry_run=true`
-prints the plan and the lerobot-train command and runs nothing.
+Every source is checked for the shared schema (`spec.dataset_features()`, robot type, 20 fps) before anything is
+written; sim demos lose their `episode.*` features, the sources are merged and `lerobot-train` trains the preset's
+student (`presets/glove.py`). Each dataset is built beside its folder and renamed when complete, so a re-run reuses it.
 """
 
 from __future__ import annotations
@@ -32,19 +27,14 @@ from lerobot_blindgrasp.presets.glove import GlovePreset
 class GloveTrainConfig:
     # lerobot-record dataset folders (each session's --dataset.root), merged in this order
     glove: list[Path] = field(default_factory=list)
-    # where the merged dataset and the student go
-    output_dir: Path | None = None
-    # a key of lerobot_blindgrasp.presets.glove.GLOVE_PRESETS: glove, sim_plus_glove (and *_smoke for CI)
-    preset: str = "glove"
+    output_dir: Path | None = None  # where the merged dataset and the student go
+    preset: str = "glove"  # a key of presets.glove.GLOVE_PRESETS: glove, sim_plus_glove (and *_smoke for CI)
     # a blindgrasp-collect-demos folder; required by the sim_plus_glove presets, refused by the others
     sim_demos: Path | None = None
-    # repo id of the merged dataset (a local name; nothing is pushed)
-    repo_id: str = "local/blindgrasp_glove_train"
+    repo_id: str = "local/blindgrasp_glove_train"  # the merged dataset's (a local name; nothing is pushed)
     seed: int = 1000
-    # lerobot-train --policy.device; None: the preset's (cpu)
-    device: str | None = None
-    # print what would run, run nothing
-    dry_run: bool = False
+    device: str | None = None  # lerobot-train --policy.device; None: the preset's (cpu)
+    dry_run: bool = False  # print what would run, run nothing
 
     def __post_init__(self):
         p = presets.get(self.preset, "glove")
@@ -145,15 +135,9 @@ def train_on_glove(cfg: GloveTrainConfig) -> Path:
     if cfg.dry_run:
         many = len(sources) + (cfg.sim_demos is not None) > 1
         dataset = out / "dataset" if many else Path(cfg.glove[0])
-        print(
-            "\n".join(
-                [
-                    *plan,
-                    f"merge -> {dataset}" if many else f"train on {dataset}",
-                    shlex.join(train_command(p, dataset, cfg.repo_id, student, cfg.seed, cfg.device)),
-                ]
-            )
-        )
+        plan.append(f"merge -> {dataset}" if many else f"train on {dataset}")
+        cmd = train_command(p, dataset, cfg.repo_id, student, cfg.seed, cfg.device)
+        print("\n".join([*plan, shlex.join(cmd)]))
         return student
     out.mkdir(parents=True, exist_ok=True)
     if cfg.sim_demos is not None:

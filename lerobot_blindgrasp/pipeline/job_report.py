@@ -1,8 +1,6 @@
-"""The pipeline report: markdown plus PNG plots, from what each stage left in the output folder (the teacher's
-`eval.json` and TensorBoard scalars, the demos' `yield_report.json`, the student's `lerobot-train` log and
-lerobot-eval's `eval_info.json`). Teacher and student ran the same start states, so the report pairs them episode by
-episode; every rate carries its 95 % Wilson interval. The grasp strips show, for each object shape, frames of one
-successful episode lerobot-eval rendered (its `video_paths` beside `successes`), decoded with PyAV.
+"""The pipeline report: markdown plus PNG plots, from what each stage left in the output folder. Teacher and student
+ran the same start states, so the report pairs them episode by episode; every rate carries its 95 % Wilson interval.
+The grasp strips show, per object shape, frames of one successful episode lerobot-eval rendered (PyAV decodes them).
 """
 
 from __future__ import annotations
@@ -81,7 +79,6 @@ def write_job_report(out: Path, record: dict, bigger: str) -> Path:
 
 def _success_lines(out: Path, record: dict, figs: Path) -> list[str]:
     """Teacher and student success per object, paired start state by start state, with the grasp strips."""
-    lines: list[str] = []
     teacher = json.loads((out / "teacher_eval" / "eval.json").read_text())
     t_det = {o: r["successes"] for o, r in teacher["modes"]["deterministic"]["per_object"].items()}
     t_sto = {o: r["successes"] for o, r in teacher["modes"].get("stochastic", {}).get("per_object", {}).items()}
@@ -101,7 +98,7 @@ def _success_lines(out: Path, record: dict, figs: Path) -> list[str]:
     bar_chart(figs / "success_per_object.png", names, series, "Sim success per object", "success (%)")
     seed = record.get("seeds", {}).get("eval_index", teacher.get("seed"))
     n_ep = len(next(iter(stu.values()), []))
-    lines += [
+    lines = [
         "## Success per object (sim)",
         "",
         f"Student: `lerobot-eval --env.type=blindgrasp --env.task={record['preset']['evaluation']['task']} "
@@ -132,8 +129,7 @@ def _success_lines(out: Path, record: dict, figs: Path) -> list[str]:
 
 def _curve_lines(out: Path, figs: Path) -> list[str]:
     """The teacher's (when trained in this run) and the student's learning curves."""
-    lines: list[str] = []
-    lines += ["## Learning curves", ""]
+    lines = ["## Learning curves", ""]
     tc = teacher_curves(out / "teacher") if (out / "teacher").is_dir() else {}  # only when trained in this run
     if tc:
         plot_curves(figs / "teacher_curves.png", tc, "Teacher (PPO)")
@@ -152,8 +148,7 @@ def _curve_lines(out: Path, figs: Path) -> list[str]:
 
 def _demo_lines(out: Path, record: dict, figs: Path) -> list[str]:
     """The demo sets' yield, and what the student trained on."""
-    lines: list[str] = []
-    lines += ["## Demonstrations", ""]
+    lines = ["## Demonstrations", ""]
     extra = [name for name, _ in ((record.get("preset") or {}).get("demos") or {}).get("extra_episodes", ())]
     sets = [("curated", "demos"), ("uncurated", "demos_uncurated")]
     sets += [(f"{label}, extra episodes of {name}", f"{sub}_{name}") for label, sub in sets for name in extra]
@@ -260,10 +255,8 @@ def pick_per_class(videos: dict[str, list[Path]]) -> dict[str, tuple[str, Path]]
 
 
 def read_frames(video: Path, n: int) -> tuple[list[np.ndarray], np.ndarray]:
-    """n RGB frames evenly spaced over the video (first and last included), and their frame indices.
-
-    The container's frame count picks the indices up front, so decoding stops at the last one and only the picked
-    frames are converted to RGB; a video whose container gives no count, or a wrong one, is decoded whole."""
+    """n RGB frames evenly spaced over the video (first and last included), and their frame indices. Decoding stops
+    at the last index the container's frame count gives; a video without a count, or a wrong one, is decoded whole."""
     import av  # lerobot[dataset] dependency; imported here so the report works without any video
 
     with av.open(str(video)) as container:

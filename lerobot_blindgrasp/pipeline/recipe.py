@@ -1,10 +1,7 @@
 """The command line of every stage, built from a registry preset: one definition for `blindgrasp-pipeline` and for
-`scripts/paper_recipe.sh`, which runs Table V at the preset's sizes stage by stage:
-
-    blindgrasp-pipeline --preset=paper --output_dir=outputs/paper --print_commands=demos
-
-prints the commands of that stage not done yet, one shell line each (stages in the order of STAGES). Student steps
-come from the collected dataset (`presets.student`), so `students` can only be printed once the demos exist.
+`scripts/paper_recipe.sh`, which runs Table V stage by stage (`--print_commands=STAGE` prints the commands of that
+stage not done yet). Student steps come from the collected dataset (`presets.student`), so `students` can only be
+printed once the demos exist.
 """
 
 from __future__ import annotations

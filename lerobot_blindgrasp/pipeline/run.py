@@ -1,20 +1,11 @@
-"""`blindgrasp-pipeline --preset={quick_blind,quick,cpu,paper,smoke}`: the whole method, end to end, ending in a report.
+"""`blindgrasp-pipeline --preset=NAME`: the whole method, end to end, ending in a report (the presets and their run
+times: docs/getting-started.md). Sizes come from the preset registry (`presets/`), command lines from `recipe.py`.
 
-    blindgrasp-pipeline                    # README command 1 (quick_blind, beyond the paper): ~10 min on 2 cores
-    blindgrasp-pipeline --preset=quick_blind_targeted   # the shipped student's recipe (beyond the paper), ~17 min
-    blindgrasp-pipeline --preset=quick     # the paper's student recipe on the default shipped teacher, ~13 min
-    blindgrasp-pipeline --preset=cpu       # trains its own teacher from scratch: hours on 2 cores
-    blindgrasp-pipeline --preset=paper --device=cuda    # the paper's Tables III-IV: a GPU machine
-    blindgrasp-pipeline --preset=quick --teacher=runs/teacher_cpu     # any teacher folder instead
-
-Sizes come from the preset registry (`presets/`), command lines from `recipe.py`. Stages, each a real CLI run as a
-subprocess with its log in <out>/logs/: the teacher (shipped, `--teacher`, or `blindgrasp-train-teacher`); curated
-demos (`blindgrasp-collect-demos`, a preset's `extra_episodes` merged in); the student (`lerobot-train`) and any
-DAgger rounds (`blindgrasp-dagger`, then fine-tuning); the student in sim (`lerobot-eval`) and the teacher on the
-same start states (`blindgrasp-eval-teacher` with the same `--seed`); `report.md` with its plots. A re-run goes on
-where it stopped: a stage is skipped once `pipeline.json` marks it completed, a mark written only after its command
-succeeded, and a stage cut short runs again, resuming where its command can. Env seeds: teacher training from
-`--seed`, demos and evaluation from their own ranges (`spec.SEED_RANGES`), so no start state is used twice.
+Each stage is a real CLI run as a subprocess with its log in <out>/logs/: the teacher (shipped, `--teacher`, or
+trained), curated demos, the student (`lerobot-train`) and any DAgger rounds, the student in sim (`lerobot-eval`)
+and the teacher on the same start states, then `report.md`. A re-run skips each stage `pipeline.json` marks completed
+(marked only after its command succeeded) and runs one cut short again, resuming where its command can. Each stage
+draws env seeds from its own range (`spec.SEED_RANGES`), so no start state is used twice.
 """
 
 from __future__ import annotations
@@ -43,9 +34,7 @@ Go bigger (same command, another preset):
 class PipelineConfig:
     """The method end to end (teacher -> curated demos -> student -> paired sim eval -> report)."""
 
-    # registry preset (lerobot_blindgrasp/presets): quick_blind (README command 1, beyond the paper), quick (the
-    # paper's student recipe on the default shipped teacher), cpu, paper, smoke, ...
-    preset: str = "quick_blind"
+    preset: str = "quick_blind"  # a registry preset (`lerobot_blindgrasp/presets`, listed in docs/reference.md)
     output_dir: Path | None = None  # default outputs/pipeline_<preset>; re-running continues where it stopped
     seed: int = spec.TEACHER_TRAIN_SEED  # teacher-training env seed and torch seed; also picks the demo seed block
     teacher: Path | None = None  # this teacher folder instead of the preset's (shipped or trained from scratch)
@@ -78,8 +67,7 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     record["seeds"] = {"pipeline": seed, "demos_first_env_seed": demo_seed, "eval_index": eval_seed}
     record["device"] = device
     stage = Stage(out, record)
-    # One torch thread per process: on 2 cores, intra-op threads of several processes fight; MuJoCo's own threads
-    # are unaffected.
+    # One torch thread per process: on few cores, intra-op threads of several processes fight (MuJoCo's are apart).
     env1 = {"OMP_NUM_THREADS": "1", "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     student_env = {**env1, "OMP_NUM_THREADS": str(preset.student.threads)}
 
@@ -91,8 +79,7 @@ def run_pipeline(cfg: PipelineConfig) -> Path:
     record["student_schedule"] = asdict(sched)
     ckpt = _train(stage, "student", out / "student", cmd, student_env)
     record["student_recipe"] = preset.student_recipe
-    # DAgger rounds (beyond the paper): the latest student drives, the teacher labels, the student is fine-tuned
-    # on the aggregate.
+    # DAgger rounds (beyond the paper): the latest student drives, the teacher labels, the student is fine-tuned.
     for r in range(1, (preset.dagger.rounds if preset.dagger else 0) + 1):
         relabelled, name = out / f"dagger_{r}", f"student_dagger_{r}"
         dagger_seed = recipe.dagger_seed(seed, r)
@@ -212,16 +199,13 @@ def _collect_stage(
     curate: bool,
     extra: tuple[str, int] | None = None,
 ) -> Path:
-    name = root.name if extra else "demos" if curate else "demos_uncurated"
-    if stage.done(name):
-        stage.skip(name, "collected")
-        return root
     from lerobot_blindgrasp.demos.collect_cli import EXIT_EMPTY
 
+    name = root.name if extra else "demos" if curate else "demos_uncurated"
     # An empty curated set is the caller's (the uncurated fallback). A collection cut short is resumed
     # (recipe.demos_collect adds --resume=true; the collector repairs a crashed folder first).
     cmd = recipe.demos_collect(preset, teacher, root, repo_id, first_seed, curate=curate, extra=extra)
-    stage.run(name, cmd, ok=(0, EXIT_EMPTY))
+    stage.once(name, "collected", cmd, ok=(0, EXIT_EMPTY))
     return root
 
 
@@ -235,9 +219,8 @@ def _targeted_demos(
     seed: int,
     curated: bool,
 ) -> tuple[Path, str]:
-    """Beyond the paper: the preset's extra episodes of the objects it names (one collection each, curated or not
-    as the set the student trains on), merged with that set by LeRobot's `aggregate_datasets`. Returns the merged
-    dataset and its repo id."""
+    """Beyond the paper: (merged dataset, repo id) of the set the student trains on and the preset's extra episodes
+    of the objects it names, one collection each, curated or not as that set (LeRobot's `aggregate_datasets`)."""
     roots, repos = [demos], [repo]
     for k, (name, n) in enumerate(preset.demos.extra_episodes):
         root, extra_repo = out / f"{demos.name}_{name}", f"{repo}_{name}"

@@ -1,10 +1,7 @@
-"""Two evaluations side by side, paired start state by start state: per-object rates and an exact McNemar test.
+"""Two evaluations side by side, paired start state by start state: per-object rates and an exact McNemar test. Both
+must have run the same seed and episode count, so that episode k of object o is the same start state in both.
 
     python -m lerobot_blindgrasp.results.compare --a=PATH --b=PATH [--a_label=teacher --b_label=student]
-
-PATH is a lerobot-eval or `blindgrasp-eval-teacher` output (its json, or its folder; a teacher's deterministic mode
-unless written `PATH:stochastic`). Both must have run the same seed and episode count, so that episode k of object o
-is the same start state in both (`spec.eval_seed`) and a difference shows as discordant pairs.
 """
 
 from __future__ import annotations

@@ -1,6 +1,5 @@
 """Success rates with their 95 % Wilson score interval, the way every recorded number is reported: it stays inside
-[0, 1] and keeps its width at 0/n and n/n (per-object rates are often 0/20 or 20/20), where the normal
-approximation collapses to zero width.
+[0, 1] and keeps its width at 0/n and n/n (per-object rates are often 0/20 or 20/20).
 """
 
 from __future__ import annotations
@@ -39,12 +38,9 @@ def count(flags: Iterable) -> tuple[int, int]:
 
 
 def mcnemar_exact_p(only_a: int, only_b: int) -> float:
-    """Two-sided exact McNemar p-value for two policies run on the same start states.
-
-    Only the discordant episodes carry information: `only_a` start states that policy A solved and B did not, and
-    `only_b` the reverse. Under "no difference" each discordant episode is a fair coin, so the p-value is the
-    two-sided binomial tail of min(only_a, only_b) out of only_a + only_b at p = 1/2 (written out here with
-    math.comb: scipy is not a dependency)."""
+    """Two-sided exact McNemar p-value for two policies run on the same start states: `only_a` start states that A
+    solved and B did not, `only_b` the reverse. Under "no difference" each is a fair coin, so p is the two-sided
+    binomial tail of min(only_a, only_b) of only_a + only_b at 1/2 (with math.comb: scipy is not a dependency)."""
     if only_a < 0 or only_b < 0:
         raise ValueError(f"need non-negative counts, got {only_a} and {only_b}")
     n = only_a + only_b
@@ -76,10 +72,9 @@ def paired_counts(a: Iterable, b: Iterable) -> dict[str, int]:
 
 
 def paired_difference(a: Mapping[str, Sequence], b: Mapping[str, Sequence], keys: Iterable[str]) -> dict:
-    """B against A on the same start states, pooled over `keys` (objects; one missing from a side counts as no
-    episodes there), episode k of each key paired with episode k: `paired_counts`, plus `n` episodes,
-    `a_successes` and `b_successes`, `diff_pp` (B minus A, in percentage points) and the exact McNemar `p`.
-    Raises ValueError when the two sides do not hold the same number of episodes."""
+    """B against A on the same start states, pooled over `keys` (a key missing from a side has no episodes there):
+    `paired_counts`, plus `n` episodes, `a_successes`, `b_successes`, `diff_pp` (B minus A, in percentage points)
+    and the exact McNemar `p`. ValueError when the two sides do not hold the same number of episodes."""
     keys = list(keys)
     pa = [bool(x) for k in keys for x in a.get(k, [])]
     pb = [bool(x) for k in keys for x in b.get(k, [])]

@@ -1,8 +1,6 @@
 """What the project ships besides code: the trained models (`models/`) and the hardware site settings
-(`robot_configs/`), found the same way from a source checkout and from an installed wheel (`blindgrasp-path`).
-
-A wheel carries them as this package's data (`setup.py` maps `lerobot_blindgrasp.shipped.models` onto `models/`,
-and `robot_configs` likewise); an editable install finds them in the source tree.
+(`robot_configs/`), found alike from a source checkout and from an installed wheel, whose package data they are
+(`setup.py` maps them under `lerobot_blindgrasp.shipped`).
 """
 
 from __future__ import annotations

@@ -10,13 +10,11 @@ Table IV -> field:
     L2 regularization 0.01              -> `optimizer_weight_decay`
     linear lr decay after 100 epochs    -> `scheduler_constant_steps` (100 epochs' steps), `scheduler_end_factor`
     loss: MSE                           -> `BlindgraspTransformerPolicy.forward`
-    Transformer layers 6                -> `n_layers`   (via `size="paper"`)
-    embedding dimension 512             -> `embed_dim`  (via `size="paper"`)
-    attention heads 8                   -> `n_heads`    (via `size="paper"`)
+    layers 6, embedding 512, heads 8    -> `n_layers`, `embed_dim`, `n_heads` (via `size="paper"`)
+    MLP head [1024, 1024]               -> `head_hidden_dims` (via `size="paper"`)
     context length 30 / frame stack 30  -> `n_obs_steps`
     dropout rate 0.1                    -> `dropout`
     activation GELU                     -> the transformer MLP (fixed)
-    MLP head [1024, 1024]               -> `head_hidden_dims` (via `size="paper"`)
 
 `--policy.size` (default `paper`, Table IV) picks the architecture from `SIZES`; an explicit `n_layers`,
 `embed_dim`, `n_heads` or `head_hidden_dims` wins. `config.json` stores the resolved numbers.
@@ -69,9 +67,8 @@ class ConstantThenLinearDecaySchedulerConfig(LRSchedulerConfig):
 
 @dataclass
 class TrainedFor:
-    """The robot a checkpoint was trained for, from its training dataset's metadata (robot type, fps, the state and
-    action names, in order): the real gripper refuses a checkpoint whose facts differ from its own, or that has
-    none, before any servo takes torque (`policy_contract.py`)."""
+    """The robot a checkpoint was trained for (`policy_contract.facts_from_dataset`), which the real gripper checks
+    before any servo takes torque."""
 
     robot_type: str | None = None
     fps: float | None = None
@@ -80,19 +77,13 @@ class TrainedFor:
     action_meaning: str = policy_contract.ACTION_MEANING  # what the action means once postprocessed
     source: str | None = None
 
-    @classmethod
-    def from_dataset(cls, meta, source: str | None = None) -> TrainedFor:
-        """From a `LeRobotDatasetMetadata` (or anything with `robot_type`, `fps`, `features` and `repo_id`)."""
-        return cls(**policy_contract.facts_from_dataset(meta, source))
-
 
 @PreTrainedConfig.register_subclass("blindgrasp_transformer")
 @dataclass
 class BlindgraspTransformerConfig(PreTrainedConfig):
     """See the module docstring for the Table IV mapping and the size presets."""
 
-    # Context length = frame stacking length (Table IV: 30): the policy sees (o_{t-29}, ..., o_t).
-    n_obs_steps: int = 30
+    n_obs_steps: int = 30  # context length = frame stack (Table IV): the policy sees (o_{t-29}, ..., o_t)
 
     # Architecture. None -> taken from SIZES[size] in __post_init__.
     size: str = "paper"
@@ -102,21 +93,18 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     head_hidden_dims: list[int] | None = None
     # One rate for robomimic's three dropouts (embedding, attention weights, block outputs); Table IV gives one.
     dropout: float = 0.1
-    # robomimic's deterministic BC-Transformer squashes the action output with tanh (targets lie in [-1, 1]).
-    tanh_output: bool = True
+    tanh_output: bool = True  # as robomimic's deterministic BC-Transformer (the targets lie in [-1, 1])
 
     # Action: IDENTITY, since the target->delta processor step scales it by the 0.3 rad bound (checked below).
     normalization_mapping: dict[str, NormalizationMode] = field(
         default_factory=lambda: {"STATE": NormalizationMode.MEAN_STD, "ACTION": NormalizationMode.IDENTITY}
     )
 
-    # Training (Table IV). The batch size of 256 is lerobot-train's `--batch_size=256`.
     optimizer_lr: float = 1e-4
     optimizer_betas: tuple[float, float] = (0.9, 0.999)
     optimizer_eps: float = 1e-8
     optimizer_weight_decay: float = 0.01
-    # Not in the paper; LeRobot's AdamW default. 0 disables clipping.
-    optimizer_grad_clip_norm: float = 10.0
+    optimizer_grad_clip_norm: float = 10.0  # not in the paper: LeRobot's AdamW default; 0 disables clipping
     # "Linear decay after 100 epochs": constant lr for this many steps (None: the whole run; epochs depend on the
     # dataset, `presets.student`), then linear to end_factor x lr (0.1: robomimic's BC-Transformer template).
     scheduler_constant_steps: int | None = None
@@ -128,8 +116,7 @@ class BlindgraspTransformerConfig(PreTrainedConfig):
     augment_force_bias_n: float = 0.0
     augment_joint_offset_rad: float = 0.0
 
-    # Filled from the training dataset's metadata when lerobot-train builds the policy. None: not recorded.
-    trained_for: TrainedFor | None = None
+    trained_for: TrainedFor | None = None  # set when lerobot-train builds the policy; None: not recorded
 
     @property
     def augmentation_active(self) -> bool:

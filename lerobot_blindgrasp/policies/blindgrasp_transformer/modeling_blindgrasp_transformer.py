@@ -5,10 +5,9 @@ deterministic head) over o_t = (9 joint positions, 3 forces). B batch, T context
     n_layers x pre-LN block: x + Attn(LN(x)), x + MLP(LN(x))      fused qkv (no bias), GELU MLP 4x
     final LayerNorm -> MLP head [1024, 1024] on the LAST token -> A -> tanh
 
-A window that starts before its episode repeats the first frame, flagged in `observation.state_is_pad` (LeRobot's
-padding); padded keys are masked out of attention, and the rolling inference context starts the same way, so step t
-sees exactly what training saw for frame t. `forward` runs the last layer for the last token only (the one the head
-reads); `forward_reference`, every token with explicit softmax attention, is kept to check it.
+A window that starts before its episode repeats the first frame, flagged in `observation.state_is_pad`; padded keys
+are masked out of attention, and the inference context starts the same way, so step t sees what training saw for
+frame t. `forward` runs the last layer for the last token only; `forward_reference` (every token) checks it.
 """
 
 from __future__ import annotations
@@ -21,7 +20,7 @@ from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch import Tensor, nn
 
-from lerobot_blindgrasp import project, spec
+from lerobot_blindgrasp import policy_contract, project, spec
 
 from .configuration_blindgrasp_transformer import BlindgraspTransformerConfig, TrainedFor
 from .processor_blindgrasp_transformer import Q_NOW, normalized_delta_to_target
@@ -207,7 +206,7 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         super().__init__(config)
         config.validate_features()
         if kwargs.get("dataset_meta") is not None:  # lerobot-train: the dataset it trains on says the robot
-            config.trained_for = TrainedFor.from_dataset(kwargs["dataset_meta"])
+            config.trained_for = TrainedFor(**policy_contract.facts_from_dataset(kwargs["dataset_meta"]))
         self.config = config
         self.model = BlindgraspGPT(config)
         self.reset()
@@ -289,10 +288,8 @@ class BlindgraspTransformerPolicy(PreTrainedPolicy):
         """The paper's imitation loss (`imitation_loss`) of the last token's prediction, per sample or averaged."""
         pred = self.model(batch[OBS_STATE], batch.get(STATE_IS_PAD))
         per_sample = imitation_loss(pred, batch[ACTION])
-        if reduction == "none":
-            return per_sample, {"mse": per_sample.mean().item()}
-        loss = per_sample.mean()
-        return loss, {"mse": loss.item()}
+        mse = per_sample.mean()
+        return (per_sample if reduction == "none" else mse), {"mse": mse.item()}
 
 
 def imitation_loss(pred: Tensor, action: Tensor) -> Tensor:

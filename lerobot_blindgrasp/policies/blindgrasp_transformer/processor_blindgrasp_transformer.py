@@ -8,10 +8,9 @@ A LeRobot `action` is the ABSOLUTE joint target (rad), target = q_now + delta; t
     select_action  action := q_now + 0.3 * pred, with the q_now that came with the observation
     postprocessor  unnormalizer (identity for the action; kept for lerobot-train's overrides) -> device(cpu)
 
-The policy, not the postprocessor, makes the target: LeRobot's postprocessor sees only the policy's output, so
-q_now travels with the observation and nothing is remembered between calls. The clip is of training targets;
-actions are bounded by the model (tanh) and by the env or robot. LeRobot's `RelativeActionsProcessorStep` takes the
-whole state, does no bound scaling, and is refused by lerobot-rollout's sync engine.
+The policy makes the target (LeRobot's postprocessor sees only the policy's output), so nothing is remembered
+between calls. LeRobot's `RelativeActionsProcessorStep` takes the whole state, does no bound scaling, and is refused
+by lerobot-rollout's sync engine.
 """
 
 from __future__ import annotations
@@ -83,10 +82,8 @@ class TargetToNormalizedDeltaStep(ProcessorStep):
 class SensorAugmentStep(ProcessorStep):
     """Training-time sensor errors, drawn once per sample and held over its window (beyond the paper): a force gain
     g (log-uniform in [1/(1+force_gain), 1+force_gain]), a force offset b (+-force_bias_n) and a joint calibration
-    offset d (+-joint_offset_rad per joint). The observation becomes (q + d, g f + b) and the target moves by d, so
-    the commanded step is unchanged, as on a gripper whose encoders are off by d. Only (B, T, 12) windows that come
-    with an action (training batches) are changed.
-    """
+    offset d (+-joint_offset_rad per joint). The observation becomes (q + d, g f + b) and the target moves by d: the
+    same step, as on a gripper whose encoders are off by d. Only (B, T, 12) windows with an action (training) change."""
 
     force_gain: float = 0.0
     force_bias_n: float = 0.0

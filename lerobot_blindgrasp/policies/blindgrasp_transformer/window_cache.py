@@ -1,9 +1,7 @@
 """The student's data path: LeRobotDataset windows sliced from one in-memory tensor per column (as robomimic's
-`hdf5_cache_mode="low_dim"`), with the same items as LeRobot's `DatasetReader`, which converts each window through
-Python lists at a cost above the student's update. `install_window_cache()` (at plugin import) asks
-`compat.serve_dataset_readers_with` for each reader that loads a table: one of this plugin's schema (`ours`) that
-the cache reproduces exactly (`servable`) becomes a `LowDimWindowReader`, every other keeps LeRobot's path.
-`BLINDGRASP_LOW_DIM_CACHE=0` at load time keeps LeRobot's path.
+`hdf5_cache_mode="low_dim"`), the same items as LeRobot's `DatasetReader`, which builds each window through Python
+lists at a cost above the student's update. Only a reader of this plugin's schema (`ours`) that the cache reproduces
+exactly (`servable`) is served; `BLINDGRASP_LOW_DIM_CACHE=0` at load time keeps LeRobot's path for all.
 """
 
 from __future__ import annotations
@@ -108,8 +106,7 @@ class LowDimCache:
             wanted = abs_idx + delta
             padding[f"{key}_is_pad"] = (wanted < start) | (wanted >= end)
             windows[key] = self.columns[key][self.rows(wanted.clamp(start, end - 1))]
-        item = {**item, **padding}
-        item.update(windows)
+        item = {**item, **padding, **windows}  # a window replaces its frame's value in place
         item["task"] = self.tasks[int(item["task_index"])]
         return item
 

@@ -1,7 +1,6 @@
 """Configuration of the real gripper (`--robot.type=blindgrasp_gripper`): the paper's D'Claw-derived build by default,
-a site's file in `robot_configs/` (`--robot="include robot_configs/blindgrasp_gripper.yaml"`). Parsing also keeps
-what the script's command line says and LeRobot never hands the robot (`command_line`: the policy, the loop's rate,
-the dataset), which the robot checks at connect.
+a site's file in `robot_configs/`. Parsing also keeps what the script's command line says and LeRobot never hands the
+robot (`command_line`: the policy, the loop's rate, the dataset), which the robot checks at connect.
 """
 
 from __future__ import annotations
@@ -28,8 +27,7 @@ DYNAMIXEL_BAUDRATES = (9600, 57_600, 115_200, 1_000_000, 2_000_000, 3_000_000, 4
 @RobotConfig.register_subclass("blindgrasp_gripper")
 @dataclass
 class BlindgraspGripperConfig(RobotConfig):
-    # U2D2 (or any USB-RS485/TTL adapter) serial port of the Dynamixel bus.
-    port: str = "/dev/ttyUSB0"
+    port: str = "/dev/ttyUSB0"  # the Dynamixel bus's serial port (a U2D2 or any USB-RS485/TTL adapter)
     # Must equal the servos' Baud_Rate register; D'Claw/ROBEL use 1 Mbps (factory default is 57 600).
     baudrate: int = 1_000_000
     # Servo ID per joint, in `spec.JOINT_NAMES` order (D'Claw convention 10, 11, 12 / 20, 21, 22 / 30, 31, 32).
@@ -38,8 +36,7 @@ class BlindgraspGripperConfig(RobotConfig):
     # a wider one is refused (the policy never saw it).
     joint_lower: list[float] = field(default_factory=lambda: spec.JOINT_LOWER.tolist())
     joint_upper: list[float] = field(default_factory=lambda: spec.JOINT_UPPER.tolist())
-    # Per-step bound |target - q_now| (rad): the paper's action clip, applied again on the robot.
-    max_relative_target: float = spec.ACTION_BOUND_RAD
+    max_relative_target: float = spec.ACTION_BOUND_RAD  # |target - q_now| per step (rad): the paper's clip, again
     # CURRENT_POSITION (5) makes the current limit act as a torque limit, like the sim's actuator forcerange.
     # POSITION (3) would enforce the position limits in firmware instead but ignore Goal_Current.
     operating_mode: str = "CURRENT_POSITION"
@@ -49,10 +46,8 @@ class BlindgraspGripperConfig(RobotConfig):
     position_p_gain: int = 800
     position_i_gain: int = 0
     position_d_gain: int = 0
-    # Profile_Velocity (0.229 rpm units); 0 = no profile, as in the sim.
-    profile_velocity: int = 0
-    # Extra tries of a failed bus transaction before the gripper stops with a GripperBusError.
-    bus_num_retry: int = 2
+    profile_velocity: int = 0  # Profile_Velocity (0.229 rpm units); 0 = no profile, as in the sim
+    bus_num_retry: int = 2  # extra tries of a failed bus transaction before a GripperBusError stop
     # The servos' own Bus_Watchdog (20 ms units): a servo that hears no instruction for this long stops where it is
     # until the robot re-arms it, which bounds how long the gripper moves after the host dies. 0 disables it.
     bus_watchdog_ms: int = 200
@@ -75,10 +70,8 @@ class BlindgraspGripperConfig(RobotConfig):
     # lock_memory keeps the process in RAM (mlockall). A refusal is a warning (docs/hardware.md, "The host PC").
     realtime_priority: int = 0
     lock_memory: bool = False
-    # Servo health (`hardware/servo_diagnostics.py`): the health block is read every this many control periods.
-    health_every_n: int = 4
-    # Calibration: a joint must move at least this far (rad) in the "positive" pose to read its direction.
-    calibration_min_motion_rad: float = 0.15
+    health_every_n: int = 4  # control periods between reads of the servo health block (`servo_diagnostics.py`)
+    calibration_min_motion_rad: float = 0.15  # how far (rad) a joint must move in the "positive" calibration pose
     disable_torque_on_disconnect: bool = True
     # A policy on the command line whose fit no file states is refused before any torque (`policy_contract.py`);
     # true runs it with a warning.

@@ -1,7 +1,6 @@
-"""Bus traffic while no control loop runs (a tare, an operator placing the object): one servo state check every
-`KEEPALIVE_S`, so the servos' Bus_Watchdog, which stops them when this host dies, stays armed and never trips, and a
-servo that reset during the wait is caught before the next trial. Disarming it instead would leave a host that dies
-in a wait with nine torqued servos and nobody watching.
+"""Bus traffic while no control loop runs (a tare, an operator placing the object): a servo state check every
+`KEEPALIVE_S` keeps the servos' Bus_Watchdog armed without tripping it and catches a servo that reset meanwhile.
+Disarming it instead would leave a host that dies in a wait with nine torqued servos and nobody watching.
 """
 
 from __future__ import annotations

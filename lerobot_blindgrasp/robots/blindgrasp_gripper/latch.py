@@ -1,11 +1,8 @@
 """The safety latch: any failure while connected turns the torque off on every servo that answers, closes both ports
-and raises one error that says so.
-
-`SafetyLatch.guard(what)` wraps every call of the gripper that touches the hardware; a failure of the layers below
-(`hardware/`) becomes the gripper's named error (`errors.py`), and reconnecting is the operator's decision. While
-armed (at connect), the process is guarded too: `atexit`, an uncaught exception before Python reports it (a
-script's cleanup can fail before its disconnect, as lerobot-record's `dataset.finalize()` on a full disk), and
-SIGTERM/SIGHUP unwinding like Ctrl-C (`signals.py`).
+and raises one error that says so. `SafetyLatch.guard(what)` wraps every call of the gripper that touches the
+hardware and names the failure (`errors.py`); reconnecting is the operator's decision. While armed, the process is
+guarded too: `atexit`, an uncaught exception before Python reports it (a script's cleanup can fail before its
+disconnect), and SIGTERM/SIGHUP unwinding like Ctrl-C (`signals.py`).
 """
 
 from __future__ import annotations

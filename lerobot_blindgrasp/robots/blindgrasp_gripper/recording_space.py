@@ -1,10 +1,8 @@
-"""Room on disk for the next recording episode, checked at every episode start: refused with the numbers if not.
-
-A disk that fills at LeRobot's `save_episode` also loses the episodes before (docs/upstream/dataset-crash-safety.md);
-before an episode starts, refusing costs nothing. The dataset is found from the script's command line
-(`compat.read_command_line`), its features from its `meta/info.json`. The need is an upper bound: raw bytes per frame
-(images at their raw size), the episode's stats row, times `MARGIN` for parquet's dictionary pages, plus
-`FIXED_BYTES` for the files rewritten at every save and the footers `finalize()` writes.
+"""Room on disk for the next recording episode, checked at every episode start: refused with the numbers if not (a
+disk that fills at LeRobot's `save_episode` also loses the episodes before). The dataset comes from the script's
+command line, its features from its `meta/info.json`. The need is an upper bound: raw bytes per frame (images raw),
+the episode's stats row, times `MARGIN` for parquet's dictionary pages, plus `FIXED_BYTES` for the files rewritten at
+every save and the footers `finalize()` writes.
 """
 
 from __future__ import annotations

@@ -1,10 +1,7 @@
 """Raw servo ticks -> the sim's joint zero and direction, from two hand-held poses (torque off): the reference pose
-(q = 0) and a positive pose (every joint moved at least `calibration_min_motion_rad` its positive way).
-
-The sign of the motion gives Drive_Mode's reverse bit, then Homing_Offset puts the reference pose at `ZERO_TICK`,
-both in the servo's EEPROM: the firmware reports sim-convention positions, q = (ticks - ZERO_TICK) * 2 pi / 4096 for
-every joint, and `DynamixelMotorsBus.is_calibrated` checks them against the file. This file also reads, checks and
-writes the calibration file.
+(q = 0) and a positive pose. The sign of the motion gives Drive_Mode's reverse bit, then Homing_Offset puts the
+reference pose at `ZERO_TICK`, both in EEPROM, so the firmware reports q = (ticks - ZERO_TICK) * 2 pi / 4096. Also
+reads, checks and writes the calibration file.
 """
 
 from __future__ import annotations

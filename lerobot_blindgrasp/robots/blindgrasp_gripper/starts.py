@@ -1,9 +1,6 @@
-"""Where a start is, as the robot can tell (connect, a recording episode, a loop resuming after a pause): health is
-then judged at the start levels, and a recording's episode needs room on disk (`recording_space.py`).
-
-LeRobot's Robot interface has no call at an episode's start, but lerobot-record announces each episode with a
-`log_say` line at INFO that reaches every root handler (`compat.is_episode_announcement` recognises it):
-`EpisodeStarts`, installed while the gripper is connected, is one such handler.
+"""Where a start is (connect, a recording episode, a loop resuming after a pause): health is then judged at the start
+levels, and a recording's episode needs room on disk (`recording_space.py`). LeRobot's Robot interface has no call at
+an episode's start; lerobot-record's `log_say` line at INFO reaches every root handler, `EpisodeStarts` among them.
 """
 
 from __future__ import annotations
