@@ -76,9 +76,18 @@ class EmulatedBridgeSender(GloveSender):
 
 
 def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A free UDP port below Linux's default ephemeral range (32768-60999), where no socket's automatic bind (every
+    sender's source port, in any test process) can take it between this check and the test's own bind."""
+    rng = random.Random()
+    for _ in range(1000):
+        port = rng.randrange(20000, 32768)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+        return port
+    raise RuntimeError("no free UDP port in 20000-32767")
 
 
 class GloveEmulator:

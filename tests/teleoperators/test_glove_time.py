@@ -1,6 +1,6 @@
-"""Glove time by the bridge's clock (issue 45 item 3): order by the bridge's sequence, age by its clock, tell a
-restarted bridge from late datagrams. First the receiver's rules on a simulated clock (fuzzed with hypothesis),
-then the teleoperator against the emulated bridge over UDP, with the network faults that broke it before."""
+"""Glove time by the bridge's clock: order by the bridge's sequence, age by its clock, tell a restarted bridge from
+late datagrams. First the receiver's rules on a simulated clock (fuzzed with hypothesis), then the teleoperator
+against the emulated bridge over UDP, with the network's faults."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig
+from lerobot_blindgrasp.teleoperators.manus_glove import ManusGlove, ManusGloveConfig, receiver
 from lerobot_blindgrasp.teleoperators.manus_glove.manus_glove import GloveStreamLost
 from lerobot_blindgrasp.teleoperators.manus_glove.protocol import GloveDatagram, GloveSender
 from lerobot_blindgrasp.teleoperators.manus_glove.receiver import OFFSET_LEAK, GloveReceiver
@@ -128,10 +128,30 @@ def test_fuzz_orderings_never_step_back_nor_use_a_stale_pose(events, pause_start
         assert kept  # a calm network delivers
 
 
+class PreemptedClocks:
+    """The host's clocks as the receiver reads them, with its thread preempted for `lag_s` between a monotonic and
+    a wall-clock read once armed: from then on both clocks read `lag_s` later, as after any preemption."""
+
+    def __init__(self, lag_s: float):
+        self.lag_s, self.armed, self.shift = lag_s, False, 0.0
+
+    def monotonic(self) -> float:
+        return time.monotonic() + self.shift
+
+    def time(self) -> float:
+        if self.armed:
+            self.armed, self.shift = False, self.lag_s
+        return time.time() + self.shift
+
+
 @pytest.mark.skipif(sys.platform != "linux", reason="kernel arrival stamps (SO_TIMESTAMPNS) are Linux's")
-def test_a_busy_host_is_not_taken_for_a_network_pause():
+@pytest.mark.parametrize("preempted", [False, True], ids=["", "preempted between the clock reads"])
+def test_a_busy_host_is_not_taken_for_a_network_pause(monkeypatch, preempted):
     """Datagrams that waited in the socket buffer while this process was busy were not queued on the network: they
-    are kept (by the kernel's arrival stamps), and their age still counts the wait."""
+    are kept (by the kernel's arrival stamps), and their age still counts the wait. A preemption between the
+    receiver's two clock reads, twice the wall-clock step it watches for, is not taken for a step of the clock."""
+    clocks = PreemptedClocks(2 * receiver.WALL_STEP_S)
+    monkeypatch.setattr(receiver, "time", clocks)
     port = free_udp_port()
     # The wait below is three times max_latency_s; max_latency_s itself is the margin a busy test process has
     # between a datagram's `sent` stamp and its send call, which would count as time on the network.
@@ -146,9 +166,10 @@ def test_a_busy_host_is_not_taken_for_a_network_pause():
             sender.send(ERGO)
             time.sleep(0.01)
         time.sleep(0.75)
+        clocks.armed = preempted
         frames = [f for _ in range(5) for f in r._receive()]
         assert [f.seq for f in frames] == [4, 5, 6, 7, 8] and r.stale == 0
-        assert time.monotonic() - frames[-1].sent_local >= 0.75  # its age counts the time it waited here
+        assert not clocks.armed and clocks.monotonic() - frames[-1].sent_local >= 0.75  # it waited here too
     finally:
         r._close()
         sender.close()

@@ -30,6 +30,18 @@ RETIRED_SESSIONS = 16  # earlier session ids remembered, to drop their late data
 # A loopback bridge's `sent` may lead this host's receive stamp by scheduling noise only; more is another clock.
 SHARED_CLOCK_SLACK_S = 0.005
 WALL_STEP_S = 0.01  # a change of (wall - monotonic) between two reads beyond this is a step of the wall clock
+# A busy host can preempt this thread between its two clock reads, which would look like a step of the wall clock;
+# a pair read further apart than this is read again.
+CLOCK_PAIR_GAP_S = 0.001
+
+
+def _clock_pair() -> tuple[float, float]:
+    """(monotonic, wall) at one instant: the wall clock read between two monotonic reads, close together."""
+    for _ in range(3):
+        before, wall, after = time.monotonic(), time.time(), time.monotonic()
+        if after - before <= CLOCK_PAIR_GAP_S:
+            break
+    return (before + after) / 2, wall
 
 
 @dataclass(frozen=True)
@@ -113,7 +125,7 @@ class GloveReceiver(LatestFrameStream[GloveFrame]):
             datagram, addr = self._sock.recvfrom(65536)
             return datagram, addr, time.monotonic()
         datagram, ancillary, _, addr = self._sock.recvmsg(65536, socket.CMSG_SPACE(_TIMESPEC.size))
-        mono, wall = time.monotonic(), time.time()
+        mono, wall = _clock_pair()
         skew, last = wall - mono, self._wall_skew
         self._wall_skew = skew
         if last is not None and abs(skew - last) > WALL_STEP_S:
