@@ -19,6 +19,7 @@ from lerobot_blindgrasp.envs import real_report
 from lerobot_blindgrasp.envs.operator import FAILURE_KEYS, SUCCESS_KEYS, OperatorKeys, SocketOperator
 from lerobot_blindgrasp.hardware.loop_timing import StepPacer
 from lerobot_blindgrasp.hardware.realtime import GcPause
+from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import GripperStallError
 from lerobot_blindgrasp.sim import objects, randomization
 from lerobot_blindgrasp.sim.gym_env import start_seed
 
@@ -103,6 +104,7 @@ class RealGraspEnv(gym.Env):
         # Where each period goes, logged per trial; "policy" is the caller's time between a step and the next.
         self._step_s: dict[str, list[float]] = {"read": [], "policy": [], "write": []}
         self._returned_at: float | None = None
+        self._stopped: str | None = None  # the stall stop's message, when one ended the trial
 
     def _overruns(self) -> int:
         timing = getattr(self.robot, "timing", None)
@@ -184,11 +186,14 @@ class RealGraspEnv(gym.Env):
         t_in = time.perf_counter()
         if self._returned_at is not None:
             self._step_s["policy"].append(t_in - self._returned_at)
-        self.robot.send_action(dict(zip(spec.ACTION_NAMES, action.tolist(), strict=True)))
-        self._step_s["write"].append(time.perf_counter() - t_in)
-        self._schedule.wait()
-        t_read = time.perf_counter()
-        obs = self._observe()
+        try:
+            self.robot.send_action(dict(zip(spec.ACTION_NAMES, action.tolist(), strict=True)))
+            self._step_s["write"].append(time.perf_counter() - t_in)
+            self._schedule.wait()
+            t_read = time.perf_counter()
+            obs = self._observe()
+        except GripperStallError as e:
+            return self._end_on_stall(e)
         self._step_s["read"].append(time.perf_counter() - t_read)
         self._t += 1
         forces = self._obs[spec.STATE_FORCE_SLICE]
@@ -204,11 +209,27 @@ class RealGraspEnv(gym.Env):
         terminated = self._decided is not None and not truncated
         success = bool(self._decided and self._decided[0])
         if terminated or truncated:
-            self._log_trial(success)
-            self._gc.resume()  # between trials, where a collection may take its time
-            self.session.keys.clear()  # keys pressed during this trial must not decide the next one
+            self._finish_trial(success)
         self._returned_at = time.perf_counter()
         return obs, float(success), terminated, truncated, {"is_success": success}
+
+    def _finish_trial(self, success: bool) -> None:
+        self._log_trial(success)
+        self._gc.resume()  # between trials, where a collection may take its time
+        self.session.keys.clear()  # keys pressed during this trial must not decide the next one
+
+    def _end_on_stall(self, e: GripperStallError):
+        """The stall stop ends this trial as a failure instead of the whole evaluation: a finger squeezed at its
+        current limit for seconds (a missed grasp runs its full 10 s), the torque is off, and the servos are within
+        their limits. The next trial reconnects through every check of a first connect. A stop whose torque-off
+        was not confirmed still ends the session."""
+        if not getattr(e, "torque_off_confirmed", False):
+            raise e
+        logger.warning("[%s] trial %d ended by the stall stop: %s", self.object_name,
+                       self.session.trials[self.object_name], e)  # fmt: skip
+        self._decided, self._stopped = (False, "stall stop"), str(e)
+        self._finish_trial(False)
+        return spaces.observation(self._obs), 0.0, True, False, {"is_success": False}
 
     def _judge(self, forces: np.ndarray) -> None:
         if self.cfg.success_mode == "operator":
@@ -242,6 +263,7 @@ class RealGraspEnv(gym.Env):
                 "peak_force_n": [round(float(f), 3) for f in self._peak],
                 "loop_overruns": self._overruns() - self._overruns_at_start,
                 "late_steps_rebased": self._schedule.rebased,
+                "stopped": self._stopped,
                 "step_ms": {
                     k: [round(1e3 * float(np.percentile(v, p)), 2) for p in (50, 99, 100)] if v else []
                     for k, v in self._step_s.items()

@@ -31,6 +31,11 @@ class ServoHealthError(RuntimeError):
     """A health item reached its ERROR level, or was too close to its limit to start."""
 
 
+class ServoStallError(ServoHealthError):
+    """Only the current item reached ERROR: a finger held at its current limit. The command squeezed too long; the
+    servos themselves are within their limits, so a new trial may start after the stop."""
+
+
 @dataclass(frozen=True)
 class Diagnostic:
     level: int
@@ -145,8 +150,10 @@ class ServoHealth:
         if start and (close := self.start_problems(block) + errors):
             raise ServoHealthError(f"Refused to start: {'; '.join(close)}.")
         if errors:
-            raise ServoHealthError(f"Servo health: {'; '.join(errors)}. Stopped before the firmware's own "
-                                   "shutdown would drop the object.")  # fmt: skip
+            stall = all(d.item == "current" for d in found if d.level == ERROR)
+            raise (ServoStallError if stall else ServoHealthError)(
+                f"Servo health: {'; '.join(errors)}. Stopped before the firmware's own shutdown would drop the object."
+            )
         return currents
 
     def start_problems(self, block: dict[str, dict[str, int]]) -> list[str]:

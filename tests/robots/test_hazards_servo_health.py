@@ -7,9 +7,11 @@ before the firmware's own shutdown; the level rules alone on readings given by h
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 
+import numpy as np
 import pytest
 from dynamixel_sdk import robotis_def as dx
 from emulators.harness import connect_gripper
@@ -17,10 +19,16 @@ from emulators.loop import hold, stopped
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.dynamixel import EmulatedServo
+from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
+from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 from lerobot_blindgrasp.hardware import xm430
-from lerobot_blindgrasp.hardware.servo_diagnostics import ERROR, OK, WARN, ServoHealth
+from lerobot_blindgrasp.hardware.servo_diagnostics import ERROR, OK, WARN, ServoHealth, ServoStallError
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
-from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import GripperHardwareError, GripperHealthError
+from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import (
+    GripperHardwareError,
+    GripperHealthError,
+    GripperStallError,
+)
 
 JOINTS = ["ff_j10"]
 
@@ -217,6 +225,72 @@ def test_a_stall_at_the_current_limit_stops_before_the_firmware_overload(rig, ro
         hold(robot, 100, target)
     assert stopped(rig, robot)
     assert not any(s.get("Hardware_Error_Status") for s in rig.dxl.servos.values())  # before the firmware's stop
+
+
+def _stall_trial(rig, tmp_path, monkeypatch) -> tuple[RealGraspEnv, np.ndarray]:
+    """An eval trial (force mode, a criterion no squeeze meets) on a rigid object, and the action that squeezes it
+    with the three proximal servos at their current limit (the step bound keeps each goal 0.3 rad into it)."""
+    monkeypatch.setattr(xm430, "STALL_STOP_S", 1.5)
+    monkeypatch.setattr(xm430, "STALL_WARN_S", 0.5)
+    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
+    cfg = BlindGraspRealEnvConfig(robot=rig.robot_config(tmp_path / "cal"), task="foam_brick", success_mode="force",
+                                  hold_force_n=1e3, unattended_reset_s=0.0, episode_s=3.0,
+                                  trial_log=str(tmp_path / "trials.jsonl"))  # fmt: skip
+    env = RealGraspEnv(GripperSession(cfg), "foam_brick")
+    squeeze = spec.HOME_POSE.copy()
+    squeeze[1::3] = spec.HOME_POSE[1] - 0.6
+    env.reset(seed=0)
+    rig.place_object(contact_q=float(spec.HOME_POSE[1]) - 0.05)
+    return env, squeeze
+
+
+def test_a_stall_ends_the_eval_trial_as_a_failure_and_the_next_trial_reconnects(rig, tmp_path, monkeypatch):
+    """In lerobot-eval a missed grasp runs its full 10 s, and a finger may squeeze at its limit past the stall stop.
+    That stop ends the trial (torque off, a failure in the record), not the evaluation: the next trial reconnects
+    through every check of a first connect."""
+    env, squeeze = _stall_trial(rig, tmp_path, monkeypatch)
+    try:
+        for steps in range(1, env._max_episode_steps + 1):  # noqa: B007 (read after the loop)
+            _, reward, terminated, truncated, info = env.step(squeeze)
+            if terminated or truncated:
+                break
+        assert terminated and not truncated and not info["is_success"] and reward == 0.0
+        assert steps < env._max_episode_steps  # the stop, not the time limit, ended it
+        assert stopped(rig, env.robot)
+        rig.remove_object()
+        env.reset(seed=1)  # the next trial: connected again, homed, torqued
+        assert env.robot.is_connected and rig.dxl.any_torque()
+        for _ in range(env._max_episode_steps):
+            *_, truncated, _ = env.step(spec.HOME_POSE)
+        assert truncated
+    finally:
+        env.close()
+    first, second = (json.loads(line) for line in (tmp_path / "trials.jsonl").read_text().splitlines())
+    assert (first["success"], first["decided_by"]) == (False, "stall stop")
+    assert "at the current limit for" in first["stopped"] and "Torque is off on all servos" in first["stopped"]
+    assert second["trial"] == 2 and second["stopped"] is None
+
+
+def test_a_stall_stop_whose_torque_off_is_unconfirmed_ends_the_evaluation(rig, tmp_path, monkeypatch):
+    """A servo that does not confirm the torque-off may still be squeezing: nothing goes on, whatever the cause."""
+    env, squeeze = _stall_trial(rig, tmp_path, monkeypatch)
+    check = ServoHealth.check
+
+    def check_then_lose_a_servo(self, *args, **kwargs):
+        try:
+            return check(self, *args, **kwargs)
+        except ServoStallError:
+            rig.dxl.missing_ids.add(31)  # its cable comes loose as the stall stop begins
+            raise
+
+    monkeypatch.setattr(ServoHealth, "check", check_then_lose_a_servo)
+    try:
+        with pytest.raises(GripperStallError, match=r"NOT confirmed by servo IDs \[31\]"):
+            for _ in range(env._max_episode_steps):
+                env.step(squeeze)
+    finally:
+        env.close()
+    assert not env.robot.is_connected
 
 
 def test_a_negative_current_read_raw_is_a_stall_not_174_amps():

@@ -114,7 +114,8 @@ def test_calibrate_then_the_shipped_student_grasps_through_the_real_env(twin):
     assert info["judge"].startswith("twin (the sim's rule")
     real = [json.loads(line) for line in (tmp / "real_trials.jsonl").read_text().splitlines()]
     assert [r["seed"] for r in real] == SEEDS
-    assert all(r["decided_by"] == info["judge"] for r in real)
+    # A missed grasp may squeeze past the stall stop in its 10 s: that trial fails by the stop, and the next goes on.
+    assert all(r["decided_by"] in (info["judge"], "stall stop") for r in real)
     placed = [json.loads(line) for line in (tmp / "twin_trials.jsonl").read_text().splitlines()]
     assert [p["env_seed"] for p in placed] == [start_seed(s, OBJECT) for s in SEEDS]
     assert [p["success"] for p in placed] == [r["success"] for r in real] == list(successes)

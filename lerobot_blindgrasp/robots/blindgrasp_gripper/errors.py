@@ -51,6 +51,11 @@ class GripperHealthError(GripperSafetyStop):
     too close to its limit to start a trial or episode (`hardware/servo_diagnostics.py`): stopped before the firmware's own shutdown."""
 
 
+class GripperStallError(GripperHealthError):
+    """A finger sat at its current limit for `xm430.STALL_STOP_S` (stopped, torque off). Only the command was at
+    fault, so an evaluation ends that trial as a failure and reconnects for the next one."""
+
+
 class GripperConsistencyError(GripperSafetyStop):
     """Two inputs that see the same physics disagree beyond what physics allows (`hardware/consistency.py`): a fingertip force
     its finger's servos do not hold, or a servo that does not drive its joint toward the goal."""

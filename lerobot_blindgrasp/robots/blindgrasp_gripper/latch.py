@@ -21,7 +21,7 @@ from lerobot_blindgrasp.hardware.force_board.reader import ForceStreamError, For
 from lerobot_blindgrasp.hardware.loop_timing import LoopOverrunError
 from lerobot_blindgrasp.hardware.plausibility import ImplausibleReadingError
 from lerobot_blindgrasp.hardware.ports import PortAccessError, PortInUseError
-from lerobot_blindgrasp.hardware.servo_diagnostics import ServoHealthError
+from lerobot_blindgrasp.hardware.servo_diagnostics import ServoHealthError, ServoStallError
 from lerobot_blindgrasp.hardware.servo_registers import (
     FirmwareTooOldError,
     ProtectionNotKeptError,
@@ -42,6 +42,7 @@ from .errors import (
     GripperProtectionError,
     GripperReadingError,
     GripperSafetyStop,
+    GripperStallError,
     GripperStateError,
     GripperTimingError,
 )
@@ -62,6 +63,7 @@ _NAMED_STOPS = (
     (ProtectionNotKeptError, GripperProtectionError, ""),
     (ServoFaultError, GripperHardwareError, ""),
     (ServoStateChangedError, GripperStateError, ""),
+    (ServoStallError, GripperStallError, ""),
     (ServoHealthError, GripperHealthError, ""),
     (ConsistencyError, GripperConsistencyError, "Inputs disagree: "),
 )
@@ -128,6 +130,7 @@ class SafetyLatch:
                 e.torque_off_handled = True
                 raise
             err.torque_off_handled = True
+            err.torque_off_confirmed = was_open and not unconfirmed
             raise err from e
 
     def _named_stop(self, e: BaseException, what: str, note: str) -> BaseException | None:
