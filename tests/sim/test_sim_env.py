@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import mujoco
 import numpy as np
 import pytest
 import torch
@@ -252,8 +253,9 @@ def test_batch_backend_state_is_torch_sharing_memory_with_the_physics():
 
 
 def test_batch_backend_reset_starts_envs_from_rest_and_leaves_the_others():
-    """The batch's reset (mj_resetData's defaults) zeroes velocity, the solver's warm start and applied forces of the
-    envs it resets, so the backend does not zero them again; the other envs keep their state."""
+    """The reset (mj_resetData's defaults, copied into the envs' state rows) zeroes velocity, the solver's warm start
+    and applied forces of the envs it resets, exactly as the batch's own reset would; the other envs keep their
+    state."""
     env = BatchedGraspEnv(GraspEnvConfig(num_envs=3, seed=0, nthread=1))
     env.reset()
     p, warm = env.physics, env.physics.batch.bind("qacc_warmstart")
@@ -266,4 +268,7 @@ def test_batch_backend_reset_starts_envs_from_rest_and_leaves_the_others():
     p.reset(torch.tensor([0, 1]))
     assert p.qvel[:2].abs().max() == 0 and (warm[:2] == 0).all() and p.xfrc_applied[:2].abs().max() == 0
     assert torch.equal(p.qvel[2], kept) and p.xfrc_applied[2, :, :3].abs().min() == 0.3
+    rows = p.batch.state.copy()
+    p.batch.reset([0, 1], stage=mujoco.mjtStage.mjSTAGE_NONE)
+    np.testing.assert_array_equal(p.batch.state, rows)  # what mujoco.batch's reset writes, bit for bit
     env.close()
