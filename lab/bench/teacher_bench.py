@@ -95,7 +95,7 @@ def _build(cfg: BenchTeacherConfig):
     from rsl_rl.runners import OnPolicyRunner
 
     from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
-    from lerobot_blindgrasp.teacher.train import build_env_config
+    from lerobot_blindgrasp.teacher.train import build_env_config, critic_beside_actor
     from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
     preset = _preset(cfg)
@@ -116,6 +116,7 @@ def _build(cfg: BenchTeacherConfig):
             runner.load(str(cfg.checkpoint))
         except (RuntimeError, KeyError) as e:  # state-dict shapes or keys of another preset
             raise SystemExit(f"{cfg.checkpoint} is not a checkpoint of preset {preset.name!r}: {e}") from None
+    critic_beside_actor(runner.alg, device)
     return preset, env, runner, device
 
 

@@ -10,6 +10,7 @@ offset frame (`delta_for_target`), as with a real servo's wrong homing offset.""
 from __future__ import annotations
 
 import logging
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import mujoco
 import numpy as np
@@ -72,6 +73,8 @@ class BatchedGraspEnv:
         f64 = {"dtype": torch.float64, "device": dev}
         self._seeds = rng.as_words(self.env_seeds, dev)
         self._noise_key = rng.stream_key(self._seeds, rng.STREAM_OBS_NOISE)
+        # the step's observation noise, drawn in a helper thread on a CPU while the physics runs (`step_tensors`)
+        self._noise_helper = ThreadPoolExecutor(1, thread_name_prefix="obs-noise") if dev.type == "cpu" else None
         self.sensor_draw = randomization.draw_sensors(cfg.dr, self._seeds)
         self.sensor_index = sensors.SensorIndex.from_model(template, dev)
         self._object_body = template.body("object").id
@@ -157,8 +160,9 @@ class BatchedGraspEnv:
         if ids is not None and self.physics.name != "batch":
             raise NotImplementedError("stepping a subset of envs needs the batch backend")
         a = self.validate_action(action).clamp(-spec.ACTION_BOUND_RAD, spec.ACTION_BOUND_RAD)
+        noise = self._draw_noise_beside()  # while the physics runs
         target, failed = self._actuate(a, ids)
-        obs = self._observe()
+        obs = self._observe(noise=noise)
         raw = self._raw
         terms, reward = self._rewards(raw, a, failed)
         self.episode_length += 1
@@ -268,11 +272,14 @@ class BatchedGraspEnv:
         out = self._f64(target) - q
         return out if isinstance(target, torch.Tensor) else on_host(out)
 
-    def _observe(self, ids: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
-        """Both observations for all envs or `ids`; for all envs, also the raw quantities the rewards read."""
+    def _observe(self, ids: torch.Tensor | None = None, noise: Future | None = None) -> dict[str, torch.Tensor]:
+        """Both observations for all envs or `ids`; for all envs, also the raw quantities the rewards read. `noise`:
+        their noise draw, being made in the helper thread."""
         sel = slice(None) if ids is None else ids
-        counter = self.episode[sel] * 100_003 + self.episode_length[sel]
-        noise = rng.normal(None, rng.STREAM_OBS_NOISE, counter, observations.NOISE_DIM, self._noise_key[sel])
+        if noise is not None:
+            noise = noise.result()
+        else:
+            noise = rng.normal(None, *self._noise_args(sel))
         state = [x[sel] for x in (self._qpos, self._qvel, self._sensordata, self.rest_height, self.prev_action)]
         raw, obs = observations.observe(
             *state[:3], self.sensor_index, *state[3:], noise, self.cfg.dr, self.sensor_draw.rows(sel)
@@ -280,6 +287,21 @@ class BatchedGraspEnv:
         if ids is None:
             self._raw = raw  # what this step's reward terms read (set by every full observation, reset first)
         return obs
+
+    def _noise_args(self, sel: slice | torch.Tensor) -> tuple:
+        """`rng.normal`'s arguments (after the seeds) for the observation noise of rows `sel` at their counters."""
+        counter = self.episode[sel] * 100_003 + self.episode_length[sel]
+        return rng.STREAM_OBS_NOISE, counter, observations.NOISE_DIM, self._noise_key[sel]
+
+    def _draw_noise_beside(self) -> Future | None:
+        """On a CPU, the step's observation noise drawn in the helper thread while MuJoCo steps: a pure function of
+        the episode counters, which the physics does not change. Its tens of whole-batch ops then take a share of a
+        physics core instead of running after the physics on this thread. Drawn beside this thread's own torch ops
+        instead, it would slow both: two Python threads running small ops at once hand the GIL back and forth at
+        every op, whereas MuJoCo steps without holding it."""
+        if self._noise_helper is None:
+            return None
+        return self._noise_helper.submit(rng.normal, None, *self._noise_args(slice(None)))
 
     # --- helpers for tests, rendering and eval (numpy on the host) ---------------------------------------------
     def set_targets(self, cmd) -> None:
@@ -304,4 +326,6 @@ class BatchedGraspEnv:
         return m, d
 
     def close(self) -> None:
+        if self._noise_helper is not None:
+            self._noise_helper.shutdown(cancel_futures=True)
         self.physics.close()

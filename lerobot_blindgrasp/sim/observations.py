@@ -79,7 +79,7 @@ def observe(
     uni_true = sensors.uniaxial_force(contact, si.read(sensordata, "zaxis"))
     obj_pos = qpos[:, OBJECT_POS]
     tip_obj = si.read(sensordata, "objcontact")  # world frame, the force each tip exerts on the object
-    tip_obj_norm = tip_obj.square().sum(-1).sqrt()
+    tip_obj_norm = sensors.sum_short(tip_obj.square(), -1).sqrt()
     raw = {
         "q": qpos[:, JOINTS],
         "uniaxial_clean": force.reading(uni_true),  # noise-free reading (rewards, curation)

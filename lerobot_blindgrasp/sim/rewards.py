@@ -14,6 +14,7 @@ from functools import cached_property
 import torch
 
 from lerobot_blindgrasp import spec
+from lerobot_blindgrasp.sim import sensors
 
 
 @dataclass(frozen=True)
@@ -82,7 +83,7 @@ class RewardConfig:
 
 def planar_distance(object_xy: torch.Tensor) -> torch.Tensor:
     """d_xy, eq. 2: distance in the table plane between the object and the gripper centre (the world origin)."""
-    return object_xy.square().sum(-1).sqrt()
+    return sensors.sum_short(object_xy.square(), -1).sqrt()
 
 
 def num_contacts(uniaxial_force, threshold: float = spec.FORCE_THRESHOLD_N):

@@ -15,6 +15,7 @@ import logging
 import shutil
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -200,6 +201,7 @@ def _runner(cfg: TrainTeacherConfig, preset: TeacherPreset, env: BatchedGraspEnv
     vec = RslRlGraspEnv(env, device=device, on_step=tick, blind_group=preset.actor_input if reads_blind else None)
     runner = distributed.runner_class(device)(vec, preset.runner_cfg(), log_dir=str(cfg.output_dir), device=device)
     runner.alg.update = with_torch_threads(runner.alg.update, update_thread_count(cfg, env))
+    critic_beside_actor(runner.alg, device)
     runner.save = atomic_save(runner.save)
     ckpt = newest_loadable_checkpoint(cfg.output_dir)
     if ckpt is None:
@@ -252,6 +254,48 @@ def with_torch_threads(update, threads: int):
             torch.set_num_threads(acting)
 
     return threaded
+
+
+def critic_beside_actor(alg, device: str) -> None:
+    """On a CPU, `alg.act` runs the critic's forward in a second thread beside the actor's. Between physics steps the
+    physics threads' cores are idle, and the two MLPs are the acting step's largest cost. Each op runs with the
+    torch thread count it would run with alone, and the critic draws no random numbers, so the actions and values are
+    bit-identical to rsl-rl's own `act`. Its result reaches rsl-rl's `act` through `_CriticAhead`."""
+    if torch.device(device).type != "cpu":
+        return
+    pool = ThreadPoolExecutor(1, thread_name_prefix="critic")
+    act = alg.act
+
+    def forward(critic, obs, inference: bool, grad: bool):
+        # grad and inference mode are per thread: the caller's (rsl-rl acts under inference mode)
+        with torch.inference_mode(inference), torch.set_grad_enabled(grad):
+            return critic(obs)
+
+    def act_beside(obs):
+        critic = alg.critic
+        future = pool.submit(forward, critic, obs, torch.is_inference_mode_enabled(), torch.is_grad_enabled())
+        alg.critic = _CriticAhead(critic, future)
+        try:
+            return act(obs)
+        finally:
+            alg.critic = critic
+            future.exception()  # the helper is done with `obs` before the caller goes on
+
+    alg.act = act_beside
+
+
+class _CriticAhead:
+    """The critic while `critic_beside_actor`'s thread computes its forward: calling it returns that result; all else
+    is the critic's."""
+
+    def __init__(self, critic, future):
+        self._critic, self._future = critic, future
+
+    def __call__(self, obs):
+        return self._future.result()
+
+    def __getattr__(self, name):
+        return getattr(self._critic, name)
 
 
 def _train_stages(cfg: TrainTeacherConfig, stages: tuple[tuple[str, int], ...]) -> None:

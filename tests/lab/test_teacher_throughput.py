@@ -154,6 +154,48 @@ def test_the_update_runs_with_its_own_torch_threads_and_acting_gets_its_count_ba
         torch.set_num_threads(previous)
 
 
+def test_the_critic_beside_the_actor_acts_bit_identically_in_its_own_thread():
+    """`critic_beside_actor`: the critic's forward runs in a second thread while the actor's runs; actions, values,
+    log-probs and distribution parameters are rsl-rl's own `act`'s, bit for bit, under the caller's inference mode."""
+    import contextlib
+    import threading
+
+    import torch
+    from rsl_rl.runners import OnPolicyRunner
+
+    from lerobot_blindgrasp.presets import teacher as teacher_presets
+    from lerobot_blindgrasp.teacher.train import build_env_config, critic_beside_actor
+    from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
+
+    preset = teacher_presets.get_preset("cpu")
+    env = BatchedGraspEnv(build_env_config(preset, 36, seed=1, nthread=1))
+    with contextlib.redirect_stdout(None):
+        runner = OnPolicyRunner(RslRlGraspEnv(env), preset.runner_cfg(), log_dir=None, device="cpu")
+    alg, critic = runner.alg, runner.alg.critic
+    obs = runner.env.get_observations()
+    threads = []
+    critic.register_forward_hook(lambda *_: threads.append(threading.get_ident()))
+
+    def acted():
+        torch.manual_seed(7)  # the actor samples its actions
+        with torch.inference_mode():
+            actions = alg.act(obs)
+        t = alg.transition
+        out = [actions, t.values, t.actions_log_prob, *t.distribution_params]
+        alg.transition.clear()
+        return out
+
+    own = acted()
+    critic_beside_actor(alg, "cpu")
+    beside = acted()
+    assert all(torch.equal(a, b) for a, b in zip(own, beside, strict=True))
+    assert beside[1].is_inference() and alg.critic is critic  # the caller's mode; the critic module back in place
+    assert threads[0] == threading.get_ident() and threads[1] != threading.get_ident()
+    act = alg.act
+    critic_beside_actor(alg, "cuda")  # on a GPU the forwards are queued on the device: no thread
+    assert alg.act is act
+
+
 def test_the_update_defaults_to_the_physics_threads_then_the_acting_threads():
     from types import SimpleNamespace
 

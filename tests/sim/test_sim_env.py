@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import mujoco
 import numpy as np
 import pytest
 import torch
@@ -198,6 +199,40 @@ def test_env_i_of_a_batch_equals_a_single_env_with_its_seed():
         assert rb[2] == rs[0]
 
 
+def test_the_noise_drawn_beside_the_physics_is_the_one_drawn_after_it():
+    """On a CPU the step's observation noise is drawn in a helper thread while MuJoCo steps; the env's outputs are
+    bit for bit those of drawing it on the caller's thread after the physics, resets included."""
+    import threading
+
+    from lerobot_blindgrasp.sim import rng as sim_rng
+
+    cfg = GraspEnvConfig(num_envs=6, seed=3, nthread=1, episode_s=0.2, dr=randomization.PAPER_DR)
+    beside, after = BatchedGraspEnv(cfg), BatchedGraspEnv(cfg)
+    after._noise_helper = None
+    drawn_in = set()
+    normal = sim_rng.normal
+
+    def recording(*args, **kwargs):
+        drawn_in.add(threading.current_thread().name.split("_")[0])
+        return normal(*args, **kwargs)
+
+    actions = np.random.default_rng(0).uniform(-0.3, 0.3, (8, 6, 9))
+    for env in (beside, after):
+        env.reset()
+        env.out = []
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(sim_rng, "normal", recording)
+            env.out = [env.step_tensors(torch.as_tensor(a)) for a in actions]
+    assert drawn_in == {"obs-noise", "MainThread"} and beside.episode.sum() > 0  # resets draw on the caller's
+    for b, a in zip(beside.out, after.out, strict=True):
+        for k in b[0]:
+            assert torch.equal(b[0][k].view(torch.int32), a[0][k].view(torch.int32))  # bits, signed zeros too
+        assert torch.equal(b[1], a[1]) and torch.equal(b[2], a[2]) and torch.equal(b[3], a[3])
+    beside.close()
+    with pytest.raises(RuntimeError, match="shutdown"):  # close() ends the helper thread
+        beside._noise_helper.submit(int)
+
+
 # --- bad input and physics failures ---------------------------------------------------------------------------------
 def test_bad_inputs_are_rejected_clearly():
     with pytest.raises(ValueError, match="unknown object 'banana'"):
@@ -252,8 +287,9 @@ def test_batch_backend_state_is_torch_sharing_memory_with_the_physics():
 
 
 def test_batch_backend_reset_starts_envs_from_rest_and_leaves_the_others():
-    """The batch's reset (mj_resetData's defaults) zeroes velocity, the solver's warm start and applied forces of the
-    envs it resets, so the backend does not zero them again; the other envs keep their state."""
+    """The reset (mj_resetData's defaults, copied into the envs' state rows) zeroes velocity, the solver's warm start
+    and applied forces of the envs it resets, exactly as the batch's own reset would; the other envs keep their
+    state."""
     env = BatchedGraspEnv(GraspEnvConfig(num_envs=3, seed=0, nthread=1))
     env.reset()
     p, warm = env.physics, env.physics.batch.bind("qacc_warmstart")
@@ -266,4 +302,7 @@ def test_batch_backend_reset_starts_envs_from_rest_and_leaves_the_others():
     p.reset(torch.tensor([0, 1]))
     assert p.qvel[:2].abs().max() == 0 and (warm[:2] == 0).all() and p.xfrc_applied[:2].abs().max() == 0
     assert torch.equal(p.qvel[2], kept) and p.xfrc_applied[2, :, :3].abs().min() == 0.3
+    rows = p.batch.state.copy()
+    p.batch.reset([0, 1], stage=mujoco.mjtStage.mjSTAGE_NONE)
+    np.testing.assert_array_equal(p.batch.state, rows)  # what mujoco.batch's reset writes, bit for bit
     env.close()

@@ -334,3 +334,24 @@ def test_push_events_match_the_numpy_schedule():
         old[due, 1, :3] = force
         _close(xfrc, old, f"step {t} applied force", scale=1.0)
         np.testing.assert_array_equal(pushes.schedule.counter.numpy(), counter)
+
+
+def test_short_sums_round_as_torchs_own_sum_signed_zeros_included():
+    """`sensors.sum_short` replaces `sum` over the tips' 2- and 3-entry axes: bit for bit the same, on the strided
+    views the sensors are read through, with the zeros (+0 and -0) a tip without contact reports."""
+    from lerobot_blindgrasp.sim import sensors
+
+    g = torch.Generator().manual_seed(0)
+    rows = torch.randn(1026, 130, dtype=torch.float64, generator=g)
+    rows[torch.rand(rows.shape, generator=g) < 0.3] = 0.0
+    rows[torch.rand(rows.shape, generator=g) < 0.2] = -0.0
+    tips = rows[:, 10:130].unflatten(1, (3, 40))  # (n, tip, reading) views, as SensorIndex.read gives
+    force, axis = tips[:, :, 0:3], tips[:, :, 3:6]
+    rot = torch.randn(1026, 3, 3, 3, dtype=torch.float64, generator=g)
+    rot[rot.abs() < 0.3] = -0.0
+    cases = [(force * axis, -1), (force, -1), (rows[:, :2].square(), -1), (rot * force[..., :, None], -2)]
+    for x, dim in cases:
+        ours, torchs = sensors.sum_short(x, dim), x.sum(dim)
+        assert torch.equal(ours.view(torch.int64), torchs.view(torch.int64))
+    all_negative_zero = torch.full((4, 3), -0.0, dtype=torch.float64)
+    assert sensors.sum_short(all_negative_zero, -1).signbit().logical_not().all()  # +0, as torch's sum

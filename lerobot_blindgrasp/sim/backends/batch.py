@@ -32,6 +32,11 @@ class BatchBackend:
             warnings.filterwarnings("ignore", "The given NumPy array is not writable")
             self.sensordata = torch.from_numpy(self.batch.bind("sensordata"))
         self._warnings_seen = np.zeros(n, dtype=np.int64)
+        # Each sim's state row as mj_resetData leaves it, which `reset` copies in: a call loads the whole state from
+        # its row (the batch is not persistent), so the copy is the reset, without a call into the batch per reset.
+        self.batch.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
+        self._state = torch.from_numpy(self.batch.state)
+        self._reset_state = self._state.clone()
 
     @property
     def nthread(self) -> int:
@@ -39,7 +44,8 @@ class BatchBackend:
 
     def reset(self, ids) -> None:
         # the model's defaults, as mj_resetData: zero velocity, warm-start and applied forces
-        self.batch.reset(_ids(ids), stage=mujoco.mjtStage.mjSTAGE_NONE)
+        ids = torch.as_tensor(ids)
+        self._state.index_copy_(0, ids, self._reset_state.index_select(0, ids))
 
     def forward(self, ids) -> None:
         ids = _ids(ids)
