@@ -13,6 +13,7 @@ import pytest
 import torch
 from safetensors.torch import load_file
 
+from lerobot_blindgrasp import shipped as shipped_files
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.teacher import evaluate, export, policy
@@ -49,7 +50,7 @@ def run_dir(shipped, tmp_path) -> Path:
 
 def test_the_shipped_teacher_is_safetensors_and_json_only(shipped):
     folder = policy.default_teacher()
-    assert folder == policy.models_dir() / policy.SHIPPED_TEACHER
+    assert folder == shipped_files.path(policy.SHIPPED_TEACHER)
     assert shipped.checkpoint == folder / policy.WEIGHTS_NAME
     assert not list(folder.glob("*.pt")) and not list(folder.glob("*.pkl"))
     cfg = json.loads((folder / policy.CONFIG_NAME).read_text())
@@ -122,7 +123,7 @@ def test_clear_one_line_errors(run_dir, tmp_path, monkeypatch):
     with pytest.raises(TeacherError, match="does not fit its config") as e:
         TeacherPolicy(run_dir)
     cases.append(e)
-    monkeypatch.setattr(policy, "models_dir", lambda: tmp_path / "site-packages")  # a non-editable install
+    monkeypatch.setattr(shipped_files, "folder", lambda kind: tmp_path / "site-packages")  # a non-editable install
     with pytest.raises(TeacherError, match="BLINDGRASP_TEACHER") as e:
         policy.default_teacher()
     cases.append(e)
