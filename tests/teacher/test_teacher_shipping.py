@@ -80,6 +80,15 @@ def test_export_of_a_run_dir_acts_exactly_like_its_checkpoint(run_dir, tmp_path,
     cfg = json.loads((out / policy.CONFIG_NAME).read_text())
     assert cfg["weights"]["source_checkpoint"] == "model_7.pt"
     assert cfg["weights"]["source_sha256"] == policy.file_sha256(run_dir / "model_7.pt")
+    # Its card gives the commands the shipped cards give (model_cards), run on this folder.
+    assert (
+        "```bash\nblindgrasp-eval-teacher --teacher=THIS_FOLDER --episodes=20\n" in (out / "README.md").read_text()
+    )
+    calibrated = export.card({**cfg, "joint_calibration_rad": 0.05})  # trained against a joint offset
+    assert (
+        "blindgrasp-collect-demos --teacher=THIS_FOLDER --joint_calibration_rad=0.05 \\\n  --output_dir"
+        in calibrated
+    )
     # The CLI does the same and keeps a hand-written card.
     (out / "README.md").write_text("my card")
     export.main([f"--source={run_dir}", f"--output_dir={out}"])
