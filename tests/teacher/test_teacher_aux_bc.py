@@ -143,7 +143,9 @@ def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, m
 
 
 def test_script_success_table_per_object(capsys):
-    scripted_demos.main(["--objects=capsule_small,cuboid_a_large", "--episodes_per_object=2", "--pushes=false"])
+    from lab.diagnosis import script_success
+
+    script_success.main(["--objects=capsule_small,cuboid_a_large", "--episodes_per_object=2", "--pushes=false"])
     out = capsys.readouterr().out
     assert "| cuboid_a_large | 0% (0/2) |" in out and "| capsule_small |" in out and "| **all** |" in out
 
