@@ -44,12 +44,18 @@ def rig():
 
 
 @pytest.fixture
-def robot(rig, tmp_path, monkeypatch):
+def calibrated(rig, tmp_path, monkeypatch):
+    """The gripper's config on the rig; its first connect calibrates it, answered by the scripted operator."""
+    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
+    return rig.robot_config(tmp_path / "calibration")
+
+
+@pytest.fixture
+def robot(calibrated):
     """A connected, calibrated gripper on the rig (calibrated by the scripted operator)."""
     from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
 
-    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
-    r = BlindgraspGripper(rig.robot_config(tmp_path / "calibration"))
+    r = BlindgraspGripper(calibrated)
     r.connect()
     yield r
     if r.is_connected:

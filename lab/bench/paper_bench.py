@@ -74,9 +74,9 @@ class BenchPaperConfig(BenchConfig):
     output: Path | None = None  # the JSON, rewritten after each stage (default: printed only)
 
     def __post_init__(self):
-        from lerobot_blindgrasp.presets import teacher as teacher_presets
+        from lerobot_blindgrasp import presets
 
-        teacher_presets.get_preset(self.preset)
+        presets.get(self.preset, "teacher")
         if self.backend not in ("batch", "warp"):
             raise ValueError(f"--bench.backend must be batch or warp, got {self.backend!r}")
         unknown = set(self.stages) - set(STAGES)
@@ -85,9 +85,9 @@ class BenchPaperConfig(BenchConfig):
 
 
 def run(cfg: BenchPaperConfig) -> dict:
-    from lerobot_blindgrasp.presets import teacher as teacher_presets
+    from lerobot_blindgrasp import presets
 
-    num_envs = cfg.num_envs or teacher_presets.get_preset(cfg.preset).num_envs
+    num_envs = cfg.num_envs or presets.get(cfg.preset, "teacher").num_envs
     result = {"preset": cfg.preset, "num_envs": num_envs, "backend": cfg.backend, "machine": machine(cfg.backend)}
     result["stages"] = _earlier_stages(cfg, result)
     for name, stage in (("warmup", _warmup), ("loop", _loop), ("demos", _demos), ("onemodel", _onemodel)):

@@ -35,7 +35,7 @@ import numpy as np
 import torch
 
 from lab.bench import BenchConfig, sim_bench
-from lerobot_blindgrasp.presets import teacher as teacher_presets
+from lerobot_blindgrasp import presets
 from lerobot_blindgrasp.presets.teacher_configs import TeacherPreset
 
 
@@ -64,7 +64,7 @@ class BenchTeacherConfig(BenchConfig):
     variant_rounds: int = 2  # interleaved rounds of the variants (the fastest of each is kept)
 
     def __post_init__(self):
-        teacher_presets.get_preset(self.preset)  # unknown preset: a clear error before anything heavy
+        presets.get(self.preset, "teacher")  # unknown preset: a clear error before anything heavy
         if self.backend not in ("batch", "warp"):
             raise ValueError(f"--bench.backend must be batch or warp, got {self.backend!r}")
         if self.checkpoint is not None:
@@ -78,7 +78,7 @@ class BenchTeacherConfig(BenchConfig):
 
 
 def _preset(cfg: BenchTeacherConfig) -> TeacherPreset:
-    preset = teacher_presets.get_preset(cfg.preset)
+    preset = presets.get(cfg.preset, "teacher")
     runner = preset.runner_cfg()
     if cfg.hidden_dims:
         runner["actor"]["hidden_dims"] = list(cfg.hidden_dims)

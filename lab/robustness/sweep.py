@@ -85,9 +85,9 @@ class RobustnessConfig:
 
 
 def default_student(models_dir: Path | None = None) -> Path:
-    from lerobot_blindgrasp.teacher.policy import models_dir as repo_models
+    from lerobot_blindgrasp import shipped
 
-    d = (models_dir or repo_models()) / "student_cpu"
+    d = (models_dir or shipped.folder("models")) / "student_cpu"
     if not (d / "config.json").is_file():
         raise FileNotFoundError(f"the shipped student is not at {d}; pass --student=<a LeRobot policy folder>")
     return d

@@ -24,17 +24,21 @@ STUDENT_EVAL = (
 LOCAL_INSTALL = "pip install -e .   # in a clone of the code; a wheel (python -m build) carries this model too"
 
 
-def _uses(name: str, ref: str, folder: Path | None) -> list[str]:
-    """The commands that use model `name`, found at `ref` (a local folder or, for a student, a Hub repo id)."""
-    if not name.startswith("teacher"):
-        return [STUDENT_EVAL.format(ref=ref)]
-    calib = 0.0
-    if folder is not None and (folder / "teacher_config.json").is_file():
-        calib = json.loads((folder / "teacher_config.json").read_text()).get("joint_calibration_rad") or 0.0
+def teacher_uses(ref: str, config: dict | None = None) -> list[str]:
+    """The commands that use the teacher at `ref` (a folder); `config` is its teacher_config.json, if known."""
+    calib = (config or {}).get("joint_calibration_rad") or 0.0
     collect = f"blindgrasp-collect-demos --teacher={ref} --output_dir=runs/demos --repo_id=you/blindgrasp_demos"
     if calib:  # its student's demos are rolled out under the offset it was trained against
         collect = collect.replace(" --output_dir", f" --joint_calibration_rad={calib:g} \\\n  --output_dir")
     return [f"blindgrasp-eval-teacher --teacher={ref} --episodes=20", collect]
+
+
+def _uses(name: str, ref: str, folder: Path | None) -> list[str]:
+    """The commands that use model `name`, found at `ref` (a local folder or, for a student, a Hub repo id)."""
+    if not name.startswith("teacher"):
+        return [STUDENT_EVAL.format(ref=ref)]
+    config = folder / "teacher_config.json" if folder is not None else None
+    return teacher_uses(ref, json.loads(config.read_text()) if config is not None and config.is_file() else None)
 
 
 def install_section(name: str, folder: Path | None = None, repo_id: str | None = None) -> str:

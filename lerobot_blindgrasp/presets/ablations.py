@@ -39,7 +39,7 @@ def is_teacher_ablation(variant: Variant) -> bool:
 
 def _stages(settings: TeacherPreset) -> list[TeacherPreset]:
     """The preset and every preset its staged recipe trains before it (`TeacherPreset.stages`)."""
-    return [settings, *(teacher.get_preset(name) for name, _ in settings.stages)]
+    return [settings, *(teacher.TEACHER_PRESETS[name] for name, _ in settings.stages)]
 
 
 def _scripted_demos(settings: TeacherPreset) -> dict | None:
@@ -72,7 +72,7 @@ def teacher_words(preset: str, variant: Variant | dict | None, last_iteration: i
         what += f", iterations 0..{last_iteration}"
     if preset not in teacher.TEACHER_PRESETS:
         return what + " (a preset this version does not have)"
-    clones = has_scripted_cloning(teacher.get_preset(preset))
+    clones = has_scripted_cloning(teacher.TEACHER_PRESETS[preset])
     return what + (", PPO with scripted-grasp cloning" if clones else ", PPO only (no cloning)")
 
 

@@ -172,10 +172,3 @@ TEACHER_PRESETS: dict[str, TeacherPreset] = {
         QUICK,
     )
 }
-
-
-def get_preset(name: str) -> TeacherPreset:
-    try:
-        return TEACHER_PRESETS[name]
-    except KeyError:
-        raise ValueError(f"unknown teacher preset {name!r}; choose from {', '.join(TEACHER_PRESETS)}") from None

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lerobot_blindgrasp import durable, project
+from lerobot_blindgrasp.cards import model_cards
 from lerobot_blindgrasp.cli import parse_config
 from lerobot_blindgrasp.teacher import policy
 
@@ -72,6 +73,7 @@ def export_teacher(source: str | Path, out_dir: str | Path, overwrite_card: bool
 
 def card(config: dict) -> str:
     w = config["weights"]
+    uses = "\n".join(model_cards.teacher_uses("THIS_FOLDER", config))
     return f"""---
 library_name: {PACKAGE}
 tags: [lerobot, robotics, blindgrasp, reinforcement-learning, ppo]
@@ -87,8 +89,9 @@ used to collect the curated demonstrations the `blindgrasp_transformer` student 
 
 Use it (`{project.install_line()}`):
 
-    blindgrasp-eval-teacher --teacher=THIS_FOLDER --episodes=20
-    blindgrasp-collect-demos --teacher=THIS_FOLDER --output_dir=runs/demos --repo_id=you/blindgrasp_demos
+```bash
+{uses}
+```
 
 Made by: `{config.get("command", "?")}` (env seeds from {config.get("seed")}, {config.get("num_envs")} envs).
 {project.code_line()}

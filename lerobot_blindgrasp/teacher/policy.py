@@ -17,7 +17,7 @@ import torch
 from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import shipped, spec
 from lerobot_blindgrasp.teacher import blind_approach
 
 CONFIG_NAME = "teacher_config.json"
@@ -32,18 +32,11 @@ class TeacherError(FileNotFoundError):
     """A teacher that cannot be found or loaded; the message is one line that says what to do."""
 
 
-def models_dir() -> Path:
-    """The shipped models: the wheel's copy (package data, `lerobot_blindgrasp.shipped`), else <repo root>/models."""
-    from lerobot_blindgrasp import shipped
-
-    return shipped.folder("models")
-
-
 def default_teacher(folder: str | None = None) -> Path:
     """The teacher a command uses when none is given: $BLINDGRASP_TEACHER, else the shipped `folder` of models/."""
     if os.environ.get(TEACHER_ENV_VAR):
         return Path(os.environ[TEACHER_ENV_VAR])
-    d = models_dir() / (folder or SHIPPED_TEACHER)
+    d = shipped.folder("models") / (folder or SHIPPED_TEACHER)
     if not (d / WEIGHTS_NAME).is_file():
         raise TeacherError(
             f"the shipped teacher is not at {d} (a wheel ships it as package data; reinstall "

@@ -3,8 +3,6 @@ settings are `presets.teacher_configs.ScriptedDemos`."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from lerobot_blindgrasp import spec
@@ -44,37 +42,3 @@ def collect_scripted_demos(cfg: ScriptedDemos) -> dict:
     p = np.stack(seen_policy, axis=1)[keep].reshape(-1, spec.STATE_DIM)
     a = np.stack(seen_act, axis=1)[keep].reshape(-1, spec.NUM_JOINTS)
     return {"obs": {"privileged": o, "policy": p}, "actions": a, "success": rates}
-
-
-@dataclass
-class ScriptSuccessConfig:
-    """How often the side-grasp script lifts each object from training start states (what cloning can use)."""
-
-    objects: str = "all"  # "all", "medium", or a comma-separated list of catalogue names
-    episodes_per_object: int = 30
-    pushes: bool = True  # Table II's random pushes (the paper's training randomization)
-
-
-def main(argv=None) -> None:
-    """python -m lerobot_blindgrasp.teacher.scripted_demos [--objects=all] [--episodes_per_object=30]"""
-    from lerobot_blindgrasp.cli import parse_config
-
-    cfg = parse_config(ScriptSuccessConfig, argv)
-    demos = ScriptedDemos(
-        objects=objects.resolve_objects(cfg.objects),
-        episodes_per_object=cfg.episodes_per_object,
-        steps_per_episode=1,
-        pushes=cfg.pushes,
-    )
-    rates = collect_scripted_demos(demos)["success"]
-    print(
-        f"side-grasp script, {cfg.episodes_per_object} episodes per object from seed {demos.seed}, "
-        f"pushes={cfg.pushes}\n\n| object | success |\n|---|---:|"
-    )
-    for name, rate in rates.items():
-        print(f"| {name} | {rate:.0%} ({round(rate * cfg.episodes_per_object)}/{cfg.episodes_per_object}) |")
-    print(f"| **all** | **{np.mean(list(rates.values())):.1%}** |")
-
-
-if __name__ == "__main__":
-    main()

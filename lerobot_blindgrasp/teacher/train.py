@@ -22,10 +22,9 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
-from lerobot_blindgrasp import durable, spec
+from lerobot_blindgrasp import durable, presets, spec
 from lerobot_blindgrasp.cli import interrupts_as_keyboard_interrupt, parse_config, sleeping_openmp_threads
 from lerobot_blindgrasp.presets import SHIPPED_TEACHER_PRESET
-from lerobot_blindgrasp.presets.teacher import get_preset
 from lerobot_blindgrasp.presets.teacher_configs import TeacherPreset, Variant
 from lerobot_blindgrasp.rollout.envs import env_config
 from lerobot_blindgrasp.sim import objects, randomization
@@ -94,12 +93,14 @@ class TrainTeacherConfig:
         if self.output_dir is None:
             raise ValueError("--output_dir is required (the run directory; re-running with it resumes)")
         self.output_dir = Path(self.output_dir)
-        get_preset(self.preset)  # unknown preset: a clear error before anything heavy
+        presets.get(self.preset, "teacher")  # unknown preset: a clear error before anything heavy
 
 
 def train(cfg: TrainTeacherConfig) -> Path:
     """Train the preset (first the stages of a staged one) in cfg.output_dir; returns the last checkpoint."""
-    preset = Variant(no_incentive=cfg.no_incentive, student_obs=cfg.student_obs).apply(get_preset(cfg.preset))
+    preset = Variant(no_incentive=cfg.no_incentive, student_obs=cfg.student_obs).apply(
+        presets.get(cfg.preset, "teacher")
+    )
     num_envs = cfg.num_envs or preset.num_envs
     if preset.stages and newest_loadable_checkpoint(cfg.output_dir) is None:
         _train_stages(cfg, preset.stages)
@@ -307,7 +308,9 @@ def _train_stages(cfg: TrainTeacherConfig, stages: tuple[tuple[str, int], ...]) 
         if previous is not None and newest_loadable_checkpoint(folder) is None:
             _copy_checkpoint(previous, folder)
         stage = dataclasses.replace(cfg, preset=name, iterations=iterations, export=False, output_dir=folder)
-        preset = Variant(no_incentive=cfg.no_incentive, student_obs=cfg.student_obs).apply(get_preset(name))
+        preset = Variant(no_incentive=cfg.no_incentive, student_obs=cfg.student_obs).apply(
+            presets.get(name, "teacher")
+        )
         previous = _train_one(stage, preset, cfg.num_envs or preset.num_envs, iterations)
     _copy_checkpoint(previous, cfg.output_dir)
 

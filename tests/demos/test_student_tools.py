@@ -148,9 +148,11 @@ def test_dagger_and_diagnosis_end_to_end(demos, tmp_path):
     assert aggregate.meta.total_frames == demo.meta.total_frames + relabelled.meta.total_frames
     # A student episode runs until the object leaves the workspace or the 10 s are up (not the demos' 5 s).
     assert all(1 <= n <= spec.EPISODE_STEPS for n in relabelled.meta.episodes["length"])
-    # A second run with the same arguments finds the work done and redoes nothing.
+    # A second run with the same arguments finds the work done and redoes nothing (the command's own entry point,
+    # in this process: the check comes before anything is loaded).
     stamp = (out / dagger.DONE).stat().st_mtime_ns
-    subprocess.run(cmd, check=True, capture_output=True, env=env, timeout=600)
+    assert cmd[1:3] == ["-m", "lerobot_blindgrasp.demos.dagger"]
+    dagger.main(cmd[3:])
     assert (out / dagger.DONE).stat().st_mtime_ns == stamp
 
     # The diagnosis: its closed loop is lerobot-eval's (same successes on the same start states and batch).

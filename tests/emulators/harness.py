@@ -41,6 +41,28 @@ def tiny_student_train(repo_id: str, root: Path, out: Path, steps: int, *extra: 
     ]
 
 
+class ScriptedKeyboard:
+    """The operator's keyboard: a test calls `press` the way LeRobot's key listeners call the dispatch they get."""
+
+    def __init__(self, dispatch, controls_help=""):
+        self.press = dispatch
+
+    def stop(self):
+        pass
+
+
+def trial_env(robot_config, task: str, keys=None, **settings):
+    """A real trial (`RealGraspEnv`) of `task` on the emulated gripper, which the trial's first reset connects:
+    `settings` are `--env.*` ones; no `keys`: headless, nobody at a keyboard, as an unattended run."""
+    from lerobot_blindgrasp.envs.operator import OperatorKeys
+    from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
+    from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
+
+    keys = keys or OperatorKeys(listener_factory=lambda dispatch, controls_help="": None)
+    cfg = BlindGraspRealEnvConfig(robot=robot_config, task=task, **settings)
+    return RealGraspEnv(GripperSession(cfg, keys), task)
+
+
 def cli_env(home: Path) -> dict[str, str]:
     """Offline, isolated environment for LeRobot CLI subprocesses."""
     return {

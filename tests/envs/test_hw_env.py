@@ -8,30 +8,14 @@ import threading
 import gymnasium as gym
 import numpy as np
 import pytest
+from emulators.harness import ScriptedKeyboard, trial_env
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.envs.operator import OperatorKeys
 from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
 from lerobot_blindgrasp.envs.real_report import success_table
-from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 
 CLOSE = np.tile([0.0, -0.2, -0.3], 3)[None]  # squeezes past the emulated object's contact at J*1 = 0.2 rad
-
-
-class ScriptedKeyboard:
-    """The operator's keyboard: calls the listener's dispatch the way LeRobot's key listeners do."""
-
-    def __init__(self, dispatch, controls_help=""):
-        self.press = dispatch
-
-    def stop(self):
-        pass
-
-
-@pytest.fixture
-def calibrated(rig, tmp_path, monkeypatch):
-    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
-    return rig.robot_config(tmp_path / "calibration")
 
 
 def test_force_mode_trials_through_the_vector_env(rig, calibrated, tmp_path):
@@ -77,10 +61,8 @@ def test_force_mode_trials_through_the_vector_env(rig, calibrated, tmp_path):
 
 
 def test_operator_mode_decides_with_keys(rig, calibrated):
-    cfg = BlindGraspRealEnvConfig(robot=calibrated, task="sphere_medium", episode_s=0.5)
     keys = OperatorKeys(listener_factory=ScriptedKeyboard)
-    session = GripperSession(cfg, keys)
-    env = RealGraspEnv(session, "sphere_medium")
+    env = trial_env(calibrated, "sphere_medium", keys, episode_s=0.5)
     press = keys.listener.press
     try:
         outcomes = []
@@ -104,11 +86,9 @@ def test_operator_mode_decides_with_keys(rig, calibrated):
 
 
 def test_operator_mode_without_a_keyboard_is_refused(calibrated):
-    cfg = BlindGraspRealEnvConfig(robot=calibrated, task="sphere_medium")
-    no_keyboard = OperatorKeys(listener_factory=lambda dispatch, controls_help="": None)
-    session = GripperSession(cfg, no_keyboard)
+    env = trial_env(calibrated, "sphere_medium")  # no keyboard (headless), in the default operator mode
     with pytest.raises(RuntimeError, match="success_mode=force"):
-        session.ensure_connected()
+        env.session.ensure_connected()
 
 
 def test_per_object_success_table():

@@ -4,11 +4,10 @@
 from __future__ import annotations
 
 import numpy as np
+from emulators.harness import trial_env
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.envs.operator import OperatorKeys
-from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
-from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv, sim_start_pose
+from lerobot_blindgrasp.envs.real_trial import sim_start_pose
 from lerobot_blindgrasp.sim import observations
 from lerobot_blindgrasp.sim.gym_env import BlindGraspGymEnv
 
@@ -27,15 +26,13 @@ def test_the_sim_start_pose_is_the_sim_envs_own_start_state():
         sim.close()
 
 
-def test_a_real_trial_starts_at_the_sim_start_pose(rig, robot):
-    robot.disconnect()
-    cfg = BlindGraspRealEnvConfig(robot=robot.config, task=OBJECT, success_mode="force", start_pose="sim",
-                                  unattended_reset_s=0.0, episode_s=0.1)  # fmt: skip
-    no_keyboard = OperatorKeys(listener_factory=lambda dispatch, controls_help="": None)
-    env = RealGraspEnv(GripperSession(cfg, no_keyboard), OBJECT)
+def test_a_real_trial_starts_at_the_sim_start_pose(calibrated):
+    env = trial_env(
+        calibrated, OBJECT, success_mode="force", start_pose="sim", unattended_reset_s=0.0, episode_s=0.1
+    )
     try:
         obs, _ = env.reset(seed=7)
     finally:
         env.close()
     q = obs["agent_pos"][: spec.NUM_JOINTS]
-    np.testing.assert_allclose(q, sim_start_pose(OBJECT, 7), atol=cfg.home_tolerance_rad)
+    np.testing.assert_allclose(q, sim_start_pose(OBJECT, 7), atol=env.cfg.home_tolerance_rad)

@@ -12,27 +12,17 @@ import time
 from pathlib import Path
 
 import numpy as np
-from emulators.harness import Operator, cli_env
+from emulators.harness import Operator, ScriptedKeyboard, cli_env, trial_env
 from emulators.rig import LATENCY_TIMER_MS
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.envs.operator import OperatorKeys
-from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
-from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 from lerobot_blindgrasp.hardware.xm430 import RAD_PER_TICK, WATCHDOG_TRIPPED, WATCHDOG_UNIT_MS
 
 TRIAL_WAIT = Path(__file__).resolve().parents[1] / "emulators" / "trial_wait.py"
 # Longer than the shipped 200 ms, so that a loaded CI host that starves this process for a few periods does not trip
 # the watchdog through the keep-alive; the silent waits below are still twice as long, which the old env tripped on.
 WATCHDOG_MS = 600
-
-
-class ScriptedKeyboard:
-    def __init__(self, dispatch, controls_help=""):
-        self.press = dispatch
-
-    def stop(self):
-        pass
 
 
 def _armed(rig) -> bool:
@@ -46,9 +36,8 @@ def test_an_operator_slower_than_the_watchdog_trips_nothing(rig, robot, caplog):
     robot.disconnect()
     robot.config.bus_watchdog_ms = WATCHDOG_MS
     pause_s = 2 * WATCHDOG_MS / 1e3
-    cfg = BlindGraspRealEnvConfig(robot=robot.config, task="sphere_medium", episode_s=0.1)
     keys = OperatorKeys(listener_factory=ScriptedKeyboard)
-    env = RealGraspEnv(GripperSession(cfg, keys), "sphere_medium")
+    env = trial_env(robot.config, "sphere_medium", keys, episode_s=0.1)
     caplog.set_level(logging.WARNING)
     try:
         threading.Timer(pause_s, keys.listener.press, ["enter"]).start()
@@ -72,10 +61,8 @@ def test_unattended_waits_and_tares_trip_nothing(rig, robot, caplog):
     robot.disconnect()
     robot.config.bus_watchdog_ms = WATCHDOG_MS
     robot.config.force_sensor.tare_s = 2 * WATCHDOG_MS / 1e3
-    cfg = BlindGraspRealEnvConfig(robot=robot.config, task="sphere_medium", success_mode="force",
-                                  unattended_reset_s=2 * WATCHDOG_MS / 1e3, episode_s=0.1)  # fmt: skip
-    no_keyboard = OperatorKeys(listener_factory=lambda dispatch, controls_help="": None)  # headless: unattended
-    env = RealGraspEnv(GripperSession(cfg, no_keyboard), "sphere_medium")
+    env = trial_env(robot.config, "sphere_medium", success_mode="force", unattended_reset_s=2 * WATCHDOG_MS / 1e3,
+                    episode_s=0.1)  # fmt: skip
     caplog.set_level(logging.WARNING)
     try:
         env.reset()

@@ -1,4 +1,5 @@
-"""`python -m lab.bench --bench.type=policy` runs end to end (at a small size) and reports a consistent result."""
+"""`python -m lab.bench --bench.type=policy` and `--bench.type=build` run end to end (at a small size) and report a
+consistent result."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import pytest
 import torch
 
 from lab.bench import main
+from lab.bench.build_bench import BenchBuildConfig, run
 
 
 def test_policy_bench_json(capsys):
@@ -45,3 +47,17 @@ def test_policy_bench_table(capsys):
         torch.set_num_threads(previous)
     table = capsys.readouterr().out
     assert "| select_action (fast) |" in table and "floor: FLOPs / model-GEMM throughput" in table
+
+
+@pytest.mark.parametrize("backend", ["batch", "warp"])
+def test_the_build_bench_times_each_count_and_says_the_load(backend):
+    """Env construction timed per env count, on both backends, at tiny counts."""
+    cfg = BenchBuildConfig(num_envs=[4, 8], backend=backend, device="cpu", repeats=2, warmup_envs=4, json=True)
+    result = run(cfg)
+    assert result["backend"] == backend and [r["num_envs"] for r in result["rows"]] == [4, 8]
+    for r in result["rows"]:
+        assert len(r["builds"]) == 2 and r["seconds"] == min(b["seconds"] for b in r["builds"]) > 0
+        assert r["envs_per_s"] == pytest.approx(r["num_envs"] / r["seconds"])
+        assert r["device"] == "cpu" and all(b["load_before"] >= 0 for b in r["builds"])
+    with pytest.raises(ValueError, match="backend"):
+        BenchBuildConfig(backend="gpu")

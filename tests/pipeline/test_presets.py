@@ -66,14 +66,14 @@ def test_every_entry_is_complete():
 def test_pipeline_teacher_and_student_read_the_same_objects():
     assert teacher_configs.Variant is presets.Variant
     for name in ("paper", "cpu", "quick"):
-        assert teacher_presets.get_preset(name) is presets.teacher.TEACHER_PRESETS[name]
+        assert presets.get(name, "teacher") is presets.teacher.TEACHER_PRESETS[name]
     assert student_cfg.SIZES is presets.SIZES
     c = student_cfg.BlindgraspTransformerConfig(size="cpu", device="cpu")
     cpu = presets.SIZES["cpu"]
     assert c.n_layers == cpu["n_layers"] and c.head_hidden_dims == cpu["head_hidden_dims"]
     cfg = parse_config(TrainTeacherConfig, ["--preset=cpu_bc_capsule", "--output_dir=x"])
     # The cpu pipeline trains the shipped teacher's recipe from scratch
-    assert teacher_presets.get_preset(cfg.preset) is presets.PRESETS["cpu"].teacher.settings
+    assert presets.get(cfg.preset, "teacher") is presets.PRESETS["cpu"].teacher.settings
     assert presets.PRESETS["cpu"].teacher.settings is presets.SHIPPED_TEACHER_PRESET
 
 
@@ -214,7 +214,7 @@ def test_the_shipped_teachers_record_matches_its_preset():
     """`blindgrasp-train-teacher` resumes only when these keys match, and the registry must still describe the
     shipped teacher: its recorded run config (models/teacher_cpu_bc/teacher_config.json) is its preset's."""
     old = json.loads((ROOT / "models" / "teacher_cpu_bc" / "teacher_config.json").read_text())
-    preset = teacher_configs.Variant(**old["variant"]).apply(teacher_presets.get_preset(old["preset"]))
+    preset = teacher_configs.Variant(**old["variant"]).apply(presets.get(old["preset"], "teacher"))
     assert old["preset"] == presets.SHIPPED_TEACHER_PRESET.name
     assert old["runner"] == preset.runner_cfg()
     assert old["reward"] == preset.reward.as_record()
@@ -320,9 +320,10 @@ def test_paper_recipe_script_takes_its_commands_from_the_pipeline(tmp_path, caps
 def test_quick_table_v_teacher_ablations_are_the_recorded_ones(tmp_path):
     """The proposed rows use the shipped teacher; w/o r_i and RL w/ o_t train the shipped recipe's PPO-only prefix
     (`cpu`, iterations 0..1397) with their switch flipped: the commands and checkpoints of the recorded table."""
+    from lerobot_blindgrasp import shipped as shipped_files
     from lerobot_blindgrasp.teacher import policy
 
-    shipped = json.loads((policy.models_dir() / policy.SHIPPED_TEACHER / policy.CONFIG_NAME).read_text())
+    shipped = json.loads((shipped_files.path(policy.SHIPPED_TEACHER) / policy.CONFIG_NAME).read_text())
     iterations = shipped["weights"]["iteration"] + 1  # model_<it>.pt holds iterations 0..it
     assert presets.SHIPPED_TEACHER_ITERATIONS == iterations
     assert (

@@ -12,14 +12,13 @@ import time
 
 import numpy as np
 import pytest
+from emulators.harness import trial_env
 from emulators.loop import as_q, stopped
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from lerobot.utils.robot_utils import precise_sleep
 
 from lerobot_blindgrasp import spec
-from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
-from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
 from lerobot_blindgrasp.hardware.loop_timing import LoopOverrunError, PeriodMonitor, SampleSpacing
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripperConfig
 from lerobot_blindgrasp.robots.blindgrasp_gripper.errors import GripperTimingError
@@ -216,11 +215,13 @@ def test_jittery_reads_stay_spaced_within_their_own_jitter(seed, base_s, jitter_
     assert np.diff(ends).min() >= spacing.min_gap_s - jitter_s - 1e-9
 
 
-def test_no_short_step_after_a_stall_in_the_eval_trial(rig, tmp_path, monkeypatch):
-    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
-    cfg = BlindGraspRealEnvConfig(robot=rig.robot_config(tmp_path / "cal"), task="foam_brick", success_mode="force",
-                                  unattended_reset_s=0.0, episode_s=5.0)  # fmt: skip
-    env = RealGraspEnv(GripperSession(cfg), "foam_brick")
+def _force_trial(robot_config):
+    """An unattended force-mode eval trial, long enough for the steps below."""
+    return trial_env(robot_config, "foam_brick", success_mode="force", unattended_reset_s=0.0, episode_s=5.0)
+
+
+def test_no_short_step_after_a_stall_in_the_eval_trial(calibrated):
+    env = _force_trial(calibrated)
     try:
         env.reset(seed=0)
         times, step = _sample_times(env.robot), [0]
@@ -235,11 +236,8 @@ def test_no_short_step_after_a_stall_in_the_eval_trial(rig, tmp_path, monkeypatc
         env.close()
 
 
-def test_the_trial_rebases_after_a_stall_instead_of_bursting(rig, tmp_path, monkeypatch):
-    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
-    cfg = BlindGraspRealEnvConfig(robot=rig.robot_config(tmp_path / "cal"), task="foam_brick", success_mode="force",
-                                  unattended_reset_s=0.0, episode_s=5.0)  # fmt: skip
-    env = RealGraspEnv(GripperSession(cfg), "foam_brick")
+def test_the_trial_rebases_after_a_stall_instead_of_bursting(rig, calibrated):
+    env = _force_trial(calibrated)
     try:
         env.reset(seed=0)
         timing = env.robot.timing

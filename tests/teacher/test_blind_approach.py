@@ -8,13 +8,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from lerobot_blindgrasp import spec
+from lerobot_blindgrasp import shipped, spec
 from lerobot_blindgrasp.presets import teacher as presets
 from lerobot_blindgrasp.sim import randomization
 from lerobot_blindgrasp.sim.batched_config import GraspEnvConfig
 from lerobot_blindgrasp.sim.batched_env import BatchedGraspEnv
 from lerobot_blindgrasp.teacher import blind_approach
-from lerobot_blindgrasp.teacher.policy import TeacherPolicy, models_dir
+from lerobot_blindgrasp.teacher.policy import TeacherPolicy
 from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
 S = spec.PRIVILEGED_SLICES
@@ -44,8 +44,8 @@ def test_mask_hides_exactly_the_object_state_until_a_load_cell_reads_a_touch():
 
 
 def test_shipped_blind_teacher_acts_the_same_wherever_the_object_is_until_it_touches():
-    teacher = TeacherPolicy(models_dir() / "teacher_cpu_bc_calib")
-    plain = TeacherPolicy(models_dir() / "teacher_cpu_bc")
+    teacher = TeacherPolicy(shipped.path("teacher_cpu_bc_calib"))
+    plain = TeacherPolicy(shipped.path("teacher_cpu_bc"))
     assert teacher.obs_groups["actor"] == [blind_approach.GROUP]
     assert teacher.config["preset"] == presets.CPU_BC_CALIB_BLIND.name
     assert teacher.actor_input == presets.CPU_BC_CALIB_BLIND.actor_input
@@ -67,7 +67,7 @@ def test_shipped_blind_teacher_acts_the_same_wherever_the_object_is_until_it_tou
     # Revealed after more than reveal_delay_steps consecutive touching steps (one fresh teacher per trajectory:
     # the touch counts are per env batch).
     def after_touching(priv: np.ndarray, steps: int) -> np.ndarray:
-        t = TeacherPolicy(models_dir() / "teacher_cpu_bc_calib")
+        t = TeacherPolicy(shipped.path("teacher_cpu_bc_calib"))
         priv = _touch(priv, slice(None))
         for k in range(steps):
             priv[:, S["previous_action"]] = 0.01 * (k + 1)  # no longer an episode's first step
@@ -127,7 +127,7 @@ def test_the_blind_group_flows_from_the_env_through_ppo_to_the_loaded_teacher(tm
 
 
 def test_blind_preset_continues_the_shipped_teachers_run_with_an_asymmetric_actor_critic():
-    p = presets.get_preset("cpu_bc_blind_approach")
+    p = presets.TEACHER_PRESETS["cpu_bc_blind_approach"]
     assert p.stages[-1] == (presets.CPU_BC_CAPSULE.name, presets.CPU_BC_CAPSULE.max_iterations)
     assert p.runner["obs_groups"] == {"actor": [blind_approach.GROUP], "critic": ["privileged"]}
     assert p.object_weights == presets.CPU_BC_CAPSULE.object_weights
@@ -136,7 +136,7 @@ def test_blind_preset_continues_the_shipped_teachers_run_with_an_asymmetric_acto
 
 
 def test_blind_presets_chain_reveal6_then_calibration_blind():
-    r6, cal = presets.get_preset("cpu_bc_blind_reveal6"), presets.get_preset("cpu_bc_calib_blind")
+    r6, cal = presets.TEACHER_PRESETS["cpu_bc_blind_reveal6"], presets.TEACHER_PRESETS["cpu_bc_calib_blind"]
     assert r6.stages[-1] == (presets.CPU_BC_BLIND_APPROACH.name, presets.CPU_BC_BLIND_APPROACH.max_iterations)
     assert cal.stages[-1] == (r6.name, r6.max_iterations) and (r6.max_iterations, cal.max_iterations) == (
         2550,

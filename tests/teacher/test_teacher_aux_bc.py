@@ -77,7 +77,7 @@ def test_scripted_demos_keep_only_successful_episodes_and_refuse_bad_settings():
 
 
 def test_cpu_bc_joint_is_cpu_plus_the_cloning_algorithm_only():
-    cpu, bc = teacher_presets.CPU, teacher_presets.get_preset("cpu_bc_joint")
+    cpu, bc = teacher_presets.CPU, teacher_presets.TEACHER_PRESETS["cpu_bc_joint"]
     alg = bc.runner_cfg()["algorithm"]
     assert resolve_callable(alg["class_name"]) is aux_bc.PPOWithScriptedDemos
     rest = {k: v for k, v in alg.items() if k not in ("class_name", "scripted_demos")}
@@ -107,7 +107,7 @@ def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, m
         objects=("capsule_small",), episodes_per_object=3, decay_iterations=3, batch_size=256, coef=full
     )
     short = replace(
-        teacher_presets.get_preset("cpu_bc_joint"),
+        teacher_presets.TEACHER_PRESETS["cpu_bc_joint"],
         max_iterations=3,
         runner=demos.runner_cfg(teacher_presets.CPU.runner),
     )
@@ -143,7 +143,9 @@ def test_cloning_pulls_the_actor_to_the_script_and_its_decay_resumes(tmp_path, m
 
 
 def test_script_success_table_per_object(capsys):
-    scripted_demos.main(["--objects=capsule_small,cuboid_a_large", "--episodes_per_object=2", "--pushes=false"])
+    from lab.diagnosis import script_success
+
+    script_success.main(["--objects=capsule_small,cuboid_a_large", "--episodes_per_object=2", "--pushes=false"])
     out = capsys.readouterr().out
     assert "| cuboid_a_large | 0% (0/2) |" in out and "| capsule_small |" in out and "| **all** |" in out
 

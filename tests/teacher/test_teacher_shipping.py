@@ -13,6 +13,7 @@ import pytest
 import torch
 from safetensors.torch import load_file
 
+from lerobot_blindgrasp import shipped as shipped_files
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.sim import objects
 from lerobot_blindgrasp.teacher import evaluate, export, policy
@@ -49,7 +50,7 @@ def run_dir(shipped, tmp_path) -> Path:
 
 def test_the_shipped_teacher_is_safetensors_and_json_only(shipped):
     folder = policy.default_teacher()
-    assert folder == policy.models_dir() / policy.SHIPPED_TEACHER
+    assert folder == shipped_files.path(policy.SHIPPED_TEACHER)
     assert shipped.checkpoint == folder / policy.WEIGHTS_NAME
     assert not list(folder.glob("*.pt")) and not list(folder.glob("*.pkl"))
     cfg = json.loads((folder / policy.CONFIG_NAME).read_text())
@@ -79,6 +80,15 @@ def test_export_of_a_run_dir_acts_exactly_like_its_checkpoint(run_dir, tmp_path,
     cfg = json.loads((out / policy.CONFIG_NAME).read_text())
     assert cfg["weights"]["source_checkpoint"] == "model_7.pt"
     assert cfg["weights"]["source_sha256"] == policy.file_sha256(run_dir / "model_7.pt")
+    # Its card gives the commands the shipped cards give (model_cards), run on this folder.
+    assert (
+        "```bash\nblindgrasp-eval-teacher --teacher=THIS_FOLDER --episodes=20\n" in (out / "README.md").read_text()
+    )
+    calibrated = export.card({**cfg, "joint_calibration_rad": 0.05})  # trained against a joint offset
+    assert (
+        "blindgrasp-collect-demos --teacher=THIS_FOLDER --joint_calibration_rad=0.05 \\\n  --output_dir"
+        in calibrated
+    )
     # The CLI does the same and keeps a hand-written card.
     (out / "README.md").write_text("my card")
     export.main([f"--source={run_dir}", f"--output_dir={out}"])
@@ -122,7 +132,7 @@ def test_clear_one_line_errors(run_dir, tmp_path, monkeypatch):
     with pytest.raises(TeacherError, match="does not fit its config") as e:
         TeacherPolicy(run_dir)
     cases.append(e)
-    monkeypatch.setattr(policy, "models_dir", lambda: tmp_path / "site-packages")  # a non-editable install
+    monkeypatch.setattr(shipped_files, "folder", lambda kind: tmp_path / "site-packages")  # a non-editable install
     with pytest.raises(TeacherError, match="BLINDGRASP_TEACHER") as e:
         policy.default_teacher()
     cases.append(e)
