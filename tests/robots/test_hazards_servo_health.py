@@ -14,13 +14,12 @@ import time
 import numpy as np
 import pytest
 from dynamixel_sdk import robotis_def as dx
-from emulators.harness import connect_gripper
+from emulators.harness import connect_gripper, trial_env
 from emulators.loop import hold, stopped
 
 from lerobot_blindgrasp import spec
 from lerobot_blindgrasp.emulators.dynamixel import EmulatedServo
-from lerobot_blindgrasp.envs.real_env import BlindGraspRealEnvConfig
-from lerobot_blindgrasp.envs.real_trial import GripperSession, RealGraspEnv
+from lerobot_blindgrasp.envs.real_trial import RealGraspEnv
 from lerobot_blindgrasp.hardware import xm430
 from lerobot_blindgrasp.hardware.servo_diagnostics import ERROR, OK, WARN, ServoHealth, ServoStallError
 from lerobot_blindgrasp.robots.blindgrasp_gripper import BlindgraspGripper
@@ -227,28 +226,27 @@ def test_a_stall_at_the_current_limit_stops_before_the_firmware_overload(rig, ro
     assert not any(s.get("Hardware_Error_Status") for s in rig.dxl.servos.values())  # before the firmware's stop
 
 
-def _stall_trial(rig, tmp_path, monkeypatch) -> tuple[RealGraspEnv, np.ndarray]:
+def _stall_trial(calibrated, tmp_path, monkeypatch) -> tuple[RealGraspEnv, np.ndarray]:
     """An eval trial (force mode, a criterion no squeeze meets) on a rigid object, and the action that squeezes it
     with the three proximal servos at their current limit (the step bound keeps each goal 0.3 rad into it)."""
     monkeypatch.setattr(xm430, "STALL_STOP_S", 1.5)
     monkeypatch.setattr(xm430, "STALL_WARN_S", 0.5)
-    monkeypatch.setattr("builtins.input", rig.calibration_inputs())
-    cfg = BlindGraspRealEnvConfig(robot=rig.robot_config(tmp_path / "cal"), task="foam_brick", success_mode="force",
-                                  hold_force_n=1e3, unattended_reset_s=0.0, episode_s=3.0,
-                                  trial_log=str(tmp_path / "trials.jsonl"))  # fmt: skip
-    env = RealGraspEnv(GripperSession(cfg), "foam_brick")
+    env = trial_env(calibrated, "foam_brick", success_mode="force", hold_force_n=1e3, unattended_reset_s=0.0,
+                    episode_s=3.0, trial_log=str(tmp_path / "trials.jsonl"))  # fmt: skip
     squeeze = spec.HOME_POSE.copy()
     squeeze[1::3] = spec.HOME_POSE[1] - 0.6
     env.reset(seed=0)
-    rig.place_object(contact_q=float(spec.HOME_POSE[1]) - 0.05)
     return env, squeeze
 
 
-def test_a_stall_ends_the_eval_trial_as_a_failure_and_the_next_trial_reconnects(rig, tmp_path, monkeypatch):
+def test_a_stall_ends_the_eval_trial_as_a_failure_and_the_next_trial_reconnects(
+    rig, calibrated, tmp_path, monkeypatch
+):
     """In lerobot-eval a missed grasp runs its full 10 s, and a finger may squeeze at its limit past the stall stop.
     That stop ends the trial (torque off, a failure in the record), not the evaluation: the next trial reconnects
     through every check of a first connect."""
-    env, squeeze = _stall_trial(rig, tmp_path, monkeypatch)
+    env, squeeze = _stall_trial(calibrated, tmp_path, monkeypatch)
+    rig.place_object(contact_q=float(spec.HOME_POSE[1]) - 0.05)
     try:
         for steps in range(1, env._max_episode_steps + 1):  # noqa: B007 (read after the loop)
             _, reward, terminated, truncated, info = env.step(squeeze)
@@ -271,9 +269,10 @@ def test_a_stall_ends_the_eval_trial_as_a_failure_and_the_next_trial_reconnects(
     assert second["trial"] == 2 and second["stopped"] is None
 
 
-def test_a_stall_stop_whose_torque_off_is_unconfirmed_ends_the_evaluation(rig, tmp_path, monkeypatch):
+def test_a_stall_stop_whose_torque_off_is_unconfirmed_ends_the_evaluation(rig, calibrated, tmp_path, monkeypatch):
     """A servo that does not confirm the torque-off may still be squeezing: nothing goes on, whatever the cause."""
-    env, squeeze = _stall_trial(rig, tmp_path, monkeypatch)
+    env, squeeze = _stall_trial(calibrated, tmp_path, monkeypatch)
+    rig.place_object(contact_q=float(spec.HOME_POSE[1]) - 0.05)
     check = ServoHealth.check
 
     def check_then_lose_a_servo(self, *args, **kwargs):
