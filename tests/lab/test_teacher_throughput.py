@@ -163,11 +163,11 @@ def test_the_critic_beside_the_actor_acts_bit_identically_in_its_own_thread():
     import torch
     from rsl_rl.runners import OnPolicyRunner
 
-    from lerobot_blindgrasp.presets import teacher as teacher_presets
+    from lerobot_blindgrasp import presets
     from lerobot_blindgrasp.teacher.train import build_env_config, critic_beside_actor
     from lerobot_blindgrasp.teacher.vecenv import RslRlGraspEnv
 
-    preset = teacher_presets.get_preset("cpu")
+    preset = presets.get("cpu", "teacher")
     env = BatchedGraspEnv(build_env_config(preset, 36, seed=1, nthread=1))
     with contextlib.redirect_stdout(None):
         runner = OnPolicyRunner(RslRlGraspEnv(env), preset.runner_cfg(), log_dir=None, device="cpu")
